@@ -1,0 +1,1 @@
+"""Application functions: skills for specific applications, built from the core functions."""

@@ -1,0 +1,317 @@
+"""The primitives: the robot API every skill is made of, and the unit a bridge executes.
+
+A skill (a function of the application XML) expands into a sequence of primitives; the group
+machine runs each primitive as one Ready -> <state> -> Ready cycle, where ``<state>`` is the
+primitive's :attr:`STATE` (paper Table 1), and a bridge carries it to a robot.  Primitives are
+robot-independent and in SI units (m, rad, s; REP 103); poses are in the robot's world frame
+(for Nextage: ``WAIST``), already resolved from cell-model names by the skill.
+
+Each primitive names the result type its bridge returns (:attr:`RESULT`), so skills can use what
+a primitive measured -- a vision correction feeding the next move, for instance.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any, ClassVar, Literal, Union
+
+from core_functions.geometry import Pose
+
+
+class WorkState(Enum):
+    """The working states of the group machine (paper Table 1) and the request signal into each."""
+
+    MOTION = "Motion"
+    FULL_BODY_MOTION = "FullBodyMotion"
+    RECORD_TRAJECTORY = "RecordTrajectory"
+    TRAJECTORY_EXECUTION = "TrajectoryExecution"
+    END_EFFECTOR = "EndEffector"
+    VISION = "Vision"
+    MASTER_SLAVE = "MasterSlave"
+
+    @property
+    def request_signal(self) -> str:
+        return _REQUEST_SIGNALS[self]
+
+
+_REQUEST_SIGNALS = {
+    WorkState.MOTION: "motion_request",
+    WorkState.FULL_BODY_MOTION: "full_body_request",
+    WorkState.RECORD_TRAJECTORY: "record_trajectory_request",
+    WorkState.TRAJECTORY_EXECUTION: "trajectory_execution_request",
+    WorkState.END_EFFECTOR: "end_effector_request",
+    WorkState.VISION: "vision_request",
+    WorkState.MASTER_SLAVE: "master_slave_request",
+}
+
+Interpolation = Literal["ptp", "linear"]
+EndEffectorAction = Literal[
+    "gripper_open",
+    "gripper_close",
+    "air_on",
+    "air_off",
+    "tool_on",
+    "tool_off",
+    "hand_draw_in",
+    "hand_keep",
+    "hand_release",
+]
+END_EFFECTOR_ACTIONS: tuple[str, ...] = EndEffectorAction.__args__  # type: ignore[attr-defined]
+
+
+# --------------------------------------------------------------------------------- results
+@dataclass(frozen=True)
+class MotionResult:
+    """Where the group ended: joint positions (rad) and TCP pose in the world frame."""
+
+    joint_names: tuple[str, ...] = ()
+    positions: tuple[float, ...] = ()
+    tcp: Pose | None = None
+
+
+@dataclass(frozen=True)
+class EndEffectorResult:
+    """The I/O state of the group's hand after the action."""
+
+    io: dict[str, bool] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class VisionResult:
+    """What a camera found: a measured pose (world frame), a scalar measurement, a confidence."""
+
+    pose: Pose | None = None
+    value: float | None = None
+    score: float = 1.0
+
+
+@dataclass(frozen=True)
+class TrajectoryResult:
+    """A joint trajectory: ``points[i]`` is reached at ``times[i]`` seconds after the start."""
+
+    joint_names: tuple[str, ...] = ()
+    points: tuple[tuple[float, ...], ...] = ()
+    times: tuple[float, ...] = ()
+
+
+PrimitiveResult = Union[MotionResult, EndEffectorResult, VisionResult, TrajectoryResult]
+
+
+def _finite(name: str, *values: float) -> None:
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{name} must be finite numbers, got {values}")
+
+
+# ------------------------------------------------------------------------------ primitives
+@dataclass(frozen=True)
+class MoveJoints:
+    """Articular move of the group's joints (absolute, or relative to the current position)."""
+
+    KIND: ClassVar[str] = "move_joints"
+    STATE: ClassVar[WorkState] = WorkState.MOTION
+    RESULT: ClassVar[type] = MotionResult
+    positions: tuple[float, ...]
+    joint_names: tuple[str, ...] = ()
+    relative: bool = False
+
+    def __post_init__(self) -> None:
+        _finite("joint positions", *self.positions)
+        if self.joint_names and len(self.joint_names) != len(self.positions):
+            raise ValueError(f"{len(self.positions)} positions for {len(self.joint_names)} joint names")
+
+
+@dataclass(frozen=True)
+class MoveCartesian:
+    """Move the TCP to a world-frame pose, point-to-point (joint interpolated) or linear."""
+
+    KIND: ClassVar[str] = "move_cartesian"
+    STATE: ClassVar[WorkState] = WorkState.MOTION
+    RESULT: ClassVar[type] = MotionResult
+    target: Pose
+    interpolation: Interpolation = "ptp"
+    frame: str = ""  # the cell-model name the target came from, for traces and errors
+
+
+@dataclass(frozen=True)
+class MoveRelative:
+    """Move the TCP by ``delta``, expressed in the world frame or in the current tool frame."""
+
+    KIND: ClassVar[str] = "move_relative"
+    STATE: ClassVar[WorkState] = WorkState.MOTION
+    RESULT: ClassVar[type] = MotionResult
+    delta: Pose
+    reference: Literal["world", "tool"] = "world"
+    interpolation: Interpolation = "linear"
+
+
+@dataclass(frozen=True)
+class SetSpeed:
+    """Speed of the following motions as a fraction (0, 1] of the robot's maximum."""
+
+    KIND: ClassVar[str] = "set_speed"
+    STATE: ClassVar[WorkState] = WorkState.MOTION
+    RESULT: ClassVar[type] = MotionResult
+    fraction: float
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.fraction <= 1.0):
+            raise ValueError(f"speed fraction must be in (0, 1], got {self.fraction}")
+
+
+@dataclass(frozen=True)
+class Dwell:
+    """Hold the current position for ``seconds`` (a motion of zero length: pausable, stoppable)."""
+
+    KIND: ClassVar[str] = "dwell"
+    STATE: ClassVar[WorkState] = WorkState.MOTION
+    RESULT: ClassVar[type] = MotionResult
+    seconds: float
+
+    def __post_init__(self) -> None:
+        if not (self.seconds >= 0.0 and math.isfinite(self.seconds)):
+            raise ValueError(f"dwell needs a finite duration >= 0 s, got {self.seconds}")
+
+
+@dataclass(frozen=True)
+class EndEffector:
+    """A tool or hand action: gripper, air, deburring spindle, Nextage air hand."""
+
+    KIND: ClassVar[str] = "end_effector"
+    STATE: ClassVar[WorkState] = WorkState.END_EFFECTOR
+    RESULT: ClassVar[type] = EndEffectorResult
+    action: EndEffectorAction
+
+
+@dataclass(frozen=True)
+class Vision:
+    """A vision operation: locate a feature (returns its measured pose), inspect or measure."""
+
+    KIND: ClassVar[str] = "vision"
+    STATE: ClassVar[WorkState] = WorkState.VISION
+    RESULT: ClassVar[type] = VisionResult
+    task: Literal["locate", "inspect", "measure"]
+    target: str = ""
+    nominal: Pose | None = None
+    camera: str = ""
+
+
+@dataclass(frozen=True)
+class RecordTrajectory:
+    """Record a trajectory: planned through waypoints, or taught by sampling the joints."""
+
+    KIND: ClassVar[str] = "record_trajectory"
+    STATE: ClassVar[WorkState] = WorkState.RECORD_TRAJECTORY
+    RESULT: ClassVar[type] = TrajectoryResult
+    name: str
+    mode: Literal["plan", "teach"] = "plan"
+    waypoints: tuple[Pose, ...] = ()
+    interpolation: Interpolation = "ptp"
+    duration: float = 0.0
+    sample_period: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            raise ValueError("a recorded trajectory needs a name")
+        if self.mode == "plan" and not self.waypoints:
+            raise ValueError("planning a trajectory needs at least one waypoint")
+        if self.mode == "teach" and not (self.duration > 0 and self.sample_period > 0):
+            raise ValueError("teaching needs a duration and a sample period > 0")
+
+
+@dataclass(frozen=True)
+class ExecuteTrajectory:
+    """Replay a joint trajectory (points reached at the given times, scaled by the set speed)."""
+
+    KIND: ClassVar[str] = "execute_trajectory"
+    STATE: ClassVar[WorkState] = WorkState.TRAJECTORY_EXECUTION
+    RESULT: ClassVar[type] = MotionResult
+    name: str
+    joint_names: tuple[str, ...]
+    points: tuple[tuple[float, ...], ...]
+    times: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if not self.points or len(self.points) != len(self.times):
+            raise ValueError(f"trajectory {self.name!r}: {len(self.points)} points for {len(self.times)} times")
+        if any(len(p) != len(self.joint_names) for p in self.points):
+            raise ValueError(f"trajectory {self.name!r}: every point needs {len(self.joint_names)} values")
+        if any(b < a for a, b in zip(self.times, self.times[1:])):
+            raise ValueError(f"trajectory {self.name!r}: times must not decrease")
+
+
+@dataclass(frozen=True)
+class FullBodyMove:
+    """One coordinated move of every joint of the robot (15 on Nextage); sent once both arms agree."""
+
+    KIND: ClassVar[str] = "full_body_move"
+    STATE: ClassVar[WorkState] = WorkState.FULL_BODY_MOTION
+    RESULT: ClassVar[type] = MotionResult
+    joint_names: tuple[str, ...]
+    positions: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        _finite("joint positions", *self.positions)
+        if len(self.joint_names) != len(self.positions):
+            raise ValueError(f"{len(self.positions)} positions for {len(self.joint_names)} joints")
+
+
+@dataclass(frozen=True)
+class MasterSlaveMove:
+    """Bi-manual move: the master's TCP path, and the slave's derived with a fixed offset.
+
+    ``slave_path[i] = master_path[i] * offset``; the offset is the slave TCP expressed in the
+    master TCP frame (for a part held by both hands: their relative pose at the start).
+    """
+
+    KIND: ClassVar[str] = "master_slave_move"
+    STATE: ClassVar[WorkState] = WorkState.MASTER_SLAVE
+    RESULT: ClassVar[type] = MotionResult
+    master: str
+    slave: str
+    master_path: tuple[Pose, ...]
+    offset: Pose
+
+    def __post_init__(self) -> None:
+        if self.master == self.slave:
+            raise ValueError("master and slave must be different groups")
+        if not self.master_path:
+            raise ValueError("a master/slave move needs a master path")
+
+    def slave_path(self) -> tuple[Pose, ...]:
+        return tuple(p.compose(self.offset) for p in self.master_path)
+
+
+Primitive = Union[
+    MoveJoints,
+    MoveCartesian,
+    MoveRelative,
+    SetSpeed,
+    Dwell,
+    EndEffector,
+    Vision,
+    RecordTrajectory,
+    ExecuteTrajectory,
+    FullBodyMove,
+    MasterSlaveMove,
+]
+PRIMITIVE_TYPES: tuple[type, ...] = Primitive.__args__  # type: ignore[attr-defined]
+PRIMITIVES_BY_KIND: dict[str, type] = {t.KIND: t for t in PRIMITIVE_TYPES}
+
+
+def describe(primitive: Any) -> str:
+    """One line for logs and traces: the kind and its main argument."""
+    kind = primitive.KIND
+    if isinstance(primitive, MoveCartesian):
+        return f"{kind}({primitive.frame or primitive.target}, {primitive.interpolation})"
+    if isinstance(primitive, EndEffector):
+        return f"{kind}({primitive.action})"
+    if isinstance(primitive, Vision):
+        return f"{kind}({primitive.task} {primitive.target})"
+    if isinstance(primitive, (RecordTrajectory, ExecuteTrajectory)):
+        return f"{kind}({primitive.name})"
+    if isinstance(primitive, SetSpeed):
+        return f"{kind}({primitive.fraction:g})"
+    if isinstance(primitive, Dwell):
+        return f"{kind}({primitive.seconds:g} s)"
+    return kind

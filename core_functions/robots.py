@@ -1,0 +1,172 @@
+"""Robot descriptions the application model is checked against: groups, joints, limits, poses.
+
+An application names its robot; the robot decides which groups may appear in an operation,
+how many joints a joint move needs, and which joint values are plausible.  The Nextage Open
+data follow the public nextage_description URDF (docs/architecture.md); the simulator's URDF is
+tested against this table so the two cannot drift apart.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+GroupKind = Literal["arm", "torso_head"]
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    name: str
+    lower: float  # rad
+    upper: float  # rad
+    max_velocity: float  # rad/s
+
+    def contains(self, value: float, tolerance: float = 1e-9) -> bool:
+        return self.lower - tolerance <= value <= self.upper + tolerance
+
+
+@dataclass(frozen=True)
+class GroupSpec:
+    name: str
+    kind: GroupKind
+    joints: tuple[JointSpec, ...]
+    camera: str = ""  # the camera a vision request of this group uses by default
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    name: str
+    description: str
+    groups: tuple[GroupSpec, ...]
+    aliases: tuple[str, ...] = ()
+    #: Named whole-robot joint poses (rad), e.g. Nextage "initial" and "off".
+    poses: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: The back end ``run`` uses when none is chosen.
+    default_backend: str = "nextage-sim"
+
+    def group(self, name: str) -> GroupSpec:
+        for g in self.groups:
+            if g.name == name:
+                return g
+        raise KeyError(name)
+
+    @property
+    def group_names(self) -> tuple[str, ...]:
+        return tuple(g.name for g in self.groups)
+
+    @property
+    def arm_groups(self) -> tuple[str, ...]:
+        return tuple(g.name for g in self.groups if g.kind == "arm")
+
+    @property
+    def joints(self) -> tuple[JointSpec, ...]:
+        return tuple(j for g in self.groups for j in g.joints)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    def joint(self, name: str) -> JointSpec:
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(name)
+
+    def group_pose(self, pose_name: str, group: str) -> tuple[float, ...]:
+        """The joint values of ``group`` in the named whole-robot pose."""
+        pose = self.poses[pose_name]
+        return tuple(pose[j] for j in self.group(group).joint_names)
+
+
+def _deg(*values: float) -> tuple[float, ...]:
+    return tuple(math.radians(v) for v in values)
+
+
+def _joint(name: str, lower_deg: float, upper_deg: float, velocity: float) -> JointSpec:
+    return JointSpec(name, math.radians(lower_deg), math.radians(upper_deg), velocity)
+
+
+def _nextage_arm(prefix: str, j3: tuple[float, float]) -> tuple[JointSpec, ...]:
+    limits = [(-88, 88), (-140, 60), (-158, 0), j3, (-100, 100), (-163, 163)]
+    return tuple(_joint(f"{prefix}_JOINT{i}", lo, hi, 1.0) for i, (lo, hi) in enumerate(limits))
+
+
+def _pose(names: tuple[str, ...], values_deg: tuple[float, ...]) -> dict[str, float]:
+    return dict(zip(names, _deg(*values_deg)))
+
+
+_NEXTAGE_TORSO_HEAD = (
+    _joint("CHEST_JOINT0", -163, 163, 0.5),
+    _joint("HEAD_JOINT0", -70, 70, 0.5),
+    _joint("HEAD_JOINT1", -20, 70, 0.5),
+)
+_NEXTAGE_RARM = _nextage_arm("RARM", (-165, 105))
+_NEXTAGE_LARM = _nextage_arm("LARM", (-105, 165))
+_NEXTAGE_ORDER = tuple(j.name for j in (*_NEXTAGE_TORSO_HEAD, *_NEXTAGE_RARM, *_NEXTAGE_LARM))
+
+NEXTAGE_OPEN = RobotModel(
+    name="nextage_open",
+    description="Kawada Nextage Open: 15 DOF, two 6-DOF arms on a rotating torso, 2-DOF head",
+    aliases=("nextage",),
+    groups=(
+        GroupSpec("left_arm", "arm", _NEXTAGE_LARM, camera="left_hand_camera"),
+        GroupSpec("right_arm", "arm", _NEXTAGE_RARM, camera="right_hand_camera"),
+        GroupSpec("torso_head", "torso_head", _NEXTAGE_TORSO_HEAD, camera="head_camera"),
+    ),
+    poses={
+        "initial": _pose(_NEXTAGE_ORDER, (0, 0, 0, -0.6, 0, -100, 15.2, 9.4, 3.2, 0.6, 0, -100, -15.2, 9.4, -3.2)),
+        "off": _pose(_NEXTAGE_ORDER, (0, 0, 0, 25, -140, -150, 45, 0, 0, -25, -140, -150, -45, 0, 0)),
+    },
+    default_backend="nextage-sim",
+)
+
+_VIPER_JOINTS = (
+    _joint("joint_1", -170, 170, math.radians(328)),
+    _joint("joint_2", -190, 45, math.radians(300)),
+    _joint("joint_3", -29, 256, math.radians(375)),
+    _joint("joint_4", -190, 190, math.radians(375)),
+    _joint("joint_5", -120, 120, math.radians(375)),
+    _joint("joint_6", -360, 360, math.radians(600)),
+)
+
+ADEPT_VIPER_S850 = RobotModel(
+    name="adept_viper_s850",
+    description="Adept Viper s850: 6-axis arm on an Adept V+ controller (AdeptServer over TCP)",
+    aliases=("viper", "vplus"),
+    groups=(GroupSpec("arm", "arm", _VIPER_JOINTS, camera="tool_camera"),),
+    poses={"home": dict(zip((j.name for j in _VIPER_JOINTS), _deg(0, -90, 180, 0, 0, 0)))},
+    default_backend="vplus",
+)
+
+_KUKA_JOINTS = (
+    _joint("A1", -170, 170, math.radians(156)),
+    _joint("A2", -190, 45, math.radians(156)),
+    _joint("A3", -120, 156, math.radians(156)),
+    _joint("A4", -185, 185, math.radians(343)),
+    _joint("A5", -120, 120, math.radians(362)),
+    _joint("A6", -350, 350, math.radians(659)),
+)
+
+KUKA_KR = RobotModel(
+    name="kuka_kr",
+    description="KUKA KR (6-axis, KR C4 controller) driven through RSI over UDP",
+    aliases=("kuka", "kuka_rsi"),
+    groups=(GroupSpec("arm", "arm", _KUKA_JOINTS, camera="tool_camera"),),
+    poses={"home": dict(zip((j.name for j in _KUKA_JOINTS), _deg(0, -90, 90, 0, 0, 0)))},
+    default_backend="kuka-rsi",
+)
+
+ROBOTS: tuple[RobotModel, ...] = (NEXTAGE_OPEN, ADEPT_VIPER_S850, KUKA_KR)
+
+
+def find_robot(name: str) -> RobotModel:
+    """The robot named ``name`` or one of its aliases; KeyError lists what exists."""
+    for robot in ROBOTS:
+        if name == robot.name or name in robot.aliases:
+            return robot
+    known = ", ".join(sorted(n for r in ROBOTS for n in (r.name, *r.aliases)))
+    raise KeyError(f"unknown robot {name!r} (known: {known})")

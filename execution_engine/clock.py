@@ -1,0 +1,219 @@
+"""The one injectable clock every duration in the project goes through.
+
+Robot applications run for minutes of robot time, yet tests must run them in milliseconds and
+deterministically, and an operator may want to watch a simulation at 10x.  So nothing in the
+project calls ``time.sleep``, ``time.monotonic`` or ``asyncio.sleep`` directly: it asks a
+:class:`Clock`.  Three kinds exist:
+
+* :func:`real_clock` -- wall time, for real controllers;
+* :func:`scaled_clock` -- wall time multiplied by a speed factor (the simulator at 10x or 100x);
+* :func:`simulated_clock` -- virtual time on a :class:`VirtualTimeLoop`: whenever every task is
+  waiting for a timer, time jumps straight to the next timer.  Runs are deterministic and take
+  no wall time for waiting.
+
+All three are the same :class:`Clock` class; what differs is the event loop they run on and the
+speed factor.  "Run time" is seconds since the clock was started, so traces of real, scaled and
+simulated runs read the same.
+"""
+from __future__ import annotations
+
+import asyncio
+import math
+import selectors
+import threading
+from collections.abc import Awaitable, Callable, Coroutine, Mapping
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+__all__ = [
+    "Clock",
+    "VirtualTimeLoop",
+    "real_clock",
+    "run_with_clock",
+    "scaled_clock",
+    "simulated_clock",
+]
+
+
+class Clock:
+    """Run time in seconds, sleeps and timeouts, all scaled by ``speed``.
+
+    The clock binds to the event loop it is first used on; ``now()`` may be read from any thread
+    (a logging thread, the rclpy executor) because it only reads the loop's monotonic time.
+    """
+
+    def __init__(self, speed: float = 1.0, *, simulated: bool = False) -> None:
+        if not (speed > 0 and math.isfinite(speed)):
+            raise ValueError(f"clock speed must be a positive finite factor, got {speed!r}")
+        self._speed = float(speed)
+        self._simulated = simulated
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._origin = 0.0
+        self._lock = threading.Lock()
+
+    # ----------------------------------------------------------------------------- binding
+    @property
+    def speed(self) -> float:
+        """Run seconds per wall second (1.0 real time); meaningless for a simulated clock."""
+        return self._speed
+
+    @property
+    def simulated(self) -> bool:
+        """True when time is virtual: waiting costs no wall time."""
+        return self._simulated
+
+    def bind(self, loop: asyncio.AbstractEventLoop | None = None) -> Clock:
+        """Tie the clock to ``loop`` (default: the running loop) and start run time at 0."""
+        loop = loop or asyncio.get_running_loop()
+        with self._lock:
+            if self._loop is not None and self._loop is not loop:
+                raise RuntimeError("a Clock serves one event loop; create another Clock for another loop")
+            if self._loop is None:
+                if self._simulated and not isinstance(loop, VirtualTimeLoop):
+                    raise RuntimeError("a simulated clock needs a VirtualTimeLoop; use run_with_clock()")
+                self._loop = loop
+                self._origin = loop.time()
+        return self
+
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            self.bind()
+        assert self._loop is not None
+        return self._loop
+
+    # ------------------------------------------------------------------------------- time
+    def now(self) -> float:
+        """Seconds of run time since the clock was bound."""
+        loop = self._loop
+        if loop is None:
+            return 0.0
+        return (loop.time() - self._origin) * self._speed
+
+    def to_wall(self, run_seconds: float) -> float:
+        """Wall (loop) seconds that ``run_seconds`` of run time take."""
+        return max(0.0, run_seconds) / self._speed
+
+    async def sleep(self, seconds: float) -> None:
+        """Sleep ``seconds`` of run time (0 or less just yields to other tasks)."""
+        self.loop  # noqa: B018 - binds on first use
+        await asyncio.sleep(self.to_wall(seconds))
+
+    async def sleep_until(self, run_time: float) -> None:
+        """Sleep until run time ``run_time``; returns at once if it has passed."""
+        await self.sleep(run_time - self.now())
+
+    async def wait_for(self, awaitable: Awaitable[T], timeout: float | None) -> T:
+        """``asyncio.wait_for`` with the timeout in run seconds (None waits without bound)."""
+        self.loop  # noqa: B018
+        if timeout is None:
+            return await awaitable
+        return await asyncio.wait_for(awaitable, self.to_wall(timeout))
+
+    def call_later(self, delay: float, callback: Callable[..., Any], *args: Any) -> asyncio.TimerHandle:
+        """Schedule ``callback`` after ``delay`` run seconds on the clock's loop."""
+        return self.loop.call_later(self.to_wall(delay), callback, *args)
+
+    def __repr__(self) -> str:
+        kind = "simulated" if self._simulated else f"x{self._speed:g}"
+        return f"Clock({kind}, now={self.now():.3f})"
+
+
+def real_clock() -> Clock:
+    """Wall time, 1:1."""
+    return Clock(1.0)
+
+
+def scaled_clock(speed: float) -> Clock:
+    """Wall time sped up (or slowed down) by ``speed``."""
+    return Clock(speed)
+
+
+def simulated_clock() -> Clock:
+    """Virtual time that jumps over idle waits; must run on a :class:`VirtualTimeLoop`."""
+    return Clock(1.0, simulated=True)
+
+
+class _VirtualSelector(selectors.BaseSelector):
+    """Selector that turns an idle wait into a jump of the loop's virtual time.
+
+    asyncio computes how long it may block until the next timer and passes that to
+    ``select``.  We poll the real file descriptors without blocking; if nothing is ready and a
+    timer is pending, we advance virtual time to it instead of sleeping.  With no timer pending
+    (``timeout is None``) only another thread or a socket can wake the loop, so we block for
+    real.  Loopback sockets served by tasks of the same loop deliver data synchronously, so a
+    TCP or UDP peer simulated in-process works under virtual time too.
+    """
+
+    def __init__(self, loop: VirtualTimeLoop) -> None:
+        self._real = selectors.DefaultSelector()
+        self._loop = loop
+
+    def register(self, fileobj: Any, events: int, data: Any = None) -> selectors.SelectorKey:
+        return self._real.register(fileobj, events, data)
+
+    def unregister(self, fileobj: Any) -> selectors.SelectorKey:
+        return self._real.unregister(fileobj)
+
+    def modify(self, fileobj: Any, events: int, data: Any = None) -> selectors.SelectorKey:
+        return self._real.modify(fileobj, events, data)
+
+    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        ready = self._real.select(0)
+        if ready:
+            return ready
+        if timeout is None:
+            return self._real.select(None)
+        if timeout > 0:
+            self._loop.advance(timeout)
+        return []
+
+    def close(self) -> None:
+        self._real.close()
+
+    def get_key(self, fileobj: Any) -> selectors.SelectorKey:
+        return self._real.get_key(fileobj)
+
+    def get_map(self) -> Mapping[Any, selectors.SelectorKey]:
+        return self._real.get_map()
+
+
+class VirtualTimeLoop(asyncio.SelectorEventLoop):
+    """An asyncio loop whose ``time()`` is virtual and jumps over idle waits."""
+
+    def __init__(self) -> None:
+        self._virtual_now = 0.0
+        super().__init__(_VirtualSelector(self))
+
+    def time(self) -> float:
+        return self._virtual_now
+
+    def advance(self, seconds: float) -> None:
+        """Move virtual time forward (never backward)."""
+        if seconds > 0:
+            self._virtual_now += seconds
+
+
+def run_with_clock(main: Callable[[Clock], Coroutine[Any, Any, T]], clock: Clock) -> T:
+    """Run ``main(clock)`` to completion on a fresh loop suited to ``clock``."""
+    loop: asyncio.AbstractEventLoop = VirtualTimeLoop() if clock.simulated else asyncio.new_event_loop()
+    try:
+        asyncio.set_event_loop(loop)
+        clock.bind(loop)
+        return loop.run_until_complete(main(clock))
+    finally:
+        try:
+            _cancel_pending(loop)
+            loop.run_until_complete(loop.shutdown_asyncgens())
+        finally:
+            asyncio.set_event_loop(None)
+            loop.close()
+
+
+def _cancel_pending(loop: asyncio.AbstractEventLoop) -> None:
+    pending = [t for t in asyncio.all_tasks(loop) if not t.done()]
+    for task in pending:
+        task.cancel()
+    if pending:
+        loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))

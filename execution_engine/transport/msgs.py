@@ -1,0 +1,135 @@
+"""Python mirrors of the few ROS 2 common_interfaces types the project uses.
+
+The core never imports rclpy, yet its nodes must speak exactly what ROS 2 nodes speak.  Each
+mirror names its ROS type (``ROS_TYPE``) and holds the same fields with the same meaning, so the
+rclpy adapter converts field by field and the in-process transport passes the frozen objects
+themselves.  No custom .msg types exist: structured payloads travel as JSON in
+:class:`String` (see :mod:`execution_engine.transport.wire`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+
+@dataclass(frozen=True)
+class Time:
+    """builtin_interfaces/Time, as seconds since the node's clock origin."""
+
+    ROS_TYPE: ClassVar[str] = "builtin_interfaces/msg/Time"
+    sec: int = 0
+    nanosec: int = 0
+
+    @staticmethod
+    def from_seconds(seconds: float) -> Time:
+        whole = math.floor(seconds)
+        return Time(int(whole), int(round((seconds - whole) * 1e9)) % 1_000_000_000)
+
+    def to_seconds(self) -> float:
+        return self.sec + self.nanosec * 1e-9
+
+
+@dataclass(frozen=True)
+class Header:
+    """std_msgs/Header."""
+
+    ROS_TYPE: ClassVar[str] = "std_msgs/msg/Header"
+    stamp: Time = field(default_factory=Time)
+    frame_id: str = ""
+
+
+@dataclass(frozen=True)
+class String:
+    """std_msgs/String: the carrier of every JSON message of the project."""
+
+    ROS_TYPE: ClassVar[str] = "std_msgs/msg/String"
+    data: str = ""
+
+
+@dataclass(frozen=True)
+class Bool:
+    """std_msgs/Bool (the cell safety stop)."""
+
+    ROS_TYPE: ClassVar[str] = "std_msgs/msg/Bool"
+    data: bool = False
+
+
+@dataclass(frozen=True)
+class JointState:
+    """sensor_msgs/JointState: positions in rad, velocities in rad/s (REP 103)."""
+
+    ROS_TYPE: ClassVar[str] = "sensor_msgs/msg/JointState"
+    header: Header = field(default_factory=Header)
+    name: tuple[str, ...] = ()
+    position: tuple[float, ...] = ()
+    velocity: tuple[float, ...] = ()
+    effort: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class Point:
+    """geometry_msgs/Point in metres."""
+
+    ROS_TYPE: ClassVar[str] = "geometry_msgs/msg/Point"
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+
+@dataclass(frozen=True)
+class Quaternion:
+    """geometry_msgs/Quaternion (x, y, z, w)."""
+
+    ROS_TYPE: ClassVar[str] = "geometry_msgs/msg/Quaternion"
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    w: float = 1.0
+
+
+@dataclass(frozen=True)
+class Pose:
+    """geometry_msgs/Pose."""
+
+    ROS_TYPE: ClassVar[str] = "geometry_msgs/msg/Pose"
+    position: Point = field(default_factory=Point)
+    orientation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass(frozen=True)
+class PoseStamped:
+    """geometry_msgs/PoseStamped (a group's TCP pose)."""
+
+    ROS_TYPE: ClassVar[str] = "geometry_msgs/msg/PoseStamped"
+    header: Header = field(default_factory=Header)
+    pose: Pose = field(default_factory=Pose)
+
+
+@dataclass(frozen=True)
+class TriggerRequest:
+    """std_srvs/Trigger request (empty)."""
+
+    ROS_TYPE: ClassVar[str] = "std_srvs/srv/Trigger_Request"
+
+
+@dataclass(frozen=True)
+class TriggerResponse:
+    """std_srvs/Trigger response."""
+
+    ROS_TYPE: ClassVar[str] = "std_srvs/srv/Trigger_Response"
+    success: bool = False
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class Trigger:
+    """std_srvs/Trigger: the service type of every operator command (pause, resume, ...)."""
+
+    ROS_TYPE: ClassVar[str] = "std_srvs/srv/Trigger"
+    Request: ClassVar[type[TriggerRequest]] = TriggerRequest
+    Response: ClassVar[type[TriggerResponse]] = TriggerResponse
+
+
+MESSAGE_TYPES: tuple[type, ...] = (String, Bool, JointState, PoseStamped)
+SERVICE_TYPES: tuple[type, ...] = (Trigger,)

@@ -1,0 +1,229 @@
+"""The transport port: the only way nodes of this project talk to each other.
+
+The engine, every group machine and every bridge is a :class:`Node`; they share nothing but
+topics and services, even when they run in one process.  That keeps the in-process deployment
+(the embedded default, used by the tests) and a ROS 2 deployment (each node its own process,
+rclpy underneath) the same program.  The API follows rclpy's shape -- ``create_publisher``,
+``create_subscription``, ``create_service``, ``create_client``, ``declare_parameter`` -- with
+two deliberate differences: callbacks run on the node's asyncio loop, and service handlers and
+client calls are coroutines.
+
+Faults inside callbacks never vanish: a transport catches them and hands them to the node's
+fault handler (by default: log at ERROR), which a group machine turns into ErrorHandling.
+"""
+from __future__ import annotations
+
+import logging
+import re
+from abc import ABC, abstractmethod
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Any, Generic, TypeVar
+
+from execution_engine.clock import Clock
+from execution_engine.transport.qos import COMMANDS, QoS
+
+M = TypeVar("M")
+Req = TypeVar("Req")
+Resp = TypeVar("Resp")
+
+ParameterValue = bool | int | float | str | list[str] | list[float] | list[int]
+FaultHandler = Callable[[str, BaseException], None]
+
+_TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
+_ABSOLUTE_NAME = re.compile(rf"^(/{_TOKEN})+$")
+_NODE_NAME = re.compile(rf"^{_TOKEN}$")
+_NAMESPACE = re.compile(rf"^(/|(/{_TOKEN})+)$")
+
+
+class TransportError(RuntimeError):
+    """A name, type or service problem on the transport, naming the endpoint concerned."""
+
+
+class ServiceUnavailable(TransportError):
+    """No server answered on a service name within the timeout."""
+
+
+def validate_node_name(name: str) -> str:
+    if not _NODE_NAME.match(name):
+        raise TransportError(f"invalid node name {name!r}: use letters, digits and '_', not starting with a digit")
+    return name
+
+
+def resolve_name(name: str, namespace: str = "/", node_name: str = "") -> str:
+    """Resolve a topic or service name as ROS 2 does: absolute, relative to the namespace, or private (~)."""
+    if not _NAMESPACE.match(namespace):
+        raise TransportError(f"invalid namespace {namespace!r}")
+    base = namespace.rstrip("/")
+    if name.startswith("~"):
+        if not node_name:
+            raise TransportError(f"private name {name!r} needs a node")
+        rest = name[1:].lstrip("/")
+        resolved = f"{base}/{node_name}" + (f"/{rest}" if rest else "")
+    elif name.startswith("/"):
+        resolved = name
+    else:
+        resolved = f"{base}/{name}"
+    if not _ABSOLUTE_NAME.match(resolved):
+        raise TransportError(
+            f"invalid topic or service name {name!r} (resolved {resolved!r}): tokens are letters, digits "
+            "and '_', separated by single '/', not starting with a digit, no trailing '/'"
+        )
+    return resolved
+
+
+class Publisher(ABC, Generic[M]):
+    topic: str
+    msg_type: type[M]
+
+    @abstractmethod
+    def publish(self, msg: M) -> None:
+        """Send ``msg`` to every matching subscription; raises TransportError on a wrong type."""
+
+    def _check(self, msg: object) -> None:
+        if type(msg) is not self.msg_type:
+            raise TransportError(
+                f"publisher on {self.topic} carries {self.msg_type.__name__}, got {type(msg).__name__}"
+            )
+
+
+class Subscription(ABC, Generic[M]):
+    topic: str
+    msg_type: type[M]
+
+    @abstractmethod
+    def destroy(self) -> None:
+        """Stop receiving."""
+
+
+class ServiceServer(ABC):
+    name: str
+
+    @abstractmethod
+    def destroy(self) -> None:
+        """Stop serving."""
+
+
+class ServiceClient(ABC, Generic[Req, Resp]):
+    name: str
+
+    @abstractmethod
+    async def wait_for_service(self, timeout: float) -> bool:
+        """True once a server exists; False after ``timeout`` run seconds."""
+
+    @abstractmethod
+    async def call(self, request: Req, timeout: float = 5.0) -> Resp:
+        """Call the service; raises ServiceUnavailable or TimeoutError after ``timeout`` run seconds."""
+
+
+class Node(ABC):
+    """One participant on the transport, with its own name, parameters and fault handler."""
+
+    def __init__(
+        self,
+        name: str,
+        namespace: str,
+        clock: Clock,
+        parameter_overrides: Mapping[str, ParameterValue] | None = None,
+    ) -> None:
+        self.name = validate_node_name(name)
+        resolve_name("x", namespace)  # validates the namespace
+        self.namespace = namespace
+        self.clock = clock
+        self.logger = logging.getLogger(f"{namespace.strip('/').replace('/', '.') or 'root'}.{name}")
+        self._overrides: dict[str, ParameterValue] = dict(parameter_overrides or {})
+        self._parameters: dict[str, ParameterValue] = {}
+        self.fault_handler: FaultHandler = self._log_fault
+
+    @property
+    def fully_qualified_name(self) -> str:
+        return f"{self.namespace.rstrip('/')}/{self.name}"
+
+    def resolve(self, name: str) -> str:
+        return resolve_name(name, self.namespace, self.name)
+
+    # ------------------------------------------------------------------------- parameters
+    def declare_parameter(self, name: str, default: ParameterValue, description: str = "") -> ParameterValue:
+        """Declare a parameter with a default; an override given at launch must have the same type."""
+        if name in self._parameters:
+            raise TransportError(f"{self.fully_qualified_name}: parameter {name!r} declared twice")
+        value = self._overrides.get(name, default)
+        if not _same_parameter_type(value, default):
+            raise TransportError(
+                f"{self.fully_qualified_name}: parameter {name!r} must be {type(default).__name__}, "
+                f"got {type(value).__name__} {value!r}"
+            )
+        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        self._parameters[name] = value
+        return value
+
+    def get_parameter(self, name: str) -> ParameterValue:
+        try:
+            return self._parameters[name]
+        except KeyError:
+            raise TransportError(f"{self.fully_qualified_name}: parameter {name!r} was never declared") from None
+
+    def undeclared_overrides(self) -> list[str]:
+        """Overrides nobody declared: almost always a typo in a launch file."""
+        return sorted(set(self._overrides) - set(self._parameters))
+
+    # --------------------------------------------------------------------------- endpoints
+    @abstractmethod
+    def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]: ...
+
+    @abstractmethod
+    def create_subscription(
+        self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS
+    ) -> Subscription[M]: ...
+
+    @abstractmethod
+    def create_service(
+        self, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]
+    ) -> ServiceServer: ...
+
+    @abstractmethod
+    def create_client(self, srv_type: type, name: str) -> ServiceClient[Any, Any]: ...
+
+    @abstractmethod
+    def destroy(self) -> None:
+        """Remove every endpoint of this node."""
+
+    # ------------------------------------------------------------------------------ faults
+    def report_fault(self, where: str, error: BaseException) -> None:
+        """Hand a fault from a callback to the node's fault handler; never lets it escape silently."""
+        try:
+            self.fault_handler(where, error)
+        except Exception:  # the handler itself failed: the log is the last resort
+            self.logger.exception("fault handler failed while handling %s: %r", where, error)
+
+    def _log_fault(self, where: str, error: BaseException) -> None:
+        self.logger.error("%s: fault in %s: %s: %s", self.fully_qualified_name, where, type(error).__name__, error)
+
+
+def _same_parameter_type(value: object, default: object) -> bool:
+    if isinstance(default, bool) or isinstance(value, bool):
+        return type(value) is type(default)
+    if isinstance(default, float):
+        return isinstance(value, (int, float))
+    if isinstance(default, list):
+        return isinstance(value, list)
+    return type(value) is type(default)
+
+
+class Transport(ABC):
+    """A family of nodes that can reach each other."""
+
+    def __init__(self, clock: Clock) -> None:
+        self.clock = clock
+
+    @abstractmethod
+    def create_node(
+        self,
+        name: str,
+        namespace: str = "/",
+        parameters: Mapping[str, ParameterValue] | None = None,
+    ) -> Node: ...
+
+    @abstractmethod
+    async def shutdown(self) -> None:
+        """Destroy every node and release the middleware."""

@@ -1,0 +1,226 @@
+"""The JSON messages between engine, group machines, bridges and viewers, and their topic names.
+
+Every structured message is a frozen dataclass carried as JSON in ``std_msgs/String``, with a
+protocol version ``v`` (always 1) and, for commands and their answers, a correlation ``id``.
+Receivers decode with :func:`execution_engine.transport.codec.decode`, which validates the whole
+message; a message that fails is reported and ignored.  Names follow the table in
+docs/architecture.md.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from core_functions.geometry import Pose
+from core_functions.primitives import Primitive
+
+PROTOCOL_VERSION = 1
+
+
+def _check_version(v: int) -> None:
+    if v != PROTOCOL_VERSION:
+        raise ValueError(f"protocol version {v} is not supported (this node speaks v{PROTOCOL_VERSION})")
+
+
+# --------------------------------------------------------------------- engine <-> machine
+@dataclass(frozen=True)
+class SmRequest:
+    """Engine -> machine: run one function of one operation (or ``end``: go to Finish)."""
+
+    id: str
+    kind: Literal["execute", "end"] = "execute"
+    operation: str = ""
+    function: str = ""
+    params: tuple[str, ...] = ()  # the <param value=...> texts; the machine parses them with the catalog
+    attempt: int = 1
+    v: int = PROTOCOL_VERSION
+
+    def __post_init__(self) -> None:
+        _check_version(self.v)
+        if self.kind == "execute" and not self.function:
+            raise ValueError("an execute request needs a function")
+
+
+@dataclass(frozen=True)
+class SmResult:
+    """Machine -> engine: the outcome of a whole function."""
+
+    id: str
+    group: str
+    outcome: Literal["succeeded", "aborted", "preempted"]
+    operation: str = ""
+    function: str = ""
+    error: str | None = None
+    t_start: float = 0.0
+    t_end: float = 0.0
+    primitives: int = 0
+    v: int = PROTOCOL_VERSION
+
+    def __post_init__(self) -> None:
+        _check_version(self.v)
+
+
+@dataclass(frozen=True)
+class SmStatus:
+    """Machine -> anyone: one event of the machine (a transition, a function or primitive edge)."""
+
+    group: str
+    event: Literal[
+        "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error"
+    ]
+    state: str
+    t: float
+    from_state: str | None = field(default=None, metadata={"json": "from"})
+    to_state: str | None = field(default=None, metadata={"json": "to"})
+    signal: str | None = None
+    operation: str | None = None
+    function: str | None = None
+    request_id: str | None = None
+    primitive: str | None = None
+    index: int | None = None
+    count: int | None = None
+    outcome: str | None = None
+    error: str | None = None
+    v: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True)
+class TransitionSpec:
+    """One row of the transition table: ``from --signal--> to``."""
+
+    source: str = field(metadata={"json": "from"})
+    signal: str
+    target: str = field(metadata={"json": "to"})
+
+
+@dataclass(frozen=True)
+class SmStructure:
+    """Machine -> viewers (latched): the states and transitions, for drawing the machine."""
+
+    group: str
+    initial: str
+    states: tuple[str, ...]
+    transitions: tuple[TransitionSpec, ...]
+    v: int = PROTOCOL_VERSION
+
+
+# ---------------------------------------------------------------------- machine <-> bridge
+@dataclass(frozen=True)
+class BridgeCommand:
+    """Machine -> bridge: execute a primitive, or pause / resume / stop the group's motion."""
+
+    id: str
+    group: str
+    op: Literal["execute", "pause", "resume", "stop"]
+    primitive: Primitive | None = None
+    v: int = PROTOCOL_VERSION
+
+    def __post_init__(self) -> None:
+        _check_version(self.v)
+        if (self.op == "execute") != (self.primitive is not None):
+            raise ValueError("an execute command carries a primitive, and only it does")
+
+
+@dataclass(frozen=True)
+class BridgeFeedback:
+    """Bridge -> machine: what became of a command (``id`` is the command's)."""
+
+    id: str
+    group: str
+    status: Literal["accepted", "done", "error", "paused", "resumed", "stopped"]
+    error: str | None = None
+    result: dict[str, Any] | None = None
+    t: float = 0.0
+    v: int = PROTOCOL_VERSION
+
+
+# --------------------------------------------------------------------------------- engine
+@dataclass(frozen=True)
+class GroupProgress:
+    state: str
+    operation: str | None = None
+    function: str | None = None
+
+
+@dataclass(frozen=True)
+class EngineStatus:
+    """Engine -> anyone: where the application is."""
+
+    app: str
+    state: Literal["idle", "running", "paused", "stepping", "error", "alarm", "stopping", "finished", "failed", "stopped"]
+    operation_index: int
+    operation_count: int
+    t: float
+    operation_id: str | None = None
+    groups: dict[str, GroupProgress] = field(default_factory=dict)
+    message: str = ""
+    v: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True)
+class CellFrame:
+    """A named frame of the cell, resolved to the world frame, with its attributes."""
+
+    name: str
+    pose: Pose
+    kind: str = "frame"
+    parent: str = "world"
+    attributes: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class CellSnapshot:
+    """Engine -> machines and bridges (latched): the cell model the application runs in."""
+
+    name: str
+    frames: tuple[CellFrame, ...] = ()
+    elements: dict[str, dict[str, str]] = field(default_factory=dict)
+    joint_poses: dict[str, dict[str, float]] = field(default_factory=dict)
+    truth: dict[str, Pose] = field(default_factory=dict)
+    v: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True)
+class SyncMessage:
+    """Machine <-> machine, for FullBodyMotion and MasterSlave: who is at the barrier, and what for."""
+
+    group: str
+    key: str
+    event: Literal["arrived", "done", "failed", "left"]
+    state: str
+    t: float = 0.0
+    error: str | None = None
+    v: int = PROTOCOL_VERSION
+
+
+# ---------------------------------------------------------------------------------- names
+def sm_topic(group: str, leaf: str) -> str:
+    """``/<group>/sm/<leaf>`` for request, result, state, status, structure."""
+    return f"/{group}/sm/{leaf}"
+
+
+def sm_service(group: str, command: str) -> str:
+    """``/<group>/sm/<command>`` for pause, resume, stop, reset."""
+    return f"/{group}/sm/{command}"
+
+
+def bridge_topic(group: str, leaf: str) -> str:
+    """``/<group>/bridge/<leaf>`` for command and feedback."""
+    return f"/{group}/bridge/{leaf}"
+
+
+def tcp_pose_topic(group: str) -> str:
+    return f"/{group}/tcp_pose"
+
+
+ENGINE_STATUS = "/execution_engine/status"
+ENGINE_CELL = "/execution_engine/cell"
+JOINT_STATES = "/joint_states"
+SAFETY_STOP = "/cell/safety_stop"
+SYNC_TOPIC = "/coordination/sync"
+ENGINE_SERVICES = ("start", "pause", "resume", "stop", "step", "reset")
+MACHINE_SERVICES = ("pause", "resume", "stop", "reset")
+
+
+def engine_service(command: str) -> str:
+    return f"/execution_engine/{command}"

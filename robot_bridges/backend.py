@@ -1,0 +1,99 @@
+"""The bridge port: what a robot back end must do so group machines can drive it.
+
+A back end executes :mod:`core_functions.primitives` for one or more groups and reports where
+the robot is.  It knows nothing of topics: :class:`robot_bridges.bridge_node.BridgeNode` carries
+commands and feedback over the transport.  Back ends exist for the Nextage kinematic simulator,
+an Adept V+ controller (TCP) and a KUKA controller over RSI (UDP).
+
+Contract, which the bridge node and the tests rely on:
+
+* ``execute`` runs one primitive to completion and returns its result, or raises
+  :class:`BridgeError` with a :class:`FaultKind`; it never returns half-done.
+* ``pause`` holds the group where it is; ``resume`` completes the *same* primitive to the same
+  target; ``stop`` abandons it, and the pending ``execute`` raises ``BridgeError(STOPPED)``.
+* Any other exception out of a back end is a bug; the bridge node still reports it as an error.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from enum import Enum
+from typing import TYPE_CHECKING
+
+from core_functions.geometry import Pose
+from core_functions.primitives import Primitive, PrimitiveResult
+
+if TYPE_CHECKING:  # the cell snapshot is only a parameter type here
+    from execution_engine.transport.wire import CellSnapshot
+
+
+class FaultKind(Enum):
+    """Why a primitive failed, so error handling and reports can tell faults apart."""
+
+    UNREACHABLE = "unreachable"  # no IK solution / outside the workspace
+    JOINT_LIMIT = "joint_limit"  # a target or a path point beyond a joint limit
+    COLLISION = "collision"
+    VISION = "vision"  # feature not found, camera failure
+    UNSUPPORTED = "unsupported"  # the robot cannot do this primitive
+    STOPPED = "stopped"  # stop requested while executing
+    TIMEOUT = "timeout"  # the controller did not answer in time
+    CONNECTION = "connection"  # the link to the controller broke
+    PROTOCOL = "protocol"  # the controller answered something we cannot parse
+    CONTROLLER = "controller"  # the controller reported a fault (RSI stop, drive error)
+    BUSY = "busy"  # a primitive is already running for this group
+    INTERNAL = "internal"  # a defect in the bridge itself
+
+
+class BridgeError(Exception):
+    """A primitive failed on the robot side; ``kind`` says why, the message says where."""
+
+    def __init__(self, kind: FaultKind, message: str) -> None:
+        super().__init__(f"{kind.value}: {message}")
+        self.kind = kind
+        self.detail = message
+
+
+class RobotBackend(ABC):
+    """One robot controller (real or simulated) serving one or more groups."""
+
+    #: Human-readable name for logs ("nextage_sim", "vplus 192.168.0.10:1234", ...).
+    name: str = "backend"
+    #: The frame poses are expressed in (the robot base; ``WAIST`` on Nextage).
+    world_frame: str = "world"
+
+    @property
+    @abstractmethod
+    def groups(self) -> tuple[str, ...]:
+        """The groups this back end drives."""
+
+    async def start(self) -> None:
+        """Connect or start the simulation; called once before the first command."""
+
+    async def close(self) -> None:
+        """Release the connection; called once at shutdown."""
+
+    @abstractmethod
+    async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
+        """Run ``primitive`` on ``group`` to completion; raise :class:`BridgeError` on failure."""
+
+    @abstractmethod
+    async def pause(self, group: str) -> None:
+        """Hold the group's motion in place (no-op when idle)."""
+
+    @abstractmethod
+    async def resume(self, group: str) -> None:
+        """Continue the paused primitive to its original target."""
+
+    @abstractmethod
+    async def stop(self, group: str) -> None:
+        """Abandon the group's current primitive and hold position."""
+
+    @abstractmethod
+    def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
+        """Names and positions (rad) of every joint the back end knows."""
+
+    @abstractmethod
+    def tcp_pose(self, group: str) -> Pose | None:
+        """The group's TCP in the world frame, or None for a group without one (torso_head)."""
+
+    def set_cell(self, cell: CellSnapshot) -> None:  # noqa: B027 - optional hook
+        """Receive the application's cell model (simulators use it for simulated vision)."""

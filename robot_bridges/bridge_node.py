@@ -1,0 +1,171 @@
+"""The bridge node: carries primitives from group machines to a :class:`RobotBackend`.
+
+Subscribes ``/<group>/bridge/command`` for each group of the back end, answers on
+``/<group>/bridge/feedback`` (accepted, then done or error; paused / resumed / stopped for the
+control commands), and publishes ``/joint_states`` and ``/<group>/tcp_pose`` periodically.
+One primitive runs per group at a time; a second one is refused as BUSY rather than queued,
+because a machine that sends two primitives at once has lost track of its robot.
+
+Every failure becomes an ``error`` feedback naming the command: garbage on the command topic is
+reported (it has no id to answer), a back-end exception is reported even when it is a bug.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from core_functions.primitives import describe
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, String, Time
+from execution_engine.transport.port import Node, Publisher
+from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
+from execution_engine.transport.wire import (
+    ENGINE_CELL,
+    JOINT_STATES,
+    BridgeCommand,
+    BridgeFeedback,
+    CellSnapshot,
+    bridge_topic,
+    tcp_pose_topic,
+)
+from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
+
+log = logging.getLogger(__name__)
+
+
+class BridgeNode:
+    """Binds one back end to the transport through one node."""
+
+    def __init__(self, node: Node, backend: RobotBackend) -> None:
+        self.node = node
+        self.backend = backend
+        self.clock = node.clock
+        self.state_period = float(node.declare_parameter("state_period", 0.05, "joint_states / tcp_pose period (s)"))
+        if self.state_period <= 0:
+            raise ValueError(f"{node.fully_qualified_name}: state_period must be > 0, got {self.state_period}")
+        self._feedback: dict[str, Publisher[String]] = {}
+        self._running: dict[str, asyncio.Task[None]] = {}
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._joint_pub = node.create_publisher(JointState, JOINT_STATES, SENSOR)
+        self._tcp_pubs = {g: node.create_publisher(PoseStamped, tcp_pose_topic(g), SENSOR) for g in backend.groups}
+        for group in backend.groups:
+            self._feedback[group] = node.create_publisher(String, bridge_topic(group, "feedback"), COMMANDS)
+            node.create_subscription(
+                String, bridge_topic(group, "command"), lambda msg, g=group: self._on_command(g, msg), COMMANDS
+            )
+        node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
+        self._state_task: asyncio.Task[None] | None = None
+        self.errors: list[str] = []
+
+    # ---------------------------------------------------------------------------- lifecycle
+    async def start(self) -> None:
+        await self.backend.start()
+        self._state_task = asyncio.get_running_loop().create_task(self._publish_state_loop(), name="bridge state")
+
+    async def close(self) -> None:
+        for task in [*self._running.values(), *self._tasks]:
+            task.cancel()
+        if self._state_task:
+            self._state_task.cancel()
+        await asyncio.gather(*self._running.values(), *self._tasks, return_exceptions=True)
+        if self._state_task:
+            await asyncio.gather(self._state_task, return_exceptions=True)
+        await self.backend.close()
+        self.node.destroy()
+
+    # ------------------------------------------------------------------------------ inbound
+    def _on_cell(self, msg: String) -> None:
+        try:
+            cell = codec.decode(CellSnapshot, msg.data, source=ENGINE_CELL)
+        except codec.WireError as error:
+            self._report(f"ignored cell model: {error}")
+            return
+        self.backend.set_cell(cell)
+
+    def _on_command(self, group: str, msg: String) -> None:
+        source = bridge_topic(group, "command")
+        try:
+            command = codec.decode(BridgeCommand, msg.data, source=source)
+        except codec.WireError as error:
+            self._report(f"rejected command: {error}")
+            return
+        if command.group != group:
+            self._send(group, command.id, "error", error=f"command for group {command.group!r} arrived on {source}")
+            return
+        if command.op == "execute":
+            self._start_execute(command)
+        else:
+            self._spawn(self._control(command))
+
+    def _start_execute(self, command: BridgeCommand) -> None:
+        group = command.group
+        busy = self._running.get(group)
+        if busy is not None and not busy.done():
+            self._send(group, command.id, "error", error=f"{FaultKind.BUSY.value}: {group} is already executing a primitive")
+            return
+        self._send(group, command.id, "accepted")
+        task = asyncio.get_running_loop().create_task(self._execute(command), name=f"bridge {group} {command.id}")
+        self._running[group] = task
+
+    async def _execute(self, command: BridgeCommand) -> None:
+        assert command.primitive is not None
+        group = command.group
+        try:
+            result = await self.backend.execute(group, command.primitive)
+        except BridgeError as error:
+            self._send(group, command.id, "error", error=str(error))
+        except asyncio.CancelledError:
+            self._send(group, command.id, "error", error=f"{FaultKind.STOPPED.value}: bridge shutting down")
+            raise
+        except Exception as error:  # noqa: BLE001 - a back-end defect must still reach the machine
+            log.exception("%s: %s failed", self.backend.name, describe(command.primitive))
+            self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}")
+        else:
+            self._send(group, command.id, "done", result=codec.to_primitive(result))
+
+    async def _control(self, command: BridgeCommand) -> None:
+        group = command.group
+        status = {"pause": "paused", "resume": "resumed", "stop": "stopped"}[command.op]
+        try:
+            await getattr(self.backend, command.op)(group)
+        except BridgeError as error:
+            self._send(group, command.id, "error", error=str(error))
+        except Exception as error:  # noqa: BLE001
+            log.exception("%s: %s of %s failed", self.backend.name, command.op, group)
+            self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}")
+        else:
+            self._send(group, command.id, status)
+
+    # ----------------------------------------------------------------------------- outbound
+    def _send(self, group: str, command_id: str, status: str, *, error: str | None = None, result: dict | None = None) -> None:
+        feedback = BridgeFeedback(id=command_id, group=group, status=status, error=error, result=result, t=self.clock.now())  # type: ignore[arg-type]
+        self._feedback[group].publish(String(codec.encode(feedback)))
+
+    def _report(self, text: str) -> None:
+        self.errors.append(text)
+        self.node.logger.error("%s: %s", self.node.fully_qualified_name, text)
+
+    def _spawn(self, coro: object) -> None:
+        task = asyncio.get_running_loop().create_task(coro)  # type: ignore[arg-type]
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def publish_state(self) -> None:
+        """Publish joint_states and every TCP pose once (also called after each primitive)."""
+        stamp = Time.from_seconds(self.clock.now())
+        names, positions = self.backend.joint_state()
+        self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(names), position=tuple(positions)))
+        for group, pub in self._tcp_pubs.items():
+            pose = self.backend.tcp_pose(group)
+            if pose is None:
+                continue
+            msg_pose = Pose(Point(pose.x, pose.y, pose.z), Quaternion(pose.qx, pose.qy, pose.qz, pose.qw))
+            pub.publish(PoseStamped(header=Header(stamp=stamp, frame_id=self.backend.world_frame), pose=msg_pose))
+
+    async def _publish_state_loop(self) -> None:
+        while True:
+            try:
+                self.publish_state()
+            except Exception as error:  # noqa: BLE001 - reported; the loop keeps the robot visible
+                self.node.report_fault("joint state publishing", error)
+            await self.clock.sleep(self.state_period)

@@ -1,0 +1,1 @@
+"""kuka_rsi back end."""

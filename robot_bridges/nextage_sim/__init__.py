@@ -1,0 +1,1 @@
+"""nextage_sim back end."""

@@ -1,0 +1,1 @@
+"""vplus back end."""

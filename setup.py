@@ -1,0 +1,58 @@
+"""Install script for colcon (ament_python) and for pip.
+
+colcon reads ``data_files`` to lay out ``share/dual_arm_executive`` the way ``ros2 launch`` and
+ament_index expect; pip installs the same files under ``<prefix>/share/dual_arm_executive``, where
+:mod:`execution_engine.resources` finds them when the source tree is not at hand.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+PACKAGE = "dual_arm_executive"
+HERE = Path(__file__).resolve().parent
+
+
+def tree(folder: str) -> list[tuple[str, list[str]]]:
+    """Map every file below ``folder`` to the matching directory under share/<package>."""
+    entries: dict[str, list[str]] = {}
+    for path in sorted((HERE / folder).rglob("*")):
+        if path.is_file() and "__pycache__" not in path.parts:
+            rel = path.relative_to(HERE)
+            entries.setdefault(str(Path("share") / PACKAGE / rel.parent), []).append(str(rel))
+    return sorted(entries.items())
+
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    description="Skill-based execution of XML robot applications with one state machine per robot group",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    packages=find_packages(
+        include=["execution_engine*", "core_functions*", "app_functions*", "robot_bridges*"]
+    ),
+    package_data={"robot_bridges.nextage_sim": ["urdf/*.urdf"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        *tree("launch"),
+        *tree("config"),
+        *tree("apps_xml"),
+    ],
+    install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7"],
+    extras_require={"test": ["pytest>=7", "hypothesis>=6.80"]},
+    zip_safe=True,
+    entry_points={
+        "console_scripts": [
+            "execution_engine = execution_engine.nodes:engine_main",
+            "group_machine = execution_engine.nodes:group_machine_main",
+            "nextage_sim_bridge = robot_bridges.nextage_sim.node:main",
+            "vplus_bridge = robot_bridges.vplus.node:main",
+            "vplus_simulator = robot_bridges.vplus.simulator:main",
+            "kuka_rsi_bridge = robot_bridges.kuka_rsi.node:main",
+            "kuka_rsi_simulator = robot_bridges.kuka_rsi.simulator:main",
+        ]
+    },
+)
