@@ -1,0 +1,27 @@
+"""Shared fixtures: simulated time, a local transport, and hypothesis profiles."""
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Coroutine
+from typing import Any, TypeVar
+
+import pytest
+from hypothesis import HealthCheck, settings
+
+from execution_engine.clock import Clock, run_with_clock, simulated_clock
+
+T = TypeVar("T")
+
+settings.register_profile("ci", deadline=None, max_examples=200, suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("dev", deadline=None, max_examples=60, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+
+@pytest.fixture
+def run_sim() -> Callable[[Callable[[Clock], Coroutine[Any, Any, T]]], T]:
+    """Run ``main(clock)`` on a fresh virtual-time loop: waits cost no wall time, runs are deterministic."""
+
+    def run(main: Callable[[Clock], Coroutine[Any, Any, T]]) -> T:
+        return run_with_clock(main, simulated_clock())
+
+    return run
