@@ -37,6 +37,7 @@ class ParamType(Enum):
     CHOICE = "choice"  # one of the listed choices
     NAME = "name"  # an identifier you choose (a trajectory name)
     FRAME = "frame"  # the name of a frame of the cell model
+    FRAMES = "frames"  # one or more cell frame names, separated by spaces or commas
     ELEMENT = "element"  # the name of an element (reference) of the cell model
     TARGET = "target"  # a cell frame name, or "x,y,z,roll,pitch,yaw" in m and rad (mm/deg suffix allowed)
     JOINTS = "joints"  # one value per joint of the group, rad (deg suffix allowed)
@@ -227,6 +228,13 @@ def _parse_element(spec: ParamSpec, text: str, ctx: BindContext) -> str:
     return text
 
 
+def _parse_frames(spec: ParamSpec, text: str, ctx: BindContext) -> tuple[str, ...]:
+    names = [t for t in re.split(r"[,\s]+", text) if t]
+    if not names:
+        raise ValueError("no frame names given")
+    return tuple(_parse_frame(spec, name, ctx) for name in names)
+
+
 def _numbers(text: str, unit_spec: ParamSpec) -> list[float]:
     """Comma- or space-separated numbers; a unit may follow each number or the whole list."""
     tokens = [t for t in re.split(r"[,\s]+", text) if t]
@@ -287,6 +295,7 @@ _PARSERS: dict[ParamType, Callable[[ParamSpec, str, BindContext], Any]] = {
     ParamType.CHOICE: _parse_choice,
     ParamType.NAME: _parse_name,
     ParamType.FRAME: _parse_frame,
+    ParamType.FRAMES: _parse_frames,
     ParamType.ELEMENT: _parse_element,
     ParamType.TARGET: _parse_target,
     ParamType.JOINTS: _parse_joints,

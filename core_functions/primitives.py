@@ -260,8 +260,10 @@ class FullBodyMove:
 class MasterSlaveMove:
     """Bi-manual move: the master's TCP path, and the slave's derived with a fixed offset.
 
-    ``slave_path[i] = master_path[i] * offset``; the offset is the slave TCP expressed in the
-    master TCP frame (for a part held by both hands: their relative pose at the start).
+    ``slave_path[i] = master_path[i] * offset``, where the offset is the slave TCP expressed in
+    the master TCP frame; ``offset=None`` means "the offset the two TCPs have when the move
+    starts" (a part held by both hands stays held).  The slave's machine holds a copy with an
+    empty ``master_path``: only the master's copy, which has the path, is sent to a bridge.
     """
 
     KIND: ClassVar[str] = "master_slave_move"
@@ -269,17 +271,16 @@ class MasterSlaveMove:
     RESULT: ClassVar[type] = MotionResult
     master: str
     slave: str
-    master_path: tuple[Pose, ...]
-    offset: Pose
+    master_path: tuple[Pose, ...] = ()
+    offset: Pose | None = None
 
     def __post_init__(self) -> None:
         if self.master == self.slave:
             raise ValueError("master and slave must be different groups")
-        if not self.master_path:
-            raise ValueError("a master/slave move needs a master path")
 
-    def slave_path(self) -> tuple[Pose, ...]:
-        return tuple(p.compose(self.offset) for p in self.master_path)
+    def slave_path(self, offset: Pose) -> tuple[Pose, ...]:
+        """The slave's waypoints for ``offset`` (pass ``self.offset`` or the measured start offset)."""
+        return tuple(p.compose(offset) for p in self.master_path)
 
 
 Primitive = Union[

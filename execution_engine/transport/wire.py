@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from core_functions.cell_index import CellFrame, CellIndex
 from core_functions.geometry import Pose
 from core_functions.primitives import Primitive
 
@@ -33,6 +34,8 @@ class SmRequest:
     function: str = ""
     params: tuple[str, ...] = ()  # the <param value=...> texts; the machine parses them with the catalog
     attempt: int = 1
+    sync: str = ""  # barrier key shared by the partners of a synchronised function
+    partners: tuple[str, ...] = ()  # every group taking part in that synchronised function, leader first
     v: int = PROTOCOL_VERSION
 
     def __post_init__(self) -> None:
@@ -158,17 +161,6 @@ class EngineStatus:
 
 
 @dataclass(frozen=True)
-class CellFrame:
-    """A named frame of the cell, resolved to the world frame, with its attributes."""
-
-    name: str
-    pose: Pose
-    kind: str = "frame"
-    parent: str = "world"
-    attributes: dict[str, str] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
 class CellSnapshot:
     """Engine -> machines and bridges (latched): the cell model the application runs in."""
 
@@ -178,6 +170,9 @@ class CellSnapshot:
     joint_poses: dict[str, dict[str, float]] = field(default_factory=dict)
     truth: dict[str, Pose] = field(default_factory=dict)
     v: int = PROTOCOL_VERSION
+
+    def index(self) -> CellIndex:
+        return CellIndex(self.name, self.frames, self.elements, self.joint_poses)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,105 @@
+"""The cell model as skills see it: named frames resolved to the world frame, elements, joint poses.
+
+The application's cell model XML is loaded once, by the engine, which publishes it resolved to
+world poses (a ``CellSnapshot``); each group machine wraps that in a :class:`CellIndex`, so
+skills look frames up by name without knowing where the model came from.  Vision corrections
+are kept beside the nominal poses (:meth:`CellIndex.correct`), never overwriting them: a
+re-run starts from the nominal cell again.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+from core_functions.geometry import Pose
+
+
+@dataclass(frozen=True)
+class CellFrame:
+    """A named frame of the cell, resolved to the world frame, with its attributes."""
+
+    name: str
+    pose: Pose
+    kind: str = "frame"
+    parent: str = "world"
+    attributes: dict[str, str] = field(default_factory=dict)
+
+
+class CellIndex:
+    """Lookup of frames, elements and joint poses by name (implements catalog.CellView)."""
+
+    def __init__(
+        self,
+        name: str,
+        frames: Iterable[CellFrame],
+        elements: Mapping[str, Mapping[str, str]] | None = None,
+        joint_poses: Mapping[str, Mapping[str, float]] | None = None,
+    ) -> None:
+        self.name = name
+        self._frames = {f.name: f for f in frames}
+        self._elements = {k: dict(v) for k, v in (elements or {}).items()}
+        self._joint_poses = {k: dict(v) for k, v in (joint_poses or {}).items()}
+        self._measured: dict[str, Pose] = {}
+
+    # ------------------------------------------------------------------ catalog.CellView
+    def has_frame(self, name: str) -> bool:
+        return name in self._frames or name == "world"
+
+    def frame_kind(self, name: str) -> str:
+        return "world" if name == "world" else self._frames[name].kind
+
+    def frame_names(self) -> Iterable[str]:
+        return self._frames.keys()
+
+    def has_element(self, name: str) -> bool:
+        return name in self._elements
+
+    def element_kind(self, name: str) -> str:
+        return self._elements[name].get("kind", "element")
+
+    def has_joint_pose(self, name: str) -> bool:
+        return name in self._joint_poses
+
+    # --------------------------------------------------------------------------- lookup
+    def frame(self, name: str) -> CellFrame:
+        try:
+            return self._frames[name]
+        except KeyError:
+            raise KeyError(f"cell {self.name!r} has no frame {name!r}") from None
+
+    def nominal(self, name: str) -> Pose:
+        """The frame's world pose as the cell model gives it."""
+        return Pose() if name == "world" else self.frame(name).pose
+
+    def pose(self, name: str) -> Pose:
+        """The best known world pose: the last vision measurement if any, else the nominal."""
+        return self._measured.get(name) or self.nominal(name)
+
+    def correct(self, name: str, measured: Pose) -> None:
+        """Record where vision found ``name``; later :meth:`pose` calls use it."""
+        self.frame(name)
+        self._measured[name] = measured
+
+    def element(self, name: str) -> dict[str, str]:
+        try:
+            return dict(self._elements[name])
+        except KeyError:
+            raise KeyError(f"cell {self.name!r} has no element {name!r}") from None
+
+    def number(self, frame_or_element: str, attribute: str, default: float | None = None) -> float:
+        """A numeric attribute of a frame or element (SI units), e.g. a hole's diameter."""
+        source = self._elements.get(frame_or_element)
+        if source is None:
+            source = self.frame(frame_or_element).attributes
+        text = source.get(attribute)
+        if text is None:
+            if default is None:
+                raise KeyError(f"{frame_or_element!r} has no attribute {attribute!r}")
+            return default
+        return float(text)
+
+    def joint_pose(self, name: str) -> dict[str, float]:
+        try:
+            return dict(self._joint_poses[name])
+        except KeyError:
+            raise KeyError(f"cell {self.name!r} has no joint pose {name!r}") from None
