@@ -65,7 +65,7 @@ class IKOptions:
     max_iterations: int = 60
     restarts: int = 8
     max_step: float = 0.5  # rad per iteration, keeps DLS steps inside the linear region
-    damping: float = 1e-4  # lower bound of the squared DLS damping
+    damping: float = 1e-6  # bias of the squared DLS damping (which also grows with the error)
     restart_seed: int = 20170419
 
 
@@ -176,7 +176,7 @@ class ArmKinematics:
         lower, upper = self.lower, self.upper
         e = self._error(goal_r, goal_p, q)
         cost = float(e @ e)
-        damping = opts.damping
+        boost = 1.0
         stalled = 0
         for _ in range(opts.max_iterations):
             pos_err, rot_err = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
@@ -189,6 +189,7 @@ class ArmKinematics:
                 jac[:, blocked] = 0.0
             jjt = jac @ jac.T
             for _ in range(8):  # bounded damping increases before giving up this iterate
+                damping = boost * (0.5 * cost + opts.damping)
                 dq = jac.T @ np.linalg.solve(jjt + damping * self._eye6, e)
                 largest = float(np.max(np.abs(dq)))
                 if largest > opts.max_step:
@@ -197,14 +198,14 @@ class ArmKinematics:
                 e_trial = self._error(goal_r, goal_p, trial)
                 trial_cost = float(e_trial @ e_trial)
                 if trial_cost < cost:
-                    stalled = stalled + 1 if trial_cost > 0.999 * cost else 0
+                    stalled = stalled + 1 if trial_cost > 0.9999 * cost else 0
                     q, e, cost = trial, e_trial, trial_cost
-                    damping = max(opts.damping, damping * 0.3)
+                    boost = max(1.0, boost * 0.3)
                     break
-                damping *= 10.0
+                boost *= 10.0
             else:
                 break
-            if stalled >= 5:
+            if stalled >= 10:
                 break
         pos_err, rot_err = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
         ok = pos_err < opts.position_tolerance and rot_err < opts.orientation_tolerance
