@@ -1,0 +1,77 @@
+"""The loaded application: what the engine runs, checked and normalised, with source positions.
+
+Immutable, so the engine, the CLI and viewers can share one instance without copies.  Params stay
+the texts of ``<param value=...>`` -- the group machine parses them with the same catalog that
+validated them -- but positional and complete: optional params left out are filled with their
+defaults, and a group left out of an operation gets an explicit, ``implicit=True`` wait call.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from core_functions.robots import RobotModel
+from execution_engine.app_model.cell import Cell
+
+ErrorAction = Literal["abort", "safe_pose", "alarm"]
+WAIT = "wait"
+
+
+@dataclass(frozen=True)
+class ErrorPolicy:
+    """What the engine does when a function fails (paper: error handling; docs/application_xml.md)."""
+
+    retries: int = 0
+    action: ErrorAction = "abort"
+    safe_pose: str | None = None  # a robot pose or a cell <joint_pose>; None when the robot has none
+    alarm_timeout: float = 0.0  # seconds an alarm waits for an operator reset; 0 = forever
+
+
+@dataclass(frozen=True)
+class Call:
+    """One group's function in one operation."""
+
+    group: str
+    function: str
+    params: tuple[str, ...]
+    implicit: bool = False  # True: the group was left out of the operation and waits
+    file: str = ""
+    line: int = 0
+    col: int = 0
+
+    @property
+    def is_wait(self) -> bool:
+        return self.function == WAIT
+
+
+@dataclass(frozen=True)
+class Operation:
+    """One step: every group of the robot has a call (in the robot's group order)."""
+
+    id: str
+    name: str | None
+    line: int
+    col: int
+    calls: Mapping[str, Call]
+
+
+@dataclass(frozen=True)
+class Application:
+    """A validated application file."""
+
+    name: str
+    path: Path
+    robot: RobotModel
+    cell: Cell | None
+    error_policy: ErrorPolicy
+    operations: tuple[Operation, ...]
+    description: str = ""
+    version: str | None = None
+
+    def operation(self, operation_id: str) -> Operation:
+        for operation in self.operations:
+            if operation.id == operation_id:
+                return operation
+        raise KeyError(operation_id)

@@ -1,0 +1,158 @@
+"""Read an XML file from outside the program without letting it do anything but be parsed.
+
+Application and cell files are written by users and passed around; a file must not be able to
+expand entities ("billion laughs"), read other files or reach the network through a DTD, or
+exhaust memory.  So: a size limit checked before reading, UTF-8 only (the text is needed for
+columns anyway), any DOCTYPE or ENTITY declaration refused before the parser sees it, and lxml
+configured to resolve nothing.  Every failure is a :class:`Diagnostic`, never an exception.
+"""
+from __future__ import annotations
+
+import codecs
+import os
+import re
+import stat
+from dataclasses import dataclass
+from pathlib import Path
+
+from lxml import etree
+
+from execution_engine.app_model.diagnostics import Diagnostic, Location
+from execution_engine.app_model.positions import SourceMap
+
+DEFAULT_MAX_BYTES = 32 * 1024 * 1024
+
+_DECLARATIONS = re.compile(r"<!--.*?-->|<!\[CDATA\[.*?\]\]>|<!(DOCTYPE|ENTITY)", re.S)
+_ENCODING = re.compile(r"""^<\?xml[^>]*?\sencoding\s*=\s*["']([^"']*)["']""")
+_UTF8_NAMES = {"utf-8", "utf8", "us-ascii", "ascii"}
+_LXML_POSITION = re.compile(r",\s*line \d+,\s*column \d+\s*$")
+
+# libxml2's wording for the syntax errors people make by hand, in plain words.
+_SYNTAX_REWRITES: tuple[tuple[re.Pattern[str], str], ...] = (
+    (re.compile(r"Opening and ending tag mismatch: (\S+) line (\d+) and (\S+)"),
+     r"closing tag </\3> does not match <\1> opened on line \2"),
+    (re.compile(r"""AttValue: " or ' expected"""), "attribute value must be in quotes"),
+    (re.compile(r"Premature end of data in tag (\S+) line (\d+)"), r"the file ends before <\1> (line \2) is closed"),
+    (re.compile(r"EndTag: '</' not found"), "the file ends before the root element is closed"),
+    (re.compile(r"Start tag expected, '<' not found"), "no XML element found"),
+    (re.compile(r"Document is empty"), "the file is empty"),
+    (re.compile(r"Extra content at the end of the document"), "text after the end of the root element"),
+    (re.compile(r"Entity '([^']*)' not defined"), r"unknown entity &\1; (only &lt; &gt; &amp; &quot; &apos; and &#...; exist)"),
+    (re.compile(r"Attribute (\S+) redefined"), r"attribute \1 is given twice"),
+)
+
+
+@dataclass(frozen=True)
+class XmlDocument:
+    """A parsed, well-formed file: its root element and where everything is in the text."""
+
+    path: Path
+    root: etree._Element
+    source: SourceMap
+
+    @property
+    def file(self) -> str:
+        return self.source.file
+
+
+def _hardened_parser() -> etree.XMLParser:
+    # A new parser per file: its error log then holds this file's errors only.
+    return etree.XMLParser(
+        resolve_entities=False,
+        no_network=True,
+        load_dtd=False,
+        dtd_validation=False,
+        huge_tree=False,
+        remove_comments=False,
+    )
+
+
+def _location_of_byte(file: str, data: bytes, offset: int) -> Location:
+    before = data[:offset].decode("utf-8", errors="replace")
+    line = before.count("\n") + 1
+    return Location(file, line, len(before) - (before.rfind("\n") + 1) + 1)
+
+
+def _decode(file: str, data: bytes) -> tuple[str | None, Diagnostic | None]:
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE, codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)):
+        return None, Diagnostic(file, 1, 1, "the file is UTF-16/32; only UTF-8 files are supported")
+    if data.startswith(codecs.BOM_UTF8):
+        data = data[len(codecs.BOM_UTF8):]
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        where = _location_of_byte(file, data, error.start)
+        return None, Diagnostic.at(where, f"invalid UTF-8 byte 0x{data[error.start]:02x} (files must be UTF-8)")
+    declared = _ENCODING.match(text)
+    if declared and declared.group(1).strip().lower() not in _UTF8_NAMES:
+        col = declared.start(1) + 1
+        return None, Diagnostic(file, 1, col, f"encoding {declared.group(1)!r} is not supported; write the file in UTF-8")
+    return text, None
+
+
+def _refuse_declarations(file: str, text: str) -> Diagnostic | None:
+    if "<!DOCTYPE" not in text and "<!ENTITY" not in text:
+        return None
+    for match in _DECLARATIONS.finditer(text):
+        if match.group(1):
+            where = SourceMap(file, text).at_offset(match.start())
+            return Diagnostic.at(
+                where,
+                f"<!{match.group(1)}> declarations are not allowed "
+                "(DTDs and entities are refused so a file cannot expand or fetch anything)",
+            )
+    return None
+
+
+def _syntax_message(message: str) -> str:
+    message = _LXML_POSITION.sub("", message).strip()
+    for pattern, replacement in _SYNTAX_REWRITES:
+        if pattern.search(message):
+            return pattern.sub(replacement, message)
+    return message
+
+
+def read_xml(path: Path, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES) -> tuple[XmlDocument | None, list[Diagnostic]]:
+    """Parse ``path`` safely; the document, or None and the reasons (``display`` names the file)."""
+    file = display if display is not None else str(path)
+    try:
+        info = os.stat(path)
+    except OSError as error:
+        return None, [Diagnostic(file, 1, 1, f"cannot read the file: {error.strerror or error}")]
+    if not stat.S_ISREG(info.st_mode):
+        return None, [Diagnostic(file, 1, 1, "not a regular file")]
+    if info.st_size > max_bytes:
+        return None, [Diagnostic(file, 1, 1, f"the file is {info.st_size} bytes, over the limit of {max_bytes} bytes")]
+    try:
+        with open(path, "rb") as stream:
+            data = stream.read(max_bytes + 1)
+    except OSError as error:
+        return None, [Diagnostic(file, 1, 1, f"cannot read the file: {error.strerror or error}")]
+    if len(data) > max_bytes:
+        return None, [Diagnostic(file, 1, 1, f"the file is over the limit of {max_bytes} bytes")]
+    return parse_bytes(data, path=path, display=file)
+
+
+def parse_bytes(data: bytes, *, path: Path, display: str) -> tuple[XmlDocument | None, list[Diagnostic]]:
+    """Parse bytes already read (and size-checked) as the content of ``path``."""
+    text, problem = _decode(display, data)
+    if text is None:
+        return None, [problem] if problem else []
+    problem = _refuse_declarations(display, text)
+    if problem is not None:
+        return None, [problem]
+    parser = _hardened_parser()
+    source = SourceMap(display, text)
+    try:
+        root = etree.fromstring(data, parser)
+    except etree.XMLSyntaxError as error:
+        line, col = error.position if error.position else (1, 1)
+        return None, [Diagnostic.at(source.at_line(line or 1, col or 1), _syntax_message(str(error.msg or error)))]
+    except (etree.LxmlError, ValueError) as error:
+        return None, [Diagnostic(display, 1, 1, f"cannot parse the file: {error}")]
+    if root is None:
+        return None, [Diagnostic(display, 1, 1, "no XML element found")]
+    docinfo = root.getroottree().docinfo
+    if docinfo.doctype or docinfo.internalDTD is not None:  # defence in depth; refused above already
+        return None, [Diagnostic(display, 1, 1, "DTDs are not allowed")]
+    return XmlDocument(path=path, root=root, source=SourceMap(display, text, root)), []

@@ -1,0 +1,229 @@
+"""Structural validation against the XSDs, with libxml2's messages rewritten into plain words.
+
+The schema says *what may go where*; libxml2 says so in terms of content models and facets
+("[facet 'pattern'] The value '1a' is not accepted by the pattern ..."). Users need the element,
+the attribute and what would be accepted, at the right line and column.  The wording of a value
+error comes from the ``xs:documentation`` of the simple type in the XSD itself, so the schema
+stays the single description of every attribute.
+"""
+from __future__ import annotations
+
+import difflib
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+from lxml import etree
+
+from execution_engine.app_model.diagnostics import Diagnostic, Location
+from execution_engine.app_model.safe_xml import XmlDocument
+from execution_engine.resources import share_path
+
+XS = "{http://www.w3.org/2001/XMLSchema}"
+
+_BUILTIN_TYPES = {
+    "xs:string": "a text",
+    "xs:double": "a number",
+    "xs:decimal": "a number",
+    "xs:integer": "a whole number",
+    "xs:nonNegativeInteger": "a whole number, 0 or more",
+}
+
+# Extra advice for an element found where the schema does not allow it: (parent, element) -> hint.
+_PLACEMENT_HINTS = {
+    ("application", "description"): "<description> and <error_policy> come before the first <operation>, at most once each",
+    ("application", "error_policy"): "<description> and <error_policy> come before the first <operation>, at most once each",
+    ("function", "param"): "params go inside <params>",
+}
+_GROUP_HINT = "a group runs exactly one <function> per operation; put the next one in a new <operation>"
+
+_ELEMENT_MSG = re.compile(r"^Element '([^']*)'(?:, attribute '([^']*)')?: (.*)$", re.S)
+_EXPECTED = re.compile(r"Expected is(?: one of)? \( ([^)]*) \)")
+
+
+@dataclass(frozen=True)
+class SchemaInfo:
+    """A compiled XSD and what the message rewriting needs to know about it."""
+
+    name: str
+    schema: etree.XMLSchema
+    root: str
+    attributes: dict[str, dict[str, str]] = field(default_factory=dict)  # element -> attribute -> type
+    open_attributes: frozenset[str] = frozenset()  # elements that accept free attributes
+    type_docs: dict[str, str] = field(default_factory=dict)  # simple type -> what it accepts
+
+
+def _collect(xsd: etree._Element) -> tuple[dict[str, dict[str, str]], set[str], dict[str, str], str]:
+    types = {t.get("name", ""): t for t in xsd.iterfind(f"{XS}complexType")}
+    docs: dict[str, str] = {}
+    for simple in xsd.iterfind(f"{XS}simpleType"):
+        text = simple.findtext(f"{XS}annotation/{XS}documentation")
+        if text:
+            docs[simple.get("name", "")] = " ".join(text.split())
+    attributes: dict[str, dict[str, str]] = {}
+    open_elements: set[str] = set()
+    for element in xsd.iter(f"{XS}element"):
+        name = element.get("name")
+        if not name:
+            continue
+        complex_type = element.find(f"{XS}complexType")
+        if complex_type is None and element.get("type") in types:
+            complex_type = types[element.get("type", "")]
+        if complex_type is None:
+            continue
+        own = attributes.setdefault(name, {})
+        for attribute in complex_type.iterfind(f"{XS}attribute"):
+            own[attribute.get("name", "")] = attribute.get("type", "xs:string")
+        if complex_type.find(f"{XS}anyAttribute") is not None:
+            open_elements.add(name)
+    root = next((e.get("name", "") for e in xsd.iterfind(f"{XS}element")), "")
+    return attributes, open_elements, docs, root
+
+
+@lru_cache(maxsize=None)
+def load_schema(name: str) -> SchemaInfo:
+    """The compiled ``apps_xml/schema/<name>.xsd`` (our own trusted file, parsed once)."""
+    path: Path = share_path("apps_xml", "schema", f"{name}.xsd")
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
+    xsd = etree.parse(str(path), parser)
+    attributes, open_elements, docs, root = _collect(xsd.getroot())
+    return SchemaInfo(name, etree.XMLSchema(xsd), root, attributes, frozenset(open_elements), docs)
+
+
+class _PathIndex:
+    """Resolves libxml2's node paths (``/application/operation[3]/left_arm``) in linear total time."""
+
+    def __init__(self, root: etree._Element) -> None:
+        self._root = root
+        self._children: dict[etree._Element, dict[str, list[etree._Element]]] = {}
+
+    def find(self, path: str | None) -> etree._Element | None:
+        if not path or not path.startswith("/"):
+            return None
+        steps = path.strip("/").split("/")
+        match = re.fullmatch(r"([^\[\]]+)(?:\[(\d+)\])?", steps[0])
+        if match is None or match.group(1) != self._root.tag:
+            return None
+        node = self._root
+        for step in steps[1:]:
+            match = re.fullmatch(r"([^\[\]]+)(?:\[(\d+)\])?", step)
+            if match is None:
+                return None
+            by_tag = self._children.get(node)
+            if by_tag is None:
+                by_tag = {}
+                for child in node.iterchildren(etree.Element):
+                    by_tag.setdefault(child.tag, []).append(child)
+                self._children[node] = by_tag
+            candidates = by_tag.get(match.group(1), [])
+            index = int(match.group(2) or 1) - 1
+            if not 0 <= index < len(candidates):
+                return None
+            node = candidates[index]
+        return node
+
+
+def _names(listing: str) -> list[str]:
+    return [n.strip() for n in listing.split(",") if n.strip()]
+
+
+def _one_of(names: list[str]) -> str:
+    tags = [f"<{n}>" for n in names]
+    return tags[0] if len(tags) == 1 else ", ".join(tags[:-1]) + " or " + tags[-1]
+
+
+class _Rewriter:
+    def __init__(self, info: SchemaInfo) -> None:
+        self.info = info
+
+    def expected_value(self, element: str, attribute: str) -> str:
+        type_name = self.info.attributes.get(element, {}).get(attribute, "")
+        return self.info.type_docs.get(type_name) or _BUILTIN_TYPES.get(type_name, "a valid value")
+
+    def attribute_message(self, node: etree._Element | None, element: str, attribute: str, detail: str) -> str:
+        if "is not allowed" in detail:
+            allowed = sorted(self.info.attributes.get(element, {}))
+            close = difflib.get_close_matches(attribute, allowed, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            return f"<{element}> has no attribute {attribute}{hint}; it takes: {', '.join(allowed)}"
+        value = node.get(attribute) if node is not None else None
+        shown = f"={value!r}" if value is not None else ""
+        return f"attribute {attribute}{shown} of <{element}>: expected {self.expected_value(element, attribute)}"
+
+    def element_message(self, node: etree._Element | None, element: str, detail: str) -> str:
+        parent = node.getparent() if node is not None else None
+        parent_tag = parent.tag if parent is not None and isinstance(parent.tag, str) else ""
+        required = re.match(r"The attribute '([^']*)' is required but missing", detail)
+        if required:
+            return f"<{element}> needs the attribute {required.group(1)}"
+        expected = _EXPECTED.search(detail)
+        expected_names = _names(expected.group(1)) if expected else []
+        if detail.startswith("Missing child element"):
+            if "operation" in expected_names:
+                return f"<{element}> needs at least one <operation>"
+            return f"<{element}> needs {_one_of(expected_names)} inside"
+        if detail.startswith("This element is not expected"):
+            return self._unexpected(element, parent_tag, expected_names)
+        if detail.startswith("Character content is not allowed"):
+            return f"<{element}> cannot contain text; write values as attributes"
+        if detail.startswith("Character content other than whitespace"):
+            return f"text is not allowed inside <{element}>, only elements"
+        if "No matching global declaration" in detail:
+            return f"the root element is <{element}>; this file must start with <{self.info.root}>"
+        return f"<{element}>: {detail.strip()}"
+
+    def _unexpected(self, element: str, parent: str, expected: list[str]) -> str:
+        where = f" inside <{parent}>" if parent else ""
+        message = f"<{element}> is not allowed here{where}"
+        hint = _PLACEMENT_HINTS.get((parent, element))
+        if hint is None and element == "function" and parent in {"left_arm", "right_arm", "torso_head", "arm"}:
+            hint = _GROUP_HINT
+        if hint is None and element not in self.info.attributes:
+            candidates = expected or list(self.info.attributes)
+            close = difflib.get_close_matches(element, candidates, n=1)
+            if close:
+                hint = f"did you mean <{close[0]}>?"
+        if expected:
+            message += f"; expected {_one_of(expected)}"
+        return message + (f" ({hint})" if hint else "")
+
+
+def validate_structure(doc: XmlDocument, schema: str) -> list[Diagnostic]:
+    """Every schema violation of ``doc``, one diagnostic per element or attribute at fault."""
+    info = load_schema(schema)
+    if info.schema.validate(doc.root):
+        return []
+    index = _PathIndex(doc.root)
+    rewriter = _Rewriter(info)
+    out: list[Diagnostic] = []
+    reported: set[tuple[object, str | None]] = set()
+    for entry in info.schema.error_log:
+        node = index.find(getattr(entry, "path", None))
+        match = _ELEMENT_MSG.match(entry.message or "")
+        element, attribute, detail = (match.group(1), match.group(2), match.group(3)) if match else ("", None, entry.message or "")
+        key: tuple[object, str | None] = (node if node is not None else entry.line, attribute)
+        if attribute is not None and key in reported:
+            continue  # a facet error and its "not a valid value" follow-up are one problem
+        reported.add(key)
+        where = _where(doc, node, attribute, entry.line)
+        if attribute is not None:
+            message = rewriter.attribute_message(node, element, attribute, detail)
+        else:
+            message = rewriter.element_message(node, element, detail)
+        out.append(Diagnostic.at(where, message))
+    return out
+
+
+def _where(doc: XmlDocument, node: etree._Element | None, attribute: str | None, line: int) -> Location:
+    if node is None:
+        return doc.source.at_line(line or 1)
+    if attribute is not None:
+        return doc.source.attribute(node, attribute)
+    return doc.source.element(node)
+
+
+def known_elements(schema: str) -> Iterable[str]:
+    """Element names declared by a schema (used by tests to keep the XSD and robots in step)."""
+    return load_schema(schema).attributes.keys()
