@@ -16,11 +16,13 @@ Contract, which the bridge node and the tests rely on:
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
 from enum import Enum
 from typing import TYPE_CHECKING
 
 from core_functions.geometry import Pose
 from core_functions.primitives import Primitive, PrimitiveResult
+from core_functions.robots import RobotModel
 
 if TYPE_CHECKING:  # the cell snapshot is only a parameter type here
     from execution_engine.transport.wire import CellSnapshot
@@ -97,3 +99,16 @@ class RobotBackend(ABC):
 
     def set_cell(self, cell: CellSnapshot) -> None:  # noqa: B027 - optional hook
         """Receive the application's cell model (simulators use it for simulated vision)."""
+
+
+@dataclass(frozen=True)
+class BackendOptions:
+    """How to reach (or simulate) a robot; each back end uses what concerns it and rejects the rest."""
+
+    robot: RobotModel
+    host: str | None = None  # a real controller's address; None: start a simulator in-process
+    port: int | None = None
+    rsi_listen: str | None = None  # KUKA RSI: HOST:PORT to serve a real controller on
+    faults: tuple[str, ...] = ()  # fault injections for tests and demos, e.g. "right_arm:joint_limit@0.5"
+    seed: int = 0
+    extra: dict[str, str] = field(default_factory=dict)

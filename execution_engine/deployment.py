@@ -1,0 +1,77 @@
+"""The embedded deployment: engine, one machine per group and a bridge, as nodes of one process.
+
+This is the default way to run (``python -m execution_engine run``) and the test bed: the
+nodes are exactly those of a ROS 2 launch, talking only over the in-process transport, so
+nothing here can lean on shared memory that a real deployment would not have.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from core_functions.robots import RobotModel
+from execution_engine.clock import Clock
+from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.machine.group_machine import GroupMachine
+from execution_engine.transport.local import LocalTransport
+from execution_engine.transport.port import ParameterValue, Transport
+from robot_bridges.backend import RobotBackend
+from robot_bridges.bridge_node import BridgeNode
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Deployment:
+    transport: Transport
+    engine: ExecutionEngine
+    machines: dict[str, GroupMachine]
+    bridge: BridgeNode
+    tasks: list[asyncio.Task[None]] = field(default_factory=list)
+
+    async def close(self) -> None:
+        for task in self.tasks:
+            task.cancel()
+        await asyncio.gather(*self.tasks, return_exceptions=True)
+        await self.bridge.close()
+        for machine in self.machines.values():
+            machine.close()
+        await self.transport.shutdown()
+
+
+async def deploy_local(
+    clock: Clock,
+    robot: RobotModel,
+    backend: RobotBackend,
+    *,
+    machine_parameters: Mapping[str, ParameterValue] | None = None,
+    engine_parameters: Mapping[str, ParameterValue] | None = None,
+    bridge_parameters: Mapping[str, ParameterValue] | None = None,
+    transport: LocalTransport | None = None,
+) -> Deployment:
+    """Start every node of a robot cell on one in-process transport."""
+    transport = transport or LocalTransport(clock)
+    bridge = BridgeNode(transport.create_node(f"{backend.name.replace('-', '_')}_bridge", parameters=bridge_parameters), backend)
+    await bridge.start()
+    machines: dict[str, GroupMachine] = {}
+    for group in robot.group_names:
+        params = {"group": group, "robot": robot.name, **(machine_parameters or {})}
+        machines[group] = GroupMachine(transport.create_node(f"{group}_machine", parameters=params))
+    engine = ExecutionEngine(transport.create_node("execution_engine", parameters=engine_parameters))
+    deployment = Deployment(transport, engine, machines, bridge)
+    loop = asyncio.get_running_loop()
+    for group, machine in machines.items():
+        deployment.tasks.append(loop.create_task(_supervise(machine, group), name=f"{group} machine"))
+    return deployment
+
+
+async def _supervise(machine: GroupMachine, group: str) -> None:
+    try:
+        await machine.run()
+    except asyncio.CancelledError:
+        raise
+    except Exception:  # noqa: BLE001 - GroupMachine.run only leaves by cancellation; log anything else
+        log.exception("the %s machine stopped unexpectedly", group)
+        raise

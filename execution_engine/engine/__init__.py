@@ -1,0 +1,1 @@
+"""The execution engine: runs an application's operations over the group machines."""

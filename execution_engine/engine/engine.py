@@ -1,0 +1,476 @@
+"""The execution engine node (paper §2.2.2): orchestrates an application over the group machines.
+
+Operations run in document order.  Within an operation every group's function is dispatched at
+once and runs concurrently; operation N+1 is dispatched only when every group has returned a
+result for N and is back in Ready -- the paper's guarantee that keeps the arms coordinated.  A
+group whose function is ``wait`` (no seconds) sits the operation out.
+
+When a function fails, dispatching stops, the other groups are paused, and the application's
+error policy decides: retry (reset the machine, send the function again), then either
+``abort`` (stop everything, end), ``safe_pose`` (stop, then move every group to a named joint
+pose, end) or ``alarm`` (hold everything until an operator resets, then retry; or stop).
+Operators pause, resume, stop and step the whole application through the engine's services;
+a ``true`` on ``/cell/safety_stop`` pauses every group until an operator resumes.
+"""
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+
+from app_functions.registry import full_catalog
+from core_functions.catalog import BindContext, Catalog
+from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.engine.group_link import GroupLink
+from execution_engine.engine.report import GroupError, RunReport
+from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import Bool, String, Trigger, TriggerRequest, TriggerResponse
+from execution_engine.transport.port import Node
+from execution_engine.transport.qos import EVENTS, LATCHED
+from execution_engine.transport.wire import (
+    ENGINE_CELL,
+    ENGINE_SERVICES,
+    ENGINE_STATUS,
+    SAFETY_STOP,
+    CellSnapshot,
+    EngineStatus,
+    GroupProgress,
+    SmRequest,
+    SmResult,
+    engine_service,
+)
+
+
+@dataclass
+class _Dispatch:
+    """A function sent to a group and not yet answered."""
+
+    call: Call
+    request: SmRequest
+    future: asyncio.Future[SmResult]
+    deadline: float
+
+
+class ApplicationAborted(Exception):
+    """The run cannot go on (policy exhausted, operator stop); the report says why."""
+
+
+class ExecutionEngine:
+    """One engine node; runs one application at a time."""
+
+    def __init__(self, node: Node, catalog: Catalog | None = None) -> None:
+        self.node = node
+        self.clock = node.clock
+        self.catalog = catalog or full_catalog()
+        self.autostart = bool(node.declare_parameter("autostart", True, "start running as soon as the machines are ready"))
+        self.startup_timeout = float(node.declare_parameter("startup_timeout", 15.0, "how long to wait for the group machines (s)"))
+        self.function_timeout = float(node.declare_parameter("function_timeout", 3600.0, "longest a function may take (s)"))
+        self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
+        self._status_pub = node.create_publisher(String, ENGINE_STATUS, EVENTS)
+        self._cell_pub = node.create_publisher(String, ENGINE_CELL, LATCHED)
+        node.create_subscription(Bool, SAFETY_STOP, self._on_safety, LATCHED)
+        for command in ENGINE_SERVICES:
+            node.create_service(Trigger, engine_service(command), lambda req, c=command: self._on_service(c, req))
+        self.links: dict[str, GroupLink] = {}
+        self.app: Application | None = None
+        self.report: RunReport | None = None
+        self.state = "idle"
+        self._op_index = 0
+        self._operation: Operation | None = None
+        self._message = ""
+        self._paused = False
+        self._stepping = False
+        self._stop_reason: str | None = None
+        self._safety_active = False
+        self._control = asyncio.Event()  # set whenever pause/resume/stop/step/reset/start happens
+        self._started = not self.autostart
+        self._start_requested = False
+        self._alarm_reset = False
+        self._progress: dict[str, GroupProgress] = {}
+
+    # ============================================================================ running
+    async def run(self, app: Application) -> RunReport:
+        """Run ``app`` to its end; always returns a report, never raises for robot faults."""
+        self.app = app
+        report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
+        self.report = report
+        for group in app.robot.group_names:
+            if group not in self.links:
+                self.links[group] = GroupLink(self.node, group, self.service_timeout)
+            report.group_busy.setdefault(group, 0.0)
+            report.group_functions.setdefault(group, 0)
+        if app.cell is not None:
+            snapshot: CellSnapshot = app.cell.to_snapshot()
+            self._cell_pub.publish(String(codec.encode(snapshot)))
+        try:
+            await self._await_machines()
+            await self._await_start()
+            self._set_state("running")
+            for index, operation in enumerate(app.operations):
+                if not await self._gate():
+                    break
+                self._op_index, self._operation = index, operation
+                self._set_state("stepping" if self._stepping else "running")
+                await self._run_operation(operation)
+                report.operations_done = index + 1
+                if self._stepping:
+                    self._paused = True
+            if self._stop_reason is not None:
+                report.outcome, report.message = "stopped", self._stop_reason
+        except ApplicationAborted as abort:
+            report.outcome = "stopped" if self._stop_reason is not None else "failed"
+            report.message = str(abort)
+        self._set_state("stopping")
+        report.finished_cleanly = await self._end_all()
+        report.t_end = self.clock.now()
+        self._set_state({"finished": "finished", "failed": "failed", "stopped": "stopped"}[report.outcome], report.message)
+        return report
+
+    async def _await_machines(self) -> None:
+        """Every group machine must be up (Ready, or Finish from an earlier run) before we start."""
+        waits = {g: link.wait_state((READY, FINISH, ERROR_HANDLING), self.startup_timeout) for g, link in self.links.items()}
+        results = dict(zip(waits, await asyncio.gather(*waits.values())))
+        missing = [g for g, ok in results.items() if not ok]
+        if missing:
+            raise ApplicationAborted(
+                f"no group machine answered for {', '.join(missing)} within {self.startup_timeout:g} s "
+                "(is group_machine running for each group, and the bridge?)"
+            )
+        for group, link in self.links.items():
+            if link.state == ERROR_HANDLING:
+                ok, message = await link.command("reset")
+                if not ok or not await link.wait_state((READY,), self.service_timeout):
+                    raise ApplicationAborted(f"{group} is in ErrorHandling from an earlier run and would not reset: {message}")
+
+    async def _await_start(self) -> None:
+        if self.autostart:
+            return
+        self._set_state("idle", "waiting for start")
+        while not self._start_requested and self._stop_reason is None:
+            await self._wait_control()
+        if self._stop_reason is not None:
+            raise ApplicationAborted(self._stop_reason)
+
+    async def _gate(self) -> bool:
+        """Hold between operations while paused; False when the application must stop."""
+        while self._paused and self._stop_reason is None:
+            self._set_state("paused")
+            await self._wait_control()
+        return self._stop_reason is None
+
+    async def _wait_control(self) -> None:
+        self._control.clear()
+        await self._control.wait()
+
+    def _poke(self) -> None:
+        self._control.set()
+
+    # ---------------------------------------------------------------------- operations
+    def _sits_out(self, call: Call) -> bool:
+        if call.function != "wait":
+            return False
+        spec = self.catalog.get("wait")
+        assert spec is not None and self.app is not None
+        (seconds,) = spec.bind(call.params, BindContext(self.app.robot, call.group, self.app.cell))
+        return seconds == 0
+
+    def _requests(self, operation: Operation, calls: dict[str, Call], attempt: int) -> dict[str, SmRequest]:
+        """One request per group; synchronised functions get a shared barrier key and partner list."""
+        assert self.app is not None
+        by_sync: dict[str, list[str]] = {}
+        for group, call in calls.items():
+            spec = self.catalog.get(call.function)
+            if spec is not None and spec.sync:
+                by_sync.setdefault(spec.sync, []).append(group)
+        requests = {}
+        for group, call in calls.items():
+            spec = self.catalog.get(call.function)
+            sync, partners = "", ()
+            if spec is not None and spec.sync:
+                members = by_sync[spec.sync]
+                leaders = [g for g in members if calls[g].function == "master_move"]
+                partners = tuple(leaders + [g for g in members if g not in leaders])
+                sync = f"{self.app.name}:{operation.id}:{spec.sync}:{attempt}"
+            requests[group] = SmRequest(
+                id=self.links[group].new_id(),
+                operation=operation.id,
+                function=call.function,
+                params=call.params,
+                attempt=attempt,
+                sync=sync,
+                partners=partners,
+            )
+        return requests
+
+    def _dispatch(self, operation: Operation, calls: dict[str, Call], attempt: int) -> dict[str, _Dispatch]:
+        sent = {}
+        deadline = self.clock.now() + self.function_timeout
+        for group, request in self._requests(operation, calls, attempt).items():
+            future = self.links[group].send(request)
+            sent[group] = _Dispatch(calls[group], request, future, deadline)
+            self._progress[group] = GroupProgress(self.links[group].state, operation.id, request.function)
+        self._publish_status()
+        return sent
+
+    async def _run_operation(self, operation: Operation) -> None:
+        calls = {g: c for g, c in operation.calls.items() if not self._sits_out(c)}
+        pending = self._dispatch(operation, calls, attempt=1)
+        report = self.report
+        assert report is not None
+        while pending:
+            futures = {d.future: g for g, d in pending.items()}
+            horizon = min(d.deadline for d in pending.values()) - self.clock.now()
+            done, _ = await asyncio.wait(futures, timeout=self.clock.to_wall(max(0.0, horizon)), return_when=asyncio.FIRST_COMPLETED)
+            if not done:
+                late = [g for g, d in pending.items() if d.deadline <= self.clock.now()]
+                for group in late:
+                    await self._abandon(pending, group, f"no result within {self.function_timeout:g} s")
+                continue
+            failed: list[tuple[str, asyncio.Future[SmResult]]] = []
+            for future in done:
+                group = futures[future]
+                result = future.result()
+                report.group_busy[group] += max(0.0, result.t_end - result.t_start)
+                report.group_functions[group] += 1
+                if result.outcome == "succeeded":
+                    del pending[group]
+                else:
+                    failed.append((group, future))
+            for group, future in failed:
+                # a sync partner's failure may already have been handled (and retried) with the first one
+                if group in pending and pending[group].future is future:
+                    await self._on_failure(operation, pending, group, future.result())
+        await self._await_ready(tuple(calls))
+
+    async def _await_ready(self, groups: tuple[str, ...]) -> None:
+        for group in groups:
+            if not await self.links[group].wait_state((READY,), self.service_timeout):
+                raise ApplicationAborted(f"{group} did not return to Ready after its result (it is in {self.links[group].state})")
+
+    async def _abandon(self, pending: dict[str, _Dispatch], group: str, why: str) -> None:
+        dispatch = pending.pop(group)
+        self.links[group].forget(dispatch.request.id)
+        await self.links[group].command("stop")
+        assert self.report is not None
+        self.report.errors.append(GroupError(group, dispatch.request.operation, dispatch.request.function, why, dispatch.request.attempt, self.clock.now()))
+        raise ApplicationAborted(f"{group}: {dispatch.request.function}: {why}")
+
+    # ------------------------------------------------------------------- error policy
+    async def _on_failure(self, operation: Operation, pending: dict[str, _Dispatch], group: str, result: SmResult) -> None:
+        """Apply the application's error policy to a failed function (and its sync partners)."""
+        assert self.app is not None and self.report is not None
+        dispatch = pending[group]
+        error = result.error or result.outcome
+        self.report.errors.append(GroupError(group, operation.id, dispatch.request.function, error, dispatch.request.attempt, self.clock.now()))
+        if result.outcome == "preempted" or self._stop_reason is not None:
+            raise ApplicationAborted(self._stop_reason or f"{group} was stopped: {error}")
+        failed = {group: dispatch}
+        for partner in dispatch.request.partners:  # a synchronised function fails for all of its partners
+            if partner != group and partner in pending:
+                failed[partner] = pending[partner]
+        others = [g for g in pending if g not in failed]
+        self._set_state("error", f"{group}: {dispatch.request.function} failed: {error}")
+        for other in others:
+            await self.links[other].command("pause")
+        await self._collect(failed, group)
+        policy = self.app.error_policy
+        attempt = dispatch.request.attempt
+        if attempt <= policy.retries:
+            self.report.retries += 1
+            await self._retry(operation, pending, failed, attempt + 1)
+        elif policy.action == "alarm" and await self._alarm(group, error, policy.alarm_timeout):
+            self.report.retries += 1
+            await self._retry(operation, pending, failed, attempt + 1)
+        else:
+            await self._stop_groups(others, pending)
+            if policy.action == "safe_pose" and policy.safe_pose:
+                await self._go_safe(policy.safe_pose)
+            raise ApplicationAborted(f"{group}: {dispatch.request.function} failed: {error}")
+        for other in others:
+            await self.links[other].command("resume")
+        self._set_state("running")
+
+    async def _collect(self, failed: dict[str, _Dispatch], first: str) -> None:
+        """Wait for the failed partners' own results (they fail through the barrier)."""
+        for group, dispatch in failed.items():
+            if group == first or dispatch.future.done():
+                continue
+            try:
+                await self.clock.wait_for(asyncio.shield(dispatch.future), self.service_timeout * 2)
+            except asyncio.TimeoutError:
+                await self.links[group].command("stop")
+
+    async def _retry(self, operation: Operation, pending: dict[str, _Dispatch], failed: dict[str, _Dispatch], attempt: int) -> None:
+        for group in failed:
+            link = self.links[group]
+            if link.state == ERROR_HANDLING:
+                await link.command("reset")
+            if not await link.wait_state((READY,), self.service_timeout):
+                raise ApplicationAborted(f"{group} could not be reset for a retry (it is in {link.state})")
+        resent = self._dispatch(operation, {g: d.call for g, d in failed.items()}, attempt)
+        pending.update(resent)
+
+    async def _alarm(self, group: str, error: str, timeout: float) -> bool:
+        """Hold for an operator reset; True to retry, False to give up (stop or timeout)."""
+        self._alarm_reset = False
+        self._set_state("alarm", f"ALARM {group}: {error} - reset to retry, stop to abort")
+        deadline = self.clock.now() + timeout if timeout > 0 else None
+        while not self._alarm_reset and self._stop_reason is None:
+            remaining = None if deadline is None else deadline - self.clock.now()
+            if remaining is not None and remaining <= 0:
+                return False
+            self._control.clear()
+            try:
+                await self.clock.wait_for(self._control.wait(), remaining)
+            except asyncio.TimeoutError:
+                return False
+        return self._alarm_reset and self._stop_reason is None
+
+    async def _stop_groups(self, groups: list[str], pending: dict[str, _Dispatch]) -> None:
+        """Stop running groups and wait (bounded) for their preempted results."""
+        for group in groups:
+            await self.links[group].command("stop")
+        for group in groups:
+            dispatch = pending.get(group)
+            if dispatch is None:
+                continue
+            try:
+                await self.clock.wait_for(asyncio.shield(dispatch.future), self.service_timeout * 2)
+            except asyncio.TimeoutError:
+                self.links[group].forget(dispatch.request.id)
+
+    async def _go_safe(self, pose: str) -> None:
+        """Reset every group and move each one that the pose covers to it, all at once."""
+        assert self.app is not None and self.report is not None
+        self._set_state("error", f"moving to safe pose {pose!r}")
+        calls: dict[str, Call] = {}
+        for group, link in self.links.items():
+            if link.state == ERROR_HANDLING:
+                await link.command("reset")
+            await link.wait_state((READY,), self.service_timeout)
+            spec = self.catalog.get("move_to_joint_pose")
+            assert spec is not None
+            if not spec.check((pose,), BindContext(self.app.robot, group, self.app.cell)):
+                calls[group] = Call(group, "move_to_joint_pose", (pose,))
+        safe_op = Operation(id=f"safe_pose:{pose}", name="safe pose", line=0, col=0, calls=calls)
+        sent = self._dispatch(safe_op, calls, attempt=1)
+        self.report.safe_pose = pose
+        for group, dispatch in sent.items():
+            try:
+                result = await self.clock.wait_for(dispatch.future, self.function_timeout)
+            except asyncio.TimeoutError:
+                self.report.errors.append(GroupError(group, safe_op.id, "move_to_joint_pose", "safe pose not reached in time", 1, self.clock.now()))
+                continue
+            if result.outcome != "succeeded":
+                self.report.errors.append(GroupError(group, safe_op.id, "move_to_joint_pose", result.error or result.outcome, 1, self.clock.now()))
+
+    async def _end_all(self) -> bool:
+        """Send every machine to Finish; True when all of them got there."""
+        for group, link in self.links.items():
+            if link.state in (*WORKING_STATES, PAUSE):
+                await link.command("stop")
+                await link.wait_state((ERROR_HANDLING, READY), self.service_timeout)
+            link.send_end()
+        reached = await asyncio.gather(*(link.wait_state((FINISH,), self.service_timeout) for link in self.links.values()))
+        return all(reached)
+
+    # -------------------------------------------------------------------------- operator
+    async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:
+        handler = getattr(self, f"_cmd_{command}")
+        ok, message = await handler(f"service {engine_service(command)}")
+        return Trigger.Response(ok, message)
+
+    async def _cmd_start(self, source: str) -> tuple[bool, str]:
+        if self._start_requested or self.state != "idle":
+            return False, f"already {self.state}"
+        self._start_requested = True
+        self._poke()
+        return True, "started"
+
+    async def _cmd_pause(self, source: str) -> tuple[bool, str]:
+        if self.state in ("finished", "failed", "stopped", "stopping"):
+            return False, f"cannot pause: {self.state}"
+        self._paused = True
+        self._stepping = False
+        answers = [await link.command("pause") for link in self.links.values() if link.state in (READY, *WORKING_STATES)]
+        self._set_state("paused", f"paused by {source}")
+        self._poke()
+        return True, "paused" + "".join(f"; {m}" for ok, m in answers if not ok)
+
+    async def _cmd_resume(self, source: str) -> tuple[bool, str]:
+        if self.state in ("finished", "failed", "stopped", "stopping", "alarm"):
+            return False, f"cannot resume: {self.state}" + (" (use reset to acknowledge the alarm)" if self.state == "alarm" else "")
+        if self._safety_active:
+            return False, "the safety stop is still active"
+        self._paused = False
+        self._stepping = False
+        for link in self.links.values():
+            if link.state in (PAUSE, READY):
+                await link.command("resume")
+        self._set_state("running", f"resumed by {source}")
+        self._poke()
+        return True, "resumed"
+
+    async def _cmd_step(self, source: str) -> tuple[bool, str]:
+        if self.state in ("finished", "failed", "stopped", "stopping", "alarm"):
+            return False, f"cannot step: {self.state}"
+        self._stepping = True
+        self._start_requested = True
+        if self._paused:
+            self._paused = False
+            for link in self.links.values():
+                if link.state in (PAUSE, READY):
+                    await link.command("resume")
+        self._poke()
+        return True, "stepping: the next operation runs, then the application pauses"
+
+    async def _cmd_stop(self, source: str) -> tuple[bool, str]:
+        if self.state in ("finished", "failed", "stopped"):
+            return False, f"already {self.state}"
+        self._stop_reason = f"stopped by {source}"
+        for link in self.links.values():
+            if link.state in (READY, PAUSE, *WORKING_STATES):
+                await link.command("stop")
+        self._poke()
+        return True, "stopping"
+
+    async def _cmd_reset(self, source: str) -> tuple[bool, str]:
+        if self.state != "alarm":
+            return False, f"no alarm to reset ({self.state})"
+        self._alarm_reset = True
+        self._poke()
+        return True, "alarm acknowledged: retrying"
+
+    def _on_safety(self, msg: Bool) -> None:
+        if msg.data and not self._safety_active:
+            self._safety_active = True
+            asyncio.get_running_loop().create_task(self._cmd_pause(f"safety stop on {SAFETY_STOP}"))
+        elif not msg.data and self._safety_active:
+            self._safety_active = False
+            self._message = "safety stop cleared: resume to continue"
+            self._publish_status()
+
+    # ---------------------------------------------------------------------------- status
+    def _set_state(self, state: str, message: str | None = None) -> None:
+        self.state = state
+        if message is not None:
+            self._message = message
+        self._publish_status()
+
+    def _publish_status(self) -> None:
+        app = self.app
+        groups = {
+            g: GroupProgress(link.state, *(self._progress[g].operation, self._progress[g].function) if g in self._progress else (None, None))
+            for g, link in self.links.items()
+        }
+        status = EngineStatus(
+            app=app.name if app else "",
+            state=self.state,  # type: ignore[arg-type]
+            operation_index=self._op_index + 1 if self._operation else 0,
+            operation_count=len(app.operations) if app else 0,
+            t=self.clock.now(),
+            operation_id=self._operation.id if self._operation else None,
+            groups=groups,
+            message=self._message,
+        )
+        self._status_pub.publish(String(codec.encode(status)))

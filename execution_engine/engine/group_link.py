@@ -1,0 +1,93 @@
+"""The engine's handle on one group machine: requests out, results and state in, operator services.
+
+Results are matched to requests by id; a result for a request the engine no longer waits for
+(a retried or abandoned one) is dropped.  The group's state arrives on its latched state topic,
+so the engine knows where each machine is even if it started after them.
+"""
+from __future__ import annotations
+
+import asyncio
+import itertools
+import uuid
+
+from execution_engine.clock import Clock
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import String, Trigger
+from execution_engine.transport.port import Node, ServiceUnavailable, TransportError
+from execution_engine.transport.qos import COMMANDS, LATCHED
+from execution_engine.transport.wire import SmRequest, SmResult, sm_service, sm_topic
+
+
+class GroupLink:
+    def __init__(self, node: Node, group: str, service_timeout: float) -> None:
+        self.node = node
+        self.group = group
+        self.clock: Clock = node.clock
+        self.service_timeout = service_timeout
+        self.state = "unknown"
+        self._state_changed = asyncio.Event()
+        self._pending: dict[str, asyncio.Future[SmResult]] = {}
+        self._ids = itertools.count(1)
+        self._session = uuid.uuid4().hex[:6]
+        self._requests = node.create_publisher(String, sm_topic(group, "request"), COMMANDS)
+        node.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
+        node.create_subscription(String, sm_topic(group, "state"), self._on_state, LATCHED)
+        self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
+        self.rejected: list[str] = []
+
+    def new_id(self) -> str:
+        return f"engine-{self._session}-{self.group}-{next(self._ids)}"
+
+    # -------------------------------------------------------------------------- requests
+    def send(self, request: SmRequest) -> asyncio.Future[SmResult]:
+        future: asyncio.Future[SmResult] = asyncio.get_running_loop().create_future()
+        self._pending[request.id] = future
+        self._requests.publish(String(codec.encode(request)))
+        return future
+
+    def send_end(self) -> None:
+        self._requests.publish(String(codec.encode(SmRequest(id=self.new_id(), kind="end"))))
+
+    def forget(self, request_id: str) -> None:
+        future = self._pending.pop(request_id, None)
+        if future is not None and not future.done():
+            future.cancel()
+
+    def _on_result(self, msg: String) -> None:
+        try:
+            result = codec.decode(SmResult, msg.data, source=sm_topic(self.group, "result"))
+        except codec.WireError as error:
+            self.rejected.append(str(error))
+            self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
+            return
+        future = self._pending.pop(result.id, None)
+        if future is not None and not future.done():
+            future.set_result(result)
+
+    # ------------------------------------------------------------------------------ state
+    def _on_state(self, msg: String) -> None:
+        self.state = msg.data
+        self._state_changed.set()
+
+    async def wait_state(self, states: tuple[str, ...], timeout: float) -> bool:
+        """True once the machine is in one of ``states``; False after ``timeout`` run seconds."""
+        deadline = self.clock.now() + timeout
+        while self.state not in states:
+            remaining = deadline - self.clock.now()
+            if remaining <= 0:
+                return False
+            self._state_changed.clear()
+            try:
+                await self.clock.wait_for(self._state_changed.wait(), remaining)
+            except asyncio.TimeoutError:
+                return self.state in states
+        return True
+
+    # --------------------------------------------------------------------------- services
+    async def command(self, name: str) -> tuple[bool, str]:
+        """Call the machine's pause/resume/stop/reset; never raises (a failure is the answer)."""
+        try:
+            response = await self._clients[name].call(Trigger.Request(), timeout=self.service_timeout)
+        except (ServiceUnavailable, TransportError, asyncio.TimeoutError) as error:
+            return False, f"{sm_service(self.group, name)}: {type(error).__name__}: {error}"
+        return response.success, response.message

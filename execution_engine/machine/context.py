@@ -1,0 +1,170 @@
+"""What the states of one group machine share: its node, its function run, its links.
+
+States are small because everything they do to the outside world goes through here:
+publishing status and results, sending bridge commands, starting and finishing functions, the
+barrier board of synchronised motions.  One context per machine; states hold no other state.
+"""
+from __future__ import annotations
+
+import itertools
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from core_functions.catalog import BindContext, Catalog, ParamError
+from core_functions.cell_index import CellIndex
+from core_functions.functions import CoreFunctions
+from core_functions.primitives import Primitive
+from core_functions.robots import RobotModel
+from execution_engine.clock import Clock
+from execution_engine.machine.events import EventQueue
+from execution_engine.machine.function_run import FunctionRun, SkillError
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import String
+from execution_engine.transport.port import Node, Publisher
+from execution_engine.transport.wire import BridgeCommand, SmRequest, SmResult, SmStatus, SyncMessage
+
+
+@dataclass(frozen=True)
+class MachineConfig:
+    """Bounds of every wait of the machine, in run seconds."""
+
+    bridge_timeout: float = 5.0  # a bridge must acknowledge a command this fast
+    primitive_timeout: float = 600.0  # no primitive runs longer than this
+    sync_timeout: float = 30.0  # partners must meet at a barrier within this
+
+
+@dataclass
+class Publishers:
+    result: Publisher[String]
+    status: Publisher[String]
+    state: Publisher[String]
+    bridge: Publisher[String]
+    sync: Publisher[String]
+
+
+class MachineContext:
+    """Shared by every state of one group machine."""
+
+    def __init__(
+        self,
+        *,
+        group: str,
+        node: Node,
+        robot: RobotModel,
+        catalog: Catalog,
+        functions: CoreFunctions,
+        events: EventQueue,
+        publishers: Publishers,
+        config: MachineConfig,
+    ) -> None:
+        self.group = group
+        self.node = node
+        self.clock: Clock = node.clock
+        self.robot = robot
+        self.catalog = catalog
+        self.functions = functions
+        self.events = events
+        self.pub = publishers
+        self.config = config
+        self.run: FunctionRun | None = None
+        self.hold = False  # paused while in Ready: the next primitive waits for resume
+        self.active_command: str | None = None  # the bridge command a working state is running
+        self.sync_board: dict[str, dict[str, SyncMessage]] = {}
+        self.sync_key: str | None = None  # the barrier this group has announced itself at
+        self.sync_sent: str | None = None  # the barrier whose command this leader has sent
+        self._ids = itertools.count(1)
+        self._session = uuid.uuid4().hex[:6]
+        self.state_name = "Ready"
+
+    # --------------------------------------------------------------------------- identity
+    def new_id(self) -> str:
+        return f"{self.group}-{self._session}-{next(self._ids)}"
+
+    @property
+    def cell(self) -> CellIndex | None:
+        return self.functions.ctx.cell
+
+    def set_cell(self, cell: CellIndex) -> None:
+        self.functions.ctx.cell = cell
+
+    # ---------------------------------------------------------------------------- publish
+    def status(self, event: str, **fields: Any) -> None:
+        """Publish one status event (the trace and the viewers are built from these)."""
+        run = self.run
+        defaults: dict[str, Any] = {}
+        if run is not None:
+            defaults = {"operation": run.request.operation, "function": run.request.function, "request_id": run.request.id}
+        values = {"state": self.state_name, **defaults, **fields}
+        message = SmStatus(group=self.group, event=event, t=self.clock.now(), **values)  # type: ignore[arg-type]
+        self.pub.status.publish(String(codec.encode(message)))
+
+    def send_bridge(self, op: str, primitive: Primitive | None = None, command_id: str | None = None) -> str:
+        """Publish a bridge command; returns its id (feedback carries the same id)."""
+        cid = command_id or self.new_id()
+        command = BridgeCommand(id=cid, group=self.group, op=op, primitive=primitive)  # type: ignore[arg-type]
+        self.pub.bridge.publish(String(codec.encode(command)))
+        return cid
+
+    def send_sync(self, key: str, event: str, error: str | None = None) -> None:
+        message = SyncMessage(group=self.group, key=key, event=event, state=self.state_name, t=self.clock.now(), error=error)  # type: ignore[arg-type]
+        self.record_sync(message)
+        self.pub.sync.publish(String(codec.encode(message)))
+
+    def record_sync(self, message: SyncMessage) -> None:
+        self.sync_board.setdefault(message.key, {})[message.group] = message
+        if len(self.sync_board) > 64:  # keys of finished barriers: keep the newest only
+            for stale in list(self.sync_board)[:-64]:
+                del self.sync_board[stale]
+
+    # ------------------------------------------------------------------------- functions
+    def start_function(self, request: SmRequest) -> str | None:
+        """Bind and start a requested function; returns an error text when it cannot start."""
+        spec = self.catalog.get(request.function)
+        if spec is None:
+            return f"unknown function {request.function!r}{self.catalog.suggest(request.function)}"
+        try:
+            args = spec.bind(request.params, BindContext(self.robot, self.group, self.cell))
+        except ParamError as error:
+            return f"{request.function}: {error.message}"
+        except KeyError as error:  # a group unknown to the robot
+            return f"{request.function}: {error}"
+        method: Callable[..., Any] = getattr(self.functions, spec.method)
+        run = FunctionRun(request, spec, method(*args), self.clock.now())
+        self.run = run
+        self.status("function_start")
+        try:
+            run.start()
+        except SkillError as error:
+            self.finish_function("aborted", str(error))
+            return None
+        return None
+
+    def finish_function(self, outcome: str, error: str | None = None) -> None:
+        """Close the current function and send its result to the engine."""
+        run = self.run
+        if run is None:
+            return
+        if not run.finished:
+            run.close()
+        self.status("function_end", outcome=outcome, error=error, count=run.started)
+        self.send_result(run.request, outcome, error, t_start=run.t_start, primitives=run.started)
+        self.run = None
+
+    def send_result(
+        self, request: SmRequest, outcome: str, error: str | None, *, t_start: float | None = None, primitives: int = 0
+    ) -> None:
+        now = self.clock.now()
+        result = SmResult(
+            id=request.id,
+            group=self.group,
+            outcome=outcome,  # type: ignore[arg-type]
+            operation=request.operation,
+            function=request.function,
+            error=error,
+            t_start=now if t_start is None else t_start,
+            t_end=now,
+            primitives=primitives,
+        )
+        self.pub.result.publish(String(codec.encode(result)))

@@ -1,0 +1,262 @@
+"""The group machine node: one robot group's state machine on the transport.
+
+Builds the machine from Table 2, connects it to its topics and services, and keeps it alive:
+the machine's own task is supervised, so a defect inside a state does not kill the node
+silently -- it is reported and the machine lands in ErrorHandling, waiting for a reset, exactly
+as a robot fault would.
+
+Topics (``/<group>/sm/...``): ``request`` in, ``result`` out, ``state`` (latched), ``status``
+(every event), ``structure`` (latched); services ``pause``, ``resume``, ``stop``, ``reset``;
+``/<group>/bridge/command`` out and ``feedback`` in; the coordination topic for barriers; the
+engine's cell model (latched).
+"""
+from __future__ import annotations
+
+import asyncio
+import os
+from pathlib import Path
+
+from app_functions.registry import full_catalog, functions_class
+from core_functions.functions import SkillContext
+from core_functions.robots import find_robot
+from core_functions.trajectory_store import TrajectoryStore
+from execution_engine.machine.context import MachineConfig, MachineContext, Publishers
+from execution_engine.machine.events import (
+    EventQueue,
+    FaultEvent,
+    FeedbackEvent,
+    OperatorSignal,
+    RequestEvent,
+    SyncEvent,
+)
+from execution_engine.machine.states import (
+    ErrorHandlingState,
+    PauseState,
+    ReadyState,
+    StopState,
+    SyncState,
+    WorkingState,
+)
+from execution_engine.machine.table import (
+    ERROR_HANDLING,
+    FINISH,
+    PAUSE,
+    READY,
+    STOP,
+    SYNC_STATES,
+    TABLE_2,
+    WORKING_STATES,
+)
+from execution_engine.smach import StateMachine, StructureInfo, TransitionRecord, UserData
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import String, Trigger, TriggerRequest, TriggerResponse
+from execution_engine.transport.port import Node
+from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
+from execution_engine.transport.wire import (
+    ENGINE_CELL,
+    MACHINE_SERVICES,
+    SYNC_TOPIC,
+    BridgeFeedback,
+    CellSnapshot,
+    SmRequest,
+    SmStructure,
+    SyncMessage,
+    TransitionSpec,
+    bridge_topic,
+    sm_service,
+    sm_topic,
+)
+
+_VALID_IN = {
+    "pause": (READY, *WORKING_STATES),
+    "resume": (PAUSE,),
+    "stop": (READY, *WORKING_STATES, PAUSE),
+    "reset": (ERROR_HANDLING,),
+}
+
+
+def default_trajectory_db() -> str:
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return str(Path(base) / "dual_arm_executive" / "trajectories.sqlite")
+
+
+class GroupMachine:
+    """One group's machine, its node wiring and its supervision."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self.clock = node.clock
+        self.group = str(node.declare_parameter("group", "left_arm", "the robot group this machine drives"))
+        robot_name = str(node.declare_parameter("robot", "nextage_open", "robot model (nextage_open, adept_viper_s850, kuka_kr)"))
+        libraries = str(node.declare_parameter("libraries", "all", "comma-separated function libraries, or all"))
+        db = str(node.declare_parameter("trajectory_db", "", "SQLite file of recorded trajectories ('' = per-user default)"))
+        config = MachineConfig(
+            bridge_timeout=float(node.declare_parameter("bridge_timeout", MachineConfig.bridge_timeout)),
+            primitive_timeout=float(node.declare_parameter("primitive_timeout", MachineConfig.primitive_timeout)),
+            sync_timeout=float(node.declare_parameter("sync_timeout", MachineConfig.sync_timeout)),
+        )
+        self.robot = find_robot(robot_name)
+        if self.group not in self.robot.group_names:
+            raise ValueError(f"{node.fully_qualified_name}: group {self.group!r} is not a group of {self.robot.name} ({', '.join(self.robot.group_names)})")
+        chosen = None if libraries.strip() == "all" else [x.strip() for x in libraries.split(",") if x.strip()]
+        self.store = TrajectoryStore(db or default_trajectory_db())
+        skill_context = SkillContext(self.group, self.robot, None, self.store, self.clock.now)
+        functions = functions_class(chosen)(skill_context)
+        self.events = EventQueue(self.clock)
+        g = self.group
+        publishers = Publishers(
+            result=node.create_publisher(String, sm_topic(g, "result"), COMMANDS),
+            status=node.create_publisher(String, sm_topic(g, "status"), EVENTS),
+            state=node.create_publisher(String, sm_topic(g, "state"), LATCHED),
+            bridge=node.create_publisher(String, bridge_topic(g, "command"), COMMANDS),
+            sync=node.create_publisher(String, SYNC_TOPIC, COMMANDS),
+        )
+        self._structure_pub = node.create_publisher(String, sm_topic(g, "structure"), LATCHED)
+        self.ctx = MachineContext(
+            group=g,
+            node=node,
+            robot=self.robot,
+            catalog=full_catalog(chosen),
+            functions=functions,
+            events=self.events,
+            publishers=publishers,
+            config=config,
+        )
+        node.create_subscription(String, sm_topic(g, "request"), self._on_request, COMMANDS)
+        node.create_subscription(String, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS)
+        node.create_subscription(String, SYNC_TOPIC, self._on_sync, COMMANDS)
+        node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
+        for command in MACHINE_SERVICES:
+            node.create_service(Trigger, sm_service(g, command), lambda req, c=command: self._on_service(c, req))
+        node.fault_handler = self._on_fault
+        self.machine = self._build()
+        self.userdata = UserData(primitive=None, resume_command=None, early_done=None, error=None, stop_reason=None)
+
+    # ----------------------------------------------------------------------------- build
+    def _build(self) -> StateMachine:
+        sm = StateMachine(self.group, (FINISH,), self.clock)
+        ctx = self.ctx
+        sm.add(READY, ReadyState(ctx), TABLE_2[READY])
+        for name in WORKING_STATES:
+            state = SyncState(name, ctx) if name in SYNC_STATES else WorkingState(name, ctx)
+            sm.add(name, state, TABLE_2[name])
+        sm.add(PAUSE, PauseState(ctx), TABLE_2[PAUSE])
+        sm.add(STOP, StopState(ctx), TABLE_2[STOP])
+        sm.add(ERROR_HANDLING, ErrorHandlingState(ctx), TABLE_2[ERROR_HANDLING])
+        sm.set_initial(READY)
+        sm.check()
+        sm.add_observer(self)
+        self._publish_structure(sm.structure())
+        return sm
+
+    # --------------------------------------------------------------------- introspection
+    def _publish_structure(self, structure: StructureInfo) -> None:
+        message = SmStructure(
+            group=self.group,
+            initial=structure.initial,
+            states=(*structure.states, FINISH),
+            transitions=tuple(TransitionSpec(s, o, t) for s, o, t in structure.transitions),
+        )
+        self._structure_pub.publish(String(codec.encode(message)))
+
+    def on_structure(self, structure: StructureInfo) -> None:
+        """Structure is published once, when built (latched); nothing to do per run."""
+
+    def on_enter(self, machine: str, state: str, t: float) -> None:
+        if self.ctx.state_name != state:
+            self._set_state(state)
+
+    def on_transition(self, record: TransitionRecord) -> None:
+        self.ctx.status("transition", from_state=record.source, to_state=record.target, signal=record.outcome, state=record.target)
+        self._set_state(record.target)
+
+    def _set_state(self, state: str) -> None:
+        self.ctx.state_name = state
+        self.ctx.pub.state.publish(String(state))
+
+    @property
+    def state(self) -> str:
+        return self.ctx.state_name
+
+    # ---------------------------------------------------------------------------- inputs
+    def _on_request(self, msg: String) -> None:
+        try:
+            request = codec.decode(SmRequest, msg.data, source=sm_topic(self.group, "request"))
+        except codec.WireError as error:
+            self.ctx.status("error", error=f"rejected request: {error}")
+            self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
+            return
+        self.events.put(RequestEvent(request))
+
+    def _on_feedback(self, msg: String) -> None:
+        try:
+            feedback = codec.decode(BridgeFeedback, msg.data, source=bridge_topic(self.group, "feedback"))
+        except codec.WireError as error:
+            self.events.put(FaultEvent("bridge feedback", str(error)))
+            return
+        self.events.put(FeedbackEvent(feedback))
+
+    def _on_sync(self, msg: String) -> None:
+        try:
+            message = codec.decode(SyncMessage, msg.data, source=SYNC_TOPIC)
+        except codec.WireError as error:
+            self.node.logger.error("%s: ignored sync message: %s", self.node.fully_qualified_name, error)
+            return
+        if message.group == self.group:
+            return
+        self.ctx.record_sync(message)
+        self.events.put(SyncEvent(message))
+
+    def _on_cell(self, msg: String) -> None:
+        try:
+            snapshot = codec.decode(CellSnapshot, msg.data, source=ENGINE_CELL)
+        except codec.WireError as error:
+            self.ctx.status("error", error=f"ignored cell model: {error}")
+            return
+        self.ctx.set_cell(snapshot.index())
+
+    async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:
+        state = self.ctx.state_name
+        valid = state in _VALID_IN[command]
+        if command == "pause" and state == READY and self.ctx.hold:
+            valid = False
+        if command == "resume" and state == READY and self.ctx.hold:
+            valid = True
+        if not valid:
+            return Trigger.Response(False, f"{self.group}: cannot {command} in {state}")
+        self.events.put(OperatorSignal(command, sm_service(self.group, command)))  # type: ignore[arg-type]
+        return Trigger.Response(True, f"{self.group}: {command} accepted in {state}")
+
+    def _on_fault(self, where: str, error: BaseException) -> None:
+        self.node.logger.error("%s: fault in %s: %r", self.node.fully_qualified_name, where, error)
+        self.events.put(FaultEvent(where, f"{type(error).__name__}: {error}"))
+
+    # ----------------------------------------------------------------------------- run
+    async def run(self) -> None:
+        """Run the machine for as long as the node lives; Finish waits for the next application."""
+        self._set_state(READY)
+        initial = READY
+        while True:
+            try:
+                self.machine.set_initial(initial)
+                await self.machine.execute(self.userdata)
+                self._set_state(FINISH)
+                await self._wait_for_restart()
+                initial = READY
+            except asyncio.CancelledError:
+                raise
+            except Exception as error:  # noqa: BLE001 - supervised: reported, then ErrorHandling
+                self.node.logger.exception("%s: machine fault", self.node.fully_qualified_name)
+                self.ctx.status("error", error=f"internal fault: {type(error).__name__}: {error}")
+                self.userdata["error"] = f"internal fault: {type(error).__name__}: {error}"
+                initial = ERROR_HANDLING
+
+    async def _wait_for_restart(self) -> None:
+        while True:
+            event = await self.events.get()
+            if isinstance(event, RequestEvent) and event.request.kind == "execute":
+                self.events.put_back(event)
+                return
+
+    def close(self) -> None:
+        self.store.close()

@@ -1,0 +1,437 @@
+"""The states of the group machine (paper Table 1, plus Pause, Stop and ErrorHandling).
+
+Each state returns exactly the signals of its row of Table 2 (:mod:`.table`).  What a state
+does with an event it cannot use is written down here, case by case: a request arriving while
+the arm moves is refused (the engine must wait for Ready), feedback for an old command is
+dropped, an ``end`` request is kept for a state that can honour it.
+
+Userdata keys (SMACH blackboard): ``primitive`` (Ready -> working state), ``resume_command``
+(the bridge command a paused working state resumes), ``early_done`` (its completion, if it
+arrived during the pause), ``error`` and ``stop_reason`` (for ErrorHandling).
+"""
+from __future__ import annotations
+
+from collections.abc import MutableMapping
+from typing import Any
+
+from core_functions.primitives import MasterSlaveMove, describe
+from execution_engine.machine.context import MachineContext
+from execution_engine.machine.events import (
+    Event,
+    FaultEvent,
+    FeedbackEvent,
+    OperatorSignal,
+    RequestEvent,
+    SyncEvent,
+)
+from execution_engine.machine.function_run import SkillError
+from execution_engine.machine.table import (
+    END,
+    ERROR,
+    ERROR_HANDLING,
+    OK,
+    PAUSE,
+    PAUSE_SIGNAL,
+    READY,
+    RESUME,
+    STOP,
+    STOP_SIGNAL,
+    signals_of,
+)
+from execution_engine.smach import State
+from execution_engine.transport import codec
+from execution_engine.transport.wire import BridgeFeedback
+
+UD_KEYS = ("primitive", "resume_command", "early_done", "error", "stop_reason")
+
+
+class MachineState(State):
+    """A state of the group machine; its outcomes are its row of Table 2."""
+
+    def __init__(self, name: str, ctx: MachineContext) -> None:
+        super().__init__(signals_of(name), input_keys=UD_KEYS, output_keys=UD_KEYS)
+        self.name = name
+        self.ctx = ctx
+
+    def refuse(self, event: RequestEvent) -> None:
+        """Answer a request this state cannot take; ``end`` is kept for a state that can."""
+        request = event.request
+        if request.kind == "end":
+            self.ctx.events.put_back(event)
+            return
+        self.ctx.send_result(request, "aborted", f"{self.ctx.group} is in {self.name}, not Ready: request refused")
+
+    async def _control(
+        self, op: str, *, keep_done_of: str | None = None, userdata: MutableMapping[str, Any] | None = None
+    ) -> str | None:
+        """Send pause/resume/stop to the bridge and wait for its acknowledgement.
+
+        Returns None when acknowledged, else the problem.  Events that arrive meanwhile are
+        handed back in order, except the final feedback of ``keep_done_of`` (the primitive
+        finished while we paused it), which is kept in userdata for the resume.
+        """
+        ctx = self.ctx
+        control_id = ctx.send_bridge(op)
+        expected = {"pause": "paused", "resume": "resumed", "stop": "stopped"}[op]
+        deadline = ctx.clock.now() + ctx.config.bridge_timeout
+        held: list[Event] = []
+        problem: str | None = None
+        while True:
+            event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
+            if event is None:
+                problem = f"timeout: the bridge did not acknowledge {op} within {ctx.config.bridge_timeout:g} s"
+                break
+            if isinstance(event, FeedbackEvent) and event.feedback.id == control_id:
+                if event.feedback.status == expected:
+                    break
+                if event.feedback.status == "error":
+                    problem = f"{op} failed: {event.feedback.error}"
+                    break
+            elif (
+                isinstance(event, FeedbackEvent)
+                and event.feedback.id == keep_done_of
+                and event.feedback.status in ("done", "error")
+                and userdata is not None
+            ):
+                userdata["early_done"] = event.feedback
+            else:
+                held.append(event)
+        for event in reversed(held):
+            ctx.events.put_back(event)
+        return problem
+
+
+# -------------------------------------------------------------------------------- Ready
+class ReadyState(MachineState):
+    """Waits for the engine; hands the next primitive of the running function to its state."""
+
+    def __init__(self, ctx: MachineContext) -> None:
+        super().__init__(READY, ctx)
+
+    async def execute(self, userdata: MutableMapping[str, Any]) -> str:
+        ctx = self.ctx
+        while True:
+            run = ctx.run
+            if run is not None and run.finished:
+                ctx.finish_function("succeeded")
+                continue
+            if run is not None and run.next_primitive is not None and not ctx.hold:
+                primitive = run.take()
+                userdata["primitive"] = primitive
+                return primitive.STATE.request_signal
+            event = await ctx.events.get()
+            if isinstance(event, RequestEvent):
+                if event.request.kind == "end":
+                    if run is not None:
+                        ctx.finish_function("preempted", "application ended")
+                    ctx.hold = False
+                    return END
+                if run is not None:
+                    ctx.send_result(event.request, "aborted", f"{ctx.group} is busy with {run.label}: request refused")
+                    continue
+                problem = ctx.start_function(event.request)
+                if problem is not None:
+                    ctx.status("error", error=problem, operation=event.request.operation, function=event.request.function)
+                    ctx.send_result(event.request, "aborted", problem)
+            elif isinstance(event, OperatorSignal):
+                if event.command == "pause":
+                    ctx.hold = True
+                elif event.command == "resume":
+                    ctx.hold = False
+                elif event.command == "stop":
+                    ctx.hold = False
+                    if run is not None:
+                        ctx.finish_function("preempted", f"stopped by {event.source}")
+            elif isinstance(event, FaultEvent) and run is not None:
+                ctx.status("error", error=f"{event.where}: {event.error}")
+                ctx.finish_function("aborted", f"{event.where}: {event.error}")
+            # FeedbackEvent here is stale (an old command); SyncEvent is already on the board.
+
+
+# ---------------------------------------------------------------------- working states
+class WorkingState(MachineState):
+    """Runs one primitive on the bridge: execute, then done / error; pause and stop on request."""
+
+    async def execute(self, userdata: MutableMapping[str, Any]) -> str:
+        resume_id = userdata.get("resume_command")
+        userdata["resume_command"] = None
+        if resume_id is not None:
+            return await self._resume(userdata, resume_id)
+        return await self._run(userdata)
+
+    async def _run(self, userdata: MutableMapping[str, Any]) -> str:
+        ctx = self.ctx
+        primitive = userdata["primitive"]
+        assert ctx.run is not None
+        ctx.status("primitive_start", primitive=describe(primitive), index=ctx.run.started)
+        command_id = ctx.send_bridge("execute", primitive)
+        return await self._await_done(userdata, command_id, accepted=False)
+
+    async def _resume(self, userdata: MutableMapping[str, Any], command_id: str) -> str:
+        early: BridgeFeedback | None = userdata.get("early_done")
+        userdata["early_done"] = None
+        if early is not None:
+            return self._finish(userdata, early)
+        outcome = await self._control("resume")
+        if outcome is not None:
+            userdata["error"] = outcome
+            return ERROR
+        return await self._await_done(userdata, command_id, accepted=True)
+
+    async def _await_done(self, userdata: MutableMapping[str, Any], command_id: str, *, accepted: bool) -> str:
+        ctx = self.ctx
+        ctx.active_command = command_id
+        primitive = userdata["primitive"]
+        accept_deadline = ctx.clock.now() + ctx.config.bridge_timeout
+        done_deadline = ctx.clock.now() + ctx.config.primitive_timeout
+        while True:
+            deadline = done_deadline if accepted else accept_deadline
+            event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
+            if event is None:
+                what = "finish" if accepted else "accept"
+                limit = ctx.config.primitive_timeout if accepted else ctx.config.bridge_timeout
+                userdata["error"] = f"timeout: the bridge did not {what} {describe(primitive)} within {limit:g} s"
+                return ERROR
+            if isinstance(event, FeedbackEvent) and event.feedback.id == command_id:
+                status = event.feedback.status
+                if status == "accepted":
+                    accepted = True
+                elif status in ("done", "error"):
+                    return self._finish(userdata, event.feedback)
+            elif isinstance(event, OperatorSignal):
+                outcome = await self._operator(userdata, event, command_id)
+                if outcome is not None:
+                    return outcome
+            elif isinstance(event, RequestEvent):
+                self.refuse(event)
+            elif isinstance(event, FaultEvent):
+                userdata["error"] = f"{event.where}: {event.error}"
+                return ERROR
+
+    async def _operator(self, userdata: MutableMapping[str, Any], signal: OperatorSignal, command_id: str) -> str | None:
+        if signal.command == "pause":
+            problem = await self._control("pause", keep_done_of=command_id, userdata=userdata)
+            if problem is not None:
+                userdata["error"] = problem
+                return ERROR
+            userdata["resume_command"] = command_id
+            return PAUSE_SIGNAL
+        if signal.command == "stop":
+            userdata["stop_reason"] = f"stopped by {signal.source}"
+            return STOP_SIGNAL
+        return None  # resume / reset do not apply while working
+
+    def _finish(self, userdata: MutableMapping[str, Any], feedback: BridgeFeedback) -> str:
+        """Turn a final feedback into ok (skill advanced) or error."""
+        ctx = self.ctx
+        primitive = userdata["primitive"]
+        ctx.active_command = None
+        assert ctx.run is not None
+        index = ctx.run.started
+        if feedback.status == "error":
+            error = feedback.error or "bridge reported an error without a message"
+            ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="error", error=error)
+            userdata["error"] = f"{describe(primitive)}: {error}"
+            return ERROR
+        ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done")
+        try:
+            result = codec.from_primitive(primitive.RESULT, feedback.result or {}, source=f"/{ctx.group}/bridge/feedback")
+            ctx.run.advance(result)
+        except (codec.WireError, SkillError) as error:
+            userdata["error"] = str(error)
+            return ERROR
+        return OK
+
+class SyncState(WorkingState):
+    """FullBodyMotion / MasterSlave: meet the partner groups, then the leader moves the robot.
+
+    Every partner announces its arrival on the sync topic; when all have arrived, the leader
+    (the master, or the first partner of a full-body move) sends the one command that moves
+    them all, and tells the others when it is done or failed.  A partner that never arrives
+    is an error after ``sync_timeout``.
+    """
+
+    async def execute(self, userdata: MutableMapping[str, Any]) -> str:
+        ctx = self.ctx
+        assert ctx.run is not None
+        request = ctx.run.request
+        primitive = userdata["primitive"]
+        key = request.sync or f"{request.operation}:{request.function}"
+        partners = request.partners or (ctx.group,)
+        leader = primitive.master if isinstance(primitive, MasterSlaveMove) else partners[0]
+        if userdata.get("resume_command") is not None and leader == ctx.group:
+            return self._report(userdata, key, await super().execute(userdata))
+        if ctx.sync_key != key:
+            ctx.sync_key = key
+            ctx.status("primitive_start", primitive=describe(primitive), index=ctx.run.started)
+            ctx.send_sync(key, "arrived")
+        outcome = await self._barrier(userdata, key, partners)
+        if outcome is not None:
+            return outcome
+        if leader == ctx.group:
+            if ctx.sync_sent != key:
+                ctx.sync_sent = key
+                command_id = ctx.send_bridge("execute", primitive)
+                outcome = await self._await_done(userdata, command_id, accepted=False)
+            else:
+                outcome = ERROR
+                userdata["error"] = "synchronised command lost after a pause"
+            return self._report(userdata, key, outcome)
+        return await self._follow(userdata, key, leader, partners)
+
+    def _report(self, userdata: MutableMapping[str, Any], key: str, outcome: str) -> str:
+        ctx = self.ctx
+        if outcome == OK:
+            ctx.send_sync(key, "done")
+            ctx.sync_key = ctx.sync_sent = None
+        elif outcome == ERROR:
+            ctx.send_sync(key, "failed", userdata.get("error"))
+            ctx.sync_key = ctx.sync_sent = None
+        return outcome
+
+    async def _barrier(self, userdata: MutableMapping[str, Any], key: str, partners: tuple[str, ...]) -> str | None:
+        ctx = self.ctx
+        deadline = ctx.clock.now() + ctx.config.sync_timeout
+        while True:
+            board = ctx.sync_board.get(key, {})
+            failed = [m for m in board.values() if m.event == "failed"]
+            if failed:
+                userdata["error"] = f"partner {failed[0].group} failed: {failed[0].error}"
+                ctx.sync_key = None
+                return ERROR
+            missing = [g for g in partners if g not in board]
+            if not missing:
+                return None
+            event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
+            if event is None:
+                userdata["error"] = f"timeout: {', '.join(missing)} did not reach the {self.name} barrier within {ctx.config.sync_timeout:g} s"
+                self._report(userdata, key, ERROR)
+                return ERROR
+            outcome = await self._interrupt(userdata, event)
+            if outcome is not None:
+                return outcome
+
+    async def _follow(self, userdata: MutableMapping[str, Any], key: str, leader: str, partners: tuple[str, ...]) -> str:
+        ctx = self.ctx
+        deadline = ctx.clock.now() + ctx.config.primitive_timeout
+        while True:
+            board = ctx.sync_board.get(key, {})
+            failed = [m for g, m in board.items() if m.event == "failed" and g != ctx.group]
+            if failed:
+                userdata["error"] = f"{failed[0].group} failed the {self.name}: {failed[0].error}"
+                ctx.sync_key = None
+                return ERROR
+            if board.get(leader) is not None and board[leader].event == "done":
+                ctx.sync_key = ctx.sync_sent = None
+                assert ctx.run is not None
+                ctx.status("primitive_end", primitive=describe(userdata["primitive"]), index=ctx.run.started, outcome="done")
+                try:
+                    ctx.run.advance(userdata["primitive"].RESULT())
+                except SkillError as error:
+                    userdata["error"] = str(error)
+                    return ERROR
+                return OK
+            event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
+            if event is None:
+                userdata["error"] = f"timeout: {leader} did not finish the {self.name} within {ctx.config.primitive_timeout:g} s"
+                return self._report(userdata, key, ERROR)
+            outcome = await self._interrupt(userdata, event)
+            if outcome is not None:
+                return outcome
+
+    async def _interrupt(self, userdata: MutableMapping[str, Any], event: Event) -> str | None:
+        """Operator signals and faults while waiting on partners (nothing of ours is moving)."""
+        if isinstance(event, OperatorSignal):
+            if event.command == "pause":
+                return PAUSE_SIGNAL
+            if event.command == "stop":
+                userdata["stop_reason"] = f"stopped by {event.source}"
+                return STOP_SIGNAL
+        elif isinstance(event, RequestEvent):
+            self.refuse(event)
+        elif isinstance(event, FaultEvent):
+            userdata["error"] = f"{event.where}: {event.error}"
+            return ERROR
+        return None  # SyncEvent: the board changed, look again
+
+
+# ------------------------------------------------------------------ Pause, Stop, Error
+class PauseState(MachineState):
+    """Holds until resume or stop; an error reported meanwhile (the bridge failed) wins."""
+
+    def __init__(self, ctx: MachineContext) -> None:
+        super().__init__(PAUSE, ctx)
+
+    async def execute(self, userdata: MutableMapping[str, Any]) -> str:
+        ctx = self.ctx
+        paused = userdata.get("resume_command")
+        while True:
+            event = await ctx.events.get()
+            if isinstance(event, OperatorSignal):
+                if event.command == "resume":
+                    return RESUME
+                if event.command == "stop":
+                    userdata["stop_reason"] = f"stopped by {event.source}"
+                    return STOP_SIGNAL
+            elif isinstance(event, FeedbackEvent) and event.feedback.id == paused:
+                if event.feedback.status == "error":
+                    userdata["error"] = f"while paused: {event.feedback.error}"
+                    return ERROR
+                if event.feedback.status == "done":
+                    userdata["early_done"] = event.feedback
+            elif isinstance(event, FaultEvent):
+                userdata["error"] = f"while paused: {event.where}: {event.error}"
+                return ERROR
+            elif isinstance(event, RequestEvent):
+                self.refuse(event)
+
+
+class StopState(MachineState):
+    """Halts the robot and abandons the function; Table 2 then leads to ErrorHandling."""
+
+    def __init__(self, ctx: MachineContext) -> None:
+        super().__init__(STOP, ctx)
+
+    async def execute(self, userdata: MutableMapping[str, Any]) -> str:
+        reason = userdata.get("stop_reason") or "stopped"
+        problem = await self._control("stop")
+        self.ctx.active_command = None
+        userdata["resume_command"] = None
+        userdata["early_done"] = None
+        userdata["error"] = reason if problem is None else f"{reason}; {problem}"
+        return ERROR
+
+
+class ErrorHandlingState(MachineState):
+    """Reports the error, holds the robot, and waits for a reset (-> Ready) or the end (-> Finish).
+
+    What to do about the error -- retry, go to a safe pose, raise an alarm for the operator --
+    is the application's error policy, applied by the engine, which sees the function's result.
+    """
+
+    def __init__(self, ctx: MachineContext) -> None:
+        super().__init__(ERROR_HANDLING, ctx)
+
+    async def execute(self, userdata: MutableMapping[str, Any]) -> str:
+        ctx = self.ctx
+        error = userdata.get("error") or "unknown error"
+        stopped = userdata.get("stop_reason") is not None
+        if ctx.active_command is not None:
+            ctx.send_bridge("stop")  # whatever failed, the arm must not keep moving
+            ctx.active_command = None
+        if ctx.sync_key is not None:
+            ctx.send_sync(ctx.sync_key, "failed", error)
+            ctx.sync_key = ctx.sync_sent = None
+        ctx.status("error", error=error)
+        ctx.finish_function("preempted" if stopped else "aborted", error)
+        for key in ("error", "stop_reason", "resume_command", "early_done"):
+            userdata[key] = None
+        ctx.hold = False
+        while True:
+            event = await ctx.events.get()
+            if isinstance(event, OperatorSignal) and event.command == "reset":
+                return OK
+            if isinstance(event, RequestEvent):
+                if event.request.kind == "end":
+                    return END
+                ctx.send_result(event.request, "aborted", f"{ctx.group} is in ErrorHandling: reset it before new requests")

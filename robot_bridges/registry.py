@@ -1,0 +1,35 @@
+"""The back ends the CLI and launch files can choose, by name, imported only when chosen.
+
+Each entry is ``module:function`` of an async factory ``(clock, BackendOptions) -> RobotBackend``;
+importing lazily keeps pinocchio, sockets and simulators out of runs that do not use them.
+"""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Awaitable, Callable
+
+from execution_engine.clock import Clock
+from robot_bridges.backend import BackendOptions, RobotBackend
+
+BACKENDS: dict[str, str] = {
+    "nextage-sim": "robot_bridges.nextage_sim.backend:create",
+    "vplus": "robot_bridges.vplus.backend:create",
+    "kuka-rsi": "robot_bridges.kuka_rsi.backend:create",
+}
+
+BackendFactory = Callable[[Clock, BackendOptions], Awaitable[RobotBackend]]
+
+
+def backend_factory(name: str) -> BackendFactory:
+    try:
+        target = BACKENDS[name]
+    except KeyError:
+        raise KeyError(f"unknown robot back end {name!r} (choose from: {', '.join(BACKENDS)})") from None
+    module_name, _, function = target.partition(":")
+    module = importlib.import_module(module_name)
+    factory: BackendFactory = getattr(module, function)
+    return factory
+
+
+async def create_backend(name: str, clock: Clock, options: BackendOptions) -> RobotBackend:
+    return await backend_factory(name)(clock, options)
