@@ -1,0 +1,324 @@
+"""A V+ AdeptServer simulator: the TCP server a Viper s850 controller runs, over a kinematic arm.
+
+It behaves like AdeptServer's ``serverloop``/``on_recv`` (seed 000, ``adeptserver.V2``): read
+whatever bytes arrived, run every complete message in order -- one at a time, for every client,
+because the controller runs one server task -- and after each skill write
+``<id>:done:<t_recv>,<t_done>:<pose>``.  ``t_recv`` is when the chunk holding the message was
+read and ``t_done`` when the skill returned, in controller-clock seconds since the server
+started, with millisecond resolution.  Like the real server it sends no error replies: a message
+it cannot parse, an unknown skill, or a skill that fails (a location out of reach) gets no ack,
+only a line in the log and in :attr:`VPlusSimulator.errors`.  Unlike the real server, which
+splits each read on ``\\r\\n`` and so breaks on a message cut across two reads, it reassembles
+lines across any segmentation, as the seed says both ends should.
+
+For tests, :class:`Faults` injects what real networks and controllers do: drop the connection
+(after a number of messages, or when a given skill starts), delay acks, garble them, and write
+them in small pieces.  Everything runs on the injectable clock.
+
+``python -m robot_bridges.vplus.simulator --port 1234`` runs it standalone until SIGINT/SIGTERM.
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+from execution_engine.clock import Clock, run_with_clock, scaled_clock
+from robot_bridges.vplus.codec import (
+    MAX_LINE,
+    Ack,
+    Skill,
+    DecodeError,
+    FrameError,
+    LineSplitter,
+    Message,
+    UnknownSkill,
+    decode_message,
+)
+from robot_bridges.vplus.kinematics import HOME_DEG
+from robot_bridges.vplus.sim_arm import SimulatedArm, SkillError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PORT = 1234
+#: AdeptServer opens its socket with ``/CLIENTS 10``.
+MAX_CLIENTS = 10
+_READ_SIZE = 2048  # AdeptServer's /BUFFER_SIZE
+
+
+@dataclass
+class Faults:
+    """What to break, for tests.  Fields may be changed while the simulator runs."""
+
+    #: Close the connection after this many more messages have been read (the last one unanswered).
+    drop_after: int | None = None
+    #: Close the connection when a message with one of these skills starts executing (once per
+    #: skill: it is removed when it fires).  The skill still runs to its end -- the arm keeps
+    #: moving -- but its ack is never written.
+    drop_on: set[str] = field(default_factory=set)
+    #: Extra run-time seconds before each ack is written.
+    ack_delay: float = 0.0
+    #: Garble this many of the next acks (the status field becomes unreadable).
+    garble_acks: int = 0
+    #: Write each ack in pieces of this many bytes, one write each (0: whole).
+    split_acks: int = 0
+    #: Skills that run but are never acked, as if the ack were lost.
+    mute: set[str] = field(default_factory=set)
+
+
+@dataclass
+class _Client:
+    peer: str
+    writer: asyncio.StreamWriter
+    task: asyncio.Task[None]
+
+
+class VPlusSimulator:
+    """The AdeptServer TCP server over a :class:`SimulatedArm`; ``async with`` starts and stops it."""
+
+    def __init__(
+        self,
+        clock: Clock,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        *,
+        arm: SimulatedArm | None = None,
+        faults: Faults | None = None,
+        max_clients: int = MAX_CLIENTS,
+        max_line: int = MAX_LINE,
+        skills: Iterable[Skill] = tuple(Skill),
+    ) -> None:
+        self.clock = clock
+        self.host = host
+        self._requested_port = port
+        self.arm = arm or SimulatedArm(clock, joints_deg=HOME_DEG)
+        self.faults = faults or Faults()
+        self.max_clients = max_clients
+        self.max_line = max_line
+        #: The skills this server has; AdeptServer variants differ (gripper, movehome on some only).
+        self.skills = frozenset(Skill(s) for s in skills)
+        self.errors: list[str] = []
+        self.received: list[Message] = []
+        self.acked: list[str] = []
+        self._server: asyncio.Server | None = None
+        self._clients: dict[int, _Client] = {}
+        self._next_client = 0
+        self._robot = asyncio.Lock()  # one server task on the controller: one skill at a time
+        self._t0 = 0.0
+
+    # ---------------------------------------------------------------------------- lifecycle
+    async def start(self) -> VPlusSimulator:
+        self._t0 = self.clock.now()
+        self._server = await asyncio.start_server(self._on_connect, self.host, self._requested_port)
+        log.info("V+ simulator listening on %s:%d", self.host, self.port)
+        return self
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+        for client in list(self._clients.values()):
+            client.writer.close()
+            client.task.cancel()
+        await asyncio.gather(*(c.task for c in self._clients.values()), return_exceptions=True)
+        self._clients.clear()
+        if self._server is not None:
+            await self._server.wait_closed()
+            self._server = None
+
+    async def __aenter__(self) -> VPlusSimulator:
+        return await self.start()
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    @property
+    def port(self) -> int:
+        if self._server is None or not self._server.sockets:
+            return self._requested_port
+        return int(self._server.sockets[0].getsockname()[1])
+
+    @property
+    def clients(self) -> int:
+        return len(self._clients)
+
+    def controller_time(self) -> float:
+        """Seconds since the server started (V+ ``TIMER(-3) - t0``)."""
+        return self.clock.now() - self._t0
+
+    async def drop_clients(self) -> None:
+        """Close every client connection now (a cable pulled, a controller reboot)."""
+        for client in list(self._clients.values()):
+            client.writer.close()
+
+    async def send_raw(self, data: bytes) -> None:
+        """Write ``data`` to every client as is (to test how a client takes unexpected bytes)."""
+        for client in list(self._clients.values()):
+            client.writer.write(data)
+            with contextlib.suppress(ConnectionError):
+                await client.writer.drain()
+
+    # ---------------------------------------------------------------------------- serving
+    async def _on_connect(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        peer = _peer(writer)
+        if len(self._clients) >= self.max_clients:
+            self._error(f"{peer}: refused, {self.max_clients} clients already connected")
+            writer.close()
+            return
+        key = self._next_client
+        self._next_client += 1
+        task = asyncio.current_task()
+        assert task is not None
+        self._clients[key] = _Client(peer, writer, task)
+        log.info("connection established: %s", peer)
+        try:
+            await self._serve(peer, reader, writer)
+        except (ConnectionError, asyncio.IncompleteReadError) as error:
+            log.info("%s: connection lost: %s", peer, error)
+        except asyncio.CancelledError:
+            raise
+        except Exception as error:  # noqa: BLE001 - a simulator defect must be visible, not silent
+            self._error(f"{peer}: simulator fault: {type(error).__name__}: {error}")
+            log.exception("%s: simulator fault", peer)
+        finally:
+            self._clients.pop(key, None)
+            writer.close()
+            log.info("connection closed: %s", peer)
+
+    async def _serve(self, peer: str, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        splitter = LineSplitter(self.max_line)
+        while not writer.is_closing():
+            data = await reader.read(_READ_SIZE)
+            if not data:
+                return
+            t_recv = self.controller_time()
+            try:
+                lines = splitter.feed(data)
+            except FrameError as error:
+                self._error(f"{peer}: {error}; closing the connection")
+                return
+            for line in lines:
+                if writer.is_closing():
+                    return
+                await self._handle(peer, line, t_recv, writer)
+
+    async def _handle(self, peer: str, line: bytes, t_recv: float, writer: asyncio.StreamWriter) -> None:
+        faults = self.faults
+        if faults.drop_after is not None:
+            if faults.drop_after <= 0:
+                faults.drop_after = None
+                writer.close()
+                return
+            faults.drop_after -= 1
+        try:
+            message = decode_message(line)
+        except UnknownSkill as error:
+            self._error(f"{peer}: unknown skill {error.skill!r} in message {error.msg_id}: not acked")
+            return
+        except DecodeError as error:
+            self._error(f"{peer}: malformed message: {error}: not acked")
+            return
+        if message.command.skill not in self.skills:
+            self._error(f"{peer}: unknown skill {message.command.skill.value!r} in message {message.id}: not acked")
+            return
+        self.received.append(message)
+        skill = message.command.skill.value
+        async with self._robot:
+            if skill in faults.drop_on:
+                faults.drop_on.discard(skill)
+                writer.close()
+            try:
+                await self.arm.run(message.command)
+            except SkillError as error:
+                self._error(f"{peer}: {message}: {error}: not acked")
+                return
+            ack = Ack(message.id, t_recv, self.controller_time(), self.arm.location())
+        if writer.is_closing() or skill in faults.mute:
+            return
+        await self._write_ack(ack, writer)
+
+    async def _write_ack(self, ack: Ack, writer: asyncio.StreamWriter) -> None:
+        faults = self.faults
+        if faults.ack_delay > 0:
+            await self.clock.sleep(faults.ack_delay)
+        data = ack.encode()
+        if faults.garble_acks > 0:
+            faults.garble_acks -= 1
+            data = data.replace(b":done:", b":d\x7fne:", 1)
+        if faults.split_acks > 0:
+            for i in range(0, len(data), faults.split_acks):
+                writer.write(data[i : i + faults.split_acks])
+                await writer.drain()
+                await self.clock.sleep(1e-4)  # a separate segment, not coalesced with the next piece
+        else:
+            writer.write(data)
+            await writer.drain()
+        self.acked.append(ack.id)
+
+    def _error(self, text: str) -> None:
+        self.errors.append(text)
+        log.warning("%s", text)
+
+
+def _peer(writer: asyncio.StreamWriter) -> str:
+    name = writer.get_extra_info("peername")
+    return f"{name[0]}:{name[1]}" if isinstance(name, tuple) else str(name)
+
+
+# ---------------------------------------------------------------------------------- CLI
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m robot_bridges.vplus.simulator", description=__doc__.split("\n")[0])
+    parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0 picks one)")
+    parser.add_argument("--speed", type=float, default=1.0, help="run-time speed factor: 10 simulates 10x faster than real time")
+    parser.add_argument("--run-for", type=float, default=None, metavar="SECONDS", help="stop after this much run time")
+    parser.add_argument("--max-clients", type=int, default=MAX_CLIENTS, help=f"simultaneous clients (default {MAX_CLIENTS})")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log every connection and error")
+    return parser
+
+
+async def serve(clock: Clock, host: str, port: int, *, run_for: float | None = None, max_clients: int = MAX_CLIENTS) -> int:
+    """Run the simulator until SIGINT/SIGTERM or ``run_for`` seconds of run time; returns an exit code."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        async with VPlusSimulator(clock, host, port, max_clients=max_clients) as sim:
+            print(f"V+ simulator on {host}:{sim.port} (x{clock.speed:g}); Ctrl-C stops it", flush=True)
+            with contextlib.suppress(asyncio.TimeoutError):
+                await clock.wait_for(stop.wait(), run_for)
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
+    if not (0 <= args.port <= 65535):
+        print(f"error: --port must be 0..65535, got {args.port}", file=sys.stderr)
+        return 2
+    if not (args.speed > 0):
+        print(f"error: --speed must be > 0, got {args.speed}", file=sys.stderr)
+        return 2
+    if args.max_clients < 1:
+        print(f"error: --max-clients must be >= 1, got {args.max_clients}", file=sys.stderr)
+        return 2
+    try:
+        return run_with_clock(
+            lambda clock: serve(clock, args.host, args.port, run_for=args.run_for, max_clients=args.max_clients),
+            scaled_clock(args.speed),
+        )
+    except OSError as error:
+        print(f"error: cannot serve on {args.host}:{args.port}: {error}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

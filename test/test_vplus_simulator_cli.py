@@ -1,0 +1,61 @@
+"""The simulator as a program: arguments, a real connection, and stopping on SIGTERM."""
+from __future__ import annotations
+
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+
+import pytest
+
+from robot_bridges.vplus import codec
+from robot_bridges.vplus.simulator import main
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--port", "70000"], "--port must be 0..65535"),
+        (["--speed", "0"], "--speed must be > 0"),
+        (["--max-clients", "0"], "--max-clients must be >= 1"),
+    ],
+)
+def test_bad_arguments_are_refused_with_a_clear_message(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_bounded_run_stops_by_itself(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", "0", "--speed", "100", "--run-for", "1"]) == 0  # 1 s of run time at 100x
+    assert re.search(r"V\+ simulator on 127\.0\.0\.1:\d+", capsys.readouterr().out)
+
+
+def test_the_module_serves_acks_and_stops_on_sigterm() -> None:
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "robot_bridges.vplus.simulator", "--port", "0", "--speed", "50"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        assert proc.stdout is not None
+        banner = proc.stdout.readline()
+        port = int(re.search(r":(\d+) ", banner).group(1))  # type: ignore[union-attr]
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as conn:
+            conn.settimeout(10)
+            conn.sendall(codec.Message("a1b2c3d4", codec.ENABLE_AIR).encode())
+            data = b""
+            while not data.endswith(b"\r\n"):
+                data += conn.recv(256)
+        ack = codec.decode_ack(data[:-2])
+        assert ack.id == "a1b2c3d4" and ack.pose[:3] == pytest.approx((480, 0, 710), abs=1e-3)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
