@@ -101,7 +101,7 @@ class ArmKinematics:
             raise RuntimeError(f"{group}: reduced arm model has unexpected joint order {arm_ids}")
         self.lower = full.lower[self.indices].copy()
         self.upper = full.upper[self.indices].copy()
-        self._chest_zero_inv = np.linalg.inv(full.frame_matrix(full.neutral(), TORSO_LINK))
+        self._chest_zero_inv = _rigid_inverse(full.frame_matrix(full.neutral(), TORSO_LINK))
         self._initial = full.named_pose("initial")[self.indices]
         rng = np.random.default_rng(options.restart_seed + (0 if group == "left_arm" else 1))
         margin = 0.05 * (self.upper - self.lower)
@@ -120,7 +120,7 @@ class ArmKinematics:
     def tool(self, tool: Pose) -> None:
         self._tool = tool
         self._tool_m = tool.matrix()
-        self._tool_inv = np.linalg.inv(self._tool_m)
+        self._tool_inv = _rigid_inverse(self._tool_m)
 
     # ------------------------------------------------------------------------------ FK
     def base_matrix(self, q_full: Vector) -> Matrix:
@@ -142,7 +142,7 @@ class ArmKinematics:
         seeds.  Raises ``BridgeError(UNREACHABLE)`` naming the arm, the target and the best
         residual when no attempt converges inside the joint limits.
         """
-        goal = np.linalg.inv(self.base_matrix(q_full)) @ target.matrix() @ self._tool_inv
+        goal = _rigid_inverse(self.base_matrix(q_full)) @ target.matrix() @ self._tool_inv
         goal_r = np.ascontiguousarray(goal[:3, :3])
         goal_p = np.ascontiguousarray(goal[:3, 3])
         seeds = [np.clip(q_full[self.indices], self.lower, self.upper)]
@@ -179,11 +179,12 @@ class ArmKinematics:
         boost = 1.0
         stalled = 0
         for _ in range(opts.max_iterations):
-            pos_err, rot_err = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
+            pos_err, rot_err = _norms(e)
             if pos_err < opts.position_tolerance and rot_err < opts.orientation_tolerance:
                 return q, pos_err, rot_err, True
             jac = pin.computeFrameJacobian(self.model, self.data, q, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
-            blocked = ((q <= lower + 1e-9) & (jac.T @ e < 0)) | ((q >= upper - 1e-9) & (jac.T @ e > 0))
+            descent = jac.T @ e
+            blocked = ((q <= lower + 1e-9) & (descent < 0)) | ((q >= upper - 1e-9) & (descent > 0))
             if blocked.any():
                 jac = jac.copy()
                 jac[:, blocked] = 0.0
@@ -207,7 +208,7 @@ class ArmKinematics:
                 break
             if stalled >= 10:
                 break
-        pos_err, rot_err = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
+        pos_err, rot_err = _norms(e)
         ok = pos_err < opts.position_tolerance and rot_err < opts.orientation_tolerance
         return q, pos_err, rot_err, ok
 
@@ -219,6 +220,19 @@ class ArmKinematics:
         e[:3] = goal_p - placement.translation
         e[3:] = pin.log3(goal_r @ placement.rotation.T)
         return e
+
+
+def _norms(e: Vector) -> tuple[float, float]:
+    """Lengths of the position and rotation halves of a 6-vector (cheaper than np.linalg.norm)."""
+    x, y, z, a, b, c = e.tolist()
+    return math.sqrt(x * x + y * y + z * z), math.sqrt(a * a + b * b + c * c)
+
+
+def _rigid_inverse(m: Matrix) -> Matrix:
+    inverse = np.eye(4)
+    inverse[:3, :3] = m[:3, :3].T
+    inverse[:3, 3] = -m[:3, :3].T @ m[:3, 3]
+    return inverse
 
 
 class NextageModel:
