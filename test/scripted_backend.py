@@ -32,6 +32,7 @@ from execution_engine.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 
 STEP = 0.01
+VISION_OFFSET = 0.001
 
 
 @dataclass
@@ -39,6 +40,7 @@ class Executed:
     group: str
     kind: str
     t_start: float
+    primitive: Primitive
     t_end: float | None = None
     outcome: str = "running"
 
@@ -98,7 +100,7 @@ class ScriptedBackend(RobotBackend):
         if state.busy:
             raise BridgeError(FaultKind.BUSY, f"{group} busy")
         state.busy, state.stopped, state.paused = True, False, False
-        entry = Executed(group, primitive.KIND, self.clock.now())
+        entry = Executed(group, primitive.KIND, self.clock.now(), primitive)
         self.log.append(entry)
         try:
             await self._run(group, primitive)
@@ -141,8 +143,8 @@ class ScriptedBackend(RobotBackend):
         if isinstance(primitive, EndEffector):
             self.io[group][primitive.action] = True
             return EndEffectorResult(dict(self.io[group]))
-        if isinstance(primitive, Vision):
-            return VisionResult(pose=primitive.nominal or Pose(), value=1.0)
+        if isinstance(primitive, Vision):  # the part is 1 mm off its nominal place along x
+            return VisionResult(pose=(primitive.nominal or Pose()).translated(dx=VISION_OFFSET), value=1.0)
         if isinstance(primitive, RecordTrajectory):
             names = self.robot.group(group).joint_names
             return TrajectoryResult(names, (tuple(0.0 for _ in names), tuple(0.1 for _ in names)), (0.0, 1.0))

@@ -365,6 +365,11 @@ class PauseState(MachineState):
     async def execute(self, userdata: MutableMapping[str, Any]) -> str:
         ctx = self.ctx
         paused = userdata.get("resume_command")
+        early: BridgeFeedback | None = userdata.get("early_done")
+        if early is not None and early.status == "error":  # it failed as the pause landed
+            userdata["early_done"] = None
+            userdata["error"] = f"while pausing: {early.error}"
+            return ERROR
         while True:
             event = await ctx.events.get()
             if isinstance(event, OperatorSignal):

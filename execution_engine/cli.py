@@ -1,0 +1,254 @@
+"""``python -m execution_engine``: validate applications, list the function catalog, run applications.
+
+Exit codes: 0 success (``run``: every group reached Finish cleanly); 1 invalid application or a
+failed run; 2 bad command line or back-end setup; 3 run stopped by the operator.
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import math
+import signal
+import sys
+from collections.abc import Sequence
+from contextlib import ExitStack
+from pathlib import Path
+from typing import IO
+
+from app_functions.registry import full_catalog
+from core_functions.catalog import Catalog, ParamType
+from core_functions.robots import ROBOTS
+from execution_engine.app_model import Application, ApplicationError, load_application, validate_application
+from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
+from execution_engine.deployment import deploy_local
+from execution_engine.engine.report import RunReport
+from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
+from execution_engine.operator_console import OperatorConsole
+
+EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED = 0, 1, 2, 3
+
+XML_USAGE = """\
+An application is an XML file: <application name=".." robot="nextage" cell="cells/your_cell.xml">, holding
+<operation id="1"> elements in the order they run. In each operation, one element per robot group (Nextage:
+left_arm, right_arm, torso_head; single-arm robots: arm) holds one <function name="..."> with its params in order:
+<params><param value="..."/></params>. A group left out of an operation waits. Groups of one operation run at the
+same time; the next operation starts when all are done. Optional: <error_policy retries="1" action="abort|safe_pose|
+alarm" safe_pose="initial"/> before the operations. Numbers are SI (m, rad, s) unless a unit is written after them
+(mm, deg, ms, %). Check a file with: python -m execution_engine validate FILE"""
+
+PARAM_TYPE_HELP = {
+    ParamType.NUMBER: "a number; a unit suffix of the param's unit family may follow (mm, cm, deg, ms, %)",
+    ParamType.INTEGER: "a whole number",
+    ParamType.BOOLEAN: "true or false (also yes/no, 1/0)",
+    ParamType.TEXT: "free text",
+    ParamType.CHOICE: "one of the listed choices",
+    ParamType.NAME: "a name you choose: letters, digits, _ . -",
+    ParamType.FRAME: "the name of a frame of the cell model (of one of the listed kinds, if any)",
+    ParamType.FRAMES: "cell frame names separated by spaces or commas",
+    ParamType.ELEMENT: "the name of an element (reference) of the cell model",
+    ParamType.TARGET: "a cell frame name, or 'x,y,z,roll,pitch,yaw' in the world frame (m, rad; mm/deg suffixes allowed)",
+    ParamType.JOINTS: "one value per joint of the group in the robot's order, rad (or 'deg' after the list)",
+    ParamType.JOINT_POSE: "a named joint pose of the robot (e.g. initial, off) or a <joint_pose> of the cell",
+    ParamType.GROUP: "the name of another group of the robot",
+}
+
+
+# ------------------------------------------------------------------------------ validate
+def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[str]) -> int:
+    status = EXIT_OK
+    for file in files:
+        diagnostics = validate_application(file, catalog)
+        errors = [d for d in diagnostics if getattr(d, "severity", "error") == "error"]
+        for diagnostic in diagnostics:
+            err.write(f"{diagnostic}\n")
+        if errors:
+            status = EXIT_INVALID
+            err.write(f"{file}: {len(errors)} error(s)\n")
+        else:
+            out.write(f"{file}: valid\n")
+    return status
+
+
+# ----------------------------------------------------------------------------- functions
+def catalog_document(catalog: Catalog) -> dict[str, object]:
+    return {
+        "xml_usage": XML_USAGE,
+        "param_types": {t.value: PARAM_TYPE_HELP[t] for t in ParamType},
+        "robots": {r.name: {"aliases": list(r.aliases), "groups": {g.name: {"kind": g.kind, "joints": list(g.joint_names)} for g in r.groups}, "joint_poses": sorted(r.poses)} for r in ROBOTS},
+        "functions": catalog.describe(),
+    }
+
+
+def cmd_functions(catalog: Catalog, as_json: bool, out: IO[str]) -> int:
+    if as_json:
+        json.dump(catalog_document(catalog), out, indent=2)
+        out.write("\n")
+        return EXIT_OK
+    out.write(XML_USAGE + "\n\nRobots:\n")
+    for robot in ROBOTS:
+        groups = ", ".join(f"{g.name} ({g.kind}, {len(g.joints)} joints)" for g in robot.groups)
+        out.write(f"  {robot.name} (also: {', '.join(robot.aliases)}): {groups}; poses: {', '.join(sorted(robot.poses))}\n")
+    out.write("\nFunctions:\n")
+    for spec in (catalog.functions[n] for n in catalog.names()):
+        out.write(f"\n  {spec.signature()}    [{spec.library}; groups: {', '.join(spec.group_kinds)}]\n")
+        for line in spec.doc.splitlines():
+            out.write(f"      {line}\n")
+        for p in spec.params:
+            extras = [p.type.value]
+            if p.unit:
+                extras.append(f"unit {p.unit}")
+            if p.choices:
+                extras.append("one of " + "|".join(p.choices))
+            if p.kinds:
+                extras.append("kind " + "|".join(p.kinds))
+            if p.minimum is not None or p.maximum is not None:
+                extras.append(f"range [{'' if p.minimum is None else f'{p.minimum:g}'}, {'' if p.maximum is None else f'{p.maximum:g}'}]")
+            extras.append("required" if p.required else f"default {p.default}")
+            out.write(f"      - {p.name}: {p.doc} ({'; '.join(extras)})\n")
+        if spec.sync:
+            out.write(f"      synchronised ({spec.sync}): give it to the partner groups in the same operation\n")
+    out.write("\nParameter types:\n")
+    for t, text in PARAM_TYPE_HELP.items():
+        out.write(f"  {t.value:<11} {text}\n")
+    return EXIT_OK
+
+
+# ----------------------------------------------------------------------------------- run
+def parse_speed(text: str) -> float:
+    """A positive speed factor, or ``max`` for simulated time (as fast as the computer goes)."""
+    if text.lower() in ("max", "inf", "fastest"):
+        return math.inf
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"speed must be a positive number or 'max', got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"speed must be a positive number or 'max', got {text!r}")
+    return value
+
+
+async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], trace: IO[str] | None) -> RunReport:
+    from robot_bridges.backend import BackendOptions
+    from robot_bridges.registry import create_backend
+
+    options = BackendOptions(
+        robot=app.robot,
+        host=args.host,
+        port=args.port,
+        rsi_listen=args.rsi_listen,
+        faults=tuple(args.fault or ()),
+        seed=args.seed,
+    )
+    backend = await create_backend(args.robot or app.robot.default_backend, clock, options)
+    machine_parameters = {"trajectory_db": args.trajectory_db} if args.trajectory_db else {}
+    deployment = await deploy_local(clock, app.robot, backend, machine_parameters=machine_parameters)
+    observer = RunObserver(deployment.transport.create_node("run_observer"), app.robot.group_names)
+    if not args.quiet:
+        printer = LivePrinter(out, (*app.robot.group_names, "engine"))
+        observer.sinks.append(printer.on_status)
+        observer.engine_sinks.append(printer.on_engine)
+    if trace is not None:
+        writer = TraceWriter(trace)
+        observer.sinks.append(writer.on_status)
+        observer.engine_sinks.append(writer.on_engine)
+    console = OperatorConsole(deployment.transport.create_node("operator_console"), out)
+    loop = asyncio.get_running_loop()
+    interactive = console.attach_stdin(loop) if args.interactive else False
+    run_task = loop.create_task(deployment.engine.run(app))
+    interrupts = 0
+
+    def on_interrupt() -> None:
+        nonlocal interrupts
+        interrupts += 1
+        if interrupts == 1:
+            out.write("\ninterrupt: stopping the application (Ctrl-C again to abandon)\n")
+            loop.create_task(console.command("stop"))
+        else:
+            run_task.cancel()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, on_interrupt)
+        except (NotImplementedError, RuntimeError):
+            pass
+    try:
+        return await run_task
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                loop.remove_signal_handler(sig)
+            except (NotImplementedError, RuntimeError):
+                pass
+        if interactive:
+            OperatorConsole.detach_stdin(loop)
+        await deployment.close()
+
+
+def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[str]) -> int:
+    try:
+        app = load_application(args.file, catalog)
+    except ApplicationError as error:
+        for diagnostic in error.diagnostics:
+            err.write(f"{diagnostic}\n")
+        err.write(f"{args.file}: not run: {len(error.diagnostics)} problem(s)\n")
+        return EXIT_INVALID
+    clock = simulated_clock() if math.isinf(args.speed) else scaled_clock(args.speed)
+    with ExitStack() as stack:
+        trace = stack.enter_context(open(args.trace, "w", encoding="utf-8")) if args.trace else None
+        try:
+            report = run_with_clock(lambda c: _run(app, args, c, out, trace), clock)
+        except (KeyError, ValueError, OSError, ConnectionError) as error:
+            err.write(f"error: cannot run {args.file}: {error}\n")
+            return EXIT_USAGE
+        except asyncio.CancelledError:
+            err.write("run abandoned\n")
+            return EXIT_STOPPED
+    out.write("\n" + "\n".join(report.summary_lines()) + "\n")
+    if report.ok:
+        return EXIT_OK
+    return EXIT_STOPPED if report.outcome == "stopped" else EXIT_INVALID
+
+
+# ---------------------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m execution_engine", description="Skill-based robot applications in XML.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = parser.add_subparsers(dest="command", required=True)
+    validate = sub.add_parser("validate", help="check application files; FILE:LINE:COL messages on problems")
+    validate.add_argument("files", nargs="+", metavar="FILE")
+    functions = sub.add_parser("functions", help="list the function catalog")
+    functions.add_argument("--json", action="store_true", help="machine-readable catalog")
+    run = sub.add_parser("run", help="run an application (default: on the Nextage kinematic simulator)")
+    run.add_argument("file", metavar="FILE")
+    run.add_argument("--speed", type=parse_speed, default=1.0, help="run-time speed factor (default 1 = real time), or 'max'")
+    run.add_argument("--trace", metavar="PATH", help="write every event as a JSON line to PATH")
+    run.add_argument("--robot", choices=("nextage-sim", "vplus", "kuka-rsi"), help="back end (default: the application robot's)")
+    run.add_argument("--host", help="controller address (V+); none starts the simulator")
+    run.add_argument("--port", type=int, help="controller port (V+ default 1234)")
+    run.add_argument("--rsi-listen", metavar="HOST:PORT", help="KUKA RSI: serve a real controller on this address")
+    run.add_argument("--fault", action="append", metavar="GROUP:KIND@FRACTION", help="simulator fault injection, e.g. right_arm:joint_limit@0.5 (repeatable)")
+    run.add_argument("--seed", type=int, default=0, help="simulator random seed (vision noise)")
+    run.add_argument("--trajectory-db", metavar="PATH", help="SQLite file for recorded trajectories")
+    run.add_argument("--interactive", action="store_true", help="read operator commands from the terminal")
+    run.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:
+        return EXIT_USAGE if exit_.code else EXIT_OK
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s", stream=err)
+    catalog = full_catalog()
+    if args.command == "validate":
+        return cmd_validate(args.files, catalog, out, err)
+    if args.command == "functions":
+        return cmd_functions(catalog, args.json, out)
+    if not Path(args.file).is_file():
+        err.write(f"error: {args.file}: no such file\n")
+        return EXIT_INVALID
+    return cmd_run(args, catalog, out, err)
