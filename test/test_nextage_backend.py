@@ -9,6 +9,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from core_functions.geometry import Pose
 from core_functions.primitives import (
@@ -25,7 +27,7 @@ from core_functions.primitives import (
     Vision,
 )
 from core_functions.robots import NEXTAGE_OPEN
-from execution_engine.clock import Clock, run_with_clock, scaled_clock
+from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.transport.wire import CellFrame, CellSnapshot
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.nextage_sim.backend import NextageSimBackend, create
@@ -92,6 +94,26 @@ def test_joint_move_is_visible_in_progress_synchronised_and_within_velocity(run_
         assert speeds.max() <= 1.0 + 1e-6
 
     run_sim(main)
+
+
+@settings(max_examples=25)
+@given(st.data(), st.floats(0.1, 1.0))
+def test_any_arm_move_takes_the_limiting_joints_trapezoid_time(data: st.DataObject, speed: float) -> None:
+    """Arm joints share v = 1 rad/s and a = 1.5 rad/s^2, so the joint travelling farthest sets the time."""
+    specs = NEXTAGE_OPEN.group("left_arm").joints
+    goal = tuple(data.draw(st.floats(j.lower, j.upper), label=j.name) for j in specs)
+
+    async def main(clock: Clock) -> None:
+        backend = NextageSimBackend(clock)
+        await backend.execute("left_arm", SetSpeed(speed))
+        distance = float(np.max(np.abs(np.array(goal) - joints(backend, LEFT))))
+        v, a = 1.0 * speed, 1.5 * speed * speed
+        expected = distance / v + v / a if distance >= v * v / a else 2.0 * math.sqrt(distance / a)
+        result, duration = await timed(clock, backend.execute("left_arm", MoveJoints(goal)))
+        assert duration == pytest.approx(expected, abs=1e-6)
+        np.testing.assert_allclose(result.positions, goal, atol=1e-12)
+
+    run_with_clock(main, simulated_clock())
 
 
 def test_joint_limit_target_is_refused_before_moving(run_sim: Run[None]) -> None:
@@ -303,6 +325,27 @@ def test_full_body_move_holds_all_groups_and_moves_fifteen_joints(run_sim: Run[N
         np.testing.assert_allclose(result.positions, [off[n] for n in names], atol=1e-12)
         assert duration > 2.0  # LARM_JOINT1 travels 140 deg at <= 1 rad/s
         await backend.execute("right_arm", Dwell(0.1))
+
+    run_sim(main)
+
+
+def test_the_same_full_body_move_from_two_groups_is_one_motion(run_sim: Run[None]) -> None:
+    async def main(clock: Clock) -> None:
+        backend = NextageSimBackend(clock)
+        names = NEXTAGE_OPEN.joint_names
+        move = FullBodyMove(names, tuple(0.0 for _ in names))
+        (first, t_first), (second, t_second) = await asyncio.gather(
+            timed(clock, backend.execute("left_arm", move)), timed(clock, backend.execute("right_arm", move))
+        )
+        assert t_first == pytest.approx(t_second) and first.positions == second.positions
+        assert second.tcp == backend.tcp_pose("right_arm")  # each group gets its own TCP
+        other = FullBodyMove(names[:1], (0.3,))
+        task = asyncio.ensure_future(backend.execute("left_arm", other))
+        await clock.sleep(0.1)
+        with pytest.raises(BridgeError) as info:  # a different command is no partner: busy
+            await backend.execute("torso_head", FullBodyMove(names[:1], (0.2,)))
+        assert info.value.kind is FaultKind.BUSY
+        await task
 
     run_sim(main)
 

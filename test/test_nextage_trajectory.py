@@ -3,6 +3,7 @@ Cartesian-linear paths and trajectory replay (no clock involved: motions are fun
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.nextage_sim.model import NextageModel
 from robot_bridges.nextage_sim.trajectory import (
     CartesianLimits,
+    Motion,
     Trapezoid,
     interpolate_pose,
     plan_joint_move,
@@ -27,7 +29,7 @@ MODEL = NextageModel()
 LEFT = MODEL.arms["left_arm"]
 
 
-def _solver(q_full: np.ndarray):  # type: ignore[no-untyped-def]
+def _solver(q_full: np.ndarray) -> Callable[[Pose, np.ndarray], np.ndarray]:
     base = q_full.copy()
 
     def solve(target: Pose, seed: np.ndarray) -> np.ndarray:
@@ -37,7 +39,7 @@ def _solver(q_full: np.ndarray):  # type: ignore[no-untyped-def]
     return solve
 
 
-def _derivative(motion, step: float = 1e-3) -> np.ndarray:  # type: ignore[no-untyped-def]
+def _derivative(motion: Motion, step: float = 1e-3) -> np.ndarray:
     times = np.arange(0.0, motion.duration + step, step)
     positions = np.array([motion.at(float(t)) for t in times])
     return np.diff(positions, axis=0) / step
