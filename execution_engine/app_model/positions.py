@@ -1,14 +1,17 @@
 """Line and column of every element and attribute, computed from the source text.
 
-lxml gives an element's ``sourceline`` -- the line where its start tag *ends* -- and no column.
-Diagnostics must point at the ``<tag`` or ``attr=`` at fault, so the start tags are found again in
-the text: once the document is known to be well-formed, every ``<`` outside comments, CDATA and
-processing instructions that is not ``</`` opens an element, in document order, which is exactly
-the order of ``root.iter()``.  Columns are 1-based and count characters (a tab is one column).
+lxml gives an element's ``sourceline`` -- the line where its start tag *ends*, and only
+approximately beyond line 65535 -- and no column.  Diagnostics must point at the ``<tag`` or
+``attr=`` at fault, so the start tags are found again in the text: once the document is known to
+be well-formed, every ``<`` outside comments, CDATA and processing instructions that is not ``</``
+opens an element, in document order, which is exactly the order of ``root.iter()``.  The two are
+zipped once, on first use, into an element -> offset map.  Columns are 1-based and count
+characters (a tab is one column).
 """
 from __future__ import annotations
 
 import bisect
+import itertools
 import re
 
 from lxml import etree
@@ -21,6 +24,9 @@ _ATTRIBUTE = re.compile(r"""\s+([^\s=/>]+)\s*=\s*(?:"[^"]*"|'[^']*')""")
 
 
 def _qualified_name(element: etree._Element) -> str:
+    tag = element.tag
+    if isinstance(tag, str) and not tag.startswith("{"):
+        return tag
     local = etree.QName(element).localname
     return f"{element.prefix}:{local}" if element.prefix else local
 
@@ -30,7 +36,8 @@ class SourceMap:
 
     def __init__(self, file: str, text: str, root: etree._Element | None = None) -> None:
         self.file = file
-        self.text = text
+        # XML reads CR LF and a lone CR as one line break; so do lines and columns here.
+        self.text = text.replace("\r\n", "\n").replace("\r", "\n") if "\r" in text else text
         self._root = root
         self._line_starts: list[int] | None = None
         self._offsets: dict[etree._Element, int] | None = None
@@ -38,7 +45,8 @@ class SourceMap:
     # ---------------------------------------------------------------- offsets and lines
     def _lines(self) -> list[int]:
         if self._line_starts is None:
-            self._line_starts = [0, *(m.end() for m in re.finditer("\n", self.text))]
+            lines = self.text.split("\n")
+            self._line_starts = [0, *itertools.accumulate(len(line) + 1 for line in lines[:-1])]
         return self._line_starts
 
     def at_offset(self, offset: int) -> Location:

@@ -8,6 +8,7 @@ stays the single description of every attribute.
 """
 from __future__ import annotations
 
+import copy
 import difflib
 import re
 from collections.abc import Iterable
@@ -190,30 +191,66 @@ class _Rewriter:
         return message + (f" ({hint})" if hint else "")
 
 
+MAX_PASSES = 20
+
+
 def validate_structure(doc: XmlDocument, schema: str) -> list[Diagnostic]:
-    """Every schema violation of ``doc``, one diagnostic per element or attribute at fault."""
+    """Every schema violation of ``doc``, one diagnostic per element or attribute at fault.
+
+    libxml2 stops checking a parent's remaining children at the first element it did not expect,
+    which would hide every later mistake in that operation.  So the unexpected elements are taken
+    out of a copy of the tree and the copy is checked again, until nothing new turns up (at most
+    MAX_PASSES times); problems are always reported on the original elements.
+    """
     info = load_schema(schema)
     if info.schema.validate(doc.root):
         return []
-    index = _PathIndex(doc.root)
     rewriter = _Rewriter(info)
     out: list[Diagnostic] = []
-    reported: set[tuple[object, str | None]] = set()
-    for entry in info.schema.error_log:
-        node = index.find(getattr(entry, "path", None))
-        match = _ELEMENT_MSG.match(entry.message or "")
-        element, attribute, detail = (match.group(1), match.group(2), match.group(3)) if match else ("", None, entry.message or "")
-        key: tuple[object, str | None] = (node if node is not None else entry.line, attribute)
-        if attribute is not None and key in reported:
-            continue  # a facet error and its "not a valid value" follow-up are one problem
-        reported.add(key)
-        where = _where(doc, node, attribute, entry.line)
-        if attribute is not None:
-            message = rewriter.attribute_message(node, element, attribute, detail)
-        else:
-            message = rewriter.element_message(node, element, detail)
-        out.append(Diagnostic.at(where, message))
+    reported: set[tuple[object, str | None, str]] = set()
+    work = doc.root
+    original: dict[etree._Element, etree._Element] | None = None  # copy element -> original
+    pruned: set[etree._Element] = set()  # original parents that lost a child in the copy
+    for attempt in range(MAX_PASSES):
+        if attempt and info.schema.validate(work):
+            break
+        index = _PathIndex(work)
+        unexpected: list[etree._Element] = []
+        for entry in info.schema.error_log:
+            found = index.find(getattr(entry, "path", None))
+            node = original.get(found, found) if original is not None and found is not None else found
+            match = _ELEMENT_MSG.match(entry.message or "")
+            element, attribute, detail = (match.group(1), match.group(2), match.group(3)) if match else ("", None, entry.message or "")
+            if detail.startswith("Missing child") and node in pruned:
+                continue  # caused by taking an unexpected child out of the copy
+            key = (node if node is not None else entry.line, attribute, "" if attribute is not None else detail)
+            if key in reported:
+                continue  # a facet error and its "not a valid value" follow-up are one problem
+            reported.add(key)
+            if attribute is not None:
+                message = rewriter.attribute_message(node, element, attribute, detail)
+            else:
+                message = rewriter.element_message(node, element, detail)
+            out.append(Diagnostic.at(_where(doc, node, attribute, entry.line), message))
+            if detail.startswith("This element is not expected") and found is not None and found.getparent() is not None:
+                unexpected.append(found)
+        if not unexpected:
+            break
+        if original is None:
+            work, original = _copy(doc.root)
+            copies = {v: k for k, v in original.items()}
+            unexpected = [copies[u] for u in unexpected]
+        for node in unexpected:
+            parent = node.getparent()
+            if parent is not None:
+                pruned.add(original.get(parent, parent))
+                parent.remove(node)
     return out
+
+
+def _copy(root: etree._Element) -> tuple[etree._Element, dict[etree._Element, etree._Element]]:
+    duplicate = copy.deepcopy(root)
+    return duplicate, dict(zip(duplicate.iter(), root.iter()))
 
 
 def _where(doc: XmlDocument, node: etree._Element | None, attribute: str | None, line: int) -> Location:

@@ -50,6 +50,10 @@ class ApplicationChecker:
         self.diagnostics: list[Diagnostic] = []
         self._contexts = {g: BindContext(robot, g, cell) for g in robot.group_names}
         self._checked: dict[tuple[str, str, tuple[str, ...]], list[ParamError]] = {}
+        self._groups = robot.group_names
+        self._joint_pose_functions = {
+            f.name for f in catalog.functions.values() if any(p.type is ParamType.JOINT_POSE for p in f.params)
+        }
         wait = catalog.get(WAIT)
         self._wait_defaults = tuple(p.default or "" for p in wait.params) if wait and wait.required_count == 0 else ()
 
@@ -61,7 +65,7 @@ class ApplicationChecker:
         """Each operation's calls, one per robot group, in the robot's group order."""
         checked: list[list[CheckedCall]] = []
         for operation in self.draft.operations:
-            calls = [self.check_call(self.call_for(operation, group)) for group in self.robot.group_names]
+            calls = [self.check_call(self.call_for(operation, group)) for group in self._groups]
             self.check_full_body(operation, calls)
             self.check_master_slave(operation, calls)
             checked.append(calls)
@@ -129,7 +133,7 @@ class ApplicationChecker:
 
     def check_joint_pose_groups(self, call: CallSite, spec: FunctionSpec, texts: Sequence[str]) -> bool:
         """A cell joint pose made for one group cannot be used by another."""
-        if self.cell is None:
+        if self.cell is None or spec.name not in self._joint_pose_functions:
             return True
         ok = True
         for index, (param, text) in enumerate(zip(spec.params, texts)):
@@ -164,12 +168,12 @@ class ApplicationChecker:
                 continue
             if call.params is None and call.site.function == leader.site.function:
                 continue  # its own errors are reported
-            need = "call it too" if call.site.group in arms else "call it too or wait"
+            need = "call it too with the same params" + ("" if call.site.group in arms else ", or wait")
             shown = f"{leader.site.function}({', '.join(wanted)})"
             if call.site.implicit:
                 self.error(leader.site.where, f"{shown} on {leader.site.group} is a full-body function: {call.site.group} must {need}, but it is left out of operation {operation.id}")
             else:
-                self.error(call.site.where, f"{shown} on {leader.site.group} is a full-body function: {call.site.group} must {need} with the same params, but calls {self.describe(call)}")
+                self.error(call.site.where, f"{shown} on {leader.site.group} is a full-body function: {call.site.group} must {need}, but calls {self.describe(call)}")
 
     def check_master_slave(self, operation: OperationSite, calls: list[CheckedCall]) -> None:
         """A master and a slave function name each other's group in the same operation."""
