@@ -26,10 +26,10 @@ differently (the real one never acks it).
 from __future__ import annotations
 
 import math
+import os
 import re
-import uuid
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 
 DELIMITER = b"\r\n"
@@ -97,12 +97,18 @@ class FrameError(DecodeError):
 
 # ----------------------------------------------------------------------------------- ids
 def new_id() -> str:
-    """An id the way pyadept makes one: the first 8 characters of ``str(uuid.uuid4())``."""
-    return str(uuid.uuid4())[:8]
+    """An id as pyadept makes one: 8 random lowercase hex digits.
+
+    pyadept takes the first 8 characters of ``str(uuid.uuid4())``; those are 32 random bits (the
+    version nibble comes later), so 4 random bytes in hex are the same thing, at a fraction of the
+    cost.
+    """
+    return os.urandom(4).hex()
 
 
 def check_id(msg_id: str) -> str:
-    if not isinstance(msg_id, str) or not _ID.fullmatch(msg_id):
+    # isalnum + isascii is the same test as the _ID pattern, at a third of its cost (hot path)
+    if not (isinstance(msg_id, str) and 0 < len(msg_id) <= MAX_ID_LENGTH and msg_id.isascii() and msg_id.isalnum()):
         raise ValueError(f"message id must be 1-{MAX_ID_LENGTH} ASCII letters or digits, got {msg_id!r}")
     return msg_id
 
@@ -145,6 +151,7 @@ class Command:
 
     skill: Skill
     args: tuple[float, ...] = ()
+    _wire: bytes = field(default=b"", init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         skill = Skill(self.skill)
@@ -157,6 +164,8 @@ class Command:
             format_number(a)  # finite and bounded, or ValueError
         if skill is Skill.SET_SPEED and not (0 < args[0] <= 100):
             raise ValueError(f"set_speed takes a percentage in (0, 100], got {args[0]!r}")
+        # Encoded once: a command is immutable, and the client writes the same ones again and again.
+        object.__setattr__(self, "_wire", b":" + self.payload().encode("ascii") + DELIMITER)
 
     @property
     def is_motion(self) -> bool:
@@ -185,7 +194,7 @@ class Message:
         check_id(self.id)
 
     def encode(self) -> bytes:
-        return f"{self.id}:{self.command.payload()}".encode("ascii") + DELIMITER
+        return self.id.encode("ascii") + self.command._wire
 
     def __str__(self) -> str:
         return f"{self.id}:{self.command.payload()}"
@@ -244,8 +253,22 @@ class Ack:
         return f"{self.id}:{self.status}:{times}:{pose}".encode("ascii") + DELIMITER
 
 
+_NUM = rb"(-?[0-9]{1,10}(?:\.[0-9]{1,6})?)"
+_ACK_LINE = re.compile(rb"([0-9A-Za-z]{1,%d}):([a-z_]{1,16}):%s,%s:%s" % (MAX_ID_LENGTH, _NUM, _NUM, b",".join([_NUM] * 6)))
+
+
 def decode_ack(line: bytes) -> Ack:
     """Parse one ack line (without its delimiter), as the client does."""
+    match = _ACK_LINE.fullmatch(line)
+    if match is not None:  # the fast path, for the acks a server actually sends
+        g = match.groups()
+        pose = (float(g[4]), float(g[5]), float(g[6]), float(g[7]), float(g[8]), float(g[9]))
+        return Ack(g[0].decode("ascii"), float(g[2]), float(g[3]), pose, g[1].decode("ascii"))
+    return _decode_ack_slowly(line)
+
+
+def _decode_ack_slowly(line: bytes) -> Ack:
+    """Field by field, to say exactly what is wrong with a line the fast path refused."""
     text = _ascii(line)
     parts = text.split(":")
     if len(parts) != 4:
@@ -281,6 +304,8 @@ class LineSplitter:
         return self._tail
 
     def feed(self, data: bytes) -> list[bytes]:
+        if not self._tail and data.endswith(DELIMITER) and 2 < len(data) <= self.max_line + 2 and data.find(DELIMITER) == len(data) - 2:
+            return [data[:-2]]  # the common case: one whole line per segment
         buffer = self._tail + data if self._tail else bytes(data)
         if DELIMITER not in buffer:
             self._check(buffer)
