@@ -9,7 +9,7 @@ Conventions: the world frame is ``WAIST`` (the robot base); joint vectors ("q") 
 in pinocchio's order (:attr:`NextageModel.joint_names`); an arm's TCP is the origin of
 ``*ARM_JOINT5_Link`` composed with a configurable tool offset.  Arm IK holds the torso
 (``CHEST_JOINT0``) where it is: it solves on a 6-joint pinocchio model of the arm alone, which is
-both what a dual-arm controller does (the torso is its own group) and three times cheaper.
+what a dual-arm controller does (the torso is its own group) and cheaper than the whole robot.
 """
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ class IKOptions:
     position_tolerance: float = 1e-5  # m
     orientation_tolerance: float = 1e-4  # rad
     max_iterations: int = 60
-    restarts: int = 8
+    restarts: int = 12
     max_step: float = 0.5  # rad per iteration, keeps DLS steps inside the linear region
     damping: float = 1e-6  # bias of the squared DLS damping (which also grows with the error)
     restart_seed: int = 20170419
@@ -147,7 +147,7 @@ class ArmKinematics:
         goal_p = np.ascontiguousarray(goal[:3, 3])
         seeds = [np.clip(q_full[self.indices], self.lower, self.upper)]
         if restarts:
-            seeds += self._restart_seeds
+            seeds += [s for s in self._restart_seeds if float(np.max(np.abs(s - seeds[0]))) > 1e-9]
         best: tuple[float, float, float] | None = None
         for attempt, seed in enumerate(seeds, start=1):
             q, pos_err, rot_err, ok = self._descend(goal_r, goal_p, seed.copy())
