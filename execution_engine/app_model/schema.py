@@ -53,10 +53,24 @@ class SchemaInfo:
     root: str
     attributes: dict[str, dict[str, str]] = field(default_factory=dict)  # element -> attribute -> type
     open_attributes: frozenset[str] = frozenset()  # elements that accept free attributes
+    children: dict[str, tuple[str, ...]] = field(default_factory=dict)  # element -> allowed child elements
     type_docs: dict[str, str] = field(default_factory=dict)  # simple type -> what it accepts
 
 
-def _collect(xsd: etree._Element) -> tuple[dict[str, dict[str, str]], set[str], dict[str, str], str]:
+def _child_elements(complex_type: etree._Element) -> tuple[str, ...]:
+    """Names of the elements a complex type's content model allows (not those of grandchildren)."""
+    names: list[str] = []
+    stack = list(complex_type)
+    while stack:
+        node = stack.pop(0)
+        if node.tag == f"{XS}element":
+            names.append(node.get("name", ""))
+        elif node.tag in (f"{XS}sequence", f"{XS}choice", f"{XS}all"):
+            stack[:0] = list(node)
+    return tuple(names)
+
+
+def _collect(xsd: etree._Element) -> tuple[dict[str, dict[str, str]], set[str], dict[str, str], str, dict[str, tuple[str, ...]]]:
     types = {t.get("name", ""): t for t in xsd.iterfind(f"{XS}complexType")}
     docs: dict[str, str] = {}
     for simple in xsd.iterfind(f"{XS}simpleType"):
@@ -64,6 +78,7 @@ def _collect(xsd: etree._Element) -> tuple[dict[str, dict[str, str]], set[str], 
         if text:
             docs[simple.get("name", "")] = " ".join(text.split())
     attributes: dict[str, dict[str, str]] = {}
+    children: dict[str, tuple[str, ...]] = {}
     open_elements: set[str] = set()
     for element in xsd.iter(f"{XS}element"):
         name = element.get("name")
@@ -74,13 +89,14 @@ def _collect(xsd: etree._Element) -> tuple[dict[str, dict[str, str]], set[str], 
             complex_type = types[element.get("type", "")]
         if complex_type is None:
             continue
+        children[name] = _child_elements(complex_type)
         own = attributes.setdefault(name, {})
         for attribute in complex_type.iterfind(f"{XS}attribute"):
             own[attribute.get("name", "")] = attribute.get("type", "xs:string")
         if complex_type.find(f"{XS}anyAttribute") is not None:
             open_elements.add(name)
     root = next((e.get("name", "") for e in xsd.iterfind(f"{XS}element")), "")
-    return attributes, open_elements, docs, root
+    return attributes, open_elements, docs, root, children
 
 
 @lru_cache(maxsize=None)
@@ -89,8 +105,8 @@ def load_schema(name: str) -> SchemaInfo:
     path: Path = share_path("apps_xml", "schema", f"{name}.xsd")
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
     xsd = etree.parse(str(path), parser)
-    attributes, open_elements, docs, root = _collect(xsd.getroot())
-    return SchemaInfo(name, etree.XMLSchema(xsd), root, attributes, frozenset(open_elements), docs)
+    attributes, open_elements, docs, root, children = _collect(xsd.getroot())
+    return SchemaInfo(name, etree.XMLSchema(xsd), root, attributes, frozenset(open_elements), docs, children)
 
 
 class _PathIndex:
@@ -186,6 +202,9 @@ class _Rewriter:
             close = difflib.get_close_matches(element, candidates, n=1)
             if close:
                 hint = f"did you mean <{close[0]}>?"
+        allowed = self.info.children.get(parent, ())
+        if not expected and element not in allowed:
+            expected = list(allowed)
         if expected:
             message += f"; expected {_one_of(expected)}"
         return message + (f" ({hint})" if hint else "")
