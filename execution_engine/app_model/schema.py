@@ -106,7 +106,10 @@ def load_schema(name: str) -> SchemaInfo:
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
     xsd = etree.parse(str(path), parser)
     attributes, open_elements, docs, root, children = _collect(xsd.getroot())
-    return SchemaInfo(name, etree.XMLSchema(xsd), root, attributes, frozenset(open_elements), docs, children)
+    return SchemaInfo(
+        name=name, schema=etree.XMLSchema(xsd), root=root, attributes=attributes,
+        open_attributes=frozenset(open_elements), type_docs=docs, children=children,
+    )
 
 
 class _PathIndex:
