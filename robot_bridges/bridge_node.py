@@ -41,6 +41,7 @@ class BridgeNode:
         self.backend = backend
         self.clock = node.clock
         self.state_period = float(node.declare_parameter("state_period", 0.05, "joint_states / tcp_pose period (s)"))
+        self.stop_timeout = float(node.declare_parameter("stop_timeout", 5.0, "longest a stopped primitive may take to end (s)"))
         if self.state_period <= 0:
             raise ValueError(f"{node.fully_qualified_name}: state_period must be > 0, got {self.state_period}")
         self._feedback: dict[str, Publisher[String]] = {}
@@ -128,6 +129,8 @@ class BridgeNode:
         status = {"pause": "paused", "resume": "resumed", "stop": "stopped"}[command.op]
         try:
             await getattr(self.backend, command.op)(group)
+            if command.op == "stop":
+                await self._await_stopped(group)
         except BridgeError as error:
             self._send(group, command.id, "error", error=str(error))
         except Exception as error:  # noqa: BLE001
@@ -135,6 +138,16 @@ class BridgeNode:
             self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}")
         else:
             self._send(group, command.id, status)
+
+    async def _await_stopped(self, group: str) -> None:
+        """'stopped' promises the primitive is over, so the group can take the next one at once."""
+        task = self._running.get(group)
+        if task is None or task.done():
+            return
+        try:
+            await self.clock.wait_for(asyncio.shield(task), self.stop_timeout)
+        except asyncio.TimeoutError:
+            raise BridgeError(FaultKind.TIMEOUT, f"{group}: the primitive did not stop within {self.stop_timeout:g} s") from None
 
     # ----------------------------------------------------------------------------- outbound
     def _send(self, group: str, command_id: str, status: str, *, error: str | None = None, result: dict | None = None) -> None:

@@ -270,8 +270,7 @@ class ExecutionEngine:
                 failed[partner] = pending[partner]
         others = [g for g in pending if g not in failed]
         self._set_state("error", f"{group}: {dispatch.request.function} failed: {error}")
-        for other in others:
-            await self.links[other].command("pause")
+        await self._pause_groups(others)
         await self._collect(failed, group)
         policy = self.app.error_policy
         attempt = dispatch.request.attempt
@@ -289,6 +288,13 @@ class ExecutionEngine:
         for other in others:
             await self.links[other].command("resume")
         self._set_state("running")
+
+    async def _pause_groups(self, groups: list[str]) -> None:
+        """Pause running groups and wait (bounded) until the pause has landed."""
+        for group in groups:
+            await self.links[group].command("pause")
+        for group in groups:
+            await self.links[group].wait_state((PAUSE, READY, ERROR_HANDLING), self.service_timeout)
 
     async def _collect(self, failed: dict[str, _Dispatch], first: str) -> None:
         """Wait for the failed partners' own results (they fail through the barrier)."""

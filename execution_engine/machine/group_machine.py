@@ -129,6 +129,7 @@ class GroupMachine:
         for command in MACHINE_SERVICES:
             node.create_service(Trigger, sm_service(g, command), lambda req, c=command: self._on_service(c, req))
         node.fault_handler = self._on_fault
+        self._pause_pending_in: str | None = None  # the working state a pause was accepted in
         self.machine = self._build()
         self.userdata = UserData(primitive=None, resume_command=None, early_done=None, error=None, stop_reason=None)
 
@@ -171,6 +172,7 @@ class GroupMachine:
         self._set_state(record.target)
 
     def _set_state(self, state: str) -> None:
+        self._pause_pending_in = None
         self.ctx.state_name = state
         self.ctx.pub.state.publish(String(state))
 
@@ -217,13 +219,15 @@ class GroupMachine:
 
     async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:
         state = self.ctx.state_name
+        pausing = self._pause_pending_in == state  # accepted, not yet landed: signals are queued in order
         valid = state in _VALID_IN[command]
-        if command == "pause" and state == READY and self.ctx.hold:
+        if command == "pause" and ((state == READY and self.ctx.hold) or pausing):
             valid = False
-        if command == "resume" and state == READY and self.ctx.hold:
+        if command == "resume" and ((state == READY and self.ctx.hold) or pausing):
             valid = True
         if not valid:
             return Trigger.Response(False, f"{self.group}: cannot {command} in {state}")
+        self._pause_pending_in = state if command == "pause" and state in WORKING_STATES else None
         self.events.put(OperatorSignal(command, sm_service(self.group, command)))  # type: ignore[arg-type]
         return Trigger.Response(True, f"{self.group}: {command} accepted in {state}")
 
