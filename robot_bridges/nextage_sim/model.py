@@ -14,6 +14,7 @@ what a dual-arm controller does (the torso is its own group) and cheaper than th
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -145,11 +146,11 @@ class ArmKinematics:
         goal = _rigid_inverse(self.base_matrix(q_full)) @ target.matrix() @ self._tool_inv
         goal_r = np.ascontiguousarray(goal[:3, :3])
         goal_p = np.ascontiguousarray(goal[:3, 3])
-        seeds = [np.clip(q_full[self.indices], self.lower, self.upper)]
-        if restarts:
-            seeds += [s for s in self._restart_seeds if float(np.max(np.abs(s - seeds[0]))) > 1e-9]
+        warm = np.clip(q_full[self.indices], self.lower, self.upper)
         best: tuple[float, float, float] | None = None
-        for attempt, seed in enumerate(seeds, start=1):
+        attempt = 0
+        for seed in self._seeds(warm, restarts):
+            attempt += 1
             q, pos_err, rot_err, ok = self._descend(goal_r, goal_p, seed.copy())
             if ok:
                 return IKSolution(q, pos_err, rot_err, attempt)
@@ -160,8 +161,16 @@ class ArmKinematics:
         raise BridgeError(
             FaultKind.UNREACHABLE,
             f"{self.group}: no IK solution for TCP target {describe_target(target)}; best residual "
-            f"{best[1] * 1000:.1f} mm / {math.degrees(best[2]):.2f} deg after {len(seeds)} attempt(s)",
+            f"{best[1] * 1000:.1f} mm / {math.degrees(best[2]):.2f} deg after {attempt} attempt(s)",
         )
+
+    def _seeds(self, warm: Vector, restarts: bool) -> Iterator[Vector]:
+        """The warm start, then (lazily, only if needed) the fixed restart seeds not equal to it."""
+        yield warm
+        if restarts:
+            for seed in self._restart_seeds:
+                if float(np.max(np.abs(seed - warm))) > 1e-9:
+                    yield seed
 
     def _descend(self, goal_r: Matrix, goal_p: Vector, q: Vector) -> tuple[Vector, float, float, bool]:
         """Levenberg-Marquardt (damped least squares) with a joint-limit-aware step, from one seed.
