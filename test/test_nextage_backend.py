@@ -22,12 +22,14 @@ from core_functions.primitives import (
     MoveCartesian,
     MoveJoints,
     MoveRelative,
+    Primitive,
     RecordTrajectory,
     SetSpeed,
     Vision,
 )
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
+from execution_engine.transport import codec
 from execution_engine.transport.wire import CellFrame, CellSnapshot
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.nextage_sim.backend import NextageSimBackend, create
@@ -540,5 +542,27 @@ def test_registry_factory_reads_the_options(run_sim: Run[None]) -> None:
             await create(clock, BackendOptions(NEXTAGE_OPEN, host="10.0.0.2"))
         with pytest.raises(ValueError, match="unknown option"):
             await create(clock, BackendOptions(NEXTAGE_OPEN, extra={"speed": "2"}))
+
+    run_sim(main)
+
+
+def test_every_result_survives_the_wire_codec(run_sim: Run[None]) -> None:
+    """The bridge node sends results as JSON; numpy scalars or arrays must not leak into them."""
+
+    async def main(clock: Clock) -> None:
+        backend = NextageSimBackend(clock)
+        tcp = backend.tcp_pose("left_arm")
+        assert tcp is not None
+        _cell(backend, tcp.translated(0.1, 0, 0), tcp.translated(0.1, 0.001, 0))
+        primitives: list[Primitive] = [
+            MoveJoints((0.1,), ("LARM_JOINT0",), True),
+            Vision("inspect", "hole_1"),
+            Vision("measure", "hole_1"),
+            EndEffector("air_on"),
+            RecordTrajectory("x", waypoints=(tcp,)),
+        ]
+        for primitive in primitives:
+            result = await backend.execute("left_arm", primitive)
+            assert codec.from_primitive(type(result), codec.to_primitive(result), source="test") == result
 
     run_sim(main)

@@ -85,11 +85,11 @@ class SimulatedVision:
             return VisionResult(pose=measured)
         deviation = actual.distance_to(nominal) if nominal is not None else 0.0
         if primitive.task == "inspect":
-            return VisionResult(pose=measured, value=deviation + self._rng.normal(0.0, self.position_noise))
+            return VisionResult(pose=measured, value=float(deviation + self._rng.normal(0.0, self.position_noise)))
         value = self._attribute_value(target)
         if value is None:
             value = distance  # a range measurement when the cell names no quantity
-        return VisionResult(value=value + self._rng.normal(0.0, self.position_noise))
+        return VisionResult(value=float(value + self._rng.normal(0.0, self.position_noise)))
 
     # ------------------------------------------------------------------------------ helpers
     def _where(self, primitive: Vision) -> tuple[Pose, Pose | None]:
