@@ -349,7 +349,7 @@ class NextageSimBackend(RobotBackend):
         with self._job(frozenset({group}), primitive) as job:
             fault = self._take_fault(job, group, primitive.waypoints[0])
             if fault is not None and fault.kind is FaultKind.UNREACHABLE:
-                raise self._fault_error(job, fault, group)
+                raise self._fault_error(job, fault, primitive.waypoints[0])
             segments: list[Motion] = []
             pose = arm.tcp_pose(self._q)
             current = self._q[arm.indices]
@@ -517,8 +517,8 @@ class NextageSimBackend(RobotBackend):
                 )
             if job.progress >= job.horizon - _DONE:
                 tick(job.horizon)
-                if fail_at is not None and job.horizon >= fail_at - _DONE:
-                    raise self._fault_error(job, fault, sorted(job.groups)[0])  # type: ignore[arg-type]
+                if fault is not None and job.horizon >= fault.after * duration - _DONE:
+                    raise self._fault_error(job, fault)
                 if job.horizon >= duration - _DONE:
                     return
                 job.horizon = next(s for s in stops if s > job.horizon + _DONE)
@@ -575,10 +575,10 @@ class NextageSimBackend(RobotBackend):
         """The injected fault for this job, raised at once when it strikes before any motion."""
         fault = self._faults.take(job.groups, job.primitive)
         if fault is not None and fault.after <= 0.0:
-            raise self._fault_error(job, fault, fault.group, target)
+            raise self._fault_error(job, fault, target)
         return fault
 
-    def _fault_error(self, job: _Job, fault: FaultSpec, group: str, target: Pose | None = None) -> BridgeError:
+    def _fault_error(self, job: _Job, fault: FaultSpec, target: Pose | None = None) -> BridgeError:
         share = 0.0 if job.duration <= 0 else 100.0 * job.progress / job.duration
         where = f"{share:.0f}% into {describe(job.primitive)}"
         if fault.kind is FaultKind.UNREACHABLE:
