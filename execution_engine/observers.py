@@ -101,24 +101,38 @@ class TraceWriter:
 
 
 class LivePrinter:
-    """One console line per state change of a group, and per change of the engine's state."""
+    """One console line per state change of a group, and per change of the engine's state.
+
+    A transition into a working state is printed together with the primitive it runs (the
+    machine announces the primitive right after the transition), so each line says what the
+    arm is doing and why.
+    """
 
     def __init__(self, stream: IO[str], groups: Iterable[str]) -> None:
         self.stream = stream
         self.width = max((len(g) for g in groups), default=8)
         self._engine_state = ""
-        self._current: dict[str, str] = {}
+        self._held: dict[str, SmStatus] = {}
 
     def on_status(self, status: SmStatus) -> None:
-        if status.event == "primitive_start" and status.primitive:
-            self._current[status.group] = status.primitive
+        held = self._held.pop(status.group, None)
+        if status.event == "primitive_start" and held is not None:
+            self._transition(held, status.primitive or "")
+            return
+        if held is not None:
+            self._transition(held, "")
         if status.event == "transition":
-            where = f"op {status.operation} {status.function}" if status.operation else ""
-            doing = self._current.get(status.group, "") if status.to_state not in ("Ready", "Finish") else ""
-            line = f"{status.from_state} -> {status.to_state} ({status.signal})"
-            self._print(status.t, status.group, f"{line:<44} {where} {doing}".rstrip())
+            if status.to_state in ("Ready", "Finish", "Pause", "Stop", "ErrorHandling"):
+                self._transition(status, "")
+            else:
+                self._held[status.group] = status
         elif status.event == "error":
             self._print(status.t, status.group, f"ERROR: {status.error}")
+
+    def _transition(self, status: SmStatus, doing: str) -> None:
+        where = f"op {status.operation} {status.function}" if status.operation else ""
+        line = f"{status.from_state} -> {status.to_state} ({status.signal})"
+        self._print(status.t, status.group, f"{line:<44} {where} {doing}".rstrip())
 
     def on_engine(self, status: EngineStatus) -> None:
         if status.state != self._engine_state:
