@@ -19,7 +19,7 @@ from execution_engine.app_model.model import WAIT, ErrorAction, ErrorPolicy
 from execution_engine.app_model.reader import ApplicationDraft, CallSite, OperationSite, PolicySite
 
 # Params whose check needs the cell model; not checked while the cell itself has errors.
-_REFERENCE_TYPES = frozenset({ParamType.FRAME, ParamType.ELEMENT, ParamType.TARGET, ParamType.JOINT_POSE})
+_REFERENCE_TYPES = frozenset({ParamType.FRAME, ParamType.FRAMES, ParamType.ELEMENT, ParamType.TARGET, ParamType.JOINT_POSE})
 _ACTIONS: tuple[ErrorAction, ...] = ("abort", "safe_pose", "alarm")
 
 
