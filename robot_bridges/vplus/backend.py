@@ -1,0 +1,511 @@
+"""The Adept V+ back end: the primitives of group ``arm`` as AdeptServer skills over TCP.
+
+Units and frames: primitives are SI (m, rad) with quaternion poses in the robot's world frame,
+which for V+ is the robot base (``BASE`` null); AdeptServer speaks mm and degrees, and
+orientations as V+ yaw/pitch/roll, Z-Y-Z' Euler angles (:mod:`robot_bridges.vplus.kinematics`).
+Conversion happens here and nowhere else.
+
+How primitives map to skills -- every motion is one joined write, ``[set_speed:s,] <move>, break``:
+
+=================================  ==================================================================
+MoveJoints (absolute / relative)   ``move_joints`` / ``move_rel_joints`` (deg)
+MoveCartesian                      ``move_to`` (mm, deg)
+MoveRelative, reference tool       ``move_rel_tool`` with the delta as a V+ location
+MoveRelative, reference world      translation only: ``move_rel_world:dx,dy,dz,0,0,0``; with a
+                                   rotation: ``move_to`` the target computed from the last ack,
+                                   because AdeptServer adds Euler angles component by component
+SetSpeed                           remembered; sent as ``set_speed`` before *every* motion, since
+                                   V+ ``SPEED`` without ``ALWAYS`` lasts one motion only
+Dwell                              waits on the clock (nothing is sent)
+EndEffector                        air_on/air_off -> ``enable_air``/``disable_air``;
+                                   gripper_open/close -> ``gripper_open``/``gripper_close``
+Vision                             the :class:`MeasurementPort` (the controller has no camera)
+anything else                      ``BridgeError(UNSUPPORTED)``
+=================================  ==================================================================
+
+AdeptServer's motions are all ``MOVE``/``JMOVE``: joint-interpolated.  A ``linear`` primitive
+therefore reaches its target exactly but not along a straight line; ``linear="reject"`` refuses
+such primitives (UNSUPPORTED) instead.  Targets are checked against the Viper's kinematics and
+joint limits before anything is sent, so an impossible move fails at once as UNREACHABLE or
+JOINT_LIMIT rather than as a timeout (the server never reports errors).
+
+Where the robot is comes from the acks: ``tcp_pose`` is the pose of the last ack and the joint
+state is derived from it (inverse kinematics seeded by the commanded joints; exact after a
+joint move).  After any failure the next primitive first sends a lone ``break``, which waits for
+a motion still under way and reports the pose, so the estimate is right again before we move.
+
+Pause, resume and stop: AdeptServer cannot hold or abort a motion in progress (its only motion
+control is ``break``).  ``pause`` therefore takes effect at the end of the current motion: the
+primitive completes, and its result is held back until ``resume``.  ``stop`` abandons the
+primitive at once on our side (``BridgeError(STOPPED)``); the controller finishes the motion it
+started, and the next primitive queues behind it (V+ starts no motion before the previous one
+has ended).  An emergency stop is the controller's E-stop, not this protocol.  A ``Dwell`` is
+paused and stopped exactly.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+
+from core_functions.geometry import Pose
+from core_functions.primitives import (
+    Dwell,
+    EndEffector,
+    EndEffectorResult,
+    MotionResult,
+    MoveCartesian,
+    MoveJoints,
+    MoveRelative,
+    Primitive,
+    PrimitiveResult,
+    SetSpeed,
+    Vision,
+    VisionResult,
+    describe,
+)
+from core_functions.robots import ADEPT_VIPER_S850, RobotModel
+from execution_engine.clock import Clock
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
+from robot_bridges.vplus import codec
+from robot_bridges.vplus.client import (
+    CommandTimeout,
+    ConnectError,
+    ConnectionLost,
+    ProtocolError,
+    VPlusClient,
+    VPlusError,
+)
+from robot_bridges.vplus.codec import Ack, Command
+from robot_bridges.vplus.kinematics import (
+    IKError,
+    ViperKinematics,
+    location_to_matrix,
+    location_to_pose,
+    pose_to_location,
+)
+from robot_bridges.vplus.measurement import MeasurementError, MeasurementPort, SimulatedFocusCamera
+from robot_bridges.vplus.simulator import DEFAULT_PORT, VPlusSimulator
+
+log = logging.getLogger(__name__)
+
+GROUP = "arm"
+LinearPolicy = Literal["joint", "reject"]
+_RAMP = 0.2  # s, generous acceleration allowance per motion for the timeout estimate
+_AGREE_MM, _AGREE_DEG = 0.5, 0.05  # an ack pose this close to the predicted one confirms the joints
+_END_EFFECTOR: dict[str, Command] = {
+    "air_on": codec.ENABLE_AIR,
+    "air_off": codec.DISABLE_AIR,
+    "gripper_open": codec.GRIPPER_OPEN,
+    "gripper_close": codec.GRIPPER_CLOSE,
+}
+
+
+class _Job:
+    """The primitive under way, and what the operator asked of it."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.paused = False
+        self.stopped = False
+        self.changed = asyncio.Event()
+        self.finished: asyncio.Future[None] = loop.create_future()
+
+    def signal(self) -> None:
+        self.changed.set()
+
+    async def next_change(self) -> None:
+        await self.changed.wait()
+        self.changed.clear()
+
+
+class VPlusBackend(RobotBackend):
+    """An Adept Viper s850 behind AdeptServer (a real controller or the simulator)."""
+
+    world_frame = "world"
+
+    def __init__(
+        self,
+        clock: Clock,
+        host: str,
+        port: int = DEFAULT_PORT,
+        *,
+        robot: RobotModel = ADEPT_VIPER_S850,
+        kinematics: ViperKinematics | None = None,
+        measurement: MeasurementPort | None = None,
+        ack_timeout: float = 5.0,
+        retries: int = 3,
+        linear: LinearPolicy = "joint",
+        simulator: VPlusSimulator | None = None,
+    ) -> None:
+        group = robot.group(GROUP)
+        if len(group.joints) != 6:
+            raise ValueError(f"{robot.name}: group {GROUP!r} must have 6 joints for AdeptServer, has {len(group.joints)}")
+        if linear not in ("joint", "reject"):
+            raise ValueError(f"linear must be 'joint' or 'reject', got {linear!r}")
+        self.clock = clock
+        self.robot = robot
+        self.kin = kinematics or ViperKinematics(joints=group.joints)
+        self.joint_names = group.joint_names
+        self.measurement = measurement
+        self.ack_timeout = ack_timeout
+        self.linear = linear
+        self.client = VPlusClient(host, port, clock, timeout=ack_timeout, retries=retries)
+        self.name = f"vplus {host}:{port}"
+        self._simulator = simulator  # owned: started by create(), closed with us
+        self._joints = self.kin.home.copy()
+        self._tcp: Pose | None = None
+        self._speed = 100.0  # percent
+        self._io = {"air": False, "gripper_closed": False}
+        self._job: _Job | None = None
+        self._stale = True  # the pose estimate needs a resync before the next motion
+        self._busy_until = 0.0  # run time at which the controller should be idle again
+        self._warned_linear = False
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        return (GROUP,)
+
+    # ---------------------------------------------------------------------------- lifecycle
+    async def start(self) -> None:
+        await self._ensure_link()
+
+    async def close(self) -> None:
+        job = self._job
+        if job is not None:
+            job.stopped = True
+            job.signal()
+            await asyncio.gather(asyncio.shield(job.finished), return_exceptions=True)
+        await self.client.close()
+        if self._simulator is not None:
+            await self._simulator.close()
+
+    # ------------------------------------------------------------------------------ state
+    def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
+        return self.joint_names, tuple(float(q) for q in self._joints)
+
+    def tcp_pose(self, group: str) -> Pose | None:
+        self._check_group(group)
+        return self._tcp
+
+    @property
+    def speed_percent(self) -> float:
+        return self._speed
+
+    # ------------------------------------------------------------------------- execution
+    async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
+        self._check_group(group)
+        if self._job is not None:
+            raise BridgeError(FaultKind.BUSY, f"{self.name}: {GROUP} is already executing a primitive")
+        job = _Job(asyncio.get_running_loop())
+        self._job = job
+        work = asyncio.ensure_future(self._dispatch(primitive, job))
+        try:
+            while not work.done() and not job.stopped:
+                waiter = asyncio.ensure_future(job.next_change())
+                await asyncio.wait({work, waiter}, return_when=asyncio.FIRST_COMPLETED)
+                waiter.cancel()
+            if job.stopped:
+                raise BridgeError(FaultKind.STOPPED, f"{self.name}: {describe(primitive)} stopped")
+            result = work.result()
+            while job.paused and not job.stopped:  # pause lands at the end of the motion: hold the result
+                await job.next_change()
+            if job.stopped:
+                raise BridgeError(FaultKind.STOPPED, f"{self.name}: {describe(primitive)} stopped")
+            return result
+        finally:
+            if not work.done():
+                work.cancel()
+            await asyncio.gather(work, return_exceptions=True)
+            self._job = None
+            job.finished.set_result(None)
+
+    async def pause(self, group: str) -> None:
+        self._check_group(group)
+        if self._job is not None:
+            self._job.paused = True
+            self._job.signal()
+
+    async def resume(self, group: str) -> None:
+        self._check_group(group)
+        if self._job is not None and self._job.paused:
+            self._job.paused = False
+            self._job.signal()
+
+    async def stop(self, group: str) -> None:
+        self._check_group(group)
+        job = self._job
+        if job is None:
+            return
+        job.stopped = True
+        job.signal()
+        await asyncio.shield(job.finished)
+
+    async def _dispatch(self, primitive: Primitive, job: _Job) -> PrimitiveResult:
+        if isinstance(primitive, MoveJoints):
+            return await self._move_joints(primitive)
+        if isinstance(primitive, MoveCartesian):
+            self._check_linear(primitive.interpolation, primitive)
+            target = primitive.target
+            return await self._move_to_pose(target, codec.move_to(pose_to_location(target)), describe(primitive))
+        if isinstance(primitive, MoveRelative):
+            self._check_linear(primitive.interpolation, primitive)
+            return await self._move_relative(primitive)
+        if isinstance(primitive, SetSpeed):
+            self._speed = max(0.001, round(primitive.fraction * 100.0, 3))
+            return self._motion_result()
+        if isinstance(primitive, Dwell):
+            await self._dwell(primitive.seconds, job)
+            return self._motion_result()
+        if isinstance(primitive, EndEffector):
+            return await self._end_effector(primitive)
+        if isinstance(primitive, Vision):
+            return await self._vision(primitive)
+        raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: AdeptServer has no skill for {describe(primitive)}")
+
+    # ---------------------------------------------------------------------------- motions
+    async def _move_joints(self, primitive: MoveJoints) -> MotionResult:
+        values = self._in_group_order(primitive)
+        if primitive.relative:
+            await self._ensure_link()
+            goal = self._joints + np.asarray(values)
+            commands = codec.move_rel_joints(np.degrees(values))
+        else:
+            goal = np.asarray(values, dtype=float)
+            commands = codec.move_joints(np.degrees(values))
+        violations = self.kin.limit_violations(goal)
+        if violations:
+            raise BridgeError(FaultKind.JOINT_LIMIT, f"{self.name}: {describe(primitive)}: " + "; ".join(violations))
+        return await self._motion(commands, goal, describe(primitive))
+
+    async def _move_relative(self, primitive: MoveRelative) -> MotionResult:
+        await self._ensure_link()
+        now = self._current_pose()
+        delta = primitive.delta
+        what = describe(primitive) + f" ({primitive.reference})"
+        if primitive.reference == "tool":
+            target = now.compose(delta)
+            return await self._move_to_pose(target, codec.move_rel_tool(pose_to_location(delta)), what)
+        target = Pose(now.x + delta.x, now.y + delta.y, now.z + delta.z, *Pose.from_matrix(delta.matrix() @ now.matrix()).quaternion)
+        if delta.angle_to(Pose()) < 1e-12:  # a pure translation: the skill made for it
+            mm = (delta.x * 1000.0, delta.y * 1000.0, delta.z * 1000.0, 0.0, 0.0, 0.0)
+            return await self._move_to_pose(target, codec.move_rel_world(mm), what)
+        return await self._move_to_pose(target, codec.move_to(pose_to_location(target)), what)
+
+    async def _move_to_pose(self, target: Pose, commands: Sequence[Command], what: str) -> MotionResult:
+        await self._ensure_link()
+        try:
+            goal = self.kin.inverse(target.matrix(), self._joints)
+        except IKError as error:
+            kind = FaultKind.JOINT_LIMIT if error.reason == "joint_limit" else FaultKind.UNREACHABLE
+            raise BridgeError(kind, f"{self.name}: {what}: target {target}: {error}") from None
+        return await self._motion(commands, goal, what)
+
+    async def _motion(self, commands: Sequence[Command], goal: np.ndarray, what: str) -> MotionResult:
+        """Send one motion (with the speed and a break) and wait until the arm has arrived."""
+        await self._ensure_link()
+        messages: list[Command] = [] if self._speed == 100.0 else [codec.set_speed(self._speed)]
+        messages.extend(commands)
+        if messages[-1] != codec.BREAK:
+            messages.append(codec.BREAK)
+        estimate = self._duration(goal)
+        timeout = self.ack_timeout + 2.0 * estimate + self._busy_for()
+        self._busy_until = self.clock.now() + estimate + self._busy_for()
+        acks = await self._talk(messages, timeout, what, joined=True)
+        self._busy_until = 0.0
+        self._update(acks[-1], goal)
+        return self._motion_result()
+
+    def _duration(self, goal: np.ndarray) -> float:
+        """An upper estimate of how long the controller takes to reach ``goal`` (joint move)."""
+        delta = np.abs(np.asarray(goal) - self._joints)
+        speed = self._speed / 100.0
+        return float(np.max(delta / (self.kin.max_velocity * speed))) + _RAMP
+
+    def _busy_for(self) -> float:
+        return max(0.0, self._busy_until - self.clock.now())
+
+    def _check_linear(self, interpolation: str, primitive: Primitive) -> None:
+        if interpolation != "linear":
+            return
+        if self.linear == "reject":
+            raise BridgeError(
+                FaultKind.UNSUPPORTED, f"{self.name}: {describe(primitive)}: AdeptServer moves are joint-interpolated (MOVE), not linear"
+            )
+        if not self._warned_linear:
+            self._warned_linear = True
+            log.warning("%s: linear moves run joint-interpolated (AdeptServer MOVE): exact target, curved path", self.name)
+
+    # ---------------------------------------------------------------------- other skills
+    async def _dwell(self, seconds: float, job: _Job) -> None:
+        remaining = seconds
+        while remaining > 0 and not job.stopped:
+            if job.paused:
+                await job.next_change()
+                continue
+            started = self.clock.now()
+            try:
+                await self.clock.wait_for(job.next_change(), remaining)
+            except asyncio.TimeoutError:
+                return
+            remaining -= self.clock.now() - started
+
+    async def _end_effector(self, primitive: EndEffector) -> EndEffectorResult:
+        command = _END_EFFECTOR.get(primitive.action)
+        if command is None:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: AdeptServer has no skill for {describe(primitive)}")
+        await self._ensure_link()
+        acks = await self._talk([command], self.ack_timeout + self._busy_for(), describe(primitive))
+        self._note_pose(acks[-1])
+        if primitive.action.startswith("gripper"):
+            self._io.update(air=True, gripper_closed=primitive.action == "gripper_close")
+        else:
+            self._io["air"] = primitive.action == "air_on"
+        return EndEffectorResult(io=dict(self._io))
+
+    async def _vision(self, primitive: Vision) -> VisionResult:
+        if self.measurement is None:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: {describe(primitive)}: no measurement port connected")
+        await self._ensure_link()
+        try:
+            return await self.measurement.measure(primitive, self._current_pose())
+        except MeasurementError as error:
+            raise BridgeError(FaultKind.VISION, f"{self.name}: {describe(primitive)}: {error}") from None
+
+    # ------------------------------------------------------------------------- the link
+    async def _ensure_link(self) -> None:
+        """Connected and with a fresh pose: reconnect after a loss, resync after any failure."""
+        if not self.client.connected:
+            try:
+                await self.client.connect()
+            except ConnectError as error:
+                raise BridgeError(FaultKind.CONNECTION, f"{self.name}: {error}") from None
+            self._stale = True
+        if self._stale:
+            acks = await self._talk([codec.BREAK], self.ack_timeout + 2.0 * self._busy_for(), "resync (break)")
+            self._busy_until = 0.0
+            self._update(acks[-1], self._joints)
+
+    async def _talk(self, commands: Sequence[Command], timeout: float, what: str, *, joined: bool = False) -> list[Ack]:
+        try:
+            if joined:
+                acks = await self.client.execute_joined(*commands, timeout=timeout)
+            else:
+                acks = await self.client.execute(*commands, timeout=timeout)
+        except VPlusError as error:
+            self._stale = True
+            raise BridgeError(_fault_kind(error), f"{self.name}: {what}: {error}") from None
+        except asyncio.CancelledError:
+            self._stale = True  # abandoned (stop): the controller may still be moving
+            raise
+        self._stale = False
+        return acks
+
+    def _update(self, ack: Ack, predicted: np.ndarray) -> None:
+        """Take the pose from ``ack`` and the joints that explain it, nearest ``predicted``."""
+        self._note_pose(ack)
+        reported = location_to_matrix(ack.pose)
+        expected = self.kin.forward(predicted)
+        if _agree(expected, reported):
+            self._joints = np.asarray(predicted, dtype=float)
+            return
+        try:
+            self._joints = self.kin.inverse(reported, predicted)
+        except IKError as error:
+            log.warning("%s: pose %s from the controller has no joint solution (%s); joint state is an estimate", self.name, ack.pose, error)
+            self._joints = np.asarray(predicted, dtype=float)
+
+    def _note_pose(self, ack: Ack) -> None:
+        self._tcp = location_to_pose(ack.pose)
+
+    def _current_pose(self) -> Pose:
+        if self._tcp is None:  # before the first ack: where the joint estimate puts it
+            return Pose.from_matrix(self.kin.forward(self._joints))
+        return self._tcp
+
+    def _motion_result(self) -> MotionResult:
+        return MotionResult(self.joint_names, tuple(float(q) for q in self._joints), self._tcp)
+
+    def _in_group_order(self, primitive: MoveJoints) -> tuple[float, ...]:
+        if len(primitive.positions) != 6:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: {GROUP} has 6 joints, got {len(primitive.positions)} positions")
+        if not primitive.joint_names or tuple(primitive.joint_names) == self.joint_names:
+            return tuple(primitive.positions)
+        if sorted(primitive.joint_names) != sorted(self.joint_names):
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: joints {list(primitive.joint_names)} are not those of {GROUP} {list(self.joint_names)}")
+        by_name = dict(zip(primitive.joint_names, primitive.positions))
+        return tuple(by_name[n] for n in self.joint_names)
+
+    def _check_group(self, group: str) -> None:
+        if group != GROUP:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: no group {group!r} (this robot has only {GROUP!r})")
+
+
+def _fault_kind(error: VPlusError) -> FaultKind:
+    if isinstance(error, CommandTimeout):
+        return FaultKind.TIMEOUT
+    if isinstance(error, (ConnectionLost, ConnectError)):
+        return FaultKind.CONNECTION
+    if isinstance(error, ProtocolError):
+        return FaultKind.PROTOCOL
+    return FaultKind.INTERNAL
+
+
+def _agree(a: np.ndarray, b: np.ndarray) -> bool:
+    if np.linalg.norm(a[:3, 3] - b[:3, 3]) * 1000.0 > _AGREE_MM:
+        return False
+    cos = (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0
+    return math.degrees(math.acos(max(-1.0, min(1.0, cos)))) <= _AGREE_DEG
+
+
+# ------------------------------------------------------------------------------ registry
+_EXTRAS = ("timeout", "retries", "linear")
+
+
+async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
+    """Registry factory (``vplus``): a controller at ``host:port``, or, without a host, the simulator.
+
+    Without a host an AdeptServer simulator is started in-process on 127.0.0.1 (``port``, or a
+    free one) and a simulated focus camera answers vision requests.  Extras: ``timeout`` (s, ack
+    allowance per command on top of the motion time), ``retries`` (connection attempts after the
+    first), ``linear`` (``joint`` or ``reject``).
+    """
+    if options.robot.name != ADEPT_VIPER_S850.name:
+        raise ValueError(f"the vplus back end drives {ADEPT_VIPER_S850.name}, not {options.robot.name}")
+    if options.rsi_listen is not None:
+        raise ValueError("the vplus back end takes no rsi_listen (that is for KUKA RSI)")
+    if options.faults:
+        raise ValueError("the vplus back end takes no --fault: inject V+ faults through robot_bridges.vplus.simulator.Faults")
+    unknown = sorted(set(options.extra) - set(_EXTRAS))
+    if unknown:
+        raise ValueError(f"vplus: unknown option(s) {', '.join(unknown)} (known: {', '.join(_EXTRAS)})")
+    try:
+        timeout = float(options.extra.get("timeout", "5"))
+        retries = int(options.extra.get("retries", "3"))
+    except ValueError as error:
+        raise ValueError(f"vplus: timeout must be a number and retries an integer: {error}") from None
+    if not (timeout > 0 and math.isfinite(timeout) and retries >= 0):
+        raise ValueError(f"vplus: timeout must be > 0 and retries >= 0, got {timeout}, {retries}")
+    linear = options.extra.get("linear", "joint")
+    if linear not in ("joint", "reject"):
+        raise ValueError(f"vplus: linear must be 'joint' or 'reject', got {linear!r}")
+    if options.port is not None and not (0 <= options.port <= 65535):
+        raise ValueError(f"vplus: port must be 0..65535, got {options.port}")
+    if options.host is not None:
+        port = DEFAULT_PORT if options.port is None else options.port
+        return VPlusBackend(clock, options.host, port, robot=options.robot, ack_timeout=timeout, retries=retries, linear=linear)  # type: ignore[arg-type]
+    simulator = await VPlusSimulator(clock, "127.0.0.1", options.port or 0).start()
+    return VPlusBackend(
+        clock,
+        "127.0.0.1",
+        simulator.port,
+        robot=options.robot,
+        measurement=SimulatedFocusCamera(seed=options.seed),
+        ack_timeout=timeout,
+        retries=retries,
+        linear=linear,  # type: ignore[arg-type]
+        simulator=simulator,
+    )
