@@ -1,0 +1,259 @@
+"""Mirror <-> ROS 2 message conversion, QoS profiles and parameter values, as plain tested code.
+
+The rclpy adapter (:mod:`execution_engine.transport.ros`) must stay thin because it cannot be run
+on a machine without ROS 2; everything that is only data shuffling lives here instead, where the
+tests drive it with fake message classes shaped like rosidl's (``__slots__``, type-checking
+setters, ``get_fields_and_field_types``, ``array.array`` for numeric sequences).
+
+Conversion is driven by the mirrors in :mod:`execution_engine.transport.msgs`: each names its ROS
+type (``ROS_TYPE = "std_msgs/msg/String"``) and has the same field names.  Classes are looked up
+through an injectable *resolver* (default: import ``std_msgs.msg`` and take ``String``), so tests
+never need rclpy and a missing interface package fails with one clear message.  Values are
+coerced to the exact Python type of the mirror's field (``float(1)``), because rosidl setters
+reject an ``int`` for a ``float64`` field.
+"""
+from __future__ import annotations
+
+import array
+import dataclasses
+import importlib
+import re
+import typing
+from collections.abc import Callable, Iterable, Mapping
+from functools import lru_cache
+from typing import Any, TypeVar, get_args, get_origin
+
+from execution_engine.transport.port import ParameterValue, TransportError
+from execution_engine.transport.qos import QoS, rclpy_qos_kwargs
+
+M = TypeVar("M")
+Resolver = Callable[[str], type]
+
+_ROS_TYPE = re.compile(r"^([a-z][a-z0-9_]*)/(msg|srv)/([A-Z][A-Za-z0-9]*)(?:_(Request|Response))?$")
+
+#: Parameters rclpy declares on every node by itself; they are not overrides meant for our code.
+RCLPY_OWN_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"})
+_RCLPY_OWN_PREFIXES = ("qos_overrides.",)
+
+
+# ------------------------------------------------------------------------------- resolving
+def import_ros_type(ros_type: str) -> type:
+    """The rosidl class of ``pkg/msg/Name`` or ``pkg/srv/Name[_Request|_Response]``.
+
+    Requests and responses are reached through their service class (``Trigger.Request``),
+    because rosidl packages export the service, not always its parts.
+    """
+    match = _ROS_TYPE.match(ros_type)
+    if match is None:
+        raise TransportError(f"{ros_type!r} is not a ROS interface name like 'std_msgs/msg/String'")
+    package, kind, name, part = match.groups()
+    module_name = f"{package}.{kind}"
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as error:
+        raise TransportError(
+            f"cannot import {module_name} for {ros_type}: {error} (is the ROS 2 environment sourced?)"
+        ) from None
+    try:
+        cls = getattr(module, name)
+        return getattr(cls, part) if part else cls  # type: ignore[no-any-return]
+    except AttributeError:
+        raise TransportError(f"{module_name} has no {name}{'.' + part if part else ''} (for {ros_type})") from None
+
+
+@lru_cache(maxsize=None)
+def _mirror_fields(mirror: type) -> tuple[tuple[str, Any], ...]:
+    """(name, type hint) of each field of a mirror dataclass, in declaration order."""
+    if not (dataclasses.is_dataclass(mirror) and isinstance(getattr(mirror, "ROS_TYPE", None), str)):
+        raise TransportError(f"{mirror!r} is not a message mirror (a dataclass with ROS_TYPE)")
+    hints = typing.get_type_hints(mirror)
+    return tuple((f.name, hints[f.name]) for f in dataclasses.fields(mirror))
+
+
+def _sequence_item(hint: Any) -> Any | None:
+    """The item type of ``tuple[T, ...]``, or None when ``hint`` is not a sequence."""
+    if get_origin(hint) is tuple:
+        args = get_args(hint)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return args[0]
+        raise TransportError(f"mirror field type {hint!r}: only tuple[T, ...] maps to a ROS sequence")
+    return None
+
+
+def _is_mirror(hint: Any) -> bool:
+    return isinstance(hint, type) and dataclasses.is_dataclass(hint)
+
+
+_SCALARS: dict[Any, Callable[[Any], Any]] = {float: float, int: int, str: str}
+
+
+def _scalar(hint: Any, value: Any, path: str) -> Any:
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise TransportError(f"field {path!r}: expected a bool, got {value!r}")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise TransportError(f"field {path!r}: expected a string, got {type(value).__name__}")
+        return value
+    convert = _SCALARS.get(hint)
+    if convert is None:
+        raise TransportError(f"field {path!r}: unsupported mirror field type {hint!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TransportError(f"field {path!r}: expected a number, got {type(value).__name__}")
+    if hint is int and isinstance(value, float) and not value.is_integer():
+        raise TransportError(f"field {path!r}: expected an integer, got {value!r}")
+    return convert(value)
+
+
+def _join(path: str, name: str) -> str:
+    return f"{path}.{name}" if path else name
+
+
+class MessageConverter:
+    """Converts mirrors to rosidl messages and back, resolving and checking each class once."""
+
+    def __init__(self, resolver: Resolver = import_ros_type) -> None:
+        self._resolver = resolver
+        self._classes: dict[type, type] = {}
+
+    # ----------------------------------------------------------------------------- classes
+    def ros_class(self, mirror: type) -> type:
+        """The rosidl class for ``mirror``; TransportError when it lacks one of the mirror's fields."""
+        cls = self._classes.get(mirror)
+        if cls is not None:
+            return cls
+        fields = _mirror_fields(mirror)
+        ros_type: str = mirror.ROS_TYPE  # type: ignore[attr-defined]
+        cls = self._resolver(ros_type)
+        declared = _declared_fields(cls)
+        if declared is not None:
+            missing = [name for name, _ in fields if name not in declared]
+            if missing:
+                raise TransportError(
+                    f"{ros_type} as installed has no field(s) {', '.join(missing)} that {mirror.__name__} carries"
+                )
+        for _, hint in fields:  # nested messages are checked up front too, not on first use
+            nested = _sequence_item(hint) or hint
+            if _is_mirror(nested):
+                self.ros_class(nested)
+        self._classes[mirror] = cls
+        return cls
+
+    def service_classes(self, mirror_service: type) -> tuple[type, type, type]:
+        """(service, request, response) rosidl classes for a service mirror such as ``Trigger``."""
+        ros_type = getattr(mirror_service, "ROS_TYPE", None)
+        request, response = getattr(mirror_service, "Request", None), getattr(mirror_service, "Response", None)
+        if not isinstance(ros_type, str) or request is None or response is None:
+            raise TransportError(f"{mirror_service!r} is not a service mirror (ROS_TYPE, Request, Response)")
+        return self._resolver(ros_type), self.ros_class(request), self.ros_class(response)
+
+    # ---------------------------------------------------------------------------- outbound
+    def to_ros(self, msg: Any) -> Any:
+        """The rosidl message for mirror instance ``msg``; TransportError names the field that failed."""
+        return self._to_ros(msg, "")
+
+    def _to_ros(self, msg: Any, path: str) -> Any:
+        mirror = type(msg)
+        cls = self.ros_class(mirror)
+        kwargs: dict[str, Any] = {}
+        for name, hint in _mirror_fields(mirror):
+            kwargs[name] = self._value_to_ros(hint, getattr(msg, name), _join(path, name))
+        try:
+            return cls(**kwargs)
+        except (AssertionError, TypeError, ValueError, AttributeError) as error:
+            raise TransportError(f"cannot build {mirror.ROS_TYPE} from {mirror.__name__}: {error or type(error).__name__}") from None
+
+    def _value_to_ros(self, hint: Any, value: Any, path: str) -> Any:
+        item = _sequence_item(hint)
+        if item is not None:
+            if not isinstance(value, (tuple, list)):
+                raise TransportError(f"field {path!r}: expected a sequence, got {type(value).__name__}")
+            return [self._value_to_ros(item, v, f"{path}[{i}]") for i, v in enumerate(value)]
+        if _is_mirror(hint):
+            if type(value) is not hint:
+                raise TransportError(f"field {path!r}: expected {hint.__name__}, got {type(value).__name__}")
+            return self._to_ros(value, path)
+        return _scalar(hint, value, path)
+
+    # ----------------------------------------------------------------------------- inbound
+    def from_ros(self, mirror: type[M], ros_msg: Any) -> M:
+        """The mirror of a received rosidl message; TransportError names the field that failed."""
+        return self._from_ros(mirror, ros_msg, "")  # type: ignore[no-any-return]
+
+    def _from_ros(self, mirror: type, ros_msg: Any, path: str) -> Any:
+        kwargs: dict[str, Any] = {}
+        for name, hint in _mirror_fields(mirror):
+            where = _join(path, name)
+            try:
+                raw = getattr(ros_msg, name)
+            except AttributeError:
+                raise TransportError(f"{mirror.ROS_TYPE}: received message has no field {where!r}") from None
+            kwargs[name] = self._value_from_ros(hint, raw, where)
+        return mirror(**kwargs)
+
+    def _value_from_ros(self, hint: Any, value: Any, path: str) -> Any:
+        item = _sequence_item(hint)
+        if item is not None:
+            if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
+                raise TransportError(f"field {path!r}: expected a sequence, got {type(value).__name__}")
+            return tuple(self._value_from_ros(item, v, f"{path}[{i}]") for i, v in enumerate(value))
+        if _is_mirror(hint):
+            return self._from_ros(hint, value, path)
+        return _scalar(hint, value, path)
+
+
+def _declared_fields(cls: type) -> set[str] | None:
+    """Field names a rosidl class declares, or None if it does not say (then we trust the mirror)."""
+    getter = getattr(cls, "get_fields_and_field_types", None)
+    if getter is None:
+        return None
+    return set(getter())
+
+
+# ----------------------------------------------------------------------------- responses
+def failure_response(response_type: type[M], text: str) -> M:
+    """A response that says the call failed: ``success=False`` and ``message`` where the type has them.
+
+    Used when a service handler raised or timed out: rclpy must still answer the caller, and an
+    exception out of an rclpy callback would stop the executor.
+    """
+    names = {f.name for f in dataclasses.fields(response_type)}  # type: ignore[arg-type]
+    values: dict[str, Any] = {}
+    if "success" in names:
+        values["success"] = False
+    if "message" in names:
+        values["message"] = text
+    return response_type(**values)
+
+
+# ---------------------------------------------------------------------------------- QoS
+def qos_profile(qos: QoS, policies: Any) -> Any:
+    """``QoSProfile`` for ``qos``; ``policies`` is ``rclpy.qos`` (or a stand-in with the same names)."""
+    kwargs = rclpy_qos_kwargs(qos)
+    enums = {"reliability": policies.ReliabilityPolicy, "durability": policies.DurabilityPolicy, "history": policies.HistoryPolicy}
+    resolved: dict[str, Any] = {"depth": kwargs["depth"]}
+    for key, enum in enums.items():
+        try:
+            resolved[key] = getattr(enum, str(kwargs[key]))
+        except AttributeError:
+            raise TransportError(f"this rclpy has no {key} policy {kwargs[key]}") from None
+    return policies.QoSProfile(**resolved)
+
+
+# ---------------------------------------------------------------------------- parameters
+def plain_parameter_value(value: Any) -> ParameterValue:
+    """A parameter value as the port expects it: sequences (rclpy gives ``array.array``) as lists."""
+    if isinstance(value, (array.array, tuple, list)):
+        return list(value)
+    return value  # type: ignore[no-any-return]
+
+
+def user_overrides(parameters: Mapping[str, Any] | Iterable[tuple[str, Any]]) -> dict[str, ParameterValue]:
+    """The overrides meant for our code: every parameter but those rclpy declares by itself."""
+    items = parameters.items() if isinstance(parameters, Mapping) else parameters
+    return {
+        name: plain_parameter_value(value)
+        for name, value in items
+        if name not in RCLPY_OWN_PARAMETERS and not name.startswith(_RCLPY_OWN_PREFIXES)
+    }
