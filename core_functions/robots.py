@@ -138,7 +138,8 @@ ADEPT_VIPER_S850 = RobotModel(
     description="Adept Viper s850: 6-axis arm on an Adept V+ controller (AdeptServer over TCP)",
     aliases=("viper", "vplus"),
     groups=(GroupSpec("arm", "arm", _VIPER_JOINTS, camera="tool_camera"),),
-    poses={"home": dict(zip((j.name for j in _VIPER_JOINTS), _deg(0, -90, 180, 0, 0, 0)))},
+    # AdeptServer movehome and the seed's init_move: #PPOINT(0,-90,180,0,90,0), flange pointing down
+    poses={"home": dict(zip((j.name for j in _VIPER_JOINTS), _deg(0, -90, 180, 0, 90, 0)))},
     default_backend="vplus",
 )
 
