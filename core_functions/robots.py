@@ -47,6 +47,13 @@ class RobotModel:
     poses: dict[str, dict[str, float]] = field(default_factory=dict)
     #: The back end ``run`` uses when none is chosen.
     default_backend: str = "nextage-sim"
+    #: The robot's conventional joint order for whole-robot lists (default: group by group).
+    joint_order: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        own = [j.name for g in self.groups for j in g.joints]
+        if self.joint_order and sorted(self.joint_order) != sorted(own):
+            raise ValueError(f"{self.name}: joint_order must list exactly the joints of the groups")
 
     def group(self, name: str) -> GroupSpec:
         for g in self.groups:
@@ -64,11 +71,14 @@ class RobotModel:
 
     @property
     def joints(self) -> tuple[JointSpec, ...]:
-        return tuple(j for g in self.groups for j in g.joints)
+        """Every joint, in :attr:`joint_names` order."""
+        by_name = {j.name: j for g in self.groups for j in g.joints}
+        return tuple(by_name[name] for name in self.joint_names)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        return tuple(j.name for j in self.joints)
+        """The robot's joint order (Nextage: torso, head, right arm, left arm, as its controller lists them)."""
+        return self.joint_order or tuple(j.name for g in self.groups for j in g.joints)
 
     def joint(self, name: str) -> JointSpec:
         for j in self.joints:
@@ -122,6 +132,7 @@ NEXTAGE_OPEN = RobotModel(
         "off": _pose(_NEXTAGE_ORDER, (0, 0, 0, 25, -140, -150, 45, 0, 0, -25, -140, -150, -45, 0, 0)),
     },
     default_backend="nextage-sim",
+    joint_order=_NEXTAGE_ORDER,
 )
 
 _VIPER_JOINTS = (

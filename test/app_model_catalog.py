@@ -94,7 +94,7 @@ CELL_XML = """<?xml version="1.0" encoding="UTF-8"?>
     <frame name="rivet_2" xyz="0.02 0 0" rpy="3.14159265 0 0" kind="rivet_slot" element="ref_R10"/>
   </frame>
   <element name="ref_R10" kind="rivet" diameter="0.0048" length="0.010" grip_depth="0.004"/>
-  <joint_pose name="safe" unit="deg" joints="0.6 0 -100 -15.2 9.4 -3.2  -0.6 0 -100 15.2 9.4 3.2  0 0 0"/>
+  <joint_pose name="safe" unit="deg" joints="0 0 0  -0.6 0 -100 15.2 9.4 3.2  0.6 0 -100 -15.2 9.4 -3.2"/>
   <joint_pose name="left_ready" group="left_arm" unit="deg" joints="0.6 0 -100 -15.2 9.4 -3.2"/>
 </cell>
 """

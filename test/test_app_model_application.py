@@ -246,14 +246,14 @@ def test_invalid_cell_is_reported_with_its_own_path_and_lines(work: Path) -> Non
 
 
 def test_cell_joint_poses_are_checked_against_the_robot(work: Path) -> None:
-    cell_text = CELL_XML.replace('joints="0.6 0 -100 -15.2 9.4 -3.2  -0.6', 'joints="0.6 0 -100 -15.2 9.4 -0.6')
+    cell_text = CELL_XML.replace('joints="0 0 0  -0.6 0 -100 15.2 9.4 3.2  0.6', 'joints="0 0 0  -0.6 0 -100 15.2 9.4 0.6')
     (work / "cells" / "rivet_cell.xml").write_text(cell_text)
     path, found = check(work, app('<operation id="1"><left_arm><function name="wait"/></left_arm></operation>\n'))
     cell_path = work / "cells" / "rivet_cell.xml"
     assert found == [
-        at(cell_path, cell_text, 'joints="0.6 0 -100 -15.2 9.4 -0.6', "joint pose 'safe' has 14 values; nextage_open has 15 joints, in this order: "
-           "LARM_JOINT0 LARM_JOINT1 LARM_JOINT2 LARM_JOINT3 LARM_JOINT4 LARM_JOINT5 RARM_JOINT0 RARM_JOINT1 RARM_JOINT2 "
-           "RARM_JOINT3 RARM_JOINT4 RARM_JOINT5 CHEST_JOINT0 HEAD_JOINT0 HEAD_JOINT1"),
+        at(cell_path, cell_text, 'joints="0 0 0  -0.6 0 -100 15.2 9.4 0.6', "joint pose 'safe' has 14 values; nextage_open has 15 joints, in this order: "
+           "CHEST_JOINT0 HEAD_JOINT0 HEAD_JOINT1 RARM_JOINT0 RARM_JOINT1 RARM_JOINT2 RARM_JOINT3 RARM_JOINT4 RARM_JOINT5 "
+           "LARM_JOINT0 LARM_JOINT1 LARM_JOINT2 LARM_JOINT3 LARM_JOINT4 LARM_JOINT5"),
     ]
 
 

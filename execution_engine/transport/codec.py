@@ -198,8 +198,8 @@ def _convert_scalar(hint: Any, value: Any, path: str) -> Any:
             raise _Mismatch(path, f"expected an integer, got {_describe(value)}")
         return value
     if hint is float:
-        if type(value) not in (int, float):
-            raise _Mismatch(path, f"expected a number, got {_describe(value)}")
+        if type(value) not in (int, float) or not math.isfinite(value):
+            raise _Mismatch(path, f"expected a finite number, got {_describe(value)}")
         return float(value)
     if hint is str:
         if type(value) is not str:
