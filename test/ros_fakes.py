@@ -645,7 +645,6 @@ class FakeExecutor:
         self.cond = threading.Condition()
         self.nodes: list[FakeNode] = []
         self._is_shutdown = False
-        self._busy: set[_Entity] = set()
         self._groups_running: set[int] = set()
         self._in_flight = 0
         self._error: BaseException | None = None
@@ -676,11 +675,12 @@ class FakeExecutor:
         for node in self.nodes:
             for entity in node.entities:
                 group = entity.callback_group
-                if not entity.queue or entity in self._busy or entity.destroyed:
+                if not entity.queue or entity.destroyed:
                     continue
                 if group.exclusive and id(group) in self._groups_running:
                     continue
-                self._busy.add(entity)
+                # As in rclpy, only a mutually exclusive group serialises callbacks: a reentrant
+                # entity is taken again while its previous callback still runs.
                 if group.exclusive:
                     self._groups_running.add(id(group))
                 self._in_flight += 1
@@ -696,7 +696,6 @@ class FakeExecutor:
                 self._error = self._error or error
         finally:
             with self.cond:
-                self._busy.discard(entity)
                 self._groups_running.discard(id(entity.callback_group))
                 self._in_flight -= 1
                 self.cond.notify_all()

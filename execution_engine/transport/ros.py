@@ -1,0 +1,526 @@
+"""The ``ros`` transport: the port of :mod:`execution_engine.transport.port` over rclpy (ROS 2 Jazzy).
+
+Imported only when a ROS deployment is chosen; rclpy itself is imported inside
+:class:`RosTransport`, so this module can be read (and its fakes tested) without ROS 2.  Two
+worlds meet here and each keeps its own thread:
+
+* rclpy's executor spins in a background thread.  Every rclpy callback is a small bridge that
+  never raises (an exception out of an rclpy callback would end ``spin``):
+
+  - a subscription converts the rosidl message to our mirror and hands it to the asyncio loop
+    with ``loop.call_soon_threadsafe``; subscriptions share one mutually exclusive callback
+    group per node, so a topic's messages reach the loop in the order they arrived;
+  - a service runs our coroutine handler on the loop with ``run_coroutine_threadsafe`` and
+    waits (bounded) for its answer; services and clients use a reentrant group, so a handler
+    that itself calls a service does not block the client response it waits for -- which is
+    why the executor is a MultiThreadedExecutor, never a single-threaded one;
+  - a client call is ``call_async``; the rclpy future's done-callback settles an asyncio future.
+
+* the asyncio loop runs the node's code: callbacks, handlers, publishing.
+
+Faults in any callback go to ``node.report_fault`` on the loop, exactly as on the local
+transport.  Differences from :mod:`~execution_engine.transport.local` that a caller may notice:
+a handler that raises or times out answers the caller with ``success=False`` and the error text
+(rclpy must answer something); a call to a service that is not (yet) discovered waits for it up
+to the call's timeout before raising :class:`ServiceUnavailable`, because discovery takes time;
+a destroyed service keeps answering "destroyed" until its node is destroyed at shutdown (rclpy
+cannot destroy a service with a request in flight safely).  Parameters are read once at start-up;
+``ros2 param set`` on a declared parameter is refused rather than silently ignored.
+"""
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import logging
+import threading
+from collections.abc import Awaitable, Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+from execution_engine.clock import Clock
+from execution_engine.transport.port import (
+    Node,
+    ParameterValue,
+    Publisher,
+    ServiceClient,
+    ServiceServer,
+    ServiceUnavailable,
+    Subscription,
+    Transport,
+    TransportError,
+    resolve_name,
+    validate_node_name,
+)
+from execution_engine.transport.qos import COMMANDS, QoS
+from execution_engine.transport.ros_convert import MessageConverter, failure_response, qos_profile, user_overrides
+
+M = TypeVar("M")
+log = logging.getLogger(__name__)
+
+_POLL = 0.05  # run seconds between checks while waiting for a service to be discovered
+
+
+@dataclass(frozen=True)
+class _Rclpy:
+    """The rclpy names the adapter uses, imported once, in one place."""
+
+    rclpy: Any
+    node_class: Any
+    executor_class: Any
+    exclusive_group: Any
+    reentrant_group: Any
+    parameter: Any
+    qos: Any
+    no_signal_handlers: Any
+    remove_ros_args: Any
+    parameter_descriptor: Any
+    set_parameters_result: Any
+
+
+def _import_rclpy() -> _Rclpy:
+    try:
+        import rclpy
+        import rclpy.qos
+        from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+        from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+        from rclpy.executors import MultiThreadedExecutor
+        from rclpy.node import Node as RclpyNode
+        from rclpy.parameter import Parameter
+        from rclpy.signals import SignalHandlerOptions
+        from rclpy.utilities import remove_ros_args
+    except ImportError as error:
+        raise TransportError(
+            f"the ros transport needs rclpy ({error}); source a ROS 2 Jazzy environment "
+            "(source /opt/ros/jazzy/setup.bash) or use the local transport"
+        ) from None
+    return _Rclpy(
+        rclpy=rclpy,
+        node_class=RclpyNode,
+        executor_class=MultiThreadedExecutor,
+        exclusive_group=MutuallyExclusiveCallbackGroup,
+        reentrant_group=ReentrantCallbackGroup,
+        parameter=Parameter,
+        qos=rclpy.qos,
+        no_signal_handlers=SignalHandlerOptions.NO,
+        remove_ros_args=remove_ros_args,
+        parameter_descriptor=ParameterDescriptor,
+        set_parameters_result=SetParametersResult,
+    )
+
+
+# =================================================================================== endpoints
+class _RosPublisher(Publisher[M], Generic[M]):
+    def __init__(self, node: RosNode, msg_type: type[M], topic: str, qos: QoS) -> None:
+        self.node = node
+        self.msg_type = msg_type
+        self.topic = topic
+        self.qos = qos
+        self.alive = True
+        ros_class = node.converter.ros_class(msg_type)
+        self.handle = node.ros_node.create_publisher(ros_class, topic, node.transport.profile(qos))
+
+    def publish(self, msg: M) -> None:
+        if not self.alive:
+            raise TransportError(f"publisher on {self.topic} of {self.node.fully_qualified_name} was destroyed")
+        self._check(msg)
+        self.handle.publish(self.node.converter.to_ros(msg))
+
+
+class _RosSubscription(Subscription[M], Generic[M]):
+    def __init__(self, node: RosNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS) -> None:
+        self.node = node
+        self.msg_type = msg_type
+        self.topic = topic
+        self.qos = qos
+        self.alive = True
+        self._callback = callback
+        ros_class = node.converter.ros_class(msg_type)
+        self.handle = node.ros_node.create_subscription(
+            ros_class, topic, self._on_ros_message, node.transport.profile(qos), callback_group=node.subscription_group
+        )
+
+    def _on_ros_message(self, ros_msg: Any) -> None:
+        """Executor thread: convert, then queue the delivery on the loop. Never raises."""
+        try:
+            if not self.alive:
+                return
+            msg = self.node.converter.from_ros(self.msg_type, ros_msg)
+            self.node.transport.call_soon(self._deliver, msg)
+        except Exception as error:  # noqa: BLE001 - a bad message must not end the executor
+            self.node.report_fault_threadsafe(f"subscription {self.topic}", error)
+
+    def _deliver(self, msg: M) -> None:
+        """Loop thread."""
+        if not self.alive:
+            return
+        try:
+            self._callback(msg)
+        except Exception as error:  # noqa: BLE001 - reported, never swallowed
+            self.node.report_fault(f"subscription {self.topic}", error)
+
+    def destroy(self) -> None:
+        if not self.alive:
+            return
+        self.alive = False
+        self.node.ros_node.destroy_subscription(self.handle)
+
+
+class _RosService(ServiceServer):
+    def __init__(self, node: RosNode, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> None:
+        self.node = node
+        self.srv_type = srv_type
+        self.name = name
+        self.alive = True
+        self._handler = handler
+        service_class, _, _ = node.converter.service_classes(srv_type)
+        self.handle = node.ros_node.create_service(
+            service_class, name, self._on_request, callback_group=node.service_group
+        )
+
+    def _on_request(self, ros_request: Any, ros_response: Any) -> Any:
+        """Executor thread: run the handler on the loop and wait for it, bounded. Never raises."""
+        try:
+            request = self.node.converter.from_ros(self.srv_type.Request, ros_request)
+            response = self._run_handler(request)
+        except Exception as error:  # noqa: BLE001 - the caller gets a failure answer, the node a fault
+            self.node.report_fault_threadsafe(f"service {self.name}", error)
+            response = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}")
+        try:
+            return self.node.converter.to_ros(response)
+        except Exception as error:  # noqa: BLE001
+            self.node.report_fault_threadsafe(f"service {self.name} response", error)
+            return ros_response
+
+    def _run_handler(self, request: Any) -> Any:
+        if not self.alive:
+            return failure_response(self.srv_type.Response, f"{self.name}: service was destroyed")
+        transport = self.node.transport
+        future = asyncio.run_coroutine_threadsafe(self._call(request), transport.loop)
+        wall = transport.clock.to_wall(transport.handler_timeout)
+        transport.in_flight.add(future)
+        try:
+            return future.result(timeout=wall)
+        except concurrent.futures.TimeoutError:
+            future.cancel()
+            raise TimeoutError(f"handler did not answer within {transport.handler_timeout:g} s") from None
+        except concurrent.futures.CancelledError:
+            raise TransportError("handler cancelled: the node is shutting down") from None
+        finally:
+            transport.in_flight.discard(future)
+
+    async def _call(self, request: Any) -> Any:
+        response = await self._handler(request)
+        if type(response) is not self.srv_type.Response:
+            raise TransportError(f"service {self.name} handler answered {type(response).__name__}, not {self.srv_type.Response.__name__}")
+        return response
+
+    def destroy(self) -> None:
+        # The rclpy service goes with its node (see the module docstring); until then it answers "destroyed".
+        self.alive = False
+
+
+class _RosClient(ServiceClient[Any, Any]):
+    def __init__(self, node: RosNode, srv_type: type, name: str) -> None:
+        self.node = node
+        self.srv_type = srv_type
+        self.name = name
+        self.alive = True
+        self._pending: set[asyncio.Future[Any]] = set()
+        service_class, _, _ = node.converter.service_classes(srv_type)
+        self.handle = node.ros_node.create_client(service_class, name, callback_group=node.service_group)
+
+    async def wait_for_service(self, timeout: float) -> bool:
+        clock = self.node.clock
+        deadline = clock.now() + timeout
+        while not self.handle.service_is_ready():
+            remaining = deadline - clock.now()
+            if remaining <= 0:
+                return False
+            await clock.sleep(min(_POLL, remaining))
+        return True
+
+    async def call(self, request: Any, timeout: float = 5.0) -> Any:
+        if type(request) is not self.srv_type.Request:
+            raise TransportError(f"service {self.name} takes {self.srv_type.Request.__name__}, got {type(request).__name__}")
+        if not self.alive:
+            raise TransportError(f"client of {self.name} on {self.node.fully_qualified_name} was destroyed")
+        clock = self.node.clock
+        deadline = clock.now() + timeout
+        if not self.handle.service_is_ready() and not await self.wait_for_service(timeout):
+            raise ServiceUnavailable(f"no server for service {self.name} within {timeout:g} s")
+        transport = self.node.transport
+        answer: asyncio.Future[Any] = transport.loop.create_future()
+        ros_future = self.handle.call_async(self.node.converter.to_ros(request))
+        ros_future.add_done_callback(lambda done: transport.call_soon(_settle, answer, done))
+        self._pending.add(answer)
+        try:
+            ros_response = await clock.wait_for(answer, max(0.0, deadline - clock.now()))
+        except asyncio.TimeoutError:
+            self.handle.remove_pending_request(ros_future)
+            raise TimeoutError(f"service {self.name} did not answer within {timeout:g} s") from None
+        finally:
+            self._pending.discard(answer)
+        return self.node.converter.from_ros(self.srv_type.Response, ros_response)
+
+    def abandon(self) -> None:
+        """The node is going away: fail every call still waiting."""
+        self.alive = False
+        for answer in list(self._pending):
+            if not answer.done():
+                answer.set_exception(TransportError(f"client of {self.name} was destroyed during the call"))
+
+
+def _settle(answer: asyncio.Future[Any], ros_future: Any) -> None:
+    """Loop thread: copy an rclpy future's outcome into the asyncio future (unless it gave up)."""
+    if answer.done():
+        return
+    if ros_future.cancelled():
+        answer.set_exception(TransportError("the service call was cancelled by rclpy"))
+        return
+    error = ros_future.exception()
+    if error is not None:
+        answer.set_exception(error)
+    else:
+        answer.set_result(ros_future.result())
+
+
+# ======================================================================================= node
+class RosNode(Node):
+    """One rclpy node behind the port; its callbacks run on the transport's asyncio loop."""
+
+    def __init__(
+        self,
+        transport: RosTransport,
+        name: str,
+        namespace: str,
+        parameters: Mapping[str, ParameterValue] | None,
+    ) -> None:
+        validate_node_name(name)
+        resolve_name("x", namespace)  # validates the namespace before rclpy sees it
+        api = transport.api
+        self.transport = transport
+        self.converter = transport.converter
+        overrides = [api.parameter(key, value=value) for key, value in (parameters or {}).items()]
+        # Overrides from the command line / launch file are declared by rclpy itself, so we can
+        # read them back (and report the ones no code declares: typos in a launch file).
+        self.ros_node = api.node_class(
+            name,
+            namespace=namespace,
+            parameter_overrides=overrides,
+            automatically_declare_parameters_from_overrides=True,
+        )
+        # A launch file may rename the node (__node:=, __ns:=): the port sees the real name.
+        real_namespace = self.ros_node.get_namespace() or "/"
+        given = self.ros_node.get_parameters_by_prefix("")
+        super().__init__(
+            self.ros_node.get_name(),
+            real_namespace,
+            transport.clock,
+            user_overrides((key, self.ros_node.get_parameter(key).value) for key in given),
+        )
+        self.subscription_group = api.exclusive_group()
+        self.service_group = api.reentrant_group()
+        self._read_at_start: set[str] = set()
+        self._endpoints: list[Any] = []
+        self.destroyed = False
+        self.ros_node.add_on_set_parameters_callback(self._on_set_parameters)
+
+    # ------------------------------------------------------------------------ parameters
+    def declare_parameter(self, name: str, default: ParameterValue, description: str = "") -> ParameterValue:
+        value = super().declare_parameter(name, default, description)
+        try:
+            if not self.ros_node.has_parameter(name):
+                descriptor = self.transport.api.parameter_descriptor(description=description)
+                self.ros_node.declare_parameter(name, value, descriptor)
+        except Exception as error:  # noqa: BLE001 - rclpy's parameter exceptions have no common base
+            del self._parameters[name]
+            raise TransportError(f"{self.fully_qualified_name}: rclpy refused parameter {name!r}: {error}") from None
+        self._read_at_start.add(name)
+        return value
+
+    def _on_set_parameters(self, parameters: list[Any]) -> Any:
+        """rclpy callback (any thread): refuse changes to parameters our code has already read."""
+        frozen = [p.name for p in parameters if p.name in self._read_at_start]
+        result = self.transport.api.set_parameters_result
+        if frozen:
+            return result(
+                successful=False,
+                reason=f"{', '.join(frozen)} read at start-up; restart {self.fully_qualified_name} to change",
+            )
+        return result(successful=True)
+
+    # ------------------------------------------------------------------------- endpoints
+    def _add(self, endpoint: Any) -> Any:
+        if self.destroyed:
+            raise TransportError(f"{self.fully_qualified_name} was destroyed")
+        self._endpoints.append(endpoint)
+        return endpoint
+
+    def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]:
+        return self._add(_RosPublisher(self, msg_type, self.resolve(topic), qos))  # type: ignore[no-any-return]
+
+    def create_subscription(
+        self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS
+    ) -> Subscription[M]:
+        return self._add(_RosSubscription(self, msg_type, self.resolve(topic), callback, qos))  # type: ignore[no-any-return]
+
+    def create_service(self, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> ServiceServer:
+        return self._add(_RosService(self, srv_type, self.resolve(name), handler))  # type: ignore[no-any-return]
+
+    def create_client(self, srv_type: type, name: str) -> ServiceClient[Any, Any]:
+        return self._add(_RosClient(self, srv_type, self.resolve(name)))  # type: ignore[no-any-return]
+
+    def destroy(self) -> None:
+        """Stop every endpoint now; the rclpy node itself goes once the executor is idle."""
+        if self.destroyed:
+            return
+        self.destroyed = True
+        for endpoint in self._endpoints:
+            if isinstance(endpoint, _RosClient):
+                endpoint.abandon()
+            else:
+                endpoint.alive = False
+        self._endpoints.clear()
+        self.transport.retire(self)
+
+    # ---------------------------------------------------------------------------- faults
+    def report_fault_threadsafe(self, where: str, error: BaseException) -> None:
+        """From the executor thread: report on the loop, where the fault handler lives."""
+        if not self.transport.call_soon(self.report_fault, where, error):
+            self.logger.error("%s: fault in %s after the loop closed: %r", self.fully_qualified_name, where, error)
+
+
+# ================================================================================== transport
+class RosTransport(Transport):
+    """Nodes of one process on rclpy, with one executor thread for all of them.
+
+    Create it inside the running loop its clock is bound to.  ``args`` is the process's argv
+    (ROS arguments such as ``--ros-args -p name:=value`` are parsed by rclpy).  rclpy's own
+    SIGINT/SIGTERM handlers are not installed: the process's asyncio loop handles signals and
+    shuts the transport down in order (see :mod:`execution_engine.ros_main`).
+    ``handler_timeout`` bounds how long an executor thread waits for a service handler and
+    ``shutdown_timeout`` how long shutdown waits for in-flight callbacks; both in run seconds.
+    """
+
+    def __init__(
+        self,
+        clock: Clock,
+        args: Sequence[str] | None = None,
+        *,
+        threads: int = 4,
+        handler_timeout: float = 30.0,
+        shutdown_timeout: float = 5.0,
+    ) -> None:
+        super().__init__(clock)
+        if threads < 2:
+            raise ValueError("the ros transport needs at least 2 executor threads (a service handler may wait for a client response)")
+        self.api = _import_rclpy()
+        self.loop = clock.loop
+        self.handler_timeout = handler_timeout
+        self.shutdown_timeout = shutdown_timeout
+        self.converter = MessageConverter()
+        self._owns_context = False
+        if not self.api.rclpy.ok():
+            self.api.rclpy.init(args=None if args is None else list(args), signal_handler_options=self.api.no_signal_handlers)
+            self._owns_context = True
+        self._nodes: dict[str, RosNode] = {}
+        self._retired: list[Any] = []
+        self._stopping = False
+        self._stopped = False
+        self.spin_error: BaseException | None = None
+        self._closed = asyncio.Event()
+        self.in_flight: set[concurrent.futures.Future[Any]] = set()  # service handlers running on the loop
+        self._executor = self.api.executor_class(num_threads=threads)
+        self._thread = threading.Thread(target=self._spin, name="rclpy executor", daemon=True)
+        self._thread.start()
+
+    # ----------------------------------------------------------------------- executor side
+    def _spin(self) -> None:
+        try:
+            self._executor.spin()
+        except BaseException as error:  # noqa: BLE001 - the loop must learn that ROS is gone
+            if not self._stopping:
+                self.spin_error = error
+                log.error("rclpy executor stopped: %s: %s", type(error).__name__, error)
+        finally:
+            self.call_soon(self._closed.set)
+
+    def call_soon(self, callback: Callable[..., Any], *args: Any) -> bool:
+        """Schedule ``callback`` on the loop from any thread; False once the loop is closed."""
+        try:
+            self.loop.call_soon_threadsafe(callback, *args)
+        except RuntimeError:  # loop closed: nothing left to deliver to
+            return False
+        return True
+
+    def profile(self, qos: QoS) -> Any:
+        return qos_profile(qos, self.api.qos)
+
+    # ------------------------------------------------------------------------------- nodes
+    def create_node(
+        self, name: str, namespace: str = "/", parameters: Mapping[str, ParameterValue] | None = None
+    ) -> RosNode:
+        if self._stopping:
+            raise TransportError("the ros transport is shut down")
+        node = RosNode(self, name, namespace, parameters)
+        if node.fully_qualified_name in self._nodes:
+            node.destroy()
+            raise TransportError(f"a node named {node.fully_qualified_name} already exists")
+        self._nodes[node.fully_qualified_name] = node
+        self._executor.add_node(node.ros_node)
+        return node
+
+    def retire(self, node: RosNode) -> None:
+        """Take ``node`` off the executor; destroy its rclpy node now if nothing can still run."""
+        if self._nodes.get(node.fully_qualified_name) is node:
+            del self._nodes[node.fully_qualified_name]
+        self._executor.remove_node(node.ros_node)
+        if self._stopped:
+            _destroy_ros_node(node.ros_node)
+        else:
+            self._retired.append(node.ros_node)
+
+    def node_names(self) -> list[str]:
+        return sorted(self._nodes)
+
+    def user_args(self, argv: Sequence[str]) -> list[str]:
+        """``argv`` without the program name and without ROS arguments (``--ros-args ... --``)."""
+        return list(self.api.remove_ros_args(args=list(argv)))[1:]
+
+    async def wait_closed(self) -> None:
+        """Returns once the executor has stopped: after shutdown, or when rclpy went away by itself."""
+        await self._closed.wait()
+
+    async def shutdown(self) -> None:
+        """Destroy every node, stop the executor (bounded), and shut rclpy down if we started it."""
+        if self._stopping:
+            return
+        self._stopping = True
+        for node in list(self._nodes.values()):
+            node.destroy()
+        for future in list(self.in_flight):  # their executor threads answer "cancelled" at once
+            future.cancel()
+        wall = self.clock.to_wall(self.shutdown_timeout)
+        try:
+            # Blocking calls go to a worker thread: in-flight service callbacks need this loop.
+            if not await asyncio.to_thread(self._executor.shutdown, timeout_sec=wall):
+                log.warning("rclpy executor: callbacks still running after %g s at shutdown", self.shutdown_timeout)
+        except Exception:  # noqa: BLE001 - shutdown goes on regardless
+            log.exception("rclpy executor shutdown failed")
+        await asyncio.to_thread(self._thread.join, wall)
+        if self._thread.is_alive():
+            log.error("rclpy executor thread did not stop within %g s", self.shutdown_timeout)
+        self._stopped = True
+        for ros_node in self._retired:
+            _destroy_ros_node(ros_node)
+        self._retired.clear()
+        if self._owns_context and self.api.rclpy.ok():
+            self.api.rclpy.shutdown()
+        self._closed.set()
+
+
+def _destroy_ros_node(ros_node: Any) -> None:
+    try:
+        ros_node.destroy_node()
+    except Exception:  # noqa: BLE001 - one node failing to go must not keep the others
+        log.exception("destroying rclpy node failed")
