@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from functools import lru_cache
 
+from app_functions.focus_approach import FocusApproach
 from app_functions.rivet_installation import RivetInstallation
 from core_functions.catalog import Catalog
 from core_functions.functions import CoreFunctions
@@ -17,6 +18,7 @@ from core_functions.functions import CoreFunctions
 LIBRARIES: dict[str, type[CoreFunctions]] = {
     "core": CoreFunctions,
     "rivet_installation": RivetInstallation,
+    "focus_approach": FocusApproach,
 }
 
 

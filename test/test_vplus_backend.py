@@ -433,6 +433,6 @@ def test_the_factory_points_at_a_real_controller_without_a_simulator(run_sim: Ru
     async def main(clock: Clock) -> None:
         backend = await create(clock, BackendOptions(robot=ADEPT_VIPER_S850, host="192.0.2.10"))
         assert backend.client.peer == "192.0.2.10:1234" and backend.measurement is None
-        assert backend.name == "vplus 192.0.2.10:1234"
+        assert backend.label == "vplus 192.0.2.10:1234" and backend.name == "vplus"
 
     run_sim(main)

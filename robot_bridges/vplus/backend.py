@@ -154,7 +154,9 @@ class VPlusBackend(RobotBackend):
         self.ack_timeout = ack_timeout
         self.linear = linear
         self.client = VPlusClient(host, port, clock, timeout=ack_timeout, retries=retries)
-        self.name = f"vplus {host}:{port}"
+        # ``name`` also names the bridge node, so it stays a plain token; messages say ``label``.
+        self.name = "vplus"
+        self.label = f"vplus {host}:{port}"
         self._simulator = simulator  # owned: started by create(), closed with us
         self._joints = self.kin.home.copy()
         self._tcp: Pose | None = None
@@ -199,7 +201,7 @@ class VPlusBackend(RobotBackend):
     async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
         self._check_group(group)
         if self._job is not None:
-            raise BridgeError(FaultKind.BUSY, f"{self.name}: {GROUP} is already executing a primitive")
+            raise BridgeError(FaultKind.BUSY, f"{self.label}: {GROUP} is already executing a primitive")
         job = _Job(asyncio.get_running_loop())
         self._job = job
         work = asyncio.ensure_future(self._dispatch(primitive, job))
@@ -209,12 +211,12 @@ class VPlusBackend(RobotBackend):
                 await asyncio.wait({work, waiter}, return_when=asyncio.FIRST_COMPLETED)
                 waiter.cancel()
             if job.stopped:
-                raise BridgeError(FaultKind.STOPPED, f"{self.name}: {describe(primitive)} stopped")
+                raise BridgeError(FaultKind.STOPPED, f"{self.label}: {describe(primitive)} stopped")
             result = work.result()
             while job.paused and not job.stopped:  # pause lands at the end of the motion: hold the result
                 await job.next_change()
             if job.stopped:
-                raise BridgeError(FaultKind.STOPPED, f"{self.name}: {describe(primitive)} stopped")
+                raise BridgeError(FaultKind.STOPPED, f"{self.label}: {describe(primitive)} stopped")
             return result
         finally:
             if not work.done():
@@ -264,7 +266,7 @@ class VPlusBackend(RobotBackend):
             return await self._end_effector(primitive)
         if isinstance(primitive, Vision):
             return await self._vision(primitive)
-        raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: AdeptServer has no skill for {describe(primitive)}")
+        raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: AdeptServer has no skill for {describe(primitive)}")
 
     # ---------------------------------------------------------------------------- motions
     async def _move_joints(self, primitive: MoveJoints) -> MotionResult:
@@ -278,7 +280,7 @@ class VPlusBackend(RobotBackend):
             commands = codec.move_joints(np.degrees(values))
         violations = self.kin.limit_violations(goal)
         if violations:
-            raise BridgeError(FaultKind.JOINT_LIMIT, f"{self.name}: {describe(primitive)}: " + "; ".join(violations))
+            raise BridgeError(FaultKind.JOINT_LIMIT, f"{self.label}: {describe(primitive)}: " + "; ".join(violations))
         return await self._motion(commands, goal, describe(primitive))
 
     async def _move_relative(self, primitive: MoveRelative) -> MotionResult:
@@ -301,7 +303,7 @@ class VPlusBackend(RobotBackend):
             goal = self.kin.inverse(target.matrix(), self._joints)
         except IKError as error:
             kind = FaultKind.JOINT_LIMIT if error.reason == "joint_limit" else FaultKind.UNREACHABLE
-            raise BridgeError(kind, f"{self.name}: {what}: target {target}: {error}") from None
+            raise BridgeError(kind, f"{self.label}: {what}: target {target}: {error}") from None
         return await self._motion(commands, goal, what)
 
     async def _motion(self, commands: Sequence[Command], goal: np.ndarray, what: str) -> MotionResult:
@@ -333,11 +335,11 @@ class VPlusBackend(RobotBackend):
             return
         if self.linear == "reject":
             raise BridgeError(
-                FaultKind.UNSUPPORTED, f"{self.name}: {describe(primitive)}: AdeptServer moves are joint-interpolated (MOVE), not linear"
+                FaultKind.UNSUPPORTED, f"{self.label}: {describe(primitive)}: AdeptServer moves are joint-interpolated (MOVE), not linear"
             )
         if not self._warned_linear:
             self._warned_linear = True
-            log.warning("%s: linear moves run joint-interpolated (AdeptServer MOVE): exact target, curved path", self.name)
+            log.warning("%s: linear moves run joint-interpolated (AdeptServer MOVE): exact target, curved path", self.label)
 
     # ---------------------------------------------------------------------- other skills
     async def _dwell(self, seconds: float, job: _Job) -> None:
@@ -356,7 +358,7 @@ class VPlusBackend(RobotBackend):
     async def _end_effector(self, primitive: EndEffector) -> EndEffectorResult:
         command = _END_EFFECTOR.get(primitive.action)
         if command is None:
-            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: AdeptServer has no skill for {describe(primitive)}")
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: AdeptServer has no skill for {describe(primitive)}")
         await self._ensure_link()
         acks = await self._talk([command], self.ack_timeout + self._busy_for(), describe(primitive))
         self._note_pose(acks[-1])
@@ -368,12 +370,12 @@ class VPlusBackend(RobotBackend):
 
     async def _vision(self, primitive: Vision) -> VisionResult:
         if self.measurement is None:
-            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: {describe(primitive)}: no measurement port connected")
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: {describe(primitive)}: no measurement port connected")
         await self._ensure_link()
         try:
             return await self.measurement.measure(primitive, self._current_pose())
         except MeasurementError as error:
-            raise BridgeError(FaultKind.VISION, f"{self.name}: {describe(primitive)}: {error}") from None
+            raise BridgeError(FaultKind.VISION, f"{self.label}: {describe(primitive)}: {error}") from None
 
     # ------------------------------------------------------------------------- the link
     async def _ensure_link(self) -> None:
@@ -382,7 +384,7 @@ class VPlusBackend(RobotBackend):
             try:
                 await self.client.connect()
             except ConnectError as error:
-                raise BridgeError(FaultKind.CONNECTION, f"{self.name}: {error}") from None
+                raise BridgeError(FaultKind.CONNECTION, f"{self.label}: {error}") from None
             self._stale = True
         if self._stale:
             acks = await self._talk([codec.BREAK], self.ack_timeout + 2.0 * self._busy_for(), "resync (break)")
@@ -397,7 +399,7 @@ class VPlusBackend(RobotBackend):
                 acks = await self.client.execute(*commands, timeout=timeout)
         except VPlusError as error:
             self._stale = True
-            raise BridgeError(_fault_kind(error), f"{self.name}: {what}: {error}") from None
+            raise BridgeError(_fault_kind(error), f"{self.label}: {what}: {error}") from None
         except asyncio.CancelledError:
             self._stale = True  # abandoned (stop): the controller may still be moving
             raise
@@ -415,7 +417,7 @@ class VPlusBackend(RobotBackend):
         try:
             self._joints = self.kin.inverse(reported, predicted)
         except IKError as error:
-            log.warning("%s: pose %s from the controller has no joint solution (%s); joint state is an estimate", self.name, ack.pose, error)
+            log.warning("%s: pose %s from the controller has no joint solution (%s); joint state is an estimate", self.label, ack.pose, error)
             self._joints = np.asarray(predicted, dtype=float)
 
     def _note_pose(self, ack: Ack) -> None:
@@ -431,17 +433,17 @@ class VPlusBackend(RobotBackend):
 
     def _in_group_order(self, primitive: MoveJoints) -> tuple[float, ...]:
         if len(primitive.positions) != 6:
-            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: {GROUP} has 6 joints, got {len(primitive.positions)} positions")
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: {GROUP} has 6 joints, got {len(primitive.positions)} positions")
         if not primitive.joint_names or tuple(primitive.joint_names) == self.joint_names:
             return tuple(primitive.positions)
         if sorted(primitive.joint_names) != sorted(self.joint_names):
-            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: joints {list(primitive.joint_names)} are not those of {GROUP} {list(self.joint_names)}")
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: joints {list(primitive.joint_names)} are not those of {GROUP} {list(self.joint_names)}")
         by_name = dict(zip(primitive.joint_names, primitive.positions))
         return tuple(by_name[n] for n in self.joint_names)
 
     def _check_group(self, group: str) -> None:
         if group != GROUP:
-            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: no group {group!r} (this robot has only {GROUP!r})")
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: no group {group!r} (this robot has only {GROUP!r})")
 
 
 def _fault_kind(error: VPlusError) -> FaultKind:
