@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 GroupKind = Literal["arm", "torso_head"]
@@ -69,13 +70,13 @@ class RobotModel:
     def arm_groups(self) -> tuple[str, ...]:
         return tuple(g.name for g in self.groups if g.kind == "arm")
 
-    @property
+    @cached_property
     def joints(self) -> tuple[JointSpec, ...]:
         """Every joint, in :attr:`joint_names` order."""
         by_name = {j.name: j for g in self.groups for j in g.joints}
         return tuple(by_name[name] for name in self.joint_names)
 
-    @property
+    @cached_property
     def joint_names(self) -> tuple[str, ...]:
         """The robot's joint order (Nextage: torso, head, right arm, left arm, as its controller lists them)."""
         return self.joint_order or tuple(j.name for g in self.groups for j in g.joints)

@@ -92,6 +92,8 @@ class MachineContext:
     # ---------------------------------------------------------------------------- publish
     def status(self, event: str, **fields: Any) -> None:
         """Publish one status event (the trace and the viewers are built from these)."""
+        if self.pub.status.get_subscription_count() == 0:
+            return
         run = self.run
         defaults: dict[str, Any] = {}
         if run is not None:

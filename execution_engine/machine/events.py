@@ -72,6 +72,8 @@ class EventQueue:
         """The next event, or None after ``timeout`` run seconds (None: wait without bound)."""
         if self._front:
             return self._front.popleft()
+        if not self._queue.empty():  # the common case: no timer, no task, no wait
+            return self._queue.get_nowait()
         try:
             return await self._clock.wait_for(self._queue.get(), timeout)
         except asyncio.TimeoutError:

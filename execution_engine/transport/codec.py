@@ -18,6 +18,7 @@ import dataclasses
 import enum
 import json
 import math
+import numbers
 import types
 import typing
 from collections.abc import Callable
@@ -73,28 +74,65 @@ def _is_tagged_union(hint: Any) -> bool:
 
 
 # ----------------------------------------------------------------------------- encoding
+# Messages cross the wire several times per primitive, so each dataclass gets an encoder built
+# once from its fields; the per-message work is then attribute reads and dict stores.
+_ENCODERS: dict[type, Callable[[Any], dict[str, Any]]] = {}
+
+
+def _dataclass_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
+    fields = tuple((p.name, p.key, p.omit_none) for p in _plan(cls))
+    kind = getattr(cls, "KIND", None)
+    tag = {"kind": kind} if isinstance(kind, str) else {}
+
+    def encode_dataclass(obj: Any) -> dict[str, Any]:
+        out = dict(tag)
+        for name, key, omit_none in fields:
+            value = getattr(obj, name)
+            if value is None:
+                if not omit_none:
+                    out[key] = None
+                continue
+            out[key] = to_primitive(value)
+        return out
+
+    _ENCODERS[cls] = encode_dataclass
+    return encode_dataclass
+
+
 def to_primitive(obj: Any) -> Any:
     """Turn a dataclass (recursively) into JSON-ready Python values."""
+    t = type(obj)
+    if t is str or t is int or t is bool or obj is None:
+        return obj
+    if t is float:
+        if not math.isfinite(obj):
+            raise WireError(f"non-finite number {obj!r} cannot travel as JSON")
+        return obj
+    encoder = _ENCODERS.get(t)
+    if encoder is not None:
+        return encoder(obj)
+    if t is tuple or t is list:
+        return [to_primitive(v) for v in obj]
+    if t is dict:
+        return {str(k): to_primitive(v) for k, v in obj.items()}
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        out: dict[str, Any] = {}
-        kind = getattr(type(obj), "KIND", None)
-        if isinstance(kind, str):
-            out["kind"] = kind
-        for plan in _plan(type(obj)):
-            value = getattr(obj, plan.name)
-            if value is None and plan.omit_none:
-                continue
-            out[plan.key] = to_primitive(value)
-        return out
+        return _dataclass_encoder(t)(obj)
     if isinstance(obj, enum.Enum):
         return obj.value
     if isinstance(obj, (list, tuple)):
         return [to_primitive(v) for v in obj]
     if isinstance(obj, dict):
         return {str(k): to_primitive(v) for k, v in obj.items()}
-    if isinstance(obj, float) and not math.isfinite(obj):
-        raise WireError(f"non-finite number {obj!r} cannot travel as JSON")
-    return obj
+    item = getattr(obj, "item", None)  # a numpy scalar: travels as the plain Python number
+    if callable(item) and getattr(obj, "shape", None) == ():
+        return to_primitive(item())
+    if isinstance(obj, numbers.Integral):
+        return int(obj)
+    if isinstance(obj, numbers.Real):
+        return to_primitive(float(obj))
+    if isinstance(obj, str):
+        return str(obj)
+    raise WireError(f"{t.__name__} cannot travel as JSON")
 
 
 def encode(obj: Any) -> str:
@@ -122,22 +160,31 @@ def _reject_constant(name: str) -> Any:
 def from_primitive(cls: type[T], raw: Any, *, source: str = "") -> T:
     """Validate already-parsed JSON values as a ``cls`` message."""
     try:
-        return _convert(cls, raw, "")
+        return _converter(cls)(raw)  # type: ignore[no-any-return]
     except _Mismatch as error:
         raise WireError(error.reason, source=source, type_name=cls.__name__, path=error.path) from None
+    except RecursionError:
+        raise WireError("nested too deeply", source=source, type_name=cls.__name__) from None
 
 
 class _Mismatch(Exception):
-    def __init__(self, path: str, reason: str) -> None:
+    """A value that does not fit; the path is assembled on the way out, so the happy path pays nothing."""
+
+    def __init__(self, reason: str, parts: list[str | int] | None = None) -> None:
         super().__init__(reason)
-        self.path = path
         self.reason = reason
+        self.parts: list[str | int] = parts or []
 
+    def inside(self, key: str | int) -> _Mismatch:
+        self.parts.insert(0, key)
+        return self
 
-def _join(path: str, key: str | int) -> str:
-    if isinstance(key, int):
-        return f"{path}[{key}]"
-    return f"{path}.{key}" if path else key
+    @property
+    def path(self) -> str:
+        out = ""
+        for part in self.parts:
+            out = f"{out}[{part}]" if isinstance(part, int) else (f"{out}.{part}" if out else part)
+        return out
 
 
 def _describe(value: Any) -> str:
@@ -145,134 +192,213 @@ def _describe(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _convert(hint: Any, value: Any, path: str) -> Any:  # noqa: C901 - one dispatch over type forms
+Converter = Callable[[Any], Any]
+
+
+@lru_cache(maxsize=None)
+def _converter(hint: Any) -> Converter:  # noqa: C901 - one dispatch over type forms, run once per type
+    """Build (once per type) the function that validates and converts a JSON value for ``hint``."""
     if hint is Any:
-        _check_json_value(value, path)
-        return value
+        def convert_any(value: Any) -> Any:
+            _check_json_value(value, 0)
+            return value
+        return convert_any
     if dataclasses.is_dataclass(hint) and isinstance(hint, type):
-        return _convert_dataclass(hint, value, path)
+        return _dataclass_converter(hint)
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        try:
-            return hint(value)
-        except ValueError:
-            allowed = ", ".join(repr(m.value) for m in hint)
-            raise _Mismatch(path, f"{_describe(value)} is not one of {allowed}") from None
+        allowed = ", ".join(repr(m.value) for m in hint)
+
+        def convert_enum(value: Any) -> Any:
+            try:
+                return hint(value)
+            except ValueError:
+                raise _Mismatch(f"{_describe(value)} is not one of {allowed}") from None
+        return convert_enum
     origin = get_origin(hint)
     if origin is Literal:
-        allowed_values = get_args(hint)
-        if value not in allowed_values or type(value) is bool and True not in allowed_values and False not in allowed_values:
-            raise _Mismatch(path, f"{_describe(value)} is not one of {', '.join(repr(a) for a in allowed_values)}")
-        return value
+        values = get_args(hint)
+        text = ", ".join(repr(a) for a in values)
+
+        def convert_literal(value: Any) -> Any:
+            if type(value) is bool or value not in values:
+                if not (type(value) is bool and any(v is value for v in values)):
+                    raise _Mismatch(f"{_describe(value)} is not one of {text}")
+            return value
+        return convert_literal
     if origin in (Union, types.UnionType):
-        return _convert_union(hint, value, path)
+        return _union_converter(hint)
     if origin in (list, tuple):
-        args = get_args(hint)
-        if not isinstance(value, list):
-            raise _Mismatch(path, f"expected a list, got {_describe(value)}")
-        if origin is tuple and args and args[-1] is not Ellipsis:
-            if len(value) != len(args):
-                raise _Mismatch(path, f"expected {len(args)} items, got {len(value)}")
-            return tuple(_convert(a, v, _join(path, i)) for i, (a, v) in enumerate(zip(args, value)))
-        item = args[0] if args else Any
-        items = [_convert(item, v, _join(path, i)) for i, v in enumerate(value)]
-        return tuple(items) if origin is tuple else items
+        return _sequence_converter(hint, origin)
     if origin is dict:
-        key_type, item = get_args(hint) or (str, Any)
-        if not isinstance(value, dict):
-            raise _Mismatch(path, f"expected an object, got {_describe(value)}")
-        return {k: _convert(item, v, _join(path, k)) for k, v in value.items()}
-    return _convert_scalar(hint, value, path)
+        item = _converter((get_args(hint) or (str, Any))[1])
+
+        def convert_dict(value: Any) -> Any:
+            if type(value) is not dict:
+                raise _Mismatch(f"expected an object, got {_describe(value)}")
+            out = {}
+            for k, v in value.items():
+                try:
+                    out[k] = item(v)
+                except _Mismatch as error:
+                    raise error.inside(k) from None
+            return out
+        return convert_dict
+    return _scalar_converter(hint)
 
 
-def _convert_scalar(hint: Any, value: Any, path: str) -> Any:
+def _scalar_converter(hint: Any) -> Converter:
     if hint is type(None) or hint is None:
-        if value is not None:
-            raise _Mismatch(path, f"expected null, got {_describe(value)}")
-        return None
-    if hint is bool:
-        if type(value) is not bool:
-            raise _Mismatch(path, f"expected true or false, got {_describe(value)}")
-        return value
-    if hint is int:
-        if type(value) is not int:
-            raise _Mismatch(path, f"expected an integer, got {_describe(value)}")
-        return value
+        def convert_none(value: Any) -> None:
+            if value is not None:
+                raise _Mismatch(f"expected null, got {_describe(value)}")
+        return convert_none
     if hint is float:
-        if type(value) not in (int, float) or not math.isfinite(value):
-            raise _Mismatch(path, f"expected a finite number, got {_describe(value)}")
-        return float(value)
-    if hint is str:
-        if type(value) is not str:
-            raise _Mismatch(path, f"expected a string, got {_describe(value)}")
+        def convert_float(value: Any) -> float:
+            t = type(value)
+            if (t is not float and t is not int) or not math.isfinite(value):
+                raise _Mismatch(f"expected a finite number, got {_describe(value)}")
+            return float(value)
+        return convert_float
+    names = {bool: "true or false", int: "an integer", str: "a string"}
+    if hint not in names:
+        raise TypeError(f"unsupported field type {hint!r}")
+    expected = names[hint]
+
+    def convert_exact(value: Any) -> Any:
+        if type(value) is not hint:
+            raise _Mismatch(f"expected {expected}, got {_describe(value)}")
         return value
-    raise _Mismatch(path, f"unsupported field type {hint!r}")
+    return convert_exact
 
 
-def _convert_union(hint: Any, value: Any, path: str) -> Any:
+def _sequence_converter(hint: Any, origin: Any) -> Converter:
     args = get_args(hint)
-    if value is None:
-        if type(None) in args:
-            return None
-        raise _Mismatch(path, "is required (got null)")
+    if origin is tuple and args and args[-1] is not Ellipsis:
+        fixed = tuple(_converter(a) for a in args)
+
+        def convert_fixed(value: Any) -> Any:
+            if type(value) is not list:
+                raise _Mismatch(f"expected a list, got {_describe(value)}")
+            if len(value) != len(fixed):
+                raise _Mismatch(f"expected {len(fixed)} items, got {len(value)}")
+            return tuple(_item(c, v, i) for i, (c, v) in enumerate(zip(fixed, value)))
+        return convert_fixed
+    item = _converter(args[0] if args else Any)
+    make = tuple if origin is tuple else list
+
+    def convert_sequence(value: Any) -> Any:
+        if type(value) is not list:
+            raise _Mismatch(f"expected a list, got {_describe(value)}")
+        try:
+            return make([item(v) for v in value])
+        except _Mismatch:
+            for i, v in enumerate(value):  # find which item, for the message
+                _item(item, v, i)
+            raise
+    return convert_sequence
+
+
+def _item(convert: Converter, value: Any, index: int) -> Any:
+    try:
+        return convert(value)
+    except _Mismatch as error:
+        raise error.inside(index) from None
+
+
+def _union_converter(hint: Any) -> Converter:
+    args = get_args(hint)
+    optional = type(None) in args
     members = [a for a in args if a is not type(None)]
     if _is_tagged_union(hint):
-        if not isinstance(value, dict):
-            raise _Mismatch(path, f"expected an object with a 'kind', got {_describe(value)}")
-        kind = value.get("kind")
-        by_kind = {a.KIND: a for a in members}
-        if kind not in by_kind:
-            raise _Mismatch(_join(path, "kind"), f"{_describe(kind)} is not one of {', '.join(sorted(by_kind))}")
-        return _convert_dataclass(by_kind[kind], value, path)
-    if len(members) == 1:
-        return _convert(members[0], value, path)
-    errors = []
-    for member in members:
-        try:
-            return _convert(member, value, path)
-        except _Mismatch as error:
-            errors.append(error.reason)
-    raise _Mismatch(path, "; or ".join(errors))
+        by_kind = {a.KIND: _converter(a) for a in members}
+        kinds = ", ".join(sorted(by_kind))
+
+        def convert_tagged(value: Any) -> Any:
+            if value is None:
+                if optional:
+                    return None
+                raise _Mismatch("is required (got null)")
+            if type(value) is not dict:
+                raise _Mismatch(f"expected an object with a 'kind', got {_describe(value)}")
+            kind = value.get("kind")
+            convert = by_kind.get(kind) if isinstance(kind, str) else None
+            if convert is None:
+                raise _Mismatch(f"{_describe(kind)} is not one of {kinds}", ["kind"])
+            return convert(value)
+        return convert_tagged
+    converters = [_converter(m) for m in members]
+
+    def convert_union(value: Any) -> Any:
+        if value is None:
+            if optional:
+                return None
+            raise _Mismatch("is required (got null)")
+        errors = []
+        for convert in converters:
+            try:
+                return convert(value)
+            except _Mismatch as error:
+                errors.append(error.reason)
+        raise _Mismatch("; or ".join(errors))
+    return convert_union
 
 
-def _convert_dataclass(cls: type, value: Any, path: str) -> Any:
-    if not isinstance(value, dict):
-        raise _Mismatch(path, f"expected an object for {cls.__name__}, got {_describe(value)}")
+def _dataclass_converter(cls: type) -> Converter:
     plans = _plan(cls)
+    fields = [(p.key, p.name, p.required) for p in plans]
     known = {p.key for p in plans} | {"kind"}
-    unknown = [k for k in value if k not in known]
-    if unknown:
-        raise _Mismatch(_join(path, unknown[0]), f"unknown field in {cls.__name__}")
     kind = getattr(cls, "KIND", None)
-    if isinstance(kind, str) and value.get("kind", kind) != kind:
-        raise _Mismatch(_join(path, "kind"), f"expected {kind!r}, got {_describe(value.get('kind'))}")
-    kwargs = {}
-    for plan in plans:
-        if plan.key in value:
-            kwargs[plan.name] = _convert(plan.hint, value[plan.key], _join(path, plan.key))
-        elif plan.required:
-            raise _Mismatch(_join(path, plan.key), "is required")
-    try:
-        return cls(**kwargs)
-    except (TypeError, ValueError) as error:  # __post_init__ checks of the message itself
-        raise _Mismatch(path, str(error)) from None
+    lazy: dict[str, Converter] = {}  # built on first use: dataclasses may refer to each other
+
+    def convert_dataclass(value: Any) -> Any:
+        if type(value) is not dict:
+            raise _Mismatch(f"expected an object for {cls.__name__}, got {_describe(value)}")
+        for key in value:
+            if key not in known:
+                raise _Mismatch(f"unknown field in {cls.__name__}", [key])
+        if isinstance(kind, str) and value.get("kind", kind) != kind:
+            raise _Mismatch(f"expected {kind!r}, got {_describe(value.get('kind'))}", ["kind"])
+        kwargs = {}
+        for key, name, required in fields:
+            if key in value:
+                convert = lazy.get(key)
+                if convert is None:
+                    convert = lazy[key] = _converter(next(p.hint for p in plans if p.key == key))
+                try:
+                    kwargs[name] = convert(value[key])
+                except _Mismatch as error:
+                    raise error.inside(key) from None
+            elif required:
+                raise _Mismatch("is required", [key])
+        try:
+            return cls(**kwargs)
+        except (TypeError, ValueError) as error:  # __post_init__ checks of the message itself
+            raise _Mismatch(str(error)) from None
+    return convert_dataclass
 
 
-def _check_json_value(value: Any, path: str, depth: int = 0) -> None:
+def _check_json_value(value: Any, depth: int) -> None:
     if depth > 64:
-        raise _Mismatch(path, "nested too deeply")
+        raise _Mismatch("nested too deeply")
     if isinstance(value, _JSON_SCALARS):
         if isinstance(value, float) and not math.isfinite(value):
-            raise _Mismatch(path, "non-finite number")
+            raise _Mismatch("non-finite number")
         return
     if isinstance(value, list):
         for i, v in enumerate(value):
-            _check_json_value(v, _join(path, i), depth + 1)
+            try:
+                _check_json_value(v, depth + 1)
+            except _Mismatch as error:
+                raise error.inside(i) from None
         return
     if isinstance(value, dict):
         for k, v in value.items():
-            _check_json_value(v, _join(path, str(k)), depth + 1)
+            try:
+                _check_json_value(v, depth + 1)
+            except _Mismatch as error:
+                raise error.inside(str(k)) from None
         return
-    raise _Mismatch(path, f"not a JSON value: {_describe(value)}")
+    raise _Mismatch(f"not a JSON value: {_describe(value)}")
 
 
 def decoder(cls: type[T], *, source: str = "") -> Callable[[str], T]:

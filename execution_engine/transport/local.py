@@ -84,6 +84,9 @@ class _LocalPublisher(Publisher[M], Generic[M]):
         for sub in self.node.bus.matching_subscriptions(self):
             sub.deliver(msg)
 
+    def get_subscription_count(self) -> int:
+        return len(self.node.bus.matching_subscriptions(self))
+
 
 class _LocalService(ServiceServer):
     def __init__(self, node: LocalNode, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]):

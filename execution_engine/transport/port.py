@@ -79,6 +79,11 @@ class Publisher(ABC, Generic[M]):
     def publish(self, msg: M) -> None:
         """Send ``msg`` to every matching subscription; raises TransportError on a wrong type."""
 
+    @abstractmethod
+    def get_subscription_count(self) -> int:
+        """How many subscriptions match (rclpy's Publisher.get_subscription_count): lets a node skip
+        building messages nobody reads."""
+
     def _check(self, msg: object) -> None:
         if type(msg) is not self.msg_type:
             raise TransportError(
@@ -162,6 +167,10 @@ class Node(ABC):
             return self._parameters[name]
         except KeyError:
             raise TransportError(f"{self.fully_qualified_name}: parameter {name!r} was never declared") from None
+
+    def declared_parameters(self) -> dict[str, ParameterValue]:
+        """Every declared parameter with its value, as ``ros2 param dump`` shows them."""
+        return dict(self._parameters)
 
     def undeclared_overrides(self) -> list[str]:
         """Overrides nobody declared: almost always a typo in a launch file."""
