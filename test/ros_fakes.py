@@ -33,6 +33,8 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
+import pytest
+
 # ================================================================================= messages
 _DEFAULTS: dict[str, Callable[[], Any]] = {
     "string": str,
@@ -410,6 +412,10 @@ class FakePublisher:
         self.history: deque[Any] = deque(maxlen=qos.depth if qos.durability is DurabilityPolicy.TRANSIENT_LOCAL else 0)
         self.published: list[Any] = []
 
+    def get_subscription_count(self) -> int:
+        with GRAPH.lock:
+            return len(GRAPH.subscriptions.get(self.topic, []))
+
     def publish(self, msg: Any) -> None:
         if not isinstance(msg, self.msg_type):
             raise TypeError(f"publisher on {self.topic} expects {self.msg_type.__name__}")
@@ -620,6 +626,19 @@ class FakeNode:
                 GRAPH.subscriptions[sub.topic].remove(sub)
         return True
 
+    def destroy_publisher(self, pub: FakePublisher) -> bool:
+        with GRAPH.lock:
+            if pub in GRAPH.publishers.get(pub.topic, []):
+                GRAPH.publishers[pub.topic].remove(pub)
+        return True
+
+    def destroy_client(self, client: FakeClient) -> bool:
+        client.destroyed = True
+        with GRAPH.lock:
+            if client in GRAPH.clients:
+                GRAPH.clients.remove(client)
+        return True
+
     def destroy_node(self) -> None:
         self.destroyed = True
         with GRAPH.lock:
@@ -766,3 +785,9 @@ def install(monkeypatch: Any) -> types.ModuleType:
         monkeypatch.setitem(sys.modules, package, _module(package))
         monkeypatch.setitem(sys.modules, module_name, _module(module_name, **classes))
     return rclpy
+
+
+@pytest.fixture
+def fake_rclpy(monkeypatch: pytest.MonkeyPatch) -> types.ModuleType:
+    """The fake rclpy installed for one test (import this fixture into a test module)."""
+    return install(monkeypatch)

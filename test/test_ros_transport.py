@@ -13,6 +13,7 @@ from typing import Any, TypeVar
 
 import pytest
 import ros_fakes
+from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport.msgs import Bool, Header, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
@@ -22,11 +23,6 @@ from execution_engine.transport.ros import RosTransport
 
 T = TypeVar("T")
 BOUND = 5.0  # s: only ever reached when something hangs
-
-
-@pytest.fixture
-def fake_rclpy(monkeypatch: pytest.MonkeyPatch) -> Any:
-    return ros_fakes.install(monkeypatch)
 
 
 def run_real(main: Callable[[Clock], Coroutine[Any, Any, T]]) -> T:
@@ -369,7 +365,9 @@ def test_a_destroyed_node_neither_publishes_nor_receives(fake_rclpy: Any) -> Non
         b.create_subscription(String, "/x", inbox, COMMANDS)
         pub_a = a.create_publisher(String, "/x", COMMANDS)
         pub_b = b.create_publisher(String, "/x", COMMANDS)
+        assert pub_a.get_subscription_count() == 1
         b.destroy()
+        assert pub_b.get_subscription_count() == 0 and pub_a.get_subscription_count() == 0  # b left the graph
         with pytest.raises(TransportError, match="was destroyed"):
             pub_b.publish(String("from b"))
         pub_a.publish(String("to b"))

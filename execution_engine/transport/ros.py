@@ -125,6 +125,9 @@ class _RosPublisher(Publisher[M], Generic[M]):
         self._check(msg)
         self.handle.publish(self.node.converter.to_ros(msg))
 
+    def get_subscription_count(self) -> int:
+        return int(self.handle.get_subscription_count()) if self.alive else 0
+
 
 class _RosSubscription(Subscription[M], Generic[M]):
     def __init__(self, node: RosNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS) -> None:
@@ -371,15 +374,22 @@ class RosNode(Node):
         return self._add(_RosClient(self, srv_type, self.resolve(name)))  # type: ignore[no-any-return]
 
     def destroy(self) -> None:
-        """Stop every endpoint now; the rclpy node itself goes once the executor is idle."""
+        """Stop every endpoint now and leave the graph; services and the rclpy node itself go
+        once the executor is idle (a service may still be answering a request)."""
         if self.destroyed:
             return
         self.destroyed = True
         for endpoint in self._endpoints:
             if isinstance(endpoint, _RosClient):
                 endpoint.abandon()
-            else:
+                self.ros_node.destroy_client(endpoint.handle)
+            elif isinstance(endpoint, _RosSubscription):
+                endpoint.destroy()
+            elif isinstance(endpoint, _RosPublisher):
                 endpoint.alive = False
+                self.ros_node.destroy_publisher(endpoint.handle)
+            else:
+                endpoint.destroy()
         self._endpoints.clear()
         self.transport.retire(self)
 
