@@ -15,6 +15,7 @@ from core_functions.catalog import Catalog
 from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell
 from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, has_errors, sorted_diagnostics
 from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.app_model.positions import SourceMap
 from execution_engine.app_model.reader import ApplicationDraft, ApplicationReader, OperationSite
 from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, read_xml
 from execution_engine.app_model.schema import validate_structure
@@ -73,7 +74,7 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int) -> tuple[App
         robot=robot,
         cell=cell,
         error_policy=policy,
-        operations=tuple(_freeze(op_site, calls, doc.file) for op_site, calls in zip(draft.operations, checked)),
+        operations=tuple(_freeze(op_site, calls, draft.source) for op_site, calls in zip(draft.operations, checked)),
         description=draft.description,
         version=draft.version,
     )
@@ -95,20 +96,21 @@ def _read_cell(draft: ApplicationDraft, diagnostics: list[Diagnostic], max_bytes
     return cell, False
 
 
-def _freeze(site: OperationSite, calls: list[CheckedCall], file: str) -> Operation:
-    frozen = {
-        c.site.group: Call(
-            group=c.site.group,
-            function=c.site.function,
-            params=c.params or (),
-            implicit=c.site.implicit,
-            file=file,
-            line=c.site.where.line,
-            col=c.site.where.col,
+def _freeze(site: OperationSite, calls: list[CheckedCall], source: SourceMap) -> Operation:
+    frozen: dict[str, Call] = {}
+    for checked in calls:
+        line, col = source.line_col(checked.site.at)
+        frozen[checked.site.group] = Call(
+            group=checked.site.group,
+            function=checked.site.function,
+            params=checked.params or (),
+            implicit=checked.site.implicit,
+            file=source.file,
+            line=line,
+            col=col,
         )
-        for c in calls
-    }
-    return Operation(id=site.id, name=site.name, line=site.where.line, col=site.where.col, calls=MappingProxyType(frozen))
+    line, col = source.line_col(site.at)
+    return Operation(id=site.id, name=site.name, line=line, col=col, calls=MappingProxyType(frozen))
 
 
 def load_application(path: Path | str, catalog: Catalog, *, max_bytes: int = DEFAULT_MAX_BYTES) -> Application:

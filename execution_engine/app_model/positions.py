@@ -4,9 +4,11 @@ lxml gives an element's ``sourceline`` -- the line where its start tag *ends*, a
 approximately beyond line 65535 -- and no column.  Diagnostics must point at the ``<tag`` or
 ``attr=`` at fault, so the start tags are found again in the text: once the document is known to
 be well-formed, every ``<`` outside comments, CDATA and processing instructions that is not ``</``
-opens an element, in document order, which is exactly the order of ``root.iter()``.  The two are
-zipped once, on first use, into an element -> offset map.  Columns are 1-based and count
-characters (a tab is one column).
+opens an element, in document order, which is exactly the order of ``root.iter()``.
+
+Positions travel as character offsets (cheap to keep for 10^5 elements) and become a
+:class:`Location` only when a diagnostic or the final model needs one.  Columns are 1-based and
+count characters (a tab is one column); CR LF and a lone CR count as one line break, as in XML.
 """
 from __future__ import annotations
 
@@ -20,10 +22,14 @@ from execution_engine.app_model.diagnostics import Location
 
 # Skip comments, CDATA sections, processing instructions and end tags; capture a start tag's name.
 _TAGS = re.compile(r"<(?:!--.*?-->|!\[CDATA\[.*?\]\]>|\?.*?\?>|/|([^\s/>!?][^\s/>]*))", re.S)
+# Without comments, CDATA or processing instructions every "<" that is not "</" opens an element.
+_PLAIN_TAGS = re.compile(r"<([^\s/>!?][^\s/>]*)")
+_TAG_NAME = re.compile(r"<[^\s/>]+")
 _ATTRIBUTE = re.compile(r"""\s+([^\s=/>]+)\s*=\s*(?:"[^"]*"|'[^']*')""")
 
 
-def _qualified_name(element: etree._Element) -> str:
+def qualified_name(element: etree._Element) -> str:
+    """The element's name as written in the text (``prefix:local`` for namespaced elements)."""
     tag = element.tag
     if isinstance(tag, str) and not tag.startswith("{"):
         return tag
@@ -32,27 +38,31 @@ def _qualified_name(element: etree._Element) -> str:
 
 
 class SourceMap:
-    """Locations in one file's text; element offsets are computed on first use and cached."""
+    """Offsets and locations in one file's text."""
 
     def __init__(self, file: str, text: str, root: etree._Element | None = None) -> None:
         self.file = file
-        # XML reads CR LF and a lone CR as one line break; so do lines and columns here.
         self.text = text.replace("\r\n", "\n").replace("\r", "\n") if "\r" in text else text
         self._root = root
         self._line_starts: list[int] | None = None
+        self._tags: tuple[list[int], list[str]] | None = None
         self._offsets: dict[etree._Element, int] | None = None
 
-    # ---------------------------------------------------------------- offsets and lines
+    # ---------------------------------------------------------------- lines
     def _lines(self) -> list[int]:
         if self._line_starts is None:
             lines = self.text.split("\n")
             self._line_starts = [0, *itertools.accumulate(len(line) + 1 for line in lines[:-1])]
         return self._line_starts
 
-    def at_offset(self, offset: int) -> Location:
+    def line_col(self, offset: int) -> tuple[int, int]:
         starts = self._lines()
         index = bisect.bisect_right(starts, offset) - 1
-        return Location(self.file, index + 1, offset - starts[index] + 1)
+        return index + 1, offset - starts[index] + 1
+
+    def at_offset(self, offset: int) -> Location:
+        line, col = self.line_col(offset)
+        return Location(self.file, line, col)
 
     def at_line(self, line: int, col: int = 1) -> Location:
         """A location lxml reported (1-based line, character column), clamped into the file."""
@@ -61,49 +71,94 @@ class SourceMap:
         end = starts[line] - 1 if line < len(starts) else len(self.text)
         return Location(self.file, line, min(max(col, 1), end - starts[line - 1] + 1))
 
+    # ---------------------------------------------------------------- start tags
+    def start_tags(self) -> tuple[list[int], list[str]]:
+        """Offsets and names of every start tag, in document order (computed once)."""
+        if self._tags is None:
+            text = self.text
+            body = text[text.find("?>") + 2:] if text.startswith("<?xml") else text
+            if "<!--" in body or "<![CDATA[" in body or "<?" in body:
+                matches = [(m.start(), m.group(1)) for m in _TAGS.finditer(text) if m.group(1)]
+                self._tags = [m[0] for m in matches], [m[1] for m in matches]
+            else:
+                self._tags = [m.start() for m in _PLAIN_TAGS.finditer(text)], _PLAIN_TAGS.findall(text)
+        return self._tags
+
     def _element_offsets(self) -> dict[etree._Element, int]:
+        """Every element's offset, by zipping the scan with ``root.iter()`` (built only when needed)."""
         if self._offsets is None:
             self._offsets = {}
             if self._root is not None:
-                starts = [(m.start(), m.group(1)) for m in _TAGS.finditer(self.text) if m.group(1)]
+                offsets, names = self.start_tags()
                 elements = list(self._root.iter(etree.Element))
-                # Equal counts and names mean the scan saw the parser's elements; otherwise fall
-                # back to sourceline-based guesses rather than point at the wrong tag.
-                if len(starts) == len(elements) and all(
-                    name == _qualified_name(el) for (_, name), el in zip(starts, elements)
-                ):
-                    self._offsets = {el: offset for (offset, _), el in zip(starts, elements)}
+                # Equal names mean the scan saw the parser's elements; otherwise fall back to
+                # sourceline-based guesses rather than point at the wrong tag.
+                if len(names) == len(elements) and all(n == qualified_name(e) for n, e in zip(names, elements)):
+                    self._offsets = dict(zip(elements, offsets))
         return self._offsets
 
-    def element_offset(self, element: etree._Element) -> int | None:
-        return self._element_offsets().get(element)
-
-    # ---------------------------------------------------------------- public look-ups
-    def element(self, element: etree._Element) -> Location:
-        """Where ``<tag`` of ``element`` starts."""
-        offset = self.element_offset(element)
+    def element_offset(self, element: etree._Element) -> int:
+        """Offset of ``<tag`` of ``element`` (a best guess on its source line if the scan disagrees)."""
+        offset = self._element_offsets().get(element)
         if offset is not None:
-            return self.at_offset(offset)
-        return self._guess(element, "<" + _qualified_name(element))
+            return offset
+        starts = self._lines()
+        line = min(max(element.sourceline or 1, 1), len(starts))
+        end = starts[line] if line < len(starts) else len(self.text)
+        found = self.text.find("<" + qualified_name(element), starts[line - 1], end)
+        return found if found >= 0 else starts[line - 1]
 
-    def attribute(self, element: etree._Element, name: str) -> Location:
-        """Where ``name=`` starts in the start tag of ``element`` (the tag itself if absent)."""
-        offset = self.element_offset(element)
-        if offset is None:
-            return self._guess(element, name + "=")
-        pos = offset + 1 + len(_qualified_name(element))
+    def attribute_offset(self, tag_offset: int, name: str) -> int:
+        """Offset of ``name=`` in the start tag at ``tag_offset`` (the tag itself if it is absent)."""
+        head = _TAG_NAME.match(self.text, tag_offset)
+        if head is None:
+            return tag_offset
+        pos = head.end()
         while True:
             match = _ATTRIBUTE.match(self.text, pos)
             if match is None:
-                return self.at_offset(offset)
+                return tag_offset
             if match.group(1) == name:
-                return self.at_offset(match.start(1))
+                return match.start(1)
             pos = match.end()
 
-    def _guess(self, element: etree._Element, needle: str) -> Location:
-        line = element.sourceline or 1
-        starts = self._lines()
-        line = min(max(line, 1), len(starts))
-        end = starts[line] if line < len(starts) else len(self.text)
-        found = self.text.find(needle, starts[line - 1], end)
-        return Location(self.file, line, found - starts[line - 1] + 1 if found >= 0 else 1)
+    # ---------------------------------------------------------------- locations
+    def element(self, element: etree._Element) -> Location:
+        """Where ``<tag`` of ``element`` starts."""
+        return self.at_offset(self.element_offset(element))
+
+    def attribute(self, element: etree._Element, name: str) -> Location:
+        """Where ``name=`` starts in the start tag of ``element`` (the tag itself if absent)."""
+        return self.at_offset(self.attribute_offset(self.element_offset(element), name))
+
+    def attribute_at(self, tag_offset: int, name: str) -> Location:
+        return self.at_offset(self.attribute_offset(tag_offset, name))
+
+
+class DocumentWalk:
+    """Hands out element offsets to a reader that visits elements in document order.
+
+    A reader that walks the tree top-down and visits every element (skipping a subtree calls
+    :meth:`skip`) sees them in the order of the scan, so the n-th visit gets the n-th start tag
+    without a map from elements to offsets -- the map costs a third of loading a large file.
+    Each visit checks the name; after any disagreement the walk falls back to the map.
+    """
+
+    def __init__(self, source: SourceMap) -> None:
+        self.source = source
+        self._offsets, self._names = source.start_tags()
+        self._next = 0
+        self._aligned = True
+
+    def visit(self, element: etree._Element) -> int:
+        index = self._next
+        self._next += 1
+        if self._aligned and index < len(self._names) and self._names[index] == element.tag:
+            return self._offsets[index]
+        self._aligned = False
+        return self.source.element_offset(element)
+
+    def skip(self, element: etree._Element) -> None:
+        """``element``'s subtree is not read: step over it (``element`` itself was visited)."""
+        if len(element):
+            self._next += sum(1 for _ in element.iter(etree.Element)) - 1

@@ -4,6 +4,10 @@ The reader runs after the schema check whatever its outcome, so one run reports 
 semantic problems together.  It therefore never trusts the shape of the document: what it cannot
 interpret it skips silently (the schema has said why), and it reports only what a schema cannot
 know -- the robot, the robot's groups, repeated ids and groups, the cell file.
+
+It walks the whole tree top-down, visiting every element once in document order, so positions
+come from :class:`DocumentWalk` as plain offsets; drafts keep no lxml elements, which lets the
+tree go as soon as reading is done.
 """
 from __future__ import annotations
 
@@ -15,59 +19,54 @@ from lxml import etree
 
 from core_functions.robots import RobotModel, find_robot
 from execution_engine.app_model.diagnostics import Diagnostic, Location
-from execution_engine.app_model.positions import SourceMap
+from execution_engine.app_model.positions import DocumentWalk, SourceMap
 from execution_engine.app_model.safe_xml import XmlDocument
 
 GROUP_TAGS = frozenset({"left_arm", "right_arm", "torso_head", "arm"})  # as in application.xsd
 
 
-@dataclass
+@dataclass(slots=True)
 class ParamSite:
-    """One ``<param>`` as written."""
+    """One ``<param>`` as written; ``at`` is the offset of its start tag."""
 
     value: str
     name: str | None
-    element: etree._Element
+    at: int
 
 
-@dataclass
+@dataclass(slots=True)
 class CallSite:
-    """One group's ``<function>`` (or the implicit wait of a group left out)."""
+    """One group's ``<function>`` (``at``: its offset), or the implicit wait of a group left out."""
 
     group: str
     function: str
     params: list[ParamSite]
-    where: Location
-    element: etree._Element | None  # None: implicit
-
-    @property
-    def implicit(self) -> bool:
-        return self.element is None
+    at: int
+    implicit: bool = False
 
 
-@dataclass
+@dataclass(slots=True)
 class OperationSite:
     id: str
     name: str | None
-    where: Location
+    at: int
     calls: dict[str, CallSite] = field(default_factory=dict)
 
 
-@dataclass
+@dataclass(slots=True)
 class PolicySite:
     """``<error_policy>`` as written; values the schema rejected are left at None."""
 
-    where: Location
+    at: int
     retries: int | None = None
     action: str | None = None
     safe_pose: str | None = None
-    safe_pose_where: Location | None = None
     alarm_timeout: float | None = None
 
 
 @dataclass
 class ApplicationDraft:
-    doc: XmlDocument
+    source: SourceMap
     name: str
     robot: RobotModel | None
     cell_path: Path | None = None
@@ -78,72 +77,79 @@ class ApplicationDraft:
     policy: PolicySite | None = None
     operations: list[OperationSite] = field(default_factory=list)
 
-    @property
-    def source(self) -> SourceMap:
-        return self.doc.source
+
+def _is_element(node: etree._Element) -> bool:
+    return isinstance(node.tag, str)
 
 
 class ApplicationReader:
     def __init__(self, doc: XmlDocument) -> None:
         self.doc = doc
         self.source = doc.source
+        self.walk = DocumentWalk(doc.source)
         self.diagnostics: list[Diagnostic] = []
         self.groups: frozenset[str] = GROUP_TAGS
 
-    def error(self, where: Location, message: str) -> None:
-        self.diagnostics.append(Diagnostic.at(where, message))
+    def error(self, at: int, message: str) -> None:
+        self.diagnostics.append(Diagnostic.at(self.source.at_offset(at), message))
 
     def read(self) -> ApplicationDraft:
         root = self.doc.root
-        draft = ApplicationDraft(doc=self.doc, name=root.get("name", ""), robot=self.read_robot(root))
+        root_at = self.walk.visit(root)
+        draft = ApplicationDraft(source=self.source, name=root.get("name", ""), robot=self.read_robot(root, root_at))
         draft.version = root.get("version")
-        self.read_cell_reference(root, draft)
+        self.read_cell_reference(root, root_at, draft)
+        if draft.robot is not None:
+            self.groups = frozenset(draft.robot.group_names)
         ids: dict[str, OperationSite] = {}
-        self.groups = frozenset(draft.robot.group_names) if draft.robot is not None else GROUP_TAGS
-        for child in root.iterchildren(etree.Element):
-            if child.tag == "description":
-                draft.description = (child.text or "").strip()
-            elif child.tag == "error_policy" and draft.policy is None:
-                draft.policy = self.read_policy(child)
-            elif child.tag == "operation":
-                operation = self.read_operation(child, draft.robot)
+        for child in root:
+            if not _is_element(child):
+                continue
+            at = self.walk.visit(child)
+            if child.tag == "operation":
+                operation = self.read_operation(child, at, draft.robot)
                 if operation is None:
                     continue
                 first = ids.get(operation.id)
                 if first is not None:
-                    self.error(self.source.attribute(child, "id"), f"operation id {operation.id!r} is used twice (first on line {first.where.line})")
+                    line = self.source.at_offset(first.at).line
+                    self.error(self.source.attribute_offset(at, "id"), f"operation id {operation.id!r} is used twice (first on line {line})")
                 else:
                     ids[operation.id] = operation
                 draft.operations.append(operation)
+                continue
+            if child.tag == "description":
+                draft.description = (child.text or "").strip()
+            elif child.tag == "error_policy" and draft.policy is None:
+                draft.policy = self.read_policy(child, at)
+            self.walk.skip(child)
         return draft
 
-    def read_robot(self, root: etree._Element) -> RobotModel | None:
+    def read_robot(self, root: etree._Element, at: int) -> RobotModel | None:
         name = root.get("robot")
         if not name:
             return None  # the schema reports it
         try:
             return find_robot(name)
         except KeyError as error:
-            self.error(self.source.attribute(root, "robot"), str(error.args[0]))
+            self.error(self.source.attribute_offset(at, "robot"), str(error.args[0]))
             return None
 
-    def read_cell_reference(self, root: etree._Element, draft: ApplicationDraft) -> None:
+    def read_cell_reference(self, root: etree._Element, at: int, draft: ApplicationDraft) -> None:
         cell = root.get("cell")
         if cell is None or not cell.strip():
             return
-        draft.cell_where = self.source.attribute(root, "cell")
+        draft.cell_where = self.source.attribute_at(at, "cell")
         draft.cell_path = self.doc.path.parent / cell
         draft.cell_display = os.path.normpath(os.path.join(os.path.dirname(self.source.file), cell))
 
-    def read_policy(self, element: etree._Element) -> PolicySite:
-        policy = PolicySite(where=self.source.element(element))
+    def read_policy(self, element: etree._Element, at: int) -> PolicySite:
+        policy = PolicySite(at=at)
         retries = element.get("retries")
         if retries is not None and retries.strip().isdigit():
             policy.retries = int(retries)
         policy.action = element.get("action")
         policy.safe_pose = element.get("safe_pose")
-        if policy.safe_pose is not None:
-            policy.safe_pose_where = self.source.attribute(element, "safe_pose")
         timeout = element.get("alarm_timeout")
         if timeout is not None:
             try:
@@ -152,44 +158,68 @@ class ApplicationReader:
                 pass
         return policy
 
-    def read_operation(self, element: etree._Element, robot: RobotModel | None) -> OperationSite | None:
+    def read_operation(self, element: etree._Element, at: int, robot: RobotModel | None) -> OperationSite | None:
         op_id = element.get("id")
-        if op_id is None:
-            return None
-        operation = OperationSite(id=op_id.strip(), name=element.get("name"), where=self.source.element(element))
-        for child in element.iterchildren(etree.Element):
+        operation = OperationSite(id=(op_id or "").strip(), name=element.get("name"), at=at)
+        for child in element:
+            if not isinstance(child.tag, str):
+                continue
+            child_at = self.walk.visit(child)
             group = child.tag
             if group not in GROUP_TAGS:
-                continue  # the schema reports unknown elements
-            if robot is not None and group not in self.groups:
-                self.error(self.source.element(child), f"{group} is not a group of {robot.name} (its groups: {', '.join(robot.group_names)})")
+                self.walk.skip(child)  # the schema reports unknown elements
                 continue
-            call = self.read_call(child)
+            call = self.read_call(child, group)
+            if robot is not None and group not in self.groups:
+                self.error(child_at, f"{group} is not a group of {robot.name} (its groups: {', '.join(robot.group_names)})")
+                continue
             if call is None:
                 continue
             first = operation.calls.get(group)
             if first is not None:
-                self.error(self.source.element(child), f"group {group} appears twice in operation {operation.id} (first on line {first.where.line})")
+                line = self.source.at_offset(first.at).line
+                self.error(child_at, f"group {group} appears twice in operation {operation.id} (first on line {line})")
                 continue
             operation.calls[group] = call
-        return operation
+        return operation if op_id is not None else None
 
-    def read_call(self, group_element: etree._Element) -> CallSite | None:
-        function = next((c for c in group_element if c.tag == "function"), None)
-        if function is None:
-            return None
-        name = function.get("name")
-        if not name:
-            return None
-        params: list[ParamSite] = []
-        for holder in function:  # plain iteration: the fastest way through lxml for 10^5 calls
-            if holder.tag != "params":
+    def read_call(self, group_element: etree._Element, group: str) -> CallSite | None:
+        """The group's first ``<function>``; every element below the group is visited.
+
+        The hottest loop of loading (once per param of a 10^5-call file), hence the local names
+        and the inlined element tests.
+        """
+        visit, skip = self.walk.visit, self.walk.skip
+        call: CallSite | None = None
+        complete = True
+        for function in group_element:
+            if not isinstance(function.tag, str):
                 continue
-            for param in holder:
-                if param.tag != "param":
+            at = visit(function)
+            if function.tag != "function" or call is not None:
+                skip(function)  # the schema reports it
+                continue
+            params: list[ParamSite] = []
+            for holder in function:
+                if not isinstance(holder.tag, str):
                     continue
-                value = param.get("value")
-                if value is None:
-                    return None  # the schema reports it; checking the count would only add noise
-                params.append(ParamSite(value, param.get("name"), param))
-        return CallSite(group=group_element.tag, function=name, params=params, where=self.source.element(function), element=function)
+                visit(holder)
+                if holder.tag != "params":
+                    skip(holder)
+                    continue
+                for param in holder:
+                    tag = param.tag
+                    if not isinstance(tag, str):
+                        continue
+                    param_at = visit(param)
+                    if len(param):
+                        skip(param)
+                    value = param.get("value")
+                    if tag != "param" or value is None:
+                        complete = False  # the schema reports it; checking the count would add noise
+                        continue
+                    params.append(ParamSite(value, param.get("name"), param_at))
+            name = function.get("name")
+            call = CallSite(group, name or "", params, at)
+            complete = complete and bool(name)
+        return call if complete else None

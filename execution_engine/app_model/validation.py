@@ -37,7 +37,7 @@ class _HoldState:
     hold: Hold
     function: str = ""
     operation: str = ""
-    line: int = 0
+    at: int = 0  # offset of the function that set the hold
 
 
 class ApplicationChecker:
@@ -60,6 +60,12 @@ class ApplicationChecker:
     def error(self, where: Location, message: str) -> None:
         self.diagnostics.append(Diagnostic.at(where, message))
 
+    def error_at(self, offset: int, message: str) -> None:
+        self.error(self.draft.source.at_offset(offset), message)
+
+    def attribute(self, tag_offset: int, name: str) -> Location:
+        return self.draft.source.attribute_at(tag_offset, name)
+
     # ------------------------------------------------------------------ the whole file
     def check(self) -> list[list[CheckedCall]]:
         """Each operation's calls, one per robot group, in the robot's group order."""
@@ -73,22 +79,20 @@ class ApplicationChecker:
         return checked
 
     def call_for(self, operation: OperationSite, group: str) -> CallSite:
-        return operation.calls.get(group) or CallSite(group=group, function=WAIT, params=[], where=operation.where, element=None)
+        return operation.calls.get(group) or CallSite(group=group, function=WAIT, params=[], at=operation.at, implicit=True)
 
     # ------------------------------------------------------------------ one call
     def check_call(self, call: CallSite) -> CheckedCall:
         if call.implicit:
             return CheckedCall(call, self.catalog.get(WAIT), self._wait_defaults)
         spec = self.catalog.get(call.function)
-        source = self.draft.source
         if spec is None:
             if call.function == WAIT:  # built in when the catalog has no wait of its own
                 if call.params:
-                    self.error(source.element(call.params[0].element), "wait takes no params")
+                    self.error_at(call.params[0].at, "wait takes no params")
                     return CheckedCall(call, None, None)
                 return CheckedCall(call, None, ())
-            assert call.element is not None
-            self.error(source.attribute(call.element, "name"), f"unknown function {call.function!r}{self.catalog.suggest(call.function)}")
+            self.error(self.attribute(call.at, "name"), f"unknown function {call.function!r}{self.catalog.suggest(call.function)}")
             return CheckedCall(call, None, None)
         texts = tuple(p.value for p in call.params)
         ok = self.check_param_names(call, spec)
@@ -99,12 +103,12 @@ class ApplicationChecker:
             self._checked[key] = problems
         for problem in problems:
             if problem.index is None:
-                self.error(call.where, problem.message)
+                self.error_at(call.at, problem.message)
                 ok = False
             elif self.cell_broken and spec.params[problem.index].type in _REFERENCE_TYPES:
                 continue  # the cell's own errors are reported; fix those first
             else:
-                self.error(source.attribute(call.params[problem.index].element, "value"), problem.message)
+                self.error(self.attribute(call.params[problem.index].at, "value"), problem.message)
                 ok = False
         ok = self.check_joint_pose_groups(call, spec, texts) and ok
         if not ok or len(texts) > len(spec.params):
@@ -119,7 +123,7 @@ class ApplicationChecker:
         for index, param in enumerate(call.params):
             if param.name is None or (index < len(names) and names[index] == param.name):
                 continue
-            where = self.draft.source.attribute(param.element, "name")
+            where = self.attribute(param.at, "name")
             if param.name not in names:
                 self.error(where, f"{spec.name} has no param named {param.name!r}; its params are {spec.signature()}")
                 ok = False
@@ -143,7 +147,7 @@ class ApplicationChecker:
             pose_group = self.cell.joint_pose(name).group
             if pose_group is not None and pose_group != call.group:
                 self.error(
-                    self.draft.source.attribute(call.params[index].element, "value"),
+                    self.attribute(call.params[index].at, "value"),
                     f"param {index + 1} ({param.name}) of {spec.name}: joint pose {name!r} is for {pose_group}, not {call.group}",
                 )
                 ok = False
@@ -155,7 +159,7 @@ class ApplicationChecker:
         leaders = [c for c in calls if c.spec is not None and c.spec.sync == "full_body" and not c.site.implicit]
         if not leaders:
             return
-        leader = min(leaders, key=lambda c: (c.site.where.line, c.site.where.col))
+        leader = min(leaders, key=lambda c: c.site.at)
         if leader.params is None:
             return
         wanted = tuple(t.strip() for t in leader.params)
@@ -171,9 +175,9 @@ class ApplicationChecker:
             need = "call it too with the same params" + ("" if call.site.group in arms else ", or wait")
             shown = f"{leader.site.function}({', '.join(wanted)})"
             if call.site.implicit:
-                self.error(leader.site.where, f"{shown} on {leader.site.group} is a full-body function: {call.site.group} must {need}, but it is left out of operation {operation.id}")
+                self.error_at(leader.site.at, f"{shown} on {leader.site.group} is a full-body function: {call.site.group} must {need}, but it is left out of operation {operation.id}")
             else:
-                self.error(call.site.where, f"{shown} on {leader.site.group} is a full-body function: {call.site.group} must {need}, but calls {self.describe(call)}")
+                self.error_at(call.site.at, f"{shown} on {leader.site.group} is a full-body function: {call.site.group} must {need}, but calls {self.describe(call)}")
 
     def check_master_slave(self, operation: OperationSite, calls: list[CheckedCall]) -> None:
         """A master and a slave function name each other's group in the same operation."""
@@ -187,7 +191,7 @@ class ApplicationChecker:
             if partner.spec is None or partner.spec.sync != "master_slave":
                 if partner.spec is None and partner.params is None and not partner.site.implicit and partner.site.function != WAIT:
                     continue  # unknown partner function: reported already
-                self.error(call.site.where, (
+                self.error_at(call.site.at, (
                     f"{call.site.function} on {call.site.group} names {partner_name} as its {self.opposite(role)}, but {partner_name} "
                     f"{'is left out of' if partner.site.implicit else 'calls ' + self.describe(partner) + ' in'} operation {operation.id}; "
                     f"it must call the matching master/slave function naming {call.site.group}"
@@ -195,9 +199,9 @@ class ApplicationChecker:
                 continue
             back = self.partner(partner)
             if back is not None and back != call.site.group:
-                self.error(call.site.where, f"{call.site.function} on {call.site.group} names {partner_name}, but {partner_name}'s {partner.site.function} names {back}: they must name each other")
-            elif back is not None and role is not None and role == self.role(partner) and call.site.where < partner.site.where:
-                self.error(call.site.where, f"{call.site.group} and {partner_name} are both {role}s in operation {operation.id}: one arm leads (master), the other follows (slave)")
+                self.error_at(call.site.at, f"{call.site.function} on {call.site.group} names {partner_name}, but {partner_name}'s {partner.site.function} names {back}: they must name each other")
+            elif back is not None and role is not None and role == self.role(partner) and call.site.at < partner.site.at:
+                self.error_at(call.site.at, f"{call.site.group} and {partner_name} are both {role}s in operation {operation.id}: one arm leads (master), the other follows (slave)")
 
     def partner(self, call: CheckedCall) -> str | None:
         if call.spec is None or call.spec.sync != "master_slave" or call.params is None:
@@ -237,17 +241,18 @@ class ApplicationChecker:
                     continue
                 current = state[group]
                 if spec.requires is not None and current.hold is not Hold.UNKNOWN and spec.requires is not current.hold:
-                    self.error(call.site.where, self.hold_message(spec, group, current))
+                    line = self.draft.source.at_offset(current.at).line
+                    self.error_at(call.site.at, self.hold_message(spec, group, current, line))
                 if spec.leaves is not None:
-                    state[group] = _HoldState(spec.leaves, spec.name, operation.id, call.site.where.line)
+                    state[group] = _HoldState(spec.leaves, spec.name, operation.id, call.site.at)
 
     @staticmethod
-    def hold_message(spec: FunctionSpec, group: str, current: _HoldState) -> str:
-        since = f"operation {current.operation} (line {current.line}), where {current.function} left it empty" if current.function else "the start of the application"
+    def hold_message(spec: FunctionSpec, group: str, current: _HoldState, line: int) -> str:
+        since = f"operation {current.operation} (line {line}), where {current.function} left it empty" if current.function else "the start of the application"
         if spec.requires is Hold.PART:
             return f"{spec.name} needs the {group} to hold a part, but nothing was picked since {since}"
         if current.function:
-            return f"{spec.name} needs the {group}'s hand to be empty, but it still holds what {current.function} took in operation {current.operation} (line {current.line})"
+            return f"{spec.name} needs the {group}'s hand to be empty, but it still holds what {current.function} took in operation {current.operation} (line {line})"
         return f"{spec.name} needs the {group}'s hand to be {spec.requires.value if spec.requires else 'free'}, but it holds {current.hold.value}"
 
     # ------------------------------------------------------------------ error policy
@@ -258,14 +263,14 @@ class ApplicationChecker:
         action: ErrorAction = next((a for a in _ACTIONS if a == policy.action), "abort")
         safe_pose = policy.safe_pose
         if safe_pose is None and action == "safe_pose" and default_pose is None:
-            self.error(policy.where, (
+            self.error_at(policy.at, (
                 f"error_policy action safe_pose needs a safe_pose: {self.robot.name} has no 'initial' pose "
                 f"(its poses: {', '.join(sorted(self.robot.poses)) or 'none'}; or a <joint_pose> of the cell)"
             ))
         if safe_pose is not None and safe_pose not in self.robot.poses and not self.cell_broken:
             if self.cell is None or not self.cell.has_joint_pose(safe_pose):
                 cell_poses = sorted(self.cell.joint_poses) if self.cell is not None else []
-                self.error(policy.safe_pose_where or policy.where, (
+                self.error(self.attribute(policy.at, "safe_pose"), (
                     f"unknown safe_pose {safe_pose!r} (robot poses: {', '.join(sorted(self.robot.poses)) or 'none'}; "
                     f"cell joint poses: {', '.join(cell_poses) or 'none'})"
                 ))
