@@ -1,0 +1,96 @@
+"""``ros2 run`` entry points of the engine and of a group machine (see setup.py console_scripts).
+
+::
+
+    ros2 run dual_arm_executive execution_engine --ros-args -p application:=/path/app.xml
+    ros2 run dual_arm_executive group_machine --ros-args -r __node:=left_arm_machine -p group:=left_arm
+
+Both are thin: the objects are the same :class:`ExecutionEngine` and :class:`GroupMachine` the
+embedded deployment builds, on a :class:`~execution_engine.transport.ros.RosTransport` node
+instead of a local one; process start-up and shutdown are :mod:`execution_engine.ros_main`'s.
+"""
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from app_functions.registry import full_catalog
+from execution_engine.app_model import Application, ApplicationError, load_application
+from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.machine.group_machine import GroupMachine
+from execution_engine.ros_main import (
+    ENGINE_NODE,
+    ExitCode,
+    Outcome,
+    StartupError,
+    run_node,
+    serve_forever,
+    startup_errors,
+)
+from execution_engine.transport.port import Node
+
+
+@dataclass(frozen=True)
+class EngineSettings:
+    """What the engine process needs besides the engine's own parameters."""
+
+    application: str
+    exit_when_done: bool
+
+
+def declare_engine_parameters(node: Node) -> EngineSettings:
+    """The engine process's own parameters (the engine object declares the rest)."""
+    application = str(node.declare_parameter("application", "", "application XML file to run (required)"))
+    exit_when_done = bool(
+        node.declare_parameter("exit_when_done", False, "exit after the run (code 0 if it finished cleanly) instead of serving on")
+    )
+    return EngineSettings(application, exit_when_done)
+
+
+def load_or_explain(path: str) -> Application:
+    """The validated application; StartupError listing every diagnostic when it has errors."""
+    if not path:
+        raise StartupError("parameter 'application' is required: --ros-args -p application:=/path/app.xml")
+    try:
+        return load_application(Path(path), full_catalog())
+    except ApplicationError as error:
+        errors = sum(1 for d in error.diagnostics if d.is_error)
+        lines = [f"cannot run {path}: {errors} error(s)", *(str(d) for d in error.diagnostics)]
+        raise StartupError("\n".join(lines), ExitCode.FAILED) from None
+
+
+async def run_engine(node: Node, outcome: Outcome) -> None:
+    """Load the application, run it, print the report, then keep the operator services up."""
+    with startup_errors():
+        settings = declare_engine_parameters(node)
+        engine = ExecutionEngine(node)
+    app = load_or_explain(settings.application)
+    node.logger.info("%s: running %s (%d operations)", node.fully_qualified_name, app.name, len(app.operations))
+    outcome.code = ExitCode.FAILED  # until the report says otherwise
+    report = await engine.run(app)
+    print("\n".join(report.summary_lines()), flush=True)
+    outcome.code = ExitCode.OK if report.ok else ExitCode.FAILED
+    if not settings.exit_when_done:
+        await serve_forever()
+
+
+async def run_group_machine(node: Node, outcome: Outcome) -> None:
+    """One group's state machine, serving until stopped."""
+    with startup_errors():
+        machine = GroupMachine(node)
+    try:
+        await machine.run()
+    finally:
+        machine.close()
+
+
+def engine_main(argv: Sequence[str] | None = None) -> int:
+    """``execution_engine`` executable."""
+    return run_node(ENGINE_NODE, run_engine, sys.argv if argv is None else argv)
+
+
+def group_machine_main(argv: Sequence[str] | None = None) -> int:
+    """``group_machine`` executable; launch files rename it ``<group>_machine``."""
+    return run_node("group_machine", run_group_machine, sys.argv if argv is None else argv)

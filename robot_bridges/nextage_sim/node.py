@@ -1,0 +1,38 @@
+"""``nextage_sim_bridge``: the Nextage Open kinematic simulator as a ROS 2 node.
+
+::
+
+    ros2 run dual_arm_executive nextage_sim_bridge --ros-args -p speed:=10.0 -p faults:="right_arm:joint_limit@0.5"
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from core_functions.robots import NEXTAGE_OPEN
+from execution_engine.transport.port import Node
+from robot_bridges.backend import BackendOptions
+from robot_bridges.ros_bridge import BridgeSetup, bridge_main, csv_list
+
+BACKEND = "nextage-sim"
+
+
+def declare_nextage_parameters(node: Node) -> BridgeSetup:
+    """The simulator's parameters, with the defaults of the embedded deployment."""
+    speed = float(node.declare_parameter("speed", 1.0, "simulated time per wall second (10.0: ten times faster than real)"))
+    if not speed > 0:
+        raise ValueError(f"speed must be > 0, got {speed}")
+    initial_pose = str(node.declare_parameter("initial_pose", "initial", "joint pose the simulated robot starts in (initial or off)"))
+    control_period = float(node.declare_parameter("control_period", 0.01, "simulation step (s of simulated time)"))
+    seed = int(node.declare_parameter("seed", 0, "random seed of simulated vision noise"))
+    faults = str(node.declare_parameter("faults", "", "comma-separated injected faults, e.g. right_arm:joint_limit@0.5"))
+    options = BackendOptions(
+        robot=NEXTAGE_OPEN,
+        faults=csv_list(faults),
+        seed=seed,
+        extra={"initial_pose": initial_pose, "control_period": repr(control_period)},
+    )
+    return BridgeSetup(options, speed)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return bridge_main(BACKEND, declare_nextage_parameters, argv)

@@ -1,0 +1,81 @@
+"""The shared body of every bridge's ``ros2 run`` entry point (nextage_sim, vplus, kuka_rsi).
+
+A bridge executable differs from another only in its back end and in the parameters that
+configure it.  So an entry point is one line::
+
+    def main(argv=None) -> int:
+        return bridge_main("nextage-sim", declare_nextage_parameters, argv)
+
+where ``declare_...(node)`` declares the back end's parameters on the node and returns a
+:class:`BridgeSetup`.  This module builds the back end through the registry, wraps it in the
+same :class:`BridgeNode` the embedded deployment uses, and serves until the process stops;
+process start-up, signals and exit codes are :mod:`execution_engine.ros_main`'s.
+"""
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+
+from execution_engine.clock import Clock, scaled_clock
+from execution_engine.ros_main import ExitCode, Outcome, StartupError, bridge_node_name, run_node, serve_forever, startup_errors
+from execution_engine.transport.port import Node
+from robot_bridges.backend import BackendOptions, BridgeError
+from robot_bridges.bridge_node import BridgeNode
+from robot_bridges.registry import create_backend
+
+
+@dataclass(frozen=True)
+class BridgeSetup:
+    """How to build a back end: its options, and how fast its clock runs against wall time.
+
+    ``speed`` is for simulators (10 runs a simulated robot ten times faster than real time);
+    a bridge to a real controller leaves it at 1.
+    """
+
+    options: BackendOptions
+    speed: float = 1.0
+
+
+DeclareBridge = Callable[[Node], BridgeSetup]
+
+
+def csv_list(text: str) -> tuple[str, ...]:
+    """A list parameter written as one comma-separated string (ROS 2 cannot type an empty list)."""
+    return tuple(item.strip() for item in text.split(",") if item.strip())
+
+
+def backend_clock(node: Node, speed: float) -> Clock:
+    """The node's clock, or a clock ``speed`` times faster on the same loop for a simulator."""
+    if speed == 1.0:
+        return node.clock
+    return scaled_clock(speed).bind(node.clock.loop)
+
+
+async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: Outcome) -> None:
+    """Build the back end and its bridge node, then serve; the back end is closed on the way out."""
+    with startup_errors():
+        setup = declare(node)
+        clock = backend_clock(node, setup.speed)
+        robot_backend = await create_backend(backend, clock, setup.options)
+    try:
+        with startup_errors():
+            bridge = BridgeNode(node, robot_backend)
+    except StartupError:
+        await robot_backend.close()
+        raise
+    try:
+        try:
+            await bridge.start()
+        except BridgeError as error:
+            raise StartupError(f"{backend}: {error}", ExitCode.FAILED) from None
+        node.logger.info("%s: serving %s for %s", node.fully_qualified_name, robot_backend.name, ", ".join(robot_backend.groups))
+        await serve_forever()
+    finally:
+        await bridge.close()
+
+
+def bridge_main(backend: str, declare: DeclareBridge, argv: Sequence[str] | None = None) -> int:
+    """Run the bridge for registry back end ``backend`` as a ROS 2 node process."""
+    return run_node(bridge_node_name(backend), partial(run_bridge, backend, declare), sys.argv if argv is None else argv)
