@@ -157,3 +157,52 @@ def test_every_element_and_attribute_is_located_exactly(body: str, prefix: str) 
         for attribute in element.attrib:
             spot = source.attribute(element, attribute)
             assert re.match(re.escape(attribute) + r"\s*=", lines[spot.line - 1][spot.col - 1:]), (attribute, spot)
+
+
+# ------------------------------------------------------------------------------ the reader's walk
+_JUNK = st.sampled_from([
+    "<!-- c -->", "<?pi x?>", "<junk a='1'><function name='x'/></junk>", '<function name="extra"/>',
+    '<params><param value="p"/></params>', "<left_arm><function name='wait'/></left_arm>", "<param value='q'/>",
+    "<operation id='9'><arm><function name='wait'/></arm></operation>", "<![CDATA[<x/>]]>", "text",
+])
+
+
+@SETTINGS
+@given(cuts=st.lists(st.tuples(st.integers(0, len(APP_XML)), _JUNK), max_size=4))
+def test_the_reader_walk_gives_every_element_its_own_offset(work: Path, cuts: list[tuple[int, str]], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Junk anywhere (where it keeps the file well-formed) never shifts the offsets the reader hands out."""
+    from execution_engine.app_model.positions import DocumentWalk
+
+    text = APP_XML
+    for position, junk in sorted(cuts, reverse=True):
+        tag_end = text.rfind(">", 0, position)
+        if tag_end > 0 and text.startswith("<", text.find("<", tag_end)):  # insert between tags only
+            text = text[:tag_end + 1] + junk + text[tag_end + 1:]
+    try:
+        etree.fromstring(text.encode())
+    except etree.XMLSyntaxError:
+        return  # junk inside the prolog or after the root: not what this test is about
+    visits: list[tuple[etree._Element, int]] = []
+    walks: list[DocumentWalk] = []
+    original = DocumentWalk.visit
+
+    def recording(self: DocumentWalk, element: etree._Element) -> int:
+        offset = original(self, element)
+        visits.append((element, offset))
+        walks.append(self)
+        return offset
+
+    monkeypatch.setattr(DocumentWalk, "visit", recording)
+    path = work / "junk.xml"
+    path.write_text(text)
+    validate_application(path, CATALOG)
+    assert visits
+    assert all(walk._aligned for walk in walks)  # the fast path held: no fallback to the element map
+    from execution_engine.app_model.safe_xml import read_xml
+
+    doc, _ = read_xml(path)
+    assert doc is not None
+    truth = doc.source._element_offsets()
+    by_path = {doc.root.getroottree().getpath(e): o for e, o in truth.items()}
+    for element, offset in visits:
+        assert offset == by_path[element.getroottree().getpath(element)], element.tag
