@@ -208,6 +208,10 @@ class InvalidParameterValueException(Exception):
     pass
 
 
+class ExternalShutdownException(Exception):
+    """Raised out of ``spin`` when the context is shut down while spinning (as rclpy does)."""
+
+
 class Parameter:
     def __init__(self, name: str, type_: Any = None, value: Any = None) -> None:
         self.name = name
@@ -724,7 +728,9 @@ class FakeExecutor:
         pool = ThreadPoolExecutor(max_workers=self.num_threads, thread_name_prefix="fake executor")
         try:
             with self.cond:
-                while not self._is_shutdown and CONTEXT.ok():
+                while not self._is_shutdown:
+                    if not CONTEXT.ok():
+                        raise ExternalShutdownException()
                     if self._error is not None:
                         error, self._error = self._error, None
                         raise error
@@ -764,7 +770,9 @@ def install(monkeypatch: Any) -> types.ModuleType:
     rclpy = _module("rclpy", init=init, ok=ok, shutdown=shutdown, graph=lambda: GRAPH, context=lambda: CONTEXT)
     submodules = {
         "rclpy.node": _module("rclpy.node", Node=FakeNode),
-        "rclpy.executors": _module("rclpy.executors", MultiThreadedExecutor=MultiThreadedExecutor),
+        "rclpy.executors": _module(
+            "rclpy.executors", MultiThreadedExecutor=MultiThreadedExecutor, ExternalShutdownException=ExternalShutdownException
+        ),
         "rclpy.callback_groups": _module(
             "rclpy.callback_groups", MutuallyExclusiveCallbackGroup=MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup=ReentrantCallbackGroup
         ),

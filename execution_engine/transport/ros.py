@@ -67,6 +67,7 @@ class _Rclpy:
     rclpy: Any
     node_class: Any
     executor_class: Any
+    external_shutdown: type[BaseException]
     exclusive_group: Any
     reentrant_group: Any
     parameter: Any
@@ -83,7 +84,7 @@ def _import_rclpy() -> _Rclpy:
         import rclpy.qos
         from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
         from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-        from rclpy.executors import MultiThreadedExecutor
+        from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
         from rclpy.node import Node as RclpyNode
         from rclpy.parameter import Parameter
         from rclpy.signals import SignalHandlerOptions
@@ -97,6 +98,7 @@ def _import_rclpy() -> _Rclpy:
         rclpy=rclpy,
         node_class=RclpyNode,
         executor_class=MultiThreadedExecutor,
+        external_shutdown=ExternalShutdownException,
         exclusive_group=MutuallyExclusiveCallbackGroup,
         reentrant_group=ReentrantCallbackGroup,
         parameter=Parameter,
@@ -448,6 +450,8 @@ class RosTransport(Transport):
     def _spin(self) -> None:
         try:
             self._executor.spin()
+        except self.api.external_shutdown:  # rclpy.shutdown() elsewhere: an orderly end
+            log.info("rclpy was shut down; the executor stopped")
         except BaseException as error:  # noqa: BLE001 - the loop must learn that ROS is gone
             if not self._stopping:
                 self.spin_error = error
