@@ -10,8 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from execution_engine.clock import Clock
+from execution_engine.clock import Clock, run_with_clock, simulated_clock
 from robot_bridges.vplus import codec
 from robot_bridges.vplus.client import (
     CommandTimeout,
@@ -235,6 +237,22 @@ def test_raw_unknown_skills_and_garbage_get_no_ack_and_do_not_stop_the_server(ru
             writer.close()
 
     run_sim(main)
+
+
+@settings(max_examples=40)
+@given(st.lists(st.binary(max_size=80).map(lambda b: b.replace(b"\r\n", b"")), max_size=4))
+def test_garbage_lines_never_stop_the_server_from_acking_the_next_message(lines: list[bytes]) -> None:
+    async def main(clock: Clock) -> None:
+        async with VPlusSimulator(clock) as sim:
+            reader, writer = await asyncio.open_connection("127.0.0.1", sim.port)
+            writer.write(b"".join(line + b"\r\n" for line in lines) + b"ok1:enable_air\r\n")
+            acks = []
+            while not acks or acks[-1].id != "ok1":
+                acks.append(codec.decode_ack((await reader.readuntil(b"\r\n"))[:-2]))
+            assert sim.arm.signals[AIR_SIGNAL]
+            writer.close()
+
+    run_with_clock(main, simulated_clock())
 
 
 def test_an_unreachable_target_is_not_acked_and_the_simulator_says_why(run_sim: Run) -> None:
