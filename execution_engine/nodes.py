@@ -28,6 +28,7 @@ from execution_engine.ros_main import (
     run_node,
     serve_forever,
     startup_errors,
+    warn_undeclared,
 )
 from execution_engine.transport.port import Node
 
@@ -66,6 +67,7 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     with startup_errors():
         settings = declare_engine_parameters(node)
         engine = ExecutionEngine(node)
+    warn_undeclared(node)
     app = load_or_explain(settings.application)
     node.logger.info("%s: running %s (%d operations)", node.fully_qualified_name, app.name, len(app.operations))
     outcome.code = ExitCode.FAILED  # until the report says otherwise
@@ -80,6 +82,7 @@ async def run_group_machine(node: Node, outcome: Outcome) -> None:
     """One group's state machine, serving until stopped."""
     with startup_errors():
         machine = GroupMachine(node)
+    warn_undeclared(node)
     try:
         await machine.run()
     finally:

@@ -83,6 +83,18 @@ def startup_errors() -> Iterator[None]:
         raise StartupError(f"{type(error).__name__}: {error}") from None
 
 
+def warn_undeclared(node: Node) -> None:
+    """Log parameters given to the node that no code declared: almost always a typo."""
+    stray = node.undeclared_overrides()
+    if stray:
+        node.logger.warning(
+            "%s: parameter(s) %s given but not declared by this node (a typo?); declared: %s",
+            node.fully_qualified_name,
+            ", ".join(stray),
+            ", ".join(sorted(node.declared_parameters())),
+        )
+
+
 async def serve_forever() -> None:
     """Keep a node's services and subscriptions alive until the process is stopped."""
     await asyncio.get_running_loop().create_future()

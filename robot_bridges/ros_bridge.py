@@ -19,7 +19,16 @@ from dataclasses import dataclass
 from functools import partial
 
 from execution_engine.clock import Clock, scaled_clock
-from execution_engine.ros_main import ExitCode, Outcome, StartupError, bridge_node_name, run_node, serve_forever, startup_errors
+from execution_engine.ros_main import (
+    ExitCode,
+    Outcome,
+    StartupError,
+    bridge_node_name,
+    run_node,
+    serve_forever,
+    startup_errors,
+    warn_undeclared,
+)
 from execution_engine.transport.port import Node
 from robot_bridges.backend import BackendOptions, BridgeError
 from robot_bridges.bridge_node import BridgeNode
@@ -65,6 +74,7 @@ async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: 
     except StartupError:
         await robot_backend.close()
         raise
+    warn_undeclared(node)
     try:
         try:
             await bridge.start()

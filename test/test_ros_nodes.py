@@ -53,9 +53,12 @@ def stopped_cleanly() -> bool:
 
 
 # ================================================================================ entry points
-def test_engine_without_an_application_says_how_to_give_one(fake_rclpy: Any, capsys: pytest.CaptureFixture[str]) -> None:
-    assert nodes.engine_main(["execution_engine"]) == ExitCode.USAGE
+def test_engine_without_an_application_says_how_to_give_one(
+    fake_rclpy: Any, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    assert nodes.engine_main(["execution_engine", "--ros-args", "-p", "autostrat:=false"]) == ExitCode.USAGE
     assert "parameter 'application' is required: --ros-args -p application:=" in capsys.readouterr().err
+    assert "parameter(s) autostrat given but not declared by this node (a typo?)" in caplog.text
     assert stopped_cleanly()
 
 
