@@ -1,0 +1,64 @@
+"""docs/application_xml.md: its example files are valid, and its diagnostics are what validate prints."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from app_functions.registry import full_catalog
+from execution_engine.app_model import validate_application
+
+DOC = Path(__file__).resolve().parent.parent / "docs" / "application_xml.md"
+BLOCKS = re.findall(r"```(\w+)\n(.*?)```", DOC.read_text(), re.S)
+
+
+def example(start: str) -> str:
+    return next(body for lang, body in BLOCKS if lang == "xml" and body.lstrip().startswith("<?xml") and start in body)
+
+
+@pytest.fixture
+def example_tree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    (tmp_path / "apps_xml" / "cells").mkdir(parents=True)
+    (tmp_path / "apps_xml" / "cells" / "example_cell.xml").write_text(example("<cell "))
+    (tmp_path / "apps_xml" / "example.xml").write_text(example("<application "))
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def test_the_documented_example_is_valid(example_tree: Path) -> None:
+    assert validate_application("apps_xml/example.xml", full_catalog()) == []
+
+
+def test_the_documented_diagnostics_are_real(example_tree: Path) -> None:
+    app = example_tree / "apps_xml" / "example.xml"
+    app.write_text(app.read_text().replace("debur_drilling", "debur_driling").replace('value="slot_1"', 'value="hole_a"'))
+    cell = example_tree / "apps_xml" / "cells" / "example_cell.xml"
+    cell.write_text(cell.read_text().replace('name="hole_b" xyz="0 -40 0" rpy="180 0 90" kind="hole"',
+                                             'name="hole_b" xyz="0 -40 0" rpy="180 0 90" knid="hole"'))
+    assert [str(d) for d in validate_application("apps_xml/example.xml", full_catalog())] == shown("debur_driling")
+
+
+def shown(needle: str) -> list[str]:
+    return next(body for lang, body in BLOCKS if lang == "text" and needle in body).strip().splitlines()
+
+
+def test_the_documented_param_name_message_is_real(example_tree: Path) -> None:
+    app = example_tree / "apps_xml" / "example.xml"
+    app.write_text(app.read_text().replace('<param value="slot_1"/>', '<param name="reference" value="slot_1"/>'))
+    assert [str(d) for d in validate_application("apps_xml/example.xml", full_catalog())] == shown("is named 'reference'")
+
+
+def test_the_documented_plausibility_message_is_real(example_tree: Path) -> None:
+    app = example_tree / "apps_xml" / "example.xml"
+    text = app.read_text()
+    third = text[text.index('  <operation id="3"'):text.index("</application>")]
+    app.write_text(text.replace("</application>", third.replace('id="3"', 'id="4"') + "</application>"))
+    assert [str(d) for d in validate_application("apps_xml/example.xml", full_catalog())] == shown("needs the right_arm to hold")
+
+
+def test_the_documented_master_slave_operation_is_valid(example_tree: Path) -> None:
+    fragment = next(body for lang, body in BLOCKS if lang == "xml" and body.startswith('<operation id="7">'))
+    app = example_tree / "apps_xml" / "example.xml"
+    app.write_text(app.read_text().replace("</application>", fragment + "</application>"))
+    assert validate_application("apps_xml/example.xml", full_catalog()) == []
