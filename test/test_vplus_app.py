@@ -4,6 +4,11 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
+import re
+import signal
+import subprocess
+import sys
 from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
@@ -151,3 +156,37 @@ def test_the_default_camera_pose_of_the_cell_is_reachable_for_the_whole_approach
         seed = kin.inverse(plane.offset_local(dz=mm / 1000).matrix(), seed)
     assert kin.within_limits(seed)
     assert isinstance(plane, Pose)
+
+
+def test_run_against_a_standalone_simulator_with_host_and_port(tmp_path: Path) -> None:
+    """--host/--port reach a controller in another process: here the simulator program, both at 50x."""
+    app = tmp_path / "moves.xml"
+    app.write_text(
+        '<application name="moves" robot="viper">\n'
+        '  <operation id="1"><arm><function name="move_to_joint_pose"><params><param value="home"/></params></function></arm></operation>\n'
+        '  <operation id="2"><arm><function name="gripper_close"/></arm></operation>\n'
+        '  <operation id="3"><arm><function name="move_relative"><params><param value="0"/><param value="0"/><param value="-30 mm"/></params></function></arm></operation>\n'
+        '  <operation id="4"><arm><function name="move_to"><params><param value="0.4,-0.1,0.5,3.14159,0,0"/></params></function></arm></operation>\n'
+        "</application>\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "robot_bridges.vplus.simulator", "--port", "0", "--speed", "50"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        assert proc.stdout is not None
+        port = re.search(r":(\d+) ", proc.stdout.readline()).group(1)  # type: ignore[union-attr]
+        out, err = io.StringIO(), io.StringIO()
+        code = cli_main(["run", str(app), "--robot", "vplus", "--host", "127.0.0.1", "--port", port, "--speed", "50", "-q"], out, err)
+        assert code == 0, err.getvalue() + out.getvalue()
+        assert "FINISHED" in out.getvalue() and "4/4" in out.getvalue()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()

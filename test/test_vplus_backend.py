@@ -419,6 +419,7 @@ def test_the_factory_starts_a_simulator_when_no_host_is_given(run_sim: Run) -> N
         (BackendOptions(robot=ADEPT_VIPER_S850, extra={"timeout": "soon"}), "timeout must be a number"),
         (BackendOptions(robot=ADEPT_VIPER_S850, extra={"linear": "curvy"}), "linear must be"),
         (BackendOptions(robot=ADEPT_VIPER_S850, host="10.0.0.2", port=99999), "port must be"),
+        (BackendOptions(robot=ADEPT_VIPER_S850, extra={"camera": "webcam"}), "camera must be"),
     ],
 )
 def test_the_factory_refuses_options_it_cannot_honour(run_sim: Run, options: BackendOptions, message: str) -> None:
@@ -433,6 +434,8 @@ def test_the_factory_points_at_a_real_controller_without_a_simulator(run_sim: Ru
     async def main(clock: Clock) -> None:
         backend = await create(clock, BackendOptions(robot=ADEPT_VIPER_S850, host="192.0.2.10"))
         assert backend.client.peer == "192.0.2.10:1234" and backend.measurement is None
+        demo = await create(clock, BackendOptions(robot=ADEPT_VIPER_S850, host="127.0.0.1", port=4321, extra={"camera": "simulated"}))
+        assert isinstance(demo.measurement, SimulatedFocusCamera)
         assert backend.label == "vplus 192.0.2.10:1234" and backend.name == "vplus"
 
     run_sim(main)

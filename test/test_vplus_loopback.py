@@ -317,6 +317,26 @@ def test_disconnect_during_break_reports_acked_and_unknown_and_never_resends(run
     run_sim(main)
 
 
+def test_injected_faults_drop_after_mute_and_drop_clients(run_sim: Run) -> None:
+    async def main(clock: Clock) -> None:
+        async with cell(clock, faults=Faults(drop_after=1)) as (sim, client):
+            with pytest.raises(ConnectionLost) as caught:
+                await client.execute_joined(codec.ENABLE_AIR, codec.DISABLE_AIR)
+            assert [m.command for m, _ in caught.value.exchange.acked] == [codec.ENABLE_AIR]
+            assert [m.command for m in caught.value.exchange.unknown] == [codec.DISABLE_AIR]
+            assert sim.arm.signals[AIR_SIGNAL]  # disable_air was never run
+            sim.faults.mute = {"disable_air"}
+            await client.connect()
+            with pytest.raises(CommandTimeout):
+                await client.execute(codec.DISABLE_AIR, timeout=0.5)
+            assert not sim.arm.signals[AIR_SIGNAL]  # run, just never acked
+            await sim.drop_clients()
+            with pytest.raises(ConnectionLost):
+                await client.execute(codec.ENABLE_AIR)
+
+    run_sim(main)
+
+
 def test_a_late_ack_after_a_timeout_is_tolerated_and_the_link_carries_on(run_sim: Run) -> None:
     async def main(clock: Clock) -> None:
         async with cell(clock, faults=Faults(ack_delay=3.0)) as (sim, client):

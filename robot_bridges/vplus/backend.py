@@ -464,7 +464,7 @@ def _agree(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 # ------------------------------------------------------------------------------ registry
-_EXTRAS = ("timeout", "retries", "linear")
+_EXTRAS = ("timeout", "retries", "linear", "camera")
 
 
 async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
@@ -473,7 +473,9 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     Without a host an AdeptServer simulator is started in-process on 127.0.0.1 (``port``, or a
     free one) and a simulated focus camera answers vision requests.  Extras: ``timeout`` (s, ack
     allowance per command on top of the motion time), ``retries`` (connection attempts after the
-    first), ``linear`` (``joint`` or ``reject``).
+    first), ``linear`` (``joint`` or ``reject``), ``camera`` (``simulated`` or ``none``: what answers
+    vision requests; default ``simulated`` without a host, ``none`` with one -- a real cell plugs its
+    vision pipeline in as a :class:`MeasurementPort`).
     """
     if options.robot.name != ADEPT_VIPER_S850.name:
         raise ValueError(f"the vplus back end drives {ADEPT_VIPER_S850.name}, not {options.robot.name}")
@@ -496,16 +498,22 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
         raise ValueError(f"vplus: linear must be 'joint' or 'reject', got {linear!r}")
     if options.port is not None and not (0 <= options.port <= 65535):
         raise ValueError(f"vplus: port must be 0..65535, got {options.port}")
+    camera = options.extra.get("camera", "none" if options.host is not None else "simulated")
+    if camera not in ("simulated", "none"):
+        raise ValueError(f"vplus: camera must be 'simulated' or 'none', got {camera!r}")
+    measurement = SimulatedFocusCamera(seed=options.seed) if camera == "simulated" else None
     if options.host is not None:
         port = DEFAULT_PORT if options.port is None else options.port
-        return VPlusBackend(clock, options.host, port, robot=options.robot, ack_timeout=timeout, retries=retries, linear=linear)  # type: ignore[arg-type]
+        return VPlusBackend(
+            clock, options.host, port, robot=options.robot, measurement=measurement, ack_timeout=timeout, retries=retries, linear=linear  # type: ignore[arg-type]
+        )
     simulator = await VPlusSimulator(clock, "127.0.0.1", options.port or 0).start()
     return VPlusBackend(
         clock,
         "127.0.0.1",
         simulator.port,
         robot=options.robot,
-        measurement=SimulatedFocusCamera(seed=options.seed),
+        measurement=measurement,
         ack_timeout=timeout,
         retries=retries,
         linear=linear,  # type: ignore[arg-type]

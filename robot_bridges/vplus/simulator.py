@@ -55,7 +55,7 @@ _READ_SIZE = 2048  # AdeptServer's /BUFFER_SIZE
 class Faults:
     """What to break, for tests.  Fields may be changed while the simulator runs."""
 
-    #: Close the connection after this many more messages have been read (the last one unanswered).
+    #: Run this many more messages, then close the connection on the next one (neither run nor acked).
     drop_after: int | None = None
     #: Close the connection when a message with one of these skills starts executing (once per
     #: skill: it is removed when it fires).  The skill still runs to its end -- the arm keeps
