@@ -1,4 +1,4 @@
-"""The shared body of every bridge's ``ros2 run`` entry point (nextage_sim, vplus, kuka_rsi).
+"""The shared body of every bridge's ``ros2 run`` entry point (``<backend>/node.py``: nextage_sim, vplus, kuka_rsi).
 
 A bridge executable differs from another only in its back end and in the parameters that
 configure it.  So an entry point is one line::

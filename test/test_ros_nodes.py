@@ -25,7 +25,7 @@ from execution_engine.transport.port import Node
 from execution_engine.transport.ros import RosTransport
 from robot_bridges.nextage_sim.node import declare_nextage_parameters
 from robot_bridges.nextage_sim.node import main as nextage_main
-from robot_bridges.ros_bridge import run_bridge
+from robot_bridges.node import run_bridge
 
 BOUND = 20.0  # s: only reached when something hangs
 

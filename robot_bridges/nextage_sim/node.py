@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.transport.port import Node
 from robot_bridges.backend import BackendOptions
-from robot_bridges.ros_bridge import BridgeSetup, bridge_main, csv_list
+from robot_bridges.node import BridgeSetup, bridge_main, csv_list
 
 BACKEND = "nextage-sim"
 
