@@ -58,7 +58,7 @@ def test_acks_out_of_order_and_cut_anywhere_complete_a_joined_call(run_sim: Run)
         client = VPlusClient("sim", 1, clock)
         link, transport = attach(client)
         call = asyncio.ensure_future(client.execute_joined(codec.set_speed(10), *codec.move_tool_z(1.0)))
-        await asyncio.sleep(0)
+        await clock.sleep(0)
         sent = ids(transport)
         stream = ack_for(sent[2]) + ack_for(sent[0]) + ack_for(sent[1])
         for i in range(len(stream)):
@@ -79,7 +79,7 @@ def test_random_bytes_from_the_server_end_a_call_with_a_client_error_never_a_cra
         client = VPlusClient("sim", 1, clock, timeout=1.0)
         link, _ = attach(client)
         call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await asyncio.sleep(0)
+        await clock.sleep(0)
         for chunk in chunks:
             link.data_received(chunk)  # must not raise, whatever arrives
         try:
@@ -98,7 +98,7 @@ def test_a_truncated_ack_followed_by_close_is_a_lost_connection(cut: int) -> Non
         client = VPlusClient("sim", 1, clock, timeout=5.0)
         link, transport = attach(client)
         call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await asyncio.sleep(0)
+        await clock.sleep(0)
         link.data_received(ack_for(ids(transport)[0])[:cut])
         link.eof_received()
         with pytest.raises(ConnectionLost) as caught:
@@ -113,7 +113,7 @@ def test_an_endless_line_from_the_server_drops_the_link(run_sim: Run) -> None:
         client = VPlusClient("sim", 1, clock)
         link, _ = attach(client)
         call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await asyncio.sleep(0)
+        await clock.sleep(0)
         link.data_received(b"9" * 400)
         with pytest.raises(ConnectionLost, match="stream out of step"):
             await call
@@ -127,7 +127,7 @@ def test_a_status_other_than_done_is_a_protocol_error(run_sim: Run) -> None:
         client = VPlusClient("sim", 1, clock)
         link, transport = attach(client)
         call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await asyncio.sleep(0)
+        await clock.sleep(0)
         msg_id = ids(transport)[0]
         link.data_received(f"{msg_id}:failed:1.000,1.000:0.000,0.000,0.000,0.000,0.000,0.000\r\n".encode())
         with pytest.raises(ProtocolError, match="status 'failed'"):
@@ -141,13 +141,13 @@ def test_cancelling_a_call_keeps_its_late_acks_harmless(run_sim: Run) -> None:
         client = VPlusClient("sim", 1, clock)
         link, transport = attach(client)
         call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await asyncio.sleep(0)
+        await clock.sleep(0)
         call.cancel()
         with pytest.raises(asyncio.CancelledError):
             await call
         first = ids(transport)[0]
         second = asyncio.ensure_future(client.execute(codec.DISABLE_AIR))
-        await asyncio.sleep(0)
+        await clock.sleep(0)
         link.data_received(ack_for(first) + ack_for(ids(transport)[1]))
         (ack,) = await second
         assert ack.id == ids(transport)[1] and [m.id for m, _ in client.late_acks] == [first]
