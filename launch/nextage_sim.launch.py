@@ -22,6 +22,11 @@ PACKAGE = "dual_arm_executive"
 GROUPS = ("left_arm", "right_arm", "torso_head")
 
 
+def _node(executable: str, name: str, config: str, overrides: dict) -> Node:
+    """One node of the package: the YAML section named like the node, then ``overrides``."""
+    return Node(package=PACKAGE, executable=executable, name=name, parameters=[config, overrides], output="screen")
+
+
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory(PACKAGE)
     config = os.path.join(share, "config", "nextage_sim.yaml")
@@ -38,31 +43,13 @@ def generate_launch_description() -> LaunchDescription:
             default_value="1.0",
             description="simulated seconds per wall second (10.0 runs the robot ten times faster)",
         ),
-        Node(
-            package=PACKAGE,
-            executable="nextage_sim_bridge",
-            name="nextage_sim_bridge",
-            parameters=[config, {"speed": ParameterValue(speed, value_type=float)}],
-            output="screen",
-        ),
+        _node(executable="nextage_sim_bridge", name="nextage_sim_bridge", config=config,
+              overrides={"speed": ParameterValue(speed, value_type=float)}),
     ]
     for group in GROUPS:
-        actions.append(
-            Node(
-                package=PACKAGE,
-                executable="group_machine",
-                name=f"{group}_machine",
-                parameters=[config, {"group": group}],
-                output="screen",
-            )
-        )
+        actions.append(_node(executable="group_machine", name=f"{group}_machine", config=config, overrides={"group": group}))
     actions.append(
-        Node(
-            package=PACKAGE,
-            executable="execution_engine",
-            name="execution_engine",
-            parameters=[config, {"application": ParameterValue(application, value_type=str)}],
-            output="screen",
-        )
+        _node(executable="execution_engine", name="execution_engine", config=config,
+              overrides={"application": ParameterValue(application, value_type=str)})
     )
     return LaunchDescription(actions)

@@ -64,7 +64,7 @@ def test_the_launch_file_names_only_installed_executables() -> None:
     executables = {
         keyword.value.value
         for call in ast.walk(tree)
-        if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "Node"
+        if isinstance(call, ast.Call)
         for keyword in call.keywords
         if keyword.arg == "executable" and isinstance(keyword.value, ast.Constant)
     }

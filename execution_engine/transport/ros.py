@@ -111,15 +111,23 @@ def _import_rclpy() -> _Rclpy:
 
 
 # =================================================================================== endpoints
-class _RosPublisher(Publisher[M], Generic[M]):
+class _TopicEndpoint(Generic[M]):
+    """What a publisher and a subscription both hold; resolves the rosidl class up front."""
+
     def __init__(self, node: RosNode, msg_type: type[M], topic: str, qos: QoS) -> None:
         self.node = node
         self.msg_type = msg_type
         self.topic = topic
         self.qos = qos
         self.alive = True
-        ros_class = node.converter.ros_class(msg_type)
-        self.handle = node.ros_node.create_publisher(ros_class, topic, node.transport.profile(qos))
+        self.ros_class = node.converter.ros_class(msg_type)
+        self.profile = node.transport.profile(qos)
+
+
+class _RosPublisher(_TopicEndpoint[M], Publisher[M]):
+    def __init__(self, node: RosNode, msg_type: type[M], topic: str, qos: QoS) -> None:
+        super().__init__(node, msg_type, topic, qos)
+        self.handle = node.ros_node.create_publisher(self.ros_class, topic, self.profile)
 
     def publish(self, msg: M) -> None:
         if not self.alive:
@@ -131,17 +139,12 @@ class _RosPublisher(Publisher[M], Generic[M]):
         return int(self.handle.get_subscription_count()) if self.alive else 0
 
 
-class _RosSubscription(Subscription[M], Generic[M]):
+class _RosSubscription(_TopicEndpoint[M], Subscription[M]):
     def __init__(self, node: RosNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS) -> None:
-        self.node = node
-        self.msg_type = msg_type
-        self.topic = topic
-        self.qos = qos
-        self.alive = True
+        super().__init__(node, msg_type, topic, qos)
         self._callback = callback
-        ros_class = node.converter.ros_class(msg_type)
         self.handle = node.ros_node.create_subscription(
-            ros_class, topic, self._on_ros_message, node.transport.profile(qos), callback_group=node.subscription_group
+            self.ros_class, topic, self._on_ros_message, self.profile, callback_group=node.subscription_group
         )
 
     def _on_ros_message(self, ros_msg: Any) -> None:
