@@ -25,6 +25,7 @@ from execution_engine.ros_main import (
     ExitCode,
     Outcome,
     StartupError,
+    machine_node_name,
     run_node,
     serve_forever,
     startup_errors,
@@ -83,6 +84,11 @@ async def run_group_machine(node: Node, outcome: Outcome) -> None:
     with startup_errors():
         machine = GroupMachine(node)
     warn_undeclared(node)
+    if node.name != machine_node_name(machine.group):
+        node.logger.warning(
+            "%s drives %s; name it %s (-r __node:=%s) as the launch files do",
+            node.fully_qualified_name, machine.group, machine_node_name(machine.group), machine_node_name(machine.group),
+        )
     try:
         await machine.run()
     finally:

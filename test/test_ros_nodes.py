@@ -20,6 +20,7 @@ from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine import nodes
 from execution_engine.clock import Clock, real_clock, run_with_clock
+from execution_engine.machine.group_machine import GroupMachine
 from execution_engine.ros_main import ExitCode, Outcome, StartupError, machine_node_name, run_node
 from execution_engine.transport.port import Node
 from execution_engine.transport.ros import RosTransport
@@ -85,6 +86,17 @@ def test_wrong_parameters_and_arguments_are_usage_errors(fake_rclpy: Any, capsys
     assert "unknown Nextage pose 'upside_down'" in capsys.readouterr().err
     assert nextage_main(["nextage_sim_bridge", "--ros-args", "-p", "speed:=0.0"]) == ExitCode.USAGE
     assert "speed must be > 0" in capsys.readouterr().err
+
+
+def test_a_machine_not_named_after_its_group_is_flagged(
+    fake_rclpy: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    async def run_once(self: GroupMachine) -> None:  # the machine's life, cut short
+        return None
+
+    monkeypatch.setattr(GroupMachine, "run", run_once)
+    assert nodes.group_machine_main(["group_machine", "--ros-args", "-p", "group:=right_arm"]) == ExitCode.OK
+    assert "/group_machine drives right_arm; name it right_arm_machine (-r __node:=right_arm_machine)" in caplog.text
 
 
 # ============================================================================ process lifecycle

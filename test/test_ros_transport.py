@@ -380,6 +380,14 @@ def test_a_destroyed_node_neither_publishes_nor_receives(fake_rclpy: Any) -> Non
     run_real(lambda clock: with_transport(clock, body))
 
 
+def test_simulated_time_is_refused(fake_rclpy: Any, run_sim: Any) -> None:
+    async def main(clock: Clock) -> None:
+        with pytest.raises(ValueError, match="runs in wall time"):
+            RosTransport(clock)
+
+    run_sim(main)
+
+
 def test_without_rclpy_the_error_says_how_to_get_it(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "rclpy", None)
 

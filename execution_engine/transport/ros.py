@@ -427,6 +427,10 @@ class RosTransport(Transport):
         shutdown_timeout: float = 5.0,
     ) -> None:
         super().__init__(clock)
+        if clock.simulated:
+            raise ValueError(
+                "the ros transport runs in wall time: a simulated clock would jump over every wait for the executor thread"
+            )
         if threads < 2:
             raise ValueError("the ros transport needs at least 2 executor threads (a service handler may wait for a client response)")
         self.api = _import_rclpy()
