@@ -45,6 +45,15 @@ def attach(client: VPlusClient) -> tuple[_Link, FakeTransport]:
     return link, transport
 
 
+async def started(clock: Clock, command: codec.Command, timeout: float = 10.0) -> tuple[VPlusClient, _Link, FakeTransport, asyncio.Future[list[codec.Ack]]]:
+    """A client on a fake link with one ``execute`` under way (its message written)."""
+    client = VPlusClient("sim", 1, clock, timeout=timeout)
+    link, transport = attach(client)
+    call = asyncio.ensure_future(client.execute(command))
+    await clock.sleep(0)
+    return client, link, transport, call
+
+
 def ids(transport: FakeTransport) -> list[str]:
     return [line.split(b":")[0].decode() for chunk in transport.written for line in chunk.split(b"\r\n") if line]
 
@@ -76,10 +85,7 @@ junk = st.binary(max_size=120)
 @given(st.lists(junk, max_size=6))
 def test_random_bytes_from_the_server_end_a_call_with_a_client_error_never_a_crash(chunks: list[bytes]) -> None:
     async def main(clock: Clock) -> None:
-        client = VPlusClient("sim", 1, clock, timeout=1.0)
-        link, _ = attach(client)
-        call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await clock.sleep(0)
+        client, link, transport, call = await started(clock, codec.ENABLE_AIR, 1.0)
         for chunk in chunks:
             link.data_received(chunk)  # must not raise, whatever arrives
         try:
@@ -95,10 +101,7 @@ def test_random_bytes_from_the_server_end_a_call_with_a_client_error_never_a_cra
 @given(st.integers(min_value=1, max_value=60))
 def test_a_truncated_ack_followed_by_close_is_a_lost_connection(cut: int) -> None:
     async def main(clock: Clock) -> None:
-        client = VPlusClient("sim", 1, clock, timeout=5.0)
-        link, transport = attach(client)
-        call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await clock.sleep(0)
+        client, link, transport, call = await started(clock, codec.ENABLE_AIR, 5.0)
         link.data_received(ack_for(ids(transport)[0])[:cut])
         link.eof_received()
         with pytest.raises(ConnectionLost) as caught:
@@ -110,10 +113,7 @@ def test_a_truncated_ack_followed_by_close_is_a_lost_connection(cut: int) -> Non
 
 def test_an_endless_line_from_the_server_drops_the_link(run_sim: Run) -> None:
     async def main(clock: Clock) -> None:
-        client = VPlusClient("sim", 1, clock)
-        link, _ = attach(client)
-        call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await clock.sleep(0)
+        client, link, transport, call = await started(clock, codec.ENABLE_AIR)
         link.data_received(b"9" * 400)
         with pytest.raises(ConnectionLost, match="stream out of step"):
             await call
@@ -124,10 +124,7 @@ def test_an_endless_line_from_the_server_drops_the_link(run_sim: Run) -> None:
 
 def test_a_status_other_than_done_is_a_protocol_error(run_sim: Run) -> None:
     async def main(clock: Clock) -> None:
-        client = VPlusClient("sim", 1, clock)
-        link, transport = attach(client)
-        call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await clock.sleep(0)
+        client, link, transport, call = await started(clock, codec.ENABLE_AIR)
         msg_id = ids(transport)[0]
         link.data_received(f"{msg_id}:failed:1.000,1.000:0.000,0.000,0.000,0.000,0.000,0.000\r\n".encode())
         with pytest.raises(ProtocolError, match="status 'failed'"):
@@ -138,10 +135,7 @@ def test_a_status_other_than_done_is_a_protocol_error(run_sim: Run) -> None:
 
 def test_cancelling_a_call_keeps_its_late_acks_harmless(run_sim: Run) -> None:
     async def main(clock: Clock) -> None:
-        client = VPlusClient("sim", 1, clock)
-        link, transport = attach(client)
-        call = asyncio.ensure_future(client.execute(codec.ENABLE_AIR))
-        await clock.sleep(0)
+        client, link, transport, call = await started(clock, codec.ENABLE_AIR)
         call.cancel()
         with pytest.raises(asyncio.CancelledError):
             await call
