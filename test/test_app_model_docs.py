@@ -10,7 +10,7 @@ from app_functions.registry import full_catalog
 from execution_engine.app_model import validate_application
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "application_xml.md"
-BLOCKS = re.findall(r"```(\w+)\n(.*?)```", DOC.read_text(), re.S)
+BLOCKS: list[tuple[str, str]] = re.findall(r"```(\w+)\n(.*?)```", DOC.read_text(), re.S)
 
 
 def example(start: str) -> str:

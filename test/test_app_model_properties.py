@@ -153,8 +153,8 @@ def test_every_element_and_attribute_is_located_exactly(body: str, prefix: str) 
     for element in root.iter(etree.Element):
         where = source.element(element)
         line = lines[where.line - 1]
-        assert line[where.col - 1:].startswith("<" + element.tag), (element.tag, where)
-        for attribute in element.attrib:
+        assert line[where.col - 1:].startswith(f"<{element.tag}"), (element.tag, where)
+        for attribute in map(str, element.attrib):
             spot = source.attribute(element, attribute)
             assert re.match(re.escape(attribute) + r"\s*=", lines[spot.line - 1][spot.col - 1:]), (attribute, spot)
 

@@ -11,6 +11,7 @@ once an application names the robot.
 """
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
@@ -24,7 +25,8 @@ from core_functions.robots import RobotModel
 from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, Location, has_errors, sorted_diagnostics
 from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument, read_xml
 from execution_engine.app_model.schema import validate_structure
-from execution_engine.transport.wire import CellFrame, CellSnapshot
+from core_functions.cell_index import CellFrame
+from execution_engine.transport.wire import CellSnapshot
 
 WORLD = "world"
 _LENGTH = {"m": 1.0, "mm": 1e-3}
@@ -229,7 +231,7 @@ class _CellReader:
     def free_attributes(self, element: etree._Element, known: tuple[str, ...]) -> dict[str, str]:
         free: dict[str, str] = {}
         for key, value in element.attrib.items():
-            if key in known or not isinstance(key, str) or key.startswith("{"):
+            if not isinstance(key, str) or not isinstance(value, str) or key in known or key.startswith("{"):
                 continue
             free[key] = value
             lookalike = next((k for k in known if _one_edit_apart(key, k)), None)
@@ -312,8 +314,7 @@ class _CellReader:
         return True
 
     def check_tree(self, drafts: dict[str, _FrameDraft]) -> dict[str, Frame] | None:
-        import difflib
-
+        """Known parents first (an unknown one is the thing to fix), then cycles."""
         ok = True
         for draft in drafts.values():
             parent = draft.frame.parent

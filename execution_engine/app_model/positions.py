@@ -103,7 +103,8 @@ class SourceMap:
         if offset is not None:
             return offset
         starts = self._lines()
-        line = min(max(element.sourceline or 1, 1), len(starts))
+        sourceline = element.sourceline
+        line = min(max(sourceline if isinstance(sourceline, int) else 1, 1), len(starts))
         end = starts[line] if line < len(starts) else len(self.text)
         found = self.text.find("<" + qualified_name(element), starts[line - 1], end)
         return found if found >= 0 else starts[line - 1]

@@ -78,10 +78,6 @@ class ApplicationDraft:
     operations: list[OperationSite] = field(default_factory=list)
 
 
-def _is_element(node: etree._Element) -> bool:
-    return isinstance(node.tag, str)
-
-
 class ApplicationReader:
     def __init__(self, doc: XmlDocument) -> None:
         self.doc = doc
@@ -103,7 +99,7 @@ class ApplicationReader:
             self.groups = frozenset(draft.robot.group_names)
         ids: dict[str, OperationSite] = {}
         for child in root:
-            if not _is_element(child):
+            if not isinstance(child.tag, str):  # a comment or processing instruction
                 continue
             at = self.walk.visit(child)
             if child.tag == "operation":

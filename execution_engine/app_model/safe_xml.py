@@ -153,6 +153,6 @@ def parse_bytes(data: bytes, *, path: Path, display: str) -> tuple[XmlDocument |
     if root is None:
         return None, [Diagnostic(display, 1, 1, "no XML element found")]
     docinfo = root.getroottree().docinfo
-    if docinfo.doctype or docinfo.internalDTD is not None:  # defence in depth; refused above already
+    if getattr(docinfo, "doctype", "") or getattr(docinfo, "internalDTD", None) is not None:  # defence in depth
         return None, [Diagnostic(display, 1, 1, "DTDs are not allowed")]
     return XmlDocument(path=path, root=root, source=SourceMap(display, text, root)), []

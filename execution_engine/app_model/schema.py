@@ -50,11 +50,10 @@ class SchemaInfo:
 
     name: str
     schema: etree.XMLSchema
-    root: str
+    root: str  # the element a document must start with
     attributes: dict[str, dict[str, str]] = field(default_factory=dict)  # element -> attribute -> type
-    open_attributes: frozenset[str] = frozenset()  # elements that accept free attributes
     children: dict[str, tuple[str, ...]] = field(default_factory=dict)  # element -> allowed child elements
-    type_docs: dict[str, str] = field(default_factory=dict)  # simple type -> what it accepts
+    type_docs: dict[str, str] = field(default_factory=dict)  # simple type -> what it accepts, in words
 
 
 def _child_elements(complex_type: etree._Element) -> tuple[str, ...]:
@@ -70,7 +69,8 @@ def _child_elements(complex_type: etree._Element) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _collect(xsd: etree._Element) -> tuple[dict[str, dict[str, str]], set[str], dict[str, str], str, dict[str, tuple[str, ...]]]:
+def _describe(name: str, xsd: etree._Element, schema: etree.XMLSchema) -> SchemaInfo:
+    """What each element may hold, and the words for each simple type, read off the XSD itself."""
     types = {t.get("name", ""): t for t in xsd.iterfind(f"{XS}complexType")}
     docs: dict[str, str] = {}
     for simple in xsd.iterfind(f"{XS}simpleType"):
@@ -79,24 +79,19 @@ def _collect(xsd: etree._Element) -> tuple[dict[str, dict[str, str]], set[str], 
             docs[simple.get("name", "")] = " ".join(text.split())
     attributes: dict[str, dict[str, str]] = {}
     children: dict[str, tuple[str, ...]] = {}
-    open_elements: set[str] = set()
     for element in xsd.iter(f"{XS}element"):
-        name = element.get("name")
-        if not name:
-            continue
+        element_name = element.get("name")
         complex_type = element.find(f"{XS}complexType")
-        if complex_type is None and element.get("type") in types:
-            complex_type = types[element.get("type", "")]
         if complex_type is None:
+            complex_type = types.get(element.get("type", ""))
+        if not element_name or complex_type is None:
             continue
-        children[name] = _child_elements(complex_type)
-        own = attributes.setdefault(name, {})
+        children[element_name] = _child_elements(complex_type)
+        own = attributes.setdefault(element_name, {})
         for attribute in complex_type.iterfind(f"{XS}attribute"):
             own[attribute.get("name", "")] = attribute.get("type", "xs:string")
-        if complex_type.find(f"{XS}anyAttribute") is not None:
-            open_elements.add(name)
     root = next((e.get("name", "") for e in xsd.iterfind(f"{XS}element")), "")
-    return attributes, open_elements, docs, root, children
+    return SchemaInfo(name=name, schema=schema, root=root, attributes=attributes, children=children, type_docs=docs)
 
 
 @lru_cache(maxsize=None)
@@ -105,11 +100,7 @@ def load_schema(name: str) -> SchemaInfo:
     path: Path = share_path("apps_xml", "schema", f"{name}.xsd")
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
     xsd = etree.parse(str(path), parser)
-    attributes, open_elements, docs, root, children = _collect(xsd.getroot())
-    return SchemaInfo(
-        name=name, schema=etree.XMLSchema(xsd), root=root, attributes=attributes,
-        open_attributes=frozenset(open_elements), type_docs=docs, children=children,
-    )
+    return _describe(name, xsd.getroot(), etree.XMLSchema(xsd))
 
 
 class _PathIndex:
@@ -238,7 +229,8 @@ def validate_structure(doc: XmlDocument, schema: str) -> list[Diagnostic]:
             break
         index = _PathIndex(work)
         unexpected: list[etree._Element] = []
-        for entry in info.schema.error_log:
+        entries: Iterable[etree._LogEntry] = info.schema.error_log  # type: ignore[assignment]  # iterable; stubs lag
+        for entry in entries:
             found = index.find(getattr(entry, "path", None))
             node = original.get(found, found) if original is not None and found is not None else found
             match = _ELEMENT_MSG.match(entry.message or "")
@@ -281,8 +273,3 @@ def _where(doc: XmlDocument, node: etree._Element | None, attribute: str | None,
     if attribute is not None:
         return doc.source.attribute(node, attribute)
     return doc.source.element(node)
-
-
-def known_elements(schema: str) -> Iterable[str]:
-    """Element names declared by a schema (used by tests to keep the XSD and robots in step)."""
-    return load_schema(schema).attributes.keys()
