@@ -17,8 +17,8 @@ from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic,
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.app_model.positions import SourceMap
 from execution_engine.app_model.reader import ApplicationDraft, ApplicationReader, OperationSite
-from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, read_xml
-from execution_engine.app_model.schema import validate_structure
+from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES
+from execution_engine.app_model.schema import read_structured
 from execution_engine.app_model.validation import ApplicationChecker, CheckedCall
 
 
@@ -45,11 +45,8 @@ def read_application(
 
 
 def _read_application(path: Path, catalog: Catalog, max_bytes: int) -> tuple[Application | None, list[Diagnostic]]:
-    doc, diagnostics = read_xml(path, max_bytes=max_bytes)
+    doc, diagnostics = read_structured(path, "application", max_bytes=max_bytes)
     if doc is None:
-        return None, diagnostics
-    diagnostics = validate_structure(doc, "application")
-    if doc.root.tag != "application":
         return None, sorted_diagnostics(diagnostics)
     reader = ApplicationReader(doc)
     draft = reader.read()

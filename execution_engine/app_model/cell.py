@@ -23,8 +23,8 @@ from lxml import etree
 from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
 from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, Location, has_errors, sorted_diagnostics
-from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument, read_xml
-from execution_engine.app_model.schema import validate_structure
+from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument
+from execution_engine.app_model.schema import read_structured
 from core_functions.cell_index import CellFrame
 from execution_engine.transport.wire import CellSnapshot
 
@@ -396,11 +396,8 @@ def _one_edit_apart(a: str, b: str) -> bool:
 # ====================================================================== API
 def read_cell(path: Path, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES) -> tuple[Cell | None, list[Diagnostic]]:
     """The cell at ``path`` (None when it has errors) and every diagnostic, sorted."""
-    doc, diagnostics = read_xml(Path(path), display=display, max_bytes=max_bytes)
+    doc, diagnostics = read_structured(Path(path), "cell", display=display, max_bytes=max_bytes)
     if doc is None:
-        return None, diagnostics
-    diagnostics = validate_structure(doc, "cell")
-    if doc.root.tag != "cell":
         return None, sorted_diagnostics(diagnostics)
     reader = _CellReader(doc)
     cell = reader.read(structure_ok=not has_errors(diagnostics))

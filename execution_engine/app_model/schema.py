@@ -19,7 +19,7 @@ from pathlib import Path
 from lxml import etree
 
 from execution_engine.app_model.diagnostics import Diagnostic, Location
-from execution_engine.app_model.safe_xml import XmlDocument
+from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument, read_xml
 from execution_engine.resources import share_path
 
 XS = "{http://www.w3.org/2001/XMLSchema}"
@@ -273,3 +273,15 @@ def _where(doc: XmlDocument, node: etree._Element | None, attribute: str | None,
     if attribute is not None:
         return doc.source.attribute(node, attribute)
     return doc.source.element(node)
+
+
+def read_structured(path: Path, schema: str, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES) -> tuple[XmlDocument | None, list[Diagnostic]]:
+    """Read ``path`` safely and check it against ``schema``: the document (None when it is unreadable
+    or has the wrong root element, as then nothing more can be said) and the problems so far."""
+    doc, diagnostics = read_xml(path, display=display, max_bytes=max_bytes)
+    if doc is None:
+        return None, diagnostics
+    diagnostics = validate_structure(doc, schema)
+    if doc.root.tag != load_schema(schema).root:
+        return None, diagnostics
+    return doc, diagnostics
