@@ -1,0 +1,189 @@
+"""``<Rob>`` and ``<Sen>`` packets, encoded and decoded as a configuration says.
+
+RSI packets are small XML documents, one per 4 ms cycle.  The encoder is compiled once per
+configuration into a byte template with one ``%`` slot per value, so building a reply is one
+formatting call and no tree.  The decoder parses with lxml configured to resolve nothing and
+refuses, before parsing, what no controller sends: oversized datagrams, DTDs, entities and
+processing instructions.  Every failure is a :class:`PacketError` naming the field, so the
+loop can count and report a bad datagram and carry on with the next one.
+
+Values travel in protocol units (mm, degrees); converting to SI is the caller's job.
+A codec owns an lxml parser, which must not be shared between threads: one codec per thread.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from xml.sax.saxutils import escape
+
+from lxml import etree
+
+from robot_bridges.kuka_rsi.config import Field, RsiConfig
+
+Value = bool | int | float | str
+
+#: Largest datagram accepted.  Real packets are well below 1 kB; RSI itself refuses larger.
+MAX_PACKET_BYTES = 4096
+#: The ``Type`` attribute of every ``<Rob>`` packet.
+ROB_TYPE = "KUKA"
+_MAX_IPOC = 2**63 - 1
+_MAX_STRING = 256
+_DOUBLE_FORMAT = "%.6f"
+
+
+class PacketError(ValueError):
+    """A datagram that is not a valid packet for the configuration; the message says why."""
+
+
+def _double(raw: str, key: str) -> float:
+    try:
+        value = float(raw)
+    except ValueError:
+        raise PacketError(f"{key}={raw[:32]!r} is not a number") from None
+    if not math.isfinite(value) or "_" in raw:
+        raise PacketError(f"{key}={raw[:32]!r} is not a finite decimal number")
+    return value
+
+
+def _long(raw: str, key: str) -> int:
+    text = raw.strip()
+    if not text.lstrip("+-").isdigit() or len(text) > 20:
+        raise PacketError(f"{key}={raw[:32]!r} is not an integer")
+    return int(text)
+
+
+def _bool(raw: str, key: str) -> bool:
+    text = raw.strip().upper()
+    if text in ("1", "TRUE"):
+        return True
+    if text in ("0", "FALSE"):
+        return False
+    raise PacketError(f"{key}={raw[:32]!r} is not a boolean (0, 1, TRUE, FALSE)")
+
+
+def _string(raw: str, key: str) -> str:
+    if len(raw) > _MAX_STRING:
+        raise PacketError(f"{key} is longer than {_MAX_STRING} characters")
+    return raw
+
+
+_CONVERTERS = {"DOUBLE": _double, "LONG": _long, "BOOL": _bool, "STRING": _string}
+_FORMATS = {"DOUBLE": _DOUBLE_FORMAT, "LONG": "%d", "BOOL": "%d", "STRING": "%s"}
+_DEFAULTS: dict[str, Value] = {"DOUBLE": 0.0, "LONG": 0, "BOOL": False, "STRING": ""}
+
+
+class PacketCodec:
+    """Encoder and decoder of one packet direction (``Rob`` or ``Sen``) of one configuration."""
+
+    def __init__(self, fields: Sequence[Field], root: str, type_value: str, max_bytes: int = MAX_PACKET_BYTES) -> None:
+        self.fields = tuple(fields)
+        self.root = root
+        self.type_value = type_value
+        self.max_bytes = max_bytes
+        self.keys = tuple(f.key for f in self.fields)
+        self.index = {key: i for i, key in enumerate(self.keys)}
+        self.defaults: tuple[Value, ...] = tuple(_DEFAULTS[f.type] for f in self.fields)
+        self._has_strings = any(f.type == "STRING" for f in self.fields)
+        # Group values by element, elements in order of first appearance.
+        groups: dict[str, list[int]] = {}
+        for i, f in enumerate(self.fields):
+            groups.setdefault(f.element, []).append(i)
+        self._groups = {
+            name: tuple((i, self.fields[i].attribute, _CONVERTERS[self.fields[i].type], self.fields[i].key) for i in idx)
+            for name, idx in groups.items()
+        }
+        order = [i for idx in groups.values() for i in idx]
+        self._slot_order: tuple[int, ...] | None = None if order == list(range(len(order))) else tuple(order)
+        parts = [f'<{root} Type="{type_value}">']
+        for name, idx in groups.items():
+            first = self.fields[idx[0]]
+            if first.attribute is None:
+                parts.append(f"<{name}>{_FORMATS[first.type]}</{name}>")
+            else:
+                attrs = " ".join(f'{self.fields[i].attribute}="{_FORMATS[self.fields[i].type]}"' for i in idx)
+                parts.append(f"<{name} {attrs}/>")
+        parts.append(f"<IPOC>%d</IPOC></{root}>")
+        self._template = "".join(parts).encode("ascii")
+        self._parser = etree.XMLParser(
+            resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False, remove_comments=True, remove_pis=True
+        )
+
+    @classmethod
+    def rob(cls, config: RsiConfig, max_bytes: int = MAX_PACKET_BYTES) -> PacketCodec:
+        """Controller -> external system."""
+        return cls(config.send_fields, "Rob", ROB_TYPE, max_bytes)
+
+    @classmethod
+    def sen(cls, config: RsiConfig, max_bytes: int = MAX_PACKET_BYTES) -> PacketCodec:
+        """External system -> controller; its ``Type`` is the configured SENTYPE."""
+        return cls(config.receive_fields, "Sen", config.sentype, max_bytes)
+
+    # ------------------------------------------------------------------------------ encode
+    def encode(self, values: Sequence[Value], ipoc: int) -> bytes:
+        """The packet for ``values`` (in field order) and ``ipoc``: one formatting of the template."""
+        if self._slot_order is not None:
+            values = [values[i] for i in self._slot_order]
+        if self._has_strings:
+            values = [escape(v).encode("utf-8") if isinstance(v, str) else v for v in values]
+        return self._template % (*values, ipoc)
+
+    def encode_map(self, values: Mapping[str, Value], ipoc: int) -> bytes:
+        """The packet for ``{key: value}``; keys not given take their type's zero value."""
+        unknown = set(values) - set(self.index)
+        if unknown:
+            raise KeyError(f"not in the <{self.root}> configuration: {', '.join(sorted(unknown))}")
+        return self.encode([values.get(k, d) for k, d in zip(self.keys, self.defaults)], ipoc)
+
+    # ------------------------------------------------------------------------------ decode
+    def decode_into(self, data: bytes, out: list[Value]) -> int:
+        """Parse ``data`` into ``out`` (field order; untouched on error) and return its IPOC."""
+        size = len(data)
+        if size > self.max_bytes:
+            raise PacketError(f"datagram of {size} bytes exceeds the {self.max_bytes}-byte limit")
+        if b"<!" in data or b"<?" in data:
+            raise PacketError("declarations, DTDs, entities and processing instructions are not allowed in a packet")
+        try:
+            root = etree.fromstring(data, self._parser)
+        except etree.XMLSyntaxError as error:
+            raise PacketError(f"not well-formed XML: {error.msg or error}") from None
+        if root.tag != self.root:
+            raise PacketError(f"root element <{root.tag}> where <{self.root}> is expected")
+        kind = root.get("Type")
+        if kind != self.type_value:
+            raise PacketError(f"<{self.root} Type={kind!r}> where Type={self.type_value!r} is configured")
+        staged: list[tuple[int, Value]] = []
+        seen: set[str] = set()
+        ipoc = -1
+        for child in root:
+            tag = child.tag
+            if tag in seen:
+                raise PacketError(f"<{tag}> appears twice")
+            seen.add(tag)
+            if tag == "IPOC":
+                ipoc = _long(child.text or "", "IPOC")
+                continue
+            group = self._groups.get(tag)
+            if group is None:
+                continue  # a value this configuration does not use
+            for index, attribute, convert, key in group:
+                raw = child.text if attribute is None else child.get(attribute)
+                if raw is None:
+                    raise PacketError(f"{key} is missing")
+                staged.append((index, convert(raw, key)))
+        if ipoc < 0 or ipoc > _MAX_IPOC:
+            raise PacketError("IPOC is missing" if ipoc == -1 else f"IPOC {ipoc} is out of range")
+        if len(staged) != len(self.fields):
+            missing = [k for k in self.keys if self._element_of(k) not in seen]
+            raise PacketError(f"missing values: {', '.join(missing[:6])}")
+        for index, value in staged:
+            out[index] = value
+        return ipoc
+
+    def decode(self, data: bytes) -> tuple[int, dict[str, Value]]:
+        """Parse ``data`` into ``(ipoc, {key: value})`` (convenient, not for the hot path)."""
+        out: list[Value] = list(self.defaults)
+        ipoc = self.decode_into(data, out)
+        return ipoc, dict(zip(self.keys, out))
+
+    def _element_of(self, key: str) -> str:
+        return self.fields[self.index[key]].element
