@@ -140,6 +140,7 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
         rsi_listen=args.rsi_listen,
         faults=tuple(args.fault or ()),
         seed=args.seed,
+        extra=dict(args.backend_option or ()),
     )
     backend = await create_backend(args.robot or app.robot.default_backend, clock, options)
     machine_parameters = {"trajectory_db": args.trajectory_db} if args.trajectory_db else {}
@@ -211,6 +212,13 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
     return EXIT_STOPPED if report.outcome == "stopped" else EXIT_INVALID
 
 
+def parse_option(text: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise argparse.ArgumentTypeError(f"back-end options are KEY=VALUE, got {text!r}")
+    return key.strip(), value.strip()
+
+
 # ---------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m execution_engine", description="Skill-based robot applications in XML.")
@@ -230,6 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--rsi-listen", metavar="HOST:PORT", help="KUKA RSI: serve a real controller on this address")
     run.add_argument("--fault", action="append", metavar="GROUP:KIND@FRACTION", help="simulator fault injection, e.g. right_arm:joint_limit@0.5 (repeatable)")
     run.add_argument("--seed", type=int, default=0, help="simulator random seed (vision noise)")
+    run.add_argument("--backend-option", action="append", type=parse_option, metavar="KEY=VALUE", help="back-end specific option, e.g. timeout=20 (repeatable; each back end lists and checks its own)")
     run.add_argument("--trajectory-db", metavar="PATH", help="SQLite file for recorded trajectories")
     run.add_argument("--interactive", action="store_true", help="read operator commands from the terminal")
     run.add_argument("-q", "--quiet", action="store_true", help="print only the summary")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -53,7 +54,8 @@ async def deploy_local(
 ) -> Deployment:
     """Start every node of a robot cell on one in-process transport."""
     transport = transport or LocalTransport(clock)
-    bridge = BridgeNode(transport.create_node(f"{backend.name.replace('-', '_')}_bridge", parameters=bridge_parameters), backend)
+    node_name = re.sub(r"\W+", "_", backend.name).strip("_") or "robot"
+    bridge = BridgeNode(transport.create_node(f"{node_name}_bridge", parameters=bridge_parameters), backend)
     await bridge.start()
     machines: dict[str, GroupMachine] = {}
     for group in robot.group_names:
