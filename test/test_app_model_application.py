@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from app_model_catalog import APP_XML, CELL_XML, small_catalog
+from app_model_support import APP_XML, CELL_XML, at, small_catalog
 
 from core_functions.catalog import Catalog, ParamSpec, ParamType, skill
 from execution_engine.app_model import (
@@ -16,20 +16,6 @@ from execution_engine.app_model import (
 )
 
 CATALOG = small_catalog()
-
-
-def pos(text: str, needle: str, occurrence: int = 1) -> tuple[int, int]:
-    """1-based line and column of the n-th ``needle`` in ``text``."""
-    index = -1
-    for _ in range(occurrence):
-        index = text.index(needle, index + 1)
-    line = text.count("\n", 0, index) + 1
-    return line, index - (text.rfind("\n", 0, index) + 1) + 1
-
-
-def at(path: Path, text: str, needle: str, message: str, occurrence: int = 1) -> str:
-    line, col = pos(text, needle, occurrence)
-    return f"{path}:{line}:{col}: {message}"
 
 
 def app(body: str, *, robot: str = "nextage", cell: str | None = "cells/rivet_cell.xml", head: str = "") -> str:

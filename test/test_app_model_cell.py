@@ -6,23 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from app_model_catalog import CELL_XML
+from app_model_support import CELL_XML, at
 
 from core_functions.geometry import Pose
 from core_functions.robots import ADEPT_VIPER_S850, NEXTAGE_OPEN
 from execution_engine.app_model import ApplicationError, Cell, Frame, check_joint_poses, load_cell, validate_cell
-
-
-def pos(text: str, needle: str, occurrence: int = 1) -> tuple[int, int]:
-    index = -1
-    for _ in range(occurrence):
-        index = text.index(needle, index + 1)
-    return text.count("\n", 0, index) + 1, index - (text.rfind("\n", 0, index) + 1) + 1
-
-
-def at(path: Path, text: str, needle: str, message: str, occurrence: int = 1) -> str:
-    line, col = pos(text, needle, occurrence)
-    return f"{path}:{line}:{col}: {message}"
 
 
 def write(tmp_path: Path, text: str, name: str = "cell.xml") -> Path:

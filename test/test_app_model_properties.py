@@ -5,7 +5,7 @@ import re
 from pathlib import Path
 
 import pytest
-from app_model_catalog import APP_XML, CELL_XML, small_catalog
+from app_model_support import APP_XML, CELL_XML, small_catalog
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lxml import etree

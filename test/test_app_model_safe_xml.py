@@ -6,7 +6,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from app_model_catalog import APP_XML, CELL_XML, small_catalog
+from app_model_support import APP_XML, CELL_XML, small_catalog
 
 from execution_engine.app_model import ApplicationError, load_application, load_cell, validate_application
 from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, _hardened_parser, read_xml

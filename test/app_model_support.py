@@ -1,12 +1,29 @@
-"""A small function catalog for the application-model tests, shaped like the real one.
+"""Support for the application-model tests: a small catalog, sample files, and position helpers.
 
 The tests need functions of every kind the validator treats specially (cell references, joint
 poses, full-body and master/slave synchronisation, hand holds) without depending on the app
-function libraries, so the model can be tested on its own.
+function libraries, so the model can be tested on its own.  Expected positions are computed from
+the test's own text (``at``), independently of how the loader finds them.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from core_functions.catalog import Catalog, Hold, ParamSpec, ParamType, skill
+
+
+def pos(text: str, needle: str, occurrence: int = 1) -> tuple[int, int]:
+    """1-based line and column of the n-th ``needle`` in ``text``."""
+    index = -1
+    for _ in range(occurrence):
+        index = text.index(needle, index + 1)
+    return text.count("\n", 0, index) + 1, index - (text.rfind("\n", 0, index) + 1) + 1
+
+
+def at(path: Path, text: str, needle: str, message: str, occurrence: int = 1) -> str:
+    """The diagnostic ``FILE:LINE:COL: message`` expected at the n-th ``needle``."""
+    line, col = pos(text, needle, occurrence)
+    return f"{path}:{line}:{col}: {message}"
 
 
 class Core:
