@@ -287,6 +287,13 @@ def test_schema_errors_in_plain_words(work: Path) -> None:
     ]
 
 
+def test_description_holds_text_only(work: Path) -> None:
+    text = app('<operation id="1"><left_arm><function name="wait"/></left_arm></operation>\n',
+               head="<description>Rivets <b>fast</b></description>\n")
+    path, found = check(work, text)
+    assert found == [at(path, text, "<description>", "<description> holds text only, no elements")]
+
+
 def test_wrong_root_element(work: Path) -> None:
     path, found = check(work, '<cell name="x"/>\n')
     assert found == [f"{path}:1:1: the root element is <cell>; this file must start with <application>"]

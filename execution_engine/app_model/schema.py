@@ -177,6 +177,8 @@ class _Rewriter:
             return f"<{element}> needs {_one_of(expected_names)} inside"
         if detail.startswith("This element is not expected"):
             return self._unexpected(element, parent_tag, expected_names)
+        if detail.startswith("Element content is not allowed"):
+            return f"<{element}> holds text only, no elements"
         if detail.startswith("Character content is not allowed"):
             return f"<{element}> cannot contain text; write values as attributes"
         if detail.startswith("Character content other than whitespace"):
