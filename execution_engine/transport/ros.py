@@ -205,7 +205,6 @@ class _RosService(ServiceServer):
         transport = self.node.transport
         future = asyncio.run_coroutine_threadsafe(self._call(request), transport.loop)
         wall = transport.clock.to_wall(transport.handler_timeout)
-        transport.in_flight.add(future)
         try:
             return future.result(timeout=wall)
         except concurrent.futures.TimeoutError:
@@ -213,11 +212,20 @@ class _RosService(ServiceServer):
             raise TimeoutError(f"handler did not answer within {transport.handler_timeout:g} s") from None
         except concurrent.futures.CancelledError:
             raise TransportError("handler cancelled: the node is shutting down") from None
-        finally:
-            transport.in_flight.discard(future)
 
     async def _call(self, request: Any) -> Any:
-        response = await self._handler(request)
+        """Loop thread. Registered with the transport so shutdown can cancel it: both run on the
+        loop, so a handler either is registered before shutdown looks or sees it has begun."""
+        transport = self.node.transport
+        if transport.stopping:
+            raise TransportError("the node is shutting down")
+        task = asyncio.current_task()
+        assert task is not None
+        transport.handlers.add(task)
+        try:
+            response = await self._handler(request)
+        finally:
+            transport.handlers.discard(task)
         if type(response) is not self.srv_type.Response:
             raise TransportError(f"service {self.name} handler answered {type(response).__name__}, not {self.srv_type.Response.__name__}")
         return response
@@ -444,11 +452,11 @@ class RosTransport(Transport):
             self._owns_context = True
         self._nodes: dict[str, RosNode] = {}
         self._retired: list[Any] = []
-        self._stopping = False
+        self.stopping = False
         self._stopped = False
         self.spin_error: BaseException | None = None
         self._closed = asyncio.Event()
-        self.in_flight: set[concurrent.futures.Future[Any]] = set()  # service handlers running on the loop
+        self.handlers: set[asyncio.Task[Any]] = set()  # service handlers running on the loop
         self._executor = self.api.executor_class(num_threads=threads)
         self._thread = threading.Thread(target=self._spin, name="rclpy executor", daemon=True)
         self._thread.start()
@@ -460,7 +468,7 @@ class RosTransport(Transport):
         except self.api.external_shutdown:  # rclpy.shutdown() elsewhere: an orderly end
             log.info("rclpy was shut down; the executor stopped")
         except BaseException as error:  # noqa: BLE001 - the loop must learn that ROS is gone
-            if not self._stopping:
+            if not self.stopping:
                 self.spin_error = error
                 log.error("rclpy executor stopped: %s: %s", type(error).__name__, error)
         finally:
@@ -481,7 +489,7 @@ class RosTransport(Transport):
     def create_node(
         self, name: str, namespace: str = "/", parameters: Mapping[str, ParameterValue] | None = None
     ) -> RosNode:
-        if self._stopping:
+        if self.stopping:
             raise TransportError("the ros transport is shut down")
         node = RosNode(self, name, namespace, parameters)
         if node.fully_qualified_name in self._nodes:
@@ -514,13 +522,13 @@ class RosTransport(Transport):
 
     async def shutdown(self) -> None:
         """Destroy every node, stop the executor (bounded), and shut rclpy down if we started it."""
-        if self._stopping:
+        if self.stopping:
             return
-        self._stopping = True
+        self.stopping = True
         for node in list(self._nodes.values()):
             node.destroy()
-        for future in list(self.in_flight):  # their executor threads answer "cancelled" at once
-            future.cancel()
+        for task in list(self.handlers):  # their executor threads answer "cancelled" at once
+            task.cancel()
         wall = self.clock.to_wall(self.shutdown_timeout)
         try:
             # Blocking calls go to a worker thread: in-flight service callbacks need this loop.
