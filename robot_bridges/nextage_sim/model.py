@@ -68,6 +68,7 @@ class IKOptions:
     max_step: float = 0.5  # rad per iteration, keeps DLS steps inside the linear region
     damping: float = 1e-6  # bias of the squared DLS damping (which also grows with the error)
     restart_seed: int = 20170419
+    rotation_weight: float = 0.1  # m per rad: how the error trades orientation against position
 
 
 @dataclass(frozen=True)
@@ -102,6 +103,8 @@ class ArmKinematics:
             raise RuntimeError(f"{group}: reduced arm model has unexpected joint order {arm_ids}")
         self.lower = full.lower[self.indices].copy()
         self.upper = full.upper[self.indices].copy()
+        self._unbounded_lower = np.full(6, -np.inf)
+        self._unbounded_upper = np.full(6, np.inf)
         self._chest_zero_inv = _rigid_inverse(full.frame_matrix(full.neutral(), TORSO_LINK))
         self._initial = full.named_pose("initial")[self.indices]
         rng = np.random.default_rng(options.restart_seed + (0 if group == "left_arm" else 1))
@@ -149,9 +152,12 @@ class ArmKinematics:
         warm = np.clip(q_full[self.indices], self.lower, self.upper)
         best: tuple[float, float, float] | None = None
         attempt = 0
-        for seed in self._seeds(warm, restarts):
+        for seed, bounded in self._seeds(warm, restarts):
             attempt += 1
-            q, pos_err, rot_err, ok = self._descend(goal_r, goal_p, seed.copy())
+            q, pos_err, rot_err, ok = self._descend(goal_r, goal_p, seed.copy(), bounded)
+            if ok and not bounded:
+                wrapped = self._wrap_into_limits(q, seed)
+                ok, q = wrapped is not None, q if wrapped is None else wrapped
             if ok:
                 return IKSolution(q, pos_err, rot_err, attempt)
             score = pos_err + 0.1 * rot_err
@@ -164,15 +170,33 @@ class ArmKinematics:
             f"{best[1] * 1000:.1f} mm / {math.degrees(best[2]):.2f} deg after {attempt} attempt(s)",
         )
 
-    def _seeds(self, warm: Vector, restarts: bool) -> Iterator[Vector]:
-        """The warm start, then (lazily, only if needed) the fixed restart seeds not equal to it."""
-        yield warm
+    def _seeds(self, warm: Vector, restarts: bool) -> Iterator[tuple[Vector, bool]]:
+        """(seed, bounded) pairs: the warm start inside the limits; then, only if needed and
+        allowed, each of the warm start and the fixed restart seeds free of limits (the answer
+        wrapped back by whole turns, which often lands inside: wrist rolls) and inside them."""
+        yield warm, True
         if restarts:
+            yield warm, False
             for seed in self._restart_seeds:
                 if float(np.max(np.abs(seed - warm))) > 1e-9:
-                    yield seed
+                    yield seed, False
+                    yield seed, True
 
-    def _descend(self, goal_r: Matrix, goal_p: Vector, q: Vector) -> tuple[Vector, float, float, bool]:
+    def _wrap_into_limits(self, q: Vector, seed: Vector) -> Vector | None:
+        """``q`` with joints moved by whole turns into their limits (the same pose), or None.
+
+        Among the turns that fit, each joint takes the one closest to the seed.
+        """
+        turn = 2.0 * math.pi
+        wrapped = q.copy()
+        for i in range(len(q)):
+            fits = [q[i] + k * turn for k in range(-2, 3) if self.lower[i] - 1e-12 <= q[i] + k * turn <= self.upper[i] + 1e-12]
+            if not fits:
+                return None
+            wrapped[i] = min(fits, key=lambda v: abs(v - seed[i]))
+        return wrapped
+
+    def _descend(self, goal_r: Matrix, goal_p: Vector, q: Vector, bounded: bool = True) -> tuple[Vector, float, float, bool]:
         """Levenberg-Marquardt (damped least squares) with a joint-limit-aware step, from one seed.
 
         A step is kept only if it lowers the error, otherwise the damping grows and the step
@@ -182,16 +206,20 @@ class ArmKinematics:
         different pose).  Stops early when progress stalls (a local minimum on the limits).
         """
         opts = self.options
-        lower, upper = self.lower, self.upper
+        lower, upper = (self.lower, self.upper) if bounded else (self._unbounded_lower, self._unbounded_upper)
+        w = opts.rotation_weight
         e = self._error(goal_r, goal_p, q)
         cost = float(e @ e)
         boost = 1.0
         stalled = 0
         for _ in range(opts.max_iterations):
             pos_err, rot_err = _norms(e)
-            if pos_err < opts.position_tolerance and rot_err < opts.orientation_tolerance:
-                return q, pos_err, rot_err, True
+            if pos_err < opts.position_tolerance and rot_err < opts.orientation_tolerance * w:
+                return q, pos_err, rot_err / w, True
             jac = pin.computeFrameJacobian(self.model, self.data, q, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
+            if w != 1.0:
+                jac = jac.copy()
+                jac[3:] *= w
             descent = jac.T @ e
             blocked = ((q <= lower + 1e-9) & (descent < 0)) | ((q >= upper - 1e-9) & (descent > 0))
             if blocked.any():
@@ -218,8 +246,8 @@ class ArmKinematics:
             if stalled >= 10:
                 break
         pos_err, rot_err = _norms(e)
-        ok = pos_err < opts.position_tolerance and rot_err < opts.orientation_tolerance
-        return q, pos_err, rot_err, ok
+        ok = pos_err < opts.position_tolerance and rot_err < opts.orientation_tolerance * w
+        return q, pos_err, rot_err / w, ok
 
     def _error(self, goal_r: Matrix, goal_p: Vector, q: Vector) -> Vector:
         """Position error and rotation vector of goal w.r.t. the flange, both in world axes."""
@@ -227,7 +255,7 @@ class ArmKinematics:
         placement = pin.updateFramePlacement(self.model, self.data, self.frame_id)
         e = np.empty(6)
         e[:3] = goal_p - placement.translation
-        e[3:] = pin.log3(goal_r @ placement.rotation.T)
+        e[3:] = pin.log3(goal_r @ placement.rotation.T) * self.options.rotation_weight
         return e
 
 
