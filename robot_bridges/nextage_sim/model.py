@@ -204,6 +204,7 @@ class ArmKinematics:
         further out are taken out of the Jacobian, so the other joints do the work.  Every
         iterate is inside the limits, and so is the answer (never clipped afterwards into a
         different pose).  Stops early when progress stalls (a local minimum on the limits).
+        With ``bounded`` false the limits are ignored; the caller wraps the answer back.
         """
         opts = self.options
         lower, upper = (self.lower, self.upper) if bounded else (self._unbounded_lower, self._unbounded_upper)
