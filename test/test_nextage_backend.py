@@ -520,13 +520,15 @@ def test_vision_fails_for_unknown_or_distant_features(run_sim: Run[None]) -> Non
 
 # ------------------------------------------------------------------- clocks, options
 def test_the_simulator_runs_on_a_scaled_real_clock() -> None:
-    async def main(clock: Clock) -> float:
+    async def main(clock: Clock) -> tuple[float, float]:
         backend = NextageSimBackend(clock, control_period=0.05)
-        _, duration = await timed(clock, backend.execute("left_arm", MoveJoints((0.3,), joint_names=("LARM_JOINT0",), relative=True)))
-        return duration
+        move = MoveJoints((0.3,), joint_names=("LARM_JOINT0",), relative=True)
+        result, duration = await timed(clock, backend.execute("left_arm", move))
+        return duration, result.positions[0]
 
-    duration = run_with_clock(main, scaled_clock(200.0))
-    assert duration >= 0.3 / 1.0  # run time, not wall time: at least the planned duration
+    duration, reached = run_with_clock(main, scaled_clock(200.0))
+    assert duration >= 2.0 * math.sqrt(0.3 / 1.5) - 1e-9  # run time: never sooner than planned (a 0.3 rad triangle)
+    assert reached == pytest.approx(math.radians(0.6) + 0.3)
 
 
 def test_registry_factory_reads_the_options(run_sim: Run[None]) -> None:
