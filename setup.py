@@ -42,7 +42,7 @@ setup(
         *tree("apps_xml"),
     ],
     install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7"],
-    extras_require={"test": ["pytest>=7", "hypothesis>=6.80"]},
+    extras_require={"test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6"]},
     zip_safe=True,
     entry_points={
         "console_scripts": [

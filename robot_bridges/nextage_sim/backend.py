@@ -649,28 +649,51 @@ class NextageSimBackend(RobotBackend):
         return MotionResult(names, tuple(float(self._q[self.model.index(n)]) for n in names), self.tcp_pose(group))
 
 
+#: The default TCP: at the wrist flange (origin of ``*ARM_JOINT5_Link``), z pointing out of the hand
+#: (the flange's -x, the wrist roll axis), so a frame whose z points into a hole is approached along
+#: +z by the tool -- the convention of the cell models and skills.
+HAND_TOOL = Pose.from_xyz_rpy(0.0, 0.0, 0.0, 0.0, -math.pi / 2, 0.0)
+_EXTRAS = ("initial_pose", "control_period", "tool")
+
+
+def parse_tool(text: str) -> Pose:
+    """``"x y z roll pitch yaw"`` (m, rad) in the flange frame, or ``flange`` for the bare flange."""
+    if text.strip() == "flange":
+        return Pose()
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"nextage-sim: tool must be 'flange' or six numbers x y z roll pitch yaw (m, rad), got {text!r}")
+    return Pose.from_xyz_rpy(*values)
+
+
 async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     """Registry factory (``nextage-sim``): the simulator from CLI / launch options.
 
-    Understands ``faults``, ``seed`` and the extras ``initial_pose`` and ``control_period``; a
-    controller address makes no sense for a simulator and is refused rather than ignored.
+    Understands ``faults``, ``seed`` and the extras ``initial_pose``, ``control_period`` and
+    ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`); a controller address makes
+    no sense for a simulator and is refused rather than ignored.
     """
     if options.robot.name != NEXTAGE_OPEN.name:
         raise ValueError(f"the nextage-sim back end simulates {NEXTAGE_OPEN.name}, not {options.robot.name}")
     given = [n for n, v in (("host", options.host), ("port", options.port), ("rsi_listen", options.rsi_listen)) if v is not None]
     if given:
         raise ValueError(f"the nextage-sim back end is a simulator and takes no {', '.join(given)}")
-    unknown = sorted(set(options.extra) - {"initial_pose", "control_period"})
+    unknown = sorted(set(options.extra) - set(_EXTRAS))
     if unknown:
-        raise ValueError(f"nextage-sim: unknown option(s) {', '.join(unknown)} (known: initial_pose, control_period)")
+        raise ValueError(f"nextage-sim: unknown option(s) {', '.join(unknown)} (known: {', '.join(_EXTRAS)})")
     try:
         period = float(options.extra.get("control_period", "0.01"))
     except ValueError:
         raise ValueError(f"nextage-sim: control_period {options.extra['control_period']!r} is not a number") from None
+    tool = parse_tool(options.extra["tool"]) if "tool" in options.extra else HAND_TOOL
     return NextageSimBackend(
         clock,
         initial_pose=options.extra.get("initial_pose", "initial"),
         control_period=period,
         seed=options.seed,
         faults=[parse_fault(text) for text in options.faults],
+        tools={"left_arm": tool, "right_arm": tool},
     )

@@ -1,0 +1,41 @@
+"""``vplus_bridge``: an Adept V+ controller (AdeptServer over TCP) as a ROS 2 node.
+
+::
+
+    ros2 run dual_arm_executive vplus_bridge --ros-args -p host:=192.168.0.10 -p port:=1234
+    ros2 run dual_arm_executive vplus_bridge            # no host: an AdeptServer simulator in-process
+
+It serves group ``arm``: ``/arm/bridge/command`` in, ``/arm/bridge/feedback``, ``/joint_states`` and
+``/arm/tcp_pose`` out.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from core_functions.robots import ADEPT_VIPER_S850
+from execution_engine.transport.port import Node
+from robot_bridges.backend import BackendOptions
+from robot_bridges.node import BridgeSetup, bridge_main
+
+BACKEND = "vplus"
+
+
+def declare_vplus_parameters(node: Node) -> BridgeSetup:
+    """The V+ bridge's parameters; an empty host starts the simulator."""
+    host = str(node.declare_parameter("host", "", "AdeptServer address ('' = start the simulator on 127.0.0.1)"))
+    port = int(node.declare_parameter("port", 1234, "AdeptServer TCP port"))
+    timeout = float(node.declare_parameter("timeout", 5.0, "ack allowance per command on top of its motion time (s)"))
+    retries = int(node.declare_parameter("retries", 3, "connection attempts after the first"))
+    linear = str(node.declare_parameter("linear", "joint", "linear moves: 'joint' (run joint-interpolated) or 'reject'"))
+    camera = str(node.declare_parameter("camera", "", "what answers vision requests: simulated, none ('' = simulated without host)"))
+    if not 0 < port < 65536:
+        raise ValueError(f"port must be 1..65535, got {port}")
+    extra = {"timeout": repr(timeout), "retries": str(retries), "linear": linear}
+    if camera:
+        extra["camera"] = camera
+    options = BackendOptions(robot=ADEPT_VIPER_S850, host=host or None, port=port, extra=extra)
+    return BridgeSetup(options)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return bridge_main(BACKEND, declare_vplus_parameters, argv)
