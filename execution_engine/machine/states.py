@@ -61,6 +61,15 @@ class MachineState(State):
             return
         self.ctx.send_result(request, "aborted", f"{self.ctx.group} is in {self.name}, not Ready: request refused")
 
+    def refuse_or_fail(self, userdata: MutableMapping[str, Any], event: Event) -> str | None:
+        """While working: a request is refused, a fault is this state's error; anything else is no signal."""
+        if isinstance(event, RequestEvent):
+            self.refuse(event)
+        elif isinstance(event, FaultEvent):
+            userdata["error"] = f"{event.where}: {event.error}"
+            return ERROR
+        return None
+
     async def _control(
         self, op: str, *, keep_done_of: str | None = None, userdata: MutableMapping[str, Any] | None = None
     ) -> str | None:
@@ -202,11 +211,10 @@ class WorkingState(MachineState):
                 outcome = await self._operator(userdata, event, command_id)
                 if outcome is not None:
                     return outcome
-            elif isinstance(event, RequestEvent):
-                self.refuse(event)
-            elif isinstance(event, FaultEvent):
-                userdata["error"] = f"{event.where}: {event.error}"
-                return ERROR
+            else:
+                outcome = self.refuse_or_fail(userdata, event)
+                if outcome is not None:
+                    return outcome
 
     async def _operator(self, userdata: MutableMapping[str, Any], signal: OperatorSignal, command_id: str) -> str | None:
         if signal.command == "pause":
@@ -347,12 +355,8 @@ class SyncState(WorkingState):
             if event.command == "stop":
                 userdata["stop_reason"] = f"stopped by {event.source}"
                 return STOP_SIGNAL
-        elif isinstance(event, RequestEvent):
-            self.refuse(event)
-        elif isinstance(event, FaultEvent):
-            userdata["error"] = f"{event.where}: {event.error}"
-            return ERROR
-        return None  # SyncEvent: the board changed, look again
+            return None
+        return self.refuse_or_fail(userdata, event)  # a SyncEvent: the board changed, look again
 
 
 # ------------------------------------------------------------------ Pause, Stop, Error
