@@ -299,3 +299,53 @@ def default_config_path() -> Path:
 
 def default_config() -> RsiConfig:
     return load_config(default_config_path())
+
+
+@dataclass(frozen=True)
+class RsiRoles:
+    """What the configured tags *mean*: which carry corrections, handshakes, tool outputs.
+
+    The defaults name the tags of ``config/kuka_rsi_ethernet.xml``; a controller configured with
+    other names passes its own.  A role whose tag is absent from the configuration is simply not
+    available (no handshake, no Cartesian correction, ...), and the parts that need it say so.
+    """
+
+    axis_correction: tuple[str, ...] = ("AK.A1", "AK.A2", "AK.A3", "AK.A4", "AK.A5", "AK.A6")
+    cart_correction: tuple[str, ...] = ("RKorr.X", "RKorr.Y", "RKorr.Z", "RKorr.A", "RKorr.B", "RKorr.C")
+    stop: str = "Stop"
+    # Handshake flags sent to the KRL program (ITRA's allowRobotStart / allowRobMove /
+    # allowRobotFinish / requRealTimeEnd) and the outputs by which it acknowledges them.
+    allow_start: str = "B1"
+    allow_move: str = "B2"
+    allow_finish: str = "B3"
+    request_end: str = "B4"
+    task_active: str = "Digout.o1"
+    correction_active: str = "Digout.o2"
+    move_required: str = "Digout.o3"
+    realtime_ended: str = "Digout.o4"
+    #: Tool outputs in the order gripper (closed = 1), air, tool spindle; the robot echoes them in <Rob>.
+    tool_outputs: tuple[str, ...] = ("Tool.o1", "Tool.o2", "Tool.o3")
+
+    def handshake(self, config: RsiConfig) -> bool:
+        """True when the configuration carries all four flags and all four acknowledgements."""
+        return config.has_receive(self.allow_start, self.allow_move, self.allow_finish, self.request_end) and config.has_send(
+            self.task_active, self.correction_active, self.move_required, self.realtime_ended
+        )
+
+    def axis(self, config: RsiConfig) -> bool:
+        return config.has_receive(*self.axis_correction)
+
+    def cartesian(self, config: RsiConfig) -> bool:
+        return config.has_receive(*self.cart_correction)
+
+    def tools(self, config: RsiConfig) -> tuple[str, ...]:
+        """The tool outputs present in both directions (commanded in <Sen>, echoed in <Rob>)."""
+        return tuple(t for t in self.tool_outputs if config.has_receive(t) and config.has_send(t))
+
+
+#: The feedback values the external system reads from every ``<Rob>`` packet.
+FEEDBACK_KEYS: tuple[str, ...] = tuple(
+    f"{element}.{axis}"
+    for element, axes in (("RIst", _CARTESIAN), ("RSol", _CARTESIAN), ("AIPos", _AXES), ("ASPos", _AXES))
+    for axis in axes
+)

@@ -81,6 +81,11 @@ def matrix_to_abc(r: Matrix) -> tuple[float, float, float]:
     return math.atan2(-float(r[0, 1]), float(r[1, 1])), b, 0.0
 
 
+def rotation_angle(r: Matrix) -> float:
+    """The angle (rad, 0..pi) of a rotation matrix."""
+    return math.acos(max(-1.0, min(1.0, (float(r[0, 0] + r[1, 1] + r[2, 2]) - 1.0) / 2.0)))
+
+
 def frame(x: float, y: float, z: float, rotation: Matrix) -> Matrix:
     m = np.eye(4)
     m[:3, :3] = rotation

@@ -29,6 +29,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from robot_bridges.kuka_rsi.kinematics import rotation_angle
+
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
 
@@ -173,8 +175,7 @@ def rotvec_to_matrix(v: Vector) -> Matrix:
 
 def matrix_to_rotvec(r: Matrix) -> Vector:
     """The rotation vector (axis * angle, angle in [0, pi]) of a rotation matrix."""
-    cos_angle = max(-1.0, min(1.0, (float(r[0, 0] + r[1, 1] + r[2, 2]) - 1.0) / 2.0))
-    angle = math.acos(cos_angle)
+    angle = rotation_angle(r)
     skew = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]], dtype=float)
     if angle < 1e-7:
         return skew / 2.0
