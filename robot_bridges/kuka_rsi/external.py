@@ -239,16 +239,16 @@ class Channel:
         self.mode = "joint"
         self.quiet = 0
 
-    def _end(self, why: str) -> None:
+    def _end(self, why: str, kind: str = "controller") -> None:
         self.joint.reset(self.joint.position)
         self.cart.reset(self.cart.position, self.cart.rotation)
         self._stream = None
         if self.mode == "stream":
             self.mode = self._stream_space
         if self.active_id:
-            self._finish(False, why)
+            self._finish(False, why, kind)
         if self._pending is not None:
-            self._fail_pending(why)
+            self._fail_pending(why, kind)
 
     def _pose(self, idx: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
         x, y, z, a, b, c = (float(self.rx[i]) for i in idx)
@@ -276,9 +276,9 @@ class Channel:
                 self._report_failure(cmd_id, "the robot does not follow corrections (RSI_MOVECORR not active: allow the move first)")
             return
         if self.active_id:
-            self._finish(False, f"superseded by command {cmd_id}")
+            self._finish(False, f"superseded by command {cmd_id}", "stopped")
         if self._pending is not None:
-            self._fail_pending(f"superseded by command {cmd_id}")
+            self._fail_pending(f"superseded by command {cmd_id}", "stopped")
         if kind == CommandKind.HALT:
             self._halt()
             self._start(cmd_id, kind, ())
@@ -298,17 +298,17 @@ class Channel:
         cmd_id = int(values[1])  # type: ignore[call-overload]
         if kind == CommandKind.JOINT:
             if self._i_ak is None:
-                self._report_failure(cmd_id, f"{self.link.rsi_config().source} has no AK correction; joint moves are impossible")
+                self._report_failure(cmd_id, f"{self.link.rsi_config().source} has no AK correction; joint moves are impossible", "unsupported")
                 return None
             return "joint"
         if kind == CommandKind.CART:
             if self._i_rk is None:
-                self._report_failure(cmd_id, f"{self.link.rsi_config().source} has no RKorr correction; Cartesian moves are impossible")
+                self._report_failure(cmd_id, f"{self.link.rsi_config().source} has no RKorr correction; Cartesian moves are impossible", "unsupported")
                 return None
             return "cart"
         if kind == CommandKind.STREAM:
             return "stream"
-        self._report_failure(cmd_id, f"unknown command kind {kind}")
+        self._report_failure(cmd_id, f"unknown command kind {kind}", "internal")
         return None
 
     def _generator_idle(self) -> bool:
@@ -329,17 +329,17 @@ class Channel:
         if not self._ready_for(kind, values):
             if self._pending_age > STREAM_ARRIVAL_CYCLES:
                 self._pending = None
-                self._report_failure(cmd_id, "the tool path never arrived")
+                self._report_failure(cmd_id, "the tool path never arrived", "internal")
             return
         if self.mode != "stream" and self._generator_idle() and self._can_fold():
             self._pending = None
             self._launch(values, self._space_of(kind, values) or "joint")
 
-    def _fail_pending(self, why: str) -> None:
+    def _fail_pending(self, why: str, kind: str = "controller") -> None:
         assert self._pending is not None
         cmd_id = int(self._pending[1])  # type: ignore[call-overload]
         self._pending = None
-        self._report_failure(cmd_id, why)
+        self._report_failure(cmd_id, why, kind)
 
     def _launch(self, values: tuple[object, ...], space: str) -> None:
         kind, cmd_id = int(values[0]), int(values[1])  # type: ignore[call-overload]
@@ -349,7 +349,7 @@ class Channel:
             self._launch_stream(cmd_id, int(v[0]), limits)
             return
         if not np.all(np.isfinite(v)) or not np.all(np.isfinite(limits)):
-            self._report_failure(cmd_id, "command values must be finite")
+            self._report_failure(cmd_id, "command values must be finite", "internal")
             return
         try:
             if space == "joint":
@@ -357,10 +357,12 @@ class Channel:
                 outside = np.nonzero((target < self.lower - 1e-9) | (target > self.upper + 1e-9))[0]
                 if outside.size:
                     i = int(outside[0])
-                    self._report_failure(cmd_id, f"A{i + 1} target {math.degrees(target[i]):.3f} deg is outside its limits")
+                    self._report_failure(cmd_id, f"A{i + 1} target {math.degrees(target[i]):.3f} deg is outside its limits", "joint_limit")
                     return
                 self._fold_to("joint")
-                self.joint.set_target(target, np.minimum(limits[0], self.vmax), limits[1])
+                # limits: speed (rad/s) for every axis, acceleration, and a fraction of each axis's own maximum
+                speed = np.minimum(limits[0], self.vmax * limits[2]) if limits[2] > 0 else np.minimum(limits[0], self.vmax)
+                self.joint.set_target(target, speed, limits[1])
                 self._start(cmd_id, kind, (target,))
             else:
                 rotation = _quat_matrix(v[3:7])
@@ -368,14 +370,14 @@ class Channel:
                 self.cart.set_target(v[:3], rotation, (limits[0], limits[1], limits[2], limits[3]))
                 self._start(cmd_id, kind, (v[:3].copy(), rotation))
         except ValueError as error:
-            self._report_failure(cmd_id, str(error))
+            self._report_failure(cmd_id, str(error), "internal")
 
     def _launch_stream(self, cmd_id: int, key: int, limits: np.ndarray) -> None:
         """Play a staged path; ``limits[0]``/``limits[2]`` bound the first Cartesian step (m/s, rad/s)."""
         path = self.staged.pop(key)
         space = "joint" if path.space == "joint" else "cart"
         if space == "joint" and self._i_ak is None or space == "cart" and self._i_rk is None:
-            self._report_failure(cmd_id, f"the configuration has no correction for a {path.space} path")
+            self._report_failure(cmd_id, f"the configuration has no correction for a {path.space} path", "unsupported")
             return
         self._fold_to(space)
         first = path.points[0]
@@ -386,7 +388,7 @@ class Channel:
             turn = rotation_angle(abc_to_matrix(*first[3:]) @ self.cart.rotation.T) / self.dt
             too_far = shift > limits[0] * (1 + 1e-9) or turn > limits[2] * (1 + 1e-9)
         if too_far:
-            self._report_failure(cmd_id, f"{path.where(0)}: the first point is more than one cycle's motion away from the robot")
+            self._report_failure(cmd_id, f"{path.where(0)}: the first point is more than one cycle's motion away from the robot", "unreachable")
             return
         self._stream = path.points
         self._stream_pos = 0
@@ -549,22 +551,23 @@ class Channel:
             return None
         return f"the TCP is {shift * 1000:.3f} mm and {math.degrees(turn):.4f} deg off"
 
-    def _finish(self, ok: bool, message: str) -> None:
+    def _finish(self, ok: bool, message: str, kind: str = "controller") -> None:
+        """End the active command; ``kind`` (a FaultKind value) says why it failed."""
         self.done_id = self.active_id
         self.done_ok = 1 if ok else -1
-        self._emit(("done", self.index, self.active_id, ok, message))
+        self._emit(("done", self.index, self.active_id, ok, message, "" if ok else kind))
         self.active_id = 0
         self._active_kind = CommandKind.NONE
 
     def _report_done(self, cmd_id: int) -> None:
         self.done_id = cmd_id
         self.done_ok = 1
-        self._emit(("done", self.index, cmd_id, True, ""))
+        self._emit(("done", self.index, cmd_id, True, "", ""))
 
-    def _report_failure(self, cmd_id: int, message: str) -> None:
+    def _report_failure(self, cmd_id: int, message: str, kind: str = "controller") -> None:
         self.done_id = cmd_id
         self.done_ok = -1
-        self._emit(("done", self.index, cmd_id, False, message))
+        self._emit(("done", self.index, cmd_id, False, message, kind))
 
     # ------------------------------------------------------------------ after the reply
     def after_reply(self, t_ns: int) -> None:
@@ -609,7 +612,7 @@ class Channel:
     def mark_lost(self, why: str) -> None:
         if not self.lost:
             self.lost = True
-            self._end(why)
+            self._end(why, "timeout")
             state = self.slots.state.try_read()
             if state is not None:
                 values = list(state[1])

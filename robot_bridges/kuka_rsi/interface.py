@@ -93,7 +93,7 @@ class LoopEvents:
         self.tuning = ""
         self.faults: list[tuple[int, str, str]] = []
         self.warnings: list[str] = []
-        self.done: dict[int, tuple[bool, str]] = {}
+        self.done: dict[int, tuple[bool, str, str]] = {}  # command id -> ok, message, fault kind
         self.connected = [False] * robots
         self.stopped = False
         self.stats: tuple[Any, ...] | None = None
@@ -109,7 +109,7 @@ class LoopEvents:
             self.warnings.append(str(message[2]))
             del self.warnings[:-100]
         elif kind == "done":
-            self.done[int(message[2])] = (bool(message[3]), str(message[4]))
+            self.done[int(message[2])] = (bool(message[3]), str(message[4]), str(message[5]))
             if len(self.done) > 10_000:
                 for key in list(self.done)[:5000]:
                     del self.done[key]
@@ -254,13 +254,14 @@ class RsiInterface:
         return self.events.address
 
     # --------------------------------------------------------------------------- setters
-    def set_axial_pos(self, robot: int, joints: Sequence[float], speed: float, accel: float) -> int:
+    def set_axial_pos(self, robot: int, joints: Sequence[float], speed: float, accel: float, fraction: float = 0.0) -> int:
         """Aim robot ``robot`` at ``joints`` (rad) with at most ``speed`` (rad/s) and ``accel``
-        (rad/s^2) per axis; retargets a running move smoothly.  Returns the command id."""
+        (rad/s^2) per axis -- and, if ``fraction`` > 0, at most that fraction of each axis's own
+        maximum speed; retargets a running move smoothly.  Returns the command id."""
         cmd = next(self._ids)
         j = joints
         with self._lock:
-            self._slots[robot].command.write(CommandKind.JOINT, cmd, j[0], j[1], j[2], j[3], j[4], j[5], 0.0, speed, accel, 0.0, 0.0)
+            self._slots[robot].command.write(CommandKind.JOINT, cmd, j[0], j[1], j[2], j[3], j[4], j[5], 0.0, speed, accel, fraction, 0.0)
         return cmd
 
     def set_cart_pos(
