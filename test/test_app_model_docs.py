@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import re
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -62,3 +63,23 @@ def test_the_documented_master_slave_operation_is_valid(example_tree: Path) -> N
     app = example_tree / "apps_xml" / "example.xml"
     app.write_text(app.read_text().replace("</application>", fragment + "</application>"))
     assert validate_application("apps_xml/example.xml", full_catalog()) == []
+
+
+def test_every_documented_joint_pose_fits_the_nextage() -> None:
+    """Each <joint_pose> line shown in the guide is valid for the robot it is written for."""
+    import re
+
+    from core_functions.robots import NEXTAGE_OPEN
+    from execution_engine.app_model import check_joint_poses, read_cell
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "application_xml.md").read_text()
+    poses = re.findall(r"<joint_pose [^>]*/>", text)
+    assert poses
+    with tempfile.TemporaryDirectory() as folder:
+        cell_path = Path(folder) / "cell.xml"
+        names = [f'name="p{i}"' for i in range(len(poses))]
+        body = "\n".join(re.sub(r'name="[^"]*"', n, p) for n, p in zip(names, poses))
+        cell_path.write_text(f'<cell name="doc" angle_unit="deg">\n{body}\n</cell>\n')  # as the guide's example cell
+        cell, diagnostics = read_cell(cell_path)
+        assert cell is not None and diagnostics == []
+        assert check_joint_poses(cell, NEXTAGE_OPEN) == []

@@ -179,7 +179,7 @@ def test_ik_near_target_stays_near_the_current_configuration(values: dict[str, f
 
 @given(st.sampled_from([("LARM_JOINT2", 0.5), ("LARM_JOINT1", 1.6), ("LARM_JOINT4", 2.2), ("LARM_JOINT0", -2.0)]), configurations(margin=0.1))
 def test_ik_never_returns_a_configuration_outside_the_limits(override: tuple[str, float], values: dict[str, float]) -> None:
-    """Targets made with one joint beyond its limit: solved inside the limits, or unreachable."""
+    """Targets made with one joint beyond its limit: solved inside the limits, or refused naming why."""
     arm = MODEL.arms["left_arm"]
     values = {**values, override[0]: override[1]}
     target = arm.tcp_pose(_q(values))
@@ -188,7 +188,9 @@ def test_ik_never_returns_a_configuration_outside_the_limits(override: tuple[str
     try:
         solution = arm.solve(target, seed)
     except BridgeError as error:
-        assert error.kind is FaultKind.UNREACHABLE
+        assert error.kind in (FaultKind.UNREACHABLE, FaultKind.JOINT_LIMIT)
+        if error.kind is FaultKind.JOINT_LIMIT:  # reachable, but only beyond a limit: the message names the joint
+            assert "is reachable only with LARM_JOINT" in str(error) and "outside its limits" in str(error)
         return
     q = seed.copy()
     q[arm.indices] = solution.positions
@@ -220,3 +222,14 @@ def test_ik_honours_the_tool_offset() -> None:
     solution = arm.solve(target, q)
     q[arm.indices] = solution.positions
     assert arm.tcp_pose(q).distance_to(target) < 2e-5
+
+
+def test_a_target_reachable_only_beyond_a_limit_names_the_joint() -> None:
+    from robot_bridges.nextage_sim.backend import HAND_TOOL
+
+    arm = NextageModel().arms["right_arm"]
+    arm.tool = HAND_TOOL
+    with pytest.raises(BridgeError) as info:  # tool straight down with no yaw: the wrist roll would pass 163 deg
+        arm.solve(Pose.from_xyz_rpy(0.33, -0.2, 0.05, math.pi, 0.0, 0.0), MODEL.named_pose("initial"))
+    assert info.value.kind is FaultKind.JOINT_LIMIT
+    assert "is reachable only with RARM_JOINT5" in str(info.value) and "outside its limits [-163.0, 163.0] deg" in str(info.value)

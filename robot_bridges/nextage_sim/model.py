@@ -151,12 +151,15 @@ class ArmKinematics:
         goal_p = np.ascontiguousarray(goal[:3, 3])
         warm = np.clip(q_full[self.indices], self.lower, self.upper)
         best: tuple[float, float, float] | None = None
+        beyond_limits: Vector | None = None  # a solution that exists, but only outside the limits
         attempt = 0
         for seed, bounded in self._seeds(warm, restarts):
             attempt += 1
             q, pos_err, rot_err, ok = self._descend(goal_r, goal_p, seed.copy(), bounded)
             if ok and not bounded:
                 wrapped = self._wrap_into_limits(q, seed)
+                if wrapped is None and beyond_limits is None:
+                    beyond_limits = q
                 ok, q = wrapped is not None, q if wrapped is None else wrapped
             if ok:
                 return IKSolution(q, pos_err, rot_err, attempt)
@@ -164,10 +167,23 @@ class ArmKinematics:
             if best is None or score < best[0]:
                 best = (score, pos_err, rot_err)
         assert best is not None
+        if beyond_limits is not None:
+            raise BridgeError(FaultKind.JOINT_LIMIT, self._beyond_limits_message(target, beyond_limits))
         raise BridgeError(
             FaultKind.UNREACHABLE,
             f"{self.group}: no IK solution for TCP target {describe_target(target)}; best residual "
             f"{best[1] * 1000:.1f} mm / {math.degrees(best[2]):.2f} deg after {attempt} attempt(s)",
+        )
+
+    def _beyond_limits_message(self, target: Pose, q: Vector) -> str:
+        """Name the joint that keeps a geometrically reachable target out of reach."""
+        overshoot = np.maximum(self.lower - q, q - self.upper)
+        worst = int(np.argmax(overshoot))
+        name = self.joint_names[worst]
+        return (
+            f"{self.group}: TCP target {describe_target(target)} is reachable only with {name} = "
+            f"{math.degrees(q[worst]):.1f} deg, outside its limits [{math.degrees(self.lower[worst]):.1f}, "
+            f"{math.degrees(self.upper[worst]):.1f}] deg (try the target rotated about its z axis)"
         )
 
     def _seeds(self, warm: Vector, restarts: bool) -> Iterator[tuple[Vector, bool]]:
