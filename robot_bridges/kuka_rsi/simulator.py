@@ -165,6 +165,8 @@ class KrcModel:
         self._tools = roles.tools(config)
         self._send_values: list[Value] = list(self.rob.defaults)
         self._cache_q: dict[str, tuple[bytes, tuple[float, ...]]] = {}
+        #: When a list, the set point (rad) of every cycle is appended: what the robot was told to do.
+        self.trace: list[np.ndarray] | None = None
 
     # ------------------------------------------------------------------------------ output
     def packet(self) -> bytes:
@@ -268,6 +270,8 @@ class KrcModel:
         if self.program is Program.MOVECORR:
             self._apply_corrections(values)
         self.q_act = self.q_act + self._alpha * (self.q_cmd - self.q_act)
+        if self.trace is not None:
+            self.trace.append(self.q_cmd.copy())
         self.ipoc += self.context.cycle_ms
         if self.program is Program.FINISHED:
             raise RsiStopped(f"KRL task finished at IPOC {self.ipoc}; RSI off", error=False)

@@ -1,0 +1,132 @@
+"""<Rob> and <Sen> packets: what the configuration says travels, and nothing a hostile datagram can do."""
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from robot_bridges.kuka_rsi.codec import MAX_PACKET_BYTES, PacketCodec, PacketError
+from robot_bridges.kuka_rsi.config import default_config, parse_config
+from test_rsi_config import FIGURE_2
+
+CONFIG = default_config()
+ROB = PacketCodec.rob(CONFIG)
+SEN = PacketCodec.sen(CONFIG)
+
+finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
+
+
+def _value(field_type: str):  # type: ignore[no-untyped-def]
+    return {"DOUBLE": finite, "LONG": st.integers(-(2**31), 2**31), "BOOL": st.booleans(), "STRING": st.text(max_size=20)}[field_type]
+
+
+rob_values = st.tuples(*[_value(f.type) for f in ROB.fields])
+
+
+@given(rob_values, st.integers(min_value=0, max_value=2**63 - 1))
+def test_a_rob_packet_round_trips_every_configured_value(values: tuple, ipoc: int) -> None:  # type: ignore[type-arg]
+    packet = ROB.encode(list(values), ipoc)
+    out = list(ROB.defaults)
+    assert ROB.decode_into(packet, out) == ipoc
+    for field, sent, got in zip(ROB.fields, values, out):
+        if field.type == "DOUBLE":
+            assert got == pytest.approx(sent, abs=1e-6)
+        else:
+            assert got == sent
+
+
+def test_packets_look_like_rsi_packets() -> None:
+    values = dict.fromkeys(SEN.keys, 0.0)
+    values.update({"AK.A1": 1.5, "B2": True, "Stop": False, "Tool.o1": True})
+    packet = SEN.encode_map(values, 4242)
+    assert packet.startswith(b'<Sen Type="DualArmExecutive"><AK A1="1.500000" A2="0.000000"')
+    assert b"<B2>1</B2>" in packet and b'<Tool o1="1" o2="0" o3="0"/>' in packet
+    assert packet.endswith(b"<IPOC>4242</IPOC></Sen>")
+    ipoc, decoded = SEN.decode(packet)
+    assert ipoc == 4242 and decoded["AK.A1"] == 1.5 and decoded["B2"] is True
+
+
+def test_figure_2_packets_carry_text_elements() -> None:
+    fig2 = parse_config(FIGURE_2)
+    sen = PacketCodec.sen(fig2)
+    packet = sen.encode_map({"D1": 10.0, "D7": 2.0, "B3": True}, 7)
+    assert b'<Sen Type="Server"><D1>10.000000</D1>' in packet and b"<B3>1</B3>" in packet
+    rob = PacketCodec.rob(fig2)
+    text = (
+        b'<Rob Type="KUKA"><RIst X="1" Y="2" Z="3" A="4" B="5" C="6"/><AIPos A1="1" A2="2" A3="3" A4="4" A5="5" A6="6"/>'
+        b"<Digout_o1>1</Digout_o1><Digout_o2>0</Digout_o2><Digout_o3>TRUE</Digout_o3><Digout_o4>false</Digout_o4>"
+        b"<IPOC>123645634563</IPOC></Rob>"
+    )
+    ipoc, values = rob.decode(text)
+    assert ipoc == 123645634563 and values["RIst.Z"] == 3.0 and values["Digout_o3"] is True and values["Digout_o4"] is False
+
+
+def test_elements_the_configuration_does_not_use_are_ignored() -> None:
+    packet = ROB.encode(list(ROB.defaults), 5).replace(b"<IPOC>", b'<Tech C1="3"/><IPOC>')
+    assert ROB.decode(packet)[0] == 5
+
+
+def test_strings_are_escaped() -> None:
+    config = parse_config(FIGURE_2.replace('<ELEMENT TAG="B4"', '<ELEMENT TAG="DEF_EStr" TYPE="STRING" INDEX="INTERNAL"/><ELEMENT TAG="B4"'))
+    sen = PacketCodec.sen(config)
+    packet = sen.encode_map({"EStr": "a<b & c"}, 1)
+    assert b"<EStr>a&lt;b &amp; c</EStr>" in packet
+    assert sen.decode(packet)[1]["EStr"] == "a<b & c"
+
+
+GOOD = ROB.encode(list(ROB.defaults), 99)
+
+
+@pytest.mark.parametrize(
+    ("packet", "words"),
+    [
+        (GOOD.replace(b"<Rob", b"<Bob").replace(b"</Rob>", b"</Bob>"), "<Bob>"),
+        (GOOD.replace(b'Type="KUKA"', b'Type="Other"'), "Type"),
+        (SEN.encode(list(SEN.defaults), 1).replace(b"DualArmExecutive", b"Server"), "Type='Server'"),
+        (GOOD.replace(b"<IPOC>99</IPOC>", b""), "IPOC is missing"),
+        (GOOD.replace(b"<IPOC>99</IPOC>", b"<IPOC>-3</IPOC>"), "IPOC"),
+        (GOOD.replace(b"<IPOC>99</IPOC>", b"<IPOC>9_9</IPOC>"), "IPOC"),
+        (GOOD.replace(b"<IPOC>99</IPOC>", b"<IPOC>99</IPOC><IPOC>99</IPOC>"), "twice"),
+        (GOOD.replace(b' X="0.000000"', b' X="nan"', 1), "RIst.X"),
+        (GOOD.replace(b' X="0.000000"', b' X="1e999"', 1), "RIst.X"),
+        (GOOD.replace(b' X="0.000000"', b' X="1_0"', 1), "RIst.X"),
+        (GOOD.replace(b' X="0.000000"', b"", 1), "RIst.X is missing"),
+        (GOOD.replace(b'<Delay D="0"/>', b""), "Delay.D"),
+        (GOOD.replace(b'<Delay D="0"/>', b'<Delay D="x"/>'), "Delay.D"),
+        (GOOD.replace(b'o1="0"', b'o1="yes"', 1), "Digout.o1"),
+        (GOOD.replace(b"<RSol", GOOD[GOOD.index(b"<RIst") : GOOD.index(b"<RSol")] + b"<RSol"), "twice"),
+        (b'<?xml version="1.0"?>' + GOOD, "processing instructions"),
+        (b'<!DOCTYPE Rob [<!ENTITY a "aaaa">]>' + GOOD.replace(b"KUKA", b"&a;"), "DTD"),
+        (GOOD[:-7], "well-formed"),
+        (b"", "well-formed"),
+        (GOOD + b" " * MAX_PACKET_BYTES, "exceeds"),
+    ],
+)
+def test_bad_packets_raise_packet_error_and_change_nothing(packet: bytes, words: str) -> None:
+    codec = SEN if packet.startswith(b"<Sen") else ROB
+    out = ["untouched"] * len(codec.fields)
+    with pytest.raises(PacketError) as caught:
+        codec.decode_into(packet, out)  # type: ignore[arg-type]
+    assert words in str(caught.value)
+    assert out == ["untouched"] * len(codec.fields)
+
+
+@given(st.binary(max_size=600))
+def test_random_datagrams_raise_packet_error_only(data: bytes) -> None:
+    out = list(ROB.defaults)
+    try:
+        ROB.decode_into(data, out)
+    except PacketError:
+        assert out == list(ROB.defaults)
+
+
+@given(st.integers(min_value=0, max_value=len(GOOD) - 1), st.binary(max_size=8))
+def test_truncated_or_spliced_packets_raise_packet_error_only(cut: int, tail: bytes) -> None:
+    out = list(ROB.defaults)
+    try:
+        ipoc = ROB.decode_into(GOOD[:cut] + tail, out)
+    except PacketError:
+        return
+    assert ipoc == 99 and all(not isinstance(v, float) or math.isfinite(v) for v in out)
