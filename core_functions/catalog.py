@@ -43,6 +43,7 @@ class ParamType(Enum):
     JOINTS = "joints"  # one value per joint of the group, rad (deg suffix allowed)
     JOINT_POSE = "joint_pose"  # a named joint pose of the robot or the cell (initial, off, home, ...)
     GROUP = "group"  # the name of another group of the robot
+    CAMERA = "camera"  # a camera of the robot, or auto for the group's own
 
 
 class Hold(Enum):
@@ -83,6 +84,7 @@ class CellView(Protocol):
     def has_element(self, name: str) -> bool: ...
     def element_kind(self, name: str) -> str: ...
     def has_joint_pose(self, name: str) -> bool: ...
+    def joint_pose_group(self, name: str) -> str | None: ...
 
 
 @dataclass(frozen=True)
@@ -116,7 +118,8 @@ class ParamSpec:
         out: dict[str, Any] = {"name": self.name, "type": self.type.value, "doc": self.doc, "required": self.required}
         if self.unit:
             out["unit"] = self.unit
-            out["unit_suffixes"] = sorted(s for s in _UNITS.get(self.unit, {}) if s)
+            families = [u.strip() for u in self.unit.split(",")]
+            out["unit_suffixes"] = sorted({s for u in families for s in _UNITS.get(u, {}) if s})
         if self.default is not None:
             out["default"] = self.default
         if self.choices:
@@ -264,16 +267,22 @@ def _parse_joints(spec: ParamSpec, text: str, ctx: BindContext) -> tuple[float, 
         raise ValueError(f"{len(values)} joint values for {ctx.group}, which has {len(group.joints)} joints ({', '.join(group.joint_names)})")
     for joint, value in zip(group.joints, values):
         if not joint.contains(value):
+            hint = " (these look like degrees: write 'deg' after the list)" if abs(value) > 2 * math.pi and "deg" not in text else ""
             raise ValueError(
                 f"{joint.name} = {math.degrees(value):.2f} deg is outside its limits "
-                f"[{math.degrees(joint.lower):.1f}, {math.degrees(joint.upper):.1f}] deg"
+                f"[{math.degrees(joint.lower):.1f}, {math.degrees(joint.upper):.1f}] deg{hint}"
             )
     return tuple(values)
 
 
 def _parse_joint_pose(spec: ParamSpec, text: str, ctx: BindContext) -> str:
     _parse_name(spec, text, ctx)
-    if text in ctx.robot.poses or (ctx.cell is not None and ctx.cell.has_joint_pose(text)):
+    if text in ctx.robot.poses:
+        return text
+    if ctx.cell is not None and ctx.cell.has_joint_pose(text):
+        only = ctx.cell.joint_pose_group(text)
+        if only is not None and "robot" in spec.kinds:
+            raise ValueError(f"joint pose {text!r} is for {only} only; this function needs a whole-robot pose (a <joint_pose> without group)")
         return text
     known = sorted(ctx.robot.poses)
     raise ValueError(f"unknown joint pose {text!r} (robot poses: {', '.join(known)}; or a <joint_pose> of the cell)")
@@ -285,6 +294,12 @@ def _parse_group(spec: ParamSpec, text: str, ctx: BindContext) -> str:
     if text == ctx.group:
         raise ValueError(f"{text!r} is the calling group itself")
     return text
+
+
+def _parse_camera(spec: ParamSpec, text: str, ctx: BindContext) -> str:
+    if text == "auto" or text in ctx.robot.cameras:
+        return text
+    raise ValueError(f"{text!r} is not a camera of {ctx.robot.name} (cameras: {', '.join(ctx.robot.cameras)}, or auto)")
 
 
 _PARSERS: dict[ParamType, Callable[[ParamSpec, str, BindContext], Any]] = {
@@ -301,6 +316,7 @@ _PARSERS: dict[ParamType, Callable[[ParamSpec, str, BindContext], Any]] = {
     ParamType.JOINTS: _parse_joints,
     ParamType.JOINT_POSE: _parse_joint_pose,
     ParamType.GROUP: _parse_group,
+    ParamType.CAMERA: _parse_camera,
 }
 
 

@@ -34,11 +34,13 @@ class CellIndex:
         frames: Iterable[CellFrame],
         elements: Mapping[str, Mapping[str, str]] | None = None,
         joint_poses: Mapping[str, Mapping[str, float]] | None = None,
+        joint_pose_groups: Mapping[str, str] | None = None,
     ) -> None:
         self.name = name
         self._frames = {f.name: f for f in frames}
         self._elements = {k: dict(v) for k, v in (elements or {}).items()}
         self._joint_poses = {k: dict(v) for k, v in (joint_poses or {}).items()}
+        self._joint_pose_groups = dict(joint_pose_groups or {})
         self._measured: dict[str, Pose] = {}
 
     # ------------------------------------------------------------------ catalog.CellView
@@ -60,6 +62,9 @@ class CellIndex:
     def has_joint_pose(self, name: str) -> bool:
         return name in self._joint_poses
 
+    def joint_pose_group(self, name: str) -> str | None:
+        return self._joint_pose_groups.get(name)
+
     # --------------------------------------------------------------------------- lookup
     def frame(self, name: str) -> CellFrame:
         try:
@@ -72,11 +77,28 @@ class CellIndex:
         return Pose() if name == "world" else self.frame(name).pose
 
     def pose(self, name: str) -> Pose:
-        """The best known world pose: the last vision measurement if any, else the nominal."""
-        return self._measured.get(name) or self.nominal(name)
+        """The best known world pose of a frame.
+
+        Its own vision measurement if it has one; otherwise, if an ancestor was located, the
+        nominal pose moved with that ancestor (locating a fixture corrects every hole on it);
+        otherwise the nominal pose.
+        """
+        measured = self._measured.get(name)
+        if measured is not None:
+            return measured
+        nominal = self.nominal(name)
+        ancestor = self._frames[name].parent if name in self._frames else None
+        for _ in range(len(self._frames)):  # bounded: the tree has no cycles, but never trust that
+            if ancestor is None or ancestor not in self._frames:
+                break
+            located = self._measured.get(ancestor)
+            if located is not None:
+                return located.compose(self.nominal(ancestor).inverse()).compose(nominal)
+            ancestor = self._frames[ancestor].parent
+        return nominal
 
     def correct(self, name: str, measured: Pose) -> None:
-        """Record where vision found ``name``; later :meth:`pose` calls use it."""
+        """Record where vision found ``name``; later :meth:`pose` calls for it and its children use it."""
         self.frame(name)
         self._measured[name] = measured
 

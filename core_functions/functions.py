@@ -206,15 +206,48 @@ class CoreFunctions:
         """Any end-effector action: gripper, air, deburring tool on/off, Nextage air hand draw-in/keep/release."""
         yield EndEffector(action)  # type: ignore[arg-type]
 
+    @skill(
+        ParamSpec("target", ParamType.TARGET, "where the part is: the TCP pose that grasps it (frame or x,y,z,roll,pitch,yaw)", unit="m, rad"),
+        ParamSpec("distance", ParamType.NUMBER, "approach and retreat distance along the target's z axis", unit="m", default="0.05", minimum=0.0, maximum=0.5),
+        states=("Motion", "EndEffector"),
+        requires=Hold.NOTHING,
+        leaves=Hold.PART,
+    )
+    def pick(self, target: str | Pose, distance: float = 0.05) -> Skill:
+        """Pick a part: open the gripper, approach along the target's z, go straight in, close, retreat straight out."""
+        grasp = self.resolve(target)
+        label = target if isinstance(target, str) else "part"
+        yield EndEffector("gripper_open")
+        yield MoveCartesian(grasp.offset_local(dz=-distance), "ptp", frame=f"{label} approach")
+        yield MoveCartesian(grasp, "linear", frame=f"{label} grasp")
+        yield EndEffector("gripper_close")
+        yield MoveCartesian(grasp.offset_local(dz=-distance), "linear", frame=f"{label} retreat")
+
+    @skill(
+        ParamSpec("target", ParamType.TARGET, "where the part goes: the TCP pose that releases it (frame or x,y,z,roll,pitch,yaw)", unit="m, rad"),
+        ParamSpec("distance", ParamType.NUMBER, "approach and retreat distance along the target's z axis", unit="m", default="0.05", minimum=0.0, maximum=0.5),
+        states=("Motion", "EndEffector"),
+        requires=Hold.PART,
+        leaves=Hold.NOTHING,
+    )
+    def place(self, target: str | Pose, distance: float = 0.05) -> Skill:
+        """Place the held part: approach along the target's z, go straight in, open the gripper, retreat straight out."""
+        release = self.resolve(target)
+        label = target if isinstance(target, str) else "part"
+        yield MoveCartesian(release.offset_local(dz=-distance), "ptp", frame=f"{label} approach")
+        yield MoveCartesian(release, "linear", frame=f"{label} release")
+        yield EndEffector("gripper_open")
+        yield MoveCartesian(release.offset_local(dz=-distance), "linear", frame=f"{label} retreat")
+
     # ----------------------------------------------------------------------------- vision
     @skill(
         ParamSpec("target", ParamType.FRAME, "the cell frame to find"),
-        ParamSpec("camera", ParamType.TEXT, "camera name, or auto for the group's own camera", default="auto"),
+        ParamSpec("camera", ParamType.CAMERA, "a camera of the robot, or auto for the group's own camera", default="auto"),
         groups=ANY_GROUP,
         states=("Vision",),
     )
     def locate(self, target: str, camera: str = "auto") -> Skill:
-        """Find a frame with a camera; later moves to that frame in this group use the measured pose."""
+        """Find a frame with a camera; this group's later moves to it, and to every frame below it in the cell, use the measured pose."""
         yield from self.locate_frame(target, "" if camera == "auto" else camera)
 
     # ------------------------------------------------------------------------ trajectories
@@ -254,7 +287,7 @@ class CoreFunctions:
 
     # ---------------------------------------------------------------------- coordination
     @skill(
-        ParamSpec("pose", ParamType.JOINT_POSE, "a whole-robot named joint pose (robot pose or a cell <joint_pose> without group)"),
+        ParamSpec("pose", ParamType.JOINT_POSE, "a whole-robot named joint pose (robot pose or a cell <joint_pose> without group)", kinds=("robot",)),
         groups=ANY_GROUP,
         states=("FullBodyMotion",),
         sync="full_body",

@@ -50,6 +50,10 @@ class RobotModel:
     default_backend: str = "nextage-sim"
     #: The robot's conventional joint order for whole-robot lists (default: group by group).
     joint_order: tuple[str, ...] = ()
+    #: Every camera a vision request may name (default: each group's own camera).
+    camera_names: tuple[str, ...] = ()
+    #: Where the tool can go, in words an application writer can plan poses with.
+    workspace: str = ""
 
     def __post_init__(self) -> None:
         own = [j.name for g in self.groups for j in g.joints]
@@ -69,6 +73,10 @@ class RobotModel:
     @property
     def arm_groups(self) -> tuple[str, ...]:
         return tuple(g.name for g in self.groups if g.kind == "arm")
+
+    @cached_property
+    def cameras(self) -> tuple[str, ...]:
+        return self.camera_names or tuple(dict.fromkeys(g.camera for g in self.groups if g.camera))
 
     @cached_property
     def joints(self) -> tuple[JointSpec, ...]:
@@ -134,6 +142,13 @@ NEXTAGE_OPEN = RobotModel(
     },
     default_backend="nextage-sim",
     joint_order=_NEXTAGE_ORDER,
+    camera_names=("head_camera", "head_camera_left", "head_camera_right", "left_hand_camera", "right_hand_camera"),
+    workspace=(
+        "World frame: WAIST (x forward, y left, z up). Each arm's TCP is the wrist flange with z pointing out of the "
+        "hand. At the initial pose the TCPs are at (0.326, +/-0.182, 0.068) m with the hands pointing down. With the "
+        "tool pointing down (rpy 180 0 90 deg), both arms reach about x 0.25..0.43 m, y -0.12..0.12 m, z 0.0..0.10 m, "
+        "and each arm to about |y| = 0.28 m on its own side; rpy 180 0 0 would need the wrist roll beyond its limit."
+    ),
 )
 
 _VIPER_JOINTS = (
@@ -153,6 +168,7 @@ ADEPT_VIPER_S850 = RobotModel(
     # AdeptServer movehome and the seed's init_move: #PPOINT(0,-90,180,0,90,0), flange pointing down
     poses={"home": dict(zip((j.name for j in _VIPER_JOINTS), _deg(0, -90, 180, 0, 90, 0)))},
     default_backend="vplus",
+    workspace="World frame: the robot base. Reach 0.85 m; at home the tool flange is at (0.48, 0, 0.71) m pointing down.",
 )
 
 _KUKA_JOINTS = (
@@ -171,6 +187,7 @@ KUKA_KR = RobotModel(
     groups=(GroupSpec("arm", "arm", _KUKA_JOINTS, camera="tool_camera"),),
     poses={"home": dict(zip((j.name for j in _KUKA_JOINTS), _deg(0, -90, 90, 0, 0, 0)))},
     default_backend="kuka-rsi",
+    workspace="World frame: the robot base (x forward, z up). Reach about 0.9 m around the base axis, above the mounting plane.",
 )
 
 ROBOTS: tuple[RobotModel, ...] = (NEXTAGE_OPEN, ADEPT_VIPER_S850, KUKA_KR)

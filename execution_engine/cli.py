@@ -19,7 +19,7 @@ from typing import IO
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import Catalog, ParamType
-from core_functions.robots import ROBOTS
+from core_functions.robots import ROBOTS, RobotModel
 from execution_engine.app_model import Application, ApplicationError, load_application, validate_application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.deployment import deploy_local
@@ -52,6 +52,7 @@ PARAM_TYPE_HELP = {
     ParamType.JOINTS: "one value per joint of the group in the robot's order, rad (or 'deg' after the list)",
     ParamType.JOINT_POSE: "a named joint pose of the robot (e.g. initial, off) or a <joint_pose> of the cell",
     ParamType.GROUP: "the name of another group of the robot",
+    ParamType.CAMERA: "a camera of the robot (see robots), or auto for the group's own camera",
 }
 
 
@@ -72,11 +73,31 @@ def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[s
 
 
 # ----------------------------------------------------------------------------- functions
+def robot_document(robot: RobotModel) -> dict[str, object]:
+    """What an application writer needs of a robot: groups, joints with limits, poses, cameras (degrees)."""
+    return {
+        "aliases": list(robot.aliases),
+        "description": robot.description,
+        "workspace": robot.workspace,
+        "groups": {
+            g.name: {
+                "kind": g.kind,
+                "camera": g.camera,
+                "joints": [{"name": j.name, "min_deg": round(math.degrees(j.lower), 3), "max_deg": round(math.degrees(j.upper), 3)} for j in g.joints],
+            }
+            for g in robot.groups
+        },
+        "joint_order": list(robot.joint_names),
+        "joint_poses_deg": {name: [round(math.degrees(pose[j]), 3) for j in robot.joint_names] for name, pose in robot.poses.items()},
+        "cameras": list(robot.cameras),
+    }
+
+
 def catalog_document(catalog: Catalog) -> dict[str, object]:
     return {
         "xml_usage": XML_USAGE,
         "param_types": {t.value: PARAM_TYPE_HELP[t] for t in ParamType},
-        "robots": {r.name: {"aliases": list(r.aliases), "groups": {g.name: {"kind": g.kind, "joints": list(g.joint_names)} for g in r.groups}, "joint_poses": sorted(r.poses)} for r in ROBOTS},
+        "robots": {r.name: robot_document(r) for r in ROBOTS},
         "functions": catalog.describe(),
     }
 
@@ -86,10 +107,16 @@ def cmd_functions(catalog: Catalog, as_json: bool, out: IO[str]) -> int:
         json.dump(catalog_document(catalog), out, indent=2)
         out.write("\n")
         return EXIT_OK
-    out.write(XML_USAGE + "\n\nRobots:\n")
+    out.write(XML_USAGE + "\n\nRobots (joint limits and poses in degrees):\n")
     for robot in ROBOTS:
-        groups = ", ".join(f"{g.name} ({g.kind}, {len(g.joints)} joints)" for g in robot.groups)
-        out.write(f"  {robot.name} (also: {', '.join(robot.aliases)}): {groups}; poses: {', '.join(sorted(robot.poses))}\n")
+        out.write(f"  {robot.name} (also: {', '.join(robot.aliases)}): {robot.description}\n")
+        out.write(f"    {robot.workspace}\n")
+        for g in robot.groups:
+            limits = ", ".join(f"{j.name} [{math.degrees(j.lower):g}, {math.degrees(j.upper):g}]" for j in g.joints)
+            out.write(f"    {g.name} ({g.kind}; camera {g.camera}): {limits}\n")
+        for name, pose in sorted(robot.poses.items()):
+            out.write(f"    pose {name}: {' '.join(f'{math.degrees(pose[j]):g}' for j in robot.joint_names)}  ({', '.join(robot.joint_names)})\n")
+        out.write(f"    cameras: {', '.join(robot.cameras)}\n")
     out.write("\nFunctions:\n")
     for spec in (catalog.functions[n] for n in catalog.names()):
         out.write(f"\n  {spec.signature()}    [{spec.library}; groups: {', '.join(spec.group_kinds)}]\n")
@@ -102,13 +129,17 @@ def cmd_functions(catalog: Catalog, as_json: bool, out: IO[str]) -> int:
             if p.choices:
                 extras.append("one of " + "|".join(p.choices))
             if p.kinds:
-                extras.append("kind " + "|".join(p.kinds))
+                extras.append("whole-robot pose" if p.kinds == ("robot",) else "kind " + "|".join(p.kinds))
             if p.minimum is not None or p.maximum is not None:
                 extras.append(f"range [{'' if p.minimum is None else f'{p.minimum:g}'}, {'' if p.maximum is None else f'{p.maximum:g}'}]")
             extras.append("required" if p.required else f"default {p.default}")
             out.write(f"      - {p.name}: {p.doc} ({'; '.join(extras)})\n")
         if spec.sync:
             out.write(f"      synchronised ({spec.sync}): give it to the partner groups in the same operation\n")
+        if spec.requires is not None:
+            out.write(f"      the hand must hold: {spec.requires.value}\n")
+        if spec.leaves is not None:
+            out.write(f"      afterwards the hand holds: {spec.leaves.value}\n")
     out.write("\nParameter types:\n")
     for t, text in PARAM_TYPE_HELP.items():
         out.write(f"  {t.value:<11} {text}\n")

@@ -6,7 +6,9 @@ viewer on a ROS 2 network would be; they see exactly what an operator's tool wou
 Trace lines (one JSON object each) carry ``t`` (run seconds), ``event`` (transition,
 function_start, function_end, primitive_start, primitive_end, error), ``group``,
 ``operation`` and, where they apply, ``function``, ``from``, ``to``, ``signal``, ``state``,
-``primitive``, ``index``, ``count``, ``outcome``, ``error``.
+``primitive``, ``index``, ``count``, ``outcome``, ``error`` and, on ``primitive_end``, the
+``result`` the robot reported (joint positions in rad, TCP pose in m and quaternion, a vision
+measurement).
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ def trace_record(status: SmStatus) -> dict[str, Any]:
         "outcome": status.outcome,
         "error": status.error,
         "request_id": status.request_id,
+        "result": status.result,
     }
     record.update({k: v for k, v in optional.items() if v is not None})
     return record

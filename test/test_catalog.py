@@ -142,3 +142,46 @@ def test_robots_are_found_by_name_or_alias() -> None:
         find_robot("ur5")
     assert NEXTAGE_OPEN.joint_names[:3] == ("CHEST_JOINT0", "HEAD_JOINT0", "HEAD_JOINT1")
     assert len(NEXTAGE_OPEN.poses["initial"]) == 15
+
+
+def test_cameras_are_checked_against_the_robot() -> None:
+    camera = ParamSpec("camera", ParamType.CAMERA, "")
+    assert camera.parse("head_camera_left", CTX) == "head_camera_left"
+    assert camera.parse("auto", CTX) == "auto"
+    with pytest.raises(ValueError, match="'wrist_cam' is not a camera of nextage_open \\(cameras: head_camera, .*, or auto\\)"):
+        camera.parse("wrist_cam", CTX)
+
+
+def test_joint_values_that_look_like_degrees_get_a_hint() -> None:
+    joints = ParamSpec("joints", ParamType.JOINTS, "")
+    with pytest.raises(ValueError, match="these look like degrees: write 'deg' after the list"):
+        joints.parse("0.6 0 -100 -15.2 9.4 -3.2", CTX)
+
+
+def test_a_single_group_pose_is_refused_where_a_whole_robot_pose_is_needed() -> None:
+    cell = CellIndex("c", [], {}, {"left_clear": {"LARM_JOINT0": 0.1}}, {"left_clear": "left_arm"})
+    full_body = full_catalog().functions["full_body_move"]
+    problems = full_body.check(("left_clear",), BindContext(NEXTAGE_OPEN, "left_arm", cell))
+    assert "joint pose 'left_clear' is for left_arm only; this function needs a whole-robot pose" in problems[0].message
+    assert full_body.check(("initial",), BindContext(NEXTAGE_OPEN, "left_arm", cell)) == []
+
+
+def test_locating_a_fixture_moves_every_frame_below_it() -> None:
+    fixture = Pose.from_xyz_rpy(0.34, -0.06, 0.0)
+    cell = CellIndex(
+        "c",
+        [
+            CellFrame("fixture", fixture, "fixture"),
+            CellFrame("slot_a", fixture.compose(Pose.from_xyz_rpy(0.02, 0.0, 0.0, math.pi, 0, 0)), "slot", parent="fixture"),
+            CellFrame("pin", fixture.compose(Pose.from_xyz_rpy(0.0, 0.03, 0.01)), "pin", parent="fixture"),
+        ],
+    )
+    found = fixture.compose(Pose.from_xyz_rpy(0.0015, -0.001, 0.0, 0.0, 0.0, math.radians(0.5)))  # 1.5 mm, -1 mm, 0.5 deg off
+    cell.correct("fixture", found)
+    expected = found.compose(Pose.from_xyz_rpy(0.02, 0.0, 0.0, math.pi, 0, 0))
+    assert cell.pose("slot_a").distance_to(expected) < 1e-12 and cell.pose("slot_a").angle_to(expected) < 1e-9
+    assert cell.nominal("slot_a").distance_to(cell.pose("slot_a")) > 0.001
+    measured_pin = Pose.from_xyz_rpy(0.5, 0.5, 0.5)
+    cell.correct("pin", measured_pin)  # a frame's own measurement wins over its parent's
+    assert cell.pose("pin") == measured_pin
+    assert cell.pose("fixture") == found

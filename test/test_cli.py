@@ -46,7 +46,13 @@ def test_functions_json_is_a_complete_catalog() -> None:
     assert [p["name"] for p in pick["params"]] == ["rivet", "reference"]
     assert pick["params"][0]["type"] == "frame" and pick["params"][0]["kinds"] == ["rivet_slot"]
     assert set(document["param_types"]) >= {"number", "frame", "joints", "target", "joint_pose"}
-    assert document["robots"]["nextage_open"]["groups"]["left_arm"]["joints"][0] == "LARM_JOINT0"
+    nextage = document["robots"]["nextage_open"]
+    assert nextage["groups"]["left_arm"]["joints"][0] == {"name": "LARM_JOINT0", "min_deg": -88.0, "max_deg": 88.0}
+    assert nextage["joint_order"][:3] == ["CHEST_JOINT0", "HEAD_JOINT0", "HEAD_JOINT1"]
+    assert nextage["joint_poses_deg"]["initial"][3:6] == [-0.6, 0.0, -100.0]
+    assert "left_hand_camera" in nextage["cameras"] and "WAIST" in nextage["workspace"]
+    target = next(p for f in document["functions"] if f["name"] == "move_to" for p in f["params"] if p["name"] == "target")
+    assert {"mm", "deg"} <= set(target["unit_suffixes"])
     assert "<operation" in document["xml_usage"]
 
 

@@ -107,6 +107,10 @@ class Cell:
     def element_kind(self, name: str) -> str:
         return self.elements[name].kind
 
+    def joint_pose_group(self, name: str) -> str | None:
+        """The group a joint pose was made for, or None for a whole-robot pose."""
+        return self.joint_poses[name].group
+
     def has_joint_pose(self, name: str) -> bool:
         return name in self.joint_poses
 
@@ -153,7 +157,10 @@ class Cell:
         )
         elements = {e.name: {"kind": e.kind, **e.attributes} for e in self.elements.values()}
         joint_poses = {name: self.joint_values(name, robot) for name in self.joint_poses}
-        return CellSnapshot(name=self.name, frames=frames, elements=elements, joint_poses=joint_poses, truth=dict(self._truth))
+        groups = {name: pose.group for name, pose in self.joint_poses.items() if pose.group}
+        return CellSnapshot(
+            name=self.name, frames=frames, elements=elements, joint_poses=joint_poses, truth=dict(self._truth), joint_pose_groups=groups
+        )
 
 
 def _resolve(frames: Mapping[str, Frame]) -> tuple[dict[str, Pose], dict[str, Pose]]:

@@ -241,7 +241,7 @@ class WorkingState(MachineState):
             ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="error", error=error)
             userdata["error"] = f"{describe(primitive)}: {error}"
             return ERROR
-        ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done")
+        ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done", result=feedback.result)
         try:
             result = codec.from_primitive(primitive.RESULT, feedback.result or {}, source=f"/{ctx.group}/bridge/feedback")
             ctx.run.advance(result)

@@ -84,6 +84,7 @@ class SmStatus:
     count: int | None = None
     outcome: str | None = None
     error: str | None = None
+    result: dict[str, Any] | None = None  # primitive_end: what the bridge reported (TCP, joints, measurement)
     v: int = PROTOCOL_VERSION
 
 
@@ -169,10 +170,11 @@ class CellSnapshot:
     elements: dict[str, dict[str, str]] = field(default_factory=dict)
     joint_poses: dict[str, dict[str, float]] = field(default_factory=dict)
     truth: dict[str, Pose] = field(default_factory=dict)
+    joint_pose_groups: dict[str, str] = field(default_factory=dict)  # poses made for one group only
     v: int = PROTOCOL_VERSION
 
     def index(self) -> CellIndex:
-        return CellIndex(self.name, self.frames, self.elements, self.joint_poses)
+        return CellIndex(self.name, self.frames, self.elements, self.joint_poses, self.joint_pose_groups)
 
 
 @dataclass(frozen=True)
