@@ -743,6 +743,8 @@ class RsiLoop:
             except TimeoutError:
                 self._idle(started)
                 continue
+            except ConnectionRefusedError:
+                continue  # ICMP for an earlier reply: that robot is gone; silence will tell
             t = self.now_ns()
             channel = self._by_host_port.get(addr[:2]) or self._by_host.get(addr[0])
             if channel is None:

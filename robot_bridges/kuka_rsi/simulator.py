@@ -417,7 +417,10 @@ class _Sender:
         ready, _, _ = select.select([self.sock], [], [], max(0.0, timeout))
         if not ready:
             return None
-        n, addr = self.sock.recvfrom_into(buf)
+        try:
+            n, addr = self.sock.recvfrom_into(buf)
+        except ConnectionRefusedError:
+            return None  # ICMP: nobody listens at the external system's address (yet)
         if addr[0] != self.peer[0] or addr[1] != self.peer[1]:
             self.model.stats.foreign += 1
             return False
@@ -515,7 +518,10 @@ def _drain_until(sender: _Sender, clock: Clock, deadline: float, buf: bytearray,
         ready, _, _ = select.select([sender.sock], [], [], clock.to_wall(remaining))
         if not ready:
             return
-        n, addr = sender.sock.recvfrom_into(buf)
+        try:
+            n, addr = sender.sock.recvfrom_into(buf)
+        except ConnectionRefusedError:
+            continue  # ICMP: nobody listens at the external system's address (yet)
         if count_late:
             model.stats.late_replies_discarded += 1
             continue
