@@ -472,6 +472,8 @@ class KukaRsiBackend(RobotBackend):
                 return
             if run.stopped or run.paused:
                 continue  # superseded by the halt of stop() / pause()
+            if self._fault is not None:
+                raise self._fault  # the command ended because the robot did; say why
             raise BridgeError(_fault_kind(kind), f"{self.name}: {message}")
 
     async def _dwell(self, seconds: float) -> None:

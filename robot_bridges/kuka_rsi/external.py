@@ -129,7 +129,8 @@ class Channel:
         self.index = index
         self.link = link
         self.slots = slots
-        self._emit = events
+        self._send_event = events
+        self._events: list[tuple[object, ...]] = []
         self._logger = logger
         self.rob = PacketCodec.rob(config)
         self.sen = PacketCodec.sen(config)
@@ -215,6 +216,11 @@ class Channel:
             self.withheld += 1
             return None
         return self.sen.encode(self.tx, ipoc)
+
+    def _emit(self, event: tuple[object, ...]) -> None:
+        """Queue an event; it leaves after the reply and after the shared record of this cycle
+        is written, so whoever it wakes reads a state at least as new as the event."""
+        self._events.append(event)
 
     def _track_correcting(self) -> None:
         now = True if self._i_correcting is None else bool(self.rx[self._i_correcting])
@@ -604,6 +610,12 @@ class Channel:
             self._emit(("tick", self.index, self.cycles, self.ipoc))
         elif self.cycles % self._heartbeat == 0:
             self._emit(("tick", self.index, self.cycles, self.ipoc))
+        self.flush_events()
+
+    def flush_events(self) -> None:
+        for event in self._events:
+            self._send_event(event)
+        self._events.clear()
 
     def wake_at(self, cycle: int) -> None:
         self._wakes.append(cycle)
@@ -618,6 +630,7 @@ class Channel:
                 values = list(state[1])
                 values[4] = int(values[4]) | Status.LOST  # type: ignore[call-overload]
                 self.slots.state.write(*values)
+            self.flush_events()
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
@@ -794,8 +807,8 @@ class RsiLoop:
             if channel.connected:
                 if not channel.lost and now - channel.last_ns > s.silence_timeout * 1e9:
                     silent = (now - channel.last_ns) / 1e6
-                    channel.mark_lost(f"no RSI packet for {silent:.0f} ms")
                     self._emit(("fault", channel.index, "timeout", f"no packet from {channel.link.name} for {silent:.0f} ms after IPOC {channel.ipoc} (delay count {channel.delay})"))
+                    channel.mark_lost(f"no RSI packet for {silent:.0f} ms")  # then the running command ends
             elif not channel.lost and now - started > s.connect_timeout * 1e9:
                 channel.lost = True
                 self._emit(("fault", channel.index, "timeout", f"no packet from {channel.link.name} ({channel.link.host}) within {s.connect_timeout:g} s"))
@@ -815,6 +828,7 @@ class RsiLoop:
         elif kind == "feedback":
             _, robot, path = message
             self.logger.set_output(int(robot), None if path is None else str(path))  # type: ignore[call-overload]
+            self._emit(("feedback", robot, path))
         elif kind == "wake":
             _, robot, cycle = message
             self.channels[int(robot)].wake_at(int(cycle))  # type: ignore[call-overload]

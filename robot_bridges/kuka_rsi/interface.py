@@ -95,6 +95,7 @@ class LoopEvents:
         self.warnings: list[str] = []
         self.done: dict[int, tuple[bool, str, str]] = {}  # command id -> ok, message, fault kind
         self.connected = [False] * robots
+        self.feedback: list[str | None] = [None] * robots  # the file each robot's packets are saved to
         self.stopped = False
         self.stats: tuple[Any, ...] | None = None
 
@@ -113,6 +114,8 @@ class LoopEvents:
             if len(self.done) > 10_000:
                 for key in list(self.done)[:5000]:
                     del self.done[key]
+        elif kind == "feedback":
+            self.feedback[int(message[1])] = message[2]
         elif kind == "connected":
             self.connected[int(message[1])] = True
         elif kind == "stopped":

@@ -1,0 +1,375 @@
+"""The external-system loop against the simulated controller over loopback UDP, in accelerated time.
+
+The simulator runs in lockstep: it sends the next packet as soon as the reply to the previous one
+is in (or known missing), so every outcome below depends on what the loop answered, not on how
+fast the machine is.  Waits are for events the loop reports, each with a generous bound.
+"""
+from __future__ import annotations
+
+import math
+import socket
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core_functions.geometry import Pose
+from robot_bridges.kuka_rsi.codec import PacketCodec
+from robot_bridges.kuka_rsi.config import RsiConfig, default_config, default_config_path, parse_config
+from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
+from robot_bridges.kuka_rsi.interface import RsiInterface
+from robot_bridges.kuka_rsi.kinematics import KukaArm
+from robot_bridges.kuka_rsi.simulator import Faults, RsiContext, SimulatorThread
+from robot_bridges.kuka_rsi.streaming import ToolPathError
+
+CONFIG = default_config()
+DT = 0.004
+WAIT = 30.0  # s: the bound on any wait for an event; a healthy run needs a fraction of it
+ARM = KukaArm()
+# AK travels as degrees with 6 decimals: a set point is exact to 1e-6 deg, a velocity to 2e-6 deg per cycle.
+V_EPS = math.radians(2e-6) / DT
+READY = (0.0, -80.0, 85.0, 0.0, 30.0, 0.0)  # deg, away from the wrist singularity of the home pose
+
+
+class Rig:
+    """A loop (thread runner) and one simulated controller per robot, wired over loopback."""
+
+    def __init__(
+        self,
+        *,
+        context: RsiContext = RsiContext(start_deg=READY),
+        config: RsiConfig = CONFIG,
+        faults: Faults = Faults(),
+        cycles: int | None = None,
+        hosts: tuple[str, ...] = ("127.0.0.1",),
+        now_ns: Callable[[], int] | None = None,
+    ) -> None:
+        links = [RobotLink(f"kr{i}", host, config=config, correction_mode=context.correction_mode) for i, host in enumerate(hosts)]
+        kwargs = {} if now_ns is None else {"now_ns": now_ns}
+        self.iface = RsiInterface(links, LoopSettings(port=0, silence_timeout=0.3), mode="thread", **kwargs)  # type: ignore[arg-type]
+        self.iface.start()
+        self.address = self.iface.wait_ready(WAIT)
+        self.sims = [
+            SimulatorThread(config, self.address, context=context, faults=faults, cycles=cycles, bind=(host, 0)) for host in hosts
+        ]
+        for sim in self.sims:
+            sim.model.trace = []
+        self.sim = self.sims[0]
+
+    def start(self) -> Rig:
+        for sim in self.sims:
+            sim.start()
+        return self
+
+    def wait(self, predicate: Callable[[], bool], what: str) -> None:
+        assert self.iface.wait_event(predicate, WAIT), f"timed out waiting for {what}"
+
+    def correcting(self, robot: int = 0) -> None:
+        """ITRA's allowRobotStart and allowRobMove, with their acknowledgements."""
+        for flag, ack in (("B1", "Digout.o1"), ("B2", "Digout.o2")):
+            self.iface.set_flag(robot, flag, True)
+            self.wait(lambda: self.iface.digout(robot, ack), ack)
+            self.iface.set_flag(robot, flag, False)
+        self.wait(lambda: self.iface.state(robot).correcting, "RSI_MOVECORR")
+
+    def done(self, cmd: int) -> tuple[bool, str, str]:
+        self.wait(lambda: cmd in self.iface.events.done, f"command {cmd}")
+        return self.iface.events.done[cmd]
+
+    def close(self) -> None:
+        for sim in self.sims:
+            sim.stop()
+        self.iface.close()
+
+
+@pytest.fixture
+def rig() -> Iterator[Callable[..., Rig]]:
+    rigs: list[Rig] = []
+
+    def make(**kwargs: object) -> Rig:
+        r = Rig(**kwargs)  # type: ignore[arg-type]
+        rigs.append(r)
+        return r
+
+    yield make
+    for r in rigs:
+        r.close()
+
+
+def _velocities(trace: list[np.ndarray]) -> np.ndarray:
+    return np.diff(np.array(trace), axis=0) / DT
+
+
+# ----------------------------------------------------------------------------------- tests
+def test_every_packet_is_answered_with_its_ipoc(rig: Callable[..., Rig]) -> None:
+    r = rig(cycles=3000).start()
+    assert r.sim.join(WAIT)
+    stats = r.sim.model.stats
+    # The simulator accepts a reply only with the IPOC of the packet it answers.
+    assert stats.packets == 3000 and stats.accepted == 3000 and stats.late == 0 and stats.invalid_replies == 0
+    assert r.iface.loop is not None and r.iface.loop.stats.packets == 3000
+
+
+def test_packets_from_other_addresses_are_ignored(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.wait(lambda: r.iface.events.connected[0], "the robot")
+    rogue = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rogue.bind(("127.0.0.3", 0))
+    try:
+        packet = PacketCodec.rob(CONFIG).encode(list(PacketCodec.rob(CONFIG).defaults), 77)
+        rogue.sendto(packet, r.address)
+        r.wait(lambda: any("127.0.0.3" in w for w in r.iface.events.warnings), "the warning about the foreign datagram")
+        rogue.setblocking(False)
+        with pytest.raises(BlockingIOError):
+            rogue.recv(4096)  # no reply: it would have been sent before the warning
+    finally:
+        rogue.close()
+    assert r.iface.loop is not None and r.iface.loop.stats.foreign == 1
+    assert r.sim.model.stats.late == 0
+
+
+def test_malformed_packets_are_rejected_without_disturbing_the_loop(rig: Callable[..., Rig]) -> None:
+    r = rig(faults=Faults(garbage=0.3, seed=3), cycles=2000).start()
+    assert r.sim.join(WAIT)
+    stats = r.sim.model.stats
+    assert stats.garbage_sent > 400 and stats.late == 0 and stats.accepted == 2000
+    assert r.iface.loop is not None and r.iface.loop.stats.rejected == stats.garbage_sent
+    r.wait(lambda: any("rejected a packet from kr0" in w for w in r.iface.events.warnings), "the warning")
+
+
+def test_oversized_datagrams_from_the_robot_address_are_rejected(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.wait(lambda: r.iface.events.connected[0], "the robot")
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sender.bind(("127.0.0.1", 0))  # the robot's IP: the link accepts any port of it
+    try:
+        sender.sendto(b"<Rob>" + b" " * 9000 + b"</Rob>", r.address)
+        r.wait(lambda: r.iface.loop is not None and r.iface.loop.stats.oversized == 1, "the oversized datagram")
+        sender.setblocking(False)
+        with pytest.raises(BlockingIOError):
+            sender.recv(4096)
+    finally:
+        sender.close()
+    assert r.sim.model.stats.late == 0
+
+
+def test_replies_withheld_below_the_timeout_are_only_counted(rig: Callable[..., Rig]) -> None:
+    r = rig(context=RsiContext(start_deg=READY, timeout=5)).start()
+    r.correcting()
+    r.iface.withhold_replies(0, 4)
+    r.wait(lambda: r.iface.state(0).delay == 4, "the controller's delay count")
+    assert r.sim.running and not r.iface.events.faults
+    assert any(m for m in [r.iface.state(0).delay] if m == 4)
+
+
+def test_replies_withheld_n_times_stop_the_simulator_and_the_bridge_reports_it(rig: Callable[..., Rig]) -> None:
+    r = rig(context=RsiContext(start_deg=READY, timeout=5)).start()
+    r.correcting()
+    cmd = r.iface.set_axial_pos(0, np.radians([20, -80, 85, 0, 30, 0]), 1.0, 2.0)
+    r.iface.withhold_replies(0, 5)
+    assert r.sim.join(WAIT)
+    assert r.sim.stop_reason is not None and "RSI timeout: 5 packets late in a row" in r.sim.stop_reason
+    r.wait(lambda: bool(r.iface.events.faults), "the bridge's fault")
+    robot, kind, message = r.iface.events.faults[0]
+    assert (robot, kind) == (0, "timeout") and "no packet from kr0" in message and "delay count 4" in message
+    ok, why, fault = r.done(cmd)  # the running move is told too
+    assert not ok and fault == "timeout"
+    assert not r.iface.state(0).connected
+
+
+def test_a_joint_retarget_mid_motion_keeps_velocity_continuous_and_within_limits(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.correcting()
+    speed, accel = 1.0, 3.0
+    first = r.iface.set_axial_pos(0, np.radians([60, -60, 100, 30, 60, 90]), speed, accel)
+    start = r.iface.state(0).cycles
+    r.iface.wake_at(0, start + 80)
+    r.wait(lambda: r.iface.state(0).cycles >= start + 80, "80 cycles of motion")
+    assert r.iface.state(0).moving
+    final = np.radians([-20, -85, 70, -40, 20, -30])
+    second = r.iface.set_axial_pos(0, final, speed, accel)
+    assert r.done(second)[0]
+    assert r.iface.events.done[first][:2] == (False, f"superseded by command {second}")
+    v = _velocities(r.sim.model.trace)  # type: ignore[arg-type]
+    assert np.max(np.abs(v)) <= speed + V_EPS
+    assert np.max(np.abs(np.diff(v, axis=0))) <= accel * DT + 2 * V_EPS  # no jump, anywhere
+    assert np.allclose(r.sim.model.trace[-1], final, atol=1e-7)  # type: ignore[index]
+    assert np.allclose(r.iface.state(0).actual_joints, final, atol=1e-4)
+
+
+def test_a_cartesian_retarget_mid_motion_keeps_velocity_continuous_and_within_limits(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.correcting()
+    here = r.iface.state(0).tcp()
+    speed, accel = 0.4, 2.0
+    r.iface.set_cart_pos(0, here.translated(0.15, 0.1, -0.1), speed, accel)
+    start = r.iface.state(0).cycles
+    r.iface.wake_at(0, start + 60)
+    r.wait(lambda: r.iface.state(0).cycles >= start + 60, "60 cycles of motion")
+    final = here.translated(0.05, -0.15, -0.05)
+    assert r.done(r.iface.set_cart_pos(0, final, speed, accel))[0]
+    positions = np.array([ARM.fk(q)[:3, 3] for q in r.sim.model.trace[-400:]])  # type: ignore[index]
+    v = np.diff(positions, axis=0) / DT
+    assert np.max(np.linalg.norm(v, axis=1)) <= speed * (1 + 1e-5)
+    assert np.max(np.linalg.norm(np.diff(v, axis=0), axis=1)) <= accel * DT * (1 + 1e-4)
+    assert r.iface.state(0).tcp().distance_to(final) < 1e-4
+
+
+def test_changing_space_does_not_move_the_set_point(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.correcting()
+    assert r.done(r.iface.set_axial_pos(0, np.radians([10, -70, 80, 10, 40, 10]), 1.0, 3.0))[0]
+    here = r.iface.state(0).tcp()
+    assert r.done(r.iface.set_cart_pos(0, here.translated(0.0, 0.05, 0.0), 0.3, 2.0))[0]
+    assert r.done(r.iface.set_axial_pos(0, np.radians(READY), 1.0, 3.0))[0]
+    steps = np.linalg.norm(np.diff(np.array(r.sim.model.trace), axis=0), axis=1)  # type: ignore[arg-type]
+    starts = [i for i in range(1, len(steps)) if steps[i - 1] < 1e-12 < steps[i]]
+    assert len(starts) == 3  # three moves, each from rest
+    # Leaving rest, the set point moves by one generator step (a few 1e-5 rad), not by a fold error.
+    assert max(steps[i] for i in starts) < 2e-4
+    assert np.allclose(r.sim.model.trace[-1], np.radians(READY), atol=1e-7)  # type: ignore[index]
+
+
+def test_commands_are_refused_until_the_robot_follows_corrections(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.wait(lambda: r.iface.events.connected[0], "the robot")
+    ok, message, kind = r.done(r.iface.set_axial_pos(0, np.radians(READY), 1.0, 1.0))
+    assert not ok and "RSI_MOVECORR" in message and kind == "controller"
+    r.correcting()
+    ok, message, kind = r.done(r.iface.set_axial_pos(0, np.radians([0, -80, 85, 0, 130, 0]), 1.0, 1.0))
+    assert not ok and "A5" in message and kind == "joint_limit"
+
+
+def _holdon_config(holdon: str) -> RsiConfig:
+    return parse_config(default_config_path().read_text().replace('HOLDON="1"', f'HOLDON="{holdon}"'), f"holdon{holdon}.xml")
+
+
+@pytest.mark.parametrize("holdon", ["1", "0"])
+def test_holdon_behaves_as_configured(rig: Callable[..., Rig], holdon: str) -> None:
+    """Relative corrections: a late packet repeats the last increment (HOLDON=1) or adds none (HOLDON=0)."""
+    r = rig(context=RsiContext(start_deg=READY, correction_mode="relative"), config=_holdon_config(holdon)).start()
+    r.correcting()
+    r.iface.set_axial_pos(0, np.radians([90, -80, 85, 0, 30, 0]), 0.5, 5.0)
+    start = r.iface.state(0).cycles
+    r.iface.wake_at(0, start + 100)
+    r.wait(lambda: r.iface.state(0).cycles >= start + 100, "cruise speed")
+    before = len(r.sim.model.trace)  # type: ignore[arg-type]
+    r.iface.withhold_replies(0, 3)
+    r.wait(lambda: r.iface.state(0).delay == 3, "three late packets")
+    steps = np.degrees(np.diff(np.array(r.sim.model.trace[before - 2 : before + 8])[:, 0]))  # type: ignore[index]
+    cruise = math.degrees(0.5 * DT)
+    late = steps[np.abs(steps - cruise) > 1e-6]
+    if holdon == "1":
+        assert np.allclose(steps, cruise)  # the held increment kept the robot moving at cruise speed
+    else:
+        assert np.allclose(late, 0.0) and len(late) == 3  # three cycles without increment
+
+
+def test_holdon_keeps_an_absolute_correction_so_the_target_is_still_reached(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.correcting()
+    target = np.radians([40, -80, 85, 0, 30, 0])
+    cmd = r.iface.set_axial_pos(0, target, 0.5, 5.0)
+    r.iface.withhold_replies(0, 3)
+    assert r.done(cmd)[0]
+    assert r.iface.state(0).delay == 3
+    assert np.allclose(r.sim.model.trace[-1], target, atol=1e-7)  # type: ignore[index]
+
+
+def test_the_feedback_file_holds_every_packet(rig: Callable[..., Rig], tmp_path: Path) -> None:
+    r = rig(cycles=1500)
+    path = tmp_path / "kr0.txt"
+    r.iface.set_feedback_output(0, str(path))
+    r.wait(lambda: r.iface.events.feedback[0] == str(path), "saving to be on")
+    r.start()
+    assert r.sim.join(WAIT)
+    r.wait(lambda: r.iface.loop is not None and r.iface.loop.stats.packets == 1500, "every packet")
+    r.iface.close()  # the saving thread empties its queue before the file is closed
+    lines = path.read_text().splitlines()
+    assert lines[0].startswith("# t_us ipoc delay x_m")
+    rows = np.array([[float(v) for v in line.split()] for line in lines[1:]])
+    assert len(rows) == 1500
+    ipocs = rows[:, 1].astype(np.int64)
+    assert ipocs[0] == RsiContext().ipoc_start and np.all(np.diff(ipocs) == 4)
+    assert np.all(np.diff(rows[:, 0]) >= 0)  # timestamps in order
+    assert np.allclose(rows[0, 9:15], np.radians(READY))  # actual axes, in rad
+
+
+def test_several_robots_share_one_socket(rig: Callable[..., Rig]) -> None:
+    r = rig(hosts=("127.0.0.1", "127.0.0.2")).start()
+    r.correcting(0)
+    r.correcting(1)
+    target = np.radians([30, -70, 80, 0, 30, 0])
+    assert r.done(r.iface.set_axial_pos(1, target, 1.0, 3.0))[0]
+    assert np.allclose(r.iface.state(1).actual_joints, target, atol=1e-4)
+    assert np.allclose(r.iface.state(0).actual_joints, np.radians(READY), atol=1e-9)
+    assert all(sim.model.stats.late == 0 for sim in r.sims)
+
+
+def test_a_tool_path_streams_one_point_per_cycle(rig: Callable[..., Rig], tmp_path: Path) -> None:
+    r = rig().start()
+    r.correcting()
+    n = 300
+    a1 = 10.0 * (1 - np.cos(np.linspace(0, math.pi, n))) / 2  # 0 -> 10 deg, smooth
+    points = np.tile(np.array(READY), (n, 1))
+    points[:, 0] = a1
+    path = tmp_path / "path.txt"
+    path.write_text("# A1..A6 deg\n" + "\n".join(" ".join(f"{v:.9f}" for v in p) for p in points) + "\n")
+    ok, message, _ = r.done(r.iface.set_tool_path_from_file(0, str(path), "joint"))
+    assert ok, message
+    trace = r.sim.model.trace
+    first = int(np.argmax(np.abs(np.degrees(np.array(trace)[:, 0]) - a1[1]) < 1e-6))  # type: ignore[arg-type]  # the second point
+    # Done may come a cycle before the controller applies the last point: it is within tolerance already.
+    r.wait(lambda: len(trace) >= first - 1 + n, "the last point")  # type: ignore[arg-type]
+    trace = np.degrees(np.array(trace))  # type: ignore[arg-type]
+    assert np.allclose(trace[first - 1 : first - 1 + n], points, atol=1e-6)
+
+
+def test_a_tool_path_that_cannot_be_followed_is_refused_before_anything_moves(rig: Callable[..., Rig], tmp_path: Path) -> None:
+    r = rig().start()
+    r.correcting()
+    jump = tmp_path / "jump.txt"
+    jump.write_text("0 -80 85 0 30 0\n0.1 -80 85 0 30 0\n5 -80 85 0 30 0\n")
+    with pytest.raises(ToolPathError, match=r"jump.txt:3"):
+        r.iface.set_tool_path_from_file(0, str(jump), "joint")
+    far = tmp_path / "far.txt"
+    far.write_text("20 -80 85 0 30 0\n20.1 -80 85 0 30 0\n")
+    ok, message, kind = r.done(r.iface.set_tool_path_from_file(0, str(far), "joint"))
+    assert not ok and "far.txt:1" in message and "first point" in message and kind == "unreachable"
+    assert np.allclose(r.sim.model.trace[-1], np.radians(READY))  # type: ignore[index]
+
+
+def test_getters_use_the_injected_clock(rig: Callable[..., Rig]) -> None:
+    ticks = iter(range(10**6, 10**12, 1000))
+    r = rig(now_ns=lambda: next(ticks)).start()
+    r.correcting()
+    position = r.iface.get_curr_pos(0)
+    assert position.t_us == r.iface.state(0).t_ns / 1000.0 and position.t_us % 1 == 0
+    assert r.iface.get_timestamp() > position.t_us
+    assert np.allclose(position.joints, np.radians(READY)) and position.cartesian[:3] == pytest.approx(
+        Pose.from_matrix(ARM.fk(np.radians(READY))).position
+    )
+
+
+def test_the_loop_runs_in_its_own_process() -> None:
+    iface = RsiInterface([RobotLink("kr", "127.0.0.1")], LoopSettings(port=0, silence_timeout=0.3), mode="process")
+    iface.start()
+    sim = None
+    try:
+        address = iface.wait_ready(WAIT)
+        assert "gc frozen and disabled" in iface.events.tuning
+        sim = SimulatorThread(CONFIG, address, context=RsiContext(start_deg=READY), cycles=600).start()
+        for flag, ack in (("B1", "Digout.o1"), ("B2", "Digout.o2")):
+            iface.set_flag(0, flag, True)
+            assert iface.wait_event(lambda: iface.digout(0, ack), WAIT)
+            iface.set_flag(0, flag, False)
+        cmd = iface.set_axial_pos(0, np.radians([10, -80, 85, 0, 30, 0]), 1.0, 3.0)
+        assert iface.wait_event(lambda: cmd in iface.events.done, WAIT) and iface.events.done[cmd][0]
+        assert sim.join(WAIT) and sim.model.stats.late == 0
+    finally:
+        if sim is not None:
+            sim.stop()
+        process = iface._process
+        iface.close()
+    assert process is not None and process.returncode == 0
