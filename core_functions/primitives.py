@@ -65,6 +65,8 @@ END_EFFECTOR_ACTIONS: tuple[str, ...] = EndEffectorAction.__args__  # type: igno
 class MotionResult:
     """Where the group ended: joint positions (rad) and TCP pose in the world frame."""
 
+    KIND: ClassVar[str] = "motion"
+
     joint_names: tuple[str, ...] = ()
     positions: tuple[float, ...] = ()
     tcp: Pose | None = None
@@ -74,12 +76,16 @@ class MotionResult:
 class EndEffectorResult:
     """The I/O state of the group's hand after the action."""
 
+    KIND: ClassVar[str] = "end_effector"
+
     io: dict[str, bool] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class VisionResult:
     """What a camera found: a measured pose (world frame), a scalar measurement, a confidence."""
+
+    KIND: ClassVar[str] = "vision"
 
     pose: Pose | None = None
     value: float | None = None
@@ -89,6 +95,8 @@ class VisionResult:
 @dataclass(frozen=True)
 class TrajectoryResult:
     """A joint trajectory: ``points[i]`` is reached at ``times[i]`` seconds after the start."""
+
+    KIND: ClassVar[str] = "trajectory"
 
     joint_names: tuple[str, ...] = ()
     points: tuple[tuple[float, ...], ...] = ()

@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import logging
 
-from core_functions.primitives import describe
+from core_functions.primitives import PrimitiveResult, describe
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, String, Time
 from execution_engine.transport.port import Node, Publisher
@@ -104,9 +104,16 @@ class BridgeNode:
         if busy is not None and not busy.done():
             self._send(group, command.id, "error", error=f"{FaultKind.BUSY.value}: {group} is already executing a primitive")
             return
-        self._send(group, command.id, "accepted")
-        task = asyncio.get_running_loop().create_task(self._execute(command), name=f"bridge {group} {command.id}")
+        loop = asyncio.get_running_loop()
+        task = loop.create_task(self._execute(command), name=f"bridge {group} {command.id}")
         self._running[group] = task
+        # 'accepted' tells the machine a long primitive is under way; one that is already done
+        # after its first step (set_speed, an I/O toggle) goes straight to 'done'.
+        loop.call_soon(self._accept_if_running, group, command.id, task)
+
+    def _accept_if_running(self, group: str, command_id: str, task: asyncio.Task[None]) -> None:
+        if not task.done():
+            self._send(group, command_id, "accepted")
 
     async def _execute(self, command: BridgeCommand) -> None:
         assert command.primitive is not None
@@ -122,7 +129,7 @@ class BridgeNode:
             log.exception("%s: %s failed", self.backend.name, describe(command.primitive))
             self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}")
         else:
-            self._send(group, command.id, "done", result=codec.to_primitive(result))
+            self._send(group, command.id, "done", result=result)
 
     async def _control(self, command: BridgeCommand) -> None:
         group = command.group
@@ -150,7 +157,7 @@ class BridgeNode:
             raise BridgeError(FaultKind.TIMEOUT, f"{group}: the primitive did not stop within {self.stop_timeout:g} s") from None
 
     # ----------------------------------------------------------------------------- outbound
-    def _send(self, group: str, command_id: str, status: str, *, error: str | None = None, result: dict | None = None) -> None:
+    def _send(self, group: str, command_id: str, status: str, *, error: str | None = None, result: PrimitiveResult | None = None) -> None:
         feedback = BridgeFeedback(id=command_id, group=group, status=status, error=error, result=result, t=self.clock.now())  # type: ignore[arg-type]
         self._feedback[group].publish(String(codec.encode(feedback)))
 

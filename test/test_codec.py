@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from core_functions.geometry import Pose
-from core_functions.primitives import Dwell, EndEffector, MasterSlaveMove, MoveCartesian, MoveJoints, SetSpeed, Vision
+from core_functions.primitives import Dwell, EndEffector, MasterSlaveMove, MotionResult, MoveCartesian, MoveJoints, SetSpeed, Vision, VisionResult
 from execution_engine.transport import codec
 from execution_engine.transport.wire import (
     BridgeCommand,
@@ -37,7 +37,8 @@ MESSAGES = [
     BridgeCommand(id="c1", group="left_arm", op="execute", primitive=MoveCartesian(POSE, "linear", "drill_1")),
     BridgeCommand(id="c2", group="left_arm", op="execute", primitive=MasterSlaveMove("left_arm", "right_arm", (POSE,), None)),
     BridgeCommand(id="c3", group="left_arm", op="pause"),
-    BridgeFeedback(id="c1", group="left_arm", status="done", result={"positions": [0.1, 0.2]}, t=3.0),
+    BridgeFeedback(id="c1", group="left_arm", status="done", result=MotionResult(("LARM_JOINT0",), (0.1,), POSE), t=3.0),
+    BridgeFeedback(id="c4", group="left_arm", status="done", result=VisionResult(POSE, 0.25, 0.9), t=3.5),
     EngineStatus(app="a", state="running", operation_index=2, operation_count=9, t=4.0, groups={"left_arm": GroupProgress("Motion", "2", "debur_drilling")}),
     CellSnapshot(name="c", frames=(CellFrame("drill_1", POSE, "hole", "part", {"diameter": "0.0048"}),), truth={"drill_1": POSE}),
     SyncMessage(group="left_arm", key="k", event="arrived", state="FullBodyMotion", t=1.0),

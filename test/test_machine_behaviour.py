@@ -16,7 +16,6 @@ from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
 from execution_engine.transport.qos import LATCHED
 from execution_engine.transport.wire import SmStructure, sm_topic
-from robot_bridges.backend import FaultKind
 
 
 def test_structure_and_state_are_latched_for_late_viewers(run_sim: Any) -> None:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import asyncio
 import io
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -17,12 +16,11 @@ import pytest
 
 from app_functions.registry import full_catalog
 from core_functions.geometry import Pose
-from core_functions.primitives import MotionResult, MoveCartesian
+from core_functions.primitives import MoveCartesian
 from execution_engine.app_model import load_application
 from execution_engine.cli import main
 from execution_engine.clock import Clock
 from execution_engine.deployment import deploy_local
-from execution_engine.observers import RunObserver, TraceWriter
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String, Trigger
 from execution_engine.transport.wire import BridgeCommand, BridgeFeedback, bridge_topic
@@ -212,7 +210,7 @@ def test_pause_then_resume_mid_motion_reaches_the_same_target(run_sim: Any) -> N
         assert (await resume.call(Trigger.Request())).success
         report = await task
         await deployment.close()
-        return report, running.primitive, codec.from_primitive(MotionResult, done[running.id].result), held, still
+        return report, running.primitive, done[running.id].result, held, still
 
     report, paused_move, result, held, still = run_sim(main_)
     assert report.ok

@@ -98,6 +98,8 @@ class MachineContext:
         defaults: dict[str, Any] = {}
         if run is not None:
             defaults = {"operation": run.request.operation, "function": run.request.function, "request_id": run.request.id}
+        if "result" in fields and fields["result"] is not None:
+            fields["result"] = codec.to_primitive(fields["result"])
         values = {"state": self.state_name, **defaults, **fields}
         message = SmStatus(group=self.group, event=event, t=self.clock.now(), **values)  # type: ignore[arg-type]
         self.pub.status.publish(String(codec.encode(message)))

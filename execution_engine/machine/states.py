@@ -22,7 +22,6 @@ from execution_engine.machine.events import (
     FeedbackEvent,
     OperatorSignal,
     RequestEvent,
-    SyncEvent,
 )
 from execution_engine.machine.function_run import SkillError
 from execution_engine.machine.table import (
@@ -39,7 +38,6 @@ from execution_engine.machine.table import (
     signals_of,
 )
 from execution_engine.smach import State
-from execution_engine.transport import codec
 from execution_engine.transport.wire import BridgeFeedback
 
 UD_KEYS = ("primitive", "resume_command", "early_done", "error", "stop_reason")
@@ -241,11 +239,14 @@ class WorkingState(MachineState):
             ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="error", error=error)
             userdata["error"] = f"{describe(primitive)}: {error}"
             return ERROR
-        ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done", result=feedback.result)
+        result = feedback.result if feedback.result is not None else primitive.RESULT()
+        if type(result) is not primitive.RESULT:
+            userdata["error"] = f"{describe(primitive)}: the bridge answered a {type(result).__name__}, not a {primitive.RESULT.__name__}"
+            return ERROR
+        ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done", result=result)
         try:
-            result = codec.from_primitive(primitive.RESULT, feedback.result or {}, source=f"/{ctx.group}/bridge/feedback")
             ctx.run.advance(result)
-        except (codec.WireError, SkillError) as error:
+        except SkillError as error:
             userdata["error"] = str(error)
             return ERROR
         return OK

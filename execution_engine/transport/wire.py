@@ -13,7 +13,7 @@ from typing import Any, Literal
 
 from core_functions.cell_index import CellFrame, CellIndex
 from core_functions.geometry import Pose
-from core_functions.primitives import Primitive
+from core_functions.primitives import Primitive, PrimitiveResult
 
 PROTOCOL_VERSION = 1
 
@@ -133,7 +133,7 @@ class BridgeFeedback:
     group: str
     status: Literal["accepted", "done", "error", "paused", "resumed", "stopped"]
     error: str | None = None
-    result: dict[str, Any] | None = None
+    result: PrimitiveResult | None = None  # with "done": what the primitive's type says it returns
     t: float = 0.0
     v: int = PROTOCOL_VERSION
 
