@@ -160,7 +160,6 @@ def test_replies_withheld_below_the_timeout_are_only_counted(rig: Callable[..., 
     r.iface.withhold_replies(0, 4)
     r.wait(lambda: r.iface.state(0).delay == 4, "the controller's delay count")
     assert r.sim.running and not r.iface.events.faults
-    assert any(m for m in [r.iface.state(0).delay] if m == 4)
 
 
 def test_replies_withheld_n_times_stop_the_simulator_and_the_bridge_reports_it(rig: Callable[..., Rig]) -> None:

@@ -523,6 +523,13 @@ class KukaRsiBackend(RobotBackend):
         state = self._state()
         return EndEffectorResult({_TOOL_NAMES[i]: iface.digout(0, t, state) for i, t in enumerate(tools)})
 
+    async def wait_cycles(self, cycles: int) -> None:
+        """Let ``cycles`` RSI cycles of robot time pass (raises the fault if the robot stops)."""
+        assert self.iface is not None
+        end = self._state().cycles + cycles
+        self.iface.wake_at(0, end)
+        await self._until(lambda: self._state().cycles >= end, None, f"{cycles} RSI cycles")
+
     # ------------------------------------------------------------------ pause, resume, stop
     async def pause(self, group: str) -> None:
         self._check_group(group)

@@ -1,0 +1,275 @@
+"""KukaRsiBackend end to end: primitives in, corrections out, the accelerated simulator as the robot.
+
+The application side runs on simulated time (``run_sim``); the back end never needs the clock,
+because it counts robot cycles.  Its waits end on the loop's events.
+"""
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable, Coroutine
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core_functions.geometry import Pose
+from core_functions.primitives import (
+    Dwell,
+    EndEffector,
+    ExecuteTrajectory,
+    MotionResult,
+    MoveCartesian,
+    MoveJoints,
+    MoveRelative,
+    SetSpeed,
+    Vision,
+)
+from execution_engine.clock import Clock
+from robot_bridges.backend import BridgeError, FaultKind
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend, SimulatorSpec
+from robot_bridges.kuka_rsi.external import LoopSettings
+from robot_bridges.kuka_rsi.kinematics import KukaArm
+from robot_bridges.kuka_rsi.simulator import RsiContext
+
+READY = tuple(math.radians(v) for v in (0.0, -80.0, 85.0, 0.0, 30.0, 0.0))
+ARM = KukaArm()
+Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
+
+
+def _backend(context: RsiContext = RsiContext(start_deg=tuple(math.degrees(v) for v in READY))) -> KukaRsiBackend:
+    return KukaRsiBackend(
+        listen=("127.0.0.1", 0),
+        simulator=SimulatorSpec(runner="thread", accelerated=True, context=context),
+        runner="thread",
+        settings=LoopSettings(silence_timeout=1.0),
+    )
+
+
+def _with_backend(run_sim: Run, body: Callable[[KukaRsiBackend], Coroutine[Any, Any, Any]], **kwargs: Any) -> Any:
+    async def main(clock: Clock) -> Any:
+        backend = _backend(**kwargs)
+        await backend.start()
+        try:
+            return await body(backend)
+        finally:
+            await backend.close()
+
+    return run_sim(main)
+
+
+def _cycles(backend: KukaRsiBackend) -> int:
+    assert backend.iface is not None
+    return backend.iface.state(0).cycles
+
+
+def test_joint_and_cartesian_moves_reach_their_targets(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        assert b.groups == ("arm",) and b.joint_state()[0] == ("A1", "A2", "A3", "A4", "A5", "A6")
+        target = tuple(math.radians(v) for v in (20, -70, 80, 10, 40, -10))
+        result = await b.execute("arm", MoveJoints(target))
+        assert isinstance(result, MotionResult) and np.allclose(result.positions, target, atol=1e-4)
+        assert result.tcp is not None and result.tcp.distance_to(Pose.from_matrix(ARM.fk(target))) < 1e-4
+        goal = result.tcp.translated(0.05, -0.1, -0.05)
+        for interpolation in ("ptp", "linear"):
+            await b.execute("arm", MoveJoints(target))
+            result = await b.execute("arm", MoveCartesian(goal, interpolation))
+            assert result.tcp is not None and result.tcp.distance_to(goal) < 2e-4 and result.tcp.angle_to(goal) < 2e-3
+        relative = await b.execute("arm", MoveJoints((0.1, 0, 0, 0, 0, -0.1), relative=True))
+        assert np.allclose(np.array(relative.positions) - result.positions, (0.1, 0, 0, 0, 0, -0.1), atol=2e-4)
+        named = await b.execute("arm", MoveJoints((0.3,), joint_names=("A6",)))
+        assert named.positions[5] == pytest.approx(0.3, abs=1e-4) and named.positions[0] == pytest.approx(relative.positions[0], abs=2e-4)
+        assert b.tcp_pose("arm") is not None
+
+    _with_backend(run_sim, body)
+
+
+def test_a_linear_move_follows_a_straight_line(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        sim = b._sim_thread
+        assert sim is not None
+        start = b.tcp_pose("arm")
+        assert start is not None
+        sim.model.trace = []
+        goal = start.translated(0.1, 0.1, -0.1)
+        await b.execute("arm", MoveCartesian(goal, "linear"))
+        trace = list(sim.model.trace)
+        assert len(trace) > 100
+        line = np.array(goal.position) - start.position
+        for q in trace:  # every set point the controller received lies on the segment
+            p = ARM.fk(q)[:3, 3] - start.position
+            assert np.linalg.norm(np.cross(p, line)) / np.linalg.norm(line) < 1e-6
+            assert -1e-6 <= float(np.dot(p, line)) / float(np.dot(line, line)) <= 1 + 1e-6
+
+    _with_backend(run_sim, body)
+
+
+def test_relative_moves_in_world_and_tool_frames(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        start = b.tcp_pose("arm")
+        assert start is not None
+        world = await b.execute("arm", MoveRelative(Pose(0.0, 0.05, 0.0)))
+        assert world.tcp is not None and world.tcp.distance_to(start.translated(0.0, 0.05, 0.0)) < 2e-4
+        tool = await b.execute("arm", MoveRelative(Pose(0.0, 0.0, 0.03), reference="tool", interpolation="ptp"))
+        assert tool.tcp is not None and tool.tcp.distance_to(world.tcp.offset_local(0.0, 0.0, 0.03)) < 2e-4
+
+    _with_backend(run_sim, body)
+
+
+def test_set_speed_slows_the_following_motions(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> tuple[int, int]:
+        durations = []
+        for fraction, target in ((1.0, (40, -80, 85, 0, 30, 0)), (0.25, (0, -80, 85, 0, 30, 0))):
+            await b.execute("arm", SetSpeed(fraction))
+            before = _cycles(b)
+            await b.execute("arm", MoveJoints(tuple(math.radians(v) for v in target)))
+            durations.append(_cycles(b) - before)
+        return durations[0], durations[1]
+
+    fast, slow = _with_backend(run_sim, body)
+
+    def trapezoid_cycles(fraction: float) -> float:
+        d, v, a = math.radians(40), fraction * math.radians(156), fraction * 6.0  # A1 max speed, MotionLimits.joint_accel
+        seconds = d / v + v / a if d >= v * v / a else 2 * math.sqrt(d / a)
+        return seconds / 0.004
+
+    # each move takes its time-optimal profile at the scaled limits, plus a few cycles to settle
+    assert trapezoid_cycles(1.0) <= fast <= trapezoid_cycles(1.0) + 12
+    assert trapezoid_cycles(0.25) <= slow <= trapezoid_cycles(0.25) + 12
+
+
+def test_dwell_lasts_its_time_in_robot_cycles(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> int:
+        before = _cycles(b)
+        await b.execute("arm", Dwell(0.2))
+        return _cycles(b) - before
+
+    assert _with_backend(run_sim, body) == 50  # 0.2 s at 4 ms
+
+
+def test_end_effector_actions_set_the_tool_outputs(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        result = await b.execute("arm", EndEffector("gripper_close"))
+        assert result.io == {"gripper": True, "air": False, "tool": False}
+        result = await b.execute("arm", EndEffector("air_on"))
+        assert result.io == {"gripper": True, "air": True, "tool": False}
+        assert b._sim_thread is not None and b._sim_thread.model.outputs["Tool.o2"] is True
+        result = await b.execute("arm", EndEffector("gripper_open"))
+        assert result.io["gripper"] is False
+        with pytest.raises(BridgeError) as caught:
+            await b.execute("arm", EndEffector("hand_draw_in"))
+        assert caught.value.kind is FaultKind.UNSUPPORTED
+
+    _with_backend(run_sim, body)
+
+
+def test_a_recorded_trajectory_is_streamed_point_by_point(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        start = np.array(READY)
+        points = tuple(tuple(start + np.array([0.3 * s, 0.0, 0.0, 0.0, -0.2 * s, 0.0])) for s in (0.0, 0.25, 0.5, 0.75, 1.0))
+        trajectory = ExecuteTrajectory("sweep", ("A1", "A2", "A3", "A4", "A5", "A6"), points, (0.0, 0.25, 0.5, 0.75, 1.0))
+        before = _cycles(b)
+        result = await b.execute("arm", trajectory)
+        assert np.allclose(result.positions, points[-1], atol=1e-4)
+        assert _cycles(b) - before >= 250  # one second of points, one per 4 ms cycle
+
+    _with_backend(run_sim, body)
+
+
+@pytest.mark.parametrize(
+    ("primitive", "kind", "words"),
+    [
+        (MoveJoints(tuple(math.radians(v) for v in (0, -80, 85, 0, 130, 0))), FaultKind.JOINT_LIMIT, "A5 target 130.000 deg"),
+        (MoveJoints((0.1, 0.2)), FaultKind.UNSUPPORTED, "6 values"),
+        (MoveCartesian(Pose(2.0, 0.0, 0.5)), FaultKind.UNREACHABLE, "out of reach"),
+        (Vision("locate", "hole"), FaultKind.UNSUPPORTED, "vision"),
+    ],
+)
+def test_impossible_primitives_fail_with_their_fault_kind(run_sim: Run, primitive: Any, kind: FaultKind, words: str) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        with pytest.raises(BridgeError) as caught:
+            await b.execute("arm", primitive)
+        assert caught.value.kind is kind and words in str(caught.value)
+        with pytest.raises(BridgeError) as other:
+            await b.execute("left_arm", MoveJoints(READY))
+        assert other.value.kind is FaultKind.UNSUPPORTED
+        await b.execute("arm", MoveJoints(READY))  # and the robot still works
+
+    _with_backend(run_sim, body)
+
+
+def test_pause_holds_and_resume_completes_the_same_move(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        target = tuple(math.radians(v) for v in (90, -70, 80, 0, 40, 0))
+        await b.execute("arm", SetSpeed(0.2))
+        task = asyncio.get_running_loop().create_task(b.execute("arm", MoveJoints(target)))
+        await b.wait_cycles(60)
+        await b.pause("arm")
+        await b.wait_cycles(150)
+        assert b.iface is not None
+        held = b.iface.state(0).set_joints
+        await b.wait_cycles(50)
+        assert b.iface.state(0).set_joints == held and not task.done()  # standing still, still executing
+        assert 0.0 < held[0] < target[0]
+        await b.resume("arm")
+        result = await task
+        assert np.allclose(result.positions, target, atol=1e-4)
+
+    _with_backend(run_sim, body)
+
+
+def test_stop_abandons_the_move(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        await b.execute("arm", SetSpeed(0.2))
+        task = asyncio.get_running_loop().create_task(b.execute("arm", MoveJoints(tuple(math.radians(v) for v in (90, -70, 80, 0, 40, 0)))))
+        await b.wait_cycles(60)
+        await b.stop("arm")
+        with pytest.raises(BridgeError) as caught:
+            await task
+        assert caught.value.kind is FaultKind.STOPPED
+        result = await b.execute("arm", MoveJoints(READY))  # the next primitive runs normally
+        assert np.allclose(result.positions, READY, atol=1e-4)
+
+    _with_backend(run_sim, body)
+
+
+def test_an_rsi_timeout_on_the_controller_is_a_controller_fault(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        assert b.iface is not None
+        await b.execute("arm", SetSpeed(0.2))
+        task = asyncio.get_running_loop().create_task(b.execute("arm", MoveJoints(tuple(math.radians(v) for v in (90, -70, 80, 0, 40, 0)))))
+        await b.wait_cycles(20)
+        b.iface.withhold_replies(0, 5)
+        with pytest.raises(BridgeError) as caught:
+            await task
+        assert caught.value.kind is FaultKind.CONTROLLER
+        assert "RSI timeout: 5 packets late in a row" in str(caught.value)
+        with pytest.raises(BridgeError) as later:
+            await b.execute("arm", MoveJoints(READY))
+        assert later.value is caught.value  # the robot stays stopped until RSI is restarted
+
+    _with_backend(run_sim, body, context=RsiContext(start_deg=tuple(math.degrees(v) for v in READY), timeout=5))
+
+
+def test_an_axis_correction_monitor_stop_is_a_controller_fault(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        with pytest.raises(BridgeError) as caught:
+            await b.execute("arm", MoveJoints(tuple(math.radians(v) for v in (30, -80, 85, 0, 30, 0))))
+        assert caught.value.kind is FaultKind.CONTROLLER and "AXISCORRMON" in str(caught.value)
+
+    context = RsiContext(start_deg=tuple(math.degrees(v) for v in READY), axis_monitor_deg=(10.0,) * 6)
+    _with_backend(run_sim, body, context=context)
+
+
+def test_silence_from_the_controller_is_a_timeout(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        assert b._sim_thread is not None
+        await b.execute("arm", SetSpeed(0.2))
+        task = asyncio.get_running_loop().create_task(b.execute("arm", MoveJoints(tuple(math.radians(v) for v in (90, -70, 80, 0, 40, 0)))))
+        await b.wait_cycles(20)
+        b._sim_thread.stop()  # the controller vanishes without a word (cable pulled)
+        with pytest.raises(BridgeError) as caught:
+            await task
+        assert caught.value.kind is FaultKind.TIMEOUT and "no packet from kuka" in str(caught.value)
+
+    _with_backend(run_sim, body)
