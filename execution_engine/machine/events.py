@@ -50,34 +50,52 @@ Event = Union[OperatorSignal, RequestEvent, FeedbackEvent, SyncEvent, FaultEvent
 
 
 class EventQueue:
-    """A FIFO of events with a front slot for events a state hands back unconsumed."""
+    """A FIFO of events with a front slot for events a state hands back unconsumed.
+
+    Built on a deque and one waiter future rather than ``asyncio.Queue`` + ``wait_for``: a
+    machine waits on this queue several times per primitive, and a bounded wait here costs one
+    timer instead of a task and a timer.
+    """
 
     def __init__(self, clock: Clock, maxsize: int = 10_000) -> None:
         self._clock = clock
-        self._queue: asyncio.Queue[Event] = asyncio.Queue(maxsize)
-        self._front: deque[Event] = deque()
+        self._maxsize = maxsize
+        self._events: deque[Event] = deque()
+        self._waiter: asyncio.Future[None] | None = None
 
     def put(self, event: Event) -> None:
         """Enqueue; a full queue means the machine is wedged, which must not pass silently."""
-        try:
-            self._queue.put_nowait(event)
-        except asyncio.QueueFull:
-            raise RuntimeError(f"event queue full ({self._queue.maxsize}); dropped {event!r}") from None
+        if len(self._events) >= self._maxsize:
+            raise RuntimeError(f"event queue full ({self._maxsize}); dropped {event!r}")
+        self._events.append(event)
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
 
     def put_back(self, event: Event) -> None:
         """Return an event to the front so the next state sees it first."""
-        self._front.appendleft(event)
+        self._events.appendleft(event)
 
     async def get(self, timeout: float | None = None) -> Event | None:
         """The next event, or None after ``timeout`` run seconds (None: wait without bound)."""
-        if self._front:
-            return self._front.popleft()
-        if not self._queue.empty():  # the common case: no timer, no task, no wait
-            return self._queue.get_nowait()
+        if self._events:
+            return self._events.popleft()
+        if self._waiter is not None and not self._waiter.done():
+            raise RuntimeError("two states wait on one machine's events at once")
+        waiter = self._waiter = self._clock.loop.create_future()
+        timer = None if timeout is None else self._clock.call_later(timeout, _expire, waiter)
         try:
-            return await self._clock.wait_for(self._queue.get(), timeout)
-        except asyncio.TimeoutError:
-            return None
+            await waiter  # cancellation of the caller propagates; the timer resolves, never cancels
+        finally:
+            if timer is not None:
+                timer.cancel()
+            self._waiter = None
+        return self._events.popleft() if self._events else None
 
     def __len__(self) -> int:
-        return len(self._front) + self._queue.qsize()
+        return len(self._events)
+
+
+def _expire(waiter: asyncio.Future[None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)  # woken with nothing queued: the caller sees the timeout
