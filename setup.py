@@ -41,7 +41,7 @@ setup(
         *tree("config"),
         *tree("apps_xml"),
     ],
-    install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7"],
+    install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9"],
     extras_require={"test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6"]},
     zip_safe=True,
     entry_points={

@@ -169,6 +169,8 @@ class ExecutionEngine:
     def _sits_out(self, call: Call) -> bool:
         if call.function != "wait":
             return False
+        if call.params in ((), ("0",)):  # the implicit wait of a group left out: no parsing needed
+            return True
         spec = self.catalog.get("wait")
         assert spec is not None and self.app is not None
         (seconds,) = spec.bind(call.params, BindContext(self.app.robot, call.group, self.app.cell))
@@ -464,6 +466,8 @@ class ExecutionEngine:
         self._publish_status()
 
     def _publish_status(self) -> None:
+        if self._status_pub.get_subscription_count() == 0:
+            return
         app = self.app
         groups = {
             g: GroupProgress(link.state, *(self._progress[g].operation, self._progress[g].function) if g in self._progress else (None, None))
