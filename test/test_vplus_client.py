@@ -163,3 +163,26 @@ def test_bad_arguments_are_refused(run_sim: Run) -> None:
 
     run_sim(main)
 
+
+
+def test_ids_are_unique_within_a_joined_batch_even_when_the_generator_repeats() -> None:
+    """32-bit random ids collide in large joined batches (birthday bound); the client must not send one id twice."""
+    import itertools
+
+    from execution_engine.clock import real_clock
+    from robot_bridges.vplus.client import VPlusClient
+    from robot_bridges.vplus.codec import set_speed
+
+    repeating = itertools.cycle(["0000000a", "0000000a", "0000000b", "0000000a", "0000000c"])
+    client = VPlusClient("127.0.0.1", 1234, real_clock(), make_id=lambda: next(repeating))
+    messages = client._messages([set_speed(10), set_speed(20), set_speed(30)])
+    assert [m.id for m in messages] == ["0000000a", "0000000b", "0000000c"]
+
+
+def test_a_failure_report_of_a_huge_batch_stays_short() -> None:
+    from robot_bridges.vplus.client import Exchange
+    from robot_bridges.vplus.codec import Message, set_speed
+
+    messages = tuple(Message(f"{i:08x}", set_speed(50)) for i in range(5000))
+    text = str(Exchange(unknown=messages))
+    assert "5000 messages: 00000000:set_speed:50 ... 00001387:set_speed:50" in text and len(text) < 300

@@ -26,7 +26,7 @@ import contextlib
 import logging
 import math
 from collections import OrderedDict, deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 from execution_engine.clock import Clock
@@ -46,6 +46,7 @@ from robot_bridges.vplus.codec import (
 log = logging.getLogger(__name__)
 
 CommandLike = Command | Sequence[Command]
+_LISTED = 8  # messages named one by one in an error report
 _EXPIRED_IDS = 4096  # ids given up on (timeout, cancel) whose late acks are expected and tolerated
 _DEADLINE_SLACK = 1e-6  # s: a timer may fire a hair early (loop clock resolution)
 
@@ -61,6 +62,8 @@ class Exchange:
 
     def __str__(self) -> str:
         def names(msgs: Sequence[Message]) -> str:
+            if len(msgs) > _LISTED:  # a joined batch can hold thousands: name the ends, count the rest
+                return f"{len(msgs)} messages: {msgs[0]} ... {msgs[-1]}"
             return ", ".join(str(m) for m in msgs) or "none"
 
         return (
@@ -265,10 +268,10 @@ class VPlusClient:
         groups = [_group(c) for c in commands]
         async with self._lock:
             if len(groups) == 1:  # the common case, without the bookkeeping of several commands
-                return [ack for _, ack in await self._exchange([Message(self._new_id(), c) for c in groups[0]], timeout, [], [])]
+                return [ack for _, ack in await self._exchange(self._messages(groups[0]), timeout, [], [])]
             done: list[tuple[Message, Ack]] = []
             for i, group in enumerate(groups):
-                messages = [Message(self._new_id(), c) for c in group]
+                messages = self._messages(group)
                 done.extend(await self._exchange(messages, timeout, done, groups[i + 1 :]))
             return [ack for _, ack in done]
 
@@ -276,7 +279,7 @@ class VPlusClient:
         """Write every message of every command at once, then await all acks (within ``timeout``)."""
         groups = [_group(c) for c in commands]
         async with self._lock:
-            messages = [Message(self._new_id(), c) for group in groups for c in group]
+            messages = self._messages(c for group in groups for c in group)
             return [ack for _, ack in await self._exchange(messages, timeout, [], [])]
 
     async def _exchange(
@@ -324,7 +327,7 @@ class VPlusClient:
 
     def _unsent(self, later: list[tuple[Command, ...]]) -> tuple[Message, ...]:
         """Messages for commands never written (ids for the report only: nothing was sent)."""
-        return tuple(Message(self._new_id(), c) for group in later for c in group)
+        return tuple(self._messages(c for group in later for c in group))
 
     def _watch(self, batch: _Batch) -> None:
         self._waiting.add(batch)
@@ -352,12 +355,20 @@ class VPlusClient:
             self._watchdog_at = earliest.deadline
             self._watchdog = self.clock.call_later(earliest.deadline - now, self._on_watchdog)
 
-    def _new_id(self) -> str:
+    def _new_id(self, taken: set[str] | None = None) -> str:
+        """A fresh id: not in flight, not expired, and not ``taken`` by another message of the same batch."""
         for _ in range(100):
             msg_id = self._make_id()
-            if msg_id not in self._pending and msg_id not in self._expired:
+            if msg_id not in self._pending and msg_id not in self._expired and (taken is None or msg_id not in taken):
+                if taken is not None:
+                    taken.add(msg_id)
                 return msg_id
         raise RuntimeError("the id generator keeps repeating ids in use")
+
+    def _messages(self, commands: Iterable[Command]) -> list[Message]:
+        """One message per command, with ids unique within the batch too (32-bit random ids collide in large batches)."""
+        taken: set[str] = set()
+        return [Message(self._new_id(taken), c) for c in commands]
 
     def _expire(self, message: Message) -> None:
         self._expired[message.id] = message
