@@ -130,3 +130,19 @@ def test_truncated_or_spliced_packets_raise_packet_error_only(cut: int, tail: by
     except PacketError:
         return
     assert ipoc == 99 and all(not isinstance(v, float) or math.isfinite(v) for v in out)
+
+
+def test_the_fast_path_and_the_full_parser_agree() -> None:
+    """A packet in another but equivalent layout (attribute order, spacing, a comment) decodes the same."""
+    values = list(ROB.defaults)
+    values[0], values[12], values[25] = 525.25, -90.5, True
+    packet = ROB.encode(values, 1234)
+    rearranged = packet.replace(b'<RIst X="525.250000" Y="0.000000"', b'<RIst  Y="0.000000" X="525.250000"').replace(
+        b"<IPOC>", b"<!-- a comment --><IPOC>"
+    )
+    fast, slow = list(ROB.defaults), list(ROB.defaults)
+    assert ROB.decode_into(packet, fast) == 1234
+    with pytest.raises(PacketError, match="declarations"):
+        ROB.decode_into(rearranged, slow)  # comments are refused outright: no controller sends them
+    assert ROB.decode_into(rearranged.replace(b"<!-- a comment -->", b"\n  "), slow) == 1234
+    assert fast == slow

@@ -41,16 +41,20 @@ from core_functions.primitives import (
     MoveRelative,
     Primitive,
     PrimitiveResult,
+    RecordTrajectory,
     SetSpeed,
+    TrajectoryResult,
     describe,
 )
 from core_functions.robots import KUKA_KR, RobotModel
-from execution_engine.clock import real_clock
-from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
+from execution_engine.clock import Clock, real_clock
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
+from robot_bridges.kuka_rsi.config import ConfigError, load_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface, RunnerMode
 from robot_bridges.kuka_rsi.kinematics import KukaArm
-from robot_bridges.kuka_rsi.simulator import Faults, RsiContext, SimulatorThread
+from robot_bridges.kuka_rsi.otg import CartesianOTG, VectorOTG
+from robot_bridges.kuka_rsi.simulator import Endpoint, Faults, RsiContext, SimulatorThread
 from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError
 
 log = logging.getLogger(__name__)
@@ -359,6 +363,8 @@ class KukaRsiBackend(RobotBackend):
             return await self._end_effector(primitive.action)
         elif isinstance(primitive, ExecuteTrajectory):
             await self._trajectory(primitive)
+        elif isinstance(primitive, RecordTrajectory):
+            return await self._record(primitive)
         else:
             raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: a KUKA arm over RSI cannot do {describe(primitive)}")
         return self._motion_result()
@@ -510,6 +516,64 @@ class KukaRsiBackend(RobotBackend):
             except ToolPathError as error:
                 raise BridgeError(FaultKind.JOINT_LIMIT, f"{self.name}: {error}") from None
 
+    async def _record(self, primitive: RecordTrajectory) -> TrajectoryResult:
+        """Plan through waypoints with the robot's own generators, or sample the axes while taught."""
+        names = self.spec.joint_names
+        period = primitive.sample_period
+        if primitive.mode == "teach":
+            times, points = [], []
+            for k in range(max(1, math.ceil(primitive.duration / period - 1e-9)) + 1):
+                if k:
+                    await self.wait_cycles(max(1, round(period / self._dt)))
+                times.append(k * period)
+                points.append(tuple(self._state().actual_joints))
+            return TrajectoryResult(names, tuple(points), tuple(times))
+        q = np.array(self._state().set_joints)
+        samples: list[np.ndarray] = [q]
+        for waypoint in primitive.waypoints:
+            goal = self.arm.ik(waypoint.matrix(), q)
+            if goal is None:
+                raise BridgeError(FaultKind.UNREACHABLE, f"{self.name}: waypoint {waypoint} of {primitive.name!r} is out of reach")
+            if primitive.interpolation == "linear":
+                samples.extend(self._plan_line(q, waypoint, primitive.name))
+            else:
+                samples.extend(self._plan_joints(q, goal))
+            q = samples[-1]
+        step = max(1, round(period / self._dt))
+        picked = samples[::step] + ([] if (len(samples) - 1) % step == 0 else [samples[-1]])
+        times = [min(i * step, len(samples) - 1) * self._dt for i in range(len(picked))]
+        return TrajectoryResult(names, tuple(tuple(map(float, p)) for p in picked), tuple(times))
+
+    def _plan_joints(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
+        otg = VectorOTG([1] * 6, self._dt)
+        otg.reset(start)
+        vmax = np.array([j.max_velocity for j in self.spec.joints]) * self.speed
+        otg.set_target(goal, vmax, self.limits.joint_accel * self.speed)
+        out = []
+        while not otg.step():
+            out.append(otg.position.copy())
+        out.append(otg.position.copy())
+        return out
+
+    def _plan_line(self, start: np.ndarray, target: Pose, name: str) -> list[np.ndarray]:
+        t0 = self.arm.fk(start)
+        otg = CartesianOTG(self._dt)
+        otg.reset(t0[:3, 3], t0[:3, :3])
+        lim, f = self.limits, self.speed
+        otg.set_target(np.array(target.position), target.matrix()[:3, :3], (lim.linear_speed * f, lim.linear_accel * f, lim.angular_speed * f, lim.angular_accel * f))
+        out, q = [], start
+        while True:
+            done = otg.step()
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = otg.rotation, otg.position
+            solved = self.arm.ik(m, q)
+            if solved is None or float(np.max(np.abs(solved - q))) > math.radians(30):
+                raise BridgeError(FaultKind.UNREACHABLE, f"{self.name}: the straight line of {name!r} to {target} leaves the workspace")
+            out.append(solved)
+            q = solved
+            if done:
+                return out
+
     async def _end_effector(self, action: str) -> EndEffectorResult:
         assert self.iface is not None
         tools = self.roles.tools(self.config)
@@ -577,3 +641,70 @@ def _fault_kind(kind: str) -> FaultKind:
     except ValueError:
         return FaultKind.CONTROLLER
 
+
+
+_EXTRAS = ("runner", "simulator", "config", "mode", "cycle", "timeout", "silence", "feedback", "linear_speed", "linear_accel")
+
+
+async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
+    """Registry factory (``kuka-rsi``): the simulated KR C4, or a real one with ``rsi_listen``.
+
+    Without ``rsi_listen`` a simulator is started (its own process, real time) and the loop
+    listens on 127.0.0.1.  With ``rsi_listen=HOST:PORT`` -- the address in the controller's RSI
+    configuration -- no simulator starts and ``host`` must name the controller, the only address
+    whose packets are answered.  Extras: ``runner`` (``process`` | ``thread``: where the real-time
+    loop runs), ``simulator`` (``process`` | ``thread``), ``config`` (RSI Ethernet XML), ``mode``
+    (``absolute`` | ``relative``, as the RSI context corrects), ``cycle`` (4 | 12 ms), ``timeout``
+    (late packets in a row that stop the simulated RSI), ``silence`` (s without packets that mean
+    the robot is lost), ``feedback`` (file to save every packet to), ``linear_speed`` (m/s) and
+    ``linear_accel`` (m/s^2) at 100 % speed.
+
+    RSI runs on the robot's clock, so the application must too: a simulated or scaled clock
+    would let the engine's timeouts run ahead of the robot.
+    """
+    if options.robot.name != KUKA_KR.name:
+        raise ValueError(f"the kuka-rsi back end drives {KUKA_KR.name}, not {options.robot.name}")
+    if clock.simulated or clock.speed != 1.0:
+        raise ValueError("the kuka-rsi back end runs on the robot's real-time clock: run with --speed 1 (the default)")
+    if options.faults:
+        raise ValueError("the kuka-rsi back end takes no --fault (inject RSI faults with robot_bridges.kuka_rsi.simulator.Faults)")
+    unknown = sorted(set(options.extra) - set(_EXTRAS))
+    if unknown:
+        raise ValueError(f"kuka-rsi: unknown option(s) {', '.join(unknown)} (known: {', '.join(_EXTRAS)})")
+    extra = options.extra
+    runner = extra.get("runner", "process")
+    sim_runner = extra.get("simulator", "process")
+    mode = extra.get("mode", "absolute")
+    for name, value, allowed in (("runner", runner, ("process", "thread")), ("simulator", sim_runner, ("process", "thread")), ("mode", mode, ("absolute", "relative"))):
+        if value not in allowed:
+            raise ValueError(f"kuka-rsi: {name} must be {' or '.join(allowed)}, got {value!r}")
+    try:
+        cycle = int(extra.get("cycle", "4"))
+        timeout = int(extra.get("timeout", "100"))
+        silence = float(extra.get("silence", "0.1"))
+        limits = MotionLimits(linear_speed=float(extra.get("linear_speed", "1.0")), linear_accel=float(extra.get("linear_accel", "2.0")))
+    except ValueError as error:
+        raise ValueError(f"kuka-rsi: cycle and timeout are integers, silence, linear_speed and linear_accel numbers: {error}") from None
+    if not (silence > 0 and limits.linear_speed > 0 and limits.linear_accel > 0):
+        raise ValueError("kuka-rsi: silence, linear_speed and linear_accel must be > 0")
+    try:
+        config = load_config(extra["config"]) if "config" in extra else None
+    except ConfigError as error:
+        raise ValueError(str(error)) from None
+    settings = LoopSettings(silence_timeout=silence)
+    if options.rsi_listen is not None:
+        listen = Endpoint.parse(options.rsi_listen)
+        if options.host is None:
+            raise ValueError("kuka-rsi: with rsi_listen, give the controller's address as host: only its packets are answered")
+        link = RobotLink("kuka", options.host, options.port, config=config, correction_mode=mode, cycle_ms=cycle)
+        backend = KukaRsiBackend(listen=(listen.host, listen.port), link=link, simulator=None, runner=runner, settings=settings,  # type: ignore[arg-type]
+                                 limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
+    else:
+        if options.host is not None:
+            raise ValueError("kuka-rsi: a real controller needs rsi_listen=HOST:PORT (its RSI configuration's IP_NUMBER:PORT) as well as host")
+        context = RsiContext(cycle_ms=cycle, timeout=timeout, correction_mode=mode)
+        link = RobotLink("kuka", "127.0.0.1", None, config=config, correction_mode=mode, cycle_ms=cycle)
+        spec = SimulatorSpec(runner=sim_runner, context=context, faults=Faults(seed=options.seed))
+        backend = KukaRsiBackend(listen=("127.0.0.1", options.port or 0), link=link, simulator=spec, runner=runner,  # type: ignore[arg-type]
+                                 settings=settings, limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
+    return backend  # the bridge node starts it

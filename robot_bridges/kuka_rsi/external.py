@@ -99,6 +99,7 @@ class LoopSettings:
     gc_every: int = 2500  # cycles between young-generation collections in the slack after a reply
     switch_interval: float | None = None  # s; set sys.setswitchinterval (process mode)
     realtime_priority: int | None = None  # try SCHED_FIFO at this priority (needs CAP_SYS_NICE)
+    record_busy: bool = False  # keep every receive-to-send time (benchmarks)
 
 
 def _require_feedback(config: RsiConfig, name: str) -> None:
@@ -167,6 +168,7 @@ class Channel:
         self._sent_ak = np.zeros(6)
         self._sent_rk = np.zeros(6)
         self.quiet = 0
+        self._moved = False
         self.correcting = False
         self.active_id = 0
         self._active_kind = CommandKind.NONE
@@ -238,10 +240,11 @@ class Channel:
         p, r = self._pose(self._i_rsol)
         self.base_p, self.base_r = p, r
         self.cart.reset(p, r)
-        self.ak[:] = 0.0
-        self.rk[:] = 0.0
-        self._sent_ak[:] = 0.0
-        self._sent_rk[:] = 0.0
+        self.ak = np.zeros(6)
+        self.rk = np.zeros(6)
+        self._sent_ak = self.ak
+        self._sent_rk = self.rk
+        self._moved = True
         self.mode = "joint"
         self.quiet = 0
 
@@ -423,8 +426,9 @@ class Channel:
             self.rk = np.zeros(6)
         if self.relative:
             # Increments only: nothing has moved, so nothing may be sent for the fold itself.
-            self._sent_ak = self.ak.copy()
-            self._sent_rk = self.rk.copy()
+            self._sent_ak = self.ak
+            self._sent_rk = self.rk
+        self._moved = True
         self.mode = space
 
     def _halt(self) -> None:
@@ -455,9 +459,11 @@ class Channel:
         if self.mode == "stream":
             self._step_stream()
         elif self.mode == "joint":
-            self.joint.step()
-            self.ak = (self.joint.position - self.q_ref) / _DEG  # type: ignore[operator]
-        else:
+            if not self.joint.done:
+                self.joint.step()
+                self.ak = (self.joint.position - self.q_ref) / _DEG  # type: ignore[operator]
+                self._moved = True
+        elif not self.cart.done:
             self.cart.step()
             self._cart_correction(self.cart.position, self.cart.rotation)
         self._check_done()
@@ -466,6 +472,7 @@ class Channel:
         a, b, c = matrix_to_abc(r @ self.base_r.T)
         d = (p - self.base_p) * 1000.0
         self.rk = np.array([d[0], d[1], d[2], a / _DEG, b / _DEG, c / _DEG])
+        self._moved = True
 
     def _step_stream(self) -> None:
         assert self._stream is not None
@@ -474,6 +481,7 @@ class Channel:
         if self._stream_space == "joint":
             self.joint.position = point.copy()
             self.ak = (point - self.q_ref) / _DEG  # type: ignore[operator]
+            self._moved = True
         else:
             self.cart.position = point[:3].copy()
             self.cart.rotation = abc_to_matrix(*point[3:])
@@ -487,18 +495,29 @@ class Channel:
                 self.cart.reset(self.cart.position, self.cart.rotation)
 
     def _fill_tx(self) -> None:
-        if self._i_ak is not None:
-            out = self.ak - self._sent_ak if self.relative else self.ak
-            for i, value in zip(self._i_ak, out):
-                self.tx[i] = float(value)
-        if self._i_rk is not None:
-            out = self._relative_rk() if self.relative else self.rk
-            for i, value in zip(self._i_rk, out):
-                self.tx[i] = float(value)
-        changed = not (np.array_equal(self.ak, self._sent_ak) and np.array_equal(self.rk, self._sent_rk))
-        self.quiet = 0 if changed else self.quiet + 1
-        self._sent_ak = self.ak.copy() if changed else self._sent_ak
-        self._sent_rk = self.rk.copy() if changed else self._sent_rk
+        """Write the corrections into the reply, when they changed; count the quiet cycles.
+
+        ``ak`` and ``rk`` are replaced, never changed in place, and every assignment sets
+        ``_moved``; so "sent" can keep a reference instead of a copy.
+        """
+        tx = self.tx
+        if self._moved:
+            self._moved = False
+            self.quiet = 0
+            if self._i_ak is not None:
+                out = self.ak - self._sent_ak if self.relative else self.ak
+                for i, value in zip(self._i_ak, out.tolist()):
+                    tx[i] = value
+            if self._i_rk is not None:
+                out = self._relative_rk() if self.relative else self.rk
+                for i, value in zip(self._i_rk, out.tolist()):
+                    tx[i] = value
+            self._sent_ak, self._sent_rk = self.ak, self.rk
+        else:
+            self.quiet += 1
+            if self.relative and self.quiet == 1:  # the increments were sent once: none now
+                for i in (self._i_ak or []) + (self._i_rk or []):
+                    tx[i] = 0.0
         self._read_flags()
 
     def _relative_rk(self) -> np.ndarray:
@@ -516,8 +535,8 @@ class Channel:
             if got is not None:
                 self._flags_version = got[0]
                 self._flags = int(got[1][0])  # type: ignore[call-overload]
-        for bit, i in enumerate(self._recv_bools):
-            self.tx[i] = bool(self._flags >> bit & 1)
+                for bit, i in enumerate(self._recv_bools):
+                    self.tx[i] = bool(self._flags >> bit & 1)
 
     # ------------------------------------------------------------------ completion
     def _start(self, cmd_id: int, kind: int, target: tuple[np.ndarray, ...]) -> None:
@@ -661,8 +680,6 @@ class RsiLoop:
         slots: Sequence[RobotSlots],
         pipe: FramedPipe,
         now_ns: Callable[[], int] = time.monotonic_ns,
-        *,
-        record_latency: bool = False,
     ) -> None:
         """``now_ns`` is the timestamp source (ITRA's performance counter), injected so tests
         can drive it; the default is the system-wide monotonic clock, the same in every
@@ -680,7 +697,6 @@ class RsiLoop:
         self._by_host_port = {(l.host, l.port): c for l, c in zip(links, self.channels) if l.port is not None}
         self._by_host = {l.host: c for l, c in zip(links, self.channels) if l.port is None}
         self.stats = LoopStats()
-        self._record = record_latency
         self._shutdown = False
         self._warned: dict[str, int] = {}
 
@@ -750,6 +766,7 @@ class RsiLoop:
         started = self.now_ns()
         stats = self.stats
         gc_every = s.gc_every if s.gc_control else 0
+        record = s.record_busy
         while not self._shutdown:
             try:
                 n, addr = sock.recvfrom_into(buf)
@@ -785,7 +802,7 @@ class RsiLoop:
                 busy = self.now_ns() - t
                 if busy > stats.max_busy_ns:
                     stats.max_busy_ns = busy
-                if self._record:
+                if record:
                     stats.busy_ns.append(busy)
             stats.packets += 1
             channel.after_reply(t)

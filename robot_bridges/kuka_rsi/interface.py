@@ -134,7 +134,6 @@ class RsiInterface:
         *,
         mode: RunnerMode = "process",
         now_ns: Callable[[], int] = time.monotonic_ns,
-        record_latency: bool = False,
     ) -> None:
         """``now_ns`` is the timestamp source of the getters (and, for a loop thread, of the loop):
         the system-wide monotonic clock by default, so both sides of a process boundary agree."""
@@ -148,7 +147,6 @@ class RsiInterface:
         self.settings = settings
         self.mode = mode
         self.now_ns = now_ns
-        self._record = record_latency
         configs = [link.rsi_config() for link in self.links]
         self._flag_bits = [
             {f.key: bit for bit, f in enumerate(f for f in PacketCodec.sen(c).fields if f.type == "BOOL")} for c in configs
@@ -179,8 +177,7 @@ class RsiInterface:
             self._view = memoryview(bytearray(size))
             self._slots = layout(self._view, len(self.links))
             self.loop = RsiLoop(
-                self.links, self.settings, self._slots, FramedPipe(theirs, blocking_send=False), self.now_ns,
-                record_latency=self._record,
+                self.links, self.settings, self._slots, FramedPipe(theirs, blocking_send=False), self.now_ns
             )
             self._thread = threading.Thread(target=self.loop.run, name="rsi-manager", daemon=True)
             self._thread.start()

@@ -31,8 +31,10 @@ import argparse
 import asyncio
 import json
 import math
+import os
 import random
 import select
+import signal
 import socket
 import sys
 import threading
@@ -131,7 +133,17 @@ class SimStats:
 class KrcModel:
     """The controller, one cycle at a time: :meth:`packet`, :meth:`offer` replies, :meth:`advance`."""
 
-    def __init__(self, config: RsiConfig, context: RsiContext = RsiContext(), roles: RsiRoles = RsiRoles(), arm: KukaArm | None = None) -> None:
+    def __init__(
+        self,
+        config: RsiConfig,
+        context: RsiContext = RsiContext(),
+        roles: RsiRoles = RsiRoles(),
+        arm: KukaArm | None = None,
+        *,
+        accept_echo: bool = False,
+    ) -> None:
+        """``accept_echo``: a datagram equal to the packet counts as the reply -- to time a bare UDP
+        echo server as the baseline of a benchmark; nothing is applied then."""
         if config.onlysend:
             raise ValueError(f"{config.source}: ONLYSEND is TRUE, so no corrections could ever arrive")
         self.config = config
@@ -167,6 +179,8 @@ class KrcModel:
         self._cache_q: dict[str, tuple[bytes, tuple[float, ...]]] = {}
         #: When a list, the set point (rad) of every cycle is appended: what the robot was told to do.
         self.trace: list[np.ndarray] | None = None
+        self._accept_echo = accept_echo
+        self._last_packet = b""
 
     # ------------------------------------------------------------------------------ output
     def packet(self) -> bytes:
@@ -189,7 +203,8 @@ class KrcModel:
         for tag in self._tools:
             values[index[tag]] = self.outputs.get(tag, False)
         self.stats.packets += 1
-        return self.rob.encode(values, self.ipoc)
+        self._last_packet = self.rob.encode(values, self.ipoc)
+        return self._last_packet
 
     def _fill(self, element: str, six: Sequence[float]) -> None:
         index = self.rob.index
@@ -216,6 +231,10 @@ class KrcModel:
         """A datagram from the external system during this cycle; True if it is *the* reply."""
         if self._reply_ok:
             return False  # the cycle already has its reply; RSI takes the first valid one
+        if self._accept_echo and data == self._last_packet:
+            self._reply_ok = True
+            self.stats.accepted += 1
+            return True
         out = list(self._received)
         try:
             ipoc = self.sen.decode_into(data, out)
@@ -383,6 +402,15 @@ class Endpoint:
         return f"{self.host}:{self.port}"
 
 
+def latency_summary(latencies_ns: Sequence[int]) -> dict[str, float]:
+    """p50, p99, p99.9 and max of round trips, in microseconds."""
+    if not latencies_ns:
+        return {}
+    values = np.sort(np.asarray(latencies_ns, dtype=np.float64)) / 1000.0
+    pick = lambda q: float(values[min(len(values) - 1, int(q * len(values)))])  # noqa: E731
+    return {"n": float(len(values)), "p50": pick(0.5), "p99": pick(0.99), "p99.9": pick(0.999), "max": float(values[-1])}
+
+
 def _garbage(rng: random.Random) -> bytes:
     choices = (
         b"<Rob Type=\"KUKA\"><RIst X=\"1\"",  # truncated
@@ -394,11 +422,19 @@ def _garbage(rng: random.Random) -> bytes:
 
 
 class _Sender:
-    """Sends the model's packets with the injected loss and garbage."""
+    """Sends the model's packets with the injected loss and garbage.
 
-    def __init__(self, sock: socket.socket, peer: tuple[str, int], model: KrcModel, faults: Faults) -> None:
+    With ``now_ns`` it also times each reply from just before the send to just after the receive,
+    leaving out the model's own work, and keeps the round trips in ``model.stats.latencies_ns``.
+    """
+
+    def __init__(
+        self, sock: socket.socket, peer: tuple[str, int], model: KrcModel, faults: Faults, now_ns: Callable[[], int] | None = None
+    ) -> None:
         self.sock, self.peer, self.model, self.faults = sock, peer, model, faults
         self.rng = random.Random(faults.seed)
+        self.now_ns = now_ns
+        self.sent_ns = 0
 
     def send(self) -> bool:
         """Send this cycle's packet; False when it was 'lost'."""
@@ -409,6 +445,8 @@ class _Sender:
         if self.faults.loss and self.rng.random() < self.faults.loss:
             self.model.stats.lost += 1
             return False
+        if self.now_ns is not None:
+            self.sent_ns = self.now_ns()
         self.sock.sendto(packet, self.peer)
         return True
 
@@ -421,10 +459,14 @@ class _Sender:
             n, addr = self.sock.recvfrom_into(buf)
         except ConnectionRefusedError:
             return None  # ICMP: nobody listens at the external system's address (yet)
+        arrived = self.now_ns() if self.now_ns is not None else 0
         if addr[0] != self.peer[0] or addr[1] != self.peer[1]:
             self.model.stats.foreign += 1
             return False
-        return self.model.offer(bytes(buf[:n]))
+        accepted = self.model.offer(bytes(buf[:n]))
+        if accepted and self.now_ns is not None:
+            self.model.stats.latencies_ns.append(arrived - self.sent_ns)
+        return accepted
 
 
 def run_lockstep(
@@ -446,20 +488,13 @@ def run_lockstep(
     ``now_ns`` (for benchmarks) records each reply's round trip in ``model.stats.latencies_ns``.
     Returns why RSI stopped, or None when ``cycles`` ran out or ``stop`` was set.
     """
-    sender = _Sender(sock, peer, model, faults)
+    sender = _Sender(sock, peer, model, faults, now_ns)
     buf = bytearray(65536)
     done = 0
     while (cycles is None or done < cycles) and not (stop is not None and stop.is_set()):
-        sent_at = now_ns() if now_ns else 0
         if sender.send():
-            while True:
-                got = sender.receive(reply_grace, buf)
-                if got is None:
-                    break
-                if got:
-                    if now_ns:
-                        model.stats.latencies_ns.append(now_ns() - sent_at)
-                    break
+            while sender.receive(reply_grace, buf) is False:
+                pass  # not the reply: keep waiting for it
         try:
             model.advance()
         except RsiStopped as stopped:
@@ -483,7 +518,7 @@ def run_realtime(
     The waits are ``select`` timeouts computed from ``clock.now()``: microsecond resolution, where
     asyncio timers round to the millisecond.  A reply must arrive before the next cycle begins.
     """
-    sender = _Sender(sock, peer, model, faults)
+    sender = _Sender(sock, peer, model, faults, lambda: int(clock.now() / clock.speed * 1e9))
     buf = bytearray(65536)
     cycle = model.dt
     tick = clock.now()
@@ -492,11 +527,10 @@ def run_realtime(
         jitter = sender.rng.uniform(-faults.jitter_ms, faults.jitter_ms) / 1000.0 if faults.jitter_ms else 0.0
         send_at = tick + max(0.0, jitter)
         _drain_until(sender, clock, send_at, buf, count_late=True)
-        sent_at = clock.now()
-        if sent_at > tick + cycle:
+        if clock.now() > tick + cycle:
             model.stats.overruns += 1
         if sender.send():
-            _drain_until(sender, clock, tick + cycle, buf, count_late=False, sent_at=sent_at)
+            _drain_until(sender, clock, tick + cycle, buf, count_late=False)
         else:
             _drain_until(sender, clock, tick + cycle, buf, count_late=True)
         try:
@@ -508,7 +542,7 @@ def run_realtime(
     return None
 
 
-def _drain_until(sender: _Sender, clock: Clock, deadline: float, buf: bytearray, *, count_late: bool, sent_at: float = 0.0) -> None:
+def _drain_until(sender: _Sender, clock: Clock, deadline: float, buf: bytearray, *, count_late: bool) -> None:
     """Take datagrams until run time ``deadline``; before a packet is sent, any reply is a late one."""
     model = sender.model
     while True:
@@ -518,18 +552,14 @@ def _drain_until(sender: _Sender, clock: Clock, deadline: float, buf: bytearray,
         ready, _, _ = select.select([sender.sock], [], [], clock.to_wall(remaining))
         if not ready:
             return
-        try:
-            n, addr = sender.sock.recvfrom_into(buf)
-        except ConnectionRefusedError:
-            continue  # ICMP: nobody listens at the external system's address (yet)
         if count_late:
+            try:
+                sender.sock.recvfrom_into(buf)
+            except ConnectionRefusedError:
+                continue  # ICMP: nobody listens at the external system's address (yet)
             model.stats.late_replies_discarded += 1
             continue
-        if (addr[0], addr[1]) != sender.peer:
-            model.stats.foreign += 1
-            continue
-        if model.offer(bytes(buf[:n])):
-            model.stats.latencies_ns.append(int((clock.now() - sent_at) / clock.speed * 1e9))
+        sender.receive(0.0, buf)
 
 
 # ------------------------------------------------------------------------------------ thread
@@ -625,6 +655,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--garbage", type=float, default=0.0)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--reply-grace", type=float, default=0.25, help="accelerated mode: wall seconds to wait for a reply")
+    p.add_argument("--rt-priority", type=int, default=0, help="try SCHED_FIFO at this priority (a controller is hard real time)")
+    p.add_argument("--accept-echo", action="store_true", help="benchmark baseline: a datagram equal to the packet is the reply")
     return p
 
 
@@ -639,7 +671,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             cycle_ms=args.cycle, timeout=args.timeout, correction_mode=args.mode, axis_monitor_deg=(args.axis_monitor,) * 6
         )
         faults = Faults(args.jitter_ms, args.loss, args.garbage, args.seed)
-        model = KrcModel(config, context)
+        model = KrcModel(config, context, accept_echo=args.accept_echo)
     except (ValueError, OSError) as error:
         print(f"kuka_rsi simulator: {error}", file=sys.stderr)
         return 1
@@ -650,19 +682,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"kuka_rsi simulator: cannot bind {bind}: {error.strerror}", file=sys.stderr)
         return 1
     host, port = sock.getsockname()
+    if args.rt_priority > 0:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
+        except (PermissionError, OSError) as error:
+            print(f"kuka_rsi simulator: no real-time priority ({error.strerror or error})", file=sys.stderr)
     print(f"KRC simulator {host}:{port} -> {to}, {args.cycle} ms, {'accelerated' if args.accelerated else f'x{args.speed:g}'}", flush=True)
     peer = (to.host, to.port)
+    stop = threading.Event()
+    # SIGTERM / SIGINT end the run between two cycles, so the summary below is still printed.
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
 
     async def realtime(clock: Clock) -> RsiStopped | None:
-        return await asyncio.to_thread(run_realtime, sock, peer, model, clock, cycles=args.cycles, faults=faults)
+        return await asyncio.to_thread(run_realtime, sock, peer, model, clock, cycles=args.cycles, faults=faults, stop=stop)
 
     try:
         if args.accelerated:
-            result = run_lockstep(sock, peer, model, cycles=args.cycles, faults=faults, reply_grace=args.reply_grace)
+            result = run_lockstep(sock, peer, model, cycles=args.cycles, faults=faults, reply_grace=args.reply_grace, stop=stop)
         else:
             result = run_with_clock(realtime, real_clock() if args.speed == 1.0 else Clock(args.speed))
-    except KeyboardInterrupt:
-        result = None
     finally:
         sock.close()
     s = model.stats
@@ -673,7 +712,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         "late": s.late,
         "accepted": s.accepted,
         "invalid_replies": s.invalid_replies,
+        "overruns": s.overruns,
         "last_ipoc": model.ipoc,
+        "round_trip_us": latency_summary(s.latencies_ns),
     }
     print(json.dumps(summary), flush=True)
     return 2 if result and result.error else 0
