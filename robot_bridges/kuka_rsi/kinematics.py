@@ -82,8 +82,10 @@ def matrix_to_abc(r: Matrix) -> tuple[float, float, float]:
 
 
 def rotation_angle(r: Matrix) -> float:
-    """The angle (rad, 0..pi) of a rotation matrix."""
-    return math.acos(max(-1.0, min(1.0, (float(r[0, 0] + r[1, 1] + r[2, 2]) - 1.0) / 2.0)))
+    """The angle (rad, 0..pi) of a rotation matrix; atan2 keeps full precision near 0 and pi, where acos does not."""
+    sine = math.hypot(float(r[2, 1] - r[1, 2]), float(r[0, 2] - r[2, 0]), float(r[1, 0] - r[0, 1])) / 2.0
+    cosine = (float(r[0, 0] + r[1, 1] + r[2, 2]) - 1.0) / 2.0
+    return math.atan2(sine, cosine)
 
 
 def frame(x: float, y: float, z: float, rotation: Matrix) -> Matrix:
