@@ -248,3 +248,20 @@ def test_synchronised_full_body_move_is_dispatched_with_partners(run_sim: Any) -
     assert [(e.group, e.kind) for e in cell.backend.log] == [("left_arm", "full_body_move")]
     ends = {g: cell.functions(g)[0][3] for g in ("left_arm", "right_arm", "torso_head")}
     assert max(ends.values()) - min(ends.values()) < 0.05
+
+
+def test_a_long_lived_engine_runs_one_application_after_another(run_sim: Any) -> None:
+    async def main(clock: Clock) -> tuple[Any, Any]:
+        cell = await Cell(clock, durations={"move_joints": 3.0}).start()
+        engine = cell.deployment.engine
+        first = asyncio.ensure_future(engine.run(make_app(THREE_OPS)))
+        await clock.sleep(1.0)
+        assert (await cell.operator("stop")).success
+        stopped = await first
+        second = await engine.run(make_app(THREE_OPS))  # the machines restart from Finish; no stop carries over
+        await cell.deployment.close()
+        return stopped, second
+
+    stopped, second = run_sim(main)
+    assert stopped.outcome == "stopped"
+    assert second.ok and second.operations_done == 3 and not second.errors

@@ -83,7 +83,6 @@ class ExecutionEngine:
         self._stop_reason: str | None = None
         self._safety_active = False
         self._control = asyncio.Event()  # set whenever pause/resume/stop/step/reset/start happens
-        self._started = not self.autostart
         self._start_requested = False
         self._alarm_reset = False
         self._progress: dict[str, GroupProgress] = {}
@@ -91,6 +90,7 @@ class ExecutionEngine:
     # ============================================================================ running
     async def run(self, app: Application) -> RunReport:
         """Run ``app`` to its end; always returns a report, never raises for robot faults."""
+        self._reset_run_state()
         self.app = app
         report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
         self.report = report
@@ -125,6 +125,15 @@ class ExecutionEngine:
         report.t_end = self.clock.now()
         self._set_state({"finished": "finished", "failed": "failed", "stopped": "stopped"}[report.outcome], report.message)
         return report
+
+    def _reset_run_state(self) -> None:
+        """A long-lived engine node runs one application after another: nothing carries over."""
+        self.state = "idle"
+        self._op_index, self._operation, self._message = 0, None, ""
+        self._paused = self._stepping = self._alarm_reset = False
+        self._stop_reason = None
+        self._start_requested = False
+        self._progress.clear()
 
     async def _await_machines(self) -> None:
         """Every group machine must be up (Ready, or Finish from an earlier run) before we start."""
