@@ -22,6 +22,7 @@ from core_functions.primitives import (
     END_EFFECTOR_ACTIONS,
     Dwell,
     EndEffector,
+    EndEffectorAction,
     ExecuteTrajectory,
     FullBodyMove,
     MasterSlaveMove,
@@ -102,6 +103,15 @@ class CoreFunctions:
         if missing:
             raise LookupError(f"joint pose {name!r} is not a whole-robot pose: it lacks {', '.join(missing)}")
         return names, tuple(pose[j] for j in names)
+
+    def reach_in(self, target: str | Pose, distance: float, what: str, action: EndEffectorAction) -> Skill:
+        """Approach ``distance`` before the target along its z, go straight in, act, come straight out."""
+        pose = self.resolve(target)
+        label = target if isinstance(target, str) else "part"
+        yield MoveCartesian(pose.offset_local(dz=-distance), "ptp", frame=f"{label} approach")
+        yield MoveCartesian(pose, "linear", frame=f"{label} {what}")
+        yield EndEffector(action)
+        yield MoveCartesian(pose.offset_local(dz=-distance), "linear", frame=f"{label} retreat")
 
     def locate_frame(self, target: str, camera: str = "") -> Skill:
         """Locate ``target`` by vision and record the correction (a building block for skills)."""
@@ -215,13 +225,8 @@ class CoreFunctions:
     )
     def pick(self, target: str | Pose, distance: float = 0.05) -> Skill:
         """Pick a part: open the gripper, approach along the target's z, go straight in, close, retreat straight out."""
-        grasp = self.resolve(target)
-        label = target if isinstance(target, str) else "part"
         yield EndEffector("gripper_open")
-        yield MoveCartesian(grasp.offset_local(dz=-distance), "ptp", frame=f"{label} approach")
-        yield MoveCartesian(grasp, "linear", frame=f"{label} grasp")
-        yield EndEffector("gripper_close")
-        yield MoveCartesian(grasp.offset_local(dz=-distance), "linear", frame=f"{label} retreat")
+        yield from self.reach_in(target, distance, "grasp", "gripper_close")
 
     @skill(
         ParamSpec("target", ParamType.TARGET, "where the part goes: the TCP pose that releases it (frame or x,y,z,roll,pitch,yaw)", unit="m, rad"),
@@ -232,12 +237,7 @@ class CoreFunctions:
     )
     def place(self, target: str | Pose, distance: float = 0.05) -> Skill:
         """Place the held part: approach along the target's z, go straight in, open the gripper, retreat straight out."""
-        release = self.resolve(target)
-        label = target if isinstance(target, str) else "part"
-        yield MoveCartesian(release.offset_local(dz=-distance), "ptp", frame=f"{label} approach")
-        yield MoveCartesian(release, "linear", frame=f"{label} release")
-        yield EndEffector("gripper_open")
-        yield MoveCartesian(release.offset_local(dz=-distance), "linear", frame=f"{label} retreat")
+        yield from self.reach_in(target, distance, "release", "gripper_open")
 
     # ----------------------------------------------------------------------------- vision
     @skill(

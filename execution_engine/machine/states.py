@@ -59,6 +59,12 @@ class MachineState(State):
             return
         self.ctx.send_result(request, "aborted", f"{self.ctx.group} is in {self.name}, not Ready: request refused")
 
+    @staticmethod
+    def stopping(userdata: MutableMapping[str, Any], signal: OperatorSignal) -> str:
+        """Leave by Table 2's stop, remembering who asked (ErrorHandling reports it)."""
+        userdata["stop_reason"] = f"stopped by {signal.source}"
+        return STOP_SIGNAL
+
     def refuse_or_fail(self, userdata: MutableMapping[str, Any], event: Event) -> str | None:
         """While working: a request is refused, a fault is this state's error; anything else is no signal."""
         if isinstance(event, RequestEvent):
@@ -223,8 +229,7 @@ class WorkingState(MachineState):
             userdata["resume_command"] = command_id
             return PAUSE_SIGNAL
         if signal.command == "stop":
-            userdata["stop_reason"] = f"stopped by {signal.source}"
-            return STOP_SIGNAL
+            return self.stopping(userdata, signal)
         return None  # resume / reset do not apply while working
 
     def _finish(self, userdata: MutableMapping[str, Any], feedback: BridgeFeedback) -> str:
@@ -354,8 +359,7 @@ class SyncState(WorkingState):
             if event.command == "pause":
                 return PAUSE_SIGNAL
             if event.command == "stop":
-                userdata["stop_reason"] = f"stopped by {event.source}"
-                return STOP_SIGNAL
+                return self.stopping(userdata, event)
             return None
         return self.refuse_or_fail(userdata, event)  # a SyncEvent: the board changed, look again
 
@@ -381,8 +385,7 @@ class PauseState(MachineState):
                 if event.command == "resume":
                     return RESUME
                 if event.command == "stop":
-                    userdata["stop_reason"] = f"stopped by {event.source}"
-                    return STOP_SIGNAL
+                    return self.stopping(userdata, event)
             elif isinstance(event, FeedbackEvent) and event.feedback.id == paused:
                 if event.feedback.status == "error":
                     userdata["error"] = f"while paused: {event.feedback.error}"
