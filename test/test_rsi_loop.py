@@ -256,7 +256,9 @@ def test_holdon_behaves_as_configured(rig: Callable[..., Rig], holdon: str) -> N
     before = len(r.sim.model.trace)  # type: ignore[arg-type]
     r.iface.withhold_replies(0, 3)
     r.wait(lambda: r.iface.state(0).delay == 3, "three late packets")
-    steps = np.degrees(np.diff(np.array(r.sim.model.trace[before - 2 : before + 8])[:, 0]))  # type: ignore[index]
+    r.wait(lambda: len(r.sim.model.trace) > before + 60, "60 more cycles")  # type: ignore[arg-type]
+    # Still cruising (the move lasts ~800 cycles); the withholding began within these 60 cycles.
+    steps = np.degrees(np.diff(np.array(r.sim.model.trace[before - 2 : before + 60])[:, 0]))  # type: ignore[index]
     cruise = math.degrees(0.5 * DT)
     late = steps[np.abs(steps - cruise) > 1e-6]
     if holdon == "1":

@@ -142,7 +142,17 @@ class RsiInterface:
         if mode not in ("thread", "process"):
             raise ValueError(f"runner mode is 'thread' or 'process', not {mode!r}")
         if mode == "process":
-            settings = LoopSettings(**{**settings.__dict__, "gc_control": True, "switch_interval": settings.switch_interval or 1e-4})
+            # The loop owns this interpreter: collector off, short switch interval, and -- where the
+            # system allows it -- a real-time scheduling class (priority 0 asks for none).
+            priority = 10 if settings.realtime_priority is None else settings.realtime_priority
+            settings = LoopSettings(
+                **{
+                    **settings.__dict__,
+                    "gc_control": True,
+                    "switch_interval": settings.switch_interval or 1e-4,
+                    "realtime_priority": priority or None,
+                }
+            )
         self.links = tuple(links)
         self.settings = settings
         self.mode = mode

@@ -37,7 +37,9 @@ import select
 import signal
 import socket
 import sys
+import struct
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
@@ -120,6 +122,7 @@ class RsiStopped(Exception):
 class SimStats:
     packets: int = 0
     late: int = 0
+    late_since_first_reply: int = 0  # leaves out the packets sent before the external system was there
     accepted: int = 0
     invalid_replies: int = 0
     foreign: int = 0
@@ -270,6 +273,8 @@ class KrcModel:
             self.delay += 1
             self.late_in_row += 1
             self.stats.late += 1
+            if self.stats.accepted:
+                self.stats.late_since_first_reply += 1
             self._received = [v if hold else d for v, hold, d in zip(self._received, self._holdon, self.sen.defaults)]
             if self.late_in_row >= self.context.timeout:
                 raise RsiStopped(
@@ -421,20 +426,41 @@ def _garbage(rng: random.Random) -> bytes:
     return rng.choice(choices)
 
 
-class _Sender:
-    """Sends the model's packets with the injected loss and garbage.
+_SO_TIMESTAMPNS = 35  # Linux <asm-generic/socket.h>; not exported by the socket module
+_TIMESPEC = struct.Struct("qq")
 
-    With ``now_ns`` it also times each reply from just before the send to just after the receive,
-    leaving out the model's own work, and keeps the round trips in ``model.stats.latencies_ns``.
+
+def _wall_ns() -> int:
+    """CLOCK_REALTIME, the clock the kernel stamps received datagrams with (see :class:`_Link`).
+
+    Only the on-time verdict of the real-time driver reads it, to compare with those stamps;
+    the schedule itself runs on the injected :class:`Clock`.
+    """
+    return time.clock_gettime_ns(time.CLOCK_REALTIME)
+
+
+class _Link:
+    """The controller's socket: sends the model's packets (with injected loss and garbage) and
+    reads datagrams with their arrival time.
+
+    The arrival time is the kernel's receive stamp when the platform gives one, so a reply that
+    came in time is on time even if the simulator itself was scheduled late to read it -- a real
+    controller's RSI runs hard real time.  ``now_ns`` stamps sends (and arrivals without kernel
+    stamps); round trips of accepted replies go to ``model.stats.latencies_ns``.
     """
 
-    def __init__(
-        self, sock: socket.socket, peer: tuple[str, int], model: KrcModel, faults: Faults, now_ns: Callable[[], int] | None = None
-    ) -> None:
+    def __init__(self, sock: socket.socket, peer: tuple[str, int], model: KrcModel, faults: Faults, now_ns: Callable[[], int] | None, *, kernel_stamps: bool = False) -> None:
         self.sock, self.peer, self.model, self.faults = sock, peer, model, faults
         self.rng = random.Random(faults.seed)
         self.now_ns = now_ns
         self.sent_ns = 0
+        self.kernel_stamps = False
+        if kernel_stamps:
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                self.kernel_stamps = True
+            except OSError:
+                pass
 
     def send(self) -> bool:
         """Send this cycle's packet; False when it was 'lost'."""
@@ -450,20 +476,38 @@ class _Sender:
         self.sock.sendto(packet, self.peer)
         return True
 
-    def receive(self, timeout: float, buf: bytearray) -> bool | None:
-        """Wait up to ``timeout`` wall seconds for one datagram; True if it was the reply, None on timeout."""
+    def read(self, timeout: float, buf: bytearray) -> tuple[bytes, int] | None:
+        """Wait up to ``timeout`` wall seconds for a datagram from the peer: ``(data, arrival_ns)``,
+        ``(b"", 0)`` for anything else that arrived, None when nothing did."""
         ready, _, _ = select.select([self.sock], [], [], max(0.0, timeout))
         if not ready:
             return None
         try:
-            n, addr = self.sock.recvfrom_into(buf)
+            if self.kernel_stamps:
+                n, ancillary, _, addr = self.sock.recvmsg_into([buf], socket.CMSG_SPACE(_TIMESPEC.size))
+                arrived = next(
+                    (
+                        sec * 1_000_000_000 + nsec
+                        for level, kind, data in ancillary
+                        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= _TIMESPEC.size
+                        for sec, nsec in [_TIMESPEC.unpack_from(data)]
+                    ),
+                    0,
+                )
+            else:
+                n, addr = self.sock.recvfrom_into(buf)
+                arrived = 0
         except ConnectionRefusedError:
-            return None  # ICMP: nobody listens at the external system's address (yet)
-        arrived = self.now_ns() if self.now_ns is not None else 0
+            return (b"", 0)  # ICMP: nobody listens at the external system's address (yet)
+        if not arrived and self.now_ns is not None:
+            arrived = self.now_ns()
         if addr[0] != self.peer[0] or addr[1] != self.peer[1]:
             self.model.stats.foreign += 1
-            return False
-        accepted = self.model.offer(bytes(buf[:n]))
+            return (b"", 0)
+        return bytes(buf[:n]), arrived
+
+    def offer(self, data: bytes, arrived: int) -> bool:
+        accepted = self.model.offer(data)
         if accepted and self.now_ns is not None:
             self.model.stats.latencies_ns.append(arrived - self.sent_ns)
         return accepted
@@ -488,13 +532,15 @@ def run_lockstep(
     ``now_ns`` (for benchmarks) records each reply's round trip in ``model.stats.latencies_ns``.
     Returns why RSI stopped, or None when ``cycles`` ran out or ``stop`` was set.
     """
-    sender = _Sender(sock, peer, model, faults, now_ns)
+    link = _Link(sock, peer, model, faults, now_ns)
     buf = bytearray(65536)
     done = 0
     while (cycles is None or done < cycles) and not (stop is not None and stop.is_set()):
-        if sender.send():
-            while sender.receive(reply_grace, buf) is False:
-                pass  # not the reply: keep waiting for it
+        if link.send():
+            while True:
+                got = link.read(reply_grace, buf)
+                if got is None or (got[0] and link.offer(*got)):
+                    break  # no reply within the grace, or the reply
         try:
             model.advance()
         except RsiStopped as stopped:
@@ -515,51 +561,52 @@ def run_realtime(
 ) -> RsiStopped | None:
     """Real-time mode: a packet every cycle of ``clock`` run time, replies or not.
 
-    The waits are ``select`` timeouts computed from ``clock.now()``: microsecond resolution, where
-    asyncio timers round to the millisecond.  A reply must arrive before the next cycle begins.
+    A reply is on time if it arrived (kernel stamp) within one cycle of its packet's send; the
+    cycle is closed at the next tick, just before the next packet.  The waits are ``select``
+    timeouts computed from ``clock.now()``: microsecond resolution, where asyncio timers round
+    to the millisecond.
     """
-    sender = _Sender(sock, peer, model, faults, lambda: int(clock.now() / clock.speed * 1e9))
+    link = _Link(sock, peer, model, faults, _wall_ns, kernel_stamps=True)
     buf = bytearray(65536)
     cycle = model.dt
+    window_ns = int(clock.to_wall(cycle) * 1e9)
     tick = clock.now()
+    deadline_ns: int | None = None  # for the reply to the packet in flight; None: none can be on time
+    in_flight = False
     done = 0
-    while (cycles is None or done < cycles) and not (stop is not None and stop.is_set()):
-        jitter = sender.rng.uniform(-faults.jitter_ms, faults.jitter_ms) / 1000.0 if faults.jitter_ms else 0.0
-        send_at = tick + max(0.0, jitter)
-        _drain_until(sender, clock, send_at, buf, count_late=True)
+    while not (stop is not None and stop.is_set()):
+        jitter = link.rng.uniform(0.0, faults.jitter_ms) / 1000.0 if faults.jitter_ms else 0.0
+        _collect(link, clock, tick + jitter, buf, deadline_ns)
+        if in_flight:
+            try:
+                model.advance()
+            except RsiStopped as stopped:
+                return stopped
+            done += 1
+            if cycles is not None and done >= cycles:
+                return None
         if clock.now() > tick + cycle:
             model.stats.overruns += 1
-        if sender.send():
-            _drain_until(sender, clock, tick + cycle, buf, count_late=False)
-        else:
-            _drain_until(sender, clock, tick + cycle, buf, count_late=True)
-        try:
-            model.advance()
-        except RsiStopped as stopped:
-            return stopped
+        deadline_ns = link.sent_ns + window_ns if link.send() else None
+        in_flight = True
         tick += cycle
-        done += 1
     return None
 
 
-def _drain_until(sender: _Sender, clock: Clock, deadline: float, buf: bytearray, *, count_late: bool) -> None:
-    """Take datagrams until run time ``deadline``; before a packet is sent, any reply is a late one."""
-    model = sender.model
+def _collect(link: _Link, clock: Clock, until: float, buf: bytearray, deadline_ns: int | None) -> None:
+    """Read datagrams until run time ``until`` (and whatever has arrived by then); offer the ones
+    that arrived by ``deadline_ns``, discard the rest as late."""
     while True:
-        remaining = deadline - clock.now()
-        if remaining <= 0:
+        got = link.read(clock.to_wall(until - clock.now()), buf)
+        if got is None:
             return
-        ready, _, _ = select.select([sender.sock], [], [], clock.to_wall(remaining))
-        if not ready:
-            return
-        if count_late:
-            try:
-                sender.sock.recvfrom_into(buf)
-            except ConnectionRefusedError:
-                continue  # ICMP: nobody listens at the external system's address (yet)
-            model.stats.late_replies_discarded += 1
+        data, arrived = got
+        if not data:
             continue
-        sender.receive(0.0, buf)
+        if deadline_ns is not None and arrived <= deadline_ns:
+            link.offer(data, arrived)
+        else:
+            link.model.stats.late_replies_discarded += 1
 
 
 # ------------------------------------------------------------------------------------ thread
@@ -710,6 +757,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "error": bool(result and result.error),
         "packets": s.packets,
         "late": s.late,
+        "late_since_first_reply": s.late_since_first_reply,
         "accepted": s.accepted,
         "invalid_replies": s.invalid_replies,
         "overruns": s.overruns,
