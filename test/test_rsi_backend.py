@@ -342,3 +342,68 @@ def test_the_factory_serves_a_real_controller_without_a_simulator() -> None:
     assert backend.simulator_spec is None and backend.iface is None  # not started: the bridge node starts it
     assert (backend.link.host, backend.link.correction_mode, backend.link.cycle_ms) == ("10.0.0.5", "relative", 12)
     assert (backend.settings.host, backend.settings.port) == ("127.0.0.1", 0)
+
+
+# ------------------------------------------------------------------- through the engine and CLI
+def test_the_demo_application_runs_to_finish_through_the_cli(tmp_path: Any) -> None:
+    """``run FILE --robot kuka-rsi``: the engine, the group machine, the bridge node, the loop
+    process, and the simulated controller (accelerated, so the robot does not take 15 s)."""
+    import io
+    import json
+    from pathlib import Path
+
+    from execution_engine.cli import main as cli_main
+
+    app = Path(__file__).resolve().parents[1] / "apps_xml" / "kuka_rsi_demo.xml"
+    trace = tmp_path / "trace.jsonl"
+    out, err = io.StringIO(), io.StringIO()
+    code = cli_main(["run", str(app), "--robot", "kuka-rsi", "--backend-option", "simulator=accelerated", "--trace", str(trace), "-q"], out, err)
+    assert code == 0, err.getvalue() + out.getvalue()
+    assert "FINISHED" in out.getvalue() and "operations: 8/8" in out.getvalue()
+    states = [json.loads(line).get("state") for line in trace.read_text().splitlines()]
+    assert "TrajectoryExecution" in states and "RecordTrajectory" in states and "ErrorHandling" not in states
+
+
+def test_an_rsi_stop_puts_the_machine_in_error_handling(tmp_path: Any) -> None:
+    import io
+    import json
+    from pathlib import Path
+
+    from execution_engine.cli import main as cli_main
+
+    app = Path(__file__).resolve().parents[1] / "apps_xml" / "kuka_rsi_demo.xml"
+    trace = tmp_path / "trace.jsonl"
+    out, err = io.StringIO(), io.StringIO()
+    options = ["--backend-option", "simulator=accelerated", "--backend-option", "axis_monitor=5"]
+    code = cli_main(["run", str(app), "--robot", "kuka-rsi", *options, "--trace", str(trace), "-q"], out, err)
+    assert code == 1, err.getvalue() + out.getvalue()
+    events = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert any(e.get("state") == "ErrorHandling" for e in events)
+    assert "AXISCORRMON" in trace.read_text()
+
+
+def test_recording_plans_through_waypoints_with_the_robots_generators(run_sim: Run) -> None:
+    from core_functions.primitives import RecordTrajectory
+
+    async def body(b: KukaRsiBackend) -> None:
+        start = b.tcp_pose("arm")
+        assert start is not None
+        a, c = start.translated(0.0, -0.1, -0.05), start.translated(0.0, 0.1, -0.05)
+        for interpolation in ("linear", "ptp"):
+            result = await b.execute("arm", RecordTrajectory("sweep", waypoints=(a, c), interpolation=interpolation, sample_period=0.1))
+            assert result.joint_names == ("A1", "A2", "A3", "A4", "A5", "A6")
+            assert result.times[0] == 0.0 and all(t1 > t0 for t0, t1 in zip(result.times, result.times[1:]))
+            assert Pose.from_matrix(ARM.fk(result.points[-1])).distance_to(c) < 1e-6
+            if interpolation == "linear":  # every kept point lies on one of the two legs
+                for q in result.points[1:]:
+                    p = ARM.fk(q)[:3, 3]
+                    on_first = np.linalg.norm(np.cross(p - start.position, np.array(a.position) - start.position)) < 1e-6
+                    on_second = np.linalg.norm(np.cross(p - np.array(a.position), np.array(c.position) - a.position)) < 1e-6
+                    assert on_first or on_second
+        taught = await b.execute("arm", RecordTrajectory("still", mode="teach", duration=0.2, sample_period=0.1))
+        assert taught.times == (0.0, 0.1, 0.2) and np.allclose(taught.points, [READY] * 3, atol=1e-6)
+        with pytest.raises(BridgeError) as caught:
+            await b.execute("arm", RecordTrajectory("far", waypoints=(Pose(2.0, 0.0, 0.5),)))
+        assert caught.value.kind is FaultKind.UNREACHABLE
+
+    _with_backend(run_sim, body)

@@ -517,7 +517,8 @@ class KukaRsiBackend(RobotBackend):
                 raise BridgeError(FaultKind.JOINT_LIMIT, f"{self.name}: {error}") from None
 
     async def _record(self, primitive: RecordTrajectory) -> TrajectoryResult:
-        """Plan through waypoints with the robot's own generators, or sample the axes while taught."""
+        """Plan through waypoints with the robot's own generators at full speed (replaying scales
+        the times by the speed set then), or sample the axes while taught."""
         names = self.spec.joint_names
         period = primitive.sample_period
         if primitive.mode == "teach":
@@ -528,49 +529,70 @@ class KukaRsiBackend(RobotBackend):
                 times.append(k * period)
                 points.append(tuple(self._state().actual_joints))
             return TrajectoryResult(names, tuple(points), tuple(times))
+        return self._plan(primitive)
+
+    def _plan(self, primitive: RecordTrajectory) -> TrajectoryResult:
+        """Run the generators cycle by cycle through the waypoints; keep one point per sample period.
+
+        Inverse kinematics only for the kept points of linear legs (a handful, not one per cycle),
+        since this runs on the application's thread; consecutive kept points farther apart than the
+        axes can move in between mean the line leaves the workspace or passes a singularity.
+        """
         q = np.array(self._state().set_joints)
-        samples: list[np.ndarray] = [q]
+        start = q
+        timeline: list[tuple[bool, np.ndarray]] = [(False, q)]  # (is a pose, joints or 4x4 pose)
         for waypoint in primitive.waypoints:
             goal = self.arm.ik(waypoint.matrix(), q)
             if goal is None:
                 raise BridgeError(FaultKind.UNREACHABLE, f"{self.name}: waypoint {waypoint} of {primitive.name!r} is out of reach")
             if primitive.interpolation == "linear":
-                samples.extend(self._plan_line(q, waypoint, primitive.name))
+                timeline += [(True, pose) for pose in self._line_poses(q, waypoint)]
             else:
-                samples.extend(self._plan_joints(q, goal))
-            q = samples[-1]
-        step = max(1, round(period / self._dt))
-        picked = samples[::step] + ([] if (len(samples) - 1) % step == 0 else [samples[-1]])
-        times = [min(i * step, len(samples) - 1) * self._dt for i in range(len(picked))]
-        return TrajectoryResult(names, tuple(tuple(map(float, p)) for p in picked), tuple(times))
+                timeline += [(False, joints) for joints in self._joint_states(q, goal)]
+            q = goal
+        step = max(1, round(primitive.sample_period / self._dt))
+        kept = list(range(0, len(timeline), step))
+        if kept[-1] != len(timeline) - 1:
+            kept.append(len(timeline) - 1)
+        vmax = np.array([j.max_velocity for j in self.spec.joints])
+        points: list[np.ndarray] = []
+        reference, before = start, 0
+        for i in kept:
+            is_pose, value = timeline[i]
+            joints = self.arm.ik(value, reference) if is_pose else value
+            if joints is None or np.any(np.abs(joints - reference) > vmax * max(1, i - before) * self._dt * 1.5 + 1e-9):
+                raise BridgeError(
+                    FaultKind.UNREACHABLE,
+                    f"{self.name}: the straight line of {primitive.name!r} leaves the workspace or passes a singularity "
+                    f"{(i * self._dt):.2f} s along",
+                )
+            points.append(joints)
+            reference, before = joints, i
+        times = tuple(i * self._dt for i in kept)
+        return TrajectoryResult(self.spec.joint_names, tuple(tuple(map(float, p)) for p in points), times)
 
-    def _plan_joints(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
+    def _joint_states(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
         otg = VectorOTG([1] * 6, self._dt)
         otg.reset(start)
-        vmax = np.array([j.max_velocity for j in self.spec.joints]) * self.speed
-        otg.set_target(goal, vmax, self.limits.joint_accel * self.speed)
+        otg.set_target(goal, np.array([j.max_velocity for j in self.spec.joints]), self.limits.joint_accel)
         out = []
         while not otg.step():
             out.append(otg.position.copy())
         out.append(otg.position.copy())
         return out
 
-    def _plan_line(self, start: np.ndarray, target: Pose, name: str) -> list[np.ndarray]:
+    def _line_poses(self, start: np.ndarray, target: Pose) -> list[np.ndarray]:
         t0 = self.arm.fk(start)
         otg = CartesianOTG(self._dt)
         otg.reset(t0[:3, 3], t0[:3, :3])
-        lim, f = self.limits, self.speed
-        otg.set_target(np.array(target.position), target.matrix()[:3, :3], (lim.linear_speed * f, lim.linear_accel * f, lim.angular_speed * f, lim.angular_accel * f))
-        out, q = [], start
+        lim = self.limits
+        otg.set_target(np.array(target.position), target.matrix()[:3, :3], (lim.linear_speed, lim.linear_accel, lim.angular_speed, lim.angular_accel))
+        out = []
         while True:
             done = otg.step()
             m = np.eye(4)
             m[:3, :3], m[:3, 3] = otg.rotation, otg.position
-            solved = self.arm.ik(m, q)
-            if solved is None or float(np.max(np.abs(solved - q))) > math.radians(30):
-                raise BridgeError(FaultKind.UNREACHABLE, f"{self.name}: the straight line of {name!r} to {target} leaves the workspace")
-            out.append(solved)
-            q = solved
+            out.append(m)
             if done:
                 return out
 
@@ -643,7 +665,7 @@ def _fault_kind(kind: str) -> FaultKind:
 
 
 
-_EXTRAS = ("runner", "simulator", "config", "mode", "cycle", "timeout", "silence", "feedback", "linear_speed", "linear_accel")
+_EXTRAS = ("runner", "simulator", "config", "mode", "cycle", "timeout", "axis_monitor", "silence", "feedback", "linear_speed", "linear_accel")
 
 
 async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
@@ -653,11 +675,13 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     listens on 127.0.0.1.  With ``rsi_listen=HOST:PORT`` -- the address in the controller's RSI
     configuration -- no simulator starts and ``host`` must name the controller, the only address
     whose packets are answered.  Extras: ``runner`` (``process`` | ``thread``: where the real-time
-    loop runs), ``simulator`` (``process`` | ``thread``), ``config`` (RSI Ethernet XML), ``mode``
-    (``absolute`` | ``relative``, as the RSI context corrects), ``cycle`` (4 | 12 ms), ``timeout``
-    (late packets in a row that stop the simulated RSI), ``silence`` (s without packets that mean
-    the robot is lost), ``feedback`` (file to save every packet to), ``linear_speed`` (m/s) and
-    ``linear_accel`` (m/s^2) at 100 % speed.
+    loop runs), ``simulator`` (``process`` | ``thread``: real time; ``accelerated``: in-process
+    lockstep, the robot as fast as the loop answers -- for tests), ``config`` (RSI Ethernet XML),
+    ``mode`` (``absolute`` | ``relative``, as the RSI context corrects), ``cycle`` (4 | 12 ms),
+    ``timeout`` (late packets in a row that stop the simulated RSI), ``axis_monitor`` (deg, the
+    simulated AXISCORRMON limit), ``silence`` (s without packets that mean the robot is lost),
+    ``feedback`` (file to save every packet to), ``linear_speed`` (m/s) and ``linear_accel``
+    (m/s^2) at 100 % speed.
 
     RSI runs on the robot's clock, so the application must too: a simulated or scaled clock
     would let the engine's timeouts run ahead of the robot.
@@ -675,18 +699,20 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     runner = extra.get("runner", "process")
     sim_runner = extra.get("simulator", "process")
     mode = extra.get("mode", "absolute")
-    for name, value, allowed in (("runner", runner, ("process", "thread")), ("simulator", sim_runner, ("process", "thread")), ("mode", mode, ("absolute", "relative"))):
+    choices = (("runner", runner, ("process", "thread")), ("simulator", sim_runner, ("process", "thread", "accelerated")), ("mode", mode, ("absolute", "relative")))
+    for name, value, allowed in choices:
         if value not in allowed:
             raise ValueError(f"kuka-rsi: {name} must be {' or '.join(allowed)}, got {value!r}")
     try:
         cycle = int(extra.get("cycle", "4"))
         timeout = int(extra.get("timeout", "100"))
+        monitor = float(extra.get("axis_monitor", "360"))
         silence = float(extra.get("silence", "0.1"))
         limits = MotionLimits(linear_speed=float(extra.get("linear_speed", "1.0")), linear_accel=float(extra.get("linear_accel", "2.0")))
     except ValueError as error:
-        raise ValueError(f"kuka-rsi: cycle and timeout are integers, silence, linear_speed and linear_accel numbers: {error}") from None
-    if not (silence > 0 and limits.linear_speed > 0 and limits.linear_accel > 0):
-        raise ValueError("kuka-rsi: silence, linear_speed and linear_accel must be > 0")
+        raise ValueError(f"kuka-rsi: cycle and timeout are integers; axis_monitor, silence, linear_speed and linear_accel numbers: {error}") from None
+    if not (silence > 0 and monitor > 0 and limits.linear_speed > 0 and limits.linear_accel > 0):
+        raise ValueError("kuka-rsi: axis_monitor, silence, linear_speed and linear_accel must be > 0")
     try:
         config = load_config(extra["config"]) if "config" in extra else None
     except ConfigError as error:
@@ -702,9 +728,14 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     else:
         if options.host is not None:
             raise ValueError("kuka-rsi: a real controller needs rsi_listen=HOST:PORT (its RSI configuration's IP_NUMBER:PORT) as well as host")
-        context = RsiContext(cycle_ms=cycle, timeout=timeout, correction_mode=mode)
+        context = RsiContext(cycle_ms=cycle, timeout=timeout, correction_mode=mode, axis_monitor_deg=(monitor,) * 6)
         link = RobotLink("kuka", "127.0.0.1", None, config=config, correction_mode=mode, cycle_ms=cycle)
-        spec = SimulatorSpec(runner=sim_runner, context=context, faults=Faults(seed=options.seed))
+        accelerated = sim_runner == "accelerated"
+        if accelerated and "silence" not in extra:
+            # In-process, the lockstep controller shares the application's GIL: a long computation
+            # there can hold it back for a while.  That is silence the loop must not take for a stop.
+            settings = LoopSettings(silence_timeout=2.0)
+        spec = SimulatorSpec(runner="thread" if accelerated else sim_runner, accelerated=accelerated, context=context, faults=Faults(seed=options.seed))
         backend = KukaRsiBackend(listen=("127.0.0.1", options.port or 0), link=link, simulator=spec, runner=runner,  # type: ignore[arg-type]
                                  settings=settings, limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
     return backend  # the bridge node starts it
