@@ -1,0 +1,55 @@
+"""``kuka_rsi_bridge``: a KUKA KR C4 over RSI (UDP) as a ROS 2 node.
+
+::
+
+    ros2 run dual_arm_executive kuka_rsi_bridge --ros-args -p rsi_listen:=192.168.1.10:49152 -p host:=192.168.1.20
+    ros2 run dual_arm_executive kuka_rsi_bridge          # no rsi_listen: a KR C4 RSI simulator is started
+
+It serves group ``arm``.  RSI runs on the robot's own 4 ms (or 12 ms) clock, so this node always
+runs in real time.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from core_functions.robots import KUKA_KR
+from execution_engine.transport.port import Node
+from robot_bridges.backend import BackendOptions
+from robot_bridges.node import BridgeSetup, bridge_main
+
+BACKEND = "kuka-rsi"
+
+_TEXT_OPTIONS = {
+    "runner": ("process", "where the real-time loop runs: process or thread"),
+    "simulator": ("process", "simulated KR C4 without rsi_listen: process, thread or accelerated"),
+    "mode": ("absolute", "how the RSI context corrects: absolute or relative"),
+    "config": ("", "RSI Ethernet configuration XML ('' = the packaged config/kuka_rsi_ethernet.xml layout)"),
+    "feedback": ("", "file to save every feedback packet to ('' = no saving)"),
+}
+_NUMBER_OPTIONS = {
+    "cycle": (4, "RSI cycle of the controller in ms: 4 or 12"),
+    "timeout": (100, "late packets in a row after which the simulated RSI stops"),
+    "axis_monitor": (360.0, "simulated AXISCORRMON limit (deg)"),
+    "silence": (0.1, "seconds without packets that mean the robot is lost"),
+    "linear_speed": (1.0, "Cartesian speed at 100 % (m/s)"),
+    "linear_accel": (2.0, "Cartesian acceleration at 100 % (m/s^2)"),
+}
+
+
+def declare_kuka_parameters(node: Node) -> BridgeSetup:
+    """The RSI bridge's parameters; an empty rsi_listen starts the simulator."""
+    rsi_listen = str(node.declare_parameter("rsi_listen", "", "HOST:PORT of the controller's RSI configuration ('' = start a simulator)"))
+    host = str(node.declare_parameter("host", "", "the controller's address: only its packets are answered (with rsi_listen)"))
+    extra: dict[str, str] = {}
+    for name, (default, description) in _TEXT_OPTIONS.items():
+        value = str(node.declare_parameter(name, default, description))
+        if value:
+            extra[name] = value
+    for name, (number, description) in _NUMBER_OPTIONS.items():
+        extra[name] = str(node.declare_parameter(name, number, description))
+    options = BackendOptions(robot=KUKA_KR, host=host or None, rsi_listen=rsi_listen or None, extra=extra)
+    return BridgeSetup(options)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return bridge_main(BACKEND, declare_kuka_parameters, argv)
