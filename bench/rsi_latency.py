@@ -13,7 +13,9 @@ Four measurements, each beside a baseline measured in the same run:
    drives the echo server; round trips and the controller's count of late replies;
 3. reaction: ``set_cart_pos`` to the first feedback packet whose actual TCP moved >= 0.01 mm,
    from rest, 2 m/s and 3 m/s^2 (ITRA's measurement; ITRA reports 30 ms at 4 ms);
-4. cost of ``set_cart_pos`` and ``get_curr_pos`` per call (ITRA on Linux: 16.3 us and 35.8 us).
+4. cost of ``set_cart_pos`` and ``get_curr_pos`` per call (ITRA on Linux: 16.3 us and 35.8 us);
+5. the runner decision: the loop on a thread of a busy application process (Python bursts holding
+   the GIL, garbage collection over a large heap) against the loop in its own process, at 4 ms.
 
 The last line is one JSON object with every figure.
 """
@@ -230,6 +232,55 @@ def real_time(seconds: float, feedback: Path) -> dict[str, object]:
     return result
 
 
+# ------------------------------------------------------------- 5. thread or process: the decision
+def application_load(stop: threading.Event, burst: float = 0.02, pause: float = 0.1) -> None:
+    """What an application process does to a thread beside it: Python bursts holding the GIL and
+    allocation churn over a large heap, so the collector's full passes take a while."""
+    heap = [{"k": [i, str(i)]} for i in range(150_000)]  # long-lived, tracked objects
+    while not stop.is_set():
+        end = time.perf_counter() + burst
+        garbage = []
+        while time.perf_counter() < end:
+            node: dict[str, object] = {}
+            node["self"] = node  # a cycle: only the collector frees it
+            garbage.append(node)
+        del garbage
+        stop.wait(pause)
+    del heap
+
+
+def runner_comparison(seconds: float) -> dict[str, object]:
+    out: dict[str, object] = {}
+    for mode in ("thread", "process"):
+        port = free_port()
+        iface = RsiInterface([RobotLink("kr6", "127.0.0.1")], LoopSettings(port=port, silence_timeout=2.0), mode=mode)  # type: ignore[arg-type]
+        iface.start()
+        iface.wait_ready()
+        sim = start_simulator(port, seconds + 5.0)
+        stop = threading.Event()
+        load = threading.Thread(target=application_load, args=(stop,))
+        try:
+            if not iface.wait_event(lambda: iface.events.connected[0], 30):
+                raise RuntimeError("no packets from the simulator")
+            handshake(iface)
+            load.start()
+            targets = [np.radians(READY_DEG), np.radians((40.0, -60.0, 70.0, 30.0, 60.0, 45.0))]
+            started, k = time.monotonic(), 0
+            while time.monotonic() - started < seconds:
+                iface.set_axial_pos(0, targets[k % 2], 2.0, 5.0)
+                k += 1
+                iface.wait_event(lambda: False, 1.0)
+        finally:
+            stop.set()
+            if load.is_alive():
+                load.join()
+            sim.terminate()
+            summary = summary_of(sim, 30)
+            iface.close()
+        out[mode] = {"late": summary.get("late_since_first_reply"), "packets": summary.get("packets"), "round_trip_us": summary.get("round_trip_us"), "stopped": summary.get("stopped"), "late_replies": summary.get("late_replies"), "lateness_us": summary.get("lateness_us")}
+    return out
+
+
 # ---------------------------------------------------------------- 3 + 4. reaction and cost
 def reaction_and_cost(trials: int, calls: int) -> dict[str, object]:
     port = free_port()
@@ -295,6 +346,7 @@ def main() -> int:
     parser.add_argument("--calls", type=int, default=100_000, help="setter/getter calls timed (default 100000)")
     parser.add_argument("--quick", action="store_true", help="10 s, 10,000 cycles, 20 trials")
     parser.add_argument("--skip-engine", action="store_true", help="leave out the real-time phase with the engine")
+    parser.add_argument("--compare-seconds", type=float, default=20.0, help="thread vs process runner under load, each (0: skip)")
     parser.add_argument("--echo", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--idle", type=float, default=5.0, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -302,7 +354,7 @@ def main() -> int:
         echo_main(args.echo, args.idle)
         return 0
     if args.quick:
-        args.seconds, args.cycles, args.trials, args.calls = 10.0, 10_000, 20, 20_000
+        args.seconds, args.cycles, args.trials, args.calls, args.compare_seconds = 10.0, 10_000, 20, 20_000, 5.0
     figures: dict[str, object] = {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory() as tmp:
         print(f"1. accelerated: {args.cycles} cycles (loop process, a move always running, saving every packet)")
@@ -325,6 +377,13 @@ def main() -> int:
         print(f"   set_cart_pos p50 {rc['set_cart_pos_us']['p50']:.2f} us  p99 {rc['set_cart_pos_us']['p99']:.2f} us   (ITRA: 16.3 us)")  # type: ignore[index]
         print(f"   get_curr_pos p50 {rc['get_curr_pos_us']['p50']:.2f} us  p99 {rc['get_curr_pos_us']['p99']:.2f} us   (ITRA: 35.8 us)")  # type: ignore[index]
         figures["reaction_and_cost"] = rc
+        if args.compare_seconds > 0:
+            print(f"5. thread or process: {args.compare_seconds:g} s each at 4 ms beside an application thread (GIL bursts, GC over a large heap)")
+            cmp = runner_comparison(args.compare_seconds)
+            for mode in ("thread", "process"):
+                m = cmp[mode]
+                print(f"   {mode:7s}: {fmt(m['round_trip_us'])}  late {m['late']} of {m['packets']}")  # type: ignore[index]
+            figures["runner_comparison"] = cmp
     acc_rsi, acc_echo = acc["rsi_round_trip_us"], acc["echo_round_trip_us"]
     figures["ratios"] = {
         "accelerated_p50_rsi_over_echo": acc_rsi["p50"] / acc_echo["p50"],  # type: ignore[index]

@@ -203,7 +203,10 @@ class Channel:
     # --------------------------------------------------------------------- per packet
     def on_packet(self, data: bytes, t_ns: int) -> bytes | None:
         """Parse one packet and build its reply (None: reply withheld on purpose)."""
-        ipoc = self.rob.decode_into(data, self.rx)
+        return self.respond(self.rob.decode_into(data, self.rx), t_ns)
+
+    def respond(self, ipoc: int, t_ns: int) -> bytes | None:
+        """The reply to the packet just decoded into ``rx``: one step of the robot's motion."""
         self.ipoc = ipoc
         self.last_ns = t_ns
         self.cycles += 1
@@ -666,6 +669,7 @@ class LoopStats:
     foreign: int = 0
     rejected: int = 0
     oversized: int = 0
+    stale: int = 0  # packets skipped because a newer one from the same robot was already waiting
     max_busy_ns: int = 0  # longest receive-to-send time
     busy_ns: list[int] = field(default_factory=list)  # every receive-to-send time, when recording
 
@@ -761,54 +765,91 @@ class RsiLoop:
     def _serve(self, sock: socket.socket) -> None:
         s = self.settings
         sock.settimeout(s.poll)
+        # The same socket without Python's timeout emulation, to take what is already waiting.
+        drain = socket.socket(fileno=os.dup(sock.fileno()))
+        drain.setblocking(False)
         buf = bytearray(s.max_packet + 1)
         view = memoryview(buf)
         started = self.now_ns()
-        stats = self.stats
         gc_every = s.gc_every if s.gc_control else 0
-        record = s.record_busy
-        while not self._shutdown:
-            try:
-                n, addr = sock.recvfrom_into(buf)
-            except TimeoutError:
-                self._idle(started)
-                continue
-            except ConnectionRefusedError:
-                continue  # ICMP for an earlier reply: that robot is gone; silence will tell
-            t = self.now_ns()
+        try:
+            while not self._shutdown:
+                try:
+                    n, addr = sock.recvfrom_into(buf)
+                except TimeoutError:
+                    self._idle(started)
+                    continue
+                except ConnectionRefusedError:
+                    continue  # ICMP for an earlier reply: that robot is gone; silence will tell
+                batch = [(bytes(view[:n]), addr)]
+                while True:
+                    try:
+                        n, addr = drain.recvfrom_into(buf)
+                    except (BlockingIOError, ConnectionRefusedError):
+                        break
+                    batch.append((bytes(view[:n]), addr))
+                t = self.now_ns()
+                for channel, ipoc, source in self._packets(batch):
+                    self._answer(sock, channel, ipoc, source, t)
+                self._service(started)
+                if gc_every and self.stats.packets % gc_every < len(batch):
+                    gc.collect(0)  # in the slack after a reply, never before one
+        finally:
+            drain.close()
+
+    def _packets(self, batch: list[tuple[bytes, tuple[str, int]]]) -> list[tuple[Channel, int, tuple[str, int]]]:
+        """The packets of a batch of datagrams, decoded, and of each robot only the newest.
+
+        More than one packet from a robot means the loop was held up and the robot has moved on:
+        the older packet is late already, and answering it would step the generator for a cycle
+        the robot has counted late -- a jump in the set point when the newest reply lands.
+        Foreign, oversized and malformed datagrams are counted and reported, never answered.
+        """
+        s, stats = self.settings, self.stats
+        packets: list[tuple[Channel, int, tuple[str, int]]] = []
+        for data, addr in batch:
             channel = self._by_host_port.get(addr[:2]) or self._by_host.get(addr[0])
             if channel is None:
                 stats.foreign += 1
                 self._warn("foreign", f"ignored a datagram from {addr[0]}:{addr[1]}, which is not a configured robot")
                 continue
-            if n > s.max_packet:
+            if len(data) > s.max_packet:
                 stats.oversized += 1
                 channel.rejected += 1
                 self._warn("oversized", f"rejected a datagram over {s.max_packet} bytes from {channel.link.name}")
                 continue
             try:
-                reply = channel.on_packet(bytes(view[:n]), t)
+                ipoc = channel.rob.decode_into(data, channel.rx)  # a later packet overwrites an earlier one
             except PacketError as error:
                 stats.rejected += 1
                 channel.rejected += 1
                 self._warn(f"bad {channel.index}", f"rejected a packet from {channel.link.name}: {error}")
                 continue
-            except Exception as error:  # noqa: BLE001 - keep answering, report the defect
-                channel.broken = True
-                self._emit(("fault", channel.index, "internal", f"{type(error).__name__}: {error}\n{traceback.format_exc()}"))
-                reply = channel.sen.encode(channel.tx, channel.ipoc)
-            if reply is not None:
-                sock.sendto(reply, addr)
-                busy = self.now_ns() - t
-                if busy > stats.max_busy_ns:
-                    stats.max_busy_ns = busy
-                if record:
-                    stats.busy_ns.append(busy)
-            stats.packets += 1
-            channel.after_reply(t)
-            self._service(started)
-            if gc_every and stats.packets % gc_every == 0:
-                gc.collect(0)  # in the slack after a reply, never before one
+            packets.append((channel, ipoc, addr))
+        if len(packets) > 1:
+            newest = {id(channel): i for i, (channel, _, _) in enumerate(packets)}
+            kept = [p for i, p in enumerate(packets) if newest[id(p[0])] == i]
+            stats.stale += len(packets) - len(kept)
+            return kept
+        return packets
+
+    def _answer(self, sock: socket.socket, channel: Channel, ipoc: int, addr: tuple[str, int], t: int) -> None:
+        stats = self.stats
+        try:
+            reply = channel.respond(ipoc, t)
+        except Exception as error:  # noqa: BLE001 - keep answering, report the defect
+            channel.broken = True
+            self._emit(("fault", channel.index, "internal", f"{type(error).__name__}: {error}\n{traceback.format_exc()}"))
+            reply = channel.sen.encode(channel.tx, ipoc)
+        if reply is not None:
+            sock.sendto(reply, addr)
+            busy = self.now_ns() - t
+            if busy > stats.max_busy_ns:
+                stats.max_busy_ns = busy
+            if self.settings.record_busy:
+                stats.busy_ns.append(busy)
+        stats.packets += 1
+        channel.after_reply(t)
 
     def _service(self, started: int) -> None:
         """Between packets: control messages, silence watch."""
@@ -854,6 +895,6 @@ class RsiLoop:
             self.channels[int(robot)].withhold = int(count)  # type: ignore[call-overload]
         elif kind == "stats":
             st = self.stats
-            self._emit(("stats", st.packets, st.foreign, st.rejected, st.oversized, st.max_busy_ns, list(st.busy_ns), [c.withheld for c in self.channels], list(self.logger.written)))
+            self._emit(("stats", st.packets, st.foreign, st.rejected, st.oversized, st.max_busy_ns, list(st.busy_ns), [c.withheld for c in self.channels], list(self.logger.written), st.stale))
         else:
             self._emit(("warn", -1, f"unknown control message {kind!r}"))

@@ -123,12 +123,14 @@ class SimStats:
     packets: int = 0
     late: int = 0
     late_since_first_reply: int = 0  # leaves out the packets sent before the external system was there
+    late_ipocs: list[int] = field(default_factory=list)  # the first 1000 of those
     accepted: int = 0
     invalid_replies: int = 0
     foreign: int = 0
     lost: int = 0
     garbage_sent: int = 0
     late_replies_discarded: int = 0
+    lateness_ns: list[int] = field(default_factory=list)  # real time: how far past its deadline each discarded reply came
     overruns: int = 0
     latencies_ns: list[int] = field(default_factory=list)
 
@@ -275,6 +277,8 @@ class KrcModel:
             self.stats.late += 1
             if self.stats.accepted:
                 self.stats.late_since_first_reply += 1
+                if len(self.stats.late_ipocs) < 1000:
+                    self.stats.late_ipocs.append(self.ipoc)
             self._received = [v if hold else d for v, hold, d in zip(self._received, self._holdon, self.sen.defaults)]
             if self.late_in_row >= self.context.timeout:
                 raise RsiStopped(
@@ -572,11 +576,13 @@ def run_realtime(
     window_ns = int(clock.to_wall(cycle) * 1e9)
     tick = clock.now()
     deadline_ns: int | None = None  # for the reply to the packet in flight; None: none can be on time
+    window_end = tick  # run time until which the packet in flight may be answered
     in_flight = False
     done = 0
     while not (stop is not None and stop.is_set()):
         jitter = link.rng.uniform(0.0, faults.jitter_ms) / 1000.0 if faults.jitter_ms else 0.0
-        _collect(link, clock, tick + jitter, buf, deadline_ns)
+        # A packet the simulator itself sent late still gets its whole cycle: the next one waits.
+        _collect(link, clock, max(tick + jitter, window_end), buf, deadline_ns)
         if in_flight:
             try:
                 model.advance()
@@ -585,9 +591,11 @@ def run_realtime(
             done += 1
             if cycles is not None and done >= cycles:
                 return None
-        if clock.now() > tick + cycle:
+        now = clock.now()
+        if now > tick + cycle:
             model.stats.overruns += 1
         deadline_ns = link.sent_ns + window_ns if link.send() else None
+        window_end = now + cycle
         in_flight = True
         tick += cycle
     return None
@@ -607,6 +615,8 @@ def _collect(link: _Link, clock: Clock, until: float, buf: bytearray, deadline_n
             link.offer(data, arrived)
         else:
             link.model.stats.late_replies_discarded += 1
+            if deadline_ns is not None:
+                link.model.stats.lateness_ns.append(arrived - deadline_ns)
 
 
 # ------------------------------------------------------------------------------------ thread
@@ -763,6 +773,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         "overruns": s.overruns,
         "last_ipoc": model.ipoc,
         "round_trip_us": latency_summary(s.latencies_ns),
+        "late_ipocs": s.late_ipocs[:20],
+        "late_replies": s.late_replies_discarded,
+        "lateness_us": latency_summary(s.lateness_ns),
     }
     print(json.dumps(summary), flush=True)
     return 2 if result and result.error else 0
