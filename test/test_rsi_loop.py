@@ -374,3 +374,27 @@ def test_the_loop_runs_in_its_own_process() -> None:
         process = iface._process
         iface.close()
     assert process is not None and process.returncode == 0
+
+
+def test_of_several_waiting_packets_only_the_newest_of_each_robot_is_answered() -> None:
+    """After a stall the socket holds several packets; the older ones are late already, and
+    answering them would step the generator for cycles the robot held still."""
+    from robot_bridges.kuka_rsi.external import RsiLoop
+    from robot_bridges.kuka_rsi.pipe import FramedPipe
+    from robot_bridges.kuka_rsi.slots import layout, robot_block_size
+
+    links = [RobotLink("a", "127.0.0.1"), RobotLink("b", "127.0.0.2")]
+    ours, theirs = FramedPipe.pair()
+    loop = RsiLoop(links, LoopSettings(port=0), layout(memoryview(bytearray(2 * robot_block_size())), 2), FramedPipe(theirs, blocking_send=False))
+    try:
+        rob = PacketCodec.rob(CONFIG)
+        packet = lambda ipoc: rob.encode(list(rob.defaults), ipoc)  # noqa: E731
+        a, b = ("127.0.0.1", 5000), ("127.0.0.2", 5000)
+        batch = [(packet(100), a), (packet(200), b), (b"<Rob garbage", a), (packet(104), a), (packet(7), ("127.0.0.9", 1))]
+        kept = loop._packets(batch)
+        assert [(channel.link.name, ipoc) for channel, ipoc, _ in kept] == [("b", 200), ("a", 104)]
+        assert (loop.stats.stale, loop.stats.rejected, loop.stats.foreign) == (1, 1, 1)
+    finally:
+        loop.logger.close()
+        ours.close()
+        theirs.close()
