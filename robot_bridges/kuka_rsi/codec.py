@@ -58,6 +58,13 @@ def _long(raw: str, key: str) -> int:
     return int(text)
 
 
+def _ipoc(raw: str) -> int:
+    ipoc = _long(raw, "IPOC")
+    if not 0 <= ipoc <= _MAX_IPOC:
+        raise PacketError(f"IPOC {ipoc} is out of range")
+    return ipoc
+
+
 def _bool(raw: str, key: str) -> bool:
     text = raw.strip().upper()
     if text in ("1", "TRUE"):
@@ -188,7 +195,7 @@ class PacketCodec:
                 raise PacketError(f"<{tag}> appears twice")
             seen.add(tag)
             if tag == "IPOC":
-                ipoc = _long(child.text or "", "IPOC")
+                ipoc = _ipoc(child.text or "")
                 continue
             group = self._groups.get(tag)
             if group is None:
@@ -198,8 +205,8 @@ class PacketCodec:
                 if raw is None:
                     raise PacketError(f"{key} is missing")
                 staged.append((index, convert(raw, key)))
-        if ipoc < 0 or ipoc > _MAX_IPOC:
-            raise PacketError("IPOC is missing" if ipoc == -1 else f"IPOC {ipoc} is out of range")
+        if ipoc < 0:
+            raise PacketError("IPOC is missing")
         if len(staged) != len(self.fields):
             missing = [k for k in self.keys if self._element_of(k) not in seen]
             raise PacketError(f"missing values: {', '.join(missing[:6])}")
@@ -211,9 +218,7 @@ class PacketCodec:
         """The values of a packet the layout pattern matched: converted and checked, then stored."""
         texts = match.groups()
         staged = [(index, convert(texts[k], key)) for k, (index, convert, key) in enumerate(self._fast_fields)]
-        ipoc = _long(texts[-1], "IPOC")
-        if ipoc < 0 or ipoc > _MAX_IPOC:
-            raise PacketError(f"IPOC {ipoc} is out of range")
+        ipoc = _ipoc(texts[-1])
         for index, value in staged:
             out[index] = value
         return ipoc

@@ -14,6 +14,7 @@ expands into :class:`Field` s, the single values of a packet:
 """
 from __future__ import annotations
 
+import functools
 import re
 import sys
 from dataclasses import dataclass
@@ -297,7 +298,9 @@ def default_config_path() -> Path:
     raise ConfigError(f"default RSI configuration {DEFAULT_CONFIG_NAME} not found (looked in {', '.join(map(str, candidates))})")
 
 
+@functools.lru_cache(maxsize=1)
 def default_config() -> RsiConfig:
+    """The package's configuration, read once (a parsed configuration is immutable)."""
     return load_config(default_config_path())
 
 

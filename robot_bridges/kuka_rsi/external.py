@@ -123,7 +123,7 @@ class Channel:
         logger: FeedbackLogger,
         heartbeat_cycles: int = 25,
     ) -> None:
-        config = link.rsi_config()
+        config = self.config = link.rsi_config()
         _require_feedback(config, link.name)
         if config.onlysend:
             raise ConfigError(f"robot {link.name}: {config.source} has ONLYSEND TRUE; the robot would ignore every reply")
@@ -310,12 +310,12 @@ class Channel:
         cmd_id = int(values[1])  # type: ignore[call-overload]
         if kind == CommandKind.JOINT:
             if self._i_ak is None:
-                self._report_failure(cmd_id, f"{self.link.rsi_config().source} has no AK correction; joint moves are impossible", "unsupported")
+                self._report_failure(cmd_id, f"{self.config.source} has no AK correction; joint moves are impossible", "unsupported")
                 return None
             return "joint"
         if kind == CommandKind.CART:
             if self._i_rk is None:
-                self._report_failure(cmd_id, f"{self.link.rsi_config().source} has no RKorr correction; Cartesian moves are impossible", "unsupported")
+                self._report_failure(cmd_id, f"{self.config.source} has no RKorr correction; Cartesian moves are impossible", "unsupported")
                 return None
             return "cart"
         if kind == CommandKind.STREAM:

@@ -565,24 +565,23 @@ def run_realtime(
 ) -> RsiStopped | None:
     """Real-time mode: a packet every cycle of ``clock`` run time, replies or not.
 
-    A reply is on time if it arrived (kernel stamp) within one cycle of its packet's send; the
-    cycle is closed at the next tick, just before the next packet.  The waits are ``select``
-    timeouts computed from ``clock.now()``: microsecond resolution, where asyncio timers round
-    to the millisecond.
+    Packets leave on a fixed grid; a reply is on time if it arrived (by the kernel's receive
+    stamp) before the next tick, and the cycle is closed then, just before the next packet.  If
+    the simulator itself sends more than an eighth of a cycle late, it counts an overrun and
+    restarts its grid there, so its own hiccups never shorten the external system's cycle.  The
+    waits are ``select`` timeouts computed from ``clock.now()``: microsecond resolution, where
+    asyncio timers round to the millisecond.
     """
     link = _Link(sock, peer, model, faults, _wall_ns, kernel_stamps=True)
     buf = bytearray(65536)
     cycle = model.dt
-    window_ns = int(clock.to_wall(cycle) * 1e9)
     tick = clock.now()
     deadline_ns: int | None = None  # for the reply to the packet in flight; None: none can be on time
-    window_end = tick  # run time until which the packet in flight may be answered
     in_flight = False
     done = 0
     while not (stop is not None and stop.is_set()):
         jitter = link.rng.uniform(0.0, faults.jitter_ms) / 1000.0 if faults.jitter_ms else 0.0
-        # A packet the simulator itself sent late still gets its whole cycle: the next one waits.
-        _collect(link, clock, max(tick + jitter, window_end), buf, deadline_ns)
+        _collect(link, clock, tick + jitter, buf, deadline_ns)
         if in_flight:
             try:
                 model.advance()
@@ -592,12 +591,16 @@ def run_realtime(
             if cycles is not None and done >= cycles:
                 return None
         now = clock.now()
-        if now > tick + cycle:
+        if now - tick - jitter > cycle / 8:
+            # The simulator itself fell behind (a controller never does): start the grid again
+            # from here, so the external system still gets a whole cycle for this packet.
             model.stats.overruns += 1
-        deadline_ns = link.sent_ns + window_ns if link.send() else None
-        window_end = now + cycle
-        in_flight = True
+            tick = now - jitter
         tick += cycle
+        sent = link.send()
+        # On time means: in by the next tick of the grid, by the kernel's receive stamp.
+        deadline_ns = link.sent_ns + int(clock.to_wall(tick - now) * 1e9) if sent else None
+        in_flight = True
     return None
 
 
