@@ -757,7 +757,11 @@ class RsiLoop:
         if s.realtime_priority is not None:
             try:
                 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(s.realtime_priority))
-                notes.append(f"SCHED_FIFO {s.realtime_priority}")
+                # The saving thread shares the GIL: preempted by ordinary work while holding it,
+                # it would hold the loop back too (priority inversion).  Just below the loop, it cannot be.
+                writer = max(1, s.realtime_priority - 1)
+                os.sched_setscheduler(self.logger.native_id, os.SCHED_FIFO, os.sched_param(writer))
+                notes.append(f"SCHED_FIFO {s.realtime_priority} (saving thread {writer})")
             except (PermissionError, OSError) as error:
                 notes.append(f"no real-time priority ({error.strerror or error})")
         return ", ".join(notes) or "defaults"

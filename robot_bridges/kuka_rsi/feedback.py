@@ -60,6 +60,12 @@ class FeedbackLogger:
         self._thread = threading.Thread(target=self._run, name="rsi-feedback-writer", daemon=True)
         self._thread.start()
 
+    @property
+    def native_id(self) -> int:
+        """The writer thread's kernel id (its scheduling class can be set)."""
+        assert self._thread.native_id is not None
+        return self._thread.native_id
+
     # ------------------------------------------------------------------ called by the loop
     def enabled(self, robot: int) -> bool:
         return self._enabled[robot]
