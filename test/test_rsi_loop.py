@@ -398,3 +398,54 @@ def test_of_several_waiting_packets_only_the_newest_of_each_robot_is_answered() 
         loop.logger.close()
         ours.close()
         theirs.close()
+
+
+def test_after_late_replies_the_generator_starts_again_where_the_robot_is(rig: Callable[..., Rig]) -> None:
+    """Replies the robot never applied must not be made up in one cycle: at 2.5 rad/s, the three
+    steps it missed would be a 10 rad/s jump, which the controller refuses (A1 does 2.72)."""
+    r = rig().start()
+    r.correcting()
+    target = np.radians([150, -80, 85, 0, 30, 0])
+    cmd = r.iface.set_axial_pos(0, target, 2.5, 20.0)
+    start = r.iface.state(0).cycles
+    r.iface.wake_at(0, start + 60)
+    r.wait(lambda: r.iface.state(0).cycles >= start + 60, "cruise at 2.5 rad/s")
+    r.iface.withhold_replies(0, 3)
+    ok, message, _ = r.done(cmd)
+    assert ok, message
+    assert r.iface.state(0).delay == 3 and r.sim.running
+    assert r.iface.loop is not None and r.iface.loop.channels[0].catch_ups == 3  # once per packet reporting a new late reply
+    steps = np.abs(np.diff(np.array(r.sim.model.trace)[:, 0]))  # type: ignore[arg-type]
+    assert np.max(steps) <= 2.5 * DT + math.radians(1e-6)
+    assert np.allclose(r.sim.model.trace[-1], target, atol=1e-7)  # type: ignore[index]
+
+
+def test_a_stream_resumes_from_the_point_the_robot_holds(rig: Callable[..., Rig], tmp_path: Path) -> None:
+    r = rig().start()
+    r.correcting()
+    n = 400
+    a1 = np.linspace(0.0, 20.0, n)  # 0.2 deg per cycle: 50 deg/s
+    points = np.tile(np.array(READY), (n, 1))
+    points[:, 0] = a1
+    path = tmp_path / "path.txt"
+    path.write_text("\n".join(" ".join(f"{v:.9f}" for v in p) for p in points))
+    cmd = r.iface.set_tool_path_from_file(0, str(path), "joint")
+    start = r.iface.state(0).cycles
+    r.iface.wake_at(0, start + 100)
+    r.wait(lambda: r.iface.state(0).cycles >= start + 100, "the stream under way")
+    r.iface.withhold_replies(0, 4)
+    assert r.done(cmd)[0]
+    r.wait(lambda: np.degrees(r.sim.model.trace[-1][0]) > 20.0 - 1e-6, "the last point")  # type: ignore[index]
+    taken = np.degrees(np.array(r.sim.model.trace)[:, 0])  # type: ignore[arg-type]
+    steps = np.diff(taken)
+    assert np.max(steps) <= 0.2 + 1e-6  # never more than one point per cycle, not even after the gap
+    assert np.min(steps) >= -1e-9  # never backwards
+    assert set(np.round(a1, 6)) <= set(np.round(taken, 6))  # every point of the path was taken
+
+
+def test_a_feedback_file_that_cannot_be_opened_is_reported(rig: Callable[..., Rig], tmp_path: Path) -> None:
+    r = rig().start()
+    r.iface.set_feedback_output(0, str(tmp_path))  # a directory
+    r.wait(lambda: any("cannot open feedback file" in w and str(tmp_path) in w for w in r.iface.events.warnings), "the warning")
+    r.wait(lambda: r.iface.state(0).cycles > 50, "the loop to go on")
+    assert r.sim.model.stats.late == 0

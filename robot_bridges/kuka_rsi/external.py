@@ -185,6 +185,8 @@ class Channel:
         self._stream_space = "joint"
         self.withhold = 0
         self.withheld = 0
+        self.catch_ups = 0  # times the generator restarted from the robot's set point
+        self._robot_delay = -1
         # bookkeeping
         self.cycles = 0
         self.ipoc = 0
@@ -214,6 +216,7 @@ class Channel:
             self._track_correcting()
             self._read_commands()
             if self.correcting:
+                self._catch_up()
                 self._step()
             self._fill_tx()
         if self.withhold:
@@ -237,7 +240,7 @@ class Channel:
 
     def _begin(self) -> None:
         """RSI_MOVECORR began: corrections are measured from here."""
-        q = np.array([float(self.rx[i]) * _DEG for i in self._i_aspos])
+        q = self._axes(self._i_aspos)
         self.q_ref = q
         self.joint.reset(q)
         p, r = self._pose(self._i_rsol)
@@ -261,6 +264,45 @@ class Channel:
             self._finish(False, why, kind)
         if self._pending is not None:
             self._fail_pending(why, kind)
+
+    def _catch_up(self) -> None:
+        """When the robot counted late replies, start again from where it really is.
+
+        A reply that came late was never applied: the robot held its set point (HOLDON) while the
+        generator went on, and the next reply would make up the difference in one cycle -- a jump
+        beyond the axes' speed.  With absolute corrections the robot's set point (ASPos / RSol)
+        says exactly where it stands: the generator restarts there from rest, toward the same
+        target; a stream goes back to the point the robot holds.  (Relative corrections cannot be
+        caught up: what a late increment did depends on HOLDON.)
+        """
+        if self._i_delay is None:
+            return
+        delay = int(self.rx[self._i_delay])  # type: ignore[call-overload]
+        missed = delay - self._robot_delay if self._robot_delay >= 0 else 0
+        self._robot_delay = delay
+        if missed <= 0 or self.relative:
+            return
+        self.catch_ups += 1
+        if self.mode == "joint" and not self.joint.done:
+            self.joint.resync(self._axes(self._i_aspos))
+        elif self.mode == "cart" and not self.cart.done:
+            self.cart.resync(*self._pose(self._i_rsol))
+        elif self.mode == "stream" and self._stream is not None:
+            self._stream_pos = self._held_point()
+
+    def _held_point(self) -> int:
+        """The index after the stream point the robot's set point is on (searching back a second)."""
+        assert self._stream is not None
+        lo = max(0, self._stream_pos - 250)
+        window = self._stream[lo : self._stream_pos]
+        if self._stream_space == "joint":
+            distance = np.max(np.abs(window - self._axes(self._i_aspos)), axis=1)
+        else:
+            distance = np.linalg.norm(window[:, :3] - self._pose(self._i_rsol)[0], axis=1)
+        return lo + int(np.argmin(distance)) + 1
+
+    def _axes(self, idx: Sequence[int]) -> np.ndarray:
+        return np.array([float(self.rx[i]) * _DEG for i in idx])
 
     def _pose(self, idx: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
         x, y, z, a, b, c = (float(self.rx[i]) for i in idx)
@@ -418,7 +460,7 @@ class Channel:
         if space == "joint":
             # The robot's set point already holds every correction sent; the axis correction
             # takes all of it and the Cartesian one returns to zero, so the set point stays put.
-            q = np.array([float(self.rx[i]) * _DEG for i in self._i_aspos])
+            q = self._axes(self._i_aspos)
             self.joint.reset(q)
             self.ak = (q - self.q_ref) / _DEG
             self.rk = np.zeros(6)
@@ -566,7 +608,7 @@ class Channel:
     def _tracking_error(self) -> str | None:
         """None when the actual position is on the target, else how far off it is."""
         if len(self._active_target) == 1:
-            actual = np.array([float(self.rx[i]) * _DEG for i in self._i_aipos])
+            actual = self._axes(self._i_aipos)
             off = np.abs(actual - self._active_target[0])
             if float(np.max(off)) <= self.link.joint_tolerance:
                 return None
@@ -856,7 +898,10 @@ class RsiLoop:
         channel.after_reply(t)
 
     def _service(self, started: int) -> None:
-        """Between packets: control messages, silence watch."""
+        """Between packets: control messages, silence watch, the saving thread's complaints."""
+        errors = self.logger.errors
+        while errors:
+            self._emit(("warn", -1, errors.popleft()))
         try:
             for message in self.pipe.receive():
                 self._control(message)

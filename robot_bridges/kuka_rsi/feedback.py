@@ -103,16 +103,21 @@ class FeedbackLogger:
 
     # ------------------------------------------------------------------ the writer thread
     def _run(self) -> None:
-        while True:
-            self._wake.wait()  # bounded by close(), which sets the event
-            self._wake.clear()
-            self._drain()
-            if self._closing:
+        try:
+            while True:
+                self._wake.wait()  # bounded by close(), which sets the event
+                self._wake.clear()
                 self._drain()
-                for f in self._files:
-                    if f is not None:
-                        f.close()
-                return
+                if self._closing:
+                    self._drain()
+                    return
+        except Exception as error:  # noqa: BLE001 - the loop reports it; saving stops, the robot does not
+            self.errors.append(f"the saving thread stopped: {type(error).__name__}: {error}")
+            self._enabled = [False] * len(self._enabled)
+        finally:
+            for f in self._files:
+                if f is not None:
+                    f.close()
 
     def _drain(self) -> None:
         for robot, queue in enumerate(self._queues):

@@ -113,6 +113,12 @@ class VectorOTG:
         self.target = None
         self.done = not np.any(self.velocity)
 
+    def resync(self, position: Sequence[float] | Vector) -> None:
+        """Restart from rest at ``position`` toward the same target (the robot did not follow)."""
+        self.position = np.array(position, dtype=float)
+        self.velocity = np.zeros(self.norm.dim)
+        self.done = self.target is None
+
     def error(self) -> Vector:
         if self.target is None:
             return np.zeros(self.norm.dim)
@@ -232,6 +238,13 @@ class CartesianOTG:
     def halt(self) -> None:
         self.target_position = self.target_rotation = None
         self.done = not np.any(self.velocity)
+
+    def resync(self, position: Sequence[float] | Vector, rotation: Matrix) -> None:
+        """Restart from rest at this pose toward the same target (the robot did not follow)."""
+        self.position = np.array(position, dtype=float)
+        self.rotation = np.array(rotation, dtype=float)
+        self.velocity = np.zeros(6)
+        self.done = self.target_position is None
 
     def error(self) -> Vector:
         if self.target_position is None or self.target_rotation is None:

@@ -566,9 +566,10 @@ def run_realtime(
     """Real-time mode: a packet every cycle of ``clock`` run time, replies or not.
 
     Packets leave on a fixed grid; a reply is on time if it arrived (by the kernel's receive
-    stamp) before the next tick, and the cycle is closed then, just before the next packet.  If
-    the simulator itself sends more than an eighth of a cycle late, it counts an overrun and
-    restarts its grid there, so its own hiccups never shorten the external system's cycle.  The
+    stamp) before the next tick, and the cycle is closed then, just before the next packet is
+    computed and sent.  If the simulator itself wakes more than an eighth of a cycle late, it
+    counts an overrun and restarts its grid there, so its own hiccups never shorten the
+    external system's cycle.  The
     waits are ``select`` timeouts computed from ``clock.now()``: microsecond resolution, where
     asyncio timers round to the millisecond.
     """
@@ -582,6 +583,12 @@ def run_realtime(
     while not (stop is not None and stop.is_set()):
         jitter = link.rng.uniform(0.0, faults.jitter_ms) / 1000.0 if faults.jitter_ms else 0.0
         _collect(link, clock, tick + jitter, buf, deadline_ns)
+        woke = clock.now()
+        if woke - tick - jitter > cycle / 8:
+            # The simulator itself woke late (a controller never does): start the grid again
+            # from here, so the external system still gets a whole cycle for this packet.
+            model.stats.overruns += 1
+            tick = woke - jitter
         if in_flight:
             try:
                 model.advance()
@@ -590,13 +597,8 @@ def run_realtime(
             done += 1
             if cycles is not None and done >= cycles:
                 return None
-        now = clock.now()
-        if now - tick - jitter > cycle / 8:
-            # The simulator itself fell behind (a controller never does): start the grid again
-            # from here, so the external system still gets a whole cycle for this packet.
-            model.stats.overruns += 1
-            tick = now - jitter
         tick += cycle
+        now = clock.now()
         sent = link.send()
         # On time means: in by the next tick of the grid, by the kernel's receive stamp.
         deadline_ns = link.sent_ns + int(clock.to_wall(tick - now) * 1e9) if sent else None
