@@ -220,6 +220,7 @@ def real_time(seconds: float, feedback: Path) -> dict[str, object]:
         {
             "packets": rsi.get("packets"),
             "late": rsi.get("late_since_first_reply"),
+            "late_ipocs_from_end": [int(i) - int(rsi.get("last_ipoc", 0)) for i in rsi.get("late_ipocs", [])],  # type: ignore[union-attr]
             "late_before_first_reply": int(rsi.get("late", 0)) - int(rsi.get("late_since_first_reply", 0)),  # type: ignore[call-overload]
             "simulator_overruns": rsi.get("overruns"),
             "rsi_round_trip_us": rsi.get("round_trip_us"),
@@ -291,6 +292,7 @@ def reaction_and_cost(trials: int, calls: int) -> dict[str, object]:
         iface.wait_ready()
         if not iface.wait_event(lambda: iface.events.connected[0], 30):
             raise RuntimeError("no packets from the simulator")
+        first_ipoc = iface.state(0).ipoc
         handshake(iface)
         cmd = iface.set_axial_pos(0, np.radians(READY_DEG), 1.0, 3.0)
         iface.wait_event(lambda: cmd in iface.events.done, 30)
@@ -325,16 +327,20 @@ def reaction_and_cost(trials: int, calls: int) -> dict[str, object]:
             get_ns.append(c - b)
         overhead = min(clock() - clock() for _ in range(1000))
     finally:
-        iface.close()
-        sim.terminate()
+        sim.terminate()  # the controller first: a loop closed under it would leave it unanswered
         summary = summary_of(sim, 30)
-    ms = np.array(reactions)
+        iface.close()
+    ms = np.array(reactions or [0.0])
     return {
         "reaction_ms": {"p50": float(np.percentile(ms, 50)), "p75": float(np.percentile(ms, 75)), "p99": float(np.percentile(ms, 99)), "max": float(ms.max()), "n": len(ms)},
-        "set_cart_pos_us": {"p50": float(np.percentile(set_ns, 50)) / 1000, "p99": float(np.percentile(set_ns, 99)) / 1000},
-        "get_curr_pos_us": {"p50": float(np.percentile(get_ns, 50)) / 1000, "p99": float(np.percentile(get_ns, 99)) / 1000},
+        "set_cart_pos_us": {"p50": float(np.percentile(set_ns or [0], 50)) / 1000, "p99": float(np.percentile(set_ns or [0], 99)) / 1000},
+        "get_curr_pos_us": {"p50": float(np.percentile(get_ns or [0], 50)) / 1000, "p99": float(np.percentile(get_ns or [0], 99)) / 1000},
         "timer_overhead_us": overhead / 1000,
         "late_during_reaction": summary.get("late_since_first_reply"),
+        "late_ipocs_during_reaction": summary.get("late_ipocs"),
+        "late_replies_during_reaction": summary.get("late_replies"),
+        "lateness_during_reaction_us": summary.get("lateness_us"),
+        "first_ipoc": first_ipoc,
     }
 
 
