@@ -113,11 +113,9 @@ def settle(iface: RsiInterface, packets: int = 10) -> None:
 
 
 def handshake(iface: RsiInterface) -> None:
-    for flag, ack in (("B1", "Digout.o1"), ("B2", "Digout.o2")):
-        iface.set_flag(0, flag, True)
-        if not iface.wait_event(lambda: iface.digout(0, ack), 30):
-            raise RuntimeError(f"no {ack} from the simulator")
-        iface.set_flag(0, flag, False)
+    """Allow start and allow move: after these the robot follows corrections."""
+    iface.allow_robot_start(0, 30)
+    iface.allow_robot_move(0, 30)
 
 
 # ------------------------------------------------------------------- 1. accelerated, 100k

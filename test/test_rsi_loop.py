@@ -449,3 +449,19 @@ def test_a_feedback_file_that_cannot_be_opened_is_reported(rig: Callable[..., Ri
     r.wait(lambda: any("cannot open feedback file" in w and str(tmp_path) in w for w in r.iface.events.warnings), "the warning")
     r.wait(lambda: r.iface.state(0).cycles > 50, "the loop to go on")
     assert r.sim.model.stats.late == 0
+
+
+def test_itras_logical_setters_wait_for_the_krl_programs_acknowledgement(rig: Callable[..., Rig]) -> None:
+    r = rig().start()
+    r.wait(lambda: r.iface.events.connected[0], "the robot")
+    r.iface.allow_robot_start(0, WAIT)
+    assert r.iface.digout(0, "Digout.o1") and r.iface.digout(0, "Digout.o3")  # task active, move required
+    assert not r.iface.flag(0, "B1")  # lowered after the acknowledgement
+    r.iface.allow_robot_move(0, WAIT)
+    r.wait(lambda: r.iface.state(0).correcting, "RSI_MOVECORR")
+    r.iface.request_realtime_end(0, WAIT)
+    assert r.iface.digout(0, "Digout.o4") and not r.iface.digout(0, "Digout.o2")
+    r.iface.allow_robot_finish(0)
+    assert r.sim.join(WAIT) and r.sim.stop_reason is not None and "finished" in r.sim.stop_reason
+    with pytest.raises(TimeoutError, match="did not acknowledge B1"):
+        r.iface.allow_robot_start(0, 0.2)  # nobody answers any more

@@ -327,11 +327,19 @@ class KukaRsiBackend(RobotBackend):
         """ITRA's logical setters: raise a flag, wait for the KRL program's output, lower the flag."""
         assert self.iface is not None
         iface = self.iface
+        raised = self._state().cycles
         iface.set_flag(0, flag, True)
         try:
-            await self._until(lambda: iface.digout(0, ack), self.handshake_cycles, f"acknowledgement of {what} ({ack})")
+            await self._until(lambda: self._fresh(raised, ack, True), self.handshake_cycles, f"acknowledgement of {what} ({ack})")
         finally:
             iface.set_flag(0, flag, False)
+
+    def _fresh(self, raised: int, tag: str, value: bool) -> bool:
+        """Output ``tag`` reads ``value`` in a packet that answers a flag raised at cycle ``raised``
+        (it leaves with the next reply; the robot's answer comes in the packet after)."""
+        assert self.iface is not None
+        state = self._state()
+        return state.cycles >= raised + 2 and self.iface.digout(0, tag, state) == value
 
     # ----------------------------------------------------------------------------- execute
     async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
@@ -604,8 +612,9 @@ class KukaRsiBackend(RobotBackend):
         index, value = TOOL_ACTIONS[action]
         tag = tools[index]
         iface = self.iface
+        raised = self._state().cycles
         iface.set_flag(0, tag, value)
-        await self._until(lambda: iface.digout(0, tag) == value, self.handshake_cycles, f"the robot to switch {tag} ({action})")
+        await self._until(lambda: self._fresh(raised, tag, value), self.handshake_cycles, f"the robot to switch {tag} ({action})")
         state = self._state()
         return EndEffectorResult({_TOOL_NAMES[i]: iface.digout(0, t, state) for i, t in enumerate(tools)})
 

@@ -326,6 +326,38 @@ class RsiInterface:
                 self._flags[robot] &= ~(1 << bits[tag])
             self._slots[robot].flags.write(self._flags[robot])
 
+    # ITRA's logical setters: raise a flag, wait for the KRL program to acknowledge it on one of
+    # its outputs, lower the flag.  They block (ITRA's took 10 to 100 ms); the back end has
+    # asynchronous equivalents bounded in robot cycles.
+    def handshake(self, robot: int, flag: str, ack: str, timeout: float = 5.0) -> None:
+        """Raise ``flag``, wait (at most ``timeout`` s) until output ``ack`` is set, lower ``flag``."""
+        raised = self.state(robot).cycles
+        self.set_flag(robot, flag, True)
+        try:
+            # The flag leaves with the next reply and the robot answers in the packet after:
+            # an acknowledgement counts from two packets on, never from what was there before.
+            fresh = lambda: (st := self.state(robot)).cycles >= raised + 2 and self.digout(robot, ack, st)  # noqa: E731
+            if not self.wait_event(fresh, timeout):
+                raise TimeoutError(f"robot {self.links[robot].name} did not acknowledge {flag} on {ack} within {timeout:g} s")
+        finally:
+            self.set_flag(robot, flag, False)
+
+    def allow_robot_start(self, robot: int, timeout: float = 5.0) -> None:
+        roles = self.links[robot].roles
+        self.handshake(robot, roles.allow_start, roles.task_active, timeout)
+
+    def allow_robot_move(self, robot: int, timeout: float = 5.0) -> None:
+        roles = self.links[robot].roles
+        self.handshake(robot, roles.allow_move, roles.correction_active, timeout)
+
+    def request_realtime_end(self, robot: int, timeout: float = 5.0) -> None:
+        roles = self.links[robot].roles
+        self.handshake(robot, roles.request_end, roles.realtime_ended, timeout)
+
+    def allow_robot_finish(self, robot: int) -> None:
+        """Let the KRL task end; RSI then stops, so there is nothing to wait for but silence."""
+        self.set_flag(robot, self.links[robot].roles.allow_finish, True)
+
     def flag(self, robot: int, tag: str) -> bool:
         return bool(self._flags[robot] >> self._flag_bits[robot][tag] & 1)
 
