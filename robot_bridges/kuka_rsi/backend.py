@@ -205,7 +205,9 @@ class KukaRsiBackend(RobotBackend):
         try:
             if iface is not None and self._fault is None and self.roles.handshake(self.config):
                 await self._handshake(self.roles.request_end, self.roles.realtime_ended, "request real-time end")
-                iface.set_flag(0, self.roles.allow_finish, True)
+                tag = self.roles.allow_finish
+                iface.set_flag(0, tag, True)
+                await self._until(lambda: iface.flag_sent(0, tag), None, f"a reply carrying {tag}")  # then the KRL task ends RSI
         except BridgeError as error:
             log.warning("%s: could not end the KRL task cleanly: %s", self.name, error)
         finally:

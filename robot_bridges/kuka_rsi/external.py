@@ -582,6 +582,7 @@ class Channel:
                 self._flags = int(got[1][0])  # type: ignore[call-overload]
                 for bit, i in enumerate(self._recv_bools):
                     self.tx[i] = bool(self._flags >> bit & 1)
+                self._emit(("flags", self.index, self._flags))  # leaves after the reply that carries them
 
     # ------------------------------------------------------------------ completion
     def _start(self, cmd_id: int, kind: int, target: tuple[np.ndarray, ...]) -> None:

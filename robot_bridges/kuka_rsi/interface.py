@@ -96,6 +96,7 @@ class LoopEvents:
         self.done: dict[int, tuple[bool, str, str]] = {}  # command id -> ok, message, fault kind
         self.connected = [False] * robots
         self.feedback: list[str | None] = [None] * robots  # the file each robot's packets are saved to
+        self.flags_sent: list[int] = [0] * robots  # the <Sen> BOOLs of the latest reply that changed them
         self.stopped = False
         self.stats: tuple[Any, ...] | None = None
 
@@ -114,6 +115,8 @@ class LoopEvents:
             if len(self.done) > 10_000:
                 for key in list(self.done)[:5000]:
                     del self.done[key]
+        elif kind == "flags":
+            self.flags_sent[int(message[1])] = int(message[2])
         elif kind == "feedback":
             self.feedback[int(message[1])] = message[2]
         elif kind == "connected":
@@ -354,9 +357,16 @@ class RsiInterface:
         roles = self.links[robot].roles
         self.handshake(robot, roles.request_end, roles.realtime_ended, timeout)
 
-    def allow_robot_finish(self, robot: int) -> None:
-        """Let the KRL task end; RSI then stops, so there is nothing to wait for but silence."""
-        self.set_flag(robot, self.links[robot].roles.allow_finish, True)
+    def allow_robot_finish(self, robot: int, timeout: float = 5.0) -> None:
+        """Let the KRL task end (RSI stops then); returns once a reply has carried the flag."""
+        tag = self.links[robot].roles.allow_finish
+        self.set_flag(robot, tag, True)
+        if not self.wait_event(lambda: self.flag_sent(robot, tag), timeout):
+            raise TimeoutError(f"no reply to robot {self.links[robot].name} carried {tag} within {timeout:g} s")
+
+    def flag_sent(self, robot: int, tag: str) -> bool:
+        """Whether the latest reply that changed the flags carried ``tag`` set."""
+        return bool(self.events.flags_sent[robot] >> self._flag_bits[robot][tag] & 1)
 
     def flag(self, robot: int, tag: str) -> bool:
         return bool(self._flags[robot] >> self._flag_bits[robot][tag] & 1)
