@@ -16,6 +16,7 @@ Contract, which the bridge node and the tests rely on:
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import TYPE_CHECKING
@@ -112,3 +113,12 @@ class BackendOptions:
     faults: tuple[str, ...] = ()  # fault injections for tests and demos, e.g. "right_arm:joint_limit@0.5"
     seed: int = 0
     extra: dict[str, str] = field(default_factory=dict)
+
+    def check(self, backend: str, robot: RobotModel, known_extras: Iterable[str]) -> None:
+        """Refuse, rather than ignore, options meant for another robot or back end."""
+        if self.robot.name != robot.name:
+            raise ValueError(f"the {backend} back end drives {robot.name}, not {self.robot.name}")
+        known = sorted(known_extras)
+        unknown = sorted(set(self.extra) - set(known))
+        if unknown:
+            raise ValueError(f"{backend}: unknown option(s) {', '.join(unknown)} (known: {', '.join(known)})")

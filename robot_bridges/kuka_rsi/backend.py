@@ -697,15 +697,11 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     RSI runs on the robot's clock, so the application must too: a simulated or scaled clock
     would let the engine's timeouts run ahead of the robot.
     """
-    if options.robot.name != KUKA_KR.name:
-        raise ValueError(f"the kuka-rsi back end drives {KUKA_KR.name}, not {options.robot.name}")
+    options.check("kuka-rsi", KUKA_KR, _EXTRAS)
     if clock.simulated or clock.speed != 1.0:
         raise ValueError("the kuka-rsi back end runs on the robot's real-time clock: run with --speed 1 (the default)")
     if options.faults:
         raise ValueError("the kuka-rsi back end takes no --fault (inject RSI faults with robot_bridges.kuka_rsi.simulator.Faults)")
-    unknown = sorted(set(options.extra) - set(_EXTRAS))
-    if unknown:
-        raise ValueError(f"kuka-rsi: unknown option(s) {', '.join(unknown)} (known: {', '.join(_EXTRAS)})")
     extra = options.extra
     runner = extra.get("runner", "process")
     sim_runner = extra.get("simulator", "process")

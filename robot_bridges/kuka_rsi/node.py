@@ -30,7 +30,7 @@ _NUMBER_OPTIONS = {
     "cycle": (4, "RSI cycle of the controller in ms: 4 or 12"),
     "timeout": (100, "late packets in a row after which the simulated RSI stops"),
     "axis_monitor": (360.0, "simulated AXISCORRMON limit (deg)"),
-    "silence": (0.1, "seconds without packets that mean the robot is lost"),
+    "silence": (0.0, "seconds without packets that mean the robot is lost (0 = the back end's default: 0.1 s, 2 s for an accelerated simulator)"),
     "linear_speed": (1.0, "Cartesian speed at 100 % (m/s)"),
     "linear_accel": (2.0, "Cartesian acceleration at 100 % (m/s^2)"),
 }
@@ -46,7 +46,9 @@ def declare_kuka_parameters(node: Node) -> BridgeSetup:
         if value:
             extra[name] = value
     for name, (number, description) in _NUMBER_OPTIONS.items():
-        extra[name] = str(node.declare_parameter(name, number, description))
+        value = node.declare_parameter(name, number, description)
+        if not (name == "silence" and value == 0.0):
+            extra[name] = str(value)
     options = BackendOptions(robot=KUKA_KR, host=host or None, rsi_listen=rsi_listen or None, extra=extra)
     return BridgeSetup(options)
 

@@ -676,14 +676,10 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`); a controller address makes
     no sense for a simulator and is refused rather than ignored.
     """
-    if options.robot.name != NEXTAGE_OPEN.name:
-        raise ValueError(f"the nextage-sim back end simulates {NEXTAGE_OPEN.name}, not {options.robot.name}")
+    options.check("nextage-sim", NEXTAGE_OPEN, _EXTRAS)
     given = [n for n, v in (("host", options.host), ("port", options.port), ("rsi_listen", options.rsi_listen)) if v is not None]
     if given:
         raise ValueError(f"the nextage-sim back end is a simulator and takes no {', '.join(given)}")
-    unknown = sorted(set(options.extra) - set(_EXTRAS))
-    if unknown:
-        raise ValueError(f"nextage-sim: unknown option(s) {', '.join(unknown)} (known: {', '.join(_EXTRAS)})")
     try:
         period = float(options.extra.get("control_period", "0.01"))
     except ValueError:

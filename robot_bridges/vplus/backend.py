@@ -477,15 +477,11 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     vision requests; default ``simulated`` without a host, ``none`` with one -- a real cell plugs its
     vision pipeline in as a :class:`MeasurementPort`).
     """
-    if options.robot.name != ADEPT_VIPER_S850.name:
-        raise ValueError(f"the vplus back end drives {ADEPT_VIPER_S850.name}, not {options.robot.name}")
+    options.check("vplus", ADEPT_VIPER_S850, _EXTRAS)
     if options.rsi_listen is not None:
         raise ValueError("the vplus back end takes no rsi_listen (that is for KUKA RSI)")
     if options.faults:
         raise ValueError("the vplus back end takes no --fault: inject V+ faults through robot_bridges.vplus.simulator.Faults")
-    unknown = sorted(set(options.extra) - set(_EXTRAS))
-    if unknown:
-        raise ValueError(f"vplus: unknown option(s) {', '.join(unknown)} (known: {', '.join(_EXTRAS)})")
     try:
         timeout = float(options.extra.get("timeout", "5"))
         retries = int(options.extra.get("retries", "3"))
