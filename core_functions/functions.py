@@ -42,7 +42,6 @@ from core_functions.trajectory_store import TrajectoryStore
 #: What a catalog function returns: primitives out, their results in.
 Skill = Generator[Primitive, Any, None]
 
-ARM = ("arm",)
 ANY_GROUP = ("arm", "torso_head")
 
 _INTERPOLATION = ParamSpec(

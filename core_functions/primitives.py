@@ -304,8 +304,6 @@ Primitive = Union[
     FullBodyMove,
     MasterSlaveMove,
 ]
-PRIMITIVE_TYPES: tuple[type, ...] = Primitive.__args__  # type: ignore[attr-defined]
-PRIMITIVES_BY_KIND: dict[str, type] = {t.KIND: t for t in PRIMITIVE_TYPES}
 
 
 def describe(primitive: Any) -> str:

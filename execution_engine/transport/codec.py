@@ -431,7 +431,3 @@ def _check_json_value(value: Any, depth: int) -> None:
         return
     raise _Mismatch(f"not a JSON value: {_describe(value)}")
 
-
-def decoder(cls: type[T], *, source: str = "") -> Callable[[str], T]:
-    """A one-argument decoder bound to a message type and a source, for subscription callbacks."""
-    return lambda text: decode(cls, text, source=source)
