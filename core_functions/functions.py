@@ -44,6 +44,9 @@ Skill = Generator[Primitive, Any, None]
 
 ANY_GROUP = ("arm", "torso_head")
 
+_REACH_DISTANCE = ParamSpec(
+    "distance", ParamType.NUMBER, "approach and retreat distance along the target's z axis", unit="m", default="0.05", minimum=0.0, maximum=0.5
+)
 _INTERPOLATION = ParamSpec(
     "interpolation", ParamType.CHOICE, "ptp: joint-interpolated (fastest); linear: straight TCP line", default="ptp", choices=("ptp", "linear")
 )
@@ -217,7 +220,7 @@ class CoreFunctions:
 
     @skill(
         ParamSpec("target", ParamType.TARGET, "where the part is: the TCP pose that grasps it (frame or x,y,z,roll,pitch,yaw)", unit="m, rad"),
-        ParamSpec("distance", ParamType.NUMBER, "approach and retreat distance along the target's z axis", unit="m", default="0.05", minimum=0.0, maximum=0.5),
+        _REACH_DISTANCE,
         states=("Motion", "EndEffector"),
         requires=Hold.NOTHING,
         leaves=Hold.PART,
@@ -229,7 +232,7 @@ class CoreFunctions:
 
     @skill(
         ParamSpec("target", ParamType.TARGET, "where the part goes: the TCP pose that releases it (frame or x,y,z,roll,pitch,yaw)", unit="m, rad"),
-        ParamSpec("distance", ParamType.NUMBER, "approach and retreat distance along the target's z axis", unit="m", default="0.05", minimum=0.0, maximum=0.5),
+        _REACH_DISTANCE,
         states=("Motion", "EndEffector"),
         requires=Hold.PART,
         leaves=Hold.NOTHING,
