@@ -21,6 +21,7 @@ import asyncio
 import math
 import selectors
 import threading
+import time
 from collections.abc import Awaitable, Callable, Coroutine, Mapping
 from typing import Any, TypeVar
 
@@ -43,13 +44,16 @@ class Clock:
     (a logging thread, the rclpy executor) because it only reads the loop's monotonic time.
     """
 
-    def __init__(self, speed: float = 1.0, *, simulated: bool = False) -> None:
+    def __init__(self, speed: float = 1.0, *, simulated: bool = False, epoch: float | None = None) -> None:
         if not (speed > 0 and math.isfinite(speed)):
             raise ValueError(f"clock speed must be a positive finite factor, got {speed!r}")
+        if epoch is not None and not (math.isfinite(epoch) and epoch >= 0):
+            raise ValueError(f"clock epoch must be a finite time since 1970 in seconds, got {epoch!r}")
         self._speed = float(speed)
         self._simulated = simulated
         self._loop: asyncio.AbstractEventLoop | None = None
         self._origin = 0.0
+        self._epoch = epoch
         self._lock = threading.Lock()
 
     # ----------------------------------------------------------------------------- binding
@@ -74,6 +78,8 @@ class Clock:
                     raise RuntimeError("a simulated clock needs a VirtualTimeLoop; use run_with_clock()")
                 self._loop = loop
                 self._origin = loop.time()
+                if self._epoch is None:
+                    self._epoch = time.time()
         return self
 
     @property
@@ -90,6 +96,19 @@ class Clock:
         if loop is None:
             return 0.0
         return (loop.time() - self._origin) * self._speed
+
+    @property
+    def epoch(self) -> float:
+        """Seconds since 1970 (UTC) at run time 0: the wall time when the clock was bound, unless given."""
+        return self._epoch if self._epoch is not None else 0.0
+
+    def epoch_now(self) -> float:
+        """Run time as seconds since 1970: what stamps of messages carry when no ROS clock is at hand.
+
+        A scaled or simulated clock starts at the wall time it was bound at and then runs at its
+        own rate, like a simulator's ``/clock``.
+        """
+        return self.epoch + self.now()
 
     def to_wall(self, run_seconds: float) -> float:
         """Wall (loop) seconds that ``run_seconds`` of run time take."""

@@ -74,7 +74,7 @@ class RunObserver:
 
     def _on_engine(self, msg: String) -> None:
         try:
-            status = codec.decode(EngineStatus, msg.data, source=ENGINE_STATUS)
+            status = codec.decode(EngineStatus, msg.data, source=self.node.resolve(ENGINE_STATUS))
         except codec.WireError as error:
             self.rejected.append(str(error))
             return

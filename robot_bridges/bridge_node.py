@@ -16,7 +16,7 @@ import logging
 
 from core_functions.primitives import PrimitiveResult, describe
 from execution_engine.transport import codec
-from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, String, Time
+from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, String
 from execution_engine.transport.port import Node, Publisher
 from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
 from execution_engine.transport.wire import (
@@ -77,14 +77,14 @@ class BridgeNode:
     # ------------------------------------------------------------------------------ inbound
     def _on_cell(self, msg: String) -> None:
         try:
-            cell = codec.decode(CellSnapshot, msg.data, source=ENGINE_CELL)
+            cell = codec.decode(CellSnapshot, msg.data, source=self.node.resolve(ENGINE_CELL))
         except codec.WireError as error:
             self._report(f"ignored cell model: {error}")
             return
         self.backend.set_cell(cell)
 
     def _on_command(self, group: str, msg: String) -> None:
-        source = bridge_topic(group, "command")
+        source = self.node.resolve(bridge_topic(group, "command"))
         try:
             command = codec.decode(BridgeCommand, msg.data, source=source)
         except codec.WireError as error:
@@ -172,7 +172,7 @@ class BridgeNode:
 
     def publish_state(self) -> None:
         """Publish joint_states and every TCP pose once (also called after each primitive)."""
-        stamp = Time.from_seconds(self.clock.now())
+        stamp = self.node.now_stamp()
         names, positions = self.backend.joint_state()
         self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(names), position=tuple(positions)))
         for group, pub in self._tcp_pubs.items():

@@ -394,7 +394,7 @@ class ExecutionEngine:
     # -------------------------------------------------------------------------- operator
     async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:
         handler = getattr(self, f"_cmd_{command}")
-        ok, message = await handler(f"service {engine_service(command)}")
+        ok, message = await handler(f"service {self.node.resolve(engine_service(command))}")
         return Trigger.Response(ok, message)
 
     async def _cmd_start(self, source: str) -> tuple[bool, str]:

@@ -55,7 +55,7 @@ class GroupLink:
 
     def _on_result(self, msg: String) -> None:
         try:
-            result = codec.decode(SmResult, msg.data, source=sm_topic(self.group, "result"))
+            result = codec.decode(SmResult, msg.data, source=self.node.resolve(sm_topic(self.group, "result")))
         except codec.WireError as error:
             self.rejected.append(str(error))
             self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
@@ -89,5 +89,5 @@ class GroupLink:
         try:
             response = await self._clients[name].call(Trigger.Request(), timeout=self.service_timeout)
         except (ServiceUnavailable, TransportError, asyncio.TimeoutError) as error:
-            return False, f"{sm_service(self.group, name)}: {type(error).__name__}: {error}"
+            return False, f"{self.node.resolve(sm_service(self.group, name))}: {type(error).__name__}: {error}"
         return response.success, response.message

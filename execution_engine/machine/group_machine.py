@@ -183,7 +183,7 @@ class GroupMachine:
     # ---------------------------------------------------------------------------- inputs
     def _on_request(self, msg: String) -> None:
         try:
-            request = codec.decode(SmRequest, msg.data, source=sm_topic(self.group, "request"))
+            request = codec.decode(SmRequest, msg.data, source=self.node.resolve(sm_topic(self.group, "request")))
         except codec.WireError as error:
             self.ctx.status("error", error=f"rejected request: {error}")
             self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
@@ -192,7 +192,7 @@ class GroupMachine:
 
     def _on_feedback(self, msg: String) -> None:
         try:
-            feedback = codec.decode(BridgeFeedback, msg.data, source=bridge_topic(self.group, "feedback"))
+            feedback = codec.decode(BridgeFeedback, msg.data, source=self.node.resolve(bridge_topic(self.group, "feedback")))
         except codec.WireError as error:
             self.events.put(FaultEvent("bridge feedback", str(error)))
             return
@@ -200,7 +200,7 @@ class GroupMachine:
 
     def _on_sync(self, msg: String) -> None:
         try:
-            message = codec.decode(SyncMessage, msg.data, source=SYNC_TOPIC)
+            message = codec.decode(SyncMessage, msg.data, source=self.node.resolve(SYNC_TOPIC))
         except codec.WireError as error:
             self.node.logger.error("%s: ignored sync message: %s", self.node.fully_qualified_name, error)
             return
@@ -211,7 +211,7 @@ class GroupMachine:
 
     def _on_cell(self, msg: String) -> None:
         try:
-            snapshot = codec.decode(CellSnapshot, msg.data, source=ENGINE_CELL)
+            snapshot = codec.decode(CellSnapshot, msg.data, source=self.node.resolve(ENGINE_CELL))
         except codec.WireError as error:
             self.ctx.status("error", error=f"ignored cell model: {error}")
             return
@@ -228,7 +228,7 @@ class GroupMachine:
         if not valid:
             return Trigger.Response(False, f"{self.group}: cannot {command} in {state}")
         self._pause_pending_in = state if command == "pause" and state in WORKING_STATES else None
-        self.events.put(OperatorSignal(command, sm_service(self.group, command)))  # type: ignore[arg-type]
+        self.events.put(OperatorSignal(command, self.node.resolve(sm_service(self.group, command))))  # type: ignore[arg-type]
         return Trigger.Response(True, f"{self.group}: {command} accepted in {state}")
 
     def _on_fault(self, where: str, error: BaseException) -> None:

@@ -20,6 +20,7 @@ from collections.abc import Awaitable, Callable, Mapping
 from typing import Any, Generic, TypeVar
 
 from execution_engine.clock import Clock
+from execution_engine.transport.msgs import Time
 from execution_engine.transport.qos import COMMANDS, QoS
 
 M = TypeVar("M")
@@ -145,6 +146,15 @@ class Node(ABC):
 
     def resolve(self, name: str) -> str:
         return resolve_name(name, self.namespace, self.name)
+
+    def now_stamp(self) -> Time:
+        """The node's ROS time for message stamps (``header.stamp``), seconds since 1970.
+
+        The embedded transports derive it from the run clock (:meth:`Clock.epoch_now`); the rclpy
+        transport asks the node's ROS clock, which follows ``/clock`` when ``use_sim_time`` is set.
+        Run time (``clock.now()``) stays what every duration is measured in.
+        """
+        return Time.from_seconds(self.clock.epoch_now())
 
     # ------------------------------------------------------------------------- parameters
     def declare_parameter(self, name: str, default: ParameterValue, description: str = "") -> ParameterValue:

@@ -191,33 +191,36 @@ class SyncMessage:
 
 
 # ---------------------------------------------------------------------------------- names
+# Every name is relative: it resolves under the node's namespace, so two cells launched with
+# ``namespace:=cell_a`` and ``namespace:=cell_b`` share one ROS graph without crosstalk.  In the
+# root namespace they are the absolute names of docs/architecture.md (``/left_arm/sm/state``).
 def sm_topic(group: str, leaf: str) -> str:
-    """``/<group>/sm/<leaf>`` for request, result, state, status, structure."""
-    return f"/{group}/sm/{leaf}"
+    """``<group>/sm/<leaf>`` for request, result, state, status, structure."""
+    return f"{group}/sm/{leaf}"
 
 
 def sm_service(group: str, command: str) -> str:
-    """``/<group>/sm/<command>`` for pause, resume, stop, reset."""
-    return f"/{group}/sm/{command}"
+    """``<group>/sm/<command>`` for pause, resume, stop, reset."""
+    return f"{group}/sm/{command}"
 
 
 def bridge_topic(group: str, leaf: str) -> str:
-    """``/<group>/bridge/<leaf>`` for command and feedback."""
-    return f"/{group}/bridge/{leaf}"
+    """``<group>/bridge/<leaf>`` for command and feedback."""
+    return f"{group}/bridge/{leaf}"
 
 
 def tcp_pose_topic(group: str) -> str:
-    return f"/{group}/tcp_pose"
+    return f"{group}/tcp_pose"
 
 
-ENGINE_STATUS = "/execution_engine/status"
-ENGINE_CELL = "/execution_engine/cell"
-JOINT_STATES = "/joint_states"
-SAFETY_STOP = "/cell/safety_stop"
-SYNC_TOPIC = "/coordination/sync"
+ENGINE_STATUS = "execution_engine/status"
+ENGINE_CELL = "execution_engine/cell"
+JOINT_STATES = "joint_states"
+SAFETY_STOP = "cell/safety_stop"
+SYNC_TOPIC = "coordination/sync"
 ENGINE_SERVICES = ("start", "pause", "resume", "stop", "step", "reset")
 MACHINE_SERVICES = ("pause", "resume", "stop", "reset")
 
 
 def engine_service(command: str) -> str:
-    return f"/execution_engine/{command}"
+    return f"execution_engine/{command}"

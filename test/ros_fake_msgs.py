@@ -1,0 +1,148 @@
+"""Fake rosidl interface packages (message and service classes shaped like rosidl's), for the fake rclpy.
+
+Classes have ``__slots__``, keyword constructors that refuse unknown fields, setters that refuse
+a wrong Python type (an ``int`` for a ``float64``), numeric sequences stored as ``array.array``
+and ``get_fields_and_field_types()``; services expose ``Request`` / ``Response`` on the service
+class only.  :data:`INTERFACE_MODULES` maps each module (``std_msgs.msg``) to its classes;
+:func:`ros_fakes.install` puts them in ``sys.modules``.
+"""
+from __future__ import annotations
+
+import array
+from collections.abc import Callable
+from typing import Any
+
+# ================================================================================= messages
+_DEFAULTS: dict[str, Callable[[], Any]] = {
+    "string": str,
+    "boolean": bool,
+    "double": float,
+    "int32": int,
+    "uint32": int,
+    "uint8": int,
+    "sequence<double>": lambda: array.array("d"),
+    "sequence<string>": list,
+}
+_INT_RANGES = {"int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint8": (0, 255)}
+
+
+class FakeMessage:
+    """Base of rosidl-shaped fake messages; subclasses set ``_fields_and_field_types``."""
+
+    __slots__: tuple[str, ...] = ()
+    _fields_and_field_types: dict[str, str] = {}
+    _nested: dict[str, type] = {}
+    _field_defaults: dict[str, Any] = {}
+
+    def __init__(self, **kwargs: Any) -> None:
+        assert all("_" + key in self.__slots__ for key in kwargs), f"Invalid arguments passed to constructor: {sorted(kwargs)}"
+        for name, kind in self._fields_and_field_types.items():
+            if name in kwargs:
+                setattr(self, name, kwargs[name])
+            elif name in self._nested:
+                setattr(self, name, self._nested[name]())
+            elif name in self._field_defaults:
+                setattr(self, name, self._field_defaults[name])
+            else:
+                setattr(self, name, _DEFAULTS[kind]())
+
+    @classmethod
+    def get_fields_and_field_types(cls) -> dict[str, str]:
+        return dict(cls._fields_and_field_types)
+
+    def __eq__(self, other: object) -> bool:
+        return type(other) is type(self) and all(getattr(self, n) == getattr(other, n) for n in self._fields_and_field_types)
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{n}={getattr(self, n)!r}" for n in self._fields_and_field_types)
+        return f"{type(self).__name__}({inner})"
+
+
+def _check(kind: str, nested: type | None, name: str, value: Any) -> Any:
+    if nested is not None:
+        assert isinstance(value, nested), f"The '{name}' field must be a sub message of type '{nested.__name__}'"
+        return value
+    if kind == "string":
+        assert isinstance(value, str), f"The '{name}' field must be of type 'str'"
+    elif kind == "boolean":
+        assert isinstance(value, bool), f"The '{name}' field must be of type 'bool'"
+    elif kind == "double":
+        assert isinstance(value, float), f"The '{name}' field must be of type 'float'"
+    elif kind in _INT_RANGES:
+        low, high = _INT_RANGES[kind]
+        assert isinstance(value, int) and low <= value <= high, f"The '{name}' field must be an integer in [{low}, {high}]"
+    elif kind == "sequence<double>":
+        if isinstance(value, array.array):
+            assert value.typecode == "d", f"The '{name}' array.array() must have the type code of 'd'"
+            return value
+        assert all(isinstance(v, float) for v in value), f"The '{name}' field must be a sequence of 'float'"
+        return array.array("d", value)
+    elif kind == "sequence<string>":
+        assert all(isinstance(v, str) for v in value), f"The '{name}' field must be a sequence of 'str'"
+        return list(value)
+    else:
+        raise AssertionError(f"unknown field kind {kind}")
+    return value
+
+
+def message_class(name: str, fields: dict[str, str], nested: dict[str, type] | None = None, defaults: dict[str, Any] | None = None) -> type:
+    """A rosidl-shaped class: slots ``_<field>``, checking properties, keyword constructor."""
+    nested = nested or {}
+    namespace: dict[str, Any] = {
+        "__slots__": tuple("_" + f for f in fields),
+        "_fields_and_field_types": dict(fields),
+        "_nested": dict(nested),
+        "_field_defaults": dict(defaults or {}),
+    }
+    for field_name, kind in fields.items():
+        def getter(self: Any, _n: str = field_name) -> Any:
+            return object.__getattribute__(self, "_" + _n)
+
+        def setter(self: Any, value: Any, _n: str = field_name, _k: str = kind, _t: type | None = nested.get(field_name)) -> None:
+            object.__setattr__(self, "_" + _n, _check(_k, _t, _n, value))
+
+        namespace[field_name] = property(getter, setter)
+    return type(name, (FakeMessage,), namespace)
+
+
+Time = message_class("Time", {"sec": "int32", "nanosec": "uint32"})
+Header = message_class("Header", {"stamp": "builtin_interfaces/Time", "frame_id": "string"}, {"stamp": Time})
+String = message_class("String", {"data": "string"})
+Bool = message_class("Bool", {"data": "boolean"})
+JointState = message_class(
+    "JointState",
+    {"header": "std_msgs/Header", "name": "sequence<string>", "position": "sequence<double>", "velocity": "sequence<double>", "effort": "sequence<double>"},
+    {"header": Header},
+)
+Point = message_class("Point", {"x": "double", "y": "double", "z": "double"})
+Quaternion = message_class("Quaternion", {"x": "double", "y": "double", "z": "double", "w": "double"}, defaults={"w": 1.0})
+Pose = message_class("Pose", {"position": "geometry_msgs/Point", "orientation": "geometry_msgs/Quaternion"}, {"position": Point, "orientation": Quaternion})
+PoseStamped = message_class("PoseStamped", {"header": "std_msgs/Header", "pose": "geometry_msgs/Pose"}, {"header": Header, "pose": Pose})
+
+
+class Trigger:
+    """std_srvs/srv/Trigger: an empty request still has one placeholder field, as rosidl generates."""
+
+    Request = message_class("Trigger_Request", {"structure_needs_at_least_one_member": "uint8"})
+    Response = message_class("Trigger_Response", {"success": "boolean", "message": "string"})
+
+
+ParameterDescriptor = message_class("ParameterDescriptor", {"name": "string", "description": "string", "read_only": "boolean", "dynamic_typing": "boolean"})
+SetParametersResult = message_class("SetParametersResult", {"successful": "boolean", "reason": "string"})
+
+INTERFACE_MODULES: dict[str, dict[str, Any]] = {
+    "builtin_interfaces.msg": {"Time": Time},
+    "std_msgs.msg": {"Header": Header, "String": String, "Bool": Bool},
+    "sensor_msgs.msg": {"JointState": JointState},
+    "geometry_msgs.msg": {"Point": Point, "Quaternion": Quaternion, "Pose": Pose, "PoseStamped": PoseStamped},
+    "std_srvs.srv": {"Trigger": Trigger},
+    "rcl_interfaces.msg": {"ParameterDescriptor": ParameterDescriptor, "SetParametersResult": SetParametersResult},
+}
+
+
+def resolve(ros_type: str) -> type:
+    """A resolver over the fake interface packages (what import_ros_type does with real ones)."""
+    package, kind, name = ros_type.split("/")
+    service, _, part = name.partition("_")
+    cls = INTERFACE_MODULES[f"{package}.{kind}"][service if part else name]
+    return getattr(cls, part) if part else cls  # type: ignore[no-any-return]
