@@ -106,6 +106,7 @@ def message_class(name: str, fields: dict[str, str], nested: dict[str, type] | N
 
 
 Time = message_class("Time", {"sec": "int32", "nanosec": "uint32"})
+ClockMessage = message_class("Clock", {"clock": "builtin_interfaces/Time"}, {"clock": Time})
 Header = message_class("Header", {"stamp": "builtin_interfaces/Time", "frame_id": "string"}, {"stamp": Time})
 String = message_class("String", {"data": "string"})
 Bool = message_class("Bool", {"data": "boolean"})
@@ -132,6 +133,7 @@ SetParametersResult = message_class("SetParametersResult", {"successful": "boole
 
 INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "builtin_interfaces.msg": {"Time": Time},
+    "rosgraph_msgs.msg": {"Clock": ClockMessage},
     "std_msgs.msg": {"Header": Header, "String": String, "Bool": Bool},
     "sensor_msgs.msg": {"JointState": JointState},
     "geometry_msgs.msg": {"Point": Point, "Quaternion": Quaternion, "Pose": Pose, "PoseStamped": PoseStamped},

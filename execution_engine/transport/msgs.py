@@ -31,6 +31,14 @@ class Time:
 
 
 @dataclass(frozen=True)
+class ClockMessage:
+    """rosgraph_msgs/Clock: the simulator's time on ``/clock`` for nodes with ``use_sim_time``."""
+
+    ROS_TYPE: ClassVar[str] = "rosgraph_msgs/msg/Clock"
+    clock: Time = field(default_factory=Time)
+
+
+@dataclass(frozen=True)
 class Header:
     """std_msgs/Header."""
 
