@@ -37,6 +37,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/urdf", sorted(str(u.relative_to(HERE)) for u in HERE.glob("robot_bridges/*/urdf/*.urdf"))),
         *tree("launch"),
         *tree("config"),
         *tree("apps_xml"),

@@ -54,6 +54,9 @@ class RobotModel:
     camera_names: tuple[str, ...] = ()
     #: Where the tool can go, in words an application writer can plan poses with.
     workspace: str = ""
+    #: The robot's base frame: what a cell model calls ``world``, the root link of the robot's
+    #: URDF and the frame of its TCP poses, so tf joins the cell's frames to the robot's links.
+    world_frame: str = "world"
 
     def __post_init__(self) -> None:
         own = [j.name for g in self.groups for j in g.joints]
@@ -141,6 +144,7 @@ NEXTAGE_OPEN = RobotModel(
         "off": _pose(_NEXTAGE_ORDER, (0, 0, 0, 25, -140, -150, 45, 0, 0, -25, -140, -150, -45, 0, 0)),
     },
     default_backend="nextage-sim",
+    world_frame="WAIST",
     joint_order=_NEXTAGE_ORDER,
     camera_names=("head_camera", "head_camera_left", "head_camera_right", "left_hand_camera", "right_hand_camera"),
     workspace=(
@@ -187,6 +191,7 @@ KUKA_KR = RobotModel(
     groups=(GroupSpec("arm", "arm", _KUKA_JOINTS, camera="tool_camera"),),
     poses={"home": dict(zip((j.name for j in _KUKA_JOINTS), _deg(0, -90, 90, 0, 0, 0)))},
     default_backend="kuka-rsi",
+    world_frame="base",
     workspace="World frame: the robot base (x forward, z up). Reach about 0.9 m around the base axis, above the mounting plane.",
 )
 

@@ -101,6 +101,15 @@ class RobotBackend(ABC):
     def set_cell(self, cell: CellSnapshot) -> None:  # noqa: B027 - optional hook
         """Receive the application's cell model (simulators use it for simulated vision)."""
 
+    def robot_description(self) -> str | None:
+        """The robot's URDF text, or None when no URDF is known.
+
+        With a URDF the bridge publishes it on ``robot_description`` and the links on ``tf``
+        (:mod:`robot_bridges.robot_state`); its root link must be :attr:`world_frame`, and its
+        joint names those of :meth:`joint_state`.
+        """
+        return None
+
 
 @dataclass(frozen=True)
 class BackendOptions:

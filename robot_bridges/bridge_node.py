@@ -29,6 +29,7 @@ from execution_engine.transport.wire import (
     tcp_pose_topic,
 )
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
+from robot_bridges.robot_state import RobotStatePublisher
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +50,7 @@ class BridgeNode:
         self._tasks: set[asyncio.Task[None]] = set()
         self._joint_pub = node.create_publisher(JointState, JOINT_STATES, SENSOR)
         self._tcp_pubs = {g: node.create_publisher(PoseStamped, tcp_pose_topic(g), SENSOR) for g in backend.groups}
+        self._robot_state = RobotStatePublisher.for_backend(node, backend)  # robot_description, tf: for RViz
         for group in backend.groups:
             self._feedback[group] = node.create_publisher(String, bridge_topic(group, "feedback"), COMMANDS)
             node.create_subscription(
@@ -175,6 +177,8 @@ class BridgeNode:
         stamp = self.node.now_stamp()
         names, positions = self.backend.joint_state()
         self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(names), position=tuple(positions)))
+        if self._robot_state is not None:
+            self._robot_state.publish(names, positions, stamp)
         for group, pub in self._tcp_pubs.items():
             pose = self.backend.tcp_pose(group)
             if pose is None:

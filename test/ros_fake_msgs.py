@@ -16,6 +16,7 @@ from typing import Any
 _DEFAULTS: dict[str, Callable[[], Any]] = {
     "string": str,
     "boolean": bool,
+    "octet": lambda: bytes([0]),  # a ROS ``byte``: rosidl's default is bytes([0])
     "double": float,
     "int32": int,
     "uint32": int,
@@ -39,8 +40,8 @@ class FakeMessage:
         for name, kind in self._fields_and_field_types.items():
             if name in kwargs:
                 setattr(self, name, kwargs[name])
-            elif name in self._nested:
-                setattr(self, name, self._nested[name]())
+            elif name in self._nested:  # a sequence of messages starts empty, a sub-message default-built
+                setattr(self, name, [] if kind.startswith("sequence<") else self._nested[name]())
             elif name in self._field_defaults:
                 setattr(self, name, self._field_defaults[name])
             else:
@@ -59,8 +60,16 @@ class FakeMessage:
 
 
 def _check(kind: str, nested: type | None, name: str, value: Any) -> Any:
+    if nested is not None and kind.startswith("sequence<"):  # rosidl keeps the sequence it is given
+        assert isinstance(value, (list, tuple)) and all(isinstance(v, nested) for v in value), (
+            f"The '{name}' field must be a set or sequence and each value of type '{nested.__name__}'"
+        )
+        return value
     if nested is not None:
         assert isinstance(value, nested), f"The '{name}' field must be a sub message of type '{nested.__name__}'"
+        return value
+    if kind == "octet":
+        assert isinstance(value, (bytes, bytearray)) and len(value) == 1, f"The '{name}' field must be of type 'bytes' or 'ByteString' with length 1"
         return value
     if kind == "string":
         assert isinstance(value, str), f"The '{name}' field must be of type 'str'"
@@ -119,6 +128,26 @@ Point = message_class("Point", {"x": "double", "y": "double", "z": "double"})
 Quaternion = message_class("Quaternion", {"x": "double", "y": "double", "z": "double", "w": "double"}, defaults={"w": 1.0})
 Pose = message_class("Pose", {"position": "geometry_msgs/Point", "orientation": "geometry_msgs/Quaternion"}, {"position": Point, "orientation": Quaternion})
 PoseStamped = message_class("PoseStamped", {"header": "std_msgs/Header", "pose": "geometry_msgs/Pose"}, {"header": Header, "pose": Pose})
+Vector3 = message_class("Vector3", {"x": "double", "y": "double", "z": "double"})
+Transform = message_class(
+    "Transform", {"translation": "geometry_msgs/Vector3", "rotation": "geometry_msgs/Quaternion"}, {"translation": Vector3, "rotation": Quaternion}
+)
+TransformStamped = message_class(
+    "TransformStamped",
+    {"header": "std_msgs/Header", "child_frame_id": "string", "transform": "geometry_msgs/Transform"},
+    {"header": Header, "transform": Transform},
+)
+TFMessage = message_class("TFMessage", {"transforms": "sequence<geometry_msgs/TransformStamped>"}, {"transforms": TransformStamped})
+KeyValue = message_class("KeyValue", {"key": "string", "value": "string"})
+DiagnosticStatus = message_class(
+    "DiagnosticStatus",
+    {"level": "octet", "name": "string", "message": "string", "hardware_id": "string", "values": "sequence<diagnostic_msgs/KeyValue>"},
+    {"values": KeyValue},
+)
+DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR, DiagnosticStatus.STALE = b"\x00", b"\x01", b"\x02", b"\x03"  # type: ignore[attr-defined]
+DiagnosticArray = message_class(
+    "DiagnosticArray", {"header": "std_msgs/Header", "status": "sequence<diagnostic_msgs/DiagnosticStatus>"}, {"header": Header, "status": DiagnosticStatus}
+)
 
 
 class Trigger:
@@ -136,7 +165,12 @@ INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "rosgraph_msgs.msg": {"Clock": ClockMessage},
     "std_msgs.msg": {"Header": Header, "String": String, "Bool": Bool},
     "sensor_msgs.msg": {"JointState": JointState},
-    "geometry_msgs.msg": {"Point": Point, "Quaternion": Quaternion, "Pose": Pose, "PoseStamped": PoseStamped},
+    "geometry_msgs.msg": {
+        "Point": Point, "Quaternion": Quaternion, "Pose": Pose, "PoseStamped": PoseStamped,
+        "Vector3": Vector3, "Transform": Transform, "TransformStamped": TransformStamped,
+    },
+    "tf2_msgs.msg": {"TFMessage": TFMessage},
+    "diagnostic_msgs.msg": {"KeyValue": KeyValue, "DiagnosticStatus": DiagnosticStatus, "DiagnosticArray": DiagnosticArray},
     "std_srvs.srv": {"Trigger": Trigger},
     "rcl_interfaces.msg": {"ParameterDescriptor": ParameterDescriptor, "SetParametersResult": SetParametersResult},
 }

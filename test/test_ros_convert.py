@@ -13,7 +13,20 @@ from hypothesis import strategies as st
 
 from execution_engine.transport import msgs
 from execution_engine.transport.port import TransportError
-from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED, SENSOR, Durability, History, QoS, Reliability
+from execution_engine.transport.qos import (
+    COMMANDS,
+    DIAGNOSTICS,
+    EVENTS,
+    LATCHED,
+    ROBOT_DESCRIPTION,
+    SENSOR,
+    TF,
+    TF_STATIC,
+    Durability,
+    History,
+    QoS,
+    Reliability,
+)
 from execution_engine.transport.ros_convert import (
     MessageConverter,
     failure_response,
@@ -47,12 +60,44 @@ pose_stamped = st.builds(
     ),
 )
 
+tf_messages = st.builds(
+    msgs.TFMessage,
+    st.lists(
+        st.builds(
+            msgs.TransformStamped,
+            header=headers,
+            child_frame_id=names,
+            transform=st.builds(
+                msgs.Transform, st.builds(msgs.Vector3, finite, finite, finite), st.builds(msgs.Quaternion, finite, finite, finite, finite)
+            ),
+        ),
+        max_size=4,
+    ).map(tuple),
+)
+diagnostic_arrays = st.builds(
+    msgs.DiagnosticArray,
+    header=headers,
+    status=st.lists(
+        st.builds(
+            msgs.DiagnosticStatus,
+            level=st.binary(min_size=1, max_size=1),
+            name=names,
+            message=names,
+            hardware_id=names,
+            values=st.lists(st.builds(msgs.KeyValue, names, names), max_size=3).map(tuple),
+        ),
+        max_size=3,
+    ).map(tuple),
+)
+
 
 @given(st.one_of(
     st.builds(msgs.String, names),
     st.builds(msgs.Bool, st.booleans()),
     joint_states,
     pose_stamped,
+    tf_messages,
+    diagnostic_arrays,
     st.builds(msgs.TriggerResponse, st.booleans(), names),
     st.just(msgs.TriggerRequest()),
 ))
@@ -110,6 +155,18 @@ def test_an_installed_type_missing_a_mirror_field_is_refused_before_any_message(
         MessageConverter(resolver).ros_class(msgs.JointState)
 
 
+def test_a_ros_byte_travels_as_bytes_of_length_one() -> None:
+    # rosidl generates ``byte level`` as an 'octet' held in bytes of length 1; its setter refuses an int.
+    status = msgs.DiagnosticStatus(level=msgs.DiagnosticStatus.WARN, name="left_arm_machine: left_arm")
+    ros = converter.to_ros(status)
+    assert ros.level == b"\x01" and type(ros.level) is bytes
+    assert converter.from_ros(msgs.DiagnosticStatus, ros) == status
+    assert converter.from_ros(msgs.DiagnosticStatus, ros_fakes.DiagnosticStatus(level=bytearray(b"\x03"))).level == b"\x03"
+    for wrong in (1, b"", b"\x00\x01", "1"):
+        with pytest.raises(TransportError, match="field 'level': expected one byte"):
+            converter.to_ros(msgs.DiagnosticStatus(level=wrong))  # type: ignore[arg-type]
+
+
 def test_extra_rosidl_fields_keep_their_defaults() -> None:
     # rosidl gives an empty request a placeholder member; the mirror has no fields at all.
     ros = converter.to_ros(msgs.TriggerRequest())
@@ -161,6 +218,10 @@ policies = types.SimpleNamespace(
         (LATCHED, "RELIABLE", "TRANSIENT_LOCAL", 1),
         (EVENTS, "RELIABLE", "VOLATILE", 1000),
         (SENSOR, "BEST_EFFORT", "VOLATILE", 5),
+        (TF, "RELIABLE", "VOLATILE", 100),  # tf2_ros DynamicBroadcasterQoS
+        (TF_STATIC, "RELIABLE", "TRANSIENT_LOCAL", 1),  # tf2_ros StaticBroadcasterQoS
+        (ROBOT_DESCRIPTION, "RELIABLE", "TRANSIENT_LOCAL", 1),  # robot_state_publisher
+        (DIAGNOSTICS, "RELIABLE", "VOLATILE", 10),
     ],
 )
 def test_named_profiles_map_to_rclpy_policies(qos: QoS, reliability: str, durability: str, depth: int) -> None:

@@ -115,6 +115,82 @@ class PoseStamped:
 
 
 @dataclass(frozen=True)
+class Vector3:
+    """geometry_msgs/Vector3: a translation in metres (a transform's ``translation``)."""
+
+    ROS_TYPE: ClassVar[str] = "geometry_msgs/msg/Vector3"
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+
+@dataclass(frozen=True)
+class Transform:
+    """geometry_msgs/Transform: where a child frame is in its parent (m; rotation x y z w)."""
+
+    ROS_TYPE: ClassVar[str] = "geometry_msgs/msg/Transform"
+    translation: Vector3 = field(default_factory=Vector3)
+    rotation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass(frozen=True)
+class TransformStamped:
+    """geometry_msgs/TransformStamped: ``header.frame_id`` is the parent, ``child_frame_id`` the child."""
+
+    ROS_TYPE: ClassVar[str] = "geometry_msgs/msg/TransformStamped"
+    header: Header = field(default_factory=Header)
+    child_frame_id: str = ""
+    transform: Transform = field(default_factory=Transform)
+
+
+@dataclass(frozen=True)
+class TFMessage:
+    """tf2_msgs/TFMessage: what ``tf`` and ``tf_static`` carry (RViz, Foxglove and tf2 read them)."""
+
+    ROS_TYPE: ClassVar[str] = "tf2_msgs/msg/TFMessage"
+    transforms: tuple[TransformStamped, ...] = ()
+
+
+@dataclass(frozen=True)
+class KeyValue:
+    """diagnostic_msgs/KeyValue: one named value of a diagnostic status."""
+
+    ROS_TYPE: ClassVar[str] = "diagnostic_msgs/msg/KeyValue"
+    key: str = ""
+    value: str = ""
+
+
+@dataclass(frozen=True)
+class DiagnosticStatus:
+    """diagnostic_msgs/DiagnosticStatus.
+
+    ``level`` is a ROS ``byte``, which rosidl's Python classes hold as ``bytes`` of length 1
+    (``DiagnosticStatus.OK == b'\\x00'``) and whose setter refuses an ``int``; the mirror keeps
+    that shape so a level travels unchanged, and names the constants as rosidl does.
+    """
+
+    ROS_TYPE: ClassVar[str] = "diagnostic_msgs/msg/DiagnosticStatus"
+    OK: ClassVar[bytes] = b"\x00"
+    WARN: ClassVar[bytes] = b"\x01"
+    ERROR: ClassVar[bytes] = b"\x02"
+    STALE: ClassVar[bytes] = b"\x03"
+    level: bytes = b"\x00"
+    name: str = ""
+    message: str = ""
+    hardware_id: str = ""
+    values: tuple[KeyValue, ...] = ()
+
+
+@dataclass(frozen=True)
+class DiagnosticArray:
+    """diagnostic_msgs/DiagnosticArray: what ``diagnostics`` carries (rqt_robot_monitor, Foxglove)."""
+
+    ROS_TYPE: ClassVar[str] = "diagnostic_msgs/msg/DiagnosticArray"
+    header: Header = field(default_factory=Header)
+    status: tuple[DiagnosticStatus, ...] = ()
+
+
+@dataclass(frozen=True)
 class TriggerRequest:
     """std_srvs/Trigger request (empty)."""
 
@@ -139,5 +215,5 @@ class Trigger:
     Response: ClassVar[type[TriggerResponse]] = TriggerResponse
 
 
-MESSAGE_TYPES: tuple[type, ...] = (String, Bool, JointState, PoseStamped)
+MESSAGE_TYPES: tuple[type, ...] = (String, Bool, JointState, PoseStamped, TFMessage, DiagnosticArray)
 SERVICE_TYPES: tuple[type, ...] = (Trigger,)

@@ -57,6 +57,14 @@ COMMANDS = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 50)
 LATCHED = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
 #: Status stream: every transition matters to a trace, so reliable and deep.
 EVENTS = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 1000)
+#: ``tf``: as tf2_ros's DynamicBroadcasterQoS (reliable, volatile, depth 100), so RViz and tf2 listeners match.
+TF = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 100)
+#: ``tf_static``: as tf2_ros's StaticBroadcasterQoS; each message holds every static transform of its sender.
+TF_STATIC = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
+#: ``robot_description``: as robot_state_publisher offers it, so RViz's RobotModel gets the URDF late.
+ROBOT_DESCRIPTION = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
+#: ``diagnostics``: reliable and volatile like diagnostic_updater's publisher; a little depth for bursts.
+DIAGNOSTICS = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 10)
 #: Periodic sensor data (joint_states, tcp_pose): the newest sample wins.
 SENSOR = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, History.KEEP_LAST, 5)
 

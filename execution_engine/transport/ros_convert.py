@@ -96,6 +96,10 @@ def _scalar(hint: Any, value: Any, path: str) -> Any:
         if not isinstance(value, str):
             raise TransportError(f"field {path!r}: expected a string, got {type(value).__name__}")
         return value
+    if hint is bytes:  # a ROS ``byte``: rosidl Python holds it as bytes of length 1 and refuses an int
+        if not isinstance(value, (bytes, bytearray)) or len(value) != 1:
+            raise TransportError(f"field {path!r}: expected one byte (bytes of length 1), got {value!r}")
+        return bytes(value)
     convert = _SCALARS.get(hint)
     if convert is None:
         raise TransportError(f"field {path!r}: unsupported mirror field type {hint!r}")

@@ -216,6 +216,12 @@ def tcp_pose_topic(group: str) -> str:
 ENGINE_STATUS = "execution_engine/status"
 ENGINE_CELL = "execution_engine/cell"
 JOINT_STATES = "joint_states"
+# The standard visualisation topics (robot_state_publisher, tf2, diagnostic_updater use the same
+# names); relative too, so a namespaced cell keeps its own -- RViz then needs ``/tf:=tf`` remaps.
+ROBOT_DESCRIPTION_TOPIC = "robot_description"
+TF_TOPIC = "tf"
+TF_STATIC_TOPIC = "tf_static"
+DIAGNOSTICS_TOPIC = "diagnostics"
 SAFETY_STOP = "cell/safety_stop"
 SYNC_TOPIC = "coordination/sync"
 ENGINE_SERVICES = ("start", "pause", "resume", "stop", "step", "reset")

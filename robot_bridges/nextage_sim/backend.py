@@ -210,6 +210,9 @@ class NextageSimBackend(RobotBackend):
     def set_cell(self, cell: CellSnapshot) -> None:
         self._vision.set_cell(cell)
 
+    def robot_description(self) -> str | None:
+        return self.model.urdf_path.read_text(encoding="utf-8")
+
     # ----------------------------------------------------------------- simulator extras
     def set_tool(self, group: str, tool: Pose) -> None:
         """Make the arm's TCP ``tool`` (a pose in ``*ARM_JOINT5_Link``) instead of the flange."""

@@ -1,0 +1,112 @@
+"""A URDF's kinematic tree on pinocchio: where each child link sits in its parent link.
+
+This is robot_state_publisher's arithmetic.  The tree (which joint joins which links) and every
+transform come from pinocchio's model of the URDF -- the same loader the Nextage simulator's
+kinematics use -- so what ``tf`` shows and what the simulator computes cannot disagree, and no
+URDF origin is parsed here by hand.  In pinocchio's model each link is a BODY frame whose parent
+frame is its joint's frame (JOINT, or FIXED_JOINT for a fixed joint), whose parent frame in turn
+is the parent link; the root link hangs from the ``universe`` frame (index 0).
+
+Movable joints (revolute, continuous, prismatic) are placed from joint positions; fixed joints
+never move, so they are computed once.  Floating and planar joints are left out, as
+robot_state_publisher leaves them out: something else (localisation) owns those transforms.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from core_functions.geometry import Pose
+
+_MOVABLE_NQ = (1, 2)  # revolute / prismatic: q; continuous (unbounded revolute): cos q, sin q
+
+
+@dataclass(frozen=True)
+class TreeJoint:
+    """One URDF joint as tf shows it: ``child`` link placed in ``parent`` link."""
+
+    name: str
+    parent: str
+    child: str
+    movable: bool
+
+
+class UrdfTree:
+    """Link transforms of one URDF for given joint positions (rad, m)."""
+
+    def __init__(self, urdf_xml: str) -> None:
+        self.model = pin.buildModelFromXML(urdf_xml)
+        self._data = self.model.createData()
+        frames = self.model.frames
+        self._link_frame: dict[str, int] = {}
+        joints: list[TreeJoint] = []
+        self._slots: dict[str, tuple[int, int]] = {}  # movable joint -> (first q index, nq)
+        self.root = ""
+        for fid, frame in enumerate(frames):
+            if frame.type != pin.FrameType.BODY:
+                continue
+            self._link_frame[frame.name] = fid
+            if frame.parentFrame == 0:
+                self.root = self.root or frame.name
+                continue
+            joint_frame = frames[frame.parentFrame]
+            parent_link = frames[joint_frame.parentFrame].name
+            if joint_frame.type == pin.FrameType.FIXED_JOINT:
+                joints.append(TreeJoint(joint_frame.name, parent_link, frame.name, movable=False))
+                continue
+            joint = self.model.joints[frame.parentJoint]
+            if joint.nq not in _MOVABLE_NQ or joint.nv != 1:
+                continue  # floating or planar
+            joints.append(TreeJoint(joint_frame.name, parent_link, frame.name, movable=True))
+            self._slots[joint_frame.name] = (joint.idx_q, joint.nq)
+        self.joints: tuple[TreeJoint, ...] = tuple(joints)
+
+    @property
+    def links(self) -> tuple[str, ...]:
+        return tuple(self._link_frame)
+
+    @property
+    def movable_joints(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints if j.movable)
+
+    def fixed_transforms(self) -> list[tuple[TreeJoint, Pose]]:
+        """Every fixed joint with its child's pose in the parent (the same for any joint positions)."""
+        self._update(pin.neutral(self.model))
+        return [(j, self._relative(j)) for j in self.joints if not j.movable]
+
+    def movable_transforms(self, names: Sequence[str], positions: Sequence[float]) -> list[tuple[TreeJoint, Pose]]:
+        """Each movable joint named in ``names`` with its child's pose for its position.
+
+        Joints the state does not name are left out, not guessed at 0: a listener then reports
+        the missing transform instead of showing the arm somewhere it is not.
+        """
+        given = self.positions(names, positions)
+        q = pin.neutral(self.model)
+        for name, value in given.items():
+            first, nq = self._slots[name]
+            if nq == 1:
+                q[first] = value
+            else:
+                q[first], q[first + 1] = math.cos(value), math.sin(value)
+        self._update(q)
+        return [(j, self._relative(j)) for j in self.joints if j.name in given]
+
+    def positions(self, names: Sequence[str], positions: Sequence[float]) -> Mapping[str, float]:
+        """The positions of this tree's movable joints among ``names``; ValueError on a length mismatch."""
+        if len(names) != len(positions):
+            raise ValueError(f"joint state has {len(names)} names but {len(positions)} positions")
+        return {n: float(p) for n, p in zip(names, positions) if n in self._slots}
+
+    def _update(self, q: np.ndarray) -> None:
+        pin.forwardKinematics(self.model, self._data, q)
+        pin.updateFramePlacements(self.model, self._data)
+
+    def _relative(self, joint: TreeJoint) -> Pose:
+        placements = self._data.oMf
+        parent = placements[self._link_frame[joint.parent]]
+        child = placements[self._link_frame[joint.child]]
+        return Pose.from_matrix(np.array(parent.actInv(child).homogeneous))
