@@ -8,7 +8,7 @@ re-run starts from the nominal cell again.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from core_functions.geometry import Pose
@@ -42,6 +42,9 @@ class CellIndex:
         self._joint_poses = {k: dict(v) for k, v in (joint_poses or {}).items()}
         self._joint_pose_groups = dict(joint_pose_groups or {})
         self._measured: dict[str, Pose] = {}
+        #: Told ``(frame, measured world pose)`` after each correction: the group machine passes
+        #: corrections on to the engine, which publishes the cell's frames on tf_static.
+        self.on_correct: Callable[[str, Pose], None] | None = None
 
     # ------------------------------------------------------------------ catalog.CellView
     def has_frame(self, name: str) -> bool:
@@ -101,6 +104,12 @@ class CellIndex:
         """Record where vision found ``name``; later :meth:`pose` calls for it and its children use it."""
         self.frame(name)
         self._measured[name] = measured
+        if self.on_correct is not None:
+            self.on_correct(name, measured)
+
+    def corrections(self) -> dict[str, Pose]:
+        """Every frame located so far, with its measured world pose (children not included)."""
+        return dict(self._measured)
 
     def element(self, name: str) -> dict[str, str]:
         try:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from app_functions.registry import full_catalog
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from execution_engine.engine.group_link import GroupLink
 from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
@@ -68,6 +69,7 @@ class ExecutionEngine:
         self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
         self._status_pub = node.create_publisher(String, ENGINE_STATUS, EVENTS)
         self._cell_pub = node.create_publisher(String, ENGINE_CELL, LATCHED)
+        self._cell_frames = CellFramesBroadcaster(node)  # the cell's frames on tf_static, for RViz
         node.create_subscription(Bool, SAFETY_STOP, self._on_safety, LATCHED)
         for command in ENGINE_SERVICES:
             node.create_service(Trigger, engine_service(command), lambda req, c=command: self._on_service(c, req))
@@ -102,6 +104,7 @@ class ExecutionEngine:
         if app.cell is not None:
             snapshot: CellSnapshot = app.cell.to_snapshot()
             self._cell_pub.publish(String(codec.encode(snapshot)))
+            self._cell_frames.publish_cell(snapshot, app.robot)
         try:
             await self._await_machines()
             await self._await_start()

@@ -21,6 +21,7 @@ from core_functions.functions import SkillContext
 from core_functions.robots import find_robot
 from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.machine.context import MachineConfig, MachineContext, Publishers
+from execution_engine.machine.diagnostics import MachineDiagnostics
 from execution_engine.machine.events import (
     EventQueue,
     FaultEvent,
@@ -29,6 +30,7 @@ from execution_engine.machine.events import (
     RequestEvent,
     SyncEvent,
 )
+from execution_engine.machine.located import LocatedFramesPublisher
 from execution_engine.machine.states import (
     ErrorHandlingState,
     PauseState,
@@ -132,6 +134,8 @@ class GroupMachine:
         self._pause_pending_in: str | None = None  # the working state a pause was accepted in
         self.machine = self._build()
         self.userdata = UserData(primitive=None, resume_command=None, early_done=None, error=None, stop_reason=None)
+        self._diagnostics = MachineDiagnostics(node, self.ctx, lambda: self.userdata.get("error"))  # diagnostics, 1 Hz
+        self._located = LocatedFramesPublisher(node, g)  # vision corrections -> the engine's tf_static
 
     # ----------------------------------------------------------------------------- build
     def _build(self) -> StateMachine:
@@ -175,6 +179,7 @@ class GroupMachine:
         self._pause_pending_in = None
         self.ctx.state_name = state
         self.ctx.pub.state.publish(String(state))
+        self._diagnostics.update()
 
     @property
     def state(self) -> str:
@@ -216,6 +221,7 @@ class GroupMachine:
             self.ctx.status("error", error=f"ignored cell model: {error}")
             return
         self.ctx.set_cell(snapshot.index())
+        self._located.attach(self.ctx.cell)
 
     async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:
         state = self.ctx.state_name
@@ -263,4 +269,5 @@ class GroupMachine:
                 return
 
     def close(self) -> None:
+        self._diagnostics.close()
         self.store.close()

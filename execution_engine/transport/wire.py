@@ -178,6 +178,29 @@ class CellSnapshot:
 
 
 @dataclass(frozen=True)
+class LocatedFrames:
+    """Machine -> engine (latched ``<group>/sm/located``): where vision found frames of the cell.
+
+    Vision corrections happen inside a machine (a skill locates a hole), but the cell's frames are
+    published on ``tf_static`` by the engine alone, so that a late subscriber never receives a
+    nominal pose from one sender after a corrected one from another.  ``frames`` holds every
+    frame this group has located in the cell model ``cell`` since it received that model, as the
+    measured world poses (the engine moves their child frames with them); being cumulative, the
+    one latched message is all a late subscriber needs.  A machine sends an empty one when it
+    receives a cell model: every run starts from the nominal cell.
+    """
+
+    group: str
+    cell: str
+    frames: dict[str, Pose] = field(default_factory=dict)
+    t: float = 0.0
+    v: int = PROTOCOL_VERSION
+
+    def __post_init__(self) -> None:
+        _check_version(self.v)
+
+
+@dataclass(frozen=True)
 class SyncMessage:
     """Machine <-> machine, for FullBodyMotion and MasterSlave: who is at the barrier, and what for."""
 
@@ -195,7 +218,7 @@ class SyncMessage:
 # ``namespace:=cell_a`` and ``namespace:=cell_b`` share one ROS graph without crosstalk.  In the
 # root namespace they are the absolute names of docs/architecture.md (``/left_arm/sm/state``).
 def sm_topic(group: str, leaf: str) -> str:
-    """``<group>/sm/<leaf>`` for request, result, state, status, structure."""
+    """``<group>/sm/<leaf>`` for request, result, state, status, structure, located."""
     return f"{group}/sm/{leaf}"
 
 
