@@ -33,7 +33,7 @@ setup(
     packages=find_packages(
         include=["execution_engine*", "core_functions*", "app_functions*", "robot_bridges*"]
     ),
-    package_data={"robot_bridges.nextage_sim": ["urdf/*.urdf"]},
+    package_data={f"robot_bridges.{sim}": ["urdf/*.urdf"] for sim in ("nextage_sim", "vplus", "kuka_rsi")},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -52,7 +52,7 @@ from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotB
 from robot_bridges.kuka_rsi.config import ConfigError, load_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface, RunnerMode
-from robot_bridges.kuka_rsi.kinematics import KukaArm
+from robot_bridges.kuka_rsi.kinematics import KR6_R900, URDF_PATH, KukaArm
 from robot_bridges.kuka_rsi.otg import CartesianOTG, VectorOTG
 from robot_bridges.kuka_rsi.simulator import Endpoint, Faults, RsiContext, SimulatorThread
 from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError
@@ -666,6 +666,10 @@ class KukaRsiBackend(RobotBackend):
         if self.iface is None:
             return None
         return self._state().tcp()
+
+    def robot_description(self) -> str | None:
+        """The KR 6 R900's URDF; None for an arm given other link lengths (the URDF would lie)."""
+        return URDF_PATH.read_text(encoding="utf-8") if self.arm.g == KR6_R900 else None
 
 
 def _fault_kind(kind: str) -> FaultKind:

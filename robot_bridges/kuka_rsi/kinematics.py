@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +41,8 @@ class ArmGeometry:
 
 
 KR6_R900 = ArmGeometry()
+#: The same arm as a URDF (root ``base``, flange link ``tool0``), for robot_description and tf.
+URDF_PATH = Path(__file__).resolve().parent / "urdf" / "kuka_kr6_r900.urdf"
 _FLANGE_FROM_LINK6 = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # Ry(+90 deg)
 
 

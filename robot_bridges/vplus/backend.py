@@ -83,6 +83,8 @@ from robot_bridges.vplus.client import (
 from robot_bridges.vplus.codec import Ack, Command
 from robot_bridges.vplus.kinematics import (
     IKError,
+    URDF_PATH,
+    VIPER_S850,
     ViperKinematics,
     location_to_matrix,
     location_to_pose,
@@ -192,6 +194,10 @@ class VPlusBackend(RobotBackend):
     def tcp_pose(self, group: str) -> Pose | None:
         self._check_group(group)
         return self._tcp
+
+    def robot_description(self) -> str | None:
+        """The Viper s850's URDF; None for an arm given other link lengths (the URDF would lie)."""
+        return URDF_PATH.read_text(encoding="utf-8") if self.kin.geometry == VIPER_S850 else None
 
     @property
     def speed_percent(self) -> float:

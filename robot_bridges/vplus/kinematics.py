@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -49,6 +50,8 @@ class ViperGeometry:
 
 
 VIPER_S850 = ViperGeometry()
+#: The same arm as a URDF (root ``world``, flange link ``flange``), for robot_description and tf.
+URDF_PATH = Path(__file__).resolve().parent / "urdf" / "adept_viper_s850.urdf"
 
 
 class IKError(ValueError):
