@@ -41,9 +41,10 @@ setup(
         *tree("launch"),
         *tree("config"),
         *tree("apps_xml"),
+        *tree("schema"),
     ],
     install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9"],
-    extras_require={"test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6"]},
+    extras_require={"test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18"]},
     zip_safe=True,
     entry_points={
         "console_scripts": [
