@@ -12,12 +12,15 @@ project calls ``time.sleep``, ``time.monotonic`` or ``asyncio.sleep`` directly: 
   no wall time for waiting.
 
 All three are the same :class:`Clock` class; what differs is the event loop they run on and the
-speed factor.  "Run time" is seconds since the clock was started, so traces of real, scaled and
+speed factor.  A fourth, :class:`FollowingClock`, takes its time from outside the process (a
+simulator's ``/clock`` on a ROS node with ``use_sim_time``).  "Run time" is seconds since the clock was started, so traces of real, scaled and
 simulated runs read the same.
 """
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 import math
 import selectors
 import threading
@@ -29,6 +32,7 @@ T = TypeVar("T")
 
 __all__ = [
     "Clock",
+    "FollowingClock",
     "VirtualTimeLoop",
     "real_clock",
     "run_with_clock",
@@ -137,6 +141,171 @@ class Clock:
     def __repr__(self) -> str:
         kind = "simulated" if self._simulated else f"x{self._speed:g}"
         return f"Clock({kind}, now={self.now():.3f})"
+
+
+class _SourceTimer:
+    """A callback due at a run time of a :class:`FollowingClock`; ``cancel()`` like asyncio's handles."""
+
+    __slots__ = ("due", "order", "callback", "args", "cancelled")
+
+    def __init__(self, due: float, order: int, callback: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        self.due, self.order, self.callback, self.args, self.cancelled = due, order, callback, args, False
+
+    def __lt__(self, other: _SourceTimer) -> bool:
+        return (self.due, self.order) < (other.due, other.order)
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+
+class FollowingClock(Clock):
+    """Run time taken from a time source outside the process: a simulator's ``/clock``.
+
+    A ROS node with ``use_sim_time`` must measure every timeout and sleep in the simulator's
+    time, or a run at ten times real time reports wall seconds and gives the robot a tenth of
+    the time it was promised.  The source calls :meth:`advance_to` with its time (seconds since
+    1970); run time 0 is its first tick, sleeps and timeouts fire when the source passes them.
+
+    Nothing may wait forever on a source that stopped: when no tick came for ``stall_timeout``
+    wall seconds while something waits, ``on_stall`` is told and every pending timer fires, so
+    each wait ends in its own timeout and reports it.
+    """
+
+    def __init__(self, *, stall_timeout: float = 10.0, on_stall: Callable[[str], None] | None = None) -> None:
+        super().__init__(1.0)
+        if not (stall_timeout > 0 and math.isfinite(stall_timeout)):
+            raise ValueError(f"stall_timeout must be a positive number of seconds, got {stall_timeout!r}")
+        self.stall_timeout = stall_timeout
+        self.on_stall = on_stall
+        self._start: float | None = None  # source time at run time 0
+        self._source = 0.0  # latest source time
+        self._timers: list[_SourceTimer] = []
+        self._order = itertools.count()
+        self._last_tick_wall = 0.0
+        self._rate = 1.0  # source seconds per wall second, measured between ticks
+        self._watchdog: asyncio.TimerHandle | None = None
+        self.stalls = 0
+
+    @property
+    def speed(self) -> float:
+        """Source seconds per wall second, as measured between the last ticks."""
+        return self._rate
+
+    @property
+    def epoch(self) -> float:
+        return self._start if self._start is not None else 0.0
+
+    def bind(self, loop: asyncio.AbstractEventLoop | None = None) -> Clock:
+        first = self._loop is None
+        super().bind(loop)
+        if first:
+            self._last_tick_wall = self.loop.time()  # silence before the first tick counts too
+        return self
+
+    @property
+    def ticking(self) -> bool:
+        """True once the source has given a time."""
+        return self._start is not None
+
+    def now(self) -> float:
+        return 0.0 if self._start is None else self._source - self._start
+
+    def epoch_now(self) -> float:
+        return self._source
+
+    def to_wall(self, run_seconds: float) -> float:
+        return max(0.0, run_seconds) / self._rate
+
+    def advance_to(self, source_seconds: float) -> None:
+        """Loop thread: the source's time is now ``source_seconds``; due timers fire.  A time
+        earlier than the last one (a source restarted) is ignored: run time never goes back."""
+        if not math.isfinite(source_seconds):
+            return
+        wall = self.loop.time()
+        if self._start is None:
+            self._start = self._source = source_seconds
+        elif source_seconds > self._source:
+            elapsed = wall - self._last_tick_wall
+            if elapsed > 1e-3:
+                self._rate = max(1e-3, (source_seconds - self._source) / elapsed)
+            self._source = source_seconds
+        self._last_tick_wall = wall
+        self._fire(lambda timer: timer.due <= self.now())
+
+    def call_later(self, delay: float, callback: Callable[..., Any], *args: Any) -> asyncio.TimerHandle:
+        """Run ``callback`` on the loop once the source has advanced ``delay`` run seconds."""
+        timer = _SourceTimer(self.now() + max(0.0, delay), next(self._order), callback, args)
+        if delay <= 0 and self._start is not None:
+            self.loop.call_soon(callback, *args)
+            return timer  # type: ignore[return-value] - same cancel() protocol
+        heapq.heappush(self._timers, timer)
+        self._arm_watchdog()
+        return timer  # type: ignore[return-value]
+
+    async def sleep(self, seconds: float) -> None:
+        if seconds <= 0:
+            await asyncio.sleep(0)
+            return
+        waiter: asyncio.Future[None] = self.loop.create_future()
+        timer = self.call_later(seconds, _resolve, waiter)
+        try:
+            await waiter
+        finally:
+            timer.cancel()
+
+    async def wait_for(self, awaitable: Awaitable[T], timeout: float | None) -> T:
+        if timeout is None:
+            return await awaitable
+        task = asyncio.ensure_future(awaitable)
+        expired = False
+
+        def expire() -> None:
+            nonlocal expired
+            if not task.done():
+                expired = True
+                task.cancel()
+
+        timer = self.call_later(timeout, expire)
+        try:
+            return await task
+        except asyncio.CancelledError:
+            if expired:
+                raise asyncio.TimeoutError() from None
+            raise
+        finally:
+            timer.cancel()
+
+    def _fire(self, due: Callable[[_SourceTimer], bool]) -> None:
+        while self._timers and (self._timers[0].cancelled or due(self._timers[0])):
+            timer = heapq.heappop(self._timers)
+            if not timer.cancelled:
+                self.loop.call_soon(timer.callback, *timer.args)
+
+    def _arm_watchdog(self) -> None:
+        if self._watchdog is None:
+            self._watchdog = self.loop.call_later(self.stall_timeout / 2, self._check_stall)
+
+    def _check_stall(self) -> None:
+        self._watchdog = None
+        self._timers = [t for t in self._timers if not t.cancelled]
+        heapq.heapify(self._timers)
+        if not self._timers:
+            return
+        if self.loop.time() - self._last_tick_wall >= self.stall_timeout:
+            self.stalls += 1
+            if self.on_stall is not None:
+                self.on_stall(f"no time from the clock source for {self.stall_timeout:g} s: pending waits end now")
+            self._fire(lambda timer: True)
+            return
+        self._arm_watchdog()
+
+    def __repr__(self) -> str:
+        return f"FollowingClock(now={self.now():.3f}, x{self._rate:.3g})"
+
+
+def _resolve(waiter: asyncio.Future[None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 def real_clock() -> Clock:

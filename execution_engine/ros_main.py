@@ -26,7 +26,7 @@ from enum import IntEnum
 from typing import TYPE_CHECKING, Any
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport.port import Node, TransportError
+from execution_engine.transport.port import Node, RosArgumentsError, TransportError
 
 if TYPE_CHECKING:  # imported only when a node really runs: it needs rclpy
     from execution_engine.transport.ros import RosTransport
@@ -79,7 +79,9 @@ def startup_errors() -> Iterator[None]:
     """Turn configuration errors raised while building a node's objects into a USAGE exit."""
     try:
         yield
-    except (TransportError, ValueError, LookupError) as error:
+    except TransportError as error:  # names the node and the parameter already
+        raise StartupError(str(error)) from None
+    except (ValueError, LookupError) as error:
         raise StartupError(f"{type(error).__name__}: {error}") from None
 
 
@@ -112,8 +114,8 @@ def run_node(
 
     ``default_name`` is the node's name unless the command line renames it (``-r __node:=...``).
     """
-    if not logging.getLogger().handlers:
-        logging.basicConfig(level=logging.INFO, format="[%(levelname)s] [%(name)s]: %(message)s")
+    # No Python log handler here: on ROS every record goes to the node's rclpy logger, which
+    # prints it, publishes it on /rosout and honours --log-level (transport/ros_logging.py).
     args = list(sys.argv if argv is None else argv)
     factory = transport_factory or _ros_transport
 
@@ -132,44 +134,55 @@ def _ros_transport(clock: Clock, argv: Sequence[str]) -> RosTransport:
 async def serve_node(
     clock: Clock, default_name: str, body: NodeBody, argv: Sequence[str], transport_factory: TransportFactory
 ) -> ExitCode:
-    """The process's life on its loop: transport up, node up, body until stopped, all down."""
-    try:
-        transport = transport_factory(clock, argv)
-    except TransportError as error:
-        print(f"{default_name}: {error}", file=sys.stderr)
-        return ExitCode.INTERNAL
-    try:
-        extra = transport.user_args(argv)
-        if extra:
-            print(
-                f"{default_name}: unexpected argument(s) {' '.join(extra)}; "
-                "give parameters as: --ros-args -p name:=value",
-                file=sys.stderr,
-            )
-            return ExitCode.USAGE
-        try:
-            node = transport.create_node(default_name)
-        except TransportError as error:
-            print(f"{default_name}: {error}", file=sys.stderr)
-            return ExitCode.USAGE
-        return await _run_body(node, body, transport)
-    finally:
-        await transport.shutdown()
+    """The process's life on its loop: transport up, node up, body until stopped, all down.
 
-
-async def _run_body(node: Node, body: NodeBody, transport: RosTransport) -> ExitCode:
+    SIGINT/SIGTERM are handled from the first moment to the last: installed before rclpy starts
+    and removed only once it is down, so a signal during start-up or shutdown is an orderly stop,
+    never a KeyboardInterrupt through rclpy's teardown.
+    """
     loop = asyncio.get_running_loop()
-    outcome = Outcome()
     stop = asyncio.Event()
     installed = _install_signal_handlers(loop, stop.set)
+    try:
+        try:
+            transport = transport_factory(clock, argv)
+        except RosArgumentsError as error:
+            print(f"{default_name}: bad ROS arguments: {error}", file=sys.stderr)
+            return ExitCode.USAGE
+        except TransportError as error:
+            print(f"{default_name}: {error}", file=sys.stderr)
+            return ExitCode.INTERNAL
+        try:
+            extra = transport.user_args(argv)
+            if extra:
+                print(
+                    f"{default_name}: unexpected argument(s) {' '.join(extra)}; "
+                    "give parameters as: --ros-args -p name:=value",
+                    file=sys.stderr,
+                )
+                return ExitCode.USAGE
+            try:
+                node = transport.create_node(default_name)
+            except TransportError as error:
+                print(f"{default_name}: {error}", file=sys.stderr)
+                return ExitCode.USAGE
+            return await _run_body(node, body, transport, stop)
+        finally:
+            await transport.shutdown()
+    finally:
+        for sig in installed:
+            loop.remove_signal_handler(sig)
+
+
+async def _run_body(node: Node, body: NodeBody, transport: RosTransport, stop: asyncio.Event) -> ExitCode:
+    loop = asyncio.get_running_loop()
+    outcome = Outcome()
     work = loop.create_task(body(node, outcome), name=f"{node.fully_qualified_name} body")
     stopped = loop.create_task(stop.wait(), name="signal")
     closed = loop.create_task(transport.wait_closed(), name="rclpy closed")
     try:
         done, _ = await asyncio.wait({work, stopped, closed}, return_when=asyncio.FIRST_COMPLETED)
     finally:
-        for sig in installed:
-            loop.remove_signal_handler(sig)
         for task in (stopped, closed):
             task.cancel()
     if work not in done:
@@ -184,7 +197,9 @@ async def _run_body(node: Node, body: NodeBody, transport: RosTransport) -> Exit
     try:
         work.result()
     except StartupError as error:
-        print(f"{node.fully_qualified_name}: {error}", file=sys.stderr)
+        text = str(error)
+        prefix = f"{node.fully_qualified_name}: "
+        print(text if text.startswith(prefix) else prefix + text, file=sys.stderr)
         return error.code
     except Exception:  # noqa: BLE001 - a defect: say so with the traceback, exit non-zero
         node.logger.exception("%s: stopped by an unexpected error", node.fully_qualified_name)

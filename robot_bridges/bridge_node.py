@@ -4,7 +4,10 @@ Subscribes ``/<group>/bridge/command`` for each group of the back end, answers o
 ``/<group>/bridge/feedback`` (accepted, then done or error; paused / resumed / stopped for the
 control commands), and publishes ``/joint_states`` and ``/<group>/tcp_pose`` periodically.
 One primitive runs per group at a time; a second one is refused as BUSY rather than queued,
-because a machine that sends two primitives at once has lost track of its robot.
+because a machine that sends two primitives at once has lost track of its robot.  A command id
+is carried out once: a machine re-sends a command it got no answer for (it may have been lost
+before DDS discovery matched the topics), so a repeated id is not run again -- its latest
+feedback is repeated instead, or nothing while it is still being taken up.
 
 Every failure becomes an ``error`` feedback naming the command: garbage on the command topic is
 reported (it has no id to answer), a back-end exception is reported even when it is a bug.
@@ -13,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections import OrderedDict
 
 from core_functions.primitives import PrimitiveResult, describe
 from execution_engine.transport import codec
@@ -32,6 +36,7 @@ from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 from robot_bridges.robot_state import RobotStatePublisher
 
 log = logging.getLogger(__name__)
+_REMEMBERED_IDS = 256  # command ids a re-sent command is recognised by (a machine keeps far fewer waiting)
 
 
 class BridgeNode:
@@ -46,6 +51,7 @@ class BridgeNode:
         if self.state_period <= 0:
             raise ValueError(f"{node.fully_qualified_name}: state_period must be > 0, got {self.state_period}")
         self._feedback: dict[str, Publisher[String]] = {}
+        self._answered: OrderedDict[str, String | None] = OrderedDict()  # command id -> latest feedback
         self._running: dict[str, asyncio.Task[None]] = {}
         self._tasks: set[asyncio.Task[None]] = set()
         self._joint_pub = node.create_publisher(JointState, JOINT_STATES, SENSOR)
@@ -95,6 +101,14 @@ class BridgeNode:
         if command.group != group:
             self._send(group, command.id, "error", error=f"command for group {command.group!r} arrived on {source}")
             return
+        if command.id in self._answered:  # re-sent: carried out once, answered again
+            latest = self._answered[command.id]
+            if latest is not None:
+                self._feedback[group].publish(latest)
+            return
+        self._answered[command.id] = None
+        if len(self._answered) > _REMEMBERED_IDS:
+            self._answered.popitem(last=False)
         if command.op == "execute":
             self._start_execute(command)
         else:
@@ -161,7 +175,10 @@ class BridgeNode:
     # ----------------------------------------------------------------------------- outbound
     def _send(self, group: str, command_id: str, status: str, *, error: str | None = None, result: PrimitiveResult | None = None) -> None:
         feedback = BridgeFeedback(id=command_id, group=group, status=status, error=error, result=result, t=self.clock.now())  # type: ignore[arg-type]
-        self._feedback[group].publish(String(codec.encode(feedback)))
+        message = String(codec.encode(feedback))
+        if command_id in self._answered:
+            self._answered[command_id] = message
+        self._feedback[group].publish(message)
 
     def _report(self, text: str) -> None:
         self.errors.append(text)

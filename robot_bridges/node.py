@@ -13,12 +13,13 @@ process start-up, signals and exit codes are :mod:`execution_engine.ros_main`'s.
 """
 from __future__ import annotations
 
+import asyncio
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
-from execution_engine.clock import Clock, scaled_clock
+from execution_engine.clock import Clock, FollowingClock, scaled_clock
 from execution_engine.ros_main import (
     ExitCode,
     Outcome,
@@ -29,10 +30,16 @@ from execution_engine.ros_main import (
     startup_errors,
     warn_undeclared,
 )
+from execution_engine.transport.msgs import ClockMessage, Time
 from execution_engine.transport.port import Node
+from execution_engine.transport.qos import CLOCK
+from execution_engine.transport.wire import CLOCK_TOPIC
 from robot_bridges.backend import BackendOptions, BridgeError
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.registry import create_backend
+
+
+CLOCK_PERIOD = 0.01  # wall seconds between /clock messages of a simulator faster than real time
 
 
 @dataclass(frozen=True)
@@ -56,10 +63,22 @@ def csv_list(text: str) -> tuple[str, ...]:
 
 
 def backend_clock(node: Node, speed: float) -> Clock:
-    """The node's clock, or a clock ``speed`` times faster on the same loop for a simulator."""
-    if speed == 1.0:
+    """The node's clock, or a clock ``speed`` times faster on the same loop for a simulator.
+
+    A robot never runs on a clock taken from ``/clock`` (``use_sim_time``): it is the source of
+    time, or a real controller in wall time; then it gets its own clock on the node's loop."""
+    if speed == 1.0 and not isinstance(node.clock, FollowingClock):
         return node.clock
     return scaled_clock(speed).bind(node.clock.loop)
+
+
+async def publish_clock(node: Node, clock: Clock, period: float) -> None:
+    """``/clock`` from a simulator that runs faster than real time, every ``period`` of its time,
+    so nodes with ``use_sim_time`` measure their waits in the robot's time."""
+    publisher = node.create_publisher(ClockMessage, CLOCK_TOPIC, CLOCK)
+    while True:
+        publisher.publish(ClockMessage(Time.from_seconds(clock.epoch_now())))
+        await clock.sleep(period)
 
 
 async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: Outcome) -> None:
@@ -75,14 +94,20 @@ async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: 
         await robot_backend.close()
         raise
     warn_undeclared(node)
+    ticking: asyncio.Task[None] | None = None
     try:
         try:
             await bridge.start()
         except BridgeError as error:
             raise StartupError(f"{backend}: {error}", ExitCode.FAILED) from None
+        if setup.speed != 1.0:
+            ticking = asyncio.get_running_loop().create_task(publish_clock(node, clock, CLOCK_PERIOD * setup.speed), name="/clock")
         node.logger.info("%s: serving %s for %s", node.fully_qualified_name, robot_backend.name, ", ".join(robot_backend.groups))
         await serve_forever()
     finally:
+        if ticking is not None:
+            ticking.cancel()
+            await asyncio.gather(ticking, return_exceptions=True)
         await bridge.close()
 
 

@@ -23,8 +23,11 @@ _DEFAULTS: dict[str, Callable[[], Any]] = {
     "uint8": int,
     "sequence<double>": lambda: array.array("d"),
     "sequence<string>": list,
+    "int64": int,
+    "sequence<boolean>": list,
+    "sequence<int64>": lambda: array.array("q"),
 }
-_INT_RANGES = {"int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint8": (0, 255)}
+_INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint8": (0, 255)}
 
 
 class FakeMessage:
@@ -89,6 +92,12 @@ def _check(kind: str, nested: type | None, name: str, value: Any) -> Any:
     elif kind == "sequence<string>":
         assert all(isinstance(v, str) for v in value), f"The '{name}' field must be a sequence of 'str'"
         return list(value)
+    elif kind == "sequence<boolean>":
+        assert all(isinstance(v, bool) for v in value), f"The '{name}' field must be a sequence of 'bool'"
+        return list(value)
+    elif kind == "sequence<int64>":
+        assert all(isinstance(v, int) and not isinstance(v, bool) for v in value), f"The '{name}' field must be a sequence of 'int'"
+        return array.array("q", value)
     else:
         raise AssertionError(f"unknown field kind {kind}")
     return value
@@ -157,7 +166,15 @@ class Trigger:
     Response = message_class("Trigger_Response", {"success": "boolean", "message": "string"})
 
 
-ParameterDescriptor = message_class("ParameterDescriptor", {"name": "string", "description": "string", "read_only": "boolean", "dynamic_typing": "boolean"})
+ParameterDescriptor = message_class(
+    "ParameterDescriptor", {"name": "string", "type": "uint8", "description": "string", "read_only": "boolean", "dynamic_typing": "boolean"}
+)
+ParameterValue = message_class(
+    "ParameterValue",
+    {"type": "uint8", "bool_value": "boolean", "integer_value": "int64", "double_value": "double", "string_value": "string",
+     "bool_array_value": "sequence<boolean>", "integer_array_value": "sequence<int64>", "double_array_value": "sequence<double>",
+     "string_array_value": "sequence<string>"},
+)
 SetParametersResult = message_class("SetParametersResult", {"successful": "boolean", "reason": "string"})
 
 INTERFACE_MODULES: dict[str, dict[str, Any]] = {
@@ -172,7 +189,7 @@ INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "tf2_msgs.msg": {"TFMessage": TFMessage},
     "diagnostic_msgs.msg": {"KeyValue": KeyValue, "DiagnosticStatus": DiagnosticStatus, "DiagnosticArray": DiagnosticArray},
     "std_srvs.srv": {"Trigger": Trigger},
-    "rcl_interfaces.msg": {"ParameterDescriptor": ParameterDescriptor, "SetParametersResult": SetParametersResult},
+    "rcl_interfaces.msg": {"ParameterDescriptor": ParameterDescriptor, "ParameterValue": ParameterValue, "SetParametersResult": SetParametersResult},
 }
 
 

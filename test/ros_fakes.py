@@ -1,43 +1,58 @@
-"""A small stand-in for rclpy and the interface packages, for testing the ros transport without ROS 2.
+"""A stand-in for rclpy (7.1, ROS 2 Jazzy), for testing the ros transport without ROS 2.
 
-It models the documented behaviour the adapter relies on, not rclpy's internals:
+It models what rclpy and the middleware really do where the adapter depends on it -- including
+the parts that bit us on a real Jazzy -- not rclpy's internals:
 
-* message classes shaped like rosidl's: ``__slots__``, keyword constructors that refuse unknown
-  fields, setters that refuse a wrong Python type (an ``int`` for a ``float64``), numeric
-  sequences stored as ``array.array``, ``get_fields_and_field_types()``; services expose
-  ``Request`` / ``Response`` on the service class only;
-* ``rclpy.init(*, args, signal_handler_options)``, ``ok``, ``shutdown`` (which raises when not
-  initialised), ``utilities.remove_ros_args``; ``-p name:=value`` and ``-r __node:=name`` in the
-  init args become parameter overrides and a node rename;
-* ``Node`` with parameter overrides (and automatic declaration), ``declare_parameter`` (raising
-  when declared twice), on-set callbacks, publishers, subscriptions, services, clients;
-* executors whose ``spin`` runs callbacks on threads; a MultiThreadedExecutor honours
-  mutually-exclusive and reentrant callback groups; an exception out of a callback ends ``spin``
-  (as in rclpy); ``shutdown(timeout_sec)`` waits for callbacks in flight;
-* a process-wide graph that delivers a *copy* of each message (as DDS would), replays
-  TRANSIENT_LOCAL history to late subscribers, and routes service requests and responses;
-  ``call_async`` returns a future whose done-callbacks run on an executor thread.
+* ``rclpy.init`` parses ``--ros-args`` as rcl does and refuses what rcl refuses, with rcl's
+  exception types (``test/ros_fake_args.py``): parameter values typed by rcl's YAML rules
+  (``off`` is a bool, ``0x10`` an int), ``--params-file`` sections matched to node names,
+  ``--log-level``, ``-r __node:=``/``__ns:=`` renames;
+* DDS discovery takes time: every publisher/subscription and client/service pair matches only
+  ``GRAPH.match_delay`` wall seconds after both exist, and only when their QoS are compatible;
+  nothing is delivered before the match (a volatile message published earlier is lost; a
+  TRANSIENT_LOCAL history reaches the reader at the match); ``get_subscription_count`` /
+  ``get_publisher_count`` / ``service_is_ready`` count matches only;
+* ``Node`` with parameter overrides (and automatic declaration with a bare descriptor, the
+  override's own type), ``declare_parameter``, ``set_descriptor`` (type checks, alternative
+  value), ``describe_parameter``, on-set callbacks; ``use_sim_time`` makes ``get_clock()``
+  follow ``/clock``; ``get_logger()`` writes to a ``/rosout`` record filtered by ``--log-level``;
+  guard conditions; ``destroy_service`` after which a response still to be sent raises
+  ``InvalidHandle`` (as rclpy's ``send_response`` does);
+* executors whose ``spin`` runs callbacks on threads, honouring mutually exclusive groups over
+  take + callback + response; an exception out of a callback ends ``spin``; and, like rclpy
+  up to 7.1.11, ``shutdown(timeout_sec)`` returns at once without waiting for callbacks;
+* messages are delivered as copies (as DDS would); ``call_async`` futures' done-callbacks run
+  on an executor thread.
 
 ``install(monkeypatch)`` puts the fake modules in ``sys.modules`` and returns the fake ``rclpy``.
 """
 from __future__ import annotations
 
-import array
 import copy
 import enum
 import sys
 import threading
+import time
 import types
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import pytest
 
+from ros_fake_args import InvalidHandle, RCLError, RosArguments, UnknownROSArgsError
 from ros_fake_msgs import *  # noqa: F403 - the fake interface packages, re-exported for the tests
-from ros_fake_msgs import INTERFACE_MODULES, SetParametersResult, message_class, resolve  # noqa: F401
-
+from ros_fake_msgs import (  # noqa: F401
+    INTERFACE_MODULES,
+    ClockMessage,
+    ParameterDescriptor,
+    ParameterValue,
+    SetParametersResult,
+    Time,
+    message_class,
+    resolve,
+)
 
 # ====================================================================================== QoS
 class ReliabilityPolicy(enum.Enum):
@@ -94,15 +109,6 @@ class SignalHandlerOptions(enum.Enum):
     ALL = 3
 
 
-def _parse_value(text: str) -> Any:
-    if text in ("true", "false"):
-        return text == "true"
-    for convert in (int, float):
-        try:
-            return convert(text)
-        except ValueError:
-            pass
-    return text
 
 
 # ================================================================================== futures
@@ -158,15 +164,58 @@ class Future:
 
 
 # ============================================================================ the ROS graph
-class Graph:
-    """Everything the middleware would do between nodes of all fake processes."""
+def compatible(offered: QoSProfile, requested: QoSProfile) -> bool:
+    """DDS request/offer: a reader may not ask more reliability or durability than the writer gives."""
+    if requested.reliability is ReliabilityPolicy.RELIABLE and offered.reliability is ReliabilityPolicy.BEST_EFFORT:
+        return False
+    if requested.durability is DurabilityPolicy.TRANSIENT_LOCAL and offered.durability is DurabilityPolicy.VOLATILE:
+        return False
+    return True
 
-    def __init__(self) -> None:
+
+class Graph:
+    """Everything the middleware would do between nodes of all fake processes, discovery included."""
+
+    def __init__(self, match_delay: float = 0.02) -> None:
         self.lock = threading.RLock()
+        self.match_delay = match_delay  # wall seconds from both endpoints existing to their match
         self.subscriptions: dict[str, list[FakeSubscription]] = {}
         self.publishers: dict[str, list[FakePublisher]] = {}
-        self.services: dict[str, FakeService] = {}
+        self.services: dict[str, list[FakeService]] = {}
         self.clients: list[FakeClient] = []
+        self.matched: set[tuple[int, int]] = set()
+        self.timers: list[threading.Timer] = []
+        self.lost: list[tuple[str, Any]] = []  # (topic, message) published to a reader not matched yet
+
+    def discover(self, writer: Any, reader: Any, on_match: Callable[[], None] | None = None) -> None:
+        """Match ``writer`` and ``reader`` after the discovery delay (at once with a delay of 0)."""
+
+        def match() -> None:
+            with self.lock:
+                if writer.destroyed or reader.destroyed:
+                    return
+                self.matched.add((id(writer), id(reader)))
+            if on_match is not None:
+                on_match()
+
+        if self.match_delay <= 0:
+            match()
+            return
+        timer = threading.Timer(self.match_delay, match)
+        timer.daemon = True
+        with self.lock:
+            self.timers.append(timer)
+        timer.start()
+
+    def is_matched(self, writer: Any, reader: Any) -> bool:
+        with self.lock:
+            return (id(writer), id(reader)) in self.matched
+
+    def close(self) -> None:
+        with self.lock:
+            for timer in self.timers:
+                timer.cancel()
+            self.timers.clear()
 
 
 GRAPH = Graph()
@@ -176,6 +225,7 @@ class _Context:
     def __init__(self) -> None:
         self.initialised = False
         self.args: list[str] = []
+        self.ros_args = RosArguments([])
         self.init_kwargs: dict[str, Any] = {}
         self.on_shutdown_callbacks: list[Callable[[], None]] = []
         self.init_count = 0
@@ -189,13 +239,17 @@ class _Context:
 
 
 CONTEXT = _Context()
+ROSOUT: list[tuple[str, int, str]] = []  # (logger name, severity, message) of every log that passed its level
 
 
 def init(*, args: list[str] | None = None, context: Any = None, domain_id: int | None = None, signal_handler_options: Any = None) -> None:
     if CONTEXT.initialised:
         raise RuntimeError("rcl_init called while already initialized")
+    argv = list(args if args is not None else sys.argv)
+    ros_args = RosArguments(argv)  # raises RCLError / UnknownROSArgsError as rcl_init does
     CONTEXT.initialised = True
-    CONTEXT.args = list(args if args is not None else sys.argv)
+    CONTEXT.args = argv
+    CONTEXT.ros_args = ros_args
     CONTEXT.init_kwargs = {"args": args, "signal_handler_options": signal_handler_options}
     CONTEXT.init_count += 1
 
@@ -224,26 +278,6 @@ def remove_ros_args(args: list[str] | None = None) -> list[str]:
         elif not in_ros:
             out.append(arg)
     return out
-
-
-def _ros_args(args: list[str]) -> tuple[dict[str, Any], dict[str, str]]:
-    """``-p name:=value`` parameters and ``-r from:=to`` remaps of the ROS part of ``args``."""
-    params: dict[str, Any] = {}
-    remaps: dict[str, str] = {}
-    in_ros = False
-    it = iter(args)
-    for arg in it:
-        if arg == "--ros-args":
-            in_ros = True
-        elif arg == "--":
-            in_ros = False
-        elif in_ros and arg in ("-p", "-r"):
-            key, _, value = next(it).partition(":=")
-            if arg == "-p":
-                params[key] = _parse_value(value)
-            else:
-                remaps[key] = value
-    return params, remaps
 
 
 # ================================================================================ callbacks
@@ -283,19 +317,27 @@ class FakePublisher:
         self.node, self.msg_type, self.topic, self.qos = node, msg_type, topic, qos
         self.history: deque[Any] = deque(maxlen=qos.depth if qos.durability is DurabilityPolicy.TRANSIENT_LOCAL else 0)
         self.published: list[Any] = []
+        self.destroyed = False
+
+    def _readers(self) -> list[FakeSubscription]:
+        with GRAPH.lock:
+            return [s for s in GRAPH.subscriptions.get(self.topic, []) if GRAPH.is_matched(self, s) and compatible(self.qos, s.qos)]
 
     def get_subscription_count(self) -> int:
-        with GRAPH.lock:
-            return len(GRAPH.subscriptions.get(self.topic, []))
+        return len(self._readers())
 
     def publish(self, msg: Any) -> None:
         if not isinstance(msg, self.msg_type):
             raise TypeError(f"publisher on {self.topic} expects {self.msg_type.__name__}")
+        if self.destroyed:
+            raise InvalidHandle("cannot use Destroyable because destruction was requested")
         self.published.append(msg)
         with GRAPH.lock:
             self.history.append(msg)
-            subscriptions = list(GRAPH.subscriptions.get(self.topic, []))
-        for sub in subscriptions:
+            readers = self._readers()
+            if len(readers) < len(GRAPH.subscriptions.get(self.topic, [])):
+                GRAPH.lost.append((self.topic, msg))
+        for sub in readers:
             sub.receive(copy.deepcopy(msg))
 
 
@@ -303,6 +345,10 @@ class FakeSubscription(_Entity):
     def __init__(self, node: FakeNode, msg_type: type, topic: str, callback: Callable[[Any], None], qos: QoSProfile, callback_group: Any) -> None:
         super().__init__(node, callback_group)
         self.msg_type, self.topic, self.callback, self.qos = msg_type, topic, callback, qos
+
+    def get_publisher_count(self) -> int:
+        with GRAPH.lock:
+            return sum(1 for p in GRAPH.publishers.get(self.topic, []) if GRAPH.is_matched(p, self) and compatible(p.qos, self.qos))
 
     def receive(self, msg: Any) -> None:
         if self.destroyed:
@@ -326,7 +372,24 @@ class FakeService(_Entity):
         response = self.callback(request, self.srv_type.Response())
         if not isinstance(response, self.srv_type.Response):  # rclpy's send_response does the same
             raise TypeError(f"service {self.name} callback returned {type(response).__name__}")
-        client.push((sequence, copy.deepcopy(response)))
+        if self.destroyed:  # rclpy: `with self.handle:` in send_response on a destroyed service
+            raise InvalidHandle(f"cannot use Destroyable because destruction was requested (service {self.name})")
+        if not client.destroyed:
+            client.push((sequence, copy.deepcopy(response)))
+
+
+class FakeGuardCondition(_Entity):
+    def __init__(self, node: FakeNode, callback: Callable[[], Any], callback_group: Any) -> None:
+        super().__init__(node, callback_group)
+        self.callback = callback
+
+    def trigger(self) -> None:
+        if self.destroyed:
+            raise InvalidHandle("cannot use Destroyable because destruction was requested (guard condition)")
+        self.push(None)
+
+    def run(self, item: Any) -> None:
+        self.callback()
 
 
 class FakeClient(_Entity):
@@ -337,9 +400,12 @@ class FakeClient(_Entity):
         self.removed: list[Future] = []
         self._sequence = 0
 
-    def service_is_ready(self) -> bool:
+    def _servers(self) -> list[FakeService]:
         with GRAPH.lock:
-            return self.name in GRAPH.services
+            return [s for s in GRAPH.services.get(self.name, []) if not s.destroyed and GRAPH.is_matched(self, s)]
+
+    def service_is_ready(self) -> bool:
+        return bool(self._servers())
 
     def call_async(self, request: Any) -> Future:
         if not isinstance(request, self.srv_type.Request):
@@ -348,8 +414,8 @@ class FakeClient(_Entity):
         with GRAPH.lock:
             self._sequence += 1
             self.pending[self._sequence] = future
-            server = GRAPH.services.get(self.name)
-        if server is not None:
+            servers = self._servers()
+        for server in servers[:1]:  # a request written before the match is lost, as over DDS
             server.push((copy.deepcopy(request), self, self._sequence))
         return future
 
@@ -368,7 +434,87 @@ class FakeClient(_Entity):
             future.set_result(response)
 
 
+# ============================================================================= time, logging
+class FakeTime:
+    """rclpy.time.Time, as far as the adapter reads it."""
+
+    def __init__(self, nanoseconds: int) -> None:
+        self.nanoseconds = nanoseconds
+
+    def seconds_nanoseconds(self) -> tuple[int, int]:
+        return divmod(self.nanoseconds, 1_000_000_000)
+
+
+class FakeClock:
+    """A node's ROS clock: system time, or the last ``/clock`` (0 before one) with use_sim_time."""
+
+    def __init__(self) -> None:
+        self.ros_time_is_active = False
+        self.sim_nanoseconds = 0
+
+    def now(self) -> FakeTime:
+        return FakeTime(self.sim_nanoseconds if self.ros_time_is_active else time.time_ns())
+
+
+class FakeLogger:
+    """rclpy's RcutilsLogger: severities as ints, a level from ``--log-level``, records on /rosout."""
+
+    def __init__(self, name: str, level: int) -> None:
+        self.name = name
+        self.level = level
+
+    def get_effective_level(self) -> int:
+        return self.level
+
+    def is_enabled_for(self, severity: int) -> bool:
+        return severity >= self.level
+
+    def log(self, message: str, severity: int, **kwargs: Any) -> bool:
+        if severity not in (10, 20, 30, 40, 50):
+            raise ValueError(f"{severity} is not a valid LoggingSeverity")
+        if not isinstance(message, str):
+            raise TypeError("message must be a string")
+        if not self.is_enabled_for(severity):
+            return False
+        ROSOUT.append((self.name, severity, message))
+        return True
+
+    def debug(self, message: str, **kwargs: Any) -> bool:
+        return self.log(message, 10, **kwargs)
+
+    def info(self, message: str, **kwargs: Any) -> bool:
+        return self.log(message, 20, **kwargs)
+
+    def warning(self, message: str, **kwargs: Any) -> bool:
+        return self.log(message, 30, **kwargs)
+
+    def error(self, message: str, **kwargs: Any) -> bool:
+        return self.log(message, 40, **kwargs)
+
+    def fatal(self, message: str, **kwargs: Any) -> bool:
+        return self.log(message, 50, **kwargs)
+
+
 # ===================================================================================== nodes
+_TYPE_CODES = {bool: 1, int: 2, float: 3, str: 4}
+_VALUE_FIELDS = {1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value",
+                 6: "bool_array_value", 7: "integer_array_value", 8: "double_array_value", 9: "string_array_value"}
+
+
+def type_code(value: Any) -> int:
+    """rcl_interfaces/ParameterType of a Python value, as rclpy's Parameter.Type.from_parameter_value."""
+    if value is None:
+        return 0
+    if isinstance(value, list):
+        kinds = {type(v) for v in value}
+        return {bool: 6, int: 7, float: 8, str: 9}.get(next(iter(kinds)), 9) if len(kinds) == 1 else 9
+    return _TYPE_CODES[type(value)]
+
+
+class ParameterNotDeclaredException(Exception):
+    pass
+
+
 class FakeNode:
     def __init__(
         self,
@@ -387,31 +533,47 @@ class FakeNode:
     ) -> None:
         if not CONTEXT.ok():
             raise RuntimeError("NotInitializedException: cannot create node")
-        params, remaps = _ros_args(CONTEXT.args)
-        self._name = remaps.get("__node", node_name)
-        self._namespace = remaps.get("__ns", namespace or "/")
+        ros_args = CONTEXT.ros_args
+        self._name = ros_args.remaps.get("__node", node_name)
+        self._namespace = ros_args.remaps.get("__ns", namespace or "/")
+        fqn = f"{self._namespace.rstrip('/')}/{self._name}"
         self.default_callback_group = MutuallyExclusiveCallbackGroup()
         self.executor: FakeExecutor | None = None
         self._parameters: dict[str, Parameter] = {}
+        self._descriptors: dict[str, Any] = {}
         self._callbacks: list[Callable[[list[Parameter]], Any]] = []
         self.publishers: list[FakePublisher] = []
         self.entities: list[_Entity] = []
         self.destroyed = False
-        self.descriptions: dict[str, str] = {}
-        self._overrides = {k: Parameter(k, value=v) for k, v in params.items()}
+        self._overrides = {k: Parameter(k, value=v) for k, v in ros_args.parameters_for(fqn).items()}
         self._overrides.update({p.name: p for p in parameter_overrides or []})
         if automatically_declare_parameters_from_overrides:
             for name, param in self._overrides.items():
-                self._set(name, param.value)
+                self.declare_parameter(name, param.value, ParameterDescriptor())
         for name, default in (("use_sim_time", False), ("start_type_description_service", True)):
             if name not in self._parameters:
                 self.declare_parameter(name, default)
+        self._clock = FakeClock()
+        if self._parameters["use_sim_time"].value is True:  # rclpy's TimeSource
+            self._clock.ros_time_is_active = True
+            self.create_subscription(ClockMessage, "/clock", self._on_clock, QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+        logger_name = fqn.strip("/").replace("/", ".")
+        self._logger = FakeLogger(logger_name, CONTEXT.ros_args.log_level or 20)
+
+    def _on_clock(self, msg: Any) -> None:
+        self._clock.sim_nanoseconds = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
 
     def get_name(self) -> str:
         return self._name
 
     def get_namespace(self) -> str:
         return self._namespace
+
+    def get_clock(self) -> FakeClock:
+        return self._clock
+
+    def get_logger(self) -> FakeLogger:
+        return self._logger
 
     # parameters
     def _set(self, name: str, value: Any) -> None:
@@ -426,10 +588,35 @@ class FakeNode:
             raise ParameterAlreadyDeclaredException(name)
         if not ignore_override and name in self._overrides:
             value = self._overrides[name].value
+        descriptor = descriptor if descriptor is not None else ParameterDescriptor()
+        if descriptor.type not in (0, type_code(value)) and not descriptor.dynamic_typing:
+            raise InvalidParameterValueException(f"{name}: Wrong parameter type, expected '{descriptor.type}' got '{type_code(value)}'")
+        descriptor.type = type_code(value)
+        descriptor.name = name
         self._set(name, value)
-        if descriptor is not None:
-            self.descriptions[name] = descriptor.description
+        self._descriptors[name] = descriptor
         return self._parameters[name]
+
+    def set_descriptor(self, name: str, descriptor: Any, alternative_value: Any = None) -> Any:
+        """rclpy: keep the value if it has the descriptor's type, else take the alternative; no callbacks."""
+        if name not in self._parameters:
+            raise ParameterNotDeclaredException(name)
+        descriptor.name = name
+        candidates = [self._parameters[name].value]
+        if alternative_value is not None:
+            field = _VALUE_FIELDS.get(alternative_value.type)
+            candidates.append(None if field is None else getattr(alternative_value, field))
+        for value in candidates:
+            if descriptor.dynamic_typing or type_code(value) == descriptor.type:
+                self._parameters[name] = Parameter(name, value=list(value) if isinstance(value, (list, tuple)) or hasattr(value, "typecode") else value)
+                self._descriptors[name] = descriptor
+                return alternative_value
+        raise InvalidParameterValueException(f"{name}: Wrong parameter type, expected '{descriptor.type}'")
+
+    def describe_parameter(self, name: str) -> Any:
+        if name not in self._descriptors:
+            raise ParameterNotDeclaredException(name)
+        return self._descriptors[name]
 
     def has_parameter(self, name: str) -> bool:
         return name in self._parameters
@@ -461,35 +648,50 @@ class FakeNode:
         pub = FakePublisher(self, msg_type, topic, qos_profile)
         with GRAPH.lock:
             GRAPH.publishers.setdefault(topic, []).append(pub)
+            readers = list(GRAPH.subscriptions.get(topic, []))
         self.publishers.append(pub)
+        for sub in readers:
+            GRAPH.discover(pub, sub, lambda s=sub: _replay(pub, s))
         return pub
 
     def create_subscription(self, msg_type: type, topic: str, callback: Callable[[Any], None], qos_profile: QoSProfile, *, callback_group: Any = None) -> FakeSubscription:
         sub = FakeSubscription(self, msg_type, topic, callback, qos_profile, callback_group)
         with GRAPH.lock:
             GRAPH.subscriptions.setdefault(topic, []).append(sub)
-            latched = [
-                m for pub in GRAPH.publishers.get(topic, [])
-                if qos_profile.durability is DurabilityPolicy.TRANSIENT_LOCAL for m in pub.history
-            ]
-        for msg in latched:
-            sub.receive(copy.deepcopy(msg))
+            writers = list(GRAPH.publishers.get(topic, []))
         self.entities.append(sub)
+        for pub in writers:
+            GRAPH.discover(pub, sub, lambda p=pub: _replay(p, sub))
         return sub
 
     def create_service(self, srv_type: Any, srv_name: str, callback: Callable[[Any, Any], Any], *, qos_profile: Any = None, callback_group: Any = None) -> FakeService:
         srv = FakeService(self, srv_type, srv_name, callback, callback_group)
         with GRAPH.lock:
-            GRAPH.services[srv_name] = srv
+            GRAPH.services.setdefault(srv_name, []).append(srv)
+            clients = [c for c in GRAPH.clients if c.name == srv_name]
         self.entities.append(srv)
+        for client in clients:
+            GRAPH.discover(client, srv)
         return srv
 
     def create_client(self, srv_type: Any, srv_name: str, *, qos_profile: Any = None, callback_group: Any = None) -> FakeClient:
         client = FakeClient(self, srv_type, srv_name, callback_group)
         with GRAPH.lock:
             GRAPH.clients.append(client)
+            servers = list(GRAPH.services.get(srv_name, []))
         self.entities.append(client)
+        for srv in servers:
+            GRAPH.discover(client, srv)
         return client
+
+    def create_guard_condition(self, callback: Callable[[], Any], callback_group: Any = None) -> FakeGuardCondition:
+        guard = FakeGuardCondition(self, callback, callback_group)
+        self.entities.append(guard)
+        return guard
+
+    def destroy_guard_condition(self, guard: FakeGuardCondition) -> bool:
+        guard.destroyed = True
+        return True
 
     def destroy_subscription(self, sub: FakeSubscription) -> bool:
         sub.destroyed = True
@@ -499,9 +701,17 @@ class FakeNode:
         return True
 
     def destroy_publisher(self, pub: FakePublisher) -> bool:
+        pub.destroyed = True
         with GRAPH.lock:
             if pub in GRAPH.publishers.get(pub.topic, []):
                 GRAPH.publishers[pub.topic].remove(pub)
+        return True
+
+    def destroy_service(self, srv: FakeService) -> bool:
+        srv.destroyed = True
+        with GRAPH.lock:
+            if srv in GRAPH.services.get(srv.name, []):
+                GRAPH.services[srv.name].remove(srv)
         return True
 
     def destroy_client(self, client: FakeClient) -> bool:
@@ -513,18 +723,25 @@ class FakeNode:
 
     def destroy_node(self) -> None:
         self.destroyed = True
+        for pub in self.publishers:
+            self.destroy_publisher(pub)
+        for entity in self.entities:
+            if isinstance(entity, FakeSubscription):
+                self.destroy_subscription(entity)
+            elif isinstance(entity, FakeService):
+                self.destroy_service(entity)
+            elif isinstance(entity, FakeClient):
+                self.destroy_client(entity)
+            entity.destroyed = True
+
+
+def _replay(pub: FakePublisher, sub: FakeSubscription) -> None:
+    """At the match: a TRANSIENT_LOCAL reader gets the writer's history, as DDS delivers it."""
+    if sub.qos.durability is DurabilityPolicy.TRANSIENT_LOCAL and compatible(pub.qos, sub.qos):
         with GRAPH.lock:
-            for pub in self.publishers:
-                if pub in GRAPH.publishers.get(pub.topic, []):
-                    GRAPH.publishers[pub.topic].remove(pub)
-            for entity in self.entities:
-                entity.destroyed = True
-                if isinstance(entity, FakeSubscription) and entity in GRAPH.subscriptions.get(entity.topic, []):
-                    GRAPH.subscriptions[entity.topic].remove(entity)
-                if isinstance(entity, FakeService) and GRAPH.services.get(entity.name) is entity:
-                    del GRAPH.services[entity.name]
-                if isinstance(entity, FakeClient) and entity in GRAPH.clients:
-                    GRAPH.clients.remove(entity)
+            history = list(pub.history)
+        for msg in history:
+            sub.receive(copy.deepcopy(msg))
 
 
 # ================================================================================= executors
@@ -542,6 +759,10 @@ class FakeExecutor:
         self.spin_threads: set[int] = set()
         self.callback_threads: set[int] = set()
         CONTEXT.on_shutdown(self.wake)
+
+    @property
+    def in_flight(self) -> int:
+        return self._in_flight
 
     def wake(self) -> None:
         with self.cond:
@@ -611,13 +832,13 @@ class FakeExecutor:
             pool.shutdown(wait=False)
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
+        """rclpy <= 7.1.11: stops spinning and returns True at once, whatever is still running
+        (the wait it documents is skipped by a bug fixed in 7.1.12)."""
         with self.cond:
             self._is_shutdown = True
+            self.nodes = []
             self.cond.notify_all()
-            done = self.cond.wait_for(lambda: self._in_flight == 0, timeout=timeout_sec)
-            if done:
-                self.nodes = []
-        return bool(done)
+        return True
 
 
 MultiThreadedExecutor = FakeExecutor
@@ -633,8 +854,10 @@ def _module(name: str, **attributes: Any) -> types.ModuleType:
 def install(monkeypatch: Any) -> types.ModuleType:
     """Put the fake rclpy and interface packages in ``sys.modules``; a fresh graph and context."""
     global GRAPH, CONTEXT
+    GRAPH.close()
     GRAPH = Graph()
     CONTEXT = _Context()
+    ROSOUT.clear()
     rclpy = _module("rclpy", init=init, ok=ok, shutdown=shutdown, graph=lambda: GRAPH, context=lambda: CONTEXT)
     submodules = {
         "rclpy.node": _module("rclpy.node", Node=FakeNode),
@@ -664,6 +887,7 @@ def install(monkeypatch: Any) -> types.ModuleType:
 
 
 @pytest.fixture
-def fake_rclpy(monkeypatch: pytest.MonkeyPatch) -> types.ModuleType:
+def fake_rclpy(monkeypatch: pytest.MonkeyPatch) -> Iterator[types.ModuleType]:
     """The fake rclpy installed for one test (import this fixture into a test module)."""
-    return install(monkeypatch)
+    yield install(monkeypatch)
+    GRAPH.close()

@@ -17,7 +17,7 @@ from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport.msgs import Bool, Header, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
-from execution_engine.transport.port import ServiceUnavailable, TransportError
+from execution_engine.transport.port import ServiceUnavailable, TransportError, wait_until_matched
 from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
 from execution_engine.transport.ros import RosTransport
 
@@ -49,6 +49,18 @@ class Inbox:
         return self.items
 
 
+async def matched(transport: RosTransport, *endpoints: Any) -> None:
+    """What every real caller does before the first message: wait for DDS discovery."""
+    assert await wait_until_matched(transport.clock, endpoints, BOUND)
+
+
+async def raw_matched(clock: Clock, count: Callable[[], int]) -> None:
+    deadline = clock.now() + BOUND
+    while count() == 0:
+        assert clock.now() < deadline, "never matched"
+        await clock.sleep(0.005)
+
+
 async def with_transport(clock: Clock, body: Callable[[RosTransport], Coroutine[Any, Any, T]], **kwargs: Any) -> T:
     transport = RosTransport(clock, ["test"], **kwargs)
     try:
@@ -62,9 +74,11 @@ def test_messages_cross_nodes_converted_and_delivered_on_the_loop_thread(fake_rc
     async def body(transport: RosTransport) -> None:
         talker, listener = transport.create_node("talker"), transport.create_node("listener")
         inbox = Inbox()
-        listener.create_subscription(JointState, "/joint_states", inbox, SENSOR)
+        sub = listener.create_subscription(JointState, "/joint_states", inbox, SENSOR)
         sent = JointState(Header(Time(3, 250), "WAIST"), ("CHEST_JOINT0",), (0.25,))
-        talker.create_publisher(JointState, "/joint_states", SENSOR).publish(sent)
+        pub = talker.create_publisher(JointState, "/joint_states", SENSOR)
+        await matched(transport, pub, sub)
+        pub.publish(sent)
         assert await inbox.wait(transport.clock) == [sent]
         assert inbox.threads == {threading.get_ident()}  # the loop's thread, not an executor thread
         executor = listener.ros_node.executor
@@ -81,6 +95,7 @@ def test_a_topic_keeps_its_order_across_executor_threads(fake_rclpy: Any) -> Non
         # rclpy runs a reentrant entity's callbacks concurrently; only an exclusive group keeps order.
         assert isinstance(sub.handle.callback_group, ros_fakes.MutuallyExclusiveCallbackGroup)  # type: ignore[attr-defined]
         pub = a.create_publisher(String, "/events", COMMANDS)
+        await matched(transport, pub, sub)
         for i in range(40):
             pub.publish(String(str(i)))
         assert await inbox.wait(transport.clock, 40) == [str(i) for i in range(40)]
@@ -116,6 +131,7 @@ def test_a_failing_callback_is_reported_and_later_messages_still_arrive(fake_rcl
 
         b.create_subscription(Bool, "/cell/safety_stop", callback, COMMANDS)
         pub = a.create_publisher(Bool, "/cell/safety_stop", COMMANDS)
+        await matched(transport, pub)
         pub.publish(Bool(False))
         pub.publish(Bool(True))
         assert await inbox.wait(transport.clock) == [Bool(True)]
@@ -136,6 +152,7 @@ def test_a_message_that_cannot_be_converted_is_reported_not_delivered(fake_rclpy
         garbled = ros_fakes.JointState(name=["a"])
         object.__setattr__(garbled, "_name", [7])  # what a mis-typed peer could deliver
         raw = node.ros_node.create_publisher(ros_fakes.JointState, "/joint_states", ros_fakes.QoSProfile(depth=5))
+        await raw_matched(transport.clock, raw.get_subscription_count)
         raw.publish(garbled)
         raw.publish(ros_fakes.JointState(name=["b"]))
         assert [m.name for m in await inbox.wait(transport.clock)] == [("b",)]
@@ -178,8 +195,10 @@ def test_a_handler_that_calls_another_service_does_not_starve_its_own_answer(fak
 
         served = machine.create_service(Trigger, "/left_arm/sm/pause", machine_pause)
         to_machine = engine.create_client(Trigger, "/left_arm/sm/pause")
-        for endpoint in (served, to_machine):
-            assert isinstance(endpoint.handle.callback_group, ros_fakes.ReentrantCallbackGroup)  # type: ignore[attr-defined]
+        # The client's responses are taken while a thread waits in a handler: a reentrant group.
+        assert isinstance(to_machine.handle.callback_group, ros_fakes.ReentrantCallbackGroup)  # type: ignore[attr-defined]
+        # Each service its own exclusive group: it can be destroyed between requests (see ros.py).
+        assert isinstance(served.handle.callback_group, ros_fakes.MutuallyExclusiveCallbackGroup)  # type: ignore[attr-defined]
 
         async def engine_pause(request: TriggerRequest) -> TriggerResponse:
             answer = await to_machine.call(TriggerRequest(), timeout=BOUND)
@@ -278,10 +297,10 @@ def test_parameters_come_from_ros_arguments_and_code_and_are_read_once(fake_rclp
             assert node.declare_parameter("state_period", 0.05, "publish period") == 0.05
             assert node.undeclared_overrides() == ["sped"]
             assert node.ros_node.get_parameter("state_period").value == 0.05
-            assert node.ros_node.descriptions["state_period"] == "publish period"  # ros2 param describe
+            assert node.ros_node.describe_parameter("state_period").description == "publish period"  # ros2 param describe
             refused = node.ros_node.set_parameters([ros_fakes.Parameter("speed", value=5.0)])[0]
             assert not refused.successful and "read at start-up" in refused.reason
-            with pytest.raises(TransportError, match="parameter 'sped' must be bool"):
+            with pytest.raises(TransportError, match="parameter 'sped' must be true or false, got double 3.0"):
                 node.declare_parameter("sped", True)
         finally:
             await transport.shutdown()
@@ -365,6 +384,7 @@ def test_a_destroyed_node_neither_publishes_nor_receives(fake_rclpy: Any) -> Non
         b.create_subscription(String, "/x", inbox, COMMANDS)
         pub_a = a.create_publisher(String, "/x", COMMANDS)
         pub_b = b.create_publisher(String, "/x", COMMANDS)
+        await matched(transport, pub_a, pub_b)
         assert pub_a.get_subscription_count() == 1
         b.destroy()
         assert pub_b.get_subscription_count() == 0 and pub_a.get_subscription_count() == 0  # b left the graph
@@ -372,7 +392,8 @@ def test_a_destroyed_node_neither_publishes_nor_receives(fake_rclpy: Any) -> Non
             pub_b.publish(String("from b"))
         pub_a.publish(String("to b"))
         probe = Inbox()
-        transport.create_node("c").create_subscription(String, "/x", probe, COMMANDS)
+        probe_sub = transport.create_node("c").create_subscription(String, "/x", probe, COMMANDS)
+        await matched(transport, probe_sub)
         pub_a.publish(String("to c"))
         await probe.wait(transport.clock)  # delivered after "to b" on the same executor
         assert inbox.items == [] and transport.node_names() == ["/a", "/c"]

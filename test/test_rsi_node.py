@@ -20,7 +20,7 @@ def test_defaults_start_the_simulator_and_a_real_controller_is_named(run_sim: An
         assert "silence" not in simulated.extra  # the back end chooses (an accelerated simulator needs longer)
         real = declare_kuka_parameters(bus.create_node("real", parameters={"rsi_listen": "192.168.1.10:49152", "host": "192.168.1.20", "cycle": 12})).options
         assert (real.rsi_listen, real.host, real.extra["cycle"]) == ("192.168.1.10:49152", "192.168.1.20", "12")
-        with pytest.raises(TransportError, match="must be int"):
+        with pytest.raises(TransportError, match="must be an integer, got string"):
             declare_kuka_parameters(bus.create_node("typed", parameters={"cycle": "4"}))
 
     run_sim(main)

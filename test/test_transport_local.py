@@ -143,7 +143,7 @@ def test_node_names_parameters_and_destroy(run_sim: Any) -> None:
         assert node.declare_parameter("speed", 1.0) == 2.0  # an int override of a float parameter is fine
         assert node.declare_parameter("missing", 5) == 5
         assert node.undeclared_overrides() == ["typo"]
-        with pytest.raises(TransportError, match="must be bool"):
+        with pytest.raises(TransportError, match="must be true or false, got string"):
             bus.create_node("other", parameters={"flag": "yes"}).declare_parameter("flag", True)
         with pytest.raises(TransportError, match="declared twice"):
             node.declare_parameter("group", "x")

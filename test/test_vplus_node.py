@@ -24,7 +24,7 @@ def test_defaults_start_the_simulator_and_overrides_reach_the_backend(run_sim: A
         await backend.close()
         with pytest.raises(ValueError, match="port must be 1..65535"):
             declare_vplus_parameters(bus.create_node("bad", parameters={"port": 70000}))
-        with pytest.raises(TransportError, match="must be int"):
+        with pytest.raises(TransportError, match="must be an integer, got string"):
             declare_vplus_parameters(bus.create_node("typed", parameters={"port": "1234"}))
 
     run_sim(main)

@@ -75,6 +75,7 @@ class ExecutionEngine:
             node.create_service(Trigger, engine_service(command), lambda req, c=command: self._on_service(c, req))
         self.links: dict[str, GroupLink] = {}
         self.app: Application | None = None
+        self._cell_name = ""  # the cell model the requests of this run refer to
         self.report: RunReport | None = None
         self.state = "idle"
         self._op_index = 0
@@ -101,8 +102,10 @@ class ExecutionEngine:
                 self.links[group] = GroupLink(self.node, group, self.service_timeout)
             report.group_busy.setdefault(group, 0.0)
             report.group_functions.setdefault(group, 0)
+        self._cell_name = ""
         if app.cell is not None:
             snapshot: CellSnapshot = app.cell.to_snapshot()
+            self._cell_name = snapshot.name
             self._cell_pub.publish(String(codec.encode(snapshot)))
             self._cell_frames.publish_cell(snapshot, app.robot)
         try:
@@ -147,6 +150,11 @@ class ExecutionEngine:
             raise ApplicationAborted(
                 f"no group machine answered for {', '.join(missing)} within {self.startup_timeout:g} s "
                 "(is group_machine running for each group, and the bridge?)"
+            )
+        unlinked = [g for g, ok in zip(self.links, await asyncio.gather(*(link.link(self.startup_timeout) for link in self.links.values()))) if not ok]
+        if unlinked:
+            raise ApplicationAborted(
+                f"the request and result topics of {', '.join(unlinked)} did not match within {self.startup_timeout:g} s"
             )
         for group, link in self.links.items():
             if link.state == ERROR_HANDLING:
@@ -213,6 +221,7 @@ class ExecutionEngine:
                 attempt=attempt,
                 sync=sync,
                 partners=partners,
+                cell=self._cell_name,
             )
         return requests
 
@@ -364,6 +373,11 @@ class ExecutionEngine:
         assert self.app is not None and self.report is not None
         self._set_state("error", f"moving to safe pose {pose!r}")
         calls: dict[str, Call] = {}
+        unlinked = [g for g, ok in zip(self.links, await asyncio.gather(*(link.link(self.startup_timeout) for link in self.links.values()))) if not ok]
+        if unlinked:
+            raise ApplicationAborted(
+                f"the request and result topics of {', '.join(unlinked)} did not match within {self.startup_timeout:g} s"
+            )
         for group, link in self.links.items():
             if link.state == ERROR_HANDLING:
                 await link.command("reset")

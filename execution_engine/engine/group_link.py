@@ -13,7 +13,7 @@ import uuid
 from execution_engine.clock import Clock
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String, Trigger
-from execution_engine.transport.port import Node, ServiceUnavailable, TransportError
+from execution_engine.transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
 from execution_engine.transport.qos import COMMANDS, LATCHED
 from execution_engine.transport.wire import SmRequest, SmResult, sm_service, sm_topic
 
@@ -30,7 +30,7 @@ class GroupLink:
         self._ids = itertools.count(1)
         self._session = uuid.uuid4().hex[:6]
         self._requests = node.create_publisher(String, sm_topic(group, "request"), COMMANDS)
-        node.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
+        self._results = node.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
         node.create_subscription(String, sm_topic(group, "state"), self._on_state, LATCHED)
         self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
         self.rejected: list[str] = []
@@ -39,6 +39,11 @@ class GroupLink:
         return f"engine-{self._session}-{self.group}-{next(self._ids)}"
 
     # -------------------------------------------------------------------------- requests
+    async def link(self, timeout: float) -> bool:
+        """True once requests and results have matched the machine (DDS discovery), so the first
+        request is not lost; False after ``timeout`` run seconds."""
+        return await wait_until_matched(self.clock, (self._requests, self._results), timeout)
+
     def send(self, request: SmRequest) -> asyncio.Future[SmResult]:
         future: asyncio.Future[SmResult] = asyncio.get_running_loop().create_future()
         self._pending[request.id] = future

@@ -6,6 +6,7 @@ barrier board of synchronised motions.  One context per machine; states hold no 
 """
 from __future__ import annotations
 
+import asyncio
 import itertools
 import uuid
 from collections.abc import Callable
@@ -22,7 +23,7 @@ from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
-from execution_engine.transport.port import Node, Publisher
+from execution_engine.transport.port import Node, Publisher, Subscription, wait_until_matched
 from execution_engine.transport.wire import BridgeCommand, SmRequest, SmResult, SmStatus, SyncMessage
 
 
@@ -33,6 +34,12 @@ class MachineConfig:
     bridge_timeout: float = 5.0  # a bridge must acknowledge a command this fast
     primitive_timeout: float = 600.0  # no primitive runs longer than this
     sync_timeout: float = 30.0  # partners must meet at a barrier within this
+
+    @property
+    def resend_interval(self) -> float:
+        """A command not acknowledged by then is sent again with its id (the bridge runs it once);
+        an announcement at a barrier is repeated as often."""
+        return min(0.5, self.bridge_timeout / 4)
 
 
 @dataclass
@@ -58,6 +65,7 @@ class MachineContext:
         events: EventQueue,
         publishers: Publishers,
         config: MachineConfig,
+        feedback: Subscription[String] | None = None,
     ) -> None:
         self.group = group
         self.node = node
@@ -77,6 +85,10 @@ class MachineContext:
         self._ids = itertools.count(1)
         self._session = uuid.uuid4().hex[:6]
         self.state_name = "Ready"
+        self._feedback = feedback
+        self._bridge_linked = False  # both directions to the bridge have matched
+        self._sent: dict[str, String] = {}  # unacknowledged bridge commands, for resending
+        self.cell_arrived = asyncio.Event()
 
     # --------------------------------------------------------------------------- identity
     def new_id(self) -> str:
@@ -88,6 +100,23 @@ class MachineContext:
 
     def set_cell(self, cell: CellIndex) -> None:
         self.functions.ctx.cell = cell
+        self.cell_arrived.set()
+
+    async def wait_for_cell(self, name: str) -> str | None:
+        """The request was made for cell ``name``: wait (bounded) until the engine's latched cell
+        model has arrived; the problem when it did not."""
+        deadline = self.clock.now() + self.config.bridge_timeout
+        while self.cell is None or self.cell.name != name:
+            remaining = deadline - self.clock.now()
+            if remaining <= 0:
+                have = "no cell model" if self.cell is None else f"cell {self.cell.name!r}"
+                return f"the cell model {name!r} did not arrive within {self.config.bridge_timeout:g} s (have {have})"
+            self.cell_arrived.clear()
+            try:
+                await self.clock.wait_for(self.cell_arrived.wait(), remaining)
+            except asyncio.TimeoutError:
+                continue
+        return None
 
     # ---------------------------------------------------------------------------- publish
     def status(self, event: str, **fields: Any) -> None:
@@ -104,12 +133,38 @@ class MachineContext:
         message = SmStatus(group=self.group, event=event, t=self.clock.now(), **values)  # type: ignore[arg-type]
         self.pub.status.publish(String(codec.encode(message)))
 
+    async def link_bridge(self) -> str | None:
+        """Wait (bounded) until the command topic and the feedback topic have matched the bridge:
+        over DDS a command published before discovery is lost.  The problem, or None."""
+        if self._bridge_linked:
+            return None
+        endpoints: list[Any] = [self.pub.bridge] + ([self._feedback] if self._feedback is not None else [])
+        if not await wait_until_matched(self.clock, endpoints, self.config.bridge_timeout):
+            topic = self.node.resolve(self.pub.bridge.topic)
+            return f"timeout: no bridge subscribed to {topic} (or publishes feedback) within {self.config.bridge_timeout:g} s"
+        self._bridge_linked = True
+        return None
+
     def send_bridge(self, op: str, primitive: Primitive | None = None, command_id: str | None = None) -> str:
         """Publish a bridge command; returns its id (feedback carries the same id)."""
         cid = command_id or self.new_id()
         command = BridgeCommand(id=cid, group=self.group, op=op, primitive=primitive)  # type: ignore[arg-type]
-        self.pub.bridge.publish(String(codec.encode(command)))
+        message = String(codec.encode(command))
+        self._sent[cid] = message
+        if len(self._sent) > 16:  # only the newest few can still be waiting for their answer
+            del self._sent[next(iter(self._sent))]
+        self.pub.bridge.publish(message)
         return cid
+
+    def resend_bridge(self, command_id: str) -> None:
+        """The same command again, same id: the bridge runs an id once and repeats its last answer."""
+        message = self._sent.get(command_id)
+        if message is not None:
+            self._bridge_linked = False  # seen unanswered: check the link again before the next one
+            self.pub.bridge.publish(message)
+
+    def acknowledged(self, command_id: str) -> None:
+        self._sent.pop(command_id, None)
 
     def send_sync(self, key: str, event: str, error: str | None = None) -> None:
         message = SyncMessage(group=self.group, key=key, event=event, state=self.state_name, t=self.clock.now(), error=error)  # type: ignore[arg-type]

@@ -123,9 +123,9 @@ class GroupMachine:
             events=self.events,
             publishers=publishers,
             config=config,
+            feedback=node.create_subscription(String, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS),
         )
         node.create_subscription(String, sm_topic(g, "request"), self._on_request, COMMANDS)
-        node.create_subscription(String, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS)
         node.create_subscription(String, SYNC_TOPIC, self._on_sync, COMMANDS)
         node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
         for command in MACHINE_SERVICES:

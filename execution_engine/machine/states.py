@@ -41,6 +41,7 @@ from execution_engine.smach import State
 from execution_engine.transport.wire import BridgeFeedback
 
 UD_KEYS = ("primitive", "resume_command", "early_done", "error", "stop_reason")
+_EPSILON = 1e-9  # run seconds: a deadline this close is reached (float sums never land on it exactly)
 
 
 class MachineState(State):
@@ -84,16 +85,25 @@ class MachineState(State):
         finished while we paused it), which is kept in userdata for the resume.
         """
         ctx = self.ctx
+        problem = await ctx.link_bridge()
+        if problem is not None:
+            return problem
         control_id = ctx.send_bridge(op)
         expected = {"pause": "paused", "resume": "resumed", "stop": "stopped"}[op]
         deadline = ctx.clock.now() + ctx.config.bridge_timeout
+        resend_at = ctx.clock.now() + ctx.config.resend_interval
         held: list[Event] = []
-        problem: str | None = None
         while True:
-            event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
-            if event is None:
+            now = ctx.clock.now()
+            if now >= deadline - _EPSILON:
                 problem = f"timeout: the bridge did not acknowledge {op} within {ctx.config.bridge_timeout:g} s"
                 break
+            if now >= resend_at - _EPSILON:
+                ctx.resend_bridge(control_id)
+                resend_at = now + ctx.config.resend_interval
+            event = await ctx.events.get(max(0.0, min(deadline, resend_at) - ctx.clock.now()))
+            if event is None:
+                continue
             if isinstance(event, FeedbackEvent) and event.feedback.id == control_id:
                 if event.feedback.status == expected:
                     break
@@ -109,6 +119,7 @@ class MachineState(State):
                 userdata["early_done"] = event.feedback
             else:
                 held.append(event)
+        ctx.acknowledged(control_id)
         for event in reversed(held):
             ctx.events.put_back(event)
         return problem
@@ -142,7 +153,8 @@ class ReadyState(MachineState):
                 if run is not None:
                     ctx.send_result(event.request, "aborted", f"{ctx.group} is busy with {run.label}: request refused")
                     continue
-                problem = ctx.start_function(event.request)
+                problem = await ctx.wait_for_cell(event.request.cell) if event.request.cell else None
+                problem = problem or ctx.start_function(event.request)
                 if problem is not None:
                     ctx.status("error", error=problem, operation=event.request.operation, function=event.request.function)
                     ctx.send_result(event.request, "aborted", problem)
@@ -177,7 +189,15 @@ class WorkingState(MachineState):
         primitive = userdata["primitive"]
         assert ctx.run is not None
         ctx.status("primitive_start", primitive=describe(primitive), index=ctx.run.started)
-        command_id = ctx.send_bridge("execute", primitive)
+        return await self._execute(userdata, primitive)
+
+    async def _execute(self, userdata: MutableMapping[str, Any], primitive: Any) -> str:
+        """Send ``primitive`` once the bridge is linked, then wait for its end."""
+        problem = await self.ctx.link_bridge()
+        if problem is not None:
+            userdata["error"] = f"{describe(primitive)}: {problem}"
+            return ERROR
+        command_id = self.ctx.send_bridge("execute", primitive)
         return await self._await_done(userdata, command_id, accepted=False)
 
     async def _resume(self, userdata: MutableMapping[str, Any], command_id: str) -> str:
@@ -197,19 +217,29 @@ class WorkingState(MachineState):
         primitive = userdata["primitive"]
         accept_deadline = ctx.clock.now() + ctx.config.bridge_timeout
         done_deadline = ctx.clock.now() + ctx.config.primitive_timeout
+        resend_at = ctx.clock.now() + ctx.config.resend_interval
         while True:
+            now = ctx.clock.now()
             deadline = done_deadline if accepted else accept_deadline
-            event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
-            if event is None:
+            if now >= deadline - _EPSILON:
                 what = "finish" if accepted else "accept"
                 limit = ctx.config.primitive_timeout if accepted else ctx.config.bridge_timeout
                 userdata["error"] = f"timeout: the bridge did not {what} {describe(primitive)} within {limit:g} s"
                 return ERROR
+            if not accepted and now >= resend_at - _EPSILON:  # lost before the bridge matched: same id again
+                ctx.resend_bridge(command_id)
+                resend_at = now + ctx.config.resend_interval
+            wake = deadline if accepted else min(deadline, resend_at)
+            event = await ctx.events.get(max(0.0, wake - ctx.clock.now()))
+            if event is None:
+                continue
             if isinstance(event, FeedbackEvent) and event.feedback.id == command_id:
                 status = event.feedback.status
                 if status == "accepted":
                     accepted = True
+                    ctx.acknowledged(command_id)
                 elif status in ("done", "error"):
+                    ctx.acknowledged(command_id)
                     return self._finish(userdata, event.feedback)
             elif isinstance(event, OperatorSignal):
                 outcome = await self._operator(userdata, event, command_id)
@@ -285,8 +315,7 @@ class SyncState(WorkingState):
         if leader == ctx.group:
             if ctx.sync_sent != key:
                 ctx.sync_sent = key
-                command_id = ctx.send_bridge("execute", primitive)
-                outcome = await self._await_done(userdata, command_id, accepted=False)
+                outcome = await self._execute(userdata, primitive)
             else:
                 outcome = ERROR
                 userdata["error"] = "synchronised command lost after a pause"
@@ -316,11 +345,15 @@ class SyncState(WorkingState):
             missing = [g for g in partners if g not in board]
             if not missing:
                 return None
-            event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
-            if event is None:
+            now = ctx.clock.now()
+            if now >= deadline - _EPSILON:
                 userdata["error"] = f"timeout: {', '.join(missing)} did not reach the {self.name} barrier within {ctx.config.sync_timeout:g} s"
                 self._report(userdata, key, ERROR)
                 return ERROR
+            event = await ctx.events.get(max(0.0, min(deadline, now + ctx.config.resend_interval) - now))
+            if event is None:  # a partner that matched after our announcement has not heard it
+                ctx.send_sync(key, "arrived")
+                continue
             outcome = await self._interrupt(userdata, event)
             if outcome is not None:
                 return outcome

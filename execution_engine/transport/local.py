@@ -65,6 +65,9 @@ class _LocalSubscription(Subscription[M], Generic[M]):
         self._queue.clear()
         self.node.bus.remove_subscription(self)
 
+    def get_publisher_count(self) -> int:
+        return len(self.node.bus.matching_publishers(self)) if self.alive else 0
+
 
 class _LocalPublisher(Publisher[M], Generic[M]):
     def __init__(self, node: LocalNode, msg_type: type[M], topic: str, qos: QoS):
@@ -237,6 +240,9 @@ class LocalTransport(Transport):
         subs = self._subscriptions.get(sub.topic, [])
         if sub in subs:
             subs.remove(sub)
+
+    def matching_publishers(self, sub: _LocalSubscription[Any]) -> list[_LocalPublisher[Any]]:
+        return [p for p in self._publishers.get(sub.topic, []) if sub.qos.compatible_with(p.qos)]
 
     def matching_subscriptions(self, pub: _LocalPublisher[Any]) -> list[_LocalSubscription[Any]]:
         return [s for s in self._subscriptions.get(pub.topic, []) if s.qos.compatible_with(pub.qos)]

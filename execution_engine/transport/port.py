@@ -16,18 +16,18 @@ from __future__ import annotations
 import logging
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from typing import Any, Generic, TypeVar
 
 from execution_engine.clock import Clock
 from execution_engine.transport.msgs import Time
+from execution_engine.transport.parameters import ParameterTypeError, ParameterValue, coerce_parameter
 from execution_engine.transport.qos import COMMANDS, QoS
 
 M = TypeVar("M")
 Req = TypeVar("Req")
 Resp = TypeVar("Resp")
 
-ParameterValue = bool | int | float | str | list[str] | list[float] | list[int]
 FaultHandler = Callable[[str, BaseException], None]
 
 _TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
@@ -38,6 +38,11 @@ _NAMESPACE = re.compile(rf"^(/|(/{_TOKEN})+)$")
 
 class TransportError(RuntimeError):
     """A name, type or service problem on the transport, naming the endpoint concerned."""
+
+
+class RosArgumentsError(TransportError):
+    """rcl refused the command line's ROS arguments (``-p speed`` without ``:=``, an unknown flag,
+    a params file it cannot parse): the user's to fix, so the process exits with the usage code."""
 
 
 class ServiceUnavailable(TransportError):
@@ -100,6 +105,38 @@ class Subscription(ABC, Generic[M]):
     def destroy(self) -> None:
         """Stop receiving."""
 
+    @abstractmethod
+    def get_publisher_count(self) -> int:
+        """How many publishers match (rclpy's Subscription.get_publisher_count)."""
+
+
+async def wait_until_matched(
+    clock: Clock, endpoints: Iterable[Publisher[Any] | Subscription[Any]], timeout: float, poll: float = 0.01
+) -> bool:
+    """True once every endpoint has matched a peer; False after ``timeout`` run seconds.
+
+    Over DDS, a message published before discovery has matched the reader is lost for a
+    volatile topic, and a transient-local one reaches only readers matched in time.  A node
+    therefore waits here before the first message of a conversation (a command and the topic
+    its answer comes back on), bounded by the same timeout it gives the answer.
+    """
+    pending = list(endpoints)
+    deadline = clock.now() + timeout
+    while True:
+        pending = [e for e in pending if _matched(e) == 0]
+        if not pending:
+            return True
+        remaining = deadline - clock.now()
+        if remaining <= 0:
+            return False
+        await clock.sleep(min(poll, remaining))
+
+
+def _matched(endpoint: Publisher[Any] | Subscription[Any]) -> int:
+    if isinstance(endpoint, Publisher):
+        return endpoint.get_subscription_count()
+    return endpoint.get_publisher_count()
+
 
 class ServiceServer(ABC):
     name: str
@@ -130,6 +167,7 @@ class Node(ABC):
         namespace: str,
         clock: Clock,
         parameter_overrides: Mapping[str, ParameterValue] | None = None,
+        override_texts: Mapping[str, str] | None = None,
     ) -> None:
         self.name = validate_node_name(name)
         resolve_name("x", namespace)  # validates the namespace
@@ -137,6 +175,7 @@ class Node(ABC):
         self.clock = clock
         self.logger = logging.getLogger(f"{namespace.strip('/').replace('/', '.') or 'root'}.{name}")
         self._overrides: dict[str, ParameterValue] = dict(parameter_overrides or {})
+        self._override_texts: dict[str, str] = dict(override_texts or {})  # as the user wrote them
         self._parameters: dict[str, ParameterValue] = {}
         self.fault_handler: FaultHandler = self._log_fault
 
@@ -158,17 +197,14 @@ class Node(ABC):
 
     # ------------------------------------------------------------------------- parameters
     def declare_parameter(self, name: str, default: ParameterValue, description: str = "") -> ParameterValue:
-        """Declare a parameter with a default; an override given at launch must have the same type."""
+        """Declare a parameter with a default; an override is converted to its type (:func:`coerce_parameter`)."""
         if name in self._parameters:
             raise TransportError(f"{self.fully_qualified_name}: parameter {name!r} declared twice")
         value = self._overrides.get(name, default)
-        if not _same_parameter_type(value, default):
-            raise TransportError(
-                f"{self.fully_qualified_name}: parameter {name!r} must be {type(default).__name__}, "
-                f"got {type(value).__name__} {value!r}"
-            )
-        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
+        try:
+            value = coerce_parameter(self.fully_qualified_name, name, default, value, self._override_texts.get(name))
+        except ParameterTypeError as error:
+            raise TransportError(str(error)) from None
         self._parameters[name] = value
         return value
 
@@ -218,15 +254,6 @@ class Node(ABC):
     def _log_fault(self, where: str, error: BaseException) -> None:
         self.logger.error("%s: fault in %s: %s: %s", self.fully_qualified_name, where, type(error).__name__, error)
 
-
-def _same_parameter_type(value: object, default: object) -> bool:
-    if isinstance(default, bool) or isinstance(value, bool):
-        return type(value) is type(default)
-    if isinstance(default, float):
-        return isinstance(value, (int, float))
-    if isinstance(default, list):
-        return isinstance(value, list)
-    return type(value) is type(default)
 
 
 class Transport(ABC):

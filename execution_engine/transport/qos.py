@@ -67,6 +67,8 @@ ROBOT_DESCRIPTION = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, Histor
 DIAGNOSTICS = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 10)
 #: Periodic sensor data (joint_states, tcp_pose): the newest sample wins.
 SENSOR = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, History.KEEP_LAST, 5)
+#: ``/clock``: only the newest time matters (rclpy's TimeSource and rclcpp's ClockQoS ask this).
+CLOCK = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, History.KEEP_LAST, 1)
 
 
 def rclpy_qos_kwargs(qos: QoS) -> dict[str, str | int]:

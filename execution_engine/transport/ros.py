@@ -11,10 +11,16 @@ worlds meet here and each keeps its own thread:
     with ``loop.call_soon_threadsafe``; subscriptions share one mutually exclusive callback
     group per node, so a topic's messages reach the loop in the order they arrived;
   - a service runs our coroutine handler on the loop with ``run_coroutine_threadsafe`` and
-    waits (bounded) for its answer; services and clients use a reentrant group, so a handler
-    that itself calls a service does not block the client response it waits for -- which is
-    why the executor is a MultiThreadedExecutor, never a single-threaded one;
+    waits (bounded) for its answer.  Each service has its own mutually exclusive callback group:
+    rclpy takes a request, runs the callback and sends the response while holding the group, so
+    a guard condition in the same group is the one moment the service can be destroyed without
+    a response meeting a destroyed handle (which would end ``spin``);
+  - clients use a reentrant group, so a handler that itself calls a service does not block the
+    client response it waits for -- which is why the executor is a MultiThreadedExecutor;
   - a client call is ``call_async``; the rclpy future's done-callback settles an asyncio future.
+
+  Every callback is counted while it runs: rclpy 7.1.11 and older return from
+  ``Executor.shutdown(timeout_sec)`` at once, so shutdown waits for that count, bounded.
 
 * the asyncio loop runs the node's code: callbacks, handlers, publishing.
 
@@ -23,9 +29,12 @@ transport.  Differences from :mod:`~execution_engine.transport.local` that a cal
 a handler that raises or times out answers the caller with ``success=False`` and the error text
 (rclpy must answer something); a call to a service that is not (yet) discovered waits for it up
 to the call's timeout before raising :class:`ServiceUnavailable`, because discovery takes time;
-a destroyed service keeps answering "destroyed" until its node is destroyed at shutdown (rclpy
-cannot destroy a service with a request in flight safely).  Parameters are read once at start-up;
-``ros2 param set`` on a declared parameter is refused rather than silently ignored.
+nothing is delivered between endpoints before DDS discovery has matched them
+(:func:`~execution_engine.transport.port.wait_until_matched`).  Parameters are read once at
+start-up; ``ros2 param set`` on a declared parameter is refused rather than silently ignored.
+Stamps come from the node's ROS clock; with ``use_sim_time`` the node's run clock follows
+``/clock`` too (:class:`~execution_engine.clock.FollowingClock`).  Logging goes to rcutils and
+``/rosout`` (:mod:`~execution_engine.transport.ros_logging`).
 """
 from __future__ import annotations
 
@@ -37,9 +46,12 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from execution_engine.clock import Clock
+from execution_engine.clock import Clock, FollowingClock
+from execution_engine.transport import ros_logging
+from execution_engine.transport.msgs import ClockMessage, Time
 from execution_engine.transport.port import (
     Node,
+    RosArgumentsError,
     ParameterValue,
     Publisher,
     ServiceClient,
@@ -51,13 +63,60 @@ from execution_engine.transport.port import (
     resolve_name,
     validate_node_name,
 )
-from execution_engine.transport.qos import COMMANDS, QoS
-from execution_engine.transport.ros_convert import MessageConverter, failure_response, qos_profile, user_overrides
+from execution_engine.transport.qos import CLOCK, COMMANDS, QoS
+from execution_engine.transport.ros_args import raw_parameter_texts
+from execution_engine.transport.wire import CLOCK_TOPIC
+from execution_engine.transport.ros_convert import (
+    MessageConverter,
+    failure_response,
+    parameter_type_code,
+    qos_profile,
+    user_overrides,
+)
 
 M = TypeVar("M")
 log = logging.getLogger(__name__)
 
 _POLL = 0.05  # run seconds between checks while waiting for a service to be discovered
+
+
+def _rcl_message(error: BaseException) -> str:
+    """One line of what rcl said: without its source location and its generic prefix."""
+    text = " ".join(str(error).split())
+    text = text.split(", at ./")[0].split(", at /")[0]
+    for prefix in ("failed to initialize rcl: ", "Failed to initialize rcl: "):
+        if text.startswith(prefix):
+            text = text[len(prefix):]
+    if type(error).__name__ == "UnknownROSArgsError":
+        text = f"unknown ROS argument(s) {text}"
+    return text
+
+
+class _InFlight:
+    """Counts rclpy callbacks of the adapter while they run, so shutdown can wait for them."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._count = 0
+
+    def __enter__(self) -> None:
+        with self._cond:
+            self._count += 1
+
+    def __exit__(self, *exc: object) -> None:
+        with self._cond:
+            self._count -= 1
+            if self._count == 0:
+                self._cond.notify_all()
+
+    @property
+    def count(self) -> int:
+        return self._count
+
+    def wait_idle(self, timeout: float) -> bool:
+        """True once no callback runs; False after ``timeout`` wall seconds."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._count == 0, timeout=timeout)
 
 
 @dataclass(frozen=True)
@@ -75,6 +134,7 @@ class _Rclpy:
     no_signal_handlers: Any
     remove_ros_args: Any
     parameter_descriptor: Any
+    parameter_value: Any
     set_parameters_result: Any
 
 
@@ -82,7 +142,7 @@ def _import_rclpy() -> _Rclpy:
     try:
         import rclpy
         import rclpy.qos
-        from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+        from rcl_interfaces.msg import ParameterDescriptor, ParameterValue as ParameterValueMsg, SetParametersResult
         from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
         from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
         from rclpy.node import Node as RclpyNode
@@ -106,6 +166,7 @@ def _import_rclpy() -> _Rclpy:
         no_signal_handlers=SignalHandlerOptions.NO,
         remove_ros_args=remove_ros_args,
         parameter_descriptor=ParameterDescriptor,
+        parameter_value=ParameterValueMsg,
         set_parameters_result=SetParametersResult,
     )
 
@@ -136,6 +197,7 @@ class _RosPublisher(_TopicEndpoint[M], Publisher[M]):
         self.handle.publish(self.node.converter.to_ros(msg))
 
     def get_subscription_count(self) -> int:
+        """Matched subscriptions: zero until DDS discovery has matched one."""
         return int(self.handle.get_subscription_count()) if self.alive else 0
 
 
@@ -147,15 +209,20 @@ class _RosSubscription(_TopicEndpoint[M], Subscription[M]):
             self.ros_class, topic, self._on_ros_message, self.profile, callback_group=node.subscription_group
         )
 
+    def get_publisher_count(self) -> int:
+        """Matched publishers: zero until DDS discovery has matched one."""
+        return int(self.handle.get_publisher_count()) if self.alive else 0
+
     def _on_ros_message(self, ros_msg: Any) -> None:
         """Executor thread: convert, then queue the delivery on the loop. Never raises."""
-        try:
-            if not self.alive:
-                return
-            msg = self.node.converter.from_ros(self.msg_type, ros_msg)
-            self.node.transport.call_soon(self._deliver, msg)
-        except Exception as error:  # noqa: BLE001 - a bad message must not end the executor
-            self.node.report_fault_threadsafe(f"subscription {self.topic}", error)
+        with self.node.transport.in_flight:
+            try:
+                if not self.alive:
+                    return
+                msg = self.node.converter.from_ros(self.msg_type, ros_msg)
+                self.node.transport.call_soon(self._deliver, msg)
+            except Exception as error:  # noqa: BLE001 - a bad message must not end the executor
+                self.node.report_fault_threadsafe(f"subscription {self.topic}", error)
 
     def _deliver(self, msg: M) -> None:
         """Loop thread."""
@@ -179,25 +246,27 @@ class _RosService(ServiceServer):
         self.srv_type = srv_type
         self.name = name
         self.alive = True
+        self.gone = False  # the rclpy service is destroyed
         self._handler = handler
+        self._guard: Any = None
+        self.group = node.transport.api.exclusive_group()  # see the module docstring
         service_class, _, _ = node.converter.service_classes(srv_type)
-        self.handle = node.ros_node.create_service(
-            service_class, name, self._on_request, callback_group=node.service_group
-        )
+        self.handle = node.ros_node.create_service(service_class, name, self._on_request, callback_group=self.group)
 
     def _on_request(self, ros_request: Any, ros_response: Any) -> Any:
         """Executor thread: run the handler on the loop and wait for it, bounded. Never raises."""
-        try:
-            request = self.node.converter.from_ros(self.srv_type.Request, ros_request)
-            response = self._run_handler(request)
-        except Exception as error:  # noqa: BLE001 - the caller gets a failure answer, the node a fault
-            self.node.report_fault_threadsafe(f"service {self.name}", error)
-            response = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}")
-        try:
-            return self.node.converter.to_ros(response)
-        except Exception as error:  # noqa: BLE001
-            self.node.report_fault_threadsafe(f"service {self.name} response", error)
-            return ros_response
+        with self.node.transport.in_flight:
+            try:
+                request = self.node.converter.from_ros(self.srv_type.Request, ros_request)
+                response = self._run_handler(request)
+            except Exception as error:  # noqa: BLE001 - the caller gets a failure answer, the node a fault
+                self.node.report_fault_threadsafe(f"service {self.name}", error)
+                response = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}")
+            try:
+                return self.node.converter.to_ros(response)
+            except Exception as error:  # noqa: BLE001
+                self.node.report_fault_threadsafe(f"service {self.name} response", error)
+                return ros_response
 
     def _run_handler(self, request: Any) -> Any:
         if not self.alive:
@@ -231,8 +300,38 @@ class _RosService(ServiceServer):
         return response
 
     def destroy(self) -> None:
-        # The rclpy service goes with its node (see the module docstring); until then it answers "destroyed".
+        """Stop answering now; leave the graph as soon as no request is being answered.
+
+        While the executor spins, the rclpy service is destroyed from a guard condition in its
+        own mutually exclusive group, so never between a request's callback and its response."""
+        if not self.alive:
+            return
         self.alive = False
+        transport = self.node.transport
+        if transport.stopping:
+            return  # shutdown destroys it once the executor's callbacks are done
+        if transport.spinning:
+            self._guard = self.node.ros_node.create_guard_condition(self._destroy_in_group, callback_group=self.group)
+            self._guard.trigger()
+        else:
+            self.destroy_now()
+
+    def _destroy_in_group(self) -> None:
+        """Executor thread, holding the service's group: no request of it is in flight."""
+        with self.node.transport.in_flight:
+            self.destroy_now()
+            self.node.transport.call_soon(self.node.service_gone)
+
+    def destroy_now(self) -> None:
+        if self.gone:
+            return
+        self.gone = True
+        try:
+            self.node.ros_node.destroy_service(self.handle)
+            if self._guard is not None:
+                self.node.ros_node.destroy_guard_condition(self._guard)
+        except Exception:  # noqa: BLE001 - the node goes anyway; say what stayed behind
+            log.exception("destroying service %s failed", self.name)
 
 
 class _RosClient(ServiceClient[Any, Any]):
@@ -267,7 +366,7 @@ class _RosClient(ServiceClient[Any, Any]):
         transport = self.node.transport
         answer: asyncio.Future[Any] = transport.loop.create_future()
         ros_future = self.handle.call_async(self.node.converter.to_ros(request))
-        ros_future.add_done_callback(lambda done: transport.call_soon(_settle, answer, done))
+        ros_future.add_done_callback(lambda done: transport.settle_threadsafe(answer, done))
         self._pending.add(answer)
         try:
             ros_response = await clock.wait_for(answer, max(0.0, deadline - clock.now()))
@@ -327,26 +426,63 @@ class RosNode(Node):
         )
         # A launch file may rename the node (__node:=, __ns:=): the port sees the real name.
         real_namespace = self.ros_node.get_namespace() or "/"
+        real_name = self.ros_node.get_name()
         given = self.ros_node.get_parameters_by_prefix("")
+        fqn = f"{real_namespace.rstrip('/')}/{real_name}"
         super().__init__(
-            self.ros_node.get_name(),
+            real_name,
             real_namespace,
             transport.clock,
             user_overrides((key, self.ros_node.get_parameter(key).value) for key in given),
+            override_texts=raw_parameter_texts(transport.argv, fqn),
         )
         self.subscription_group = api.exclusive_group()
         self.service_group = api.reentrant_group()
         self._read_at_start: set[str] = set()
         self._endpoints: list[Any] = []
+        self.dying_services: list[_RosService] = []  # destroyed by us, not yet by rclpy
         self.destroyed = False
         self.ros_node.add_on_set_parameters_callback(self._on_set_parameters)
+        ros_logging.install(self.logger.name, self.ros_node.get_logger())
+        if self._use_sim_time():
+            self.clock = self._follow_sim_time()
+
+    # ------------------------------------------------------------------------------ time
+    def _use_sim_time(self) -> bool:
+        """rclpy's own parameter; read once, like every parameter of ours."""
+        self._read_at_start.add("use_sim_time")
+        try:
+            return self.ros_node.get_parameter("use_sim_time").value is True
+        except Exception:  # noqa: BLE001 - an rclpy without it has no simulated time
+            return False
+
+    def _follow_sim_time(self) -> FollowingClock:
+        """The node's run clock follows ``/clock``; a silent source is a fault, not a hang."""
+        clock = FollowingClock(
+            stall_timeout=self.transport.clock_stall_timeout,
+            on_stall=lambda text: self.report_fault(CLOCK_TOPIC, TimeoutError(text)),
+        )
+        clock.bind(self.transport.loop)
+        self.create_subscription(ClockMessage, CLOCK_TOPIC, lambda msg: clock.advance_to(msg.clock.to_seconds()), CLOCK)
+        return clock
+
+    def now_stamp(self) -> Time:
+        """The node's ROS clock: wall time, or ``/clock`` with ``use_sim_time``."""
+        sec, nanosec = self.ros_node.get_clock().now().seconds_nanoseconds()
+        return Time(int(sec), int(nanosec))
 
     # ------------------------------------------------------------------------ parameters
     def declare_parameter(self, name: str, default: ParameterValue, description: str = "") -> ParameterValue:
         value = super().declare_parameter(name, default, description)
+        api = self.transport.api
+        code = parameter_type_code(default)
+        descriptor = api.parameter_descriptor(description=description, type=code)
         try:
-            if not self.ros_node.has_parameter(name):
-                descriptor = self.transport.api.parameter_descriptor(description=description)
+            if self.ros_node.has_parameter(name):
+                # rclpy declared the override with a bare descriptor and the override's own type:
+                # give it ours, so `ros2 param describe` is right and `-p speed:=2` is a double.
+                self.ros_node.set_descriptor(name, descriptor, _parameter_value(api, code, value))
+            else:
                 self.ros_node.declare_parameter(name, value, descriptor)
         except Exception as error:  # noqa: BLE001 - rclpy's parameter exceptions have no common base
             del self._parameters[name]
@@ -387,11 +523,12 @@ class RosNode(Node):
         return self._add(_RosClient(self, srv_type, self.resolve(name)))  # type: ignore[no-any-return]
 
     def destroy(self) -> None:
-        """Stop every endpoint now and leave the graph; services and the rclpy node itself go
-        once the executor is idle (a service may still be answering a request)."""
+        """Leave the graph: every endpoint stops now; the services go as soon as none of them is
+        answering a request, and the rclpy node with the last of them."""
         if self.destroyed:
             return
         self.destroyed = True
+        services = [e for e in self._endpoints if isinstance(e, _RosService)]
         for endpoint in self._endpoints:
             if isinstance(endpoint, _RosClient):
                 endpoint.abandon()
@@ -401,10 +538,19 @@ class RosNode(Node):
             elif isinstance(endpoint, _RosPublisher):
                 endpoint.alive = False
                 self.ros_node.destroy_publisher(endpoint.handle)
-            else:
-                endpoint.destroy()
         self._endpoints.clear()
-        self.transport.retire(self)
+        ros_logging.uninstall(self.logger.name)
+        for service in services:
+            service.destroy()
+        self.dying_services = [s for s in services if not s.gone]
+        if not self.dying_services and not self.transport.stopping:
+            self.transport.retire(self)
+
+    def service_gone(self) -> None:
+        """Loop thread: one more service of this destroyed node left the graph."""
+        self.dying_services = [s for s in self.dying_services if not s.gone]
+        if not self.dying_services and not self.transport.stopping:
+            self.transport.retire(self)
 
     # ---------------------------------------------------------------------------- faults
     def report_fault_threadsafe(self, where: str, error: BaseException) -> None:
@@ -413,16 +559,25 @@ class RosNode(Node):
             self.logger.error("%s: fault in %s after the loop closed: %r", self.fully_qualified_name, where, error)
 
 
+def _parameter_value(api: _Rclpy, code: int, value: ParameterValue) -> Any:
+    """An rcl_interfaces/ParameterValue message of type ``code`` holding ``value``."""
+    field = {1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value",
+             6: "bool_array_value", 7: "integer_array_value", 8: "double_array_value", 9: "string_array_value"}[code]
+    return api.parameter_value(type=code, **{field: value})
+
+
 # ================================================================================== transport
 class RosTransport(Transport):
     """Nodes of one process on rclpy, with one executor thread for all of them.
 
     Create it inside the running loop its clock is bound to.  ``args`` is the process's argv
-    (ROS arguments such as ``--ros-args -p name:=value`` are parsed by rclpy).  rclpy's own
-    SIGINT/SIGTERM handlers are not installed: the process's asyncio loop handles signals and
-    shuts the transport down in order (see :mod:`execution_engine.ros_main`).
-    ``handler_timeout`` bounds how long an executor thread waits for a service handler and
-    ``shutdown_timeout`` how long shutdown waits for in-flight callbacks; both in run seconds.
+    (ROS arguments such as ``--ros-args -p name:=value`` are parsed by rclpy; ones rcl refuses
+    raise :class:`RosArgumentsError`).  rclpy's own SIGINT/SIGTERM handlers are not installed:
+    the process's asyncio loop handles signals and shuts the transport down in order (see
+    :mod:`execution_engine.ros_main`).  ``handler_timeout`` bounds how long an executor thread
+    waits for a service handler and ``shutdown_timeout`` how long shutdown waits for callbacks in
+    flight, both in run seconds; ``clock_stall_timeout`` how long a node with ``use_sim_time``
+    waits for ``/clock`` before its waits end (wall seconds).
     """
 
     def __init__(
@@ -433,6 +588,7 @@ class RosTransport(Transport):
         threads: int = 4,
         handler_timeout: float = 30.0,
         shutdown_timeout: float = 5.0,
+        clock_stall_timeout: float = 10.0,
     ) -> None:
         super().__init__(clock)
         if clock.simulated:
@@ -443,17 +599,21 @@ class RosTransport(Transport):
             raise ValueError("the ros transport needs at least 2 executor threads (a service handler may wait for a client response)")
         self.api = _import_rclpy()
         self.loop = clock.loop
+        self.argv = list(args or [])
         self.handler_timeout = handler_timeout
         self.shutdown_timeout = shutdown_timeout
+        self.clock_stall_timeout = clock_stall_timeout
         self.converter = MessageConverter()
+        self.in_flight = _InFlight()
         self._owns_context = False
         if not self.api.rclpy.ok():
-            self.api.rclpy.init(args=None if args is None else list(args), signal_handler_options=self.api.no_signal_handlers)
+            try:
+                self.api.rclpy.init(args=None if args is None else list(args), signal_handler_options=self.api.no_signal_handlers)
+            except RuntimeError as error:  # rcl's RCLError / UnknownROSArgsError: the arguments are wrong
+                raise RosArgumentsError(_rcl_message(error)) from None
             self._owns_context = True
         self._nodes: dict[str, RosNode] = {}
-        self._retired: list[Any] = []
         self.stopping = False
-        self._stopped = False
         self.spin_error: BaseException | None = None
         self._closed = asyncio.Event()
         self.handlers: set[asyncio.Task[Any]] = set()  # service handlers running on the loop
@@ -462,6 +622,10 @@ class RosTransport(Transport):
         self._thread.start()
 
     # ----------------------------------------------------------------------- executor side
+    @property
+    def spinning(self) -> bool:
+        return self._thread.is_alive() and not self.stopping
+
     def _spin(self) -> None:
         try:
             self._executor.spin()
@@ -482,6 +646,11 @@ class RosTransport(Transport):
             return False
         return True
 
+    def settle_threadsafe(self, answer: asyncio.Future[Any], ros_future: Any) -> None:
+        """An rclpy future's done-callback (executor thread): settle ``answer`` on the loop."""
+        with self.in_flight:
+            self.call_soon(_settle, answer, ros_future)
+
     def profile(self, qos: QoS) -> Any:
         return qos_profile(qos, self.api.qos)
 
@@ -500,14 +669,11 @@ class RosTransport(Transport):
         return node
 
     def retire(self, node: RosNode) -> None:
-        """Take ``node`` off the executor; destroy its rclpy node now if nothing can still run."""
+        """Take ``node`` off the executor and destroy its rclpy node (its services are gone)."""
         if self._nodes.get(node.fully_qualified_name) is node:
             del self._nodes[node.fully_qualified_name]
         self._executor.remove_node(node.ros_node)
-        if self._stopped:
-            _destroy_ros_node(node.ros_node)
-        else:
-            self._retired.append(node.ros_node)
+        _destroy_ros_node(node.ros_node)
 
     def node_names(self) -> list[str]:
         return sorted(self._nodes)
@@ -521,7 +687,8 @@ class RosTransport(Transport):
         await self._closed.wait()
 
     async def shutdown(self) -> None:
-        """Destroy every node, stop the executor (bounded), and shut rclpy down if we started it."""
+        """Destroy every node, stop the executor and wait for callbacks in flight (bounded), then
+        shut rclpy down if we started it."""
         if self.stopping:
             return
         self.stopping = True
@@ -530,19 +697,23 @@ class RosTransport(Transport):
         for task in list(self.handlers):  # their executor threads answer "cancelled" at once
             task.cancel()
         wall = self.clock.to_wall(self.shutdown_timeout)
+        deadline = self.loop.time() + wall
         try:
             # Blocking calls go to a worker thread: in-flight service callbacks need this loop.
-            if not await asyncio.to_thread(self._executor.shutdown, timeout_sec=wall):
-                log.warning("rclpy executor: callbacks still running after %g s at shutdown", self.shutdown_timeout)
+            await asyncio.to_thread(self._executor.shutdown, timeout_sec=wall)
         except Exception:  # noqa: BLE001 - shutdown goes on regardless
             log.exception("rclpy executor shutdown failed")
-        await asyncio.to_thread(self._thread.join, wall)
+        # rclpy <= 7.1.11 returned at once: wait for our callbacks ourselves, within the same bound.
+        if not await asyncio.to_thread(self.in_flight.wait_idle, max(0.0, deadline - self.loop.time())):
+            log.warning("rclpy executor: %d callback(s) still running after %g s at shutdown", self.in_flight.count, self.shutdown_timeout)
+        await asyncio.to_thread(self._thread.join, max(0.0, deadline - self.loop.time()))
         if self._thread.is_alive():
             log.error("rclpy executor thread did not stop within %g s", self.shutdown_timeout)
-        self._stopped = True
-        for ros_node in self._retired:
-            _destroy_ros_node(ros_node)
-        self._retired.clear()
+        for node in list(self._nodes.values()):  # the executor is idle: services go directly
+            for service in node.dying_services:
+                service.destroy_now()
+            _destroy_ros_node(node.ros_node)
+        self._nodes.clear()
         if self._owns_context and self.api.rclpy.ok():
             self.api.rclpy.shutdown()
         self._closed.set()

@@ -246,6 +246,29 @@ def qos_profile(qos: QoS, policies: Any) -> Any:
 
 
 # ---------------------------------------------------------------------------- parameters
+def parameter_type_code(default: ParameterValue) -> int:
+    """rcl_interfaces/ParameterType of a parameter declared with ``default`` (bool before int:
+    a bool is an int in Python)."""
+    if isinstance(default, bool):
+        return 1  # PARAMETER_BOOL
+    if isinstance(default, int):
+        return 2  # PARAMETER_INTEGER
+    if isinstance(default, float):
+        return 3  # PARAMETER_DOUBLE
+    if isinstance(default, str):
+        return 4  # PARAMETER_STRING
+    if isinstance(default, list):
+        items = {type(v) for v in default}
+        if items <= {bool} and items:
+            return 6  # PARAMETER_BOOL_ARRAY
+        if items <= {int} and items:
+            return 7  # PARAMETER_INTEGER_ARRAY
+        if items <= {float, int} and items:
+            return 8  # PARAMETER_DOUBLE_ARRAY
+        return 9  # PARAMETER_STRING_ARRAY (an empty list is declared as strings)
+    raise TransportError(f"no ROS parameter type for {type(default).__name__}")
+
+
 def plain_parameter_value(value: Any) -> ParameterValue:
     """A parameter value as the port expects it: sequences (rclpy gives ``array.array``) as lists."""
     if isinstance(value, (array.array, tuple, list)):

@@ -36,6 +36,7 @@ class SmRequest:
     attempt: int = 1
     sync: str = ""  # barrier key shared by the partners of a synchronised function
     partners: tuple[str, ...] = ()  # every group taking part in that synchronised function, leader first
+    cell: str = ""  # the cell model (latched on execution_engine/cell) the function's names refer to
     v: int = PROTOCOL_VERSION
 
     def __post_init__(self) -> None:
@@ -247,6 +248,7 @@ TF_STATIC_TOPIC = "tf_static"
 DIAGNOSTICS_TOPIC = "diagnostics"
 SAFETY_STOP = "cell/safety_stop"
 SYNC_TOPIC = "coordination/sync"
+CLOCK_TOPIC = "/clock"  # absolute, as rclpy's TimeSource reads it; a launch namespace remaps it to <ns>/clock
 ENGINE_SERVICES = ("start", "pause", "resume", "stop", "step", "reset")
 MACHINE_SERVICES = ("pause", "resume", "stop", "reset")
 

@@ -186,10 +186,13 @@ def matrix_to_rotvec(r: Matrix) -> Vector:
     if angle < 1e-7:
         return skew / 2.0
     if angle > math.pi - 1e-4:
-        # Near a half turn the skew part vanishes; the axis is the dominant column of (R + I) / 2.
-        sym = (np.asarray(r, dtype=float) + np.eye(3)) / 2.0
-        k = int(np.argmax(np.diag(sym)))
-        axis = sym[:, k] / math.sqrt(max(float(sym[k, k]), 1e-12))
+        # Near a half turn the skew part vanishes; the symmetric part is cos(a) I + (1 - cos(a)) k k^T,
+        # so k is the dominant column of (sym - cos(a) I) / (1 - cos(a)).  (R + I) / 2 alone keeps
+        # sin(a)/2 of the skew part: an axis error of (pi - a)/2.
+        c = math.cos(angle)
+        outer = ((np.asarray(r, dtype=float) + np.asarray(r, dtype=float).T) / 2.0 - c * np.eye(3)) / (1.0 - c)
+        k = int(np.argmax(np.diag(outer)))
+        axis = outer[:, k] / math.sqrt(max(float(outer[k, k]), 1e-12))
         if float(np.dot(axis, skew)) < 0:
             axis = -axis
         return axis / np.linalg.norm(axis) * angle
