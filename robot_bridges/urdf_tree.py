@@ -50,15 +50,18 @@ class UrdfTree:
             if frame.type != pin.FrameType.BODY:
                 continue
             self._link_frame[frame.name] = fid
-            if frame.parentFrame == 0:
+            joint_frame = frames[_parent_frame(frame)]
+            parent = frames[_parent_frame(joint_frame)]
+            if _parent_frame(frame) == 0 or parent.type != pin.FrameType.BODY:
+                # the root link: it hangs from "universe" (pinocchio 3) or from a fixed root joint
+                # frame on "universe" (pinocchio 2)
                 self.root = self.root or frame.name
                 continue
-            joint_frame = frames[frame.parentFrame]
-            parent_link = frames[joint_frame.parentFrame].name
+            parent_link = parent.name
             if joint_frame.type == pin.FrameType.FIXED_JOINT:
                 joints.append(TreeJoint(joint_frame.name, parent_link, frame.name, movable=False))
                 continue
-            joint = self.model.joints[frame.parentJoint]
+            joint = self.model.joints[_parent_joint(frame)]
             if joint.nq not in _MOVABLE_NQ or joint.nv != 1:
                 continue  # floating or planar
             joints.append(TreeJoint(joint_frame.name, parent_link, frame.name, movable=True))
@@ -110,3 +113,13 @@ class UrdfTree:
         parent = placements[self._link_frame[joint.parent]]
         child = placements[self._link_frame[joint.child]]
         return Pose.from_matrix(np.array(parent.actInv(child).homogeneous))
+
+
+def _parent_frame(frame: pin.Frame) -> int:
+    """The frame a frame hangs from: ``parentFrame`` since pinocchio 3, ``previousFrame`` in 2.x."""
+    return int(frame.parentFrame if hasattr(frame, "parentFrame") else frame.previousFrame)
+
+
+def _parent_joint(frame: pin.Frame) -> int:
+    """The joint that moves a frame: ``parentJoint`` since pinocchio 3, ``parent`` in 2.x."""
+    return int(frame.parentJoint if hasattr(frame, "parentJoint") else frame.parent)

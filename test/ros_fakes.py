@@ -511,6 +511,18 @@ def type_code(value: Any) -> int:
     return _TYPE_CODES[type(value)]
 
 
+class PublisherEventCallbacks:
+    """rclpy.event_handler: ``use_default_callbacks`` adds rclpy's warning handlers (one waitable each)."""
+
+    def __init__(self, *, use_default_callbacks: bool = True, **callbacks: Any) -> None:
+        self.use_default_callbacks = use_default_callbacks
+        self.callbacks = callbacks
+
+
+class SubscriptionEventCallbacks(PublisherEventCallbacks):
+    pass
+
+
 class ParameterNotDeclaredException(Exception):
     pass
 
@@ -644,7 +656,9 @@ class FakeNode:
         return results
 
     # endpoints
-    def create_publisher(self, msg_type: type, topic: str, qos_profile: QoSProfile, *, callback_group: Any = None) -> FakePublisher:
+    def create_publisher(
+        self, msg_type: type, topic: str, qos_profile: QoSProfile, *, callback_group: Any = None, event_callbacks: Any = None
+    ) -> FakePublisher:
         pub = FakePublisher(self, msg_type, topic, qos_profile)
         with GRAPH.lock:
             GRAPH.publishers.setdefault(topic, []).append(pub)
@@ -654,8 +668,11 @@ class FakeNode:
             GRAPH.discover(pub, sub, lambda s=sub: _replay(pub, s))
         return pub
 
-    def create_subscription(self, msg_type: type, topic: str, callback: Callable[[Any], None], qos_profile: QoSProfile, *, callback_group: Any = None) -> FakeSubscription:
+    def create_subscription(
+        self, msg_type: type, topic: str, callback: Callable[[Any], None], qos_profile: QoSProfile, *, callback_group: Any = None, event_callbacks: Any = None
+    ) -> FakeSubscription:
         sub = FakeSubscription(self, msg_type, topic, callback, qos_profile, callback_group)
+        sub.event_callbacks = event_callbacks
         with GRAPH.lock:
             GRAPH.subscriptions.setdefault(topic, []).append(sub)
             writers = list(GRAPH.publishers.get(topic, []))
@@ -874,6 +891,9 @@ def install(monkeypatch: Any) -> types.ModuleType:
         "rclpy.signals": _module("rclpy.signals", SignalHandlerOptions=SignalHandlerOptions),
         "rclpy.utilities": _module("rclpy.utilities", remove_ros_args=remove_ros_args),
         "rclpy.task": _module("rclpy.task", Future=Future),
+        "rclpy.event_handler": _module(
+            "rclpy.event_handler", PublisherEventCallbacks=PublisherEventCallbacks, SubscriptionEventCallbacks=SubscriptionEventCallbacks
+        ),
     }
     for name, module in submodules.items():
         setattr(rclpy, name.split(".", 1)[1], module)

@@ -14,7 +14,7 @@ from execution_engine.clock import Clock
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, TABLE_2
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
-from execution_engine.transport.qos import LATCHED
+from execution_engine.transport.qos import COMMANDS, LATCHED
 from execution_engine.transport.wire import SmStructure, sm_topic
 
 
@@ -338,3 +338,54 @@ def test_status_events_carry_operation_function_and_primitive_index(run_sim: Any
     times = [e["t"] for e in events]
     assert times == sorted(times)
     json.dumps(events)
+
+
+# ================================================================== lost commands (DDS start-up)
+def test_a_lost_command_is_sent_again_with_its_id_and_run_once(run_sim: Any) -> None:
+    """Over DDS a command can be lost before discovery matched; the machine sends it again, the
+    bridge carries the id out once."""
+
+    async def main(clock: Clock) -> tuple[Any, list[str], int]:
+        h = await Harness(clock, parameters={"bridge_timeout": 2.0}).start()
+        try:
+            publisher = h.machines["left_arm"].ctx.pub.bridge
+            sent: list[str] = []
+            real_publish = publisher.publish
+
+            def lossy(msg: String) -> None:  # the first command never arrives, every copy is recorded
+                sent.append(json.loads(msg.data)["id"])
+                if len(sent) > 1:
+                    real_publish(msg)
+
+            publisher.publish = lossy  # type: ignore[method-assign]
+            result = await h.result(h.send("left_arm", "gripper_open"))
+            return result, sent, len(h.backend.executed("left_arm"))
+        finally:
+            await h.close()
+
+    result, sent, executed = run_sim(main)
+    assert result.outcome == "succeeded"
+    assert len(sent) == 2 and sent[0] == sent[1]  # the same id again, after resend_interval (0.5 s)
+    assert executed == 1
+
+
+def test_the_bridge_runs_a_repeated_command_id_once_and_repeats_its_answer(run_sim: Any) -> None:
+    async def main(clock: Clock) -> tuple[list[dict[str, Any]], int]:
+        h = await Harness(clock).start()
+        try:
+            feedback: list[dict[str, Any]] = []
+            h.engine.create_subscription(String, "left_arm/bridge/feedback", lambda m: feedback.append(json.loads(m.data)), COMMANDS)
+            commands = h.engine.create_publisher(String, "left_arm/bridge/command")
+            command = String('{"id":"dup-1","group":"left_arm","op":"execute","primitive":{"kind":"end_effector","action":"gripper_open"},"v":1}')
+            commands.publish(command)
+            await clock.sleep(2.0)
+            commands.publish(command)  # the machine heard nothing and sends it again
+            await clock.sleep(2.0)
+            return feedback, len(h.backend.executed("left_arm"))
+        finally:
+            await h.close()
+
+    feedback, executed = run_sim(main)
+    assert executed == 1
+    finals = [f for f in feedback if f["status"] == "done"]
+    assert len(finals) == 2 and finals[0] == finals[1]  # the latest answer, repeated as it was

@@ -27,7 +27,7 @@ from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY,
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import Bool, String, Trigger, TriggerRequest, TriggerResponse
 from execution_engine.transport.port import Node
-from execution_engine.transport.qos import EVENTS, LATCHED
+from execution_engine.transport.qos import LATCHED
 from execution_engine.transport.wire import (
     ENGINE_CELL,
     ENGINE_SERVICES,
@@ -67,7 +67,7 @@ class ExecutionEngine:
         self.startup_timeout = float(node.declare_parameter("startup_timeout", 15.0, "how long to wait for the group machines (s)"))
         self.function_timeout = float(node.declare_parameter("function_timeout", 3600.0, "longest a function may take (s)"))
         self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
-        self._status_pub = node.create_publisher(String, ENGINE_STATUS, EVENTS)
+        self._status_pub = node.create_publisher(String, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
         self._cell_pub = node.create_publisher(String, ENGINE_CELL, LATCHED)
         self._cell_frames = CellFramesBroadcaster(node)  # the cell's frames on tf_static, for RViz
         node.create_subscription(Bool, SAFETY_STOP, self._on_safety, LATCHED)

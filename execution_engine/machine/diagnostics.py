@@ -93,6 +93,9 @@ class MachineDiagnostics:
             self._timer = None
 
     def _publish(self) -> None:
+        self._current_work()  # remember the function under way: ErrorHandling reports the one that failed
+        if self._pub.get_subscription_count() == 0:
+            return  # nobody listens: a state change costs nothing (the 1 Hz tick reaches a late monitor)
         self._pub.publish(DiagnosticArray(header=Header(stamp=self.node.now_stamp()), status=(self.status(),)))
 
     def _tick(self) -> None:

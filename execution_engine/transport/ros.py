@@ -19,6 +19,11 @@ worlds meet here and each keeps its own thread:
     client response it waits for -- which is why the executor is a MultiThreadedExecutor;
   - a client call is ``call_async``; the rclpy future's done-callback settles an asyncio future.
 
+  Publishers and subscriptions carry no QoS event handlers (but latched subscriptions, where an
+  outside publisher offering volatile QoS would silently not connect): rclpy 7.1's executor
+  rebuilds its wait set from every handler on each callback, which made a message between two
+  of our processes three times slower.
+
   Every callback is counted while it runs: rclpy 7.1.11 and older return from
   ``Executor.shutdown(timeout_sec)`` at once, so shutdown waits for that count, bounded.
 
@@ -63,7 +68,7 @@ from execution_engine.transport.port import (
     resolve_name,
     validate_node_name,
 )
-from execution_engine.transport.qos import CLOCK, COMMANDS, QoS
+from execution_engine.transport.qos import CLOCK, COMMANDS, Durability, QoS
 from execution_engine.transport.ros_args import raw_parameter_texts
 from execution_engine.transport.wire import CLOCK_TOPIC
 from execution_engine.transport.ros_convert import (
@@ -136,6 +141,8 @@ class _Rclpy:
     parameter_descriptor: Any
     parameter_value: Any
     set_parameters_result: Any
+    publisher_events: Any
+    subscription_events: Any
 
 
 def _import_rclpy() -> _Rclpy:
@@ -144,6 +151,7 @@ def _import_rclpy() -> _Rclpy:
         import rclpy.qos
         from rcl_interfaces.msg import ParameterDescriptor, ParameterValue as ParameterValueMsg, SetParametersResult
         from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+        from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
         from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
         from rclpy.node import Node as RclpyNode
         from rclpy.parameter import Parameter
@@ -168,6 +176,8 @@ def _import_rclpy() -> _Rclpy:
         parameter_descriptor=ParameterDescriptor,
         parameter_value=ParameterValueMsg,
         set_parameters_result=SetParametersResult,
+        publisher_events=PublisherEventCallbacks,
+        subscription_events=SubscriptionEventCallbacks,
     )
 
 
@@ -188,7 +198,10 @@ class _TopicEndpoint(Generic[M]):
 class _RosPublisher(_TopicEndpoint[M], Publisher[M]):
     def __init__(self, node: RosNode, msg_type: type[M], topic: str, qos: QoS) -> None:
         super().__init__(node, msg_type, topic, qos)
-        self.handle = node.ros_node.create_publisher(self.ros_class, topic, self.profile)
+        # No QoS event handlers: rclpy's executor rebuilds its wait set from every handler on each
+        # callback, and with two per endpoint that tripled the latency of a message (see the module).
+        events = node.transport.api.publisher_events(use_default_callbacks=False)
+        self.handle = node.ros_node.create_publisher(self.ros_class, topic, self.profile, event_callbacks=events)
 
     def publish(self, msg: M) -> None:
         if not self.alive:
@@ -205,8 +218,12 @@ class _RosSubscription(_TopicEndpoint[M], Subscription[M]):
     def __init__(self, node: RosNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS) -> None:
         super().__init__(node, msg_type, topic, qos)
         self._callback = callback
+        # rclpy's default handler warns of a publisher offering incompatible QoS; kept only where an
+        # outside publisher is likely to get it wrong: a latched (transient-local) subscription.
+        latched = qos.durability is Durability.TRANSIENT_LOCAL
+        events = None if latched else node.transport.api.subscription_events(use_default_callbacks=False)
         self.handle = node.ros_node.create_subscription(
-            self.ros_class, topic, self._on_ros_message, self.profile, callback_group=node.subscription_group
+            self.ros_class, topic, self._on_ros_message, self.profile, callback_group=node.subscription_group, event_callbacks=events
         )
 
     def get_publisher_count(self) -> int:
