@@ -174,7 +174,7 @@ class RosArguments:
             if flag in ("-p", "--param"):
                 name, sep, text = value.partition(":=")
                 if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.]*", name):
-                    raise RCLError(f"failed to initialize rcl: Couldn't parse parameter override rule: '{flag} {value}'. Expected format: 'name:=value'., at ./src/rcl/arguments.c:359")
+                    raise RCLError(f"failed to initialize rcl: Couldn't parse parameter override rule: '{flag} {value}'. Error: Expected lexeme type (22) not found, search ended at index {len(value)}, at ./src/rcl/arguments.c:359")
                 self.rules.append(("/**", {name: parse_value(text)}))
             elif flag in ("-r", "--remap"):
                 source, sep, target = value.partition(":=")

@@ -457,11 +457,16 @@ class FakeClock:
 
 
 class FakeLogger:
-    """rclpy's RcutilsLogger: severities as ints, a level from ``--log-level``, records on /rosout."""
+    """rclpy's RcutilsLogger: severities as ints, a level from ``--log-level``, records on /rosout.
+
+    As in rclpy, each call site (the first frame outside rclpy: file, function, line, bytecode
+    offset) keeps the severity of its first call; logging at another severity from the same
+    site raises ValueError."""
 
     def __init__(self, name: str, level: int) -> None:
         self.name = name
         self.level = level
+        self.contexts: dict[tuple[str, str, int, int], int] = {}
 
     def get_effective_level(self) -> int:
         return self.level
@@ -476,6 +481,12 @@ class FakeLogger:
             raise TypeError("message must be a string")
         if not self.is_enabled_for(severity):
             return False
+        frame = sys._getframe(1)
+        while frame.f_code.co_filename == __file__:  # rclpy's _find_caller: skip the logger itself
+            frame = frame.f_back  # type: ignore[assignment]
+        caller = (frame.f_code.co_filename, frame.f_code.co_name, frame.f_lineno, frame.f_lasti)
+        if self.contexts.setdefault(caller, severity) != severity:
+            raise ValueError("Logger severity cannot be changed between calls.")
         ROSOUT.append((self.name, severity, message))
         return True
 

@@ -75,9 +75,24 @@ class RosLogHandler(logging.Handler):
                 text = f"{text}\n{logging.Formatter().formatException(record.exc_info)}"
             if record.name not in self._loggers:  # a module's logger: say which, the node is rcutils' name
                 text = f"[{record.name}] {text}"
-            target.log(text, ros_severity(record.levelno))
+            _log(target, ros_severity(record.levelno), text)
         except Exception:  # noqa: BLE001 - logging must never break the caller
             self.handleError(record)
+
+
+def _log(target: Any, severity: int, text: str) -> None:
+    """One call site per severity: rclpy ties each call site (file, line) to the severity of its
+    first call and raises ValueError when the same site logs at another one."""
+    if severity >= 50:
+        target.fatal(text)
+    elif severity >= 40:
+        target.error(text)
+    elif severity >= 30:
+        target.warning(text)
+    elif severity >= 20:
+        target.info(text)
+    else:
+        target.debug(text)
 
 
 _HANDLER_LOCK = threading.Lock()
