@@ -186,3 +186,25 @@ def test_a_failure_report_of_a_huge_batch_stays_short() -> None:
     messages = tuple(Message(f"{i:08x}", set_speed(50)) for i in range(5000))
     text = str(Exchange(unknown=messages))
     assert "5000 messages: 00000000:set_speed:50 ... 00001387:set_speed:50" in text and len(text) < 300
+
+
+def test_an_ack_in_the_same_loop_pass_as_its_deadline_completes_the_call(run_sim: Run) -> None:
+    """The ack and the watchdog due together: the call succeeds, nothing is raised onto the loop,
+    and the watchdog still watches the calls behind it."""
+
+    async def main(clock: Clock) -> list[dict[str, Any]]:
+        raised: list[dict[str, Any]] = []
+        asyncio.get_running_loop().set_exception_handler(lambda loop, context: raised.append(context))
+        client, link, transport, call = await started(clock, codec.ENABLE_AIR, timeout=2.0)
+        await clock.sleep(0.5)
+        behind = asyncio.ensure_future(client.execute(codec.DISABLE_AIR))  # due at 2.5 s, never acked
+        await clock.sleep(0)
+        msg_id = ids(transport)[0]
+        clock.call_later(1.5 - 1e-10, link.data_received, ack_for(msg_id))  # lands in the watchdog's pass
+        (ack,) = await call
+        assert ack.id == msg_id
+        with pytest.raises(CommandTimeout, match="no ack within 2 s"):
+            await clock.wait_for(behind, 10.0)
+        return raised
+
+    assert run_sim(main) == []

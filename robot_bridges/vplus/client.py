@@ -343,6 +343,8 @@ class VPlusClient:
         for batch in [b for b in self._waiting if b.deadline <= now + _DEADLINE_SLACK]:
             self._waiting.discard(batch)
             missing = [m for m in batch.messages if m.id not in batch.acks]
+            if not missing or batch.future.done():
+                continue  # its last ack came in the same loop pass as its deadline: it made it
             batch.fail(
                 CommandTimeout(
                     f"no ack within {batch.timeout:g} s for {len(missing)} message(s), first {missing[0]} "
