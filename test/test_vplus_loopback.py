@@ -392,11 +392,33 @@ def test_the_server_refuses_clients_beyond_its_limit(run_sim: Run) -> None:
                 await c.connect()
             await clock.sleep(0.01)
             assert sim.clients == 2
-            with pytest.raises((ConnectionLost, CommandTimeout)):
+            with pytest.raises(ConnectionLost, match="the server said: refused: 2 clients already connected"):
                 await clients[2].execute(codec.ENABLE_AIR)
             assert "refused" in sim.errors[-1]
             for c in clients:
                 await c.close()
+
+    run_sim(main)
+
+
+def test_idle_clients_cannot_lock_others_out(run_sim: Run) -> None:
+    """Silent connections are closed after the idle timeout, so the slots free up; a client that
+    was closed for idleness reconnects and carries on."""
+
+    async def main(clock: Clock) -> None:
+        async with VPlusSimulator(clock, max_clients=2, idle_timeout=5.0) as sim:
+            squatters = [await asyncio.open_connection("127.0.0.1", sim.port) for _ in range(2)]
+            await clock.sleep(0.01)
+            assert sim.clients == 2
+            for reader, _ in squatters:  # each is told why, then closed
+                assert await clock.wait_for(reader.read(), 10.0) == b"closed: idle for 5 s\r\n"
+            assert sim.clients == 0
+            client = VPlusClient("127.0.0.1", sim.port, clock, timeout=1.0)
+            await client.connect()
+            assert (await client.execute(codec.ENABLE_AIR))[0].status == "done"
+            for _, writer in squatters:
+                writer.close()
+            await client.close()
 
     run_sim(main)
 

@@ -205,6 +205,8 @@ class VPlusClient:
         self.last_ack: Ack | None = None
         #: Why the connection last went down, for the report.
         self.last_failure: str = ""
+        #: A line the server sent unasked on the current connection (a refusal, an idle close).
+        self.server_said: str = ""
 
     @property
     def peer(self) -> str:
@@ -226,6 +228,7 @@ class VPlusClient:
             if attempt:
                 await self.clock.sleep(delay)
                 delay = min(delay * 2 or self.backoff, self.max_backoff)
+            self.server_said = ""  # a refusal arrives before create_connection returns: keep it
             try:
                 _, link = await self.clock.wait_for(
                     loop.create_connection(lambda: _Link(self), self.host, self.port), self.connect_timeout
@@ -382,6 +385,10 @@ class VPlusClient:
         try:
             ack = decode_ack(line)
         except DecodeError as error:
+            if not self._pending:  # nothing asked: the server speaks first, e.g. to refuse us or to close an idle link
+                self.server_said = line.decode("utf-8", "replace")[:200]
+                log.warning("V+ server %s says: %s", self.peer, self.server_said)
+                return
             self._fail_pending(ProtocolError(f"malformed ack: {error}", peer=self.peer))
             return
         batch = self._pending.pop(ack.id, None)
@@ -405,6 +412,8 @@ class VPlusClient:
     def _link_down(self, link: _Link, reason: str, kind: type[VPlusError] = ConnectionLost) -> None:
         if link is not self._link:
             return  # an old connection finishing its close
+        if self.server_said:
+            reason = f"{reason}; the server said: {self.server_said}"
         if not self.last_failure:
             self.last_failure = reason
             log.warning("V+ server %s: %s", self.peer, reason)

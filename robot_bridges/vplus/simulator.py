@@ -48,6 +48,7 @@ log = logging.getLogger(__name__)
 DEFAULT_PORT = 1234
 #: AdeptServer opens its socket with ``/CLIENTS 10``.
 MAX_CLIENTS = 10
+IDLE_TIMEOUT = 60.0  # run seconds a client may stay silent before its slot is freed (the back end reconnects)
 _READ_SIZE = 2048  # AdeptServer's /BUFFER_SIZE
 
 
@@ -92,6 +93,7 @@ class VPlusSimulator:
         max_clients: int = MAX_CLIENTS,
         max_line: int = MAX_LINE,
         skills: Iterable[Skill] = tuple(Skill),
+        idle_timeout: float = IDLE_TIMEOUT,
     ) -> None:
         self.clock = clock
         self.host = host
@@ -100,6 +102,9 @@ class VPlusSimulator:
         self.faults = faults or Faults()
         self.max_clients = max_clients
         self.max_line = max_line
+        if not idle_timeout > 0:
+            raise ValueError(f"idle_timeout must be > 0, got {idle_timeout}")
+        self.idle_timeout = idle_timeout
         #: The skills this server has; AdeptServer variants differ (gripper, movehome on some only).
         self.skills = frozenset(Skill(s) for s in skills)
         self.errors: list[str] = []
@@ -166,7 +171,12 @@ class VPlusSimulator:
     async def _on_connect(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = _peer(writer)
         if len(self._clients) >= self.max_clients:
-            self._error(f"{peer}: refused, {self.max_clients} clients already connected")
+            # Say why before closing: a client that is simply reset cannot tell a full server from a dead one.
+            reason = f"refused: {self.max_clients} clients already connected; idle ones are closed after {self.idle_timeout:g} s"
+            self._error(f"{peer}: {reason}")
+            writer.write(reason.encode() + b"\r\n")
+            with contextlib.suppress(ConnectionError):
+                await writer.drain()
             writer.close()
             return
         key = self._next_client
@@ -179,8 +189,8 @@ class VPlusSimulator:
             await self._serve(peer, reader, writer)
         except (ConnectionError, asyncio.IncompleteReadError) as error:
             log.info("%s: connection lost: %s", peer, error)
-        except asyncio.CancelledError:
-            raise
+        except asyncio.CancelledError:  # the server is closing: end quietly (a cancelled connection task
+            pass  # makes Python 3.11's start_server callback log a spurious error)
         except Exception as error:  # noqa: BLE001 - a simulator defect must be visible, not silent
             self._error(f"{peer}: simulator fault: {type(error).__name__}: {error}")
             log.exception("%s: simulator fault", peer)
@@ -192,7 +202,12 @@ class VPlusSimulator:
     async def _serve(self, peer: str, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         splitter = LineSplitter(self.max_line)
         while not writer.is_closing():
-            data = await reader.read(_READ_SIZE)
+            try:
+                data = await self.clock.wait_for(reader.read(_READ_SIZE), self.idle_timeout)
+            except asyncio.TimeoutError:  # a silent client must not hold a slot forever
+                log.info("%s: idle for %g s, closing", peer, self.idle_timeout)
+                writer.write(f"closed: idle for {self.idle_timeout:g} s".encode() + b"\r\n")
+                return
             if not data:
                 return
             t_recv = self.controller_time()
@@ -277,18 +292,23 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--speed", type=float, default=1.0, help="run-time speed factor: 10 simulates 10x faster than real time")
     parser.add_argument("--run-for", type=float, default=None, metavar="SECONDS", help="stop after this much run time")
     parser.add_argument("--max-clients", type=int, default=MAX_CLIENTS, help=f"simultaneous clients (default {MAX_CLIENTS})")
+    parser.add_argument(
+        "--idle-timeout", type=float, default=IDLE_TIMEOUT, help=f"close a client silent this long, run seconds (default {IDLE_TIMEOUT:g})"
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log every connection and error")
     return parser
 
 
-async def serve(clock: Clock, host: str, port: int, *, run_for: float | None = None, max_clients: int = MAX_CLIENTS) -> int:
+async def serve(
+    clock: Clock, host: str, port: int, *, run_for: float | None = None, max_clients: int = MAX_CLIENTS, idle_timeout: float = IDLE_TIMEOUT
+) -> int:
     """Run the simulator until SIGINT/SIGTERM or ``run_for`` seconds of run time; returns an exit code."""
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     try:
-        async with VPlusSimulator(clock, host, port, max_clients=max_clients) as sim:
+        async with VPlusSimulator(clock, host, port, max_clients=max_clients, idle_timeout=idle_timeout) as sim:
             print(f"V+ simulator on {host}:{sim.port} (x{clock.speed:g}); Ctrl-C stops it", flush=True)
             with contextlib.suppress(asyncio.TimeoutError):
                 await clock.wait_for(stop.wait(), run_for)
@@ -310,9 +330,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.max_clients < 1:
         print(f"error: --max-clients must be >= 1, got {args.max_clients}", file=sys.stderr)
         return 2
+    if not (args.idle_timeout > 0):
+        print(f"error: --idle-timeout must be > 0, got {args.idle_timeout}", file=sys.stderr)
+        return 2
     try:
         return run_with_clock(
-            lambda clock: serve(clock, args.host, args.port, run_for=args.run_for, max_clients=args.max_clients),
+            lambda clock: serve(clock, args.host, args.port, run_for=args.run_for, max_clients=args.max_clients, idle_timeout=args.idle_timeout),
             scaled_clock(args.speed),
         )
     except OSError as error:
