@@ -439,3 +439,15 @@ def test_the_factory_points_at_a_real_controller_without_a_simulator(run_sim: Ru
         assert backend.label == "vplus 192.0.2.10:1234" and backend.name == "vplus"
 
     run_sim(main)
+
+
+@pytest.mark.parametrize("clock_kind", ["scaled", "simulated"])
+def test_a_real_controller_refuses_a_speed_factor(clock_kind: str) -> None:
+    """Run time faster than real time would shorten every ack timeout of real motions."""
+    from execution_engine.clock import run_with_clock, scaled_clock, simulated_clock
+
+    async def main(clock: Clock) -> None:
+        with pytest.raises(ValueError, match=r"a real controller \(10.0.0.2\) runs in real time: run with --speed 1"):
+            await create(clock, BackendOptions(robot=ADEPT_VIPER_S850, host="10.0.0.2", port=1234))
+
+    run_with_clock(main, scaled_clock(10.0) if clock_kind == "scaled" else simulated_clock())

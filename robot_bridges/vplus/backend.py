@@ -484,6 +484,10 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     vision pipeline in as a :class:`MeasurementPort`).
     """
     options.check("vplus", ADEPT_VIPER_S850, _EXTRAS)
+    if options.host is not None and (clock.simulated or clock.speed != 1.0):
+        # A real controller moves in real time: a scaled clock would divide every ack timeout by the
+        # speed factor (real motions "time out"), a simulated one would jump every network wait.
+        raise ValueError(f"vplus: a real controller ({options.host}) runs in real time: run with --speed 1 (the default)")
     if options.rsi_listen is not None:
         raise ValueError("the vplus back end takes no rsi_listen (that is for KUKA RSI)")
     if options.faults:
