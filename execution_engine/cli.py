@@ -181,11 +181,13 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
         printer = LivePrinter(out, (*app.robot.group_names, "engine"))
         observer.sinks.append(printer.on_status)
         observer.engine_sinks.append(printer.on_engine)
+        observer.event_sinks.append(printer.on_event)
     if trace is not None:
         writer = TraceWriter(trace)
         observer.sinks.append(writer.on_status)
         observer.engine_sinks.append(writer.on_engine)
-    console = OperatorConsole(deployment.transport.create_node("operator_console"), out)
+        observer.event_sinks.append(writer.on_event)
+    console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
     loop = asyncio.get_running_loop()
     interactive = console.attach_stdin(loop) if args.interactive else False
     run_task = loop.create_task(deployment.engine.run(app))
@@ -196,7 +198,7 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
         interrupts += 1
         if interrupts == 1:
             out.write("\ninterrupt: stopping the application (Ctrl-C again to abandon)\n")
-            loop.create_task(console.command("stop"))
+            console.spawn(console.command("stop", "Ctrl-C"), loop)
         else:
             run_task.cancel()
 

@@ -1,28 +1,38 @@
 """Watching a run from outside: the live console view and the JSON-lines trace.
 
-Both are plain subscribers of the machines' ``status`` topics and the engine's status, like any
-viewer on a ROS 2 network would be; they see exactly what an operator's tool would see.
+Both are plain subscribers of the machines' ``status`` topics and the engine's status and
+events, like any viewer on a ROS 2 network would be; they see exactly what an operator's tool
+would see.
 
 Trace lines (one JSON object each) carry ``t`` (run seconds), ``event`` (transition,
-function_start, function_end, primitive_start, primitive_end, error), ``group``,
-``operation`` and, where they apply, ``function``, ``from``, ``to``, ``signal``, ``state``,
-``primitive``, ``index``, ``count``, ``outcome``, ``error`` and, on ``primitive_end``, the
-``result`` the robot reported (joint positions in rad, TCP pose in m and quaternion, a vision
-measurement).
+function_start, function_end, primitive_start, primitive_end, error, engine_state, operator),
+``group``, ``operation`` and, where they apply, ``function``, ``from``, ``to``, ``signal``,
+``state``, ``primitive``, ``index``, ``count``, ``outcome``, ``error`` and, on
+``primitive_end``, the ``result`` the robot reported (joint positions in rad, TCP pose in m and
+quaternion, a vision measurement).
+
+The engine's lines have ``group`` "engine": ``engine_state`` (``from``, ``to``, ``message``) on
+every change of the engine's state, ``operator`` (``command``, ``source``, ``state`` -- the
+engine state it came in, "alarm" for an answer to an alarm --, ``accepted``, ``answer``) on
+every operator command, and ``error`` (the message of a failed run or an alarm).
 """
 from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable
-from typing import IO, Any
+from typing import IO, Any, TypeVar
 
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS
-from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus, SmStatus, sm_topic
+from execution_engine.transport.wire import ENGINE_EVENTS, ENGINE_STATUS, EngineEvent, EngineStatus, SmStatus, sm_topic
 
-TRACE_EVENTS = ("transition", "function_start", "function_end", "primitive_start", "primitive_end", "error")
+M = TypeVar("M")
+
+TRACE_EVENTS = (
+    "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator",
+)
 
 
 def trace_record(status: SmStatus) -> dict[str, Any]:
@@ -51,35 +61,47 @@ def trace_record(status: SmStatus) -> dict[str, Any]:
     return record
 
 
+def engine_record(event: EngineEvent) -> dict[str, Any]:
+    """The trace line of one engine event: a state change or an operator command."""
+    record: dict[str, Any] = {"t": round(event.t, 6), "group": "engine", "operation": event.operation}
+    if event.event == "state":
+        record.update({"event": "engine_state", "from": event.from_state, "to": event.state, "message": event.message})
+    else:
+        record.update({
+            "event": "operator", "command": event.command, "source": event.source,
+            "state": event.state, "accepted": event.accepted, "answer": event.answer,
+        })
+    return record
+
+
 class RunObserver:
-    """Subscribes to every group's status and the engine's; fans events out to sinks."""
+    """Subscribes to every group's status and the engine's status and events; fans them out to sinks."""
 
     def __init__(self, node: Node, groups: Iterable[str]) -> None:
         self.node = node
         self.sinks: list[Callable[[SmStatus], None]] = []
         self.engine_sinks: list[Callable[[EngineStatus], None]] = []
+        self.event_sinks: list[Callable[[EngineEvent], None]] = []
         self.rejected: list[str] = []
         for group in groups:
-            node.create_subscription(String, sm_topic(group, "status"), self._on_status, EVENTS)
-        node.create_subscription(String, ENGINE_STATUS, self._on_engine, EVENTS)
+            self._subscribe(SmStatus, sm_topic(group, "status"), self.sinks)
+        self._subscribe(EngineStatus, ENGINE_STATUS, self.engine_sinks)
+        self._subscribe(EngineEvent, ENGINE_EVENTS, self.event_sinks)
 
-    def _on_status(self, msg: String) -> None:
-        try:
-            status = codec.decode(SmStatus, msg.data, source="status")
-        except codec.WireError as error:
-            self.rejected.append(str(error))
-            return
-        for sink in self.sinks:
-            sink(status)
+    def _subscribe(self, cls: type[M], topic: str, sinks: list[Callable[[M], None]]) -> None:
+        """Decode each message of ``topic`` and hand it to every sink; garbage is kept in ``rejected``."""
+        source = self.node.resolve(topic)
 
-    def _on_engine(self, msg: String) -> None:
-        try:
-            status = codec.decode(EngineStatus, msg.data, source=self.node.resolve(ENGINE_STATUS))
-        except codec.WireError as error:
-            self.rejected.append(str(error))
-            return
-        for sink in self.engine_sinks:
-            sink(status)
+        def deliver(msg: String) -> None:
+            try:
+                message = codec.decode(cls, msg.data, source=source)
+            except codec.WireError as error:
+                self.rejected.append(str(error))
+                return
+            for sink in sinks:
+                sink(message)
+
+        self.node.create_subscription(String, topic, deliver, EVENTS)
 
 
 class TraceWriter:
@@ -97,6 +119,9 @@ class TraceWriter:
         if status.state in ("failed", "alarm") and status.message and status.message != self._last_engine_message:
             self._last_engine_message = status.message
             self._write({"t": round(status.t, 6), "event": "error", "group": "engine", "operation": status.operation_id, "error": status.message})
+
+    def on_event(self, event: EngineEvent) -> None:
+        self._write(engine_record(event))
 
     def _write(self, record: dict[str, Any]) -> None:
         self.stream.write(json.dumps(record, separators=(",", ":")) + "\n")
@@ -143,6 +168,12 @@ class LivePrinter:
             progress = f"operation {status.operation_index}/{status.operation_count}" if status.operation_count else ""
             message = f" - {status.message}" if status.message else ""
             self._print(status.t, "engine", f"{status.state.upper()} {progress}{message}")
+
+    def on_event(self, event: EngineEvent) -> None:
+        """Operator commands (state changes are printed from the status, with their progress)."""
+        if event.event == "operator":
+            answer = "accepted" if event.accepted else "refused"
+            self._print(event.t, "engine", f"operator {event.command} from {event.source}: {answer} - {event.answer}")
 
     def _print(self, t: float, who: str, text: str) -> None:
         self.stream.write(f"[{t:9.3f} s] {who:<{self.width}}  {text}\n")

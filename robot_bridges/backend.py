@@ -18,32 +18,20 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from enum import Enum
 from typing import TYPE_CHECKING
 
 from core_functions.geometry import Pose
 from core_functions.primitives import Primitive, PrimitiveResult
 from core_functions.robots import RobotModel
 
+# FaultKind is defined with the wire messages: it travels in the bridge's error feedback and on
+# to the engine, which decides from it alone whether a second try can succeed.
+from execution_engine.transport.wire import FaultKind
+
+__all__ = ["BackendOptions", "BridgeError", "FaultKind", "RobotBackend"]
+
 if TYPE_CHECKING:  # the cell snapshot is only a parameter type here
     from execution_engine.transport.wire import CellSnapshot
-
-
-class FaultKind(Enum):
-    """Why a primitive failed, so error handling and reports can tell faults apart."""
-
-    UNREACHABLE = "unreachable"  # no IK solution / outside the workspace
-    JOINT_LIMIT = "joint_limit"  # a target or a path point beyond a joint limit
-    COLLISION = "collision"
-    VISION = "vision"  # feature not found, camera failure
-    UNSUPPORTED = "unsupported"  # the robot cannot do this primitive
-    STOPPED = "stopped"  # stop requested while executing
-    TIMEOUT = "timeout"  # the controller did not answer in time
-    CONNECTION = "connection"  # the link to the controller broke
-    PROTOCOL = "protocol"  # the controller answered something we cannot parse
-    CONTROLLER = "controller"  # the controller reported a fault (RSI stop, drive error)
-    BUSY = "busy"  # a primitive is already running for this group
-    INTERNAL = "internal"  # a defect in the bridge itself
 
 
 class BridgeError(Exception):

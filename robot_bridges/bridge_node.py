@@ -99,7 +99,7 @@ class BridgeNode:
             self._report(f"rejected command: {error}")
             return
         if command.group != group:
-            self._send(group, command.id, "error", error=f"command for group {command.group!r} arrived on {source}")
+            self._send(group, command.id, "error", error=f"command for group {command.group!r} arrived on {source}", fault=FaultKind.PROTOCOL)
             return
         if command.id in self._answered:  # re-sent: carried out once, answered again
             latest = self._answered[command.id]
@@ -118,7 +118,7 @@ class BridgeNode:
         group = command.group
         busy = self._running.get(group)
         if busy is not None and not busy.done():
-            self._send(group, command.id, "error", error=f"{FaultKind.BUSY.value}: {group} is already executing a primitive")
+            self._send(group, command.id, "error", error=f"{FaultKind.BUSY.value}: {group} is already executing a primitive", fault=FaultKind.BUSY)
             return
         loop = asyncio.get_running_loop()
         task = loop.create_task(self._execute(command), name=f"bridge {group} {command.id}")
@@ -137,13 +137,13 @@ class BridgeNode:
         try:
             result = await self.backend.execute(group, command.primitive)
         except BridgeError as error:
-            self._send(group, command.id, "error", error=str(error))
+            self._send(group, command.id, "error", error=str(error), fault=error.kind)
         except asyncio.CancelledError:
-            self._send(group, command.id, "error", error=f"{FaultKind.STOPPED.value}: bridge shutting down")
+            self._send(group, command.id, "error", error=f"{FaultKind.STOPPED.value}: bridge shutting down", fault=FaultKind.STOPPED)
             raise
         except Exception as error:  # noqa: BLE001 - a back-end defect must still reach the machine
             log.exception("%s: %s failed", self.backend.name, describe(command.primitive))
-            self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}")
+            self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}", fault=FaultKind.INTERNAL)
         else:
             self._send(group, command.id, "done", result=result)
 
@@ -155,10 +155,10 @@ class BridgeNode:
             if command.op == "stop":
                 await self._await_stopped(group)
         except BridgeError as error:
-            self._send(group, command.id, "error", error=str(error))
+            self._send(group, command.id, "error", error=str(error), fault=error.kind)
         except Exception as error:  # noqa: BLE001
             log.exception("%s: %s of %s failed", self.backend.name, command.op, group)
-            self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}")
+            self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}", fault=FaultKind.INTERNAL)
         else:
             self._send(group, command.id, status)
 
@@ -173,8 +173,11 @@ class BridgeNode:
             raise BridgeError(FaultKind.TIMEOUT, f"{group}: the primitive did not stop within {self.stop_timeout:g} s") from None
 
     # ----------------------------------------------------------------------------- outbound
-    def _send(self, group: str, command_id: str, status: str, *, error: str | None = None, result: PrimitiveResult | None = None) -> None:
-        feedback = BridgeFeedback(id=command_id, group=group, status=status, error=error, result=result, t=self.clock.now())  # type: ignore[arg-type]
+    def _send(
+        self, group: str, command_id: str, status: str, *, error: str | None = None, fault: FaultKind | None = None, result: PrimitiveResult | None = None
+    ) -> None:
+        """One feedback message; an error carries its FaultKind, so the machine need not parse text."""
+        feedback = BridgeFeedback(id=command_id, group=group, status=status, error=error, fault=fault, result=result, t=self.clock.now())  # type: ignore[arg-type]
         message = String(codec.encode(feedback))
         if command_id in self._answered:
             self._answered[command_id] = message

@@ -51,6 +51,7 @@ class _Failure:
     after: float  # fraction of the primitive's duration
     message: str
     while_paused: bool = False
+    on: str | None = None  # only a primitive of this KIND (None: the next one, whatever it is)
 
 
 @dataclass
@@ -80,8 +81,17 @@ class ScriptedBackend(RobotBackend):
         return self.robot.group_names
 
     # ------------------------------------------------------------------------ scripting
-    def fail_next(self, group: str, kind: FaultKind = FaultKind.JOINT_LIMIT, after: float = 0.5, message: str = "injected", *, while_paused: bool = False) -> None:
-        self._failures[group].append(_Failure(kind, after, message, while_paused))
+    def fail_next(
+        self, group: str, kind: FaultKind = FaultKind.JOINT_LIMIT, after: float = 0.5, message: str = "injected", *, while_paused: bool = False, on: str | None = None
+    ) -> None:
+        """Fail the group's next primitive (of KIND ``on``, if given) with ``kind`` at ``after`` x its duration."""
+        self._failures[group].append(_Failure(kind, after, message, while_paused, on))
+
+    def _take_failure(self, group: str, primitive: Primitive) -> _Failure | None:
+        for index, failure in enumerate(self._failures[group]):
+            if failure.on is None or failure.on == primitive.KIND:
+                return self._failures[group].pop(index)
+        return None
 
     def duration(self, primitive: Primitive) -> float:
         if isinstance(primitive, Dwell):
@@ -116,7 +126,7 @@ class ScriptedBackend(RobotBackend):
     async def _run(self, group: str, primitive: Primitive) -> None:
         state = self._state[group]
         total = self.duration(primitive)
-        failure = self._failures[group].pop(0) if self._failures[group] else None
+        failure = self._take_failure(group, primitive)
         elapsed = 0.0
         while elapsed < total or state.paused:
             if state.stopped:

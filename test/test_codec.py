@@ -15,7 +15,9 @@ from execution_engine.transport.wire import (
     BridgeCommand,
     BridgeFeedback,
     CellSnapshot,
+    EngineEvent,
     EngineStatus,
+    FaultKind,
     GroupProgress,
     SmRequest,
     SmResult,
@@ -42,6 +44,8 @@ MESSAGES = [
     EngineStatus(app="a", state="running", operation_index=2, operation_count=9, t=4.0, groups={"left_arm": GroupProgress("Motion", "2", "debur_drilling")}),
     CellSnapshot(name="c", frames=(CellFrame("drill_1", POSE, "hole", "part", {"diameter": "0.0048"}),), truth={"drill_1": POSE}),
     SyncMessage(group="left_arm", key="k", event="arrived", state="FullBodyMotion", t=1.0),
+    BridgeFeedback(id="c5", group="left_arm", status="error", error="joint_limit: LARM_JOINT1", fault=FaultKind.JOINT_LIMIT, t=4.0),
+    EngineEvent(event="operator", t=5.0, state="alarm", operation="3", command="reset", source="terminal console (key 'x')", accepted=True, answer="retrying"),
 ]
 
 

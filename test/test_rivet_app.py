@@ -29,7 +29,7 @@ from robot_bridges.registry import create_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"
-TRACE_EVENTS = {"transition", "function_start", "function_end", "primitive_start", "primitive_end", "error"}
+TRACE_EVENTS = {"transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator"}
 
 
 def run_cli(tmp_path: Path, *extra: str) -> tuple[int, str, list[dict[str, Any]]]:
@@ -118,9 +118,9 @@ def test_operations_follow_each_other_only_when_every_group_is_done(clean_run: t
 
 
 def test_an_injected_fault_recovers_by_retry(tmp_path: Path) -> None:
-    code, output, events = run_cli(tmp_path, "--fault", "right_arm:joint_limit@0.5")
+    code, output, events = run_cli(tmp_path, "--fault", "right_arm:timeout@0.5")
     assert code == 0, output
-    assert "retries: 1" in output and "joint_limit" in output
+    assert "retries: 1" in output and "retrying (attempt 2 of 2): timeout is transient" in output
     right = [(e["from"], e["to"]) for e in events if e["group"] == "right_arm" and e["event"] == "transition"]
     assert ("Motion", "ErrorHandling") in right and ("ErrorHandling", "Ready") in right
     left = [(e["from"], e["to"]) for e in events if e["group"] == "left_arm" and e["event"] == "transition"]
@@ -128,12 +128,14 @@ def test_an_injected_fault_recovers_by_retry(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("kind", ["joint_limit", "unreachable"])
-def test_a_persistent_fault_ends_the_run_with_a_report_and_the_safe_pose(tmp_path: Path, kind: str) -> None:
-    code, output, events = run_cli(tmp_path, "--fault", f"right_arm:{kind}@0.5", "--fault", f"right_arm:{kind}@0.5")
+def test_a_deterministic_fault_ends_the_run_without_a_retry_with_a_report_and_the_safe_pose(tmp_path: Path, kind: str) -> None:
+    code, output, events = run_cli(tmp_path, "--fault", f"right_arm:{kind}@0.5")
     assert code == 1
     assert "application rivet_installation: FAILED" in output
     assert "right_arm: pick_rivet failed" in output and kind in output
-    assert "robot sent to safe pose 'initial'" in output
+    assert f"not retried: {kind} is deterministic" in output and "retries:" not in output  # the policy allows 1
+    assert "robot at safe pose 'initial'" in output
+    assert "right_arm    retreat  done: 0.05 m back along the tool axis" in output
     errors = [e for e in events if e["event"] == "error"]
     assert errors and errors[0]["group"] == "right_arm"
     left = [(e["from"], e["to"]) for e in events if e["group"] == "left_arm" and e["event"] == "transition"]

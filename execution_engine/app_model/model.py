@@ -26,7 +26,9 @@ class ErrorPolicy:
     retries: int = 0
     action: ErrorAction = "abort"
     safe_pose: str | None = None  # a robot pose or a cell <joint_pose>; None when the robot has none
-    alarm_timeout: float = 0.0  # seconds an alarm waits for an operator reset; 0 = forever
+    alarm_timeout: float = 0.0  # wall seconds an alarm waits for an operator reset; 0 = forever
+    safe_speed: float = 0.3  # speed fraction of the move to the safe pose (after the retreat)
+    retreat: float = 0.05  # m an arm backs out along its tool axis before the safe pose; 0 = none
 
 
 @dataclass(frozen=True)

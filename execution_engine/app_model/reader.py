@@ -62,6 +62,8 @@ class PolicySite:
     action: str | None = None
     safe_pose: str | None = None
     alarm_timeout: float | None = None
+    safe_speed: float | None = None
+    retreat: float | None = None
 
 
 @dataclass
@@ -146,12 +148,9 @@ class ApplicationReader:
             policy.retries = int(retries)
         policy.action = element.get("action")
         policy.safe_pose = element.get("safe_pose")
-        timeout = element.get("alarm_timeout")
-        if timeout is not None:
-            try:
-                policy.alarm_timeout = float(timeout)
-            except ValueError:
-                pass
+        policy.alarm_timeout = _number(element.get("alarm_timeout"))
+        policy.safe_speed = _number(element.get("safe_speed"))
+        policy.retreat = _number(element.get("retreat"))
         return policy
 
     def read_operation(self, element: etree._Element, at: int, robot: RobotModel | None) -> OperationSite | None:
@@ -219,3 +218,13 @@ class ApplicationReader:
             call = CallSite(group, name or "", params, at)
             complete = complete and bool(name)
         return call if complete else None
+
+
+def _number(text: str | None) -> float | None:
+    """An error_policy number as written; None when absent or not a number (the XSD reports it)."""
+    if text is None:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return None

@@ -279,4 +279,6 @@ class ApplicationChecker:
             action=action,
             safe_pose=safe_pose or default_pose,
             alarm_timeout=policy.alarm_timeout or 0.0,
+            safe_speed=ErrorPolicy.safe_speed if policy.safe_speed is None else policy.safe_speed,
+            retreat=ErrorPolicy.retreat if policy.retreat is None else policy.retreat,
         )

@@ -6,34 +6,46 @@ result for N and is back in Ready -- the paper's guarantee that keeps the arms c
 group whose function is ``wait`` (no seconds) sits the operation out.
 
 When a function fails, dispatching stops, the other groups are paused, and the application's
-error policy decides: retry (reset the machine, send the function again), then either
-``abort`` (stop everything, end), ``safe_pose`` (stop, then move every group to a named joint
-pose, end) or ``alarm`` (hold everything until an operator resets, then retry; or stop).
-Operators pause, resume, stop and step the whole application through the engine's services;
-a ``true`` on ``/cell/safety_stop`` pauses every group until an operator resumes.
+error policy decides: retry (reset the machine, send the function again) -- only when the
+fault's kind can go away by itself (:mod:`.faults`) --, then either ``abort`` (stop everything,
+end), ``safe_pose`` (stop; retreat, slow down and move every group to a named joint pose,
+:mod:`.safe_pose`; end) or ``alarm`` (hold everything until an operator resets, then retry; or
+stops; ``alarm_timeout`` on the operator's wall clock, :mod:`.wall_clock`).
+Operators start, pause, resume, step, stop and reset the whole application through the engine's
+services (or, in its own process, :meth:`ExecutionEngine.operator_command`); a ``true`` on
+``/cell/safety_stop`` pauses every group until an operator resumes.  Every command and every
+change of the engine's state is published on ``execution_engine/events`` (traces) and every
+command is listed in the run report with its run time and source.
 """
 from __future__ import annotations
 
 import asyncio
-from dataclasses import dataclass
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
+from execution_engine.engine.faults import verdict
 from execution_engine.engine.group_link import GroupLink
-from execution_engine.engine.report import GroupError, RunReport
+from execution_engine.engine.operator import CONSOLE_KEYS, ENDED, Flags, decide
+from execution_engine.engine.report import GroupError, OperatorAction, RunReport
+from execution_engine.engine.safe_pose import SafePosePlan, go_safe
+from execution_engine.engine.wall_clock import RealWallClock, WallClock, wake_loop
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import Bool, String, Trigger, TriggerRequest, TriggerResponse
 from execution_engine.transport.port import Node
-from execution_engine.transport.qos import LATCHED
+from execution_engine.transport.qos import EVENTS, LATCHED
 from execution_engine.transport.wire import (
     ENGINE_CELL,
+    ENGINE_EVENTS,
     ENGINE_SERVICES,
     ENGINE_STATUS,
     SAFETY_STOP,
     CellSnapshot,
+    EngineEvent,
     EngineStatus,
     GroupProgress,
     SmRequest,
@@ -59,15 +71,18 @@ class ApplicationAborted(Exception):
 class ExecutionEngine:
     """One engine node; runs one application at a time."""
 
-    def __init__(self, node: Node, catalog: Catalog | None = None) -> None:
+    def __init__(self, node: Node, catalog: Catalog | None = None, wall_clock: WallClock | None = None) -> None:
         self.node = node
         self.clock = node.clock
+        #: The operator's clock (alarm_timeout): wall time even when the run clock is scaled or simulated.
+        self.wall_clock: WallClock = wall_clock or RealWallClock()
         self.catalog = catalog or full_catalog()
         self.autostart = bool(node.declare_parameter("autostart", True, "start running as soon as the machines are ready"))
         self.startup_timeout = float(node.declare_parameter("startup_timeout", 15.0, "how long to wait for the group machines (s)"))
         self.function_timeout = float(node.declare_parameter("function_timeout", 3600.0, "longest a function may take (s)"))
         self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
         self._status_pub = node.create_publisher(String, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
+        self._events_pub = node.create_publisher(String, ENGINE_EVENTS, EVENTS)  # every state change and command, once
         self._cell_pub = node.create_publisher(String, ENGINE_CELL, LATCHED)
         self._cell_frames = CellFramesBroadcaster(node)  # the cell's frames on tf_static, for RViz
         node.create_subscription(Bool, SAFETY_STOP, self._on_safety, LATCHED)
@@ -89,6 +104,7 @@ class ExecutionEngine:
         self._start_requested = False
         self._alarm_reset = False
         self._progress: dict[str, GroupProgress] = {}
+        self._tasks: set[asyncio.Task[tuple[bool, str]]] = set()  # safety-stop pauses under way
 
     # ============================================================================ running
     async def run(self, app: Application) -> RunReport:
@@ -97,6 +113,7 @@ class ExecutionEngine:
         self.app = app
         report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
         self.report = report
+        self._set_state("idle", "")
         for group in app.robot.group_names:
             if group not in self.links:
                 self.links[group] = GroupLink(self.node, group, self.service_timeout)
@@ -134,7 +151,6 @@ class ExecutionEngine:
 
     def _reset_run_state(self) -> None:
         """A long-lived engine node runs one application after another: nothing carries over."""
-        self.state = "idle"
         self._op_index, self._operation, self._message = 0, None, ""
         self._paused = self._stepping = self._alarm_reset = False
         self._stop_reason = None
@@ -284,7 +300,8 @@ class ExecutionEngine:
         assert self.app is not None and self.report is not None
         dispatch = pending[group]
         error = result.error or result.outcome
-        self.report.errors.append(GroupError(group, operation.id, dispatch.request.function, error, dispatch.request.attempt, self.clock.now()))
+        fault = result.fault.value if result.fault is not None else None
+        self.report.errors.append(GroupError(group, operation.id, dispatch.request.function, error, dispatch.request.attempt, self.clock.now(), fault))
         if result.outcome == "preempted" or self._stop_reason is not None:
             raise ApplicationAborted(self._stop_reason or f"{group} was stopped: {error}")
         failed = {group: dispatch}
@@ -292,25 +309,47 @@ class ExecutionEngine:
             if partner != group and partner in pending:
                 failed[partner] = pending[partner]
         others = [g for g in pending if g not in failed]
-        self._set_state("error", f"{group}: {dispatch.request.function} failed: {error}")
-        await self._pause_groups(others)
-        await self._collect(failed, group)
+        what = f"{group}: {dispatch.request.function} failed: {error}"
         policy = self.app.error_policy
         attempt = dispatch.request.attempt
-        if attempt <= policy.retries:
-            self.report.retries += 1
-            await self._retry(operation, pending, failed, attempt + 1)
-        elif policy.action == "alarm" and await self._alarm(group, error, policy.alarm_timeout):
-            self.report.retries += 1
-            await self._retry(operation, pending, failed, attempt + 1)
+        _, plan = self._retry_plan([result], attempt)  # said at once; the partners' results may change it
+        self._set_state("error", f"{what} - {plan}")
+        await self._pause_groups(others)
+        await self._collect(failed, group)
+        partner_results = [d.future.result() for d in failed.values() if d.future.done() and not d.future.cancelled()]
+        retry, plan = self._retry_plan(partner_results or [result], attempt)
+        self._message = f"{what} - {plan}"
+        unanswered = ""
+        if policy.action == "alarm" and not retry:
+            retry, unanswered = await self._alarm(group, error, plan, policy.alarm_timeout)  # notes how it was answered
         else:
+            self._note_recovery(plan)
+        if not retry:
             await self._stop_groups(others, pending)
             if policy.action == "safe_pose" and policy.safe_pose:
-                await self._go_safe(policy.safe_pose)
-            raise ApplicationAborted(f"{group}: {dispatch.request.function} failed: {error}")
+                await self._go_safe([g for g in pending if pending[g].call.function != "wait"])
+            raise ApplicationAborted(what + unanswered)
+        self.report.retries += 1
+        await self._retry(operation, pending, failed, attempt + 1)
         for other in others:
             await self.links[other].command("resume")
         self._set_state("running")
+
+    def _retry_plan(self, results: list[SmResult], attempt: int) -> tuple[bool, str]:
+        """Whether the policy retries automatically, and the words for the report and the console."""
+        assert self.app is not None
+        retries = self.app.error_policy.retries
+        retryable, why = verdict(r.fault for r in results)
+        if not retryable:
+            return False, f"not retried: {why}"
+        if attempt > retries:
+            return False, f"not retried: the error policy allows {retries} retr{'y' if retries == 1 else 'ies'}"
+        return True, f"retrying (attempt {attempt + 1} of {retries + 1}): {why}"
+
+    def _note_recovery(self, recovery: str) -> None:
+        """Say on the latest error what the policy did about it."""
+        assert self.report is not None and self.report.errors
+        self.report.errors[-1] = replace(self.report.errors[-1], recovery=recovery)
 
     async def _pause_groups(self, groups: list[str]) -> None:
         """Pause running groups and wait (bounded) until the pause has landed."""
@@ -339,21 +378,41 @@ class ExecutionEngine:
         resent = self._dispatch(operation, {g: d.call for g, d in failed.items()}, attempt)
         pending.update(resent)
 
-    async def _alarm(self, group: str, error: str, timeout: float) -> bool:
-        """Hold for an operator reset; True to retry, False to give up (stop or timeout)."""
+    # ----------------------------------------------------------------------------- alarm
+    def alarm_message(self, group: str, error: str, plan: str, timeout: float) -> str:
+        """The alarm as the operator reads it: what failed, and exactly how to answer it."""
+        reset, stop = (self.node.resolve(engine_service(c)) for c in ("reset", "stop"))
+        limit = f"; gives up after {timeout:g} s (wall clock)" if timeout > 0 else ""
+        return (
+            f"ALARM {group}: {error} ({plan}) - to retry: key {CONSOLE_KEYS['reset']!r} (run --interactive) or call {reset}; "
+            f"to abort: key {CONSOLE_KEYS['stop']!r} or call {stop}{limit}"
+        )
+
+    async def _alarm(self, group: str, error: str, plan: str, timeout: float) -> tuple[bool, str]:
+        """Hold for an operator reset: (True, "") to retry; (False, why) to give up -- a stop, or
+        ``timeout`` seconds of the operator's wall clock without an answer."""
         self._alarm_reset = False
-        self._set_state("alarm", f"ALARM {group}: {error} - reset to retry, stop to abort")
-        deadline = self.clock.now() + timeout if timeout > 0 else None
-        while not self._alarm_reset and self._stop_reason is None:
-            remaining = None if deadline is None else deadline - self.clock.now()
-            if remaining is not None and remaining <= 0:
-                return False
-            self._control.clear()
-            try:
-                await self.clock.wait_for(self._control.wait(), remaining)
-            except asyncio.TimeoutError:
-                return False
-        return self._alarm_reset and self._stop_reason is None
+        self._set_state("alarm", self.alarm_message(group, error, plan, timeout))
+        expired = False
+
+        def expire() -> None:
+            nonlocal expired
+            expired = True
+            self._poke()
+
+        timer = self.wall_clock.call_later(timeout, wake_loop(asyncio.get_running_loop(), expire)) if timeout > 0 else None
+        try:
+            while not self._alarm_reset and self._stop_reason is None and not expired:
+                await self._wait_control()
+        finally:
+            if timer is not None:
+                timer.cancel()
+        if self._alarm_reset and self._stop_reason is None:
+            self._note_recovery(f"{plan}; alarm reset by an operator: retried")
+            return True, ""
+        unanswered = "" if self._stop_reason is not None else f"; alarm not answered within {timeout:g} s (wall clock)"
+        self._note_recovery(f"{plan}{unanswered or '; alarm answered with stop'}")
+        return False, unanswered
 
     async def _stop_groups(self, groups: list[str], pending: dict[str, _Dispatch]) -> None:
         """Stop running groups and wait (bounded) for their preempted results."""
@@ -368,35 +427,47 @@ class ExecutionEngine:
             except asyncio.TimeoutError:
                 self.links[group].forget(dispatch.request.id)
 
-    async def _go_safe(self, pose: str) -> None:
-        """Reset every group and move each one that the pose covers to it, all at once."""
+    # ------------------------------------------------------------------------- safe pose
+    async def _go_safe(self, in_work: list[str]) -> None:
+        """Retreat, slow down and move every group the pose covers to it (:mod:`.safe_pose`)."""
         assert self.app is not None and self.report is not None
-        self._set_state("error", f"moving to safe pose {pose!r}")
-        calls: dict[str, Call] = {}
+        plan = SafePosePlan.build(self.app, self.catalog, in_work)
+        self._set_state("error", f"moving to safe pose {plan.pose!r}")
         unlinked = [g for g, ok in zip(self.links, await asyncio.gather(*(link.link(self.startup_timeout) for link in self.links.values()))) if not ok]
         if unlinked:
             raise ApplicationAborted(
                 f"the request and result topics of {', '.join(unlinked)} did not match within {self.startup_timeout:g} s"
             )
-        for group, link in self.links.items():
-            if link.state == ERROR_HANDLING:
-                await link.command("reset")
-            await link.wait_state((READY,), self.service_timeout)
-            spec = self.catalog.get("move_to_joint_pose")
-            assert spec is not None
-            if not spec.check((pose,), BindContext(self.app.robot, group, self.app.cell)):
-                calls[group] = Call(group, "move_to_joint_pose", (pose,))
-        safe_op = Operation(id=f"safe_pose:{pose}", name="safe pose", line=0, col=0, calls=calls)
-        sent = self._dispatch(safe_op, calls, attempt=1)
-        self.report.safe_pose = pose
+        self.report.safe_pose = plan.pose
+        self.report.safe_pose_steps.extend(await go_safe(self, self.app, plan))
+        missed = self.report.safe_pose_missed
+        reached = "NOT reached by " + ", ".join(missed) if missed else "reached"
+        self._set_state("error", f"safe pose {plan.pose!r} {reached}")
+
+    async def run_stage(self, stage: str, calls: dict[str, Call]) -> dict[str, SmResult | None]:
+        """One stage of the way to the safe pose, for every group at once (a :class:`StageRunner`)."""
+        assert self.app is not None
+        operation = Operation(id=f"safe_pose/{stage}", name=f"safe pose: {stage}", line=0, col=0, calls=calls)
+        sent = self._dispatch(operation, calls, attempt=1)
+        results: dict[str, SmResult | None] = {}
         for group, dispatch in sent.items():
             try:
-                result = await self.clock.wait_for(dispatch.future, self.function_timeout)
+                results[group] = await self.clock.wait_for(dispatch.future, self.function_timeout)
             except asyncio.TimeoutError:
-                self.report.errors.append(GroupError(group, safe_op.id, "move_to_joint_pose", "safe pose not reached in time", 1, self.clock.now()))
-                continue
-            if result.outcome != "succeeded":
-                self.report.errors.append(GroupError(group, safe_op.id, "move_to_joint_pose", result.error or result.outcome, 1, self.clock.now()))
+                self.links[group].forget(dispatch.request.id)
+                results[group] = None
+        return results
+
+    async def make_ready(self, groups: Iterable[str]) -> list[str]:
+        """Reset machines left in ErrorHandling; the groups that are not in Ready afterwards."""
+        stuck = []
+        for group in groups:
+            link = self.links[group]
+            if link.state == ERROR_HANDLING:
+                await link.command("reset")
+            if not await link.wait_state((READY,), self.service_timeout):
+                stuck.append(group)
+        return stuck
 
     async def _end_all(self) -> bool:
         """Send every machine to Finish; True when all of them got there."""
@@ -410,86 +481,104 @@ class ExecutionEngine:
 
     # -------------------------------------------------------------------------- operator
     async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:
-        handler = getattr(self, f"_cmd_{command}")
-        ok, message = await handler(f"service {self.node.resolve(engine_service(command))}")
+        ok, message = await self.operator_command(command, f"service {self.node.resolve(engine_service(command))}")
         return Trigger.Response(ok, message)
 
-    async def _cmd_start(self, source: str) -> tuple[bool, str]:
-        if self._start_requested or self.state != "idle":
-            return False, f"already {self.state}"
-        self._start_requested = True
-        self._poke()
-        return True, "started"
+    async def operator_command(self, command: str, source: str) -> tuple[bool, str]:
+        """Take (or refuse) an operator command; it is recorded before it takes effect.
 
-    async def _cmd_pause(self, source: str) -> tuple[bool, str]:
-        if self.state in ("finished", "failed", "stopped", "stopping"):
-            return False, f"cannot pause: {self.state}"
+        ``source`` says where it came from: the services pass their resolved name, the terminal
+        console of ``run --interactive`` (in this process) the key that was pressed.
+        """
+        ok, answer = decide(command, self.state, Flags(self._start_requested, self._safety_active))
+        self._record(OperatorAction(self.clock.now(), command, source, self.state, ok, answer))
+        if not ok:
+            return False, answer
+        notes = await getattr(self, f"_cmd_{command}")(source)
+        self._poke()
+        return True, answer + "".join(f"; {note}" for note in notes)
+
+    def _record(self, action: OperatorAction) -> None:
+        if self.report is not None and self.state not in ENDED:
+            self.report.operator_actions.append(action)
+        self._publish_event(EngineEvent(
+            "operator", action.t, action.state, self._operation.id if self._operation else None,
+            command=action.command, source=action.source, accepted=action.accepted, answer=action.answer,
+        ))
+
+    async def _cmd_start(self, source: str) -> list[str]:
+        self._start_requested = True
+        return []
+
+    async def _cmd_pause(self, source: str) -> list[str]:
         self._paused = True
         self._stepping = False
         answers = [await link.command("pause") for link in self.links.values() if link.state in (READY, *WORKING_STATES)]
         self._set_state("paused", f"paused by {source}")
-        self._poke()
-        return True, "paused" + "".join(f"; {m}" for ok, m in answers if not ok)
+        return [m for ok, m in answers if not ok]
 
-    async def _cmd_resume(self, source: str) -> tuple[bool, str]:
-        if self.state in ("finished", "failed", "stopped", "stopping", "alarm"):
-            return False, f"cannot resume: {self.state}" + (" (use reset to acknowledge the alarm)" if self.state == "alarm" else "")
-        if self._safety_active:
-            return False, "the safety stop is still active"
+    async def _resume_groups(self) -> None:
         self._paused = False
-        self._stepping = False
         for link in self.links.values():
             if link.state in (PAUSE, READY):
                 await link.command("resume")
-        self._set_state("running", f"resumed by {source}")
-        self._poke()
-        return True, "resumed"
 
-    async def _cmd_step(self, source: str) -> tuple[bool, str]:
-        if self.state in ("finished", "failed", "stopped", "stopping", "alarm"):
-            return False, f"cannot step: {self.state}"
+    async def _cmd_resume(self, source: str) -> list[str]:
+        self._stepping = False
+        await self._resume_groups()
+        self._set_state("running", f"resumed by {source}")
+        return []
+
+    async def _cmd_step(self, source: str) -> list[str]:
         self._stepping = True
         self._start_requested = True
         if self._paused:
-            self._paused = False
-            for link in self.links.values():
-                if link.state in (PAUSE, READY):
-                    await link.command("resume")
-        self._poke()
-        return True, "stepping: the next operation runs, then the application pauses"
+            await self._resume_groups()
+        return []
 
-    async def _cmd_stop(self, source: str) -> tuple[bool, str]:
-        if self.state in ("finished", "failed", "stopped"):
-            return False, f"already {self.state}"
+    async def _cmd_stop(self, source: str) -> list[str]:
         self._stop_reason = f"stopped by {source}"
         for link in self.links.values():
             if link.state in (READY, PAUSE, *WORKING_STATES):
                 await link.command("stop")
-        self._poke()
-        return True, "stopping"
+        return []
 
-    async def _cmd_reset(self, source: str) -> tuple[bool, str]:
-        if self.state != "alarm":
-            return False, f"no alarm to reset ({self.state})"
+    async def _cmd_reset(self, source: str) -> list[str]:
         self._alarm_reset = True
-        self._poke()
-        return True, "alarm acknowledged: retrying"
+        return []
 
     def _on_safety(self, msg: Bool) -> None:
         if msg.data and not self._safety_active:
             self._safety_active = True
-            asyncio.get_running_loop().create_task(self._cmd_pause(f"safety stop on {SAFETY_STOP}"))
+            task = asyncio.get_running_loop().create_task(self.operator_command("pause", f"safety stop on {self.node.resolve(SAFETY_STOP)}"))
+            self._tasks.add(task)
+            task.add_done_callback(self._task_done)
         elif not msg.data and self._safety_active:
             self._safety_active = False
             self._message = "safety stop cleared: resume to continue"
             self._publish_status()
 
+    def _task_done(self, task: asyncio.Task[tuple[bool, str]]) -> None:
+        """A background command must not fail unseen."""
+        self._tasks.discard(task)
+        error = None if task.cancelled() else task.exception()
+        if error is not None:
+            self.node.report_fault("safety stop pause", error)
+
     # ---------------------------------------------------------------------------- status
     def _set_state(self, state: str, message: str | None = None) -> None:
+        previous = self.state
         self.state = state
         if message is not None:
             self._message = message
+        if state != previous:
+            operation = self._operation.id if self._operation else None
+            self._publish_event(EngineEvent("state", self.clock.now(), state, operation, from_state=previous, message=self._message))
         self._publish_status()
+
+    def _publish_event(self, event: EngineEvent) -> None:
+        if self._events_pub.get_subscription_count() > 0:
+            self._events_pub.publish(String(codec.encode(event)))
 
     def _publish_status(self) -> None:
         if self._status_pub.get_subscription_count() == 0:

@@ -1,15 +1,22 @@
-"""What a run of an application came to: the summary an operator reads and the CLI's exit code."""
+"""What a run of an application came to: the summary an operator reads and the CLI's exit code.
+
+Besides times and errors, the report says what recovery did and who intervened: each error
+says whether it was retried (and why not), the safe pose lists every retreat, speed and move
+with its outcome -- a move that failed is not reported as "sent to the safe pose" -- and every
+operator command is listed with its run time and its source.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Literal
 
 RunOutcome = Literal["finished", "failed", "stopped"]
+StepOutcome = Literal["done", "skipped", "failed"]
 
 
 @dataclass(frozen=True)
 class GroupError:
-    """One failed function, as the machine reported it."""
+    """One failed function, as the machine reported it, and what the error policy did about it."""
 
     group: str
     operation: str
@@ -17,6 +24,30 @@ class GroupError:
     error: str
     attempt: int
     t: float
+    fault: str | None = None  # the FaultKind's value, e.g. "joint_limit"
+    recovery: str = ""  # "retried: timeout is transient", "not retried: joint_limit is deterministic", ...
+
+
+@dataclass(frozen=True)
+class OperatorAction:
+    """One operator command the engine received: when, what, from where, and what came of it."""
+
+    t: float
+    command: str
+    source: str  # "terminal console (key p)", "service /execution_engine/pause", "safety stop on /cell/safety_stop"
+    state: str  # the engine state the command arrived in ("alarm": an answer to the alarm)
+    accepted: bool
+    answer: str
+
+
+@dataclass(frozen=True)
+class SafePoseStep:
+    """One step of the way to the safe pose for one group."""
+
+    group: str
+    step: Literal["retreat", "speed", "move"]
+    outcome: StepOutcome
+    detail: str
 
 
 @dataclass
@@ -33,6 +64,8 @@ class RunReport:
     errors: list[GroupError] = field(default_factory=list)
     retries: int = 0
     safe_pose: str | None = None  # the pose the robot was sent to after a failure, if any
+    safe_pose_steps: list[SafePoseStep] = field(default_factory=list)
+    operator_actions: list[OperatorAction] = field(default_factory=list)
     finished_cleanly: bool = False  # every group reached Finish
 
     @property
@@ -43,6 +76,12 @@ class RunReport:
     def ok(self) -> bool:
         """Finished, every group in Finish; errors recovered by a retry do not spoil a run."""
         return self.outcome == "finished" and self.finished_cleanly
+
+    @property
+    def safe_pose_missed(self) -> list[str]:
+        """Groups sent to the safe pose that did not get there."""
+        moved = {s.group for s in self.safe_pose_steps if s.step == "move" and s.outcome == "done"}
+        return sorted({s.group for s in self.safe_pose_steps} - moved)
 
     def summary_lines(self) -> list[str]:
         lines = [
@@ -57,9 +96,24 @@ class RunReport:
         if self.retries:
             lines.append(f"  retries: {self.retries}")
         for err in self.errors:
-            lines.append(f"  error: {err.group} operation {err.operation} {err.function} (attempt {err.attempt}) at {err.t:.2f} s: {err.error}")
-        if self.safe_pose:
-            lines.append(f"  robot sent to safe pose {self.safe_pose!r}")
+            recovery = f" - {err.recovery}" if err.recovery else ""
+            lines.append(f"  error: {err.group} operation {err.operation} {err.function} (attempt {err.attempt}) at {err.t:.2f} s: {err.error}{recovery}")
+        lines += self._safe_pose_lines()
+        for action in self.operator_actions:
+            answer = "accepted" if action.accepted else "refused"
+            lines.append(f"  operator: {action.command} at {action.t:.2f} s from {action.source} (in {action.state}): {answer} - {action.answer}")
         if not self.finished_cleanly:
             lines.append("  not every group reached Finish")
         return lines
+
+    def _safe_pose_lines(self) -> list[str]:
+        if not self.safe_pose:
+            return []
+        missed = self.safe_pose_missed
+        if not self.safe_pose_steps:
+            head = f"  safe pose {self.safe_pose!r}: no group was moved"
+        elif missed:
+            head = f"  safe pose {self.safe_pose!r} NOT reached by {', '.join(missed)}"
+        else:
+            head = f"  robot at safe pose {self.safe_pose!r}"
+        return [head] + [f"    {s.group:<12} {s.step:<8} {s.outcome}: {s.detail}" for s in self.safe_pose_steps]

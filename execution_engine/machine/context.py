@@ -24,7 +24,7 @@ from execution_engine.machine.function_run import FunctionRun, SkillError
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
 from execution_engine.transport.port import Node, Publisher, Subscription, wait_until_matched
-from execution_engine.transport.wire import BridgeCommand, SmRequest, SmResult, SmStatus, SyncMessage
+from execution_engine.transport.wire import BridgeCommand, FaultKind, SmRequest, SmResult, SmStatus, SyncMessage
 
 
 @dataclass(frozen=True)
@@ -166,8 +166,9 @@ class MachineContext:
     def acknowledged(self, command_id: str) -> None:
         self._sent.pop(command_id, None)
 
-    def send_sync(self, key: str, event: str, error: str | None = None) -> None:
-        message = SyncMessage(group=self.group, key=key, event=event, state=self.state_name, t=self.clock.now(), error=error)  # type: ignore[arg-type]
+    def send_sync(self, key: str, event: str, error: str | None = None, fault: FaultKind | None = None) -> None:
+        """Announce at a barrier; a failure carries its kind, so the partners report the same one."""
+        message = SyncMessage(group=self.group, key=key, event=event, state=self.state_name, t=self.clock.now(), error=error, fault=fault)  # type: ignore[arg-type]
         self.record_sync(message)
         self.pub.sync.publish(String(codec.encode(message)))
 
@@ -196,23 +197,30 @@ class MachineContext:
         try:
             run.start()
         except SkillError as error:
-            self.finish_function("aborted", str(error))
+            self.finish_function("aborted", str(error), FaultKind.SKILL)
             return None
         return None
 
-    def finish_function(self, outcome: str, error: str | None = None) -> None:
-        """Close the current function and send its result to the engine."""
+    def finish_function(self, outcome: str, error: str | None = None, fault: FaultKind | None = None) -> None:
+        """Close the current function and send its result (with the fault's kind) to the engine."""
         run = self.run
         if run is None:
             return
         if not run.finished:
             run.close()
         self.status("function_end", outcome=outcome, error=error, count=run.started)
-        self.send_result(run.request, outcome, error, t_start=run.t_start, primitives=run.started)
+        self.send_result(run.request, outcome, error, fault, t_start=run.t_start, primitives=run.started)
         self.run = None
 
     def send_result(
-        self, request: SmRequest, outcome: str, error: str | None, *, t_start: float | None = None, primitives: int = 0
+        self,
+        request: SmRequest,
+        outcome: str,
+        error: str | None,
+        fault: FaultKind | None = None,
+        *,
+        t_start: float | None = None,
+        primitives: int = 0,
     ) -> None:
         now = self.clock.now()
         result = SmResult(
@@ -222,6 +230,7 @@ class MachineContext:
             operation=request.operation,
             function=request.function,
             error=error,
+            fault=fault,
             t_start=now if t_start is None else t_start,
             t_end=now,
             primitives=primitives,

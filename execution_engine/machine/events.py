@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Literal, Union
 
 from execution_engine.clock import Clock
-from execution_engine.transport.wire import BridgeFeedback, SmRequest, SyncMessage
+from execution_engine.transport.wire import BridgeFeedback, FaultKind, SmRequest, SyncMessage
 
 OperatorCommand = Literal["pause", "resume", "stop", "reset"]
 
@@ -42,8 +42,11 @@ class SyncEvent:
 
 @dataclass(frozen=True)
 class FaultEvent:
+    """Something outside a state went wrong (garbage feedback, a defect in a callback)."""
+
     where: str
     error: str
+    kind: FaultKind = FaultKind.INTERNAL
 
 
 Event = Union[OperatorSignal, RequestEvent, FeedbackEvent, SyncEvent, FaultEvent]

@@ -60,6 +60,7 @@ from execution_engine.transport.wire import (
     SYNC_TOPIC,
     BridgeFeedback,
     CellSnapshot,
+    FaultKind,
     SmRequest,
     SmStructure,
     SyncMessage,
@@ -133,7 +134,7 @@ class GroupMachine:
         node.fault_handler = self._on_fault
         self._pause_pending_in: str | None = None  # the working state a pause was accepted in
         self.machine = self._build()
-        self.userdata = UserData(primitive=None, resume_command=None, early_done=None, error=None, stop_reason=None)
+        self.userdata = UserData(primitive=None, resume_command=None, early_done=None, error=None, fault=None, stop_reason=None)
         self._diagnostics = MachineDiagnostics(node, self.ctx, lambda: self.userdata.get("error"))  # diagnostics, 1 Hz
         self._located = LocatedFramesPublisher(node, g)  # vision corrections -> the engine's tf_static
 
@@ -199,7 +200,7 @@ class GroupMachine:
         try:
             feedback = codec.decode(BridgeFeedback, msg.data, source=self.node.resolve(bridge_topic(self.group, "feedback")))
         except codec.WireError as error:
-            self.events.put(FaultEvent("bridge feedback", str(error)))
+            self.events.put(FaultEvent("bridge feedback", str(error), FaultKind.PROTOCOL))
             return
         self.events.put(FeedbackEvent(feedback))
 
@@ -259,6 +260,7 @@ class GroupMachine:
                 self.node.logger.exception("%s: machine fault", self.node.fully_qualified_name)
                 self.ctx.status("error", error=f"internal fault: {type(error).__name__}: {error}")
                 self.userdata["error"] = f"internal fault: {type(error).__name__}: {error}"
+                self.userdata["fault"] = FaultKind.INTERNAL
                 initial = ERROR_HANDLING
 
     async def _wait_for_restart(self) -> None:

@@ -7,7 +7,8 @@ dropped, an ``end`` request is kept for a state that can honour it.
 
 Userdata keys (SMACH blackboard): ``primitive`` (Ready -> working state), ``resume_command``
 (the bridge command a paused working state resumes), ``early_done`` (its completion, if it
-arrived during the pause), ``error`` and ``stop_reason`` (for ErrorHandling).
+arrived during the pause), ``error``, ``fault`` (its :class:`FaultKind`, which the result carries
+to the engine) and ``stop_reason`` (for ErrorHandling).
 """
 from __future__ import annotations
 
@@ -38,10 +39,24 @@ from execution_engine.machine.table import (
     signals_of,
 )
 from execution_engine.smach import State
-from execution_engine.transport.wire import BridgeFeedback
+from execution_engine.transport.wire import BridgeFeedback, FaultKind
 
-UD_KEYS = ("primitive", "resume_command", "early_done", "error", "stop_reason")
+UD_KEYS = ("primitive", "resume_command", "early_done", "error", "fault", "stop_reason")
 _EPSILON = 1e-9  # run seconds: a deadline this close is reached (float sums never land on it exactly)
+#: What a problem of the bridge link is, when a control command gets no acknowledgement or fails.
+Problem = tuple[FaultKind, str]
+
+
+def fail(userdata: MutableMapping[str, Any], kind: FaultKind, error: str) -> str:
+    """Leave by Table 2's error, with the error's text and kind for ErrorHandling (and the engine)."""
+    userdata["error"] = error
+    userdata["fault"] = kind
+    return ERROR
+
+
+def feedback_fault(feedback: BridgeFeedback) -> FaultKind:
+    """The kind of an error feedback; a bridge that does not say is not trusted with a retry."""
+    return feedback.fault if feedback.fault is not None else FaultKind.PROTOCOL
 
 
 class MachineState(State):
@@ -58,7 +73,7 @@ class MachineState(State):
         if request.kind == "end":
             self.ctx.events.put_back(event)
             return
-        self.ctx.send_result(request, "aborted", f"{self.ctx.group} is in {self.name}, not Ready: request refused")
+        self.ctx.send_result(request, "aborted", f"{self.ctx.group} is in {self.name}, not Ready: request refused", FaultKind.BUSY)
 
     @staticmethod
     def stopping(userdata: MutableMapping[str, Any], signal: OperatorSignal) -> str:
@@ -71,32 +86,32 @@ class MachineState(State):
         if isinstance(event, RequestEvent):
             self.refuse(event)
         elif isinstance(event, FaultEvent):
-            userdata["error"] = f"{event.where}: {event.error}"
-            return ERROR
+            return fail(userdata, event.kind, f"{event.where}: {event.error}")
         return None
 
     async def _control(
         self, op: str, *, keep_done_of: str | None = None, userdata: MutableMapping[str, Any] | None = None
-    ) -> str | None:
+    ) -> Problem | None:
         """Send pause/resume/stop to the bridge and wait for its acknowledgement.
 
-        Returns None when acknowledged, else the problem.  Events that arrive meanwhile are
+        Returns None when acknowledged, else the problem and its kind.  Events that arrive meanwhile are
         handed back in order, except the final feedback of ``keep_done_of`` (the primitive
         finished while we paused it), which is kept in userdata for the resume.
         """
         ctx = self.ctx
-        problem = await ctx.link_bridge()
-        if problem is not None:
-            return problem
+        link_problem = await ctx.link_bridge()
+        if link_problem is not None:
+            return FaultKind.CONNECTION, link_problem
         control_id = ctx.send_bridge(op)
         expected = {"pause": "paused", "resume": "resumed", "stop": "stopped"}[op]
         deadline = ctx.clock.now() + ctx.config.bridge_timeout
         resend_at = ctx.clock.now() + ctx.config.resend_interval
         held: list[Event] = []
+        problem: Problem | None = None
         while True:
             now = ctx.clock.now()
             if now >= deadline - _EPSILON:
-                problem = f"timeout: the bridge did not acknowledge {op} within {ctx.config.bridge_timeout:g} s"
+                problem = FaultKind.TIMEOUT, f"timeout: the bridge did not acknowledge {op} within {ctx.config.bridge_timeout:g} s"
                 break
             if now >= resend_at - _EPSILON:
                 ctx.resend_bridge(control_id)
@@ -108,7 +123,7 @@ class MachineState(State):
                 if event.feedback.status == expected:
                     break
                 if event.feedback.status == "error":
-                    problem = f"{op} failed: {event.feedback.error}"
+                    problem = feedback_fault(event.feedback), f"{op} failed: {event.feedback.error}"
                     break
             elif (
                 isinstance(event, FeedbackEvent)
@@ -147,17 +162,19 @@ class ReadyState(MachineState):
             if isinstance(event, RequestEvent):
                 if event.request.kind == "end":
                     if run is not None:
-                        ctx.finish_function("preempted", "application ended")
+                        ctx.finish_function("preempted", "application ended", FaultKind.STOPPED)
                     ctx.hold = False
                     return END
                 if run is not None:
-                    ctx.send_result(event.request, "aborted", f"{ctx.group} is busy with {run.label}: request refused")
+                    ctx.send_result(event.request, "aborted", f"{ctx.group} is busy with {run.label}: request refused", FaultKind.BUSY)
                     continue
                 problem = await ctx.wait_for_cell(event.request.cell) if event.request.cell else None
-                problem = problem or ctx.start_function(event.request)
+                kind = FaultKind.TIMEOUT  # the cell model did not arrive in time
+                if problem is None:
+                    problem, kind = ctx.start_function(event.request), FaultKind.UNSUPPORTED  # unknown function, bad params
                 if problem is not None:
                     ctx.status("error", error=problem, operation=event.request.operation, function=event.request.function)
-                    ctx.send_result(event.request, "aborted", problem)
+                    ctx.send_result(event.request, "aborted", problem, kind)
             elif isinstance(event, OperatorSignal):
                 if event.command == "pause":
                     ctx.hold = True
@@ -166,10 +183,10 @@ class ReadyState(MachineState):
                 elif event.command == "stop":
                     ctx.hold = False
                     if run is not None:
-                        ctx.finish_function("preempted", f"stopped by {event.source}")
+                        ctx.finish_function("preempted", f"stopped by {event.source}", FaultKind.STOPPED)
             elif isinstance(event, FaultEvent) and run is not None:
                 ctx.status("error", error=f"{event.where}: {event.error}")
-                ctx.finish_function("aborted", f"{event.where}: {event.error}")
+                ctx.finish_function("aborted", f"{event.where}: {event.error}", event.kind)
             # FeedbackEvent here is stale (an old command); SyncEvent is already on the board.
 
 
@@ -195,8 +212,7 @@ class WorkingState(MachineState):
         """Send ``primitive`` once the bridge is linked, then wait for its end."""
         problem = await self.ctx.link_bridge()
         if problem is not None:
-            userdata["error"] = f"{describe(primitive)}: {problem}"
-            return ERROR
+            return fail(userdata, FaultKind.CONNECTION, f"{describe(primitive)}: {problem}")
         command_id = self.ctx.send_bridge("execute", primitive)
         return await self._await_done(userdata, command_id, accepted=False)
 
@@ -205,10 +221,9 @@ class WorkingState(MachineState):
         userdata["early_done"] = None
         if early is not None:
             return self._finish(userdata, early)
-        outcome = await self._control("resume")
-        if outcome is not None:
-            userdata["error"] = outcome
-            return ERROR
+        problem = await self._control("resume")
+        if problem is not None:
+            return fail(userdata, *problem)
         return await self._await_done(userdata, command_id, accepted=True)
 
     async def _await_done(self, userdata: MutableMapping[str, Any], command_id: str, *, accepted: bool) -> str:
@@ -224,8 +239,7 @@ class WorkingState(MachineState):
             if now >= deadline - _EPSILON:
                 what = "finish" if accepted else "accept"
                 limit = ctx.config.primitive_timeout if accepted else ctx.config.bridge_timeout
-                userdata["error"] = f"timeout: the bridge did not {what} {describe(primitive)} within {limit:g} s"
-                return ERROR
+                return fail(userdata, FaultKind.TIMEOUT, f"timeout: the bridge did not {what} {describe(primitive)} within {limit:g} s")
             if not accepted and now >= resend_at - _EPSILON:  # lost before the bridge matched: same id again
                 ctx.resend_bridge(command_id)
                 resend_at = now + ctx.config.resend_interval
@@ -254,8 +268,7 @@ class WorkingState(MachineState):
         if signal.command == "pause":
             problem = await self._control("pause", keep_done_of=command_id, userdata=userdata)
             if problem is not None:
-                userdata["error"] = problem
-                return ERROR
+                return fail(userdata, *problem)
             userdata["resume_command"] = command_id
             return PAUSE_SIGNAL
         if signal.command == "stop":
@@ -272,19 +285,18 @@ class WorkingState(MachineState):
         if feedback.status == "error":
             error = feedback.error or "bridge reported an error without a message"
             ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="error", error=error)
-            userdata["error"] = f"{describe(primitive)}: {error}"
-            return ERROR
+            return fail(userdata, feedback_fault(feedback), f"{describe(primitive)}: {error}")
         result = feedback.result if feedback.result is not None else primitive.RESULT()
         if type(result) is not primitive.RESULT:
-            userdata["error"] = f"{describe(primitive)}: the bridge answered a {type(result).__name__}, not a {primitive.RESULT.__name__}"
-            return ERROR
+            answered = f"the bridge answered a {type(result).__name__}, not a {primitive.RESULT.__name__}"
+            return fail(userdata, FaultKind.PROTOCOL, f"{describe(primitive)}: {answered}")
         ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done", result=result)
         try:
             ctx.run.advance(result)
         except SkillError as error:
-            userdata["error"] = str(error)
-            return ERROR
+            return fail(userdata, FaultKind.SKILL, str(error))
         return OK
+
 
 class SyncState(WorkingState):
     """FullBodyMotion / MasterSlave: meet the partner groups, then the leader moves the robot.
@@ -317,8 +329,7 @@ class SyncState(WorkingState):
                 ctx.sync_sent = key
                 outcome = await self._execute(userdata, primitive)
             else:
-                outcome = ERROR
-                userdata["error"] = "synchronised command lost after a pause"
+                outcome = fail(userdata, FaultKind.INTERNAL, "synchronised command lost after a pause")
             return self._report(userdata, key, outcome)
         return await self._follow(userdata, key, leader, partners)
 
@@ -328,7 +339,7 @@ class SyncState(WorkingState):
             ctx.send_sync(key, "done")
             ctx.sync_key = ctx.sync_sent = None
         elif outcome == ERROR:
-            ctx.send_sync(key, "failed", userdata.get("error"))
+            ctx.send_sync(key, "failed", userdata.get("error"), userdata.get("fault"))
             ctx.sync_key = ctx.sync_sent = None
         return outcome
 
@@ -339,17 +350,15 @@ class SyncState(WorkingState):
             board = ctx.sync_board.get(key, {})
             failed = [m for m in board.values() if m.event == "failed"]
             if failed:
-                userdata["error"] = f"partner {failed[0].group} failed: {failed[0].error}"
                 ctx.sync_key = None
-                return ERROR
+                return fail(userdata, failed[0].fault or FaultKind.PROTOCOL, f"partner {failed[0].group} failed: {failed[0].error}")
             missing = [g for g in partners if g not in board]
             if not missing:
                 return None
             now = ctx.clock.now()
             if now >= deadline - _EPSILON:
-                userdata["error"] = f"timeout: {', '.join(missing)} did not reach the {self.name} barrier within {ctx.config.sync_timeout:g} s"
-                self._report(userdata, key, ERROR)
-                return ERROR
+                late = f"timeout: {', '.join(missing)} did not reach the {self.name} barrier within {ctx.config.sync_timeout:g} s"
+                return self._report(userdata, key, fail(userdata, FaultKind.TIMEOUT, late))
             event = await ctx.events.get(max(0.0, min(deadline, now + ctx.config.resend_interval) - now))
             if event is None:  # a partner that matched after our announcement has not heard it
                 ctx.send_sync(key, "arrived")
@@ -365,9 +374,8 @@ class SyncState(WorkingState):
             board = ctx.sync_board.get(key, {})
             failed = [m for g, m in board.items() if m.event == "failed" and g != ctx.group]
             if failed:
-                userdata["error"] = f"{failed[0].group} failed the {self.name}: {failed[0].error}"
                 ctx.sync_key = None
-                return ERROR
+                return fail(userdata, failed[0].fault or FaultKind.PROTOCOL, f"{failed[0].group} failed the {self.name}: {failed[0].error}")
             if board.get(leader) is not None and board[leader].event == "done":
                 ctx.sync_key = ctx.sync_sent = None
                 assert ctx.run is not None
@@ -375,13 +383,12 @@ class SyncState(WorkingState):
                 try:
                     ctx.run.advance(userdata["primitive"].RESULT())
                 except SkillError as error:
-                    userdata["error"] = str(error)
-                    return ERROR
+                    return fail(userdata, FaultKind.SKILL, str(error))
                 return OK
             event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
             if event is None:
-                userdata["error"] = f"timeout: {leader} did not finish the {self.name} within {ctx.config.primitive_timeout:g} s"
-                return self._report(userdata, key, ERROR)
+                late = f"timeout: {leader} did not finish the {self.name} within {ctx.config.primitive_timeout:g} s"
+                return self._report(userdata, key, fail(userdata, FaultKind.TIMEOUT, late))
             outcome = await self._interrupt(userdata, event)
             if outcome is not None:
                 return outcome
@@ -410,8 +417,7 @@ class PauseState(MachineState):
         early: BridgeFeedback | None = userdata.get("early_done")
         if early is not None and early.status == "error":  # it failed as the pause landed
             userdata["early_done"] = None
-            userdata["error"] = f"while pausing: {early.error}"
-            return ERROR
+            return fail(userdata, feedback_fault(early), f"while pausing: {early.error}")
         while True:
             event = await ctx.events.get()
             if isinstance(event, OperatorSignal):
@@ -421,13 +427,11 @@ class PauseState(MachineState):
                     return self.stopping(userdata, event)
             elif isinstance(event, FeedbackEvent) and event.feedback.id == paused:
                 if event.feedback.status == "error":
-                    userdata["error"] = f"while paused: {event.feedback.error}"
-                    return ERROR
+                    return fail(userdata, feedback_fault(event.feedback), f"while paused: {event.feedback.error}")
                 if event.feedback.status == "done":
                     userdata["early_done"] = event.feedback
             elif isinstance(event, FaultEvent):
-                userdata["error"] = f"while paused: {event.where}: {event.error}"
-                return ERROR
+                return fail(userdata, event.kind, f"while paused: {event.where}: {event.error}")
             elif isinstance(event, RequestEvent):
                 self.refuse(event)
 
@@ -444,8 +448,7 @@ class StopState(MachineState):
         self.ctx.active_command = None
         userdata["resume_command"] = None
         userdata["early_done"] = None
-        userdata["error"] = reason if problem is None else f"{reason}; {problem}"
-        return ERROR
+        return fail(userdata, FaultKind.STOPPED, reason if problem is None else f"{reason}; {problem[1]}")
 
 
 class ErrorHandlingState(MachineState):
@@ -462,15 +465,16 @@ class ErrorHandlingState(MachineState):
         ctx = self.ctx
         error = userdata.get("error") or "unknown error"
         stopped = userdata.get("stop_reason") is not None
+        fault: FaultKind = userdata.get("fault") or (FaultKind.STOPPED if stopped else FaultKind.INTERNAL)
         if ctx.active_command is not None:
             ctx.send_bridge("stop")  # whatever failed, the arm must not keep moving
             ctx.active_command = None
         if ctx.sync_key is not None:
-            ctx.send_sync(ctx.sync_key, "failed", error)
+            ctx.send_sync(ctx.sync_key, "failed", error, fault)
             ctx.sync_key = ctx.sync_sent = None
         ctx.status("error", error=error)
-        ctx.finish_function("preempted" if stopped else "aborted", error)
-        for key in ("error", "stop_reason", "resume_command", "early_done"):
+        ctx.finish_function("preempted" if stopped else "aborted", error, fault)
+        for key in ("error", "fault", "stop_reason", "resume_command", "early_done"):
             userdata[key] = None
         ctx.hold = False
         while True:
@@ -480,4 +484,4 @@ class ErrorHandlingState(MachineState):
             if isinstance(event, RequestEvent):
                 if event.request.kind == "end":
                     return END
-                ctx.send_result(event.request, "aborted", f"{ctx.group} is in ErrorHandling: reset it before new requests")
+                ctx.send_result(event.request, "aborted", f"{ctx.group} is in ErrorHandling: reset it before new requests", FaultKind.BUSY)

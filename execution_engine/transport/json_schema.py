@@ -30,12 +30,14 @@ from typing import Any, Literal, Union, get_args, get_origin
 from execution_engine.transport import codec
 from execution_engine.transport.wire import (
     ENGINE_CELL,
+    ENGINE_EVENTS,
     ENGINE_STATUS,
     PROTOCOL_VERSION,
     SYNC_TOPIC,
     BridgeCommand,
     BridgeFeedback,
     CellSnapshot,
+    EngineEvent,
     EngineStatus,
     LocatedFrames,
     SmRequest,
@@ -58,6 +60,7 @@ MESSAGES: tuple[tuple[str, type], ...] = (
     (bridge_topic(GROUP, "command"), BridgeCommand),
     (bridge_topic(GROUP, "feedback"), BridgeFeedback),
     (ENGINE_STATUS, EngineStatus),
+    (ENGINE_EVENTS, EngineEvent),
     (ENGINE_CELL, CellSnapshot),
     (SYNC_TOPIC, SyncMessage),
     (sm_topic(GROUP, "located"), LocatedFrames),

@@ -9,6 +9,7 @@ docs/architecture.md.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import Enum
 from typing import Any, Literal
 
 from core_functions.cell_index import CellFrame, CellIndex
@@ -21,6 +22,29 @@ PROTOCOL_VERSION = 1
 def _check_version(v: int) -> None:
     if v != PROTOCOL_VERSION:
         raise ValueError(f"protocol version {v} is not supported (this node speaks v{PROTOCOL_VERSION})")
+
+
+class FaultKind(Enum):
+    """Why a primitive or a function failed; it travels with the error so the engine can decide
+    whether a second try can succeed (:mod:`execution_engine.engine.faults`) without reading text.
+
+    Bridges raise every kind but SKILL; the group machine adds its own faults with the same kinds
+    (a bridge that does not answer is a TIMEOUT, a stop is STOPPED, a defect is INTERNAL).
+    """
+
+    UNREACHABLE = "unreachable"  # no IK solution / outside the workspace
+    JOINT_LIMIT = "joint_limit"  # a target or a path point beyond a joint limit
+    COLLISION = "collision"
+    VISION = "vision"  # feature not found, camera failure
+    UNSUPPORTED = "unsupported"  # the robot (or the machine) cannot do this primitive or request
+    STOPPED = "stopped"  # stop requested while executing
+    TIMEOUT = "timeout"  # the controller, the bridge or a partner did not answer in time
+    CONNECTION = "connection"  # the link to the controller (or to the bridge) broke
+    PROTOCOL = "protocol"  # an answer we cannot parse, or one that does not say why it failed
+    CONTROLLER = "controller"  # the controller reported a fault (RSI stop, drive error)
+    BUSY = "busy"  # a primitive is already running for this group / the machine is not Ready
+    INTERNAL = "internal"  # a defect in the bridge or the machine itself
+    SKILL = "skill"  # the skill's own code raised (a frame it cannot find, a rivet that does not fit)
 
 
 # --------------------------------------------------------------------- engine <-> machine
@@ -55,6 +79,7 @@ class SmResult:
     operation: str = ""
     function: str = ""
     error: str | None = None
+    fault: FaultKind | None = None  # with aborted / preempted: why, for the engine's retry decision
     t_start: float = 0.0
     t_end: float = 0.0
     primitives: int = 0
@@ -134,6 +159,7 @@ class BridgeFeedback:
     group: str
     status: Literal["accepted", "done", "error", "paused", "resumed", "stopped"]
     error: str | None = None
+    fault: FaultKind | None = None  # with "error": the back end's FaultKind
     result: PrimitiveResult | None = None  # with "done": what the primitive's type says it returns
     t: float = 0.0
     v: int = PROTOCOL_VERSION
@@ -159,6 +185,27 @@ class EngineStatus:
     operation_id: str | None = None
     groups: dict[str, GroupProgress] = field(default_factory=dict)
     message: str = ""
+    v: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True)
+class EngineEvent:
+    """Engine -> anyone (``execution_engine/events``): one change of the engine's state, or one
+    operator command (start, pause, resume, step, stop, reset) with who gave it and the answer.
+
+    Not latched, unlike :class:`EngineStatus`: these are events for traces and logs, each once.
+    """
+
+    event: Literal["state", "operator"]
+    t: float
+    state: str  # the engine's state after a state change; the state a command arrived in
+    operation: str | None = None
+    from_state: str | None = field(default=None, metadata={"json": "from"})  # state: the state left
+    message: str = ""
+    command: str | None = None  # operator: the command
+    source: str | None = None  # operator: the resolved service name, the terminal console, the safety stop
+    accepted: bool | None = None  # operator: whether the engine took the command
+    answer: str | None = None  # operator: what the engine answered
     v: int = PROTOCOL_VERSION
 
 
@@ -211,6 +258,7 @@ class SyncMessage:
     state: str
     t: float = 0.0
     error: str | None = None
+    fault: FaultKind | None = None  # with "failed": why, so every partner reports the same kind
     v: int = PROTOCOL_VERSION
 
 
@@ -238,6 +286,7 @@ def tcp_pose_topic(group: str) -> str:
 
 
 ENGINE_STATUS = "execution_engine/status"
+ENGINE_EVENTS = "execution_engine/events"
 ENGINE_CELL = "execution_engine/cell"
 JOINT_STATES = "joint_states"
 # The standard visualisation topics (robot_state_publisher, tf2, diagnostic_updater use the same
