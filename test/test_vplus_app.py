@@ -137,7 +137,7 @@ def test_an_error_on_the_robot_side_puts_the_group_machine_in_error_handling(tmp
     )
     trace = tmp_path / "trace.jsonl"
     out, err = io.StringIO(), io.StringIO()
-    code = cli_main(["run", str(app), "--robot", "vplus", "--speed", "max", "--trace", str(trace), "-q"], out, err)
+    code = cli_main(["run", str(app), "--robot", "vplus", "--speed", "max", "--trace", str(trace), "-q", "--no-check"], out, err)
     assert code == 1
     events = [json.loads(line) for line in trace.read_text().splitlines()]
     assert "ErrorHandling" in {e.get("state") for e in events}
@@ -180,7 +180,7 @@ def test_run_against_a_standalone_simulator_with_host_and_port(tmp_path: Path) -
         assert proc.stdout is not None
         port = re.search(r":(\d+) ", proc.stdout.readline()).group(1)  # type: ignore[union-attr]
         out, err = io.StringIO(), io.StringIO()
-        code = cli_main(["run", str(app), "--robot", "vplus", "--host", "127.0.0.1", "--port", port, "--speed", "50", "-q"], out, err)
+        code = cli_main(["run", str(app), "--robot", "vplus", "--host", "127.0.0.1", "--port", port, "--speed", "50", "--backend-option", "controller_speed=50", "-q"], out, err)
         assert code == 0, err.getvalue() + out.getvalue()
         assert "FINISHED" in out.getvalue() and "4/4" in out.getvalue()
     finally:

@@ -23,7 +23,7 @@ from core_functions.primitives import (
     Vision,
 )
 from core_functions.robots import ADEPT_VIPER_S850, NEXTAGE_OPEN
-from execution_engine.clock import Clock
+from execution_engine.clock import Clock, real_clock, run_with_clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.vplus.backend import VPlusBackend, create
 from robot_bridges.vplus.codec import Skill
@@ -422,15 +422,15 @@ def test_the_factory_starts_a_simulator_when_no_host_is_given(run_sim: Run) -> N
         (BackendOptions(robot=ADEPT_VIPER_S850, extra={"camera": "webcam"}), "camera must be"),
     ],
 )
-def test_the_factory_refuses_options_it_cannot_honour(run_sim: Run, options: BackendOptions, message: str) -> None:
+def test_the_factory_refuses_options_it_cannot_honour(options: BackendOptions, message: str) -> None:
     async def main(clock: Clock) -> None:
         with pytest.raises(ValueError, match=message):
             await create(clock, options)
 
-    run_sim(main)
+    run_with_clock(main, real_clock())  # a real controller takes no speed factor
 
 
-def test_the_factory_points_at_a_real_controller_without_a_simulator(run_sim: Run) -> None:
+def test_the_factory_points_at_a_real_controller_without_a_simulator() -> None:
     async def main(clock: Clock) -> None:
         backend = await create(clock, BackendOptions(robot=ADEPT_VIPER_S850, host="192.0.2.10"))
         assert backend.client.peer == "192.0.2.10:1234" and backend.measurement is None
@@ -438,16 +438,21 @@ def test_the_factory_points_at_a_real_controller_without_a_simulator(run_sim: Ru
         assert isinstance(demo.measurement, SimulatedFocusCamera)
         assert backend.label == "vplus 192.0.2.10:1234" and backend.name == "vplus"
 
-    run_sim(main)
+    run_with_clock(main, real_clock())
 
 
 @pytest.mark.parametrize("clock_kind", ["scaled", "simulated"])
 def test_a_real_controller_refuses_a_speed_factor(clock_kind: str) -> None:
     """Run time faster than real time would shorten every ack timeout of real motions."""
-    from execution_engine.clock import run_with_clock, scaled_clock, simulated_clock
 
     async def main(clock: Clock) -> None:
-        with pytest.raises(ValueError, match=r"a real controller \(10.0.0.2\) runs in real time: run with --speed 1"):
+        with pytest.raises(ValueError, match=r"the controller at 10.0.0.2 runs at x1 \(a real one in real time\): run with --speed 1"):
             await create(clock, BackendOptions(robot=ADEPT_VIPER_S850, host="10.0.0.2", port=1234))
+        fast = BackendOptions(robot=ADEPT_VIPER_S850, host="127.0.0.1", port=1234, extra={"controller_speed": "10"})
+        if clock.simulated:  # a network peer never runs on simulated time
+            with pytest.raises(ValueError, match="runs at x10"):
+                await create(clock, fast)
+        else:  # a simulator at x10 behind --host, and the user said so
+            assert (await create(clock, fast)).client.peer == "127.0.0.1:1234"
 
     run_with_clock(main, scaled_clock(10.0) if clock_kind == "scaled" else simulated_clock())

@@ -470,7 +470,7 @@ def _agree(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 # ------------------------------------------------------------------------------ registry
-_EXTRAS = ("timeout", "retries", "linear", "camera")
+_EXTRAS = ("timeout", "retries", "linear", "camera", "controller_speed")
 
 
 async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
@@ -484,10 +484,20 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     vision pipeline in as a :class:`MeasurementPort`).
     """
     options.check("vplus", ADEPT_VIPER_S850, _EXTRAS)
-    if options.host is not None and (clock.simulated or clock.speed != 1.0):
+    if options.host is not None:
         # A real controller moves in real time: a scaled clock would divide every ack timeout by the
         # speed factor (real motions "time out"), a simulated one would jump every network wait.
-        raise ValueError(f"vplus: a real controller ({options.host}) runs in real time: run with --speed 1 (the default)")
+        # Only a controller that is itself a simulator at that speed may be driven faster, and the
+        # user must say so (controller_speed), never the run's --speed alone.
+        try:
+            controller_speed = float(options.extra.get("controller_speed", "1"))
+        except ValueError:
+            raise ValueError(f"vplus: controller_speed must be a number, got {options.extra['controller_speed']!r}") from None
+        if clock.simulated or not math.isclose(clock.speed, controller_speed):
+            raise ValueError(
+                f"vplus: the controller at {options.host} runs at x{controller_speed:g} (a real one in real time): run with "
+                f"--speed {controller_speed:g}" + ("" if controller_speed != 1 else " (the default), or tell a simulated controller's speed with --backend-option controller_speed=F")
+            )
     if options.rsi_listen is not None:
         raise ValueError("the vplus back end takes no rsi_listen (that is for KUKA RSI)")
     if options.faults:
