@@ -14,11 +14,16 @@ quaternion, a vision measurement).
 The engine's lines have ``group`` "engine": ``engine_state`` (``from``, ``to``, ``message``) on
 every change of the engine's state, ``operator`` (``command``, ``source``, ``state`` -- the
 engine state it came in, "alarm" for an answer to an alarm --, ``accepted``, ``answer``) on
-every operator command, and ``error`` (the message of a failed run or an alarm).
+every operator command, and ``error`` (the message of a failed run or an alarm).  The last line
+of a complete trace is ``run_end`` (``outcome``, ``exit_code``, ``operations_done``,
+``operations_total``, ``records``); see :class:`TraceWriter` for what survives a crash.
 """
 from __future__ import annotations
 
+import errno
+import io
 import json
+import os
 from collections.abc import Callable, Iterable
 from typing import IO, Any, TypeVar
 
@@ -31,7 +36,7 @@ from execution_engine.transport.wire import ENGINE_EVENTS, ENGINE_STATUS, Engine
 M = TypeVar("M")
 
 TRACE_EVENTS = (
-    "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator",
+    "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "run_end",
 )
 
 
@@ -105,17 +110,32 @@ class RunObserver:
 
 
 class TraceWriter:
-    """Writes trace records as JSON lines; engine failures become ``error`` lines of group "engine"."""
+    """Writes trace records as JSON lines, durably; engine failures become ``error`` lines of group "engine".
+
+    A trace is the record an integrator reads after something went wrong, so it must survive what
+    went wrong: every record is flushed to the operating system as it is written (a ``kill -9``
+    of the run loses nothing already written, nor anything the console showed, since the trace
+    is written first), the file is synced to disk at every operation boundary and at the end,
+    and a complete trace ends with a ``run_end`` record (outcome, exit code, counts) -- a trace
+    without one was cut.  A failing write (a full disk) never stops the run: the first error is
+    kept, later records are counted as lost, and the caller reports it at the end.
+    """
 
     def __init__(self, stream: IO[str]) -> None:
         self.stream = stream
         self.lines = 0
+        self.lost = 0
+        self.error: OSError | None = None
         self._last_engine_message = ""
+        self._operation: str | None = None
 
     def on_status(self, status: SmStatus) -> None:
         self._write(trace_record(status))
 
     def on_engine(self, status: EngineStatus) -> None:
+        if status.operation_id != self._operation:  # an operation boundary: make the record so far durable
+            self._operation = status.operation_id
+            self.sync()
         if status.state in ("failed", "alarm") and status.message and status.message != self._last_engine_message:
             self._last_engine_message = status.message
             self._write({"t": round(status.t, 6), "event": "error", "group": "engine", "operation": status.operation_id, "error": status.message})
@@ -123,8 +143,43 @@ class TraceWriter:
     def on_event(self, event: EngineEvent) -> None:
         self._write(engine_record(event))
 
+    def finish(self, t: float, outcome: str, exit_code: int, operations_done: int, operations_total: int) -> None:
+        """The last record: how the run ended; then everything to disk."""
+        self._write({
+            "t": round(t, 6), "event": "run_end", "group": "engine", "outcome": outcome, "exit_code": exit_code,
+            "operations_done": operations_done, "operations_total": operations_total, "records": self.lines + 1,
+        })
+        self.sync()
+
+    def sync(self) -> None:
+        """Flush and fsync: what was written survives a crash of the whole machine, not only of the run."""
+        if self.error is not None:
+            return
+        try:
+            self.stream.flush()
+            fileno = self.stream.fileno()
+        except OSError as error:
+            self.error = error
+            return
+        except (AttributeError, ValueError, io.UnsupportedOperation):  # an in-memory stream: nothing to sync
+            return
+        try:
+            os.fsync(fileno)
+        except OSError as error:
+            if error.errno not in (errno.EINVAL, errno.EROFS):  # a pipe or a device that cannot sync
+                self.error = error
+
     def _write(self, record: dict[str, Any]) -> None:
-        self.stream.write(json.dumps(record, separators=(",", ":")) + "\n")
+        if self.error is not None:
+            self.lost += 1
+            return
+        try:
+            self.stream.write(json.dumps(record, separators=(",", ":")) + "\n")
+            self.stream.flush()
+        except OSError as error:
+            self.error = error
+            self.lost += 1
+            return
         self.lines += 1
 
 

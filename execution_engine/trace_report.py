@@ -1,0 +1,123 @@
+"""Reading a run's JSON-lines trace back: what happened, and whether the record is whole.
+
+``python -m execution_engine report run.jsonl`` is what an integrator runs after a night shift
+went wrong.  The first question is whether the trace can be trusted: a complete trace ends with
+a ``run_end`` record (:class:`execution_engine.observers.TraceWriter`); one without it was cut
+(the run was killed, the machine lost power) and the report says so, with the last event the
+trace still holds.  Lines that are not trace records (a file edited by hand, another file given
+by mistake) are named by line number and skipped, never fatal; the file is read in bounded
+memory, line by line, with a size limit per line.
+"""
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+MAX_LINE = 1 << 20  # bytes: a trace line is a few hundred bytes; a megabyte is not a trace line
+MAX_PROBLEMS = 20  # problem lines listed; the rest are counted
+
+
+@dataclass
+class TraceSummary:
+    """What a trace file holds."""
+
+    path: str
+    records: int = 0
+    by_event: Counter[str] = field(default_factory=Counter)
+    by_group: Counter[str] = field(default_factory=Counter)
+    errors: list[str] = field(default_factory=list)  # the error texts of error records
+    operator: list[str] = field(default_factory=list)  # one line per operator command
+    last: dict[str, Any] | None = None  # the last valid record
+    end: dict[str, Any] | None = None  # the run_end record, if the trace is whole
+    problems: list[str] = field(default_factory=list)  # lines that are not records
+    problem_count: int = 0
+    incomplete_tail: bool = False  # the file does not end with a newline: its last write was cut
+
+    @property
+    def cut(self) -> bool:
+        return self.end is None
+
+    def lines(self) -> list[str]:
+        """The report, one line each."""
+        out = [f"trace {self.path}: {self.records} record(s)"]
+        if self.end is not None:
+            out.append(
+                f"  ended: {self.end.get('outcome', '?')} (exit code {self.end.get('exit_code', '?')}), operations "
+                f"{self.end.get('operations_done', '?')}/{self.end.get('operations_total', '?')}, at {self.end.get('t', 0):.3f} s"
+            )
+        else:
+            where = f"at {self.last.get('t', 0):.3f} s ({_describe(self.last)})" if self.last else "before any record"
+            out.append(f"  CUT: no run_end record; the run was killed or crashed; the last event {where}")
+        if self.incomplete_tail:
+            out.append("  the last line is incomplete (cut in the middle of a write) and was skipped")
+        for group, count in sorted(self.by_group.items()):
+            out.append(f"  {group:<12} {count} record(s)")
+        out.extend(f"  operator: {line}" for line in self.operator)
+        out.extend(f"  error: {text}" for text in self.errors)
+        if self.problem_count:
+            out.append(f"  {self.problem_count} line(s) are not trace records:")
+            out.extend(f"    {p}" for p in self.problems)
+            if self.problem_count > len(self.problems):
+                out.append(f"    and {self.problem_count - len(self.problems)} more")
+        return out
+
+
+def _describe(record: dict[str, Any]) -> str:
+    event = record.get("event", "?")
+    group = record.get("group", "?")
+    if event == "transition":
+        return f"{group} {record.get('from')} -> {record.get('to')}"
+    return f"{group} {event}"
+
+
+def read_trace(path: str | Path) -> TraceSummary:
+    """Read ``path`` line by line; raises OSError only when the file cannot be opened or read."""
+    summary = TraceSummary(str(path))
+    with open(path, "rb") as stream:
+        number = 0
+        while True:
+            raw = stream.readline(MAX_LINE + 1)
+            if not raw:
+                break
+            number += 1
+            if not raw.endswith(b"\n"):
+                if len(raw) > MAX_LINE:
+                    _problem(summary, f"line {number}: longer than {MAX_LINE} bytes")
+                    while raw and not raw.endswith(b"\n"):  # skip the rest of the monster line
+                        raw = stream.readline(MAX_LINE + 1)
+                    continue
+                summary.incomplete_tail = True
+                break
+            _take(summary, number, raw)
+    return summary
+
+
+def _take(summary: TraceSummary, number: int, raw: bytes) -> None:
+    try:
+        record = json.loads(raw)
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        _problem(summary, f"line {number}: not JSON ({error})")
+        return
+    if not (isinstance(record, dict) and isinstance(record.get("event"), str) and isinstance(record.get("t"), (int, float))):
+        _problem(summary, f"line {number}: not a trace record (needs 'event' and 't')")
+        return
+    summary.records += 1
+    summary.by_event[record["event"]] += 1
+    summary.by_group[str(record.get("group", "?"))] += 1
+    summary.last = record
+    if record["event"] == "run_end":
+        summary.end = record
+    elif record["event"] == "error" and isinstance(record.get("error"), str):
+        summary.errors.append(f"{record.get('group')} at {record['t']:.3f} s: {record['error']}")
+    elif record["event"] == "operator":
+        answer = "accepted" if record.get("accepted") else "refused"
+        summary.operator.append(f"{record['t']:.3f} s {record.get('command')} from {record.get('source')}: {answer}")
+
+
+def _problem(summary: TraceSummary, text: str) -> None:
+    summary.problem_count += 1
+    if len(summary.problems) < MAX_PROBLEMS:
+        summary.problems.append(text)
