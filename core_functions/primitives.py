@@ -206,7 +206,13 @@ class Vision:
 
 @dataclass(frozen=True)
 class RecordTrajectory:
-    """Record a trajectory: planned through waypoints, or taught by sampling the joints."""
+    """Record a trajectory: planned through waypoints, or taught by sampling the joints.
+
+    A ``linear`` plan is replayed by joint interpolation between its samples, so the bridge
+    samples each straight line where it must for the replay to stay within ``tolerance`` (m) of
+    the line's position and ``angle_tolerance`` (rad) of its orientation, and fails the
+    recording where it cannot; ``sample_period`` is then the longest gap between samples.
+    """
 
     KIND: ClassVar[str] = "record_trajectory"
     STATE: ClassVar[WorkState] = WorkState.RECORD_TRAJECTORY
@@ -217,10 +223,14 @@ class RecordTrajectory:
     interpolation: Interpolation = "ptp"
     duration: float = 0.0
     sample_period: float = 0.1
+    tolerance: float = 1e-4  # m: 0.1 mm
+    angle_tolerance: float = math.radians(0.1)  # rad: 0.1 deg
 
     def __post_init__(self) -> None:
         if not self.name:
             raise ValueError("a recorded trajectory needs a name")
+        if not (self.tolerance > 0 and self.angle_tolerance > 0 and math.isfinite(self.tolerance + self.angle_tolerance)):
+            raise ValueError(f"path tolerances must be positive finite numbers, got {self.tolerance} m, {self.angle_tolerance} rad")
         if self.mode == "plan" and not self.waypoints:
             raise ValueError("planning a trajectory needs at least one waypoint")
         if self.mode == "teach" and not (self.duration > 0 and self.sample_period > 0):

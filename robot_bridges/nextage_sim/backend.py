@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from core_functions.geometry import Pose
+from core_functions.linear_path import LineTolerance
 from core_functions.primitives import (
     Dwell,
     EndEffector,
@@ -59,6 +60,7 @@ from robot_bridges.nextage_sim.trajectory import (
     plan_joint_move,
     plan_linear,
     plan_replay,
+    plan_straight,
     sample,
     straight_leg,
 )
@@ -311,7 +313,8 @@ class NextageSimBackend(RobotBackend):
             motion: Motion
             if interpolation == "linear":
                 leg = straight_leg(group, self._q[arm.indices], start, target, self._solver(arm), arm.joint_names)
-                motion = plan_linear(arm.indices, [leg], velocity, acceleration, self.cartesian_limits, speed)
+                limits = self.cartesian_limits
+                motion = plan_straight(arm.indices, leg, self._forward(arm), velocity, acceleration, limits, limits.tolerance, speed)
             else:
                 solution = arm.solve(target, self._q)
                 motion = plan_joint_move(arm.indices, self._q[arm.indices], solution.positions, velocity, acceleration, speed)
@@ -357,10 +360,13 @@ class NextageSimBackend(RobotBackend):
             pose = arm.tcp_pose(self._q)
             current = self._q[arm.indices]
             velocity, acceleration = self._limits(arm.indices)
+            tolerance = LineTolerance(primitive.tolerance, primitive.angle_tolerance)
             for waypoint in primitive.waypoints:
                 if primitive.interpolation == "linear":
                     leg = straight_leg(group, current, pose, waypoint, self._solver(arm), arm.joint_names)
-                    segments.append(plan_linear(arm.indices, [leg], velocity, acceleration, self.cartesian_limits, 1.0))
+                    segments.append(
+                        plan_straight(arm.indices, leg, self._forward(arm), velocity, acceleration, self.cartesian_limits, tolerance, 1.0)
+                    )
                 else:
                     base = self._q.copy()
                     base[arm.indices] = current
@@ -646,6 +652,16 @@ class NextageSimBackend(RobotBackend):
             return arm.solve(target, base, restarts=False).positions
 
         return solve
+
+    def _forward(self, arm: ArmKinematics) -> Callable[[np.ndarray], Pose]:
+        """The TCP pose for the arm's joints, the rest of the robot as it is now (the line's frame)."""
+        base = self._q.copy()
+
+        def forward(q_arm: np.ndarray) -> Pose:
+            base[arm.indices] = q_arm
+            return arm.tcp_pose(base)
+
+        return forward
 
     def _result(self, group: str) -> MotionResult:
         names = NEXTAGE_OPEN.group(group).joint_names

@@ -14,10 +14,13 @@ Timing model (docs/nextage_sim.md):
   starts and stops together and none exceeds its velocity or acceleration limit.
 * The speed fraction f scales *time*: a move at f takes exactly 1/f as long as at full speed
   (velocities scale by f, accelerations by f^2).
-* Cartesian-linear moves sample the straight TCP line (position lerp, orientation slerp), solve IK
-  at each sample from the previous solution, refuse joint-space jumps (a configuration change
-  means no straight line exists), and time s(t) by the maximum TCP speed, stretched until no
-  joint exceeds its velocity limit.
+* Cartesian-linear moves and recordings sample the straight TCP line (position lerp, orientation
+  slerp) where the line needs it (:mod:`core_functions.linear_path`: bisection until the joint
+  interpolation between samples stays within the tolerance), refuse lines that leave the
+  workspace or cross a singularity, and time s(t) by the maximum TCP speed, stretched until no
+  joint exceeds its velocity limit (:func:`core_functions.motion_profile.path_profile`).
+* A recording keeps every sample of such a line (:meth:`Motion.breakpoints`), so a replay that
+  interpolates joints between stored samples follows the same path.
 """
 from __future__ import annotations
 
@@ -30,6 +33,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core_functions.geometry import Pose
+from core_functions.linear_path import (
+    LineSamplingError,
+    LineTolerance,
+    NoSolution,
+    SamplingBounds,
+    StraightLine,
+    interpolate_pose,
+    plan_line,
+)
+from core_functions.motion_profile import TcpLimits, Trapezoid, joint_profile, path_profile, sample_times
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.nextage_sim.model import describe_target
 
@@ -37,45 +50,6 @@ Vector = NDArray[np.float64]
 Indices = NDArray[np.int64]
 
 _EPS = 1e-12
-
-
-# ---------------------------------------------------------------------------------- profile
-@dataclass(frozen=True)
-class Trapezoid:
-    """s(t) from 0 to 1 with peak speed ``velocity`` (1/s) and acceleration ``acceleration`` (1/s^2)."""
-
-    velocity: float
-    acceleration: float
-    duration: float
-    ramp: float  # time spent accelerating (and, symmetrically, decelerating)
-
-    @staticmethod
-    def fit(max_velocity: float, max_acceleration: float) -> Trapezoid:
-        """The fastest profile over a unit distance within both bounds (inf means unbounded)."""
-        if not (max_velocity > 0 and max_acceleration > 0):
-            raise ValueError(f"profile bounds must be > 0, got v={max_velocity}, a={max_acceleration}")
-        if math.isinf(max_velocity) and math.isinf(max_acceleration):
-            return Trapezoid(math.inf, math.inf, 0.0, 0.0)
-        a = max_acceleration
-        if max_velocity * max_velocity >= a:  # the cruise speed is never reached: triangle
-            ramp = math.sqrt(1.0 / a)
-            return Trapezoid(a * ramp, a, 2.0 * ramp, ramp)
-        v = max_velocity
-        ramp = v / a
-        return Trapezoid(v, a, 1.0 / v + ramp, ramp)
-
-    def position(self, t: float) -> float:
-        if self.duration <= 0.0 or t >= self.duration:
-            return 1.0
-        if t <= 0.0:
-            return 0.0
-        a, ramp = self.acceleration, self.ramp
-        if t < ramp:
-            return 0.5 * a * t * t
-        if t > self.duration - ramp:
-            rest = self.duration - t
-            return 1.0 - 0.5 * a * rest * rest
-        return 0.5 * a * ramp * ramp + self.velocity * (t - ramp)
 
 
 # ----------------------------------------------------------------------------------- motions
@@ -92,6 +66,14 @@ class Motion(ABC):
     @property
     def end(self) -> Vector:
         return self.at(self.duration)
+
+    def breakpoints(self) -> Vector:
+        """The instants where the joint path bends; between two of them it is a straight joint-space line.
+
+        A recording must keep them: a replay interpolating between samples that skip one cuts
+        the corner, and the TCP leaves the planned path.
+        """
+        return np.array([0.0, self.duration])
 
 
 class Hold(Motion):
@@ -133,6 +115,9 @@ class PathMove(Motion):
     def at(self, t: float) -> Vector:
         return _interpolate(self.knots, self.samples, self.profile.position(t))
 
+    def breakpoints(self) -> Vector:
+        return np.array([self.profile.time_at(float(s)) for s in self.knots])
+
 
 class TimedMove(Motion):
     """Joint points reached at given times, linearly interpolated (trajectory replay)."""
@@ -145,6 +130,9 @@ class TimedMove(Motion):
 
     def at(self, t: float) -> Vector:
         return _interpolate(self.times, self.points, t)
+
+    def breakpoints(self) -> Vector:
+        return self.times.copy()
 
 
 class Chain(Motion):
@@ -163,6 +151,9 @@ class Chain(Motion):
         k = min(max(k, 0), len(self.segments) - 1)
         return self.segments[k].at(t - float(self._starts[k]))
 
+    def breakpoints(self) -> Vector:
+        return np.concatenate([m.breakpoints() + start for m, start in zip(self.segments, self._starts)])
+
 
 def _interpolate(knots: Vector, samples: NDArray[np.float64], x: float) -> Vector:
     if x <= knots[0]:
@@ -176,9 +167,13 @@ def _interpolate(knots: Vector, samples: NDArray[np.float64], x: float) -> Vecto
 
 
 def sample(motion: Motion, period: float) -> tuple[Vector, NDArray[np.float64]]:
-    """Times and positions every ``period`` seconds, the exact end included."""
-    count = max(1, math.ceil(motion.duration / period - 1e-9))
-    times = np.minimum(np.arange(count + 1) * period, motion.duration)
+    """Times and positions every ``period`` seconds, the exact end and every breakpoint included.
+
+    The breakpoints make a replay that interpolates joints between the samples follow
+    ``motion``'s own joint path (a sampled straight line stays within its tolerance); the regular
+    samples keep its speed profile.
+    """
+    times = sample_times(motion.duration, period, motion.breakpoints())
     return times, np.array([motion.at(float(t)) for t in times])
 
 
@@ -188,48 +183,28 @@ def plan_joint_move(
 ) -> JointMove:
     """The synchronised trapezoid from ``start`` to ``goal`` at speed fraction ``speed``.
 
-    ``velocity``/``acceleration`` are the limits of the joints ``indices``.  With s the shared
-    path parameter, joint i moves d_i * s, so s may reach min(v_i/|d_i|) and min(a_i/|d_i|).
+    ``velocity``/``acceleration`` are the limits of the joints ``indices``
+    (:func:`core_functions.motion_profile.joint_profile`).
     """
-    distance = np.abs(goal - start)
-    moving = distance > _EPS
-    if not moving.any():
-        return JointMove(indices, start, goal, Trapezoid(math.inf, math.inf, 0.0, 0.0))
-    v = float(np.min(velocity[moving] / distance[moving]))
-    a = float(np.min(acceleration[moving] / distance[moving]))
-    return JointMove(indices, start, goal, Trapezoid.fit(v * speed, a * speed * speed))
+    return JointMove(indices, start, goal, joint_profile(start, goal, velocity, acceleration, speed))
 
 
 # --------------------------------------------------------------------------- Cartesian plans
 @dataclass(frozen=True)
-class CartesianLimits:
-    """TCP speed and acceleration bounds of linear moves at speed fraction 1."""
+class CartesianLimits(TcpLimits):
+    """TCP bounds of linear moves at speed fraction 1, and how their lines are sampled.
 
-    linear_velocity: float = 0.25  # m/s
-    angular_velocity: float = 1.0  # rad/s
-    linear_acceleration: float = 0.5  # m/s^2
-    angular_acceleration: float = 2.0  # rad/s^2
+    ``tolerance`` is what a single-arm straight line (MoveCartesian / MoveRelative ``linear``)
+    keeps to; a recording uses the tolerance its primitive names.  ``step`` ... ``refinements``
+    are the fixed-step sampling of master/slave paths, whose slave path is not a straight line.
+    """
+
     step: float = 0.005  # m between IK samples along the line
     angle_step: float = math.radians(2.0)  # rad between IK samples
     max_joint_jump: float = 0.25  # rad between neighbouring samples before refining
     refinements: int = 3  # times a jumping interval is split (x4 each) before giving up
-
-
-def interpolate_pose(start: Pose, end: Pose, s: float) -> Pose:
-    """Position lerp and orientation slerp (shortest way) at fraction ``s``."""
-    q0 = np.array(start.quaternion)
-    q1 = np.array(end.quaternion)
-    dot = float(q0 @ q1)
-    if dot < 0.0:
-        q1, dot = -q1, -dot
-    if dot > 0.9995:
-        q = q0 + (q1 - q0) * s
-    else:
-        theta = math.acos(min(1.0, dot))
-        q = (math.sin((1.0 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta)
-    q /= np.linalg.norm(q)
-    p = np.array(start.position) + (np.array(end.position) - np.array(start.position)) * s
-    return Pose(float(p[0]), float(p[1]), float(p[2]), float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+    tolerance: LineTolerance = LineTolerance()
+    sampling: SamplingBounds = SamplingBounds()
 
 
 @dataclass(frozen=True)
@@ -278,20 +253,41 @@ def plan_linear(
         _extend(legs, limits, knots, rows, i / count, limits.refinements)
     knot_array = np.array(knots)
     samples = np.array(rows)
-    if length <= _EPS and angle <= _EPS:
-        return PathMove(indices, knot_array, samples, Trapezoid(math.inf, math.inf, 0.0, 0.0))
-    v = min(_ratio(limits.linear_velocity, length), _ratio(limits.angular_velocity, angle))
-    a = min(_ratio(limits.linear_acceleration, length), _ratio(limits.angular_acceleration, angle))
-    slope = np.max(np.abs(np.diff(samples, axis=0)) / np.diff(knot_array)[:, None], axis=0)  # |dq/ds|
-    moving = slope > _EPS
-    if moving.any():
-        v = min(v, float(np.min(velocity[moving] / slope[moving])))
-        a = min(a, float(np.min(acceleration[moving] / slope[moving])))
-    return PathMove(indices, knot_array, samples, Trapezoid.fit(v * speed, a * speed * speed))
+    profile = path_profile(knot_array, samples, length, angle, limits, velocity, acceleration, speed)
+    return PathMove(indices, knot_array, samples, profile)
 
 
-def _ratio(limit: float, amount: float) -> float:
-    return math.inf if amount <= _EPS else limit / amount
+def plan_straight(
+    indices: Indices,
+    leg: LinearLeg,
+    forward: Callable[[Vector], Pose],
+    velocity: Vector,
+    acceleration: Vector,
+    limits: CartesianLimits,
+    tolerance: LineTolerance,
+    speed: float,
+) -> PathMove:
+    """One arm's straight TCP line, sampled so that joint interpolation keeps within ``tolerance``.
+
+    ``forward`` maps the arm's joints to its TCP pose.  The samples come from
+    :func:`core_functions.linear_path.plan_line` (bisection where the chord strays) and are the
+    path's knots, so the executed motion -- and any replay of samples taken at its breakpoints --
+    is the sampled path itself.  Raises ``BridgeError(UNREACHABLE)`` naming the arm, the target
+    and where on the line it fails (out of reach, a singularity, a tolerance it cannot keep).
+    """
+    line = StraightLine(leg.pose_at(0.0), leg.pose_at(1.0))
+
+    def solve(target: Pose, seed: Vector) -> Vector:
+        try:
+            return leg.solve(target, seed)
+        except BridgeError as error:
+            raise NoSolution(error.detail) from None
+
+    try:
+        timed = plan_line(line, leg.start_q, solve, forward, limits, velocity, acceleration, speed, tolerance, limits.sampling, leg.joint_names)
+    except LineSamplingError as error:
+        raise BridgeError(FaultKind.UNREACHABLE, f"{leg.name}: the straight line to {describe_target(line.end)}: {error}") from None
+    return PathMove(indices, timed.samples.fractions, timed.samples.joints, timed.profile)
 
 
 def _extend(legs: Sequence[LinearLeg], limits: CartesianLimits, knots: list[float], rows: list[Vector], s: float, depth: int) -> None:

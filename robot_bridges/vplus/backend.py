@@ -20,12 +20,16 @@ Dwell                              waits on the clock (nothing is sent)
 EndEffector                        air_on/air_off -> ``enable_air``/``disable_air``;
                                    gripper_open/close -> ``gripper_open``/``gripper_close``
 Vision                             the :class:`MeasurementPort` (the controller has no camera)
-anything else                      ``BridgeError(UNSUPPORTED)``
+RecordTrajectory (plan)            planned here on the Viper's kinematics; nothing is sent
+ExecuteTrajectory                  ``move_joints`` from sample to sample, each with its own speed
+anything else                      ``BridgeError(UNSUPPORTED)`` (a taught recording included)
 =================================  ==================================================================
 
 AdeptServer's motions are all ``MOVE``/``JMOVE``: joint-interpolated.  A ``linear`` primitive
 therefore reaches its target exactly but not along a straight line; ``linear="reject"`` refuses
-such primitives (UNSUPPORTED) instead.  Targets are checked against the Viper's kinematics and
+such primitives (UNSUPPORTED) instead.  A straight line within a tolerance is what a ``linear``
+*recording* gives: its samples are placed so that the ``JMOVE`` chords between them keep to the
+line (:mod:`robot_bridges.vplus.trajectory`).  Targets are checked against the Viper's kinematics and
 joint limits before anything is sent, so an impossible move fails at once as UNREACHABLE or
 JOINT_LIMIT rather than as a timeout (the server never reports errors).
 
@@ -57,13 +61,16 @@ from core_functions.primitives import (
     Dwell,
     EndEffector,
     EndEffectorResult,
+    ExecuteTrajectory,
     MotionResult,
     MoveCartesian,
     MoveJoints,
     MoveRelative,
     Primitive,
     PrimitiveResult,
+    RecordTrajectory,
     SetSpeed,
+    TrajectoryResult,
     Vision,
     VisionResult,
     describe,
@@ -92,6 +99,7 @@ from robot_bridges.vplus.kinematics import (
 )
 from robot_bridges.vplus.measurement import MeasurementError, MeasurementPort, SimulatedFocusCamera
 from robot_bridges.vplus.simulator import DEFAULT_PORT, VPlusSimulator
+from robot_bridges.vplus.trajectory import TrajectoryPlanner, plan_replay
 
 log = logging.getLogger(__name__)
 
@@ -151,6 +159,7 @@ class VPlusBackend(RobotBackend):
         self.clock = clock
         self.robot = robot
         self.kin = kinematics or ViperKinematics(joints=group.joints)
+        self.planner = TrajectoryPlanner(self.kin)
         self.joint_names = group.joint_names
         self.measurement = measurement
         self.ack_timeout = ack_timeout
@@ -272,6 +281,12 @@ class VPlusBackend(RobotBackend):
             return await self._end_effector(primitive)
         if isinstance(primitive, Vision):
             return await self._vision(primitive)
+        if isinstance(primitive, RecordTrajectory):
+            return await self._record(primitive)
+        if isinstance(primitive, ExecuteTrajectory):
+            await self._ensure_link()
+            replay = plan_replay(self.kin, self.label, primitive, self._speed)
+            return await self._send_motion(replay.commands, replay.goal, replay.estimate, describe(primitive))
         raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: AdeptServer has no skill for {describe(primitive)}")
 
     # ---------------------------------------------------------------------------- motions
@@ -319,7 +334,10 @@ class VPlusBackend(RobotBackend):
         messages.extend(commands)
         if messages[-1] != codec.BREAK:
             messages.append(codec.BREAK)
-        estimate = self._duration(goal)
+        return await self._send_motion(messages, goal, self._duration(goal), what)
+
+    async def _send_motion(self, messages: Sequence[Command], goal: np.ndarray, estimate: float, what: str) -> MotionResult:
+        """Write ``messages`` (ending in a break) at once and wait for the arm to reach ``goal``."""
         timeout = self.ack_timeout + 2.0 * estimate + self._busy_for()
         self._busy_until = self.clock.now() + estimate + self._busy_for()
         acks = await self._talk(messages, timeout, what, joined=True)
@@ -346,6 +364,15 @@ class VPlusBackend(RobotBackend):
         if not self._warned_linear:
             self._warned_linear = True
             log.warning("%s: linear moves run joint-interpolated (AdeptServer MOVE): exact target, curved path", self.label)
+
+    async def _record(self, primitive: RecordTrajectory) -> TrajectoryResult:
+        """Plan on the Viper's kinematics from where the arm is; nothing moves (:mod:`.trajectory`)."""
+        if primitive.mode == "teach":
+            raise BridgeError(
+                FaultKind.UNSUPPORTED, f"{self.label}: {describe(primitive)}: AdeptServer cannot report the arm while it is guided by hand"
+            )
+        await self._ensure_link()
+        return self.planner.record(self.label, self._joints, primitive)
 
     # ---------------------------------------------------------------------- other skills
     async def _dwell(self, seconds: float, job: _Job) -> None:
