@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import re
 from collections.abc import Callable, Coroutine
 from typing import Any
 
@@ -28,9 +29,9 @@ from core_functions.primitives import (
 from execution_engine.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, SimulatorSpec
-from robot_bridges.kuka_rsi.external import LoopSettings
+from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.kinematics import KukaArm
-from robot_bridges.kuka_rsi.simulator import RsiContext
+from robot_bridges.kuka_rsi.simulator import Quirks, RsiContext
 
 READY = tuple(math.radians(v) for v in (0.0, -80.0, 85.0, 0.0, 30.0, 0.0))
 ARM = KukaArm()
@@ -40,10 +41,13 @@ Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
 def _backend(
     context: RsiContext = RsiContext(start_deg=tuple(math.degrees(v) for v in READY)),
     settings: LoopSettings = LoopSettings(silence_timeout=1.0),
+    quirks: Quirks = Quirks(),
+    link: RobotLink | None = None,
 ) -> KukaRsiBackend:
     return KukaRsiBackend(
         listen=("127.0.0.1", 0),
-        simulator=SimulatorSpec(runner="thread", accelerated=True, context=context),
+        link=link,
+        simulator=SimulatorSpec(runner="thread", accelerated=True, context=context, quirks=quirks),
         runner="thread",
         settings=settings,
     )
@@ -374,7 +378,7 @@ def test_an_rsi_stop_puts_the_machine_in_error_handling(tmp_path: Any) -> None:
     app = Path(__file__).resolve().parents[1] / "apps_xml" / "kuka_rsi_demo.xml"
     trace = tmp_path / "trace.jsonl"
     out, err = io.StringIO(), io.StringIO()
-    options = ["--backend-option", "simulator=accelerated", "--backend-option", "axis_monitor=5"]
+    options = ["--backend-option", "simulator=accelerated", "--backend-option", "axis_monitor=5", "--no-check"]  # the dry run would refuse it
     code = cli_main(["run", str(app), "--robot", "kuka-rsi", *options, "--trace", str(trace), "-q"], out, err)
     assert code == 1, err.getvalue() + out.getvalue()
     events = [json.loads(line) for line in trace.read_text().splitlines()]
@@ -407,3 +411,45 @@ def test_recording_plans_through_waypoints_with_the_robots_generators(run_sim: R
         assert caught.value.kind is FaultKind.UNREACHABLE
 
     _with_backend(run_sim, body)
+
+
+# ------------------------------------------------------------------- peers that report otherwise
+def test_a_drifting_controller_ends_the_primitive_with_a_controller_fault_naming_the_axis(run_sim: Run) -> None:
+    async def body(b: KukaRsiBackend) -> None:
+        with pytest.raises(BridgeError) as caught:
+            await b.execute("arm", MoveJoints(tuple(math.radians(v) for v in (60, -80, 85, 0, 30, 0))))
+        error = caught.value
+        assert error.kind is FaultKind.CONTROLLER
+        assert re.search(r"A3: commanded 85\.00\d deg, the controller reports 85\.1\d\d deg \(tolerance 0\.100 deg\)", error.detail)
+        with pytest.raises(BridgeError) as later:
+            await b.execute("arm", MoveJoints(READY))
+        assert later.value is error  # the robot stays stopped until someone looks at the controller
+
+    _with_backend(run_sim, body, quirks=Quirks(drift_axis=3, drift_deg=0.002))
+
+
+def test_primitives_plan_from_the_commanded_set_point_not_the_reported_one(run_sim: Run) -> None:
+    """The peer keeps reporting its start pose (READY) as the set point; with the cross-check
+    switched off, what is planned shows: relative moves and the recorded sweep start where the
+    robot was commanded to be, never back at the reported pose."""
+
+    async def body(b: KukaRsiBackend) -> None:
+        moved = tuple(math.radians(v) for v in (10, -70, 80, 0, 60, 0))
+        await b.execute("arm", MoveJoints(moved))
+        result = await b.execute("arm", MoveJoints((0.1, 0, 0, 0, 0, 0), relative=True))
+        assert np.allclose(result.positions, np.array(moved) + (0.1, 0, 0, 0, 0, 0), atol=1e-4)
+        here = np.array(result.positions)
+        start = Pose.from_matrix(ARM.fk(here))
+        sweep = await b.execute("arm", RecordTrajectory("sweep", waypoints=(start.translated(0.0, 0.05, 0.0),), interpolation="linear"))
+        assert np.allclose(sweep.points[0], here, atol=1e-4)  # not READY, which the peer reports
+        sim = b._sim_thread
+        assert sim is not None
+        sim.model.trace = []
+        await b.execute("arm", ExecuteTrajectory("sweep", sweep.joint_names, sweep.points, sweep.times))
+        steps = np.abs(np.diff(np.array(sim.model.trace), axis=0))
+        assert np.max(steps[:, 4]) < math.radians(0.1)  # A5 stayed near 60 deg: no trip back to 30
+
+    from core_functions.primitives import RecordTrajectory
+
+    off = RobotLink("kuka", "127.0.0.1", setpoint_tolerance_deg=(math.inf,) * 6)
+    _with_backend(run_sim, body, quirks=Quirks(frozen_setpoint=True), link=off)

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from robot_bridges.kuka_rsi.codec import MAX_PACKET_BYTES, PacketCodec, PacketError
+from robot_bridges.kuka_rsi.codec import MAX_PACKET_BYTES, REASONS, PacketCodec, PacketError
 from robot_bridges.kuka_rsi.config import default_config, parse_config
 from test_rsi_config import FIGURE_2
 
@@ -146,3 +146,71 @@ def test_the_fast_path_and_the_full_parser_agree() -> None:
         ROB.decode_into(rearranged, slow)  # comments are refused outright: no controller sends them
     assert ROB.decode_into(rearranged.replace(b"<!-- a comment -->", b"\n  "), slow) == 1234
     assert fast == slow
+
+
+# ------------------------------------------------------------------- how peers actually vary
+ROS_I_CONFIG = parse_config(
+    """<ROOT><CONFIG><IP_NUMBER>127.0.0.1</IP_NUMBER><PORT>49152</PORT><SENTYPE>ImFree</SENTYPE><ONLYSEND>FALSE</ONLYSEND></CONFIG>
+    <SEND><ELEMENTS>
+      <ELEMENT TAG="DEF_RIst" TYPE="DOUBLE" INDX="INTERNAL"/><ELEMENT TAG="DEF_RSol" TYPE="DOUBLE" INDX="INTERNAL"/>
+      <ELEMENT TAG="DEF_AIPos" TYPE="DOUBLE" INDX="INTERNAL"/><ELEMENT TAG="DEF_ASPos" TYPE="DOUBLE" INDX="INTERNAL"/>
+      <ELEMENT TAG="DEF_Delay" TYPE="LONG" INDX="INTERNAL"/>
+    </ELEMENTS></SEND>
+    <RECEIVE><ELEMENTS>"""
+    + "".join(f'<ELEMENT TAG="AK.A{i}" TYPE="DOUBLE" INDX="{i}" HOLDON="1"/>' for i in range(1, 7))
+    + "</ELEMENTS></RECEIVE></ROOT>",
+    "ros_i_like.xml",
+)
+
+
+def _element_tree_packet(root_attribute: str, sort: bool) -> bytes:
+    """A <Rob> packet as Python's ElementTree writes it (ROS-I's simulator): str() of floats, and
+    under Python 2 the attributes sorted by name."""
+    import xml.etree.ElementTree as ET
+
+    def element(parent: ET.Element, tag: str, attributes: dict[str, str]) -> None:
+        ET.SubElement(parent, tag, dict(sorted(attributes.items())) if sort else attributes)
+
+    root = ET.Element("Rob", {root_attribute: "KUKA"})
+    for tag in ("RIst", "RSol"):
+        element(root, tag, {k: "0.0" for k in "XYZABC"})
+    element(root, "AIPos", {f"A{i}": str(v) for i, v in enumerate((0.0, -90.0, 90.0, 0.0, 90.0, 1e-05), start=1)})
+    element(root, "ASPos", {f"A{i}": str(v) for i, v in enumerate((0.0, -90.0, 90.0, 0.0, 90.0, 0.0), start=1)})
+    element(root, "Delay", {"D": "0"})
+    ET.SubElement(root, "IPOC").text = "17"
+    return ET.tostring(root)
+
+
+@pytest.mark.parametrize("sort", [False, True])
+def test_packets_as_ros_industrials_simulator_writes_them_are_read(sort: bool) -> None:
+    rob = PacketCodec.rob(ROS_I_CONFIG)
+    ipoc, values = rob.decode(_element_tree_packet("TYPE", sort))
+    assert ipoc == 17 and values["AIPos.A5"] == 90.0 and values["AIPos.A6"] == 1e-05 and values["Delay.D"] == 0
+
+
+def test_attribute_names_match_whatever_their_case() -> None:
+    packet = GOOD.replace(b"Type=", b"TYPE=").replace(b" A1=", b" a1=").replace(b" X=", b" x=")
+    out = list(ROB.defaults)
+    assert ROB.decode_into(packet, out) == 99
+    assert ROB.decode_into(GOOD.replace(b"Type=", b"type="), out) == 99
+
+
+@pytest.mark.parametrize(
+    ("packet", "reason", "words"),
+    [
+        (GOOD.replace(b"Type=", b"Kind="), "root attribute", "<Rob> has no Type attribute (its attributes: Kind)"),
+        (GOOD.replace(b'"KUKA"', b'"kuka"'), "root type", "<Rob Type='kuka'> where 'KUKA' is configured"),
+        (GOOD.replace(b' A1="0.000000"', b' A1="0.000000" a1="1.0"', 1), "duplicate", "gives attribute a1 twice"),
+        (GOOD.replace(b"<Rob", b"<Bob").replace(b"</Rob>", b"</Bob>"), "root element", "<Bob>"),
+        (GOOD.replace(b'<Delay D="0"/>', b""), "missing", "Delay.D"),
+        (GOOD.replace(b' X="0.000000"', b' X="nan"', 1), "value", "RIst.X"),
+        (GOOD.replace(b"<IPOC>99</IPOC>", b"<IPOC>x</IPOC>"), "ipoc", "IPOC"),
+        (b"\x00\x01garbage", "xml", "well-formed"),
+        (b'<?xml version="1.0"?>' + GOOD, "markup", "processing instructions"),
+        (GOOD + b" " * MAX_PACKET_BYTES, "size", "exceeds"),
+    ],
+)
+def test_every_refusal_names_its_reason(packet: bytes, reason: str, words: str) -> None:
+    with pytest.raises(PacketError) as caught:
+        ROB.decode(packet)
+    assert caught.value.reason == reason and reason in REASONS and words in str(caught.value)

@@ -10,7 +10,7 @@ import pytest
 from robot_bridges.kuka_rsi.codec import PacketCodec
 from robot_bridges.kuka_rsi.config import default_config, default_config_path, parse_config
 from robot_bridges.kuka_rsi.kinematics import abc_to_matrix
-from robot_bridges.kuka_rsi.simulator import Faults, KrcModel, Program, RsiContext, RsiStopped, SimulatorThread, run_lockstep
+from robot_bridges.kuka_rsi.simulator import Faults, KrcModel, Program, Quirks, RsiContext, RsiStopped, SimulatorThread, main, run_lockstep
 
 CONFIG = default_config()
 SEN = PacketCodec.sen(CONFIG)
@@ -25,8 +25,8 @@ def _config(holdon: str) -> object:
 class Robot:
     """A model and the replies an external system would send it."""
 
-    def __init__(self, context: RsiContext = RsiContext(), config: object = CONFIG) -> None:
-        self.model = KrcModel(config, context)  # type: ignore[arg-type]
+    def __init__(self, context: RsiContext = RsiContext(), config: object = CONFIG, quirks: Quirks = Quirks()) -> None:
+        self.model = KrcModel(config, context, quirks=quirks)  # type: ignore[arg-type]
         self.sen = PacketCodec.sen(config)  # type: ignore[arg-type]
         self.model.trace = []
 
@@ -232,3 +232,51 @@ def test_injected_loss_and_garbage_are_reproducible_from_the_seed() -> None:
     finally:
         silent.close()
     assert counts[0] == counts[1] and counts[0][0] > 0 and counts[0][1] > 0
+
+
+# ------------------------------------------------------------ peers that report what they like
+def test_a_frozen_set_point_reports_the_start_pose_while_the_robot_moves() -> None:
+    robot = Robot(quirks=Quirks(frozen_setpoint=True))
+    robot.start_correcting()
+    robot.cycle({"AK.A1": 0.5, "B2": True})
+    packet = robot.cycle({"AK.A1": 1.0, "B2": True})
+    assert packet["ASPos.A1"] == 0.0 and packet["RSol.Y"] == pytest.approx(0.0, abs=1e-6)
+    assert packet["AIPos.A1"] > 0.2  # the robot did move: only its report stands still
+
+
+def test_a_drifting_report_moves_away_from_the_real_set_point_during_rsi_movecorr() -> None:
+    robot = Robot(quirks=Quirks(drift_axis=3, drift_deg=0.01))
+    assert robot.cycle({})["ASPos.A3"] == pytest.approx(90.0)  # not yet: RSI_MOVECORR has not begun
+    robot.start_correcting()
+    for _ in range(10):
+        packet = robot.cycle({"B2": True})
+    assert packet["ASPos.A3"] == pytest.approx(90.0 + 0.1) and math.degrees(robot.model.q_cmd[2]) == pytest.approx(90.0)
+
+
+def test_root_attribute_spelling_ipoc_step_and_dropped_replies_as_configured() -> None:
+    model = KrcModel(CONFIG, quirks=Quirks(root_attribute="TYPE", ipoc_step=1))
+    first = model.packet()
+    assert first.startswith(b'<Rob TYPE="KUKA">')
+    model.advance()
+    assert model.ipoc == RsiContext().ipoc_start + 1
+    reply = SEN.encode_map({}, model.ipoc)
+    model.packet()
+    assert model.offer(reply, drop=True) and model.stats.dropped == 1
+    model.advance()
+    assert model.delay == 2  # the dropped reply counts late like a missing one
+
+
+def test_the_command_line_takes_the_quirks(capsys: pytest.CaptureFixture[str]) -> None:
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    try:
+        port = silent.getsockname()[1]
+        args = ["--to", f"127.0.0.1:{port}", "--accelerated", "--cycles", "3", "--reply-grace", "0", "--root-attribute", "TYPE",
+                "--frozen-setpoint", "--drift", "A2:0.5", "--ipoc-step", "1", "--drop", "0.5"]
+        assert main(args) == 0
+        packets = [silent.recv(4096) for _ in range(3)]
+    finally:
+        silent.close()
+    assert all(p.startswith(b'<Rob TYPE="KUKA">') for p in packets) and b"<IPOC>3741924002</IPOC>" in packets[2]
+    assert '"dropped": 0' in capsys.readouterr().out.splitlines()[-1]
+    assert main(["--drift", "A9:1"]) == 1

@@ -54,8 +54,8 @@ from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface, RunnerMode
 from robot_bridges.kuka_rsi.kinematics import KR6_R900, URDF_PATH, KukaArm
 from robot_bridges.kuka_rsi.otg import CartesianOTG, VectorOTG
-from robot_bridges.kuka_rsi.simulator import Endpoint, Faults, RsiContext, SimulatorThread
-from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError
+from robot_bridges.kuka_rsi.simulator import Endpoint, Faults, Quirks, RsiContext, SimulatorThread
+from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError, resample
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +91,12 @@ class SimulatorSpec:
     accelerated: bool = False  # lockstep (thread runner only)
     context: RsiContext = RsiContext()
     faults: Faults = Faults()
+    quirks: Quirks = Quirks()  # a misbehaving peer, for tests and demonstrations
+
+
+class RsiStartError(BridgeError, ConnectionError):
+    """The back end could not start: no robot to drive.  A ConnectionError as well, so a command
+    line reports it in one line like any other controller it cannot reach."""
 
 
 @dataclass
@@ -148,6 +154,7 @@ class KukaRsiBackend(RobotBackend):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._readers: list[int] = []
         self._dt = self.link.cycle_ms / 1000.0
+        self._starting = False
 
     @property
     def groups(self) -> tuple[str, ...]:
@@ -155,6 +162,19 @@ class KukaRsiBackend(RobotBackend):
 
     # ---------------------------------------------------------------------------- lifecycle
     async def start(self) -> None:
+        """Bind the loop, start the simulator if any, wait for the first valid packet and the
+        handshakes.  On failure everything started is closed again and :class:`RsiStartError` says why."""
+        self._starting = True
+        try:
+            await self._start()
+        except BridgeError as error:
+            self._fault = self._fault or error  # so close() tears down without the closing handshakes
+            await self.close()
+            raise RsiStartError(error.kind, error.detail) from None
+        finally:
+            self._starting = False
+
+    async def _start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._changed = asyncio.Event()
         self.iface = RsiInterface([self.link], self.settings, mode=self.runner)
@@ -185,15 +205,16 @@ class KukaRsiBackend(RobotBackend):
                 clock = real_clock().bind(self._sim_clock_loop)
             self._sim_thread = SimulatorThread(
                 self.config, address, context=spec.context, roles=self.roles, faults=spec.faults, clock=clock,
-                bind=(self.link.host, self.link.port or 0),
+                bind=(self.link.host, self.link.port or 0), quirks=spec.quirks,
             ).start()
             return
         ctx = spec.context
         args = [
             sys.executable, "-m", "robot_bridges.kuka_rsi.simulator", "--to", f"{address[0]}:{address[1]}",
             "--bind", f"{self.link.host}:{self.link.port or 0}", "--cycle", str(ctx.cycle_ms), "--timeout", str(ctx.timeout),
-            "--mode", ctx.correction_mode, "--seed", str(spec.faults.seed),
+            "--mode", ctx.correction_mode, "--seed", str(spec.faults.seed), "--axis-monitor", str(ctx.axis_monitor_deg[0]),
         ]
+        args += _quirk_arguments(spec.faults, spec.quirks)
         if self.link.config is not None:
             args += ["--config", self.link.config.source]
         self._sim_process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
@@ -217,6 +238,7 @@ class KukaRsiBackend(RobotBackend):
             self._readers = []
             if self._sim_thread is not None:
                 self._sim_thread.stop()
+                self._sim_thread = None
             if self._sim_clock_loop is not None:
                 self._sim_clock_loop.close()
                 self._sim_clock_loop = None
@@ -228,6 +250,7 @@ class KukaRsiBackend(RobotBackend):
                 except subprocess.TimeoutExpired:
                     self._sim_process.kill()
                     self._sim_process.communicate()
+                self._sim_process = None
             if iface is not None:
                 iface.close()
             self.iface = None
@@ -295,13 +318,16 @@ class KukaRsiBackend(RobotBackend):
             self._set_fault(BridgeError(FaultKind.TIMEOUT, f"{self.name}: {message}{hint}"))
         elif kind == "connection":
             self._set_fault(BridgeError(FaultKind.CONNECTION, f"{self.name}: {message}"))
+        elif kind == "controller":
+            self._set_fault(BridgeError(FaultKind.CONTROLLER, f"{self.name}: {message}"))
         else:
             self._set_fault(BridgeError(FaultKind.INTERNAL, f"{self.name}: {message}"))
 
     def _set_fault(self, error: BridgeError) -> None:
         if self._fault is None:
             self._fault = error
-            log.error("%s", error)
+            if not self._starting:  # a failed start says it once, in its exception
+                log.error("%s", error)
         self._changed.set()
 
     def _state(self) -> RobotState:
@@ -397,13 +423,13 @@ class KukaRsiBackend(RobotBackend):
                 raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: joints {list(primitive.joint_names)} are not the axes {list(names)}")
             # Axes not named stay where they are: no change (relative) or the current set point.
             order = {n: i for i, n in enumerate(primitive.joint_names)}
-            current = np.array(self._state().set_joints)
+            current = self._commanded()
             values = np.array(
                 [values[order[n]] if n in order else (0.0 if primitive.relative else current[i]) for i, n in enumerate(names)]
             )
         elif len(values) != 6:
             raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: a joint move needs 6 values (A1..A6), got {len(values)}")
-        target = values + np.array(self._state().set_joints) if primitive.relative else values
+        target = values + self._commanded() if primitive.relative else values
         for spec, value in zip(self.spec.joints, target):
             if not spec.contains(float(value)):
                 raise BridgeError(
@@ -430,13 +456,17 @@ class KukaRsiBackend(RobotBackend):
         m[:3, 3] = (current.x + d.x, current.y + d.y, current.z + d.z)
         return Pose.from_matrix(m)
 
+    def _commanded(self) -> np.ndarray:
+        """The joint set point the loop commands: where every plan starts (never the reported ASPos)."""
+        return np.array(self._state().commanded_joints)
+
     def _set_pose(self) -> Pose:
-        x, y, z, a, b, c = self._state().set_cartesian
-        return Pose.from_xyz_rpy(x, y, z, roll=c, pitch=b, yaw=a)
+        """The commanded TCP pose (our kinematics of the commanded joints)."""
+        return Pose.from_matrix(self.arm.fk(self._commanded()))
 
     async def _move_pose(self, target: Pose, interpolation: str, what: str) -> None:
         assert self.iface is not None
-        reference = np.array(self._state().set_joints)
+        reference = self._commanded()
         goal = self.arm.ik(target.matrix(), reference)
         if goal is None:
             raise BridgeError(FaultKind.UNREACHABLE, f"{self.name}: {what} is out of reach of the arm (no IK solution within the joint limits)")
@@ -516,8 +546,10 @@ class KukaRsiBackend(RobotBackend):
         times = np.array(primitive.times, dtype=float) / self.speed
         await self._move_joints(points[0])
         if len(points) > 1 and times[-1] > times[0]:
-            grid = np.arange(times[0], times[-1] + self._dt / 2, self._dt)
-            sampled = np.column_stack([np.interp(grid, times, points[:, i]) for i in range(6)])
+            try:
+                sampled = resample(times, points, self._dt)
+            except ValueError as error:
+                raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: trajectory {primitive.name!r}: {error}") from None
             path = ToolPath("joint", sampled, f"trajectory {primitive.name}")
             assert self.iface is not None
             iface = self.iface
@@ -548,7 +580,7 @@ class KukaRsiBackend(RobotBackend):
         since this runs on the application's thread; consecutive kept points farther apart than the
         axes can move in between mean the line leaves the workspace or passes a singularity.
         """
-        q = np.array(self._state().set_joints)
+        q = self._commanded()
         start = q
         timeline: list[tuple[bool, np.ndarray]] = [(False, q)]  # (is a pose, joints or 4x4 pose)
         for waypoint in primitive.waypoints:
@@ -680,7 +712,10 @@ def _fault_kind(kind: str) -> FaultKind:
 
 
 
-_EXTRAS = ("runner", "simulator", "config", "mode", "cycle", "timeout", "axis_monitor", "silence", "feedback", "linear_speed", "linear_accel")
+_EXTRAS = (
+    "runner", "simulator", "config", "mode", "cycle", "timeout", "axis_monitor", "silence", "connect_timeout", "feedback",
+    "linear_speed", "linear_accel", "tolerance", "tolerance_mm", "sim_frozen_setpoint", "sim_drop", "sim_drift", "sim_root_attribute",
+)
 
 
 async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
@@ -695,8 +730,13 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     ``mode`` (``absolute`` | ``relative``, as the RSI context corrects), ``cycle`` (4 | 12 ms),
     ``timeout`` (late packets in a row that stop the simulated RSI), ``axis_monitor`` (deg, the
     simulated AXISCORRMON limit), ``silence`` (s without packets that mean the robot is lost),
-    ``feedback`` (file to save every packet to), ``linear_speed`` (m/s) and ``linear_accel``
-    (m/s^2) at 100 % speed.
+    ``connect_timeout`` (s to the first valid packet), ``feedback`` (file to save every packet
+    to), ``linear_speed`` (m/s) and ``linear_accel`` (m/s^2) at 100 % speed, ``tolerance`` (deg,
+    every axis) and ``tolerance_mm`` (TCP): how far the reported set point may lie from the
+    commanded one.  A simulated controller can misbehave on purpose: ``sim_frozen_setpoint``
+    (1: ASPos stays at the start pose), ``sim_drop`` (probability a reply is discarded),
+    ``sim_drift`` (``A3:0.01``: the reported ASPos drifts, deg per cycle), ``sim_root_attribute``
+    (``TYPE``: how ``<Rob>`` spells its type attribute).
 
     RSI runs on the robot's clock, so the application must too: a simulated or scaled clock
     would let the engine's timeouts run ahead of the robot.
@@ -719,34 +759,71 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
         timeout = int(extra.get("timeout", "100"))
         monitor = float(extra.get("axis_monitor", "360"))
         silence = float(extra.get("silence", "0.1"))
+        connect = float(extra.get("connect_timeout", "10"))
         limits = MotionLimits(linear_speed=float(extra.get("linear_speed", "1.0")), linear_accel=float(extra.get("linear_accel", "2.0")))
+        tolerance = float(extra.get("tolerance", "0.1"))
+        tolerance_mm = float(extra.get("tolerance_mm", "1.0"))
     except ValueError as error:
-        raise ValueError(f"kuka-rsi: cycle and timeout are integers; axis_monitor, silence, linear_speed and linear_accel numbers: {error}") from None
-    if not (silence > 0 and monitor > 0 and limits.linear_speed > 0 and limits.linear_accel > 0):
-        raise ValueError("kuka-rsi: axis_monitor, silence, linear_speed and linear_accel must be > 0")
+        raise ValueError(
+            f"kuka-rsi: cycle and timeout are integers; axis_monitor, silence, connect_timeout, linear_speed, linear_accel, "
+            f"tolerance and tolerance_mm numbers: {error}"
+        ) from None
+    if not all(v > 0 for v in (silence, connect, monitor, limits.linear_speed, limits.linear_accel, tolerance, tolerance_mm)):
+        raise ValueError("kuka-rsi: axis_monitor, silence, connect_timeout, linear_speed, linear_accel, tolerance and tolerance_mm must be > 0")
     try:
         config = load_config(extra["config"]) if "config" in extra else None
     except ConfigError as error:
         raise ValueError(str(error)) from None
-    settings = LoopSettings(silence_timeout=silence)
+    settings = LoopSettings(silence_timeout=silence, connect_timeout=connect)
+    trust = {"setpoint_tolerance_deg": (tolerance,) * 6, "tcp_tolerance_mm": tolerance_mm}
     if options.rsi_listen is not None:
         listen = Endpoint.parse(options.rsi_listen)
         if options.host is None:
             raise ValueError("kuka-rsi: with rsi_listen, give the controller's address as host: only its packets are answered")
-        link = RobotLink("kuka", options.host, options.port, config=config, correction_mode=mode, cycle_ms=cycle)
+        if any(key.startswith("sim_") for key in extra):
+            raise ValueError("kuka-rsi: the sim_ options shape the simulated controller; a real one (rsi_listen) takes none")
+        link = RobotLink("kuka", options.host, options.port, config=config, correction_mode=mode, cycle_ms=cycle, **trust)  # type: ignore[arg-type]
         backend = KukaRsiBackend(listen=(listen.host, listen.port), link=link, simulator=None, runner=runner, settings=settings,  # type: ignore[arg-type]
                                  limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
     else:
         if options.host is not None:
             raise ValueError("kuka-rsi: a real controller needs rsi_listen=HOST:PORT (its RSI configuration's IP_NUMBER:PORT) as well as host")
         context = RsiContext(cycle_ms=cycle, timeout=timeout, correction_mode=mode, axis_monitor_deg=(monitor,) * 6)
-        link = RobotLink("kuka", "127.0.0.1", None, config=config, correction_mode=mode, cycle_ms=cycle)
+        link = RobotLink("kuka", "127.0.0.1", None, config=config, correction_mode=mode, cycle_ms=cycle, **trust)  # type: ignore[arg-type]
         accelerated = sim_runner == "accelerated"
         if accelerated and "silence" not in extra:
             # In-process, the lockstep controller shares the application's GIL: a long computation
             # there can hold it back for a while.  That is silence the loop must not take for a stop.
-            settings = LoopSettings(silence_timeout=2.0)
-        spec = SimulatorSpec(runner="thread" if accelerated else sim_runner, accelerated=accelerated, context=context, faults=Faults(seed=options.seed))
+            settings = LoopSettings(silence_timeout=2.0, connect_timeout=connect)
+        faults, quirks = _misbehaviour(extra, options.seed)
+        spec = SimulatorSpec(runner="thread" if accelerated else sim_runner, accelerated=accelerated, context=context, faults=faults, quirks=quirks)
         backend = KukaRsiBackend(listen=("127.0.0.1", options.port or 0), link=link, simulator=spec, runner=runner,  # type: ignore[arg-type]
                                  settings=settings, limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
     return backend  # the bridge node starts it
+
+
+def _misbehaviour(extra: dict[str, str], seed: int) -> tuple[Faults, Quirks]:
+    """The simulated controller's deliberate faults and quirks from the ``sim_`` options."""
+    try:
+        drop = float(extra.get("sim_drop", "0"))
+        axis, deg = Quirks.parse_drift(extra["sim_drift"]) if "sim_drift" in extra else (0, 0.0)
+        frozen = extra.get("sim_frozen_setpoint", "0")
+        if frozen not in ("0", "1"):
+            raise ValueError(f"sim_frozen_setpoint is 0 or 1, got {frozen!r}")
+        return Faults(seed=seed, drop=drop), Quirks(frozen == "1", axis, deg, extra.get("sim_root_attribute", "Type"))
+    except ValueError as error:
+        raise ValueError(f"kuka-rsi: {error}") from None
+
+
+def _quirk_arguments(faults: Faults, quirks: Quirks) -> list[str]:
+    """The simulator's command-line options for a misbehaving peer."""
+    args = ["--drop", str(faults.drop)] if faults.drop else []
+    if quirks.frozen_setpoint:
+        args.append("--frozen-setpoint")
+    if quirks.drift_axis:
+        args += ["--drift", f"A{quirks.drift_axis}:{quirks.drift_deg!r}"]
+    if quirks.root_attribute != "Type":
+        args += ["--root-attribute", quirks.root_attribute]
+    if quirks.ipoc_step is not None:
+        args += ["--ipoc-step", str(quirks.ipoc_step)]
+    return args

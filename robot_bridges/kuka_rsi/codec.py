@@ -7,6 +7,14 @@ refuses, before parsing, what no controller sends: oversized datagrams, DTDs, en
 processing instructions.  Every failure is a :class:`PacketError` naming the field, so the
 loop can count and report a bad datagram and carry on with the next one.
 
+Peers differ in how they spell attribute *names*: a KR C4 sends ``<Rob Type="KUKA">``,
+ROS-Industrial's ``kuka_rsi_simulator`` sends ``<Rob TYPE="KUKA">`` (Python's ElementTree, which
+also sorts the attributes).  XML names are case-sensitive, but no RSI peer uses two spellings of one
+name for two things, so the decoder matches attribute names of the root and of the configured
+elements case-insensitively (and refuses an element that gives one name twice in two spellings);
+element names and the ``Type`` value are matched exactly.  Every refusal carries a short
+:attr:`PacketError.reason`, so the loop can count refusals per reason and say why a peer was refused.
+
 Values travel in protocol units (mm, degrees); converting to SI is the caller's job.
 Decoding has a fast path: a regular expression compiled from the configuration matches a packet
 laid out exactly as configured (what a controller sends) in a few microseconds; its values cannot
@@ -32,13 +40,37 @@ Value = bool | int | float | str
 MAX_PACKET_BYTES = 4096
 #: The ``Type`` attribute of every ``<Rob>`` packet.
 ROB_TYPE = "KUKA"
+#: The root's type attribute, as KUKA spells it (matched case-insensitively).
+ROOT_ATTRIBUTE = "Type"
 _MAX_IPOC = 2**63 - 1
 _MAX_STRING = 256
 _DOUBLE_FORMAT = "%.6f"
 
 
 class PacketError(ValueError):
-    """A datagram that is not a valid packet for the configuration; the message says why."""
+    """A datagram that is not a valid packet for the configuration; the message says why.
+
+    ``reason`` is one of :data:`REASONS`: the loop counts refusals by it, the message is the example.
+    """
+
+    def __init__(self, message: str, reason: str = "value") -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+#: Why a datagram is refused, the keys of the loop's per-reason counters.
+REASONS: tuple[str, ...] = (
+    "size",  # over the byte limit
+    "markup",  # DTD, entity, comment, processing instruction
+    "xml",  # not well-formed
+    "root element",  # not <Rob> / <Sen>
+    "root attribute",  # no Type attribute on the root
+    "root type",  # a Type other than the expected one
+    "duplicate",  # an element or an attribute given twice
+    "missing",  # a configured value absent
+    "value",  # a number, boolean or string that does not parse
+    "ipoc",  # IPOC absent, malformed or out of range
+)
 
 
 def _double(raw: str, key: str) -> float:
@@ -59,9 +91,12 @@ def _long(raw: str, key: str) -> int:
 
 
 def _ipoc(raw: str) -> int:
-    ipoc = _long(raw, "IPOC")
+    try:
+        ipoc = _long(raw, "IPOC")
+    except PacketError as error:
+        raise PacketError(str(error), "ipoc") from None
     if not 0 <= ipoc <= _MAX_IPOC:
-        raise PacketError(f"IPOC {ipoc} is out of range")
+        raise PacketError(f"IPOC {ipoc} is out of range", "ipoc")
     return ipoc
 
 
@@ -88,17 +123,28 @@ _DEFAULTS: dict[str, Value] = {"DOUBLE": 0.0, "LONG": 0, "BOOL": False, "STRING"
 def _layout_pattern(root: str, type_value: str, groups: dict[str, list[int]], fields: tuple[Field, ...]) -> re.Pattern[str]:
     """A pattern for a packet in exactly the configured layout; values without markup or entities."""
     ws = r"\s*"
-    parts = [ws, f"<{root}", r"\s+", f'Type="{re.escape(type_value)}"', ws, ">"]
+    parts = [ws, f"<{root}", r"\s+", f'(?i:{ROOT_ATTRIBUTE})="{re.escape(type_value)}"', ws, ">"]
     for name, idx in groups.items():
         if fields[idx[0]].attribute is None:
             parts += [ws, f"<{name}>", "([^<&]*)", f"</{name}", ws, ">"]
         else:
             parts += [ws, f"<{name}"]
             for i in idx:
-                parts += [r"\s+", f"{fields[i].attribute}", ws, "=", ws, '"([^"<&]*)"']
+                parts += [r"\s+", f"(?i:{re.escape(str(fields[i].attribute))})", ws, "=", ws, '"([^"<&]*)"']
             parts += [ws, "/>"]
     parts += [ws, "<IPOC>", "([^<&]*)", "</IPOC", ws, ">", ws, f"</{root}", ws, ">", ws]
     return re.compile("".join(parts))
+
+
+def _attributes(element: etree._Element) -> dict[str, str]:
+    """An element's attributes by lower-case name; one name in two spellings is refused."""
+    found: dict[str, str] = {}
+    for name, value in element.attrib.items():
+        key = str(name).lower()
+        if key in found:
+            raise PacketError(f"<{element.tag}> gives attribute {name!s} twice, in two spellings", "duplicate")
+        found[key] = str(value)
+    return found
 
 
 class PacketCodec:
@@ -170,9 +216,9 @@ class PacketCodec:
         """Parse ``data`` into ``out`` (field order; untouched on error) and return its IPOC."""
         size = len(data)
         if size > self.max_bytes:
-            raise PacketError(f"datagram of {size} bytes exceeds the {self.max_bytes}-byte limit")
+            raise PacketError(f"datagram of {size} bytes exceeds the {self.max_bytes}-byte limit", "size")
         if b"<!" in data or b"<?" in data:
-            raise PacketError("declarations, DTDs, entities and processing instructions are not allowed in a packet")
+            raise PacketError("declarations, DTDs, entities and processing instructions are not allowed in a packet", "markup")
         if data.isascii():
             match = self._fast.fullmatch(data.decode("ascii"))
             if match is not None:
@@ -180,19 +226,23 @@ class PacketCodec:
         try:
             root = etree.fromstring(data, self._parser)
         except etree.XMLSyntaxError as error:
-            raise PacketError(f"not well-formed XML: {error.msg or error}") from None
+            raise PacketError(f"not well-formed XML: {error.msg or error}", "xml") from None
         if root.tag != self.root:
-            raise PacketError(f"root element <{root.tag}> where <{self.root}> is expected")
-        kind = root.get("Type")
+            raise PacketError(f"root element <{root.tag}> where <{self.root}> is expected", "root element")
+        attributes = _attributes(root)
+        kind = attributes.get(ROOT_ATTRIBUTE.lower())
+        if kind is None:
+            names = ", ".join(str(k) for k in root.attrib) or "none"
+            raise PacketError(f"<{self.root}> has no {ROOT_ATTRIBUTE} attribute (its attributes: {names})", "root attribute")
         if kind != self.type_value:
-            raise PacketError(f"<{self.root} Type={kind!r}> where Type={self.type_value!r} is configured")
+            raise PacketError(f"<{self.root} {ROOT_ATTRIBUTE}={kind!r}> where {self.type_value!r} is configured", "root type")
         staged: list[tuple[int, Value]] = []
         seen: set[str] = set()
         ipoc = -1
         for child in root:
             tag = child.tag
             if tag in seen:
-                raise PacketError(f"<{tag}> appears twice")
+                raise PacketError(f"<{tag}> appears twice", "duplicate")
             seen.add(tag)
             if tag == "IPOC":
                 ipoc = _ipoc(child.text or "")
@@ -200,16 +250,17 @@ class PacketCodec:
             group = self._groups.get(tag)
             if group is None:
                 continue  # a value this configuration does not use
+            values = _attributes(child)
             for index, attribute, convert, key in group:
-                raw = child.text if attribute is None else child.get(attribute)
+                raw = child.text if attribute is None else values.get(attribute.lower())
                 if raw is None:
-                    raise PacketError(f"{key} is missing")
+                    raise PacketError(f"{key} is missing", "missing")
                 staged.append((index, convert(raw, key)))
         if ipoc < 0:
-            raise PacketError("IPOC is missing")
+            raise PacketError("IPOC is missing", "ipoc")
         if len(staged) != len(self.fields):
             missing = [k for k in self.keys if self._element_of(k) not in seen]
-            raise PacketError(f"missing values: {', '.join(missing[:6])}")
+            raise PacketError(f"missing values: {', '.join(missing[:6])}", "missing")
         for index, value in staged:
             out[index] = value
         return ipoc

@@ -63,10 +63,12 @@ class RobotState:
     done_ok: int
     active_id: int
     rejected: int
+    clamped: int  # correction steps the limiter held back
     actual_cartesian: tuple[float, ...]  # RIst: m, rad
-    set_cartesian: tuple[float, ...]  # RSol
+    set_cartesian: tuple[float, ...]  # RSol, as the controller reports it
     actual_joints: tuple[float, ...]  # AIPos: rad
-    set_joints: tuple[float, ...]  # ASPos
+    set_joints: tuple[float, ...]  # ASPos, as the controller reports it: for display, never to plan from
+    commanded_joints: tuple[float, ...]  # the set point the external system commands: plan from this
 
     @property
     def connected(self) -> bool:
@@ -298,11 +300,15 @@ class RsiInterface:
         return cmd
 
     def set_tool_path(self, robot: int, path: ToolPath, *, max_speed: float = 2.0, max_angular_speed: float = 3.0) -> int:
-        """Stream ``path`` one point per cycle (checked completely first); returns the command id."""
+        """Stream ``path`` one point per cycle (checked completely first: speeds, accelerations, an
+        end at rest, against the link's limits); returns the command id."""
         link = self.links[robot]
+        max_speed = min(max_speed, link.max_linear_speed)
+        max_angular_speed = min(max_angular_speed, link.max_angular_speed)
         check_tool_path(
             path, link.cycle_ms / 1000.0, lower=np.array(link.lower), upper=np.array(link.upper),
             max_joint_speed=np.array(link.max_joint_speed), max_speed=max_speed, max_angular_speed=max_angular_speed,
+            max_joint_accel=np.array(link.max_joint_accel), max_accel=link.max_linear_accel, max_angular_accel=link.max_angular_accel,
         )
         key = next(self._stream_keys)
         assert self._pipe is not None
@@ -394,7 +400,7 @@ class RsiInterface:
     def get_curr_pos(self, robot: int) -> CurrentPosition:
         """ITRA's getCurrPos: the actual TCP and axes from the latest packet."""
         _, v = self._slots[robot].state.read()
-        return CurrentPosition(v[0] / 1000.0, v[1], v[10:16], v[22:28])  # type: ignore[arg-type, operator]
+        return CurrentPosition(v[0] / 1000.0, v[1], v[11:17], v[23:29])  # type: ignore[arg-type, operator]
 
     def get_timestamp(self) -> float:
         """ITRA's getTimestamp: microseconds of the clock the loop stamps packets with."""
@@ -402,8 +408,8 @@ class RsiInterface:
 
     def state(self, robot: int) -> RobotState:
         _, v = self._slots[robot].state.read()
-        ints = [int(x) for x in v[:10]]  # type: ignore[call-overload]
-        return RobotState(*ints, v[10:16], v[16:22], v[22:28], v[28:34])  # type: ignore[arg-type]
+        ints = [int(x) for x in v[:11]]  # type: ignore[call-overload]
+        return RobotState(*ints, v[11:17], v[17:23], v[23:29], v[29:35], v[35:41])  # type: ignore[arg-type]
 
     def digout(self, robot: int, tag: str, state: RobotState | None = None) -> bool:
         """A BOOL of the latest ``<Rob>`` packet by its tag (a handshake acknowledgement, a tool output)."""

@@ -113,11 +113,12 @@ class VectorOTG:
         self.target = None
         self.done = not np.any(self.velocity)
 
-    def resync(self, position: Sequence[float] | Vector) -> None:
-        """Restart from rest at ``position`` toward the same target (the robot did not follow)."""
+    def resync(self, position: Sequence[float] | Vector, velocity: Sequence[float] | Vector | None = None) -> None:
+        """Go on from ``position`` at ``velocity`` (rest unless given) toward the same target:
+        where the robot really is, when it did not follow (or a limiter held it back)."""
         self.position = np.array(position, dtype=float)
-        self.velocity = np.zeros(self.norm.dim)
-        self.done = self.target is None
+        self.velocity = np.zeros(self.norm.dim) if velocity is None else np.array(velocity, dtype=float)
+        self.done = self.target is None and not np.any(self.velocity)
 
     def error(self) -> Vector:
         if self.target is None:
@@ -242,12 +243,12 @@ class CartesianOTG:
         self.target_position = self.target_rotation = None
         self.done = not np.any(self.velocity)
 
-    def resync(self, position: Sequence[float] | Vector, rotation: Matrix) -> None:
-        """Restart from rest at this pose toward the same target (the robot did not follow)."""
+    def resync(self, position: Sequence[float] | Vector, rotation: Matrix, velocity: Sequence[float] | Vector | None = None) -> None:
+        """Go on from this pose at ``velocity`` (linear, angular; rest unless given) toward the same target."""
         self.position = np.array(position, dtype=float)
         self.rotation = np.array(rotation, dtype=float)
-        self.velocity = np.zeros(6)
-        self.done = self.target_position is None
+        self.velocity = np.zeros(6) if velocity is None else np.array(velocity, dtype=float)
+        self.done = self.target_position is None and not np.any(self.velocity)
 
     def error(self) -> Vector:
         if self.target_position is None or self.target_rotation is None:

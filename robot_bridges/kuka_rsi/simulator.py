@@ -17,7 +17,11 @@ What it reproduces, because the bridge must cope with it (seed 003; ARCHITECTURE
 * the KRL program of ITRA's handshakes: allow start -> task active, allow move ->
   RSI_MOVECORR (corrections followed), request end -> RSI_MOVECORR left, allow finish -> the task
   ends and RSI stops; ``Stop`` ends RSI at once;
-* injected faults for tests: send jitter, lost packets, garbage datagrams.
+* injected faults for tests: send jitter, lost packets, garbage datagrams, replies dropped;
+* peers that report what they like (:class:`Quirks`), as the external system meets them: a set
+  point frozen at the start pose (ROS-Industrial's ``kuka_rsi_simulator`` never updates ``ASPos``),
+  a reported set point drifting away from the real one, ``<Rob TYPE="KUKA">`` (ROS-I's spelling),
+  an IPOC counting packets instead of milliseconds.
 
 :class:`KrcModel` is the controller without I/O, stepped cycle by cycle.  Two drivers put it on
 a UDP socket: :func:`run_lockstep` (accelerated: the next packet goes out as soon as the reply
@@ -51,6 +55,7 @@ from execution_engine.clock import Clock, real_clock, run_with_clock
 from robot_bridges.kuka_rsi.codec import PacketCodec, PacketError, Value
 from robot_bridges.kuka_rsi.config import RsiConfig, RsiRoles, load_config, default_config
 from robot_bridges.kuka_rsi.kinematics import KukaArm, abc_to_matrix, matrix_to_abc, rotation_angle
+from robot_bridges.kuka_rsi.setpoint import compose_cartesian
 
 HOME_DEG = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
 
@@ -93,10 +98,37 @@ class Faults:
     loss: float = 0.0  # probability that a packet is never sent (the cycle is then late)
     garbage: float = 0.0  # probability that a garbage datagram precedes a packet
     seed: int = 0
+    drop: float = 0.0  # probability that a valid reply is discarded on arrival (the cycle is then late)
 
     def __post_init__(self) -> None:
-        if not (0.0 <= self.loss <= 1.0 and 0.0 <= self.garbage <= 1.0 and self.jitter_ms >= 0.0):
+        if not (0.0 <= self.loss <= 1.0 and 0.0 <= self.garbage <= 1.0 and 0.0 <= self.drop <= 1.0 and self.jitter_ms >= 0.0):
             raise ValueError(f"fault probabilities must lie in [0, 1] and jitter be >= 0: {self}")
+
+
+@dataclass(frozen=True)
+class Quirks:
+    """How a controller reports: the peers an external system must not take at their word."""
+
+    frozen_setpoint: bool = False  # ASPos and RSol keep reporting the start pose (ROS-I's kuka_rsi_simulator)
+    drift_axis: int = 0  # 1..6: the reported ASPos (and RSol) of this axis drifts from the real set point ...
+    drift_deg: float = 0.0  # ... by this much per cycle while RSI_MOVECORR runs
+    root_attribute: str = "Type"  # how <Rob> spells its type attribute (ROS-I: "TYPE")
+    ipoc_step: int | None = None  # IPOC increment per cycle; None: the cycle in ms, as a KR C4 (ROS-I: 1)
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.drift_axis <= 6 or not math.isfinite(self.drift_deg):
+            raise ValueError(f"drift axis is 1..6 (0: none) and the drift finite: {self}")
+        if not self.root_attribute.isidentifier() or (self.ipoc_step is not None and self.ipoc_step < 1):
+            raise ValueError(f"the root attribute must be a name and the IPOC step >= 1: {self}")
+
+    @staticmethod
+    def parse_drift(text: str) -> tuple[int, float]:
+        """``A3:0.01`` (or ``3:0.01``): axis and degrees per cycle."""
+        axis, sep, value = text.partition(":")
+        axis = axis.upper().removeprefix("A")
+        if not sep or not axis.isdigit():
+            raise ValueError(f"drift is AXIS:DEG_PER_CYCLE, e.g. A3:0.01, got {text!r}")
+        return int(axis), float(value)
 
 
 class Program(Enum):
@@ -129,6 +161,7 @@ class SimStats:
     foreign: int = 0
     lost: int = 0
     garbage_sent: int = 0
+    dropped: int = 0  # valid replies discarded on purpose (Faults.drop)
     late_replies_discarded: int = 0
     lateness_ns: list[int] = field(default_factory=list)  # real time: how far past its deadline each discarded reply came
     overruns: int = 0
@@ -146,6 +179,7 @@ class KrcModel:
         arm: KukaArm | None = None,
         *,
         accept_echo: bool = False,
+        quirks: Quirks = Quirks(),
     ) -> None:
         """``accept_echo``: a datagram equal to the packet counts as the reply -- to time a bare UDP
         echo server as the baseline of a benchmark; nothing is applied then."""
@@ -166,6 +200,10 @@ class KrcModel:
         self.q_cmd = np.radians(context.start_deg)
         self.q_act = self.q_cmd.copy()
         self.q_ref = self.q_cmd.copy()
+        self.quirks = quirks
+        self._q_start = self.q_cmd.copy()
+        self._drift = np.zeros(6)
+        self._root = b'<Rob Type="' if quirks.root_attribute == "Type" else None
         self._alpha = 1.0 - math.exp(-self.dt / context.servo_time_constant) if context.servo_time_constant > 0 else 1.0
         self._vmax = np.array([j.max_velocity for j in KUKA_KR.group("arm").joints])
         fields = self.sen.fields
@@ -192,9 +230,10 @@ class KrcModel:
         """The ``<Rob>`` packet of the current cycle."""
         values = self._send_values
         self._fill("RIst", self._cartesian("act", self.q_act))
-        self._fill("RSol", self._cartesian("cmd", self.q_cmd))
+        reported = self._reported_setpoint()
+        self._fill("RSol", self._cartesian("cmd", reported))
         self._fill("AIPos", tuple(math.degrees(v) for v in self.q_act))
-        self._fill("ASPos", tuple(math.degrees(v) for v in self.q_cmd))
+        self._fill("ASPos", tuple(math.degrees(v) for v in reported))
         index = self.rob.index
         if "Delay.D" in index:
             values[index["Delay.D"]] = self.delay
@@ -208,8 +247,17 @@ class KrcModel:
         for tag in self._tools:
             values[index[tag]] = self.outputs.get(tag, False)
         self.stats.packets += 1
-        self._last_packet = self.rob.encode(values, self.ipoc)
-        return self._last_packet
+        packet = self.rob.encode(values, self.ipoc)
+        if self._root is None:
+            packet = packet.replace(b'<Rob Type="', f'<Rob {self.quirks.root_attribute}="'.encode("ascii"), 1)
+        self._last_packet = packet
+        return packet
+
+    def _reported_setpoint(self) -> np.ndarray:
+        """The set point the packet reports: the real one, unless a quirk says otherwise."""
+        if self.quirks.frozen_setpoint:
+            return self._q_start
+        return self.q_cmd + self._drift if self.quirks.drift_axis else self.q_cmd
 
     def _fill(self, element: str, six: Sequence[float]) -> None:
         index = self.rob.index
@@ -232,8 +280,9 @@ class KrcModel:
         return pose
 
     # ------------------------------------------------------------------------------- input
-    def offer(self, data: bytes) -> bool:
-        """A datagram from the external system during this cycle; True if it is *the* reply."""
+    def offer(self, data: bytes, drop: bool = False) -> bool:
+        """A datagram from the external system during this cycle; True if it is *the* reply
+        (``drop``: a valid reply is discarded all the same, and the cycle will be late)."""
         if self._reply_ok:
             return False  # the cycle already has its reply; RSI takes the first valid one
         if self._accept_echo and data == self._last_packet:
@@ -249,6 +298,9 @@ class KrcModel:
         if ipoc != self.ipoc:
             self.stats.invalid_replies += 1
             return False
+        if drop:
+            self.stats.dropped += 1
+            return True
         self._received = out
         self._reply_ok = True
         self.stats.accepted += 1
@@ -300,7 +352,9 @@ class KrcModel:
         self.q_act = self.q_act + self._alpha * (self.q_cmd - self.q_act)
         if self.trace is not None:
             self.trace.append(self.q_cmd.copy())
-        self.ipoc += self.context.cycle_ms
+        if self.quirks.drift_axis and self.program is Program.MOVECORR:
+            self._drift[self.quirks.drift_axis - 1] += math.radians(self.quirks.drift_deg)
+        self.ipoc += self.quirks.ipoc_step or self.context.cycle_ms
         if self.program is Program.FINISHED:
             raise RsiStopped(f"KRL task finished at IPOC {self.ipoc}; RSI off", error=False)
 
@@ -345,7 +399,9 @@ class KrcModel:
             mm, deg = ctx.pos_limit
             limit = np.array([mm, mm, mm, deg, deg, deg])
             rk = np.clip(np.array([float(values[i]) for i in self._rk_idx]), -limit, limit)  # POSCORR
-            self._rk_total = self._rk_total + rk if relative else rk
+            self._rk_total = compose_cartesian(self._rk_total, rk) if relative else rk
+            if relative and float(np.max(np.abs(self._rk_total))) < 1e-9:
+                self._rk_total = np.zeros(6)  # increments that cancel leave no correction, not rounding noise
             shift = float(np.linalg.norm(self._rk_total[:3]))
             turn = math.degrees(rotation_angle(abc_to_matrix(*np.radians(self._rk_total[3:]))))
             if shift > ctx.pos_monitor[0] or turn > ctx.pos_monitor[1]:  # POSCORRMON
@@ -511,7 +567,8 @@ class _Link:
         return bytes(buf[:n]), arrived
 
     def offer(self, data: bytes, arrived: int) -> bool:
-        accepted = self.model.offer(data)
+        drop = bool(self.faults.drop) and self.rng.random() < self.faults.drop
+        accepted = self.model.offer(data, drop)
         if accepted and self.now_ns is not None:
             self.model.stats.latencies_ns.append(arrived - self.sent_ns)
         return accepted
@@ -644,8 +701,9 @@ class SimulatorThread:
         cycles: int | None = None,
         reply_grace: float = 0.25,
         now_ns: Callable[[], int] | None = None,
+        quirks: Quirks = Quirks(),
     ) -> None:
-        self.model = KrcModel(config, context, roles)
+        self.model = KrcModel(config, context, roles, quirks=quirks)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(bind)
         self.address: tuple[str, int] = self.sock.getsockname()
@@ -715,7 +773,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--jitter-ms", type=float, default=0.0)
     p.add_argument("--loss", type=float, default=0.0)
     p.add_argument("--garbage", type=float, default=0.0)
+    p.add_argument("--drop", type=float, default=0.0, help="probability that a valid reply is discarded (the cycle is late)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--frozen-setpoint", action="store_true", help="report ASPos/RSol of the start pose forever (ROS-I's simulator)")
+    p.add_argument("--drift", default="", metavar="AXIS:DEG", help="the reported ASPos of AXIS drifts by DEG per cycle, e.g. A3:0.01")
+    p.add_argument("--root-attribute", default="Type", help="how <Rob> spells its type attribute (ROS-I's simulator: TYPE)")
+    p.add_argument("--ipoc-step", type=int, default=None, help="IPOC increment per cycle (default: the cycle in ms; ROS-I's simulator: 1)")
     p.add_argument("--reply-grace", type=float, default=0.25, help="accelerated mode: wall seconds to wait for a reply")
     p.add_argument("--rt-priority", type=int, default=0, help="try SCHED_FIFO at this priority (a controller is hard real time)")
     p.add_argument("--accept-echo", action="store_true", help="benchmark baseline: a datagram equal to the packet is the reply")
@@ -732,8 +795,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         context = RsiContext(
             cycle_ms=args.cycle, timeout=args.timeout, correction_mode=args.mode, axis_monitor_deg=(args.axis_monitor,) * 6
         )
-        faults = Faults(args.jitter_ms, args.loss, args.garbage, args.seed)
-        model = KrcModel(config, context, accept_echo=args.accept_echo)
+        faults = Faults(args.jitter_ms, args.loss, args.garbage, args.seed, args.drop)
+        axis, deg = Quirks.parse_drift(args.drift) if args.drift else (0, 0.0)
+        quirks = Quirks(args.frozen_setpoint, axis, deg, args.root_attribute, args.ipoc_step)
+        model = KrcModel(config, context, accept_echo=args.accept_echo, quirks=quirks)
     except (ValueError, OSError) as error:
         print(f"kuka_rsi simulator: {error}", file=sys.stderr)
         return 1
@@ -775,6 +840,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "late_since_first_reply": s.late_since_first_reply,
         "accepted": s.accepted,
         "invalid_replies": s.invalid_replies,
+        "dropped": s.dropped,
         "overruns": s.overruns,
         "last_ipoc": model.ipoc,
         "round_trip_us": latency_summary(s.latencies_ns),

@@ -81,8 +81,9 @@ COMMAND_FORMAT = "qq7d4d"
 #: bits of the RECEIVE booleans the application sets (handshake flags, tool outputs, Stop).
 FLAGS_FORMAT = "Q"
 #: t_ns, ipoc, cycles, delay, status bits, send-boolean bits, done id, done result, active id,
-#: rejected packets, then RIst (m, rad), RSol, AIPos (rad), ASPos: 24 doubles.
-STATE_FORMAT = "qqqqQQqqqq24d"
+#: rejected packets, limiter clamps, then RIst (m, rad), RSol, AIPos (rad), ASPos, and the joint
+#: set point the external system commands (rad): 30 doubles.
+STATE_FORMAT = "qqqqQQqqqqq30d"
 
 
 class CommandKind:

@@ -3,9 +3,16 @@
 The trajectory is planned beforehand and every interpolation cycle takes the next point, so the
 path is followed exactly -- but nothing smooths it any more: a point too far from the previous
 one is a jump the robot must not make.  So a file is checked completely before a single point
-is sent: every value finite, joints inside their limits, and no step between two consecutive
-points (or from the robot to the first point) faster than the limits allow.  Problems are
+is sent: every value finite, joints inside their limits, no step between two consecutive points
+(or from the robot to the first point) faster than the speed limits allow, no change of step
+faster than the acceleration limits allow, and the last point reached at rest.  Problems are
 reported with the file and line.
+
+A controller that held still for a cycle (a late reply) leaves the stream behind the path; going
+on at the path's speed at once would be a jump in speed.  :class:`StreamCursor` plays the path at
+a fractional point index: one point per cycle as planned, but after a hold -- or from a start
+away from rest -- its rate ramps up from the held speed as fast as the acceleration left over by
+the path allows, so the robot re-enters the path without a jump and then follows it exactly.
 
 File format (text, one point per line, ``#`` starts a comment, values separated by blanks or
 commas), in the controller's units because such files come from KUKA tooling:
@@ -25,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_bridges.kuka_rsi.kinematics import abc_to_matrix, rotation_angle
+from robot_bridges.kuka_rsi.otg import matrix_to_rotvec
 
 Space = Literal["joint", "cartesian"]
 MAX_FILE_BYTES = 256 * 1024 * 1024
@@ -109,12 +117,74 @@ def check_tool_path(
     max_speed: float = 2.0,
     max_angular_speed: float = math.pi,
     start: NDArray[np.float64] | None = None,
+    max_joint_accel: NDArray[np.float64] | None = None,
+    max_accel: float | None = None,
+    max_angular_accel: float | None = None,
 ) -> None:
     """Refuse a path the robot cannot follow one point per cycle ``dt`` (raises ToolPathError).
 
     ``start`` is where the robot is (same units as the points): the first point must be
-    reachable from it within one cycle too.
+    reachable from it within one cycle too.  With acceleration limits the change of step between
+    consecutive points is checked as well, and the last step, into which the robot stops.
     """
+    _check_speed(path, dt, lower, upper, max_joint_speed, max_speed, max_angular_speed, start)
+    if path.space == "joint":
+        if max_joint_accel is not None:
+            _check_change(path, np.diff(path.points, axis=0), max_joint_accel * dt * dt, None, "deg")
+        return
+    if max_accel is not None:
+        _check_change(path, np.diff(path.points[:, :3], axis=0), np.array(max_accel * dt * dt), "the TCP", "mm")
+    if max_angular_accel is not None and len(path) > 1:
+        rotations = [abc_to_matrix(*p[3:]) for p in path.points]
+        turns = np.array([matrix_to_rotvec(rotations[i + 1] @ rotations[i].T) for i in range(len(rotations) - 1)])
+        _check_change(path, turns, np.array(max_angular_accel * dt * dt), "the tool orientation", "deg")
+
+
+def _check_change(path: ToolPath, steps: NDArray[np.float64], budget: NDArray[np.float64], group: str | None, unit: str) -> None:
+    """Refuse a change of step (row ``i`` of ``steps`` is the step into point ``i + 1``) beyond
+    ``budget`` per cycle, and a last step the robot could not stop from in one cycle.
+
+    ``group`` None: every coordinate against its own budget (axes, rad); else the steps are
+    3-vectors measured by their length (m or rad) against one budget.
+    """
+    def size(rows: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.abs(rows) if group is None else np.linalg.norm(rows, axis=-1, keepdims=True)
+
+    def words(value: float) -> str:
+        return f"{value * 1000.0:.4f} mm" if unit == "mm" else f"{math.degrees(value):.4f} deg"
+
+    limit = budget * (1 + 1e-9) + 1e-15
+    where = group or "an axis"
+    if len(steps) > 1:
+        change = size(np.diff(steps, axis=0))
+        over = np.nonzero(np.any(change > limit, axis=1))[0]
+        if over.size:
+            j = int(over[0])
+            raise ToolPathError(
+                f"{path.where(j + 1)}: the step out of this point changes by {words(float(np.max(change[j])))} on {where}, "
+                f"more than the acceleration allows in one cycle ({words(float(np.min(budget)))})"
+            )
+    if len(steps):
+        last = size(steps[-1:])[0]
+        if np.any(last > limit):
+            raise ToolPathError(
+                f"{path.where(len(path) - 1)}: the robot must come to rest at the last point, but the step into it is "
+                f"{words(float(np.max(last)))} on {where}, more than it can stop from in one cycle "
+                f"({words(float(np.min(budget)))}); slow the path down to its end"
+            )
+
+
+def _check_speed(
+    path: ToolPath,
+    dt: float,
+    lower: NDArray[np.float64] | None,
+    upper: NDArray[np.float64] | None,
+    max_joint_speed: NDArray[np.float64] | None,
+    max_speed: float,
+    max_angular_speed: float,
+    start: NDArray[np.float64] | None,
+) -> None:
+    """Limits and the speed of every step (see :func:`check_tool_path`)."""
     pts = path.points if start is None else np.vstack((np.asarray(start, dtype=float), path.points))
     offset = 0 if start is None else 1
     if path.space == "joint":
@@ -148,3 +218,109 @@ def _too_fast(path: ToolPath, i: int, what: str) -> None:
     if i == 0:
         raise ToolPathError(f"{path.where(0)}: the first point is too far from where the robot is ({what} in one cycle)")
     raise ToolPathError(f"{path.where(i)}: the step to this point needs {what}; the path must move at most that far per cycle")
+
+
+#: The slowest re-entry: from rest to the path's speed in at most this many cycles.
+MAX_RAMP_CYCLES = 1000
+
+
+def ramp_rate(points: NDArray[np.float64], budget: NDArray[np.float64]) -> float:
+    """How much a stream's rate (points per cycle) may grow per cycle within ``budget``.
+
+    Playing at rate ``r`` that grows by ``dr``, a step changes by at most ``dr * D + r * A`` per
+    cycle, ``D`` and ``A`` being the path's largest step and change of step on each coordinate;
+    so ``dr = min((budget - A) / D)`` keeps every change within the budget.
+    """
+    if len(points) < 2:
+        return 1.0
+    steps = np.abs(np.diff(points, axis=0))
+    largest = steps.max(axis=0)
+    change = np.abs(np.diff(points, n=2, axis=0)).max(axis=0) if len(points) > 2 else np.zeros(points.shape[1])
+    moving = largest > 0
+    if not np.any(moving):
+        return 1.0
+    rate = float(np.min((budget[moving] - change[moving]) / largest[moving]))
+    return min(1.0, max(1.0 / MAX_RAMP_CYCLES, rate))
+
+
+class StreamCursor:
+    """Where a stream is: a fractional index into its points and a rate in points per cycle.
+
+    Row 0 of ``points`` is where the robot stood when the stream began.  At rate 1 every cycle
+    takes the next point, exactly as planned; below 1 (a start away from rest, a re-entry after
+    the controller held) the cursor interpolates between points and the rate grows by ``ramp``
+    per cycle (see :func:`ramp_rate`).
+    """
+
+    def __init__(self, points: NDArray[np.float64], ramp: float, rate: float = 1.0) -> None:
+        self.points = points
+        self.last = len(points) - 1
+        self.ramp = ramp
+        self.position = 0.0
+        self.rate = rate
+
+    @property
+    def done(self) -> bool:
+        return self.position >= self.last
+
+    @property
+    def point(self) -> int:
+        """The number (from 1) of the path point the cursor is on or just past."""
+        return max(1, math.ceil(self.position - 1e-9))
+
+    def at(self, position: float) -> NDArray[np.float64]:
+        i = min(int(position), self.last)
+        fraction = position - i
+        if fraction <= 0.0 or i >= self.last:
+            return self.points[i].copy()
+        return self.points[i] + fraction * (self.points[i + 1] - self.points[i])
+
+    def advance(self) -> NDArray[np.float64]:
+        """The set point of the next cycle."""
+        if self.rate < 1.0:
+            self.rate = min(1.0, self.rate + self.ramp)
+        self.position = min(float(self.last), self.position + self.rate)
+        return self.at(self.position)
+
+    def hold(self, position: float, rate: float) -> None:
+        """Go on from ``position`` at ``rate`` (what the controller is known to hold)."""
+        self.position = min(float(self.last), max(0.0, position))
+        self.rate = min(1.0, max(0.0, rate))
+
+    def velocity(self, dt: float) -> NDArray[np.float64]:
+        """The velocity of the last step, so a generator taking over brakes instead of stopping dead."""
+        return (self.at(self.position) - self.at(max(0.0, self.position - self.rate))) / dt
+
+
+def resample(times: NDArray[np.float64], points: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
+    """The points of a timed trajectory at every cycle ``dt``, starting and ending at rest.
+
+    Straight lines between the points would change the speed in one cycle at each point -- an
+    acceleration of (speed change) / dt, far beyond an axis's.  A shape-preserving cubic (PCHIP:
+    monotone between points, so never beyond them, hence never beyond a limit they respect) with
+    zero speed at both ends keeps the acceleration of the motion the points came from, and the
+    robot starts from and comes to rest as it must.
+    """
+    t = np.asarray(times, dtype=float)
+    p = np.asarray(points, dtype=float)
+    h = np.diff(t)
+    if len(t) != len(p) or len(t) < 2 or not np.all(h > 0):
+        raise ValueError("trajectory times must increase strictly, one per point")
+    secant = np.diff(p, axis=0) / h[:, None]
+    slope = np.zeros_like(p)
+    if len(t) > 2:
+        left, right = secant[:-1], secant[1:]
+        w1 = (2 * h[1:] + h[:-1])[:, None]
+        w2 = (h[1:] + 2 * h[:-1])[:, None]
+        same = (left * right) > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            harmonic = (w1 + w2) / (w1 / left + w2 / right)
+        slope[1:-1] = np.where(same, harmonic, 0.0)
+    grid = np.arange(t[0], t[-1] + dt / 2, dt)
+    grid[-1] = min(grid[-1], t[-1])
+    k = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 2)
+    span = h[k][:, None]
+    u = ((grid - t[k]) / h[k])[:, None]
+    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
+    out: NDArray[np.float64] = h00 * p[k] + h10 * span * slope[k] + h01 * p[k + 1] + h11 * span * slope[k + 1]
+    return out

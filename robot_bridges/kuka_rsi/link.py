@@ -1,0 +1,78 @@
+"""One robot controller as the external system knows it: address, RSI context, limits, tolerances.
+
+The limits are the robot's (``core_functions.robots``: joint ranges and speeds) and the link's own
+(accelerations, which KUKA does not publish, and Cartesian limits): every correction step is held
+to them (:mod:`.guard`).  The set-point tolerances say how far the controller's reported set point
+may lie from the one our replies put there before the external system stops trusting it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from core_functions.robots import KUKA_KR
+from robot_bridges.kuka_rsi.config import FEEDBACK_KEYS, ConfigError, RsiConfig, RsiRoles, default_config
+from robot_bridges.kuka_rsi.guard import ACCEL_TIME
+
+_JOINTS = KUKA_KR.group("arm").joints
+
+
+@dataclass(frozen=True)
+class RobotLink:
+    """One robot controller served by the loop."""
+
+    name: str
+    host: str  # the IP its packets come from; packets from anywhere else are ignored
+    port: int | None = None  # and the port, when several controllers share an IP (simulators)
+    config: RsiConfig | None = None  # None: the package's default configuration
+    roles: RsiRoles = RsiRoles()
+    correction_mode: str = "absolute"  # must match the RSI context: "absolute" or "relative"
+    cycle_ms: int = 4
+    joint_tolerance: float = 1e-4  # rad: a joint move is done when every actual axis is this close
+    position_tolerance: float = 1e-4  # m: a Cartesian move is done when the actual TCP is this close
+    rotation_tolerance: float = 1e-3  # rad
+    settle_cycles: int = 500  # cycles after the generator stopped before "did not reach" is reported
+    lower: tuple[float, ...] = tuple(j.lower for j in _JOINTS)
+    upper: tuple[float, ...] = tuple(j.upper for j in _JOINTS)
+    max_joint_speed: tuple[float, ...] = tuple(j.max_velocity for j in _JOINTS)  # rad/s
+    max_joint_accel: tuple[float, ...] = tuple(j.max_velocity / ACCEL_TIME for j in _JOINTS)  # rad/s^2
+    max_linear_speed: float = 2.0  # m/s of the TCP under Cartesian corrections
+    max_linear_accel: float = 20.0  # m/s^2
+    max_angular_speed: float = math.pi  # rad/s
+    max_angular_accel: float = 10.0 * math.pi  # rad/s^2
+    # How far the reported set point (ASPos; RSol under Cartesian corrections) may lie from the
+    # commanded one; math.inf switches the cross-check off (never for a real robot).
+    setpoint_tolerance_deg: tuple[float, ...] = (0.1,) * 6  # A1..A6
+    tcp_tolerance_mm: float = 1.0
+    tcp_tolerance_deg: float = 0.1
+    report_lag_cycles: int = 1  # the report may show the set point of this many cycles before
+    ipoc_step: int | None = None  # IPOC increment per cycle; None: learned (KR C4: the cycle in ms)
+
+    def __post_init__(self) -> None:
+        if self.correction_mode not in ("absolute", "relative"):
+            raise ValueError(f"robot {self.name}: correction mode is 'absolute' or 'relative', not {self.correction_mode!r}")
+        if self.cycle_ms not in (4, 12):
+            raise ValueError(f"robot {self.name}: RSI runs at 4 ms or 12 ms, not {self.cycle_ms}")
+        sixes = (self.lower, self.upper, self.max_joint_speed, self.max_joint_accel, self.setpoint_tolerance_deg)
+        if any(len(values) != 6 for values in sixes):
+            raise ValueError(f"robot {self.name}: joint limits, accelerations and tolerances need 6 values (A1..A6)")
+        positive = (*self.max_joint_speed, *self.max_joint_accel, self.max_linear_speed, self.max_linear_accel, self.max_angular_speed, self.max_angular_accel)
+        if not all(math.isfinite(v) and v > 0 for v in positive):
+            raise ValueError(f"robot {self.name}: speed and acceleration limits must be finite and > 0")
+        if not all(v > 0 for v in (*self.setpoint_tolerance_deg, self.tcp_tolerance_mm, self.tcp_tolerance_deg)):
+            raise ValueError(f"robot {self.name}: set-point tolerances must be > 0 (math.inf: no cross-check)")
+        if self.report_lag_cycles < 0 or (self.ipoc_step is not None and self.ipoc_step < 1):
+            raise ValueError(f"robot {self.name}: report_lag_cycles must be >= 0 and ipoc_step >= 1")
+
+    def rsi_config(self) -> RsiConfig:
+        return self.config if self.config is not None else default_config()
+
+
+def require_feedback(config: RsiConfig, name: str) -> None:
+    """The external system needs the actual and set-point poses and axes in every packet."""
+    missing = [k for k in FEEDBACK_KEYS if not config.has_send(k)]
+    if missing:
+        raise ConfigError(
+            f"robot {name}: {config.source} must send DEF_RIst, DEF_RSol, DEF_AIPos and DEF_ASPos "
+            f"(missing {', '.join(missing[:4])})"
+        )
