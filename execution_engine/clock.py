@@ -19,13 +19,14 @@ simulated runs read the same.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import heapq
 import itertools
 import math
 import selectors
 import threading
 import time
-from collections.abc import Awaitable, Callable, Coroutine, Mapping
+from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -137,6 +138,26 @@ class Clock:
     def call_later(self, delay: float, callback: Callable[..., Any], *args: Any) -> asyncio.TimerHandle:
         """Schedule ``callback`` after ``delay`` run seconds on the clock's loop."""
         return self.loop.call_later(self.to_wall(delay), callback, *args)
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[None]:
+        """While a person is being waited for, simulated time stands still.
+
+        Under a simulated clock the periodic tasks of a cell (state publishing, diagnostics)
+        would otherwise make time race ahead, burning a core and hours of robot time while an
+        alarm waits for an operator.  Inside ``held()`` the loop waits for real events only
+        (a key, a service call, a wall-clock timer) and run time does not advance; real and
+        scaled clocks are not affected.  Use it only where nothing but a person can move the run on.
+        """
+        loop = self._loop
+        if not isinstance(loop, VirtualTimeLoop):
+            yield
+            return
+        loop.holds += 1
+        try:
+            yield
+        finally:
+            loop.holds -= 1
 
     def __repr__(self) -> str:
         kind = "simulated" if self._simulated else f"x{self._speed:g}"
@@ -357,7 +378,7 @@ class _VirtualSelector(selectors.BaseSelector):
         ready = self._real.select(0)
         if ready:
             return ready
-        if timeout is None:
+        if timeout is None or (self._loop.holds and timeout > 0):  # held: only the outside world moves on
             return self._real.select(None)
         if timeout > 0:
             if len(self._real.get_map()) > 1:
@@ -382,6 +403,7 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
 
     def __init__(self) -> None:
         self._virtual_now = 0.0
+        self.holds = 0  # Clock.held() depth: time stands still while positive
         super().__init__(_VirtualSelector(self))
 
     def time(self) -> float:

@@ -158,10 +158,10 @@ class TraceWriter:
         try:
             self.stream.flush()
             fileno = self.stream.fileno()
-        except OSError as error:
-            self.error = error
-            return
-        except (AttributeError, ValueError, io.UnsupportedOperation):  # an in-memory stream: nothing to sync
+        except (AttributeError, io.UnsupportedOperation):  # an in-memory stream: nothing to sync
+            return  # (UnsupportedOperation is an OSError: caught first)
+        except (OSError, ValueError) as error:
+            self.error = error if isinstance(error, OSError) else OSError(str(error))
             return
         try:
             os.fsync(fileno)

@@ -83,3 +83,11 @@ def test_lines_that_are_not_records_are_named_not_fatal(tmp_path: Path) -> None:
     summary = read_trace(path)
     assert not summary.cut and summary.problem_count == 4
     assert summary.problems[0].startswith("line 1: not JSON") and summary.problems[1] == "line 2: not a trace record (needs 'event' and 't')"
+
+
+def test_an_in_memory_stream_keeps_every_record_across_operation_boundaries() -> None:
+    stream = io.StringIO()  # fileno() raises io.UnsupportedOperation, an OSError
+    writer = TraceWriter(stream)
+    writer.on_engine(EngineStatus(app="a", state="running", operation_index=1, operation_count=2, t=0.5, operation_id="1"))
+    writer.on_status(status(0.6, "Motion"))
+    assert writer.error is None and writer.lines == 1 and stream.getvalue().count("\n") == 1

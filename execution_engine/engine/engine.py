@@ -20,6 +20,7 @@ command is listed in the run report with its run time and source.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
@@ -71,9 +72,24 @@ class ApplicationAborted(Exception):
 class ExecutionEngine:
     """One engine node; runs one application at a time."""
 
-    def __init__(self, node: Node, catalog: Catalog | None = None, wall_clock: WallClock | None = None) -> None:
+    def __init__(
+        self,
+        node: Node,
+        catalog: Catalog | None = None,
+        wall_clock: WallClock | None = None,
+        *,
+        operators: bool = True,
+        hold_for_operators: bool = False,
+    ) -> None:
         self.node = node
         self.clock = node.clock
+        #: Whether anyone can answer an alarm (a terminal console or service clients); if not, an
+        #: alarm ends the run at once instead of waiting for nobody.
+        self.operators = operators
+        #: Whether the operators are outside the process (a terminal): then simulated time stands
+        #: still while the run waits for them (Clock.held); tests that play the operator on the
+        #: run's own clock leave it off.
+        self.hold_for_operators = hold_for_operators
         #: The operator's clock (alarm_timeout): wall time even when the run clock is scaled or simulated.
         self.wall_clock: WallClock = wall_clock or RealWallClock()
         self.catalog = catalog or full_catalog()
@@ -191,7 +207,8 @@ class ExecutionEngine:
         """Hold between operations while paused; False when the application must stop."""
         while self._paused and self._stop_reason is None:
             self._set_state("paused")
-            await self._wait_control()
+            with self._operator_wait():  # between operations, only an operator moves the run on
+                await self._wait_control()
         return self._stop_reason is None
 
     async def _wait_control(self) -> None:
@@ -200,6 +217,9 @@ class ExecutionEngine:
 
     def _poke(self) -> None:
         self._control.set()
+
+    def _operator_wait(self) -> contextlib.AbstractContextManager[None]:
+        return self.clock.held() if self.hold_for_operators else contextlib.nullcontext()
 
     # ---------------------------------------------------------------------- operations
     def _sits_out(self, call: Call) -> bool:
@@ -393,6 +413,9 @@ class ExecutionEngine:
         ``timeout`` seconds of the operator's wall clock without an answer."""
         self._alarm_reset = False
         self._set_state("alarm", self.alarm_message(group, error, plan, timeout))
+        if not self.operators:  # nobody can answer: say so now rather than wait for no one
+            self._note_recovery(f"{plan}; alarm cannot be answered: no operator console and no service client can reach this engine")
+            return False, "; no operator can answer the alarm (run with --interactive at a terminal, or on ROS)"
         expired = False
 
         def expire() -> None:
@@ -402,8 +425,9 @@ class ExecutionEngine:
 
         timer = self.wall_clock.call_later(timeout, wake_loop(asyncio.get_running_loop(), expire)) if timeout > 0 else None
         try:
-            while not self._alarm_reset and self._stop_reason is None and not expired:
-                await self._wait_control()
+            with self._operator_wait():  # the robot waits for a person: simulated time must not race on
+                while not self._alarm_reset and self._stop_reason is None and not expired:
+                    await self._wait_control()
         finally:
             if timer is not None:
                 timer.cancel()
