@@ -1,6 +1,7 @@
 """``python -m execution_engine``: validate applications, list the function catalog, run applications.
 
-Exit codes: 0 success (``run``: every group reached Finish cleanly); 1 invalid application or a
+Exit codes: 0 success (``run``: every group reached Finish cleanly); 1 invalid application, problems
+found by the dry run (``validate --simulate``, and ``run`` before it starts unless ``--no-check``) or a
 failed run; 2 bad command line or back-end setup; 3 run stopped by the operator.
 """
 from __future__ import annotations
@@ -20,12 +21,14 @@ from typing import IO
 from app_functions.registry import full_catalog
 from core_functions.catalog import Catalog, ParamType
 from core_functions.robots import ROBOTS, RobotModel
-from execution_engine.app_model import Application, ApplicationError, load_application, validate_application
+from execution_engine.app_model import Application, ApplicationError, load_application, read_application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.deployment import deploy_local
+from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
+from robot_bridges.backend import BackendOptions
 
 EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED = 0, 1, 2, 3
 
@@ -57,18 +60,24 @@ PARAM_TYPE_HELP = {
 
 
 # ------------------------------------------------------------------------------ validate
-def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[str]) -> int:
+def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[str], args: argparse.Namespace | None = None) -> int:
+    """Check each file; with ``--simulate`` (``args.simulate``) also dry-run each valid one."""
     status = EXIT_OK
     for file in files:
-        diagnostics = validate_application(file, catalog)
+        app, diagnostics = read_application(file, catalog)
         errors = [d for d in diagnostics if getattr(d, "severity", "error") == "error"]
         for diagnostic in diagnostics:
             err.write(f"{diagnostic}\n")
         if errors:
             status = EXIT_INVALID
             err.write(f"{file}: {len(errors)} error(s)\n")
-        else:
-            out.write(f"{file}: valid\n")
+            continue
+        out.write(f"{file}: valid\n")
+        if args is not None and args.simulate and app is not None:
+            code, report = dry_run_check(app, file, backend_name(app, args), backend_options(app, args), args.trajectory_db, out, err)
+            if report is not None and report.findings:
+                err.write(f"{file}: {len(report.findings)} problem(s) found by the dry run\n")
+            status = max(status, code)
     return status
 
 
@@ -160,11 +169,14 @@ def parse_speed(text: str) -> float:
     return value
 
 
-async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], trace: IO[str] | None) -> RunReport:
-    from robot_bridges.backend import BackendOptions
-    from robot_bridges.registry import create_backend
+def backend_name(app: Application, args: argparse.Namespace) -> str:
+    """``--robot``, else the application robot's usual back end: the run and its dry run use the same."""
+    return str(args.robot or app.robot.default_backend)
 
-    options = BackendOptions(
+
+def backend_options(app: Application, args: argparse.Namespace) -> BackendOptions:
+    """The back end's options from the command line (``validate`` has no controller address or faults)."""
+    return BackendOptions(
         robot=app.robot,
         host=args.host,
         port=args.port,
@@ -173,7 +185,12 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
         seed=args.seed,
         extra=dict(args.backend_option or ()),
     )
-    backend = await create_backend(args.robot or app.robot.default_backend, clock, options)
+
+
+async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], trace: IO[str] | None) -> RunReport:
+    from robot_bridges.registry import create_backend
+
+    backend = await create_backend(backend_name(app, args), clock, backend_options(app, args))
     machine_parameters = {"trajectory_db": args.trajectory_db} if args.trajectory_db else {}
     deployment = await deploy_local(clock, app.robot, backend, machine_parameters=machine_parameters)
     observer = RunObserver(deployment.transport.create_node("run_observer"), app.robot.group_names)
@@ -228,6 +245,12 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
             err.write(f"{diagnostic}\n")
         err.write(f"{args.file}: not run: {len(error.diagnostics)} problem(s)\n")
         return EXIT_INVALID
+    if not args.no_check:
+        code, checked = dry_run_check(app, args.file, backend_name(app, args), backend_options(app, args), args.trajectory_db, out, err, summary=not args.quiet)
+        if code != EXIT_OK:
+            found = f"{len(checked.findings)} problem(s) found by the dry run" if checked is not None else "the dry run did not pass"
+            err.write(f"{args.file}: not run: {found}; use --no-check to run anyway\n")
+            return code
     clock = simulated_clock() if math.isinf(args.speed) else scaled_clock(args.speed)
     with ExitStack() as stack:
         trace = stack.enter_context(open(args.trace, "w", encoding="utf-8")) if args.trace else None
@@ -259,6 +282,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     validate = sub.add_parser("validate", help="check application files; FILE:LINE:COL messages on problems")
     validate.add_argument("files", nargs="+", metavar="FILE")
+    validate.add_argument("--simulate", action="store_true", help="also dry-run each valid file on the robot's simulator: every unreachable target, joint limit, missing trajectory and unsupported action at its line, and the predicted cycle time")
+    validate.add_argument("--robot", choices=("nextage-sim", "vplus", "kuka-rsi"), help="with --simulate: the back end whose simulator to use (default: the application robot's)")
+    validate.add_argument("--backend-option", action="append", type=parse_option, metavar="KEY=VALUE", help="with --simulate: back-end option as for run, e.g. config=my_rsi.xml (repeatable)")
+    validate.add_argument("--seed", type=int, default=0, help="with --simulate: simulator random seed (vision noise), as for run")
+    validate.add_argument("--trajectory-db", metavar="PATH", help="with --simulate: the trajectory database the run will use (read, never written)")
+    validate.set_defaults(host=None, port=None, rsi_listen=None, fault=None)
     functions = sub.add_parser("functions", help="list the function catalog")
     functions.add_argument("--json", action="store_true", help="machine-readable catalog")
     run = sub.add_parser("run", help="run an application (default: on the Nextage kinematic simulator)")
@@ -275,6 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--trajectory-db", metavar="PATH", help="SQLite file for recorded trajectories")
     run.add_argument("--interactive", action="store_true", help="read operator commands from the terminal")
     run.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
+    run.add_argument("--no-check", action="store_true", help="start without the dry run on the simulator (validate --simulate) that otherwise comes first")
     return parser
 
 
@@ -287,7 +317,7 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s", stream=err)
     catalog = full_catalog()
     if args.command == "validate":
-        return cmd_validate(args.files, catalog, out, err)
+        return cmd_validate(args.files, catalog, out, err, args)
     if args.command == "functions":
         return cmd_functions(catalog, args.json, out)
     if not Path(args.file).is_file():

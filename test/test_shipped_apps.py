@@ -1,4 +1,4 @@
-"""Every application shipped in apps_xml validates, and the ones for the embedded simulator run to Finish.
+"""Every application shipped in apps_xml validates and passes the dry run, and the ones for the embedded simulator run to Finish.
 
 ``apps_xml/examples/bin_transfer.xml`` was written by someone who had only the README, the guide
 (docs/application_xml.md) and ``python -m execution_engine functions``: it stays here so the catalog
@@ -22,6 +22,16 @@ APPLICATIONS = [p for p in APPS if "<application" in p.read_text(encoding="utf-8
 def test_shipped_application_validates(path: Path) -> None:
     out, err = io.StringIO(), io.StringIO()
     assert main(["validate", str(path)], out, err) == 0, err.getvalue()
+
+
+@pytest.mark.parametrize("path", APPLICATIONS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_shipped_application_passes_the_dry_run(path: Path, tmp_path: Path) -> None:
+    """Every shipped application runs on its robot's simulator without a single problem (the KUKA demo on
+    the accelerated RSI simulator); so ``run`` starts every one of them."""
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["validate", "--simulate", str(path), "--trajectory-db", str(tmp_path / "t.sqlite")], out, err)
+    assert code == 0, err.getvalue()
+    assert "no problems found" in out.getvalue()
 
 
 def test_the_application_written_from_the_catalog_alone_runs_to_finish(tmp_path: Path) -> None:

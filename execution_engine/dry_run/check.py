@@ -1,0 +1,55 @@
+"""The dry run as the command line shows it: findings like validation diagnostics, then the prediction.
+
+``validate --simulate`` and the check before ``run`` share this, so both print the same lines and
+a dry run that breaks down is one clear message and an exit code, never a traceback.
+"""
+from __future__ import annotations
+
+import logging
+from typing import IO
+
+from execution_engine.app_model.model import Application
+from execution_engine.dry_run.report import DryRunReport
+from execution_engine.dry_run.runner import DryRunError, dry_run
+from robot_bridges.backend import BackendOptions
+
+log = logging.getLogger(__name__)
+
+OK, FOUND, SETUP = 0, 1, 2  # the CLI's EXIT_OK, EXIT_INVALID, EXIT_USAGE
+
+
+def check(
+    app: Application,
+    file: str,
+    backend: str,
+    options: BackendOptions,
+    trajectory_db: str | None,
+    out: IO[str],
+    err: IO[str],
+    *,
+    summary: bool = True,
+) -> tuple[int, DryRunReport | None]:
+    """Dry-run ``app``; print its findings to ``err`` and (with ``summary``) the prediction to ``out``.
+
+    Returns (status, report): ``FOUND`` when anything was found or the dry run could not check
+    everything, ``SETUP`` when the back end refuses the options (the run would refuse them too).
+    """
+    try:
+        report = dry_run(app, backend, options, trajectory_db)
+    except (KeyError, ValueError, OSError, ConnectionError) as error:
+        err.write(f"error: cannot dry-run {file} on {backend}: {error}\n")
+        return SETUP, None
+    except DryRunError as error:
+        err.write(f"error: the dry run of {file} broke down: {error}\n")
+        return FOUND, None
+    except Exception as error:  # noqa: BLE001 - a defect of the dry run: one line, the trace with -v
+        log.info("dry run of %s", file, exc_info=True)
+        err.write(f"error: the dry run of {file} failed (a defect, please report it): {type(error).__name__}: {error}\n")
+        return FOUND, None
+    for diagnostic in report.diagnostics():
+        err.write(f"{diagnostic}\n")
+    if summary:
+        out.write("\n".join(report.summary_lines()) + "\n")
+    elif report.notes:
+        err.write("".join(f"{file}: not checked: {note}\n" for note in report.notes))
+    return (OK if report.ok else FOUND), report

@@ -1,0 +1,132 @@
+"""Collects what a dry run meets: findings at their XML calls, and the timeline of every group.
+
+The back-end decorator and the trajectory store report here as the application runs; the
+recorder knows which call of the application a group is in (the running function of that
+group's machine) and where that call is written, so a problem found deep inside a skill is
+reported at the line of the ``<function>`` that asked for it.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+from core_functions.robots import RobotModel
+from execution_engine.app_model.model import Application, Call
+from execution_engine.clock import Clock
+from execution_engine.dry_run.report import Finding, Span, TimeBase
+
+#: Where a group is: (operation id, function) of the function its machine runs, or None.
+CallLocator = Callable[[str], tuple[str, str] | None]
+
+
+class ClockTiming:
+    """Times on the application's simulated clock, relative to the start of the run."""
+
+    base: TimeBase = "simulated clock"
+
+    def __init__(self, clock: Clock) -> None:
+        self.clock = clock
+        self.origin = 0.0
+
+    def start(self) -> None:
+        self.origin = self.clock.now()
+
+    def now(self) -> float:
+        return self.clock.now() - self.origin
+
+    def place(self, groups: tuple[str, ...], start: float, end: float) -> tuple[float, float]:
+        return start, end
+
+    def elapsed(self) -> float:
+        return self.now()
+
+    def of_clock(self, t: float) -> float:
+        """A run time of the application's clock (an engine report's) on this time base."""
+        return t - self.origin
+
+
+class CycleTiming:
+    """Times in the robot's own cycles, for a controller simulator that does not run on our clock.
+
+    Such a simulator (RSI's accelerated KR C4) runs as fast as it is answered, so the time between
+    two primitives says nothing; each primitive's duration in robot cycles does.  Primitives are
+    laid back to back per group -- exact for the one-group robots these simulators drive.
+    """
+
+    base: TimeBase = "robot cycles"
+
+    def __init__(self, read: Callable[[], float]) -> None:
+        self.read = read
+        self._cursor: dict[str, float] = {}
+
+    def start(self) -> None:
+        self._cursor.clear()
+
+    def now(self) -> float:
+        return self.read()
+
+    def place(self, groups: tuple[str, ...], start: float, end: float) -> tuple[float, float]:
+        at = max((self._cursor.get(g, 0.0) for g in groups), default=0.0)
+        finish = at + max(0.0, end - start)
+        for group in groups:
+            self._cursor[group] = finish
+        return at, finish
+
+    def elapsed(self) -> float:
+        return max(self._cursor.values(), default=0.0)
+
+    def of_clock(self, t: float) -> float:
+        """The application's clock says nothing about robot time here: as far as the robot got."""
+        return self.elapsed()
+
+
+Timing = ClockTiming | CycleTiming
+
+
+class Recorder:
+    """Findings (one per call and kind, counted) and spans, as the dry run goes."""
+
+    def __init__(self, app: Application, timing: Timing) -> None:
+        self.app = app
+        self.robot: RobotModel = app.robot
+        self.timing = timing
+        self.locate: CallLocator = lambda group: None
+        self._calls: dict[tuple[str, str], Call] = {
+            (operation.id, group): call for operation in app.operations for group, call in operation.calls.items()
+        }
+        self._lines = {operation.id: (operation.line, operation.col) for operation in app.operations}
+        self._findings: dict[tuple[str, str, str], Finding] = {}  # (operation, group, kind) -> the first one
+        self._counts: dict[tuple[str, str, str], int] = {}
+        self.spans: list[Span] = []
+
+    # ---------------------------------------------------------------------------- findings
+    def finding(self, group: str, kind: str, primitive: str, message: str, t: float | None = None) -> None:
+        """A problem met by ``group`` in the call it is running now (at ``t``, default: now)."""
+        operation, function = self.locate(group) or ("?", "?")
+        self.add(group, operation, function, kind, primitive, message, t)
+
+    def add(self, group: str, operation: str, function: str, kind: str, primitive: str, message: str, t: float | None = None) -> None:
+        """A problem of call (``operation``, ``group``); the same kind again there only counts."""
+        key = (operation, group, kind)
+        if key in self._findings:
+            self._counts[key] += 1
+            return
+        call = self._calls.get((operation, group))
+        file = call.file if call is not None and call.file else str(self.app.path)
+        line, col = (call.line, call.col) if call is not None and call.line else self._lines.get(operation, (0, 0))
+        when = self.timing.elapsed() if t is None else t
+        self._findings[key] = Finding(kind, group, operation, function, primitive, message, file, line, col, when)
+        self._counts[key] = 1
+
+    def findings(self) -> tuple[Finding, ...]:
+        """Every finding, in the order found, with how often it came up in its call."""
+        return tuple(replace(finding, count=self._counts[key]) for key, finding in self._findings.items())
+
+    # ---------------------------------------------------------------------------- timeline
+    def span(self, group: str, groups: tuple[str, ...], primitive: str, start: float, end: float, finding: str | None = None) -> Span:
+        """A primitive of ``group`` (holding ``groups``) that ran from ``start`` to ``end`` (time base's raw times)."""
+        operation, function = self.locate(group) or ("?", "?")
+        begin, finish = self.timing.place(groups, start, end)
+        span = Span(group, groups, operation, function, primitive, begin, finish, finding)
+        self.spans.append(span)
+        return span

@@ -1,0 +1,140 @@
+"""What a dry run found and what it predicts: findings at their XML lines, and each group's timeline.
+
+The report is plain frozen data so that later checks can be built on it without re-running
+anything -- the timeline in particular (every primitive of every group, start and end in the
+application's time) is what a collision check between asynchronous arms needs.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Literal
+
+from execution_engine.app_model.diagnostics import Diagnostic
+
+#: How the timeline's seconds were measured: the application's simulated clock (a simulator that
+#: runs on it: every wait of the engine and the machines is in it too), or the robot's own cycles
+#: (a controller simulator that keeps its own time, such as RSI's IPOC; primitives back to back).
+TimeBase = Literal["simulated clock", "robot cycles"]
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One problem of the application, found where the robot would have met it.
+
+    ``kind`` is a :class:`robot_bridges.backend.FaultKind` value (``unreachable``, ``joint_limit``,
+    ``unsupported``, ...), ``missing_trajectory`` for a replay of a trajectory never recorded, or
+    ``function`` when the function itself failed (its skill code raised).  ``count`` says how many
+    times the same kind of problem came up in the same call (a path with ten unreachable points is
+    one finding, not ten).
+    """
+
+    kind: str
+    group: str
+    operation: str
+    function: str
+    primitive: str  # the primitive that met it (``describe()``), "" for a function-level problem
+    message: str
+    file: str
+    line: int
+    col: int
+    t: float  # when, on the report's time base
+    count: int = 1
+
+    def diagnostic(self) -> Diagnostic:
+        """The finding in the form validation prints: ``FILE:LINE:COL: operation 8 right_arm f: kind: ... (at 63.20 s)``;
+        the time says how far into the run the robot would have got."""
+        where = f"{self.primitive}: " if self.primitive else ""
+        when = f"{self.count} times in this call, first at {self.t:.2f} s" if self.count > 1 else f"at {self.t:.2f} s"
+        text = f"operation {self.operation} {self.group} {self.function}: {self.kind}: {where}{self.message} ({when})"
+        return Diagnostic(self.file, self.line, self.col, text)
+
+
+@dataclass(frozen=True)
+class Span:
+    """One primitive on the timeline: who sent it, what it held, when it ran.
+
+    ``groups`` are every group the primitive occupies (a full-body move holds all of them, a
+    master/slave move both arms), ``group`` the one whose machine sent it.  A primitive that met a
+    problem ends where it met it (``start == end`` when the target was refused before any motion),
+    ``finding`` names the kind, and the dry run goes on from there.
+    """
+
+    group: str
+    groups: tuple[str, ...]
+    operation: str
+    function: str
+    primitive: str
+    start: float
+    end: float
+    finding: str | None = None
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+
+@dataclass(frozen=True)
+class GroupTime:
+    """A group's share of the predicted cycle: busy while one of its primitives runs, idle otherwise."""
+
+    busy: float
+    idle: float
+    primitives: int
+
+
+@dataclass(frozen=True)
+class DryRunReport:
+    """The outcome of one dry run of an application.
+
+    ``complete`` is False when the dry run could not follow the whole application (the simulated
+    controller stopped for good, or a function failed and the groups that ran beside it were
+    stopped with it); ``notes`` say what was not checked.  ``cycle_time`` is the predicted time
+    of the whole application on ``time_base``.
+    """
+
+    app: str
+    file: str
+    backend: str
+    time_base: TimeBase
+    findings: tuple[Finding, ...]
+    timeline: tuple[Span, ...]
+    cycle_time: float
+    groups: Mapping[str, GroupTime]
+    operations_total: int
+    operations_checked: int
+    complete: bool = True
+    notes: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return not self.findings and self.complete
+
+    def diagnostics(self) -> list[Diagnostic]:
+        """The findings as diagnostics, by file, line and column."""
+        return sorted((f.diagnostic() for f in self.findings), key=Diagnostic.sort_key)
+
+    def summary_lines(self) -> list[str]:
+        """The prediction an integrator reads before the robot moves."""
+        state = "no problems found" if not self.findings else f"{len(self.findings)} problem(s) found"
+        lines = [
+            f"dry run of {self.app} on {self.backend}: {state}; operations checked {self.operations_checked}/{self.operations_total}",
+            f"  predicted cycle time {self.cycle_time:8.2f} s ({self.time_base})",
+        ]
+        for group, time in self.groups.items():
+            share = 100.0 * time.busy / self.cycle_time if self.cycle_time > 0 else 0.0
+            lines.append(f"  {group:<12} busy {time.busy:8.2f} s ({share:5.1f} %), idle {time.idle:8.2f} s, {time.primitives} primitives")
+        lines += [f"  not checked: {note}" for note in self.notes]
+        return lines
+
+
+def group_times(groups: tuple[str, ...], timeline: tuple[Span, ...], cycle_time: float) -> dict[str, GroupTime]:
+    """Busy and idle time of every group, from the spans that held it."""
+    busy = {g: 0.0 for g in groups}
+    count = {g: 0 for g in groups}
+    for span in timeline:
+        for group in span.groups:
+            if group in busy:
+                busy[group] += span.duration
+                count[group] += 1
+    return {g: GroupTime(busy[g], max(0.0, cycle_time - busy[g]), count[g]) for g in groups}

@@ -1,0 +1,201 @@
+"""Run an application dry: the real engine, machines and skills, against the robot's simulator.
+
+Nothing is modelled twice: the application goes through :func:`deploy_local` exactly as ``run``
+does -- the same binding of params, the same skills pulling primitives, the same barriers -- on a
+simulated clock, so minutes of robot work take a moment and the prediction is the run's own time.
+Only the edges differ: the back end is wrapped by :class:`DryRunBackend` (problems become
+findings and the run goes on), the groups share a throw-away copy of the trajectory database
+(what earlier runs recorded is there, what this one records is thrown away), and the error
+policy is ``abort``: when a function itself fails, the failure is a finding and the dry run goes
+on: the operation again without the failed calls (the groups stopped beside them are checked
+to their end), then the next one.
+"""
+from __future__ import annotations
+
+import logging
+import sqlite3
+import tempfile
+from contextlib import closing
+from dataclasses import replace
+from pathlib import Path
+
+from core_functions.catalog import Catalog
+from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
+from execution_engine.clock import Clock, real_clock, run_with_clock, simulated_clock
+from execution_engine.deployment import Deployment, deploy_local
+from execution_engine.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
+from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
+from execution_engine.dry_run.report import DryRunReport, group_times
+from execution_engine.dry_run.simulators import DryRunSetup, setup_for
+from execution_engine.machine.group_machine import default_trajectory_db
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import String
+from execution_engine.transport.qos import COMMANDS
+from execution_engine.transport.wire import SmResult, sm_topic
+from robot_bridges.backend import BackendOptions
+from robot_bridges.registry import create_backend
+
+log = logging.getLogger(__name__)
+
+FUNCTION = "function"
+_ABORT = ErrorPolicy(retries=0, action="abort")  # a retry would fail the same way; a safe pose would move
+_QUIET_BRIDGE = {"state_period": 3600.0}  # nobody watches joint_states in a dry run
+
+
+class DryRunError(Exception):
+    """The dry run itself could not be carried out (a defect, not a problem of the application)."""
+
+
+def dry_run(app: Application, backend: str, options: BackendOptions, trajectory_db: str | None = None) -> DryRunReport:
+    """Dry-run ``app`` on the simulator of ``backend`` (a registry name) set up like ``options``.
+
+    ``trajectory_db`` is the database the real run would use (default: the per-user one); it is
+    copied, never written.  Raises ``ValueError``/``KeyError`` for options the back end refuses,
+    :class:`DryRunError` when the run breaks down.
+    """
+    setup = setup_for(backend, options)
+    clock = simulated_clock() if setup.simulated_clock else real_clock()
+    return run_with_clock(lambda c: run_dry(app, setup, c, trajectory_db), clock)
+
+
+async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None) -> DryRunReport:
+    """The dry run on ``clock`` (the caller's loop); see :func:`dry_run`."""
+    inner = await create_backend(setup.backend, clock, setup.options)
+    timing: Timing = ClockTiming(clock) if setup.robot_seconds is None else CycleTiming(setup.robot_seconds(inner))
+    recorder = Recorder(app, timing)
+    backend = DryRunBackend(inner, recorder)
+    with tempfile.TemporaryDirectory(prefix="dry_run_") as folder:
+        db = _copy_store(trajectory_db or default_trajectory_db(), Path(folder) / "trajectories.sqlite")
+        try:
+            deployment = await deploy_local(clock, app.robot, backend, machine_parameters={"trajectory_db": db}, bridge_parameters=_QUIET_BRIDGE)
+        except BaseException:
+            await inner.close()
+            raise
+        store = DryRunTrajectoryStore(db, backend)
+        try:
+            _attach(deployment, recorder, store)
+            total = await _run_operations(app, deployment, recorder)
+        finally:
+            await deployment.close()
+            store.close()
+    checked, notes = len(app.operations), []
+    if backend.stuck is not None:
+        notes.append(backend.stuck)
+        ids = [op.id for op in app.operations]
+        checked = ids.index(backend.stuck_at) + 1 if backend.stuck_at in ids else checked
+    cycle_time = total if isinstance(timing, ClockTiming) else timing.elapsed()
+    timeline = tuple(recorder.spans)
+    return DryRunReport(
+        app=app.name,
+        file=str(app.path),
+        backend=setup.backend,
+        time_base=timing.base,
+        findings=recorder.findings(),
+        timeline=timeline,
+        cycle_time=cycle_time,
+        groups=group_times(app.robot.group_names, timeline, cycle_time),
+        operations_total=len(app.operations),
+        operations_checked=checked,
+        complete=not notes,
+        notes=tuple(notes),
+    )
+
+
+def _attach(deployment: Deployment, recorder: Recorder, store: DryRunTrajectoryStore) -> None:
+    """Let the recorder see which call each group runs, and give every group the shared store."""
+    machines = deployment.machines
+
+    def locate(group: str) -> tuple[str, str] | None:
+        machine = machines.get(group)
+        run = machine.ctx.run if machine is not None else None
+        return None if run is None else (run.request.operation, run.request.function)
+
+    recorder.locate = locate
+    for machine in machines.values():
+        machine.ctx.functions.ctx.trajectories = store
+
+
+async def _run_operations(app: Application, deployment: Deployment, recorder: Recorder) -> float:
+    """Run every operation, going on after function failures (see the module's docstring).
+
+    Returns the application's time: the engine's own total, summed over the parts it ran in.
+    """
+    results = _Results(deployment)
+    total, offset = 0.0, 0
+    operations = list(app.operations)
+    dropped: dict[str, set[str]] = {}  # operation id -> groups whose failed call is not run again
+    recorder.timing.start()
+    while offset < len(operations):
+        part = replace(app, operations=tuple(operations[offset:]), error_policy=_ABORT)
+        report = await deployment.engine.run(part)
+        total += report.total
+        if report.outcome == "finished":
+            break
+        if report.outcome == "stopped" or not report.errors:
+            raise DryRunError(f"the engine gave up on {app.name}: {report.message}")
+        offset += report.operations_done
+        failed = operations[offset]
+        for error in report.errors:
+            label = f"{error.function} (operation {error.operation}): "
+            message = error.error[len(label):] if error.error.startswith(label) else error.error
+            kind = getattr(error, "fault", None) or FUNCTION  # the fault's kind where the engine reports it
+            recorder.add(error.group, error.operation, error.function, kind, "", message, recorder.timing.of_clock(error.t))
+        out = dropped.setdefault(failed.id, set())
+        known = len(out)
+        out.update(e.group for e in report.errors if e.operation == failed.id)
+        again = _without(failed, out, results.succeeded(failed.id), deployment.engine.catalog)
+        if again is None or len(out) == known:  # nothing left, or nothing new to leave out: on to the next
+            offset += 1
+        else:
+            operations[offset] = again
+    return total
+
+
+def _without(operation: Operation, failed: set[str], done: set[str], catalog: Catalog) -> Operation | None:
+    """``operation`` with only the calls that were stopped beside a failure (None: nothing left to check).
+
+    The failed calls become waits; so do synchronised calls when one of them failed (their
+    partners would wait at the barrier for nothing), and calls that had finished.
+    """
+    def sync(call: Call) -> bool:
+        spec = catalog.get(call.function)
+        return spec is not None and spec.sync is not None
+
+    broken_barrier = any(sync(operation.calls[g]) for g in failed if g in operation.calls)
+    keep = {
+        g for g, call in operation.calls.items()
+        if not call.is_wait and g not in failed and g not in done and not (broken_barrier and sync(call))
+    }
+    if not keep:
+        return None
+    calls = {g: call if g in keep else Call(g, WAIT, (), implicit=True, file=call.file, line=call.line, col=call.col) for g, call in operation.calls.items()}
+    return replace(operation, calls=calls)
+
+
+class _Results:
+    """Which groups finished their function of an operation (the engine does not say, after a failure)."""
+
+    def __init__(self, deployment: Deployment) -> None:
+        self._outcomes: dict[tuple[str, str], str] = {}
+        node = deployment.transport.create_node("dry_run_results")
+        for group in deployment.machines:
+            node.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
+
+    def _on_result(self, message: String) -> None:
+        result = codec.decode(SmResult, message.data, source="dry run")
+        self._outcomes[(result.operation, result.group)] = result.outcome
+
+    def succeeded(self, operation: str) -> set[str]:
+        return {g for (op, g), outcome in self._outcomes.items() if op == operation and outcome == "succeeded"}
+
+
+def _copy_store(source: str, target: Path) -> str:
+    """A copy of the trajectory database the run would use (empty if there is none yet)."""
+    path = Path(source)
+    if source != ":memory:" and path.is_file():
+        try:
+            with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as original, closing(sqlite3.connect(target)) as copy:
+                original.backup(copy)
+        except sqlite3.Error as error:
+            log.warning("dry run: cannot read the trajectory database %s (%s); starting from an empty one", source, error)
+    return str(target)

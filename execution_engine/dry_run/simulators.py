@@ -1,0 +1,65 @@
+"""Which simulator a dry run uses for a back end, with which options, on which clock.
+
+A dry run never talks to a controller: for a real robot (``--host``, ``--rsi-listen``) it runs on
+the simulator of that robot, with the options that change what the robot can do (the RSI
+configuration and its tool outputs, V+'s ``linear`` and camera, the Nextage tool) kept, and the
+ones that only concern a connection or a demonstration (addresses, injected faults) dropped.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+from robot_bridges.backend import BackendOptions, RobotBackend
+
+#: Nextage simulator control period in the dry run (0.01 s in a run).  A planned motion stays within
+#: the joint limits between its checked samples (the limits are a box, the samples are interpolated
+#: linearly), so ticking along it every 10 ms only costs time, and each motion ends at its exact
+#: duration whatever the period.  The period bounds how long a stop takes to land, though: the
+#: engine stops the groups beside a failed function, and the bridge waits 5 s for that.
+NEXTAGE_DRY_RUN_PERIOD = 0.5
+#: Options about the link to a controller or about logging, not about what the robot does: left
+#: out of the dry run.  Every other option is kept (and an unknown one refused, as the run would).
+_LINK_ONLY: dict[str, tuple[str, ...]] = {
+    "vplus": ("controller_speed",),
+    "kuka-rsi": ("runner", "simulator", "silence", "feedback"),
+}
+
+
+@dataclass(frozen=True)
+class DryRunSetup:
+    """How to build the dry run's robot: registry name, options, clock, and its own time if it keeps one."""
+
+    backend: str
+    options: BackendOptions
+    simulated_clock: bool = True  # False: a simulator keeping its own time, run beside the real clock
+    robot_seconds: Callable[[RobotBackend], Callable[[], float]] | None = None
+
+
+def _kuka_seconds(backend: RobotBackend) -> Callable[[], float]:
+    """RSI's own time: cycles (IPOC steps) the simulated controller has run."""
+    from robot_bridges.kuka_rsi.backend import KukaRsiBackend  # only when a KUKA is dry-run: it brings numpy and the loop
+
+    if not isinstance(backend, KukaRsiBackend):
+        raise TypeError(f"RSI cycles asked of {backend.name}")
+    kuka, cycle = backend, backend.link.cycle_ms / 1000.0
+
+    def seconds() -> float:
+        return 0.0 if kuka.iface is None else kuka.iface.state(0).cycles * cycle
+
+    return seconds
+
+
+def setup_for(backend: str, options: BackendOptions) -> DryRunSetup:
+    """The dry run's simulator for ``backend`` configured by ``options`` (the ones of the real run)."""
+    extra = {k: v for k, v in options.extra.items() if k not in _LINK_ONLY.get(backend, ())}
+    offline = replace(options, host=None, port=None, rsi_listen=None, faults=(), extra=extra)
+    if backend == "nextage-sim":
+        return DryRunSetup(backend, replace(offline, extra={**extra, "control_period": str(NEXTAGE_DRY_RUN_PERIOD)}))
+    if backend == "vplus":
+        camera = extra.get("camera", "none" if options.host is not None else "simulated")  # what the real run would have
+        return DryRunSetup(backend, replace(offline, extra={**extra, "camera": camera}))
+    if backend == "kuka-rsi":
+        accelerated = {**extra, "simulator": "accelerated", "runner": "thread"}
+        return DryRunSetup(backend, replace(offline, extra=accelerated), simulated_clock=False, robot_seconds=_kuka_seconds)
+    return DryRunSetup(backend, offline)
