@@ -1,6 +1,12 @@
 """Load + validate a generated 10,000-operation application, against a bare lxml parse of the same file.
 
-Usage: python bench/load_validate.py [--operations 10000] [--repeat 5]
+Usage: python bench/load_validate.py [--operations 10000] [--repeat 5] [--hostile]
+
+With ``--hostile`` it then times the files that used to hang the validator, side by side with the
+10,000-operation baseline, each with the peak memory of a fresh process validating it alone: a
+5,000-frame parent chain; 100,000 unknown frames against a 200,000-frame cell; 31 MB of comments;
+200,000 unknown elements; 100,000 frames with a bad name each; and a file of more elements than
+the limit (refused before parsing).
 
 The application is generated from the function catalog (the real one when app_functions is
 importable, else a small stand-in) in the paper's Figure 6 layout, one function per group in
@@ -12,7 +18,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -26,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from core_functions.catalog import Catalog, FunctionSpec, Hold, ParamSpec, ParamType, skill  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN, RobotModel  # noqa: E402
-from execution_engine.app_model import load_application, validate_application  # noqa: E402
+from execution_engine.app_model import MAX_ELEMENTS, count_problems, load_application, validate_application, validate_cell  # noqa: E402
 
 FRAMES_PER_KIND = 20
 
@@ -171,11 +179,117 @@ def measure(action: Callable[[], object], repeat: int) -> tuple[list[float], lis
     return wall, cpu
 
 
+# ------------------------------------------------------------------------------ hostile files
+def _chain(folder: Path) -> Path:
+    frames = "".join(f'<frame name="f{i}" parent="{f"f{i - 1}" if i else "world"}"/>\n' for i in range(4999, -1, -1))
+    return _write(folder / "chain.xml", f'<cell name="chain">\n{frames}</cell>\n')
+
+
+def _unknown_frames(folder: Path) -> Path:
+    (folder / "cells").mkdir(exist_ok=True)
+    _write(folder / "cells" / "wide.xml", '<cell name="wide">\n' + "".join(
+        f'<frame name="frame_{i}" xyz="0 0 0" kind="hole"/>\n' for i in range(200_000)) + "</cell>\n")
+    ops = "".join(
+        f'<operation id="{i}"><left_arm><function name="debur_drilling"><params><param value="nope_{i}"/></params></function></left_arm></operation>\n'
+        for i in range(100_000)
+    )
+    return _write(folder / "unknown_frames.xml", f'<application name="a" robot="nextage" cell="cells/wide.xml">\n{ops}</application>\n')
+
+
+def _comments(folder: Path) -> Path:
+    return _write(folder / "comments.xml", '<cell name="c">' + "<!-- c -->" * 3_100_000 + "</cell>")
+
+
+def _unknown_elements(folder: Path) -> Path:
+    return _write(folder / "unknown_elements.xml", '<cell name="c">' + "<x/>" * 200_000 + "</cell>")
+
+
+def _bad_names(folder: Path) -> Path:
+    return _write(folder / "bad_names.xml", '<cell name="c">' + '<frame name="1"/>' * 100_000 + "</cell>")
+
+
+def _too_many(folder: Path) -> Path:
+    return _write(folder / "too_many.xml", '<cell name="c">' + "<x/>" * (7_000_000) + "</cell>")  # 28 MB
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+HOSTILE: dict[str, tuple[str, Callable[[Path], Path]]] = {  # each: what it is, how to write it into a folder
+    "chain_5000": ("cell: a parent chain of 5,000 frames, children first", _chain),
+    "unknown_frames": ("application: 100,000 unknown frames, cell of 200,000 frames", _unknown_frames),
+    "comments": ("cell: 31 MB of comments", _comments),
+    "unknown_elements": ("cell: 200,000 unknown elements", _unknown_elements),
+    "bad_names": ("cell: 100,000 frames with a bad name", _bad_names),
+    "too_many_elements": ("cell: 7,000,000 elements (28 MB), refused before parsing", _too_many),
+}
+
+
+def _validate(path: Path, functions: Catalog) -> list[object]:
+    with open(path, "rb") as stream:
+        head = stream.read(200)
+    return list(validate_application(path, functions) if b"<application" in head else validate_cell(path))
+
+
+def _one(case: str, folder: Path) -> int:
+    """Child process: validate one hostile file once; print its problems and peak RSS."""
+    functions, _ = catalog()
+    path = folder / case
+    found = _validate(path, functions)
+    errors, warnings = count_problems(found)  # type: ignore[arg-type]
+    print(json.dumps({"errors": errors, "shown": len(found), "max_rss_mb": _peak_rss_mb()}))
+    return 0
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory since it started (VmHWM: getrusage would count the
+    parent's peak too, kept across exec)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def hostile(functions: Catalog, operations: int, baseline_ms: float, repeat: int) -> list[dict[str, object]]:
+    rows: list[dict[str, object]] = []
+    cases = {"baseline": (f"application: the {operations:,}-operation baseline", lambda folder: generate(functions, operations, folder)), **HOSTILE}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for case, (what, make) in cases.items():
+            path = make(folder)
+            child = subprocess.run(
+                [sys.executable, __file__, "--one", str(path.relative_to(folder)), "--folder", str(folder)],
+                capture_output=True, text=True, check=True,
+            )
+            alone = json.loads(child.stdout.strip().splitlines()[-1])
+            wall, cpu = measure(lambda: _validate(path, functions), repeat)
+            med = statistics.median
+            rows.append({
+                "case": case, "what": what, "file_mb": round(path.stat().st_size / 1e6, 2), "wall_ms": round(med(wall) * 1000, 1),
+                "cpu_ms": round(med(cpu) * 1000, 1), "vs_baseline": round(med(wall) * 1000 / baseline_ms, 2),
+                "errors": alone["errors"], "shown": alone["shown"], "max_rss_mb": round(alone["max_rss_mb"], 1),
+            })
+            row = rows[-1]
+            print(f"{what:<62} {row['file_mb']:>6} MB  wall {row['wall_ms']:>8} ms  cpu {row['cpu_ms']:>8} ms  "
+                  f"{row['vs_baseline']:>5}x baseline  peak {row['max_rss_mb']:>6} MB  {row['errors']:,} problems, {row['shown']} shown")
+    return rows
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--operations", type=int, default=10_000)
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--hostile", action="store_true", help="also time the files that used to hang the validator")
+    parser.add_argument("--one", help=argparse.SUPPRESS)
+    parser.add_argument("--folder", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.one:
+        return _one(args.one, Path(args.folder))
     functions, source = catalog()
     with tempfile.TemporaryDirectory() as tmp:
         path = generate(functions, args.operations, Path(tmp))
@@ -196,7 +310,7 @@ def main() -> int:
     print(f"load + validate:           wall median {med(load) * 1000:.1f} ms (min {min(load) * 1000:.1f}), cpu median {med(load_cpu) * 1000:.1f} ms")
     print(f"ratio load+validate / parse: wall {med(load) / med(parse):.1f}x, cpu {med(load_cpu) / med(parse_cpu):.1f}x; "
           f"target <= 1000 ms: {'met' if med(load) <= 1.0 else 'missed'} (wall), {'met' if med(load_cpu) <= 1.0 else 'missed'} (cpu)")
-    print(json.dumps({
+    result: dict[str, object] = {
         "bench": "load_validate",
         "catalog": source,
         "operations": args.operations,
@@ -210,7 +324,11 @@ def main() -> int:
         "load_validate_cpu_ms_median": round(med(load_cpu) * 1000, 2),
         "ratio_median": round(med(load) / med(parse), 2),
         "ratio_cpu_median": round(med(load_cpu) / med(parse_cpu), 2),
-    }))
+    }
+    if args.hostile:
+        print(f"hostile files (each against the {args.operations:,}-operation load + validate above; limit {MAX_ELEMENTS:,} elements):")
+        result["hostile"] = hostile(functions, args.operations, med(load) * 1000, max(1, min(args.repeat, 3)))
+    print(json.dumps(result))
     return 0
 
 

@@ -20,8 +20,10 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, Protocol
 
+from core_functions import limits
 from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
+from core_functions.suggest import NameIndex, did_you_mean
 
 _IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 MAX_PARAM_LENGTH = 4096
@@ -85,15 +87,21 @@ class CellView(Protocol):
     def element_kind(self, name: str) -> str: ...
     def has_joint_pose(self, name: str) -> bool: ...
     def joint_pose_group(self, name: str) -> str | None: ...
+    def suggest_frame(self, name: str) -> str | None: ...
 
 
 @dataclass(frozen=True)
 class BindContext:
-    """Where a call happens: the robot, the group, and the cell model (None when there is none)."""
+    """Where a call happens: the robot, the group, and the cell model (None when there is none).
+
+    ``suggest`` False leaves 'did you mean' out of unknown-name messages: a validator that has
+    already suggested for many names stops paying for more (core_functions.suggest).
+    """
 
     robot: RobotModel
     group: str
     cell: CellView | None = None
+    suggest: bool = True
 
 
 @dataclass(frozen=True)
@@ -140,7 +148,10 @@ class ParamSpec:
         parser = _PARSERS[self.type]
         return parser(self, text.strip(), ctx)
 
-    def _number(self, text: str) -> float:
+    def _number(self, text: str, field: str | None = None, physical: bool = True) -> float:
+        """The number in SI units; outside its unit family's physical bound (core_functions.limits,
+        unless ``physical`` is False) or this param's own range it is refused.  ``field`` names the
+        value in messages (``x``, ``roll``) when a param holds several."""
         match = _NUMBER_WITH_UNIT.match(text)
         if not match:
             raise ValueError(f"{text!r} is not a number" + (f" (unit {self.unit})" if self.unit else ""))
@@ -155,9 +166,15 @@ class ParamSpec:
         else:
             factor = family[suffix]
         value = number * factor
-        if not math.isfinite(value):
+        if not math.isfinite(number) or not math.isfinite(value):
             raise ValueError(f"{text!r} is not a finite number")
-        self._check_range(value)
+        self._check_range(value)  # the param's own range first: tighter, and its words are the catalog's
+        bound = limits.BY_UNIT.get(self.unit) if physical else None
+        if bound is not None:
+            shown_unit = (suffix or self.unit) if self.unit != "fraction" else suffix
+            problem = bound.violation(field or self.name, number, factor, shown_unit)
+            if problem is not None:
+                raise ValueError(problem)
         return value
 
     def _check_range(self, value: float) -> None:
@@ -216,7 +233,8 @@ def _parse_frame(spec: ParamSpec, text: str, ctx: BindContext) -> str:
     if ctx.cell is None:
         raise ValueError(f"frame {text!r} needs a cell model, and the application names none")
     if not ctx.cell.has_frame(text):
-        raise ValueError(f"unknown frame {text!r} in the cell model{_suggest(text, ctx.cell.frame_names())}")
+        hint = did_you_mean(ctx.cell.suggest_frame(text)) if ctx.suggest else ""
+        raise ValueError(f"unknown frame {text!r} in the cell model{hint}")
     _check_kind(spec, "frame", text, ctx.cell.frame_kind(text))
     return text
 
@@ -238,15 +256,26 @@ def _parse_frames(spec: ParamSpec, text: str, ctx: BindContext) -> tuple[str, ..
     return tuple(_parse_frame(spec, name, ctx) for name in names)
 
 
-def _numbers(text: str, unit_spec: ParamSpec) -> list[float]:
-    """Comma- or space-separated numbers; a unit may follow each number or the whole list."""
+def _numbers(text: str, unit_spec: ParamSpec, fields: Sequence[str] = (), physical: bool = True) -> list[float]:
+    """Comma- or space-separated numbers; a unit may follow each number or the whole list.
+
+    ``fields`` names the values in messages (``x``, ``y``, ``z``); ``physical`` False leaves the
+    family bound to a tighter check that follows (joint limits)."""
     tokens = [t for t in re.split(r"[,\s]+", text) if t]
     trailing = ""
     if tokens and re.fullmatch(r"[A-Za-z/%]+", tokens[-1]):
         trailing = tokens.pop()
     if not tokens:
         raise ValueError("no numbers given")
-    return [unit_spec._number(t + trailing if trailing and re.fullmatch(r"[-+.\deE]+", t) else t) for t in tokens]
+    return [
+        unit_spec._number(t + trailing if trailing and re.fullmatch(r"[-+.\deE]+", t) else t,
+                          fields[i] if i < len(fields) else None, physical)
+        for i, t in enumerate(tokens)
+    ]
+
+
+_XYZ = ParamSpec("xyz", ParamType.NUMBER, "", unit="m")
+_RPY = ParamSpec("rpy", ParamType.NUMBER, "", unit="rad")
 
 
 def _parse_target(spec: ParamSpec, text: str, ctx: BindContext) -> str | Pose:
@@ -255,13 +284,14 @@ def _parse_target(spec: ParamSpec, text: str, ctx: BindContext) -> str | Pose:
     tokens = [t for t in re.split(r"[,\s]+", text) if t]
     if len(tokens) != 6:
         raise ValueError(f"{text!r} is neither a frame name nor 6 numbers x,y,z,roll,pitch,yaw")
-    xyz = _numbers(",".join(tokens[:3]), ParamSpec("xyz", ParamType.NUMBER, "", unit="m"))
-    rpy = _numbers(",".join(tokens[3:]), ParamSpec("rpy", ParamType.NUMBER, "", unit="rad"))
+    xyz = _numbers(",".join(tokens[:3]), _XYZ, ("x", "y", "z"))
+    rpy = _numbers(",".join(tokens[3:]), _RPY, ("roll", "pitch", "yaw"))
     return Pose.from_xyz_rpy(*xyz, *rpy)
 
 
 def _parse_joints(spec: ParamSpec, text: str, ctx: BindContext) -> tuple[float, ...]:
-    values = _numbers(text, ParamSpec(spec.name, ParamType.NUMBER, "", unit="rad"))
+    # Joint limits are the bound here, tighter than any angle bound, and their message says more.
+    values = _numbers(text, ParamSpec(spec.name, ParamType.NUMBER, "", unit="rad"), physical=False)
     group = ctx.robot.group(ctx.group)
     if len(values) != len(group.joints):
         raise ValueError(f"{len(values)} joint values for {ctx.group}, which has {len(group.joints)} joints ({', '.join(group.joint_names)})")
@@ -318,13 +348,6 @@ _PARSERS: dict[ParamType, Callable[[ParamSpec, str, BindContext], Any]] = {
     ParamType.GROUP: _parse_group,
     ParamType.CAMERA: _parse_camera,
 }
-
-
-def _suggest(name: str, known: Iterable[str]) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(name, list(known), n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 # --------------------------------------------------------------------------- functions
@@ -483,7 +506,8 @@ class Catalog:
         return sorted(self.functions)
 
     def suggest(self, name: str) -> str:
-        return _suggest(name, self.functions)
+        """' (did you mean ...?)' for an unknown function name, or ''."""
+        return did_you_mean(NameIndex(self.functions).suggest(name))
 
     def describe(self) -> list[dict[str, Any]]:
         return [self.functions[n].describe() for n in self.names()]

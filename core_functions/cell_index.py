@@ -8,10 +8,13 @@ re-run starts from the nominal cell again.
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from core_functions.geometry import Pose
+from core_functions.suggest import NameIndex
 
 
 @dataclass(frozen=True)
@@ -25,7 +28,39 @@ class CellFrame:
     attributes: dict[str, str] = field(default_factory=dict)
 
 
-class CellIndex:
+class _Kinded(Protocol):
+    @property
+    def kind(self) -> str: ...
+
+
+class FrameLookup(ABC):
+    """The frame half of catalog.CellView over a map of named frames, for every cell model.
+
+    The loaded cell (app_model) and a group machine's index of the published one hold frames of
+    different types; both answer the catalog's questions about them the same way, here."""
+
+    _names: NameIndex  # sorted on the first unknown name only
+
+    @property
+    @abstractmethod
+    def frame_map(self) -> Mapping[str, _Kinded]:
+        """Every frame by name (``world`` is not one of them)."""
+
+    def has_frame(self, name: str) -> bool:
+        return name == "world" or name in self.frame_map
+
+    def frame_kind(self, name: str) -> str:
+        return "world" if name == "world" else self.frame_map[name].kind
+
+    def frame_names(self) -> Iterable[str]:
+        return self.frame_map.keys()
+
+    def suggest_frame(self, name: str) -> str | None:
+        """The frame name closest to an unknown ``name``, at a bounded cost (core_functions.suggest)."""
+        return self._names.suggest(name)
+
+
+class CellIndex(FrameLookup):
     """Lookup of frames, elements and joint poses by name (implements catalog.CellView)."""
 
     def __init__(
@@ -42,19 +77,15 @@ class CellIndex:
         self._joint_poses = {k: dict(v) for k, v in (joint_poses or {}).items()}
         self._joint_pose_groups = dict(joint_pose_groups or {})
         self._measured: dict[str, Pose] = {}
+        self._names = NameIndex(self._frames)  # sorted on the first unknown name only
         #: Told ``(frame, measured world pose)`` after each correction: the group machine passes
         #: corrections on to the engine, which publishes the cell's frames on tf_static.
         self.on_correct: Callable[[str, Pose], None] | None = None
 
     # ------------------------------------------------------------------ catalog.CellView
-    def has_frame(self, name: str) -> bool:
-        return name in self._frames or name == "world"
-
-    def frame_kind(self, name: str) -> str:
-        return "world" if name == "world" else self._frames[name].kind
-
-    def frame_names(self) -> Iterable[str]:
-        return self._frames.keys()
+    @property
+    def frame_map(self) -> Mapping[str, CellFrame]:
+        return self._frames
 
     def has_element(self, name: str) -> bool:
         return name in self._elements
@@ -90,6 +121,8 @@ class CellIndex:
         if measured is not None:
             return measured
         nominal = self.nominal(name)
+        if not self._measured:
+            return nominal  # nothing located: no need to climb a chain of ancestors
         ancestor = self._frames[name].parent if name in self._frames else None
         for _ in range(len(self._frames)):  # bounded: the tree has no cycles, but never trust that
             if ancestor is None or ancestor not in self._frames:

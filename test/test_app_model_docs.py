@@ -44,6 +44,15 @@ def shown(needle: str) -> list[str]:
     return next(body for lang, body in BLOCKS if lang == "text" and needle in body).strip().splitlines()
 
 
+def test_the_documented_bound_messages_are_real(example_tree: Path) -> None:
+    cell = example_tree / "apps_xml" / "cells" / "example_cell.xml"
+    cell.write_text(cell.read_text().replace('name="hole_b" xyz="0 -40 0" rpy="180 0 90"', 'name="hole_b" xyz="0 -40 0" rpy="180 0 1e308"')
+                    .replace('<frame name="tray" xyz="280 -220 0"', '<frame name="tray" xyz="280 -220000 0"'))
+    app = example_tree / "apps_xml" / "example.xml"
+    app.write_text(app.read_text().replace('safe_pose="initial"/>', 'safe_pose="initial" alarm_timeout="100000"/>'))
+    assert [str(d) for d in validate_application("apps_xml/example.xml", full_catalog())] == shown("outside ±720 deg")
+
+
 def test_the_documented_param_name_message_is_real(example_tree: Path) -> None:
     app = example_tree / "apps_xml" / "example.xml"
     app.write_text(app.read_text().replace('<param value="slot_1"/>', '<param name="reference" value="slot_1"/>'))

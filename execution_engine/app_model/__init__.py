@@ -7,12 +7,14 @@ file formats.
 """
 from execution_engine.app_model.application import load_application, read_application, validate_application
 from execution_engine.app_model.cell import Cell, Element, Frame, JointPose, check_joint_poses, load_cell, read_cell, validate_cell
-from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, Location
+from execution_engine.app_model.diagnostics import MAX_DIAGNOSTICS, ApplicationError, Diagnostic, Location, Omitted, count_problems
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
-from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES
+from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, MAX_ELEMENTS
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
+    "MAX_DIAGNOSTICS",
+    "MAX_ELEMENTS",
     "WAIT",
     "Application",
     "ApplicationError",
@@ -24,8 +26,10 @@ __all__ = [
     "Frame",
     "JointPose",
     "Location",
+    "Omitted",
     "Operation",
     "check_joint_poses",
+    "count_problems",
     "load_application",
     "load_cell",
     "read_application",

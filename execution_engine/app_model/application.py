@@ -12,13 +12,14 @@ from pathlib import Path
 from types import MappingProxyType
 
 from core_functions.catalog import Catalog
-from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell
-from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, has_errors, sorted_diagnostics
-from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.app_model import wire_fit
+from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell_log
+from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, DiagnosticLog, capped, has_errors
+from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
 from execution_engine.app_model.positions import SourceMap
 from execution_engine.app_model.reader import ApplicationDraft, ApplicationReader, OperationSite
 from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES
-from execution_engine.app_model.schema import read_structured
+from execution_engine.app_model.structure import read_structured
 from execution_engine.app_model.validation import ApplicationChecker, CheckedCall
 
 
@@ -45,26 +46,26 @@ def read_application(
 
 
 def _read_application(path: Path, catalog: Catalog, max_bytes: int) -> tuple[Application | None, list[Diagnostic]]:
-    doc, diagnostics = read_structured(path, "application", max_bytes=max_bytes)
+    doc, log = read_structured(path, "application", max_bytes=max_bytes)
     if doc is None:
-        return None, sorted_diagnostics(diagnostics)
-    reader = ApplicationReader(doc)
-    draft = reader.read()
-    diagnostics.extend(reader.diagnostics)
-    cell, cell_broken = _read_cell(draft, diagnostics, max_bytes)
+        return None, capped(log)
+    draft = ApplicationReader(doc, log).read()
+    cell, cell_broken = _read_cell(draft, log, max_bytes)
     robot = draft.robot
     if robot is None:
-        return None, sorted_diagnostics(diagnostics)
+        return None, capped(log)
     if cell is not None:
-        diagnostics.extend(check_joint_poses(cell, robot))
+        joint_problems = check_joint_poses(cell, robot)
+        log.extend(joint_problems)
         cell = cell.bind(robot)
-    checker = ApplicationChecker(draft, robot, catalog, cell, cell_broken)
+        if not has_errors(joint_problems) and draft.cell_where is not None:
+            wire_fit.check_cell(cell, draft.cell_where, draft.cell_display or "", log)
+    checker = ApplicationChecker(draft, robot, catalog, cell, cell_broken, log)
     checked = checker.check()
     policy = checker.check_policy(draft.policy)
-    diagnostics.extend(checker.diagnostics)
-    diagnostics = sorted_diagnostics(diagnostics)
-    if has_errors(diagnostics):
-        return None, diagnostics
+    _check_requests(draft, checked, catalog, cell, policy, log)
+    if log.has_errors:
+        return None, capped(log)
     application = Application(
         name=draft.name,
         path=path,
@@ -75,22 +76,42 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int) -> tuple[App
         description=draft.description,
         version=draft.version,
     )
-    return application, diagnostics
+    return application, capped(log)
 
 
-def _read_cell(draft: ApplicationDraft, diagnostics: list[Diagnostic], max_bytes: int) -> tuple[Cell | None, bool]:
+def _read_cell(draft: ApplicationDraft, log: DiagnosticLog, max_bytes: int) -> tuple[Cell | None, bool]:
     """The application's cell, and whether it was named but could not be loaded."""
     if draft.cell_path is None or draft.cell_where is None:
         return None, False
     if not draft.cell_path.is_file():
-        diagnostics.append(Diagnostic.at(draft.cell_where, f"cell file {draft.cell_display} not found (looked for {draft.cell_path.resolve()})"))
+        log.append(Diagnostic.at(draft.cell_where, f"cell file {draft.cell_display} not found (looked for {draft.cell_path.resolve()})"))
         return None, True
-    cell, cell_diagnostics = read_cell(draft.cell_path, display=draft.cell_display, max_bytes=max_bytes)
-    diagnostics.extend(cell_diagnostics)
+    cell, cell_log = read_cell_log(draft.cell_path, display=draft.cell_display, max_bytes=max_bytes, fits=False)
+    log.merge(cell_log)
     if cell is None:
-        diagnostics.append(Diagnostic.at(draft.cell_where, f"cell file {draft.cell_display} has errors (listed with its name); references to its frames are not checked until they are fixed"))
+        log.append(Diagnostic.at(draft.cell_where, f"cell file {draft.cell_display} has errors (listed with its name); references to its frames are not checked until they are fixed"))
         return None, True
     return cell, False
+
+
+def _check_requests(
+    draft: ApplicationDraft, checked: list[list[CheckedCall]], catalog: Catalog, cell: Cell | None, policy: ErrorPolicy, log: DiagnosticLog,
+) -> None:
+    """Every call's request fits the transport (wire_fit); implicit waits send none."""
+    assert draft.robot is not None
+
+    def calls() -> Iterator[tuple[str, str, str, tuple[str, ...], int]]:
+        for operation, group_calls in zip(draft.operations, checked):
+            for call in group_calls:
+                if not call.site.implicit:
+                    yield operation.id, call.site.group, call.site.function, call.params or (), call.site.at
+
+    longest = (
+        max((len(op.id) for op in draft.operations), default=0),
+        max(len(WAIT), *map(len, catalog.functions)),  # the built-in wait, when the catalog has none
+        max((len(f.params) for f in catalog.functions.values()), default=0),
+    )
+    wire_fit.check_requests(calls, longest, draft.robot, draft.name, cell.name if cell is not None else "", policy.retries, log, draft.source.at_offset)
 
 
 def _freeze(site: OperationSite, calls: list[CheckedCall], source: SourceMap) -> Operation:

@@ -9,12 +9,16 @@ opens an element, in document order, which is exactly the order of ``root.iter()
 Positions travel as character offsets (cheap to keep for 10^5 elements) and become a
 :class:`Location` only when a diagnostic or the final model needs one.  Columns are 1-based and
 count characters (a tab is one column); CR LF and a lone CR count as one line break, as in XML.
+
+Memory is kept to a few bytes per element and per line (arrays of offsets, one string per
+distinct tag name): a file at the size limit holds a million of each.
 """
 from __future__ import annotations
 
 import bisect
-import itertools
 import re
+from array import array
+from collections.abc import Iterable, Iterator
 
 from lxml import etree
 
@@ -26,6 +30,31 @@ _TAGS = re.compile(r"<(?:!--.*?-->|!\[CDATA\[.*?\]\]>|\?.*?\?>|/|([^\s/>!?][^\s/
 _PLAIN_TAGS = re.compile(r"<([^\s/>!?][^\s/>]*)")
 _TAG_NAME = re.compile(r"<[^\s/>]+")
 _ATTRIBUTE = re.compile(r"""\s+([^\s=/>]+)\s*=\s*(?:"[^"]*"|'[^']*')""")
+_NEWLINE = re.compile("\n")
+
+
+def _tag_matches(text: str) -> Iterator[re.Match[str]]:
+    """The start tags of a well-formed text, in document order, one match each (name: group 1)."""
+    body = text[text.find("?>") + 2:] if text.startswith("<?xml") else text
+    if "<!--" in body or "<![CDATA[" in body or "<?" in body:
+        return (m for m in _TAGS.finditer(text) if m.group(1))
+    return _PLAIN_TAGS.finditer(text)
+
+
+def start_tags_and_attributes(text: str) -> Iterator[tuple[int, int]]:
+    """(offset, number of attributes) of each start tag, lazily, so a count can stop at a limit.
+
+    Attributes are matched one at a time from the tag name on: one regex repeating a group over a
+    tag of millions of attributes would keep a backtracking record of each (gigabytes)."""
+    for match in _tag_matches(text):
+        head = _TAG_NAME.match(text, match.start())
+        count = 0
+        position = head.end() if head is not None else match.end()
+        attribute = _ATTRIBUTE.match(text, position)
+        while attribute is not None:
+            count += 1
+            attribute = _ATTRIBUTE.match(text, attribute.end())
+        yield match.start(), count
 
 
 def qualified_name(element: etree._Element) -> str:
@@ -44,15 +73,17 @@ class SourceMap:
         self.file = file
         self.text = text.replace("\r\n", "\n").replace("\r", "\n") if "\r" in text else text
         self._root = root
-        self._line_starts: list[int] | None = None
-        self._tags: tuple[list[int], list[str]] | None = None
+        self._line_starts: array[int] | None = None
+        self._tags: tuple[array[int], list[str]] | None = None
         self._offsets: dict[etree._Element, int] | None = None
+        self._located: dict[etree._Element, int] = {}
 
     # ---------------------------------------------------------------- lines
-    def _lines(self) -> list[int]:
+    def _lines(self) -> array[int]:
         if self._line_starts is None:
-            lines = self.text.split("\n")
-            self._line_starts = [0, *itertools.accumulate(len(line) + 1 for line in lines[:-1])]
+            starts = array("q", [0])
+            starts.extend(m.end() for m in _NEWLINE.finditer(self.text))
+            self._line_starts = starts
         return self._line_starts
 
     def line_col(self, offset: int) -> tuple[int, int]:
@@ -72,16 +103,20 @@ class SourceMap:
         return Location(self.file, line, min(max(col, 1), end - starts[line - 1] + 1))
 
     # ---------------------------------------------------------------- start tags
-    def start_tags(self) -> tuple[list[int], list[str]]:
-        """Offsets and names of every start tag, in document order (computed once)."""
+    def start_tags(self) -> tuple[array[int], list[str]]:
+        """Offsets and names of every start tag, in document order (computed once).
+
+        The names are shared: one string per distinct tag, not one per element."""
         if self._tags is None:
             text = self.text
+            offsets = array("q", [m.start() for m in _tag_matches(text)])
             body = text[text.find("?>") + 2:] if text.startswith("<?xml") else text
             if "<!--" in body or "<![CDATA[" in body or "<?" in body:
-                matches = [(m.start(), m.group(1)) for m in _TAGS.finditer(text) if m.group(1)]
-                self._tags = [m[0] for m in matches], [m[1] for m in matches]
+                raw = [m.group(1) for m in _tag_matches(text)]
             else:
-                self._tags = [m.start() for m in _PLAIN_TAGS.finditer(text)], _PLAIN_TAGS.findall(text)
+                raw = _PLAIN_TAGS.findall(text)
+            shared: dict[str, str] = {}
+            self._tags = offsets, list(map(shared.setdefault, raw, raw))
         return self._tags
 
     def _element_offsets(self) -> dict[etree._Element, int]:
@@ -97,9 +132,30 @@ class SourceMap:
                     self._offsets = dict(zip(elements, offsets))
         return self._offsets
 
+    def locate(self, elements: Iterable[etree._Element]) -> None:
+        """Find the offsets of a few elements in one walk of the tree, without the map of all.
+
+        The map (:meth:`_element_offsets`) holds a Python object per element; for the handful of
+        elements a report points at, counting them off in document order is enough.
+        """
+        wanted = {e for e in elements if e not in self._located}
+        if not wanted or self._root is None or self._offsets is not None:
+            return
+        offsets, names = self.start_tags()
+        for index, element in enumerate(self._root.iter(etree.Element)):
+            if element in wanted:
+                if index >= len(names) or names[index] != qualified_name(element):
+                    return  # the scan disagrees with the parser: element_offset falls back
+                self._located[element] = offsets[index]
+                wanted.discard(element)
+                if not wanted:
+                    return
+
     def element_offset(self, element: etree._Element) -> int:
         """Offset of ``<tag`` of ``element`` (a best guess on its source line if the scan disagrees)."""
-        offset = self._element_offsets().get(element)
+        offset = self._located.get(element)
+        if offset is None:
+            offset = self._element_offsets().get(element)
         if offset is not None:
             return offset
         starts = self._lines()

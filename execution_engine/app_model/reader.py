@@ -17,8 +17,9 @@ from pathlib import Path
 
 from lxml import etree
 
+from core_functions import limits
 from core_functions.robots import RobotModel, find_robot
-from execution_engine.app_model.diagnostics import Diagnostic, Location
+from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
 from execution_engine.app_model.positions import DocumentWalk, SourceMap
 from execution_engine.app_model.safe_xml import XmlDocument
 
@@ -81,14 +82,17 @@ class ApplicationDraft:
 
 
 class ApplicationReader:
-    def __init__(self, doc: XmlDocument) -> None:
+    def __init__(self, doc: XmlDocument, log: DiagnosticLog | None = None) -> None:
         self.doc = doc
         self.source = doc.source
         self.walk = DocumentWalk(doc.source)
-        self.diagnostics: list[Diagnostic] = []
+        self.diagnostics = log if log is not None else DiagnosticLog()
         self.groups: frozenset[str] = GROUP_TAGS
 
     def error(self, at: int, message: str) -> None:
+        if self.diagnostics.full:
+            self.diagnostics.count()  # beyond the report: counted, not located
+            return
         self.diagnostics.append(Diagnostic.at(self.source.at_offset(at), message))
 
     def read(self) -> ApplicationDraft:
@@ -148,10 +152,21 @@ class ApplicationReader:
             policy.retries = int(retries)
         policy.action = element.get("action")
         policy.safe_pose = element.get("safe_pose")
-        policy.alarm_timeout = _number(element.get("alarm_timeout"))
+        policy.alarm_timeout = self.bounded(element, at, "alarm_timeout", limits.BY_UNIT["s"])
         policy.safe_speed = _number(element.get("safe_speed"))
         policy.retreat = _number(element.get("retreat"))
         return policy
+
+    def bounded(self, element: etree._Element, at: int, attribute: str, bound: limits.Bound) -> float | None:
+        """A number of ``<error_policy>`` inside its physical bound (the XSD checks only its form)."""
+        value = _number(element.get(attribute))
+        if value is None:
+            return None
+        problem = bound.violation(attribute, value)
+        if problem is not None:
+            self.error(self.source.attribute_offset(at, attribute), f"<{element.tag}> {problem}")
+            return None
+        return value
 
     def read_operation(self, element: etree._Element, at: int, robot: RobotModel | None) -> OperationSite | None:
         op_id = element.get("id")

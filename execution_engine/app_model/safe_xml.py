@@ -5,6 +5,13 @@ expand entities ("billion laughs"), read other files or reach the network throug
 exhaust memory.  So: a size limit checked before reading, UTF-8 only (the text is needed for
 columns anyway), any DOCTYPE or ENTITY declaration refused before the parser sees it, and lxml
 configured to resolve nothing.  Every failure is a :class:`Diagnostic`, never an exception.
+
+Memory follows the number of nodes more than the number of bytes: lxml spends some 150
+bytes on each element and 250 on each attribute, so 31 MB of ``<x/>`` would be a gigabyte of
+tree.  Elements and attributes are therefore capped (:data:`MAX_ELEMENTS`,
+:data:`MAX_ATTRIBUTES`, counted in the text before the tree is built), and
+comments and processing instructions are dropped while parsing -- nothing reads them, and a
+file of comments was half a gigabyte of comment nodes.
 """
 from __future__ import annotations
 
@@ -18,9 +25,14 @@ from pathlib import Path
 from lxml import etree
 
 from execution_engine.app_model.diagnostics import Diagnostic, Location
-from execution_engine.app_model.positions import SourceMap
+from execution_engine.app_model.positions import SourceMap, start_tags_and_attributes
 
 DEFAULT_MAX_BYTES = 32 * 1024 * 1024
+#: Elements a file may hold: six times the 10,000-operation benchmark application, five times a
+#: 200,000-frame cell (which is already too large to run); some 150 MB of tree at the limit.
+MAX_ELEMENTS = 1_000_000
+#: Attributes a file may hold (each costs lxml about 250 bytes: 500 MB at the limit).
+MAX_ATTRIBUTES = 2_000_000
 
 _DECLARATIONS = re.compile(r"<!--.*?-->|<!\[CDATA\[.*?\]\]>|<!(DOCTYPE|ENTITY)", re.S)
 _ENCODING = re.compile(r"""^<\?xml[^>]*?\sencoding\s*=\s*["']([^"']*)["']""")
@@ -39,6 +51,8 @@ _SYNTAX_REWRITES: tuple[tuple[re.Pattern[str], str], ...] = (
     (re.compile(r"Extra content at the end of the document"), "text after the end of the root element"),
     (re.compile(r"Entity '([^']*)' not defined"), r"unknown entity &\1; (only &lt; &gt; &amp; &quot; &apos; and &#...; exist)"),
     (re.compile(r"Attribute (\S+) redefined"), r"attribute \1 is given twice"),
+    (re.compile(r"Resource limit exceeded: .*|.*XML_PARSE_HUGE.*|Excessive depth in document.*"),
+     "the file goes beyond the parser's limits (at most 256 levels of nesting and 10 MB for one tag, text or name)"),
 )
 
 
@@ -62,8 +76,9 @@ def _hardened_parser() -> etree.XMLParser:
         no_network=True,
         load_dtd=False,
         dtd_validation=False,
-        huge_tree=False,
-        remove_comments=False,
+        huge_tree=False,  # keeps libxml2's limits: 256 levels of nesting, 10 MB per text or name
+        remove_comments=True,
+        remove_pis=True,
     )
 
 
@@ -124,8 +139,7 @@ def read_xml(path: Path, *, display: str | None = None, max_bytes: int = DEFAULT
     if info.st_size > max_bytes:
         return None, [Diagnostic(file, 1, 1, f"the file is {info.st_size} bytes, over the limit of {max_bytes} bytes")]
     try:
-        with open(path, "rb") as stream:
-            data = stream.read(max_bytes + 1)
+        data = _read_at_most(path, info.st_size, max_bytes)
     except OSError as error:
         return None, [Diagnostic(file, 1, 1, f"cannot read the file: {error.strerror or error}")]
     if len(data) > max_bytes:
@@ -133,12 +147,62 @@ def read_xml(path: Path, *, display: str | None = None, max_bytes: int = DEFAULT
     return parse_bytes(data, path=path, display=file)
 
 
+def _read_at_most(path: Path, size: int, max_bytes: int) -> bytes:
+    """The file's bytes, reading at most ``max_bytes + 1`` (a larger result means: too large).
+
+    ``read(max_bytes + 1)`` would allocate the whole limit for every file, however small; the
+    size from ``stat`` is the first guess and a file that grew since is read on in chunks.
+    """
+    with open(path, "rb") as stream:
+        data = stream.read(min(size, max_bytes) + 1)
+        if len(data) <= size or len(data) > max_bytes:
+            return data
+        chunks = [data]
+        total = len(data)
+        while total <= max_bytes:
+            chunk = stream.read(min(1 << 20, max_bytes + 1 - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+        return b"".join(chunks)
+
+
+def _too_many_nodes(display: str, data: bytes, text: str) -> Diagnostic | None:
+    """A diagnostic at the first start tag past :data:`MAX_ELEMENTS`, or at the one holding the
+    attribute past :data:`MAX_ATTRIBUTES`; None when the file is within both.
+
+    Every element starts with a ``<`` that is not ``</``, ``<!`` or ``<?``, and every attribute
+    holds a ``=``, so most files -- a flood of comments too -- are cleared by fast byte counts;
+    otherwise the start tags are scanned (comments, CDATA, instructions and end tags left out),
+    stopping at the first one over a limit.
+    """
+    start_tags_at_most = data.count(b"<") - data.count(b"</") - data.count(b"<!") - data.count(b"<?")
+    if start_tags_at_most <= MAX_ELEMENTS and data.count(b"=") <= MAX_ATTRIBUTES:
+        return None
+    source = SourceMap(display, text)
+    attributes = 0
+    for index, (offset, count) in enumerate(start_tags_and_attributes(source.text)):
+        attributes += count
+        if index == MAX_ELEMENTS:
+            what = f"{MAX_ELEMENTS:,} elements"
+        elif attributes > MAX_ATTRIBUTES:
+            what = f"{MAX_ATTRIBUTES:,} attributes"
+        else:
+            continue
+        return Diagnostic.at(source.at_offset(offset), (
+            f"the file has more than {what}, the limit; split it (a cell model or an application this "
+            "large is a generated file gone wrong)"
+        ))
+    return None
+
+
 def parse_bytes(data: bytes, *, path: Path, display: str) -> tuple[XmlDocument | None, list[Diagnostic]]:
     """Parse bytes already read (and size-checked) as the content of ``path``."""
     text, problem = _decode(display, data)
     if text is None:
         return None, [problem] if problem else []
-    problem = _refuse_declarations(display, text)
+    problem = _refuse_declarations(display, text) or _too_many_nodes(display, data, text)
     if problem is not None:
         return None, [problem]
     parser = _hardened_parser()

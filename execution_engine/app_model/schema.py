@@ -4,22 +4,19 @@ The schema says *what may go where*; libxml2 says so in terms of content models 
 ("[facet 'pattern'] The value '1a' is not accepted by the pattern ..."). Users need the element,
 the attribute and what would be accepted, at the right line and column.  The wording of a value
 error comes from the ``xs:documentation`` of the simple type in the XSD itself, so the schema
-stays the single description of every attribute.
+stays the single description of every attribute.  Running the check itself, in bounded time
+whatever the file, is :mod:`execution_engine.app_model.structure`.
 """
 from __future__ import annotations
 
-import copy
 import difflib
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
 from lxml import etree
 
-from execution_engine.app_model.diagnostics import Diagnostic, Location
-from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument, read_xml
 from execution_engine.resources import share_path
 
 XS = "{http://www.w3.org/2001/XMLSchema}"
@@ -103,7 +100,7 @@ def load_schema(name: str) -> SchemaInfo:
     return _describe(name, xsd.getroot(), etree.XMLSchema(xsd))
 
 
-class _PathIndex:
+class PathIndex:
     """Resolves libxml2's node paths (``/application/operation[3]/left_arm``) in linear total time."""
 
     def __init__(self, root: etree._Element) -> None:
@@ -145,7 +142,7 @@ def _one_of(names: list[str]) -> str:
     return tags[0] if len(tags) == 1 else ", ".join(tags[:-1]) + " or " + tags[-1]
 
 
-class _Rewriter:
+class Rewriter:
     def __init__(self, info: SchemaInfo) -> None:
         self.info = info
 
@@ -176,7 +173,7 @@ class _Rewriter:
                 return f"<{element}> needs at least one <operation>"
             return f"<{element}> needs {_one_of(expected_names)} inside"
         if detail.startswith("This element is not expected"):
-            return self._unexpected(element, parent_tag, expected_names)
+            return self.unexpected(element, parent_tag, expected_names)
         if detail.startswith("Element content is not allowed"):
             return f"<{element}> holds text only, no elements"
         if detail.startswith("Character content is not allowed"):
@@ -187,103 +184,25 @@ class _Rewriter:
             return f"the root element is <{element}>; this file must start with <{self.info.root}>"
         return f"<{element}>: {detail.strip()}"
 
-    def _unexpected(self, element: str, parent: str, expected: list[str]) -> str:
+    def unexpected(self, element: str, parent: str, expected: list[str]) -> str:
+        """``<element>`` where its parent does not allow it, with what would be allowed."""
         where = f" inside <{parent}>" if parent else ""
         message = f"<{element}> is not allowed here{where}"
         hint = _PLACEMENT_HINTS.get((parent, element))
         if hint is None and element == "function" and parent in {"left_arm", "right_arm", "torso_head", "arm"}:
             hint = _GROUP_HINT
+        allowed = self.info.children.get(parent, ())
+        if element not in allowed and allowed:
+            # Never allowed in this parent: the answer is what the parent takes, wherever the
+            # element stands (libxml2's list depends on the position it stopped at).
+            expected = list(allowed)
         if hint is None and element not in self.info.attributes:
             candidates = expected or list(self.info.attributes)
             close = difflib.get_close_matches(element, candidates, n=1)
             if close:
                 hint = f"did you mean <{close[0]}>?"
-        allowed = self.info.children.get(parent, ())
         if not expected and element not in allowed:
             expected = list(allowed)
         if expected:
             message += f"; expected {_one_of(expected)}"
         return message + (f" ({hint})" if hint else "")
-
-
-MAX_PASSES = 20
-
-
-def validate_structure(doc: XmlDocument, schema: str) -> list[Diagnostic]:
-    """Every schema violation of ``doc``, one diagnostic per element or attribute at fault.
-
-    libxml2 stops checking a parent's remaining children at the first element it did not expect,
-    which would hide every later mistake in that operation.  So the unexpected elements are taken
-    out of a copy of the tree and the copy is checked again, until nothing new turns up (at most
-    MAX_PASSES times); problems are always reported on the original elements.
-    """
-    info = load_schema(schema)
-    if info.schema.validate(doc.root):
-        return []
-    rewriter = _Rewriter(info)
-    out: list[Diagnostic] = []
-    reported: set[tuple[object, str | None, str]] = set()
-    work = doc.root
-    original: dict[etree._Element, etree._Element] | None = None  # copy element -> original
-    pruned: set[etree._Element] = set()  # original parents that lost a child in the copy
-    for attempt in range(MAX_PASSES):
-        if attempt and info.schema.validate(work):
-            break
-        index = _PathIndex(work)
-        unexpected: list[etree._Element] = []
-        entries: Iterable[etree._LogEntry] = info.schema.error_log  # type: ignore[assignment]  # iterable; stubs lag
-        for entry in entries:
-            found = index.find(getattr(entry, "path", None))
-            node = original.get(found, found) if original is not None and found is not None else found
-            match = _ELEMENT_MSG.match(entry.message or "")
-            element, attribute, detail = (match.group(1), match.group(2), match.group(3)) if match else ("", None, entry.message or "")
-            if detail.startswith("Missing child") and node in pruned:
-                continue  # caused by taking an unexpected child out of the copy
-            key = (node if node is not None else entry.line, attribute, "" if attribute is not None else detail)
-            if key in reported:
-                continue  # a facet error and its "not a valid value" follow-up are one problem
-            reported.add(key)
-            if attribute is not None:
-                message = rewriter.attribute_message(node, element, attribute, detail)
-            else:
-                message = rewriter.element_message(node, element, detail)
-            out.append(Diagnostic.at(_where(doc, node, attribute, entry.line), message))
-            if detail.startswith("This element is not expected") and found is not None and found.getparent() is not None:
-                unexpected.append(found)
-        if not unexpected:
-            break
-        if original is None:
-            work, original = _copy(doc.root)
-            copies = {v: k for k, v in original.items()}
-            unexpected = [copies[u] for u in unexpected]
-        for node in unexpected:
-            parent = node.getparent()
-            if parent is not None:
-                pruned.add(original.get(parent, parent))
-                parent.remove(node)
-    return out
-
-
-def _copy(root: etree._Element) -> tuple[etree._Element, dict[etree._Element, etree._Element]]:
-    duplicate = copy.deepcopy(root)
-    return duplicate, dict(zip(duplicate.iter(), root.iter()))
-
-
-def _where(doc: XmlDocument, node: etree._Element | None, attribute: str | None, line: int) -> Location:
-    if node is None:
-        return doc.source.at_line(line or 1)
-    if attribute is not None:
-        return doc.source.attribute(node, attribute)
-    return doc.source.element(node)
-
-
-def read_structured(path: Path, schema: str, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES) -> tuple[XmlDocument | None, list[Diagnostic]]:
-    """Read ``path`` safely and check it against ``schema``: the document (None when it is unreadable
-    or has the wrong root element, as then nothing more can be said) and the problems so far."""
-    doc, diagnostics = read_xml(path, display=display, max_bytes=max_bytes)
-    if doc is None:
-        return None, diagnostics
-    diagnostics = validate_structure(doc, schema)
-    if doc.root.tag != load_schema(schema).root:
-        return None, diagnostics
-    return doc, diagnostics

@@ -13,14 +13,17 @@ from dataclasses import dataclass
 
 from core_functions.catalog import BindContext, Catalog, FunctionSpec, Hold, ParamError, ParamType
 from core_functions.robots import RobotModel
-from execution_engine.app_model.cell import Cell
-from execution_engine.app_model.diagnostics import Diagnostic, Location
+from execution_engine.app_model.cell_model import Cell
+from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
 from execution_engine.app_model.model import WAIT, ErrorAction, ErrorPolicy
 from execution_engine.app_model.reader import ApplicationDraft, CallSite, OperationSite, PolicySite
 
 # Params whose check needs the cell model; not checked while the cell itself has errors.
 _REFERENCE_TYPES = frozenset({ParamType.FRAME, ParamType.FRAMES, ParamType.ELEMENT, ParamType.TARGET, ParamType.JOINT_POSE})
 _ACTIONS: tuple[ErrorAction, ...] = ("abort", "safe_pose", "alarm")
+#: Calls whose problems may carry a 'did you mean' (an unknown function, frame); later ones are
+#: reported without, so a file of 100,000 unknown names costs 100,000 look-ups, not searches.
+MAX_SUGGESTIONS = 100
 
 
 @dataclass
@@ -41,14 +44,19 @@ class _HoldState:
 
 
 class ApplicationChecker:
-    def __init__(self, draft: ApplicationDraft, robot: RobotModel, catalog: Catalog, cell: Cell | None, cell_broken: bool) -> None:
+    def __init__(
+        self, draft: ApplicationDraft, robot: RobotModel, catalog: Catalog, cell: Cell | None, cell_broken: bool,
+        log: DiagnosticLog | None = None,
+    ) -> None:
         self.draft = draft
         self.robot = robot
         self.catalog = catalog
         self.cell = cell
         self.cell_broken = cell_broken
-        self.diagnostics: list[Diagnostic] = []
+        self.diagnostics = log if log is not None else DiagnosticLog()
+        self.suggestions_left = MAX_SUGGESTIONS
         self._contexts = {g: BindContext(robot, g, cell) for g in robot.group_names}
+        self._plain_contexts = {g: BindContext(robot, g, cell, suggest=False) for g in robot.group_names}
         self._checked: dict[tuple[str, str, tuple[str, ...]], list[ParamError]] = {}
         self._groups = robot.group_names
         self._joint_pose_functions = {
@@ -61,10 +69,26 @@ class ApplicationChecker:
         self.diagnostics.append(Diagnostic.at(where, message))
 
     def error_at(self, offset: int, message: str) -> None:
+        if self.diagnostics.full:
+            self.diagnostics.count()  # beyond the report: no need to find the line
+            return
         self.error(self.draft.source.at_offset(offset), message)
+
+    def error_at_attribute(self, tag_offset: int, name: str, message: str) -> None:
+        if self.diagnostics.full:
+            self.diagnostics.count()
+            return
+        self.error(self.attribute(tag_offset, name), message)
 
     def attribute(self, tag_offset: int, name: str) -> Location:
         return self.draft.source.attribute_at(tag_offset, name)
+
+    def suggesting(self) -> bool:
+        """Whether the next call's problems may still carry 'did you mean' (and spends one)."""
+        if self.suggestions_left <= 0 or self.diagnostics.full:
+            return False
+        self.suggestions_left -= 1
+        return True
 
     # ------------------------------------------------------------------ the whole file
     def check(self) -> list[list[CheckedCall]]:
@@ -92,14 +116,17 @@ class ApplicationChecker:
                     self.error_at(call.params[0].at, "wait takes no params")
                     return CheckedCall(call, None, None)
                 return CheckedCall(call, None, ())
-            self.error(self.attribute(call.at, "name"), f"unknown function {call.function!r}{self.catalog.suggest(call.function)}")
+            hint = self.catalog.suggest(call.function) if self.suggesting() else ""
+            self.error_at_attribute(call.at, "name", f"unknown function {call.function!r}{hint}")
             return CheckedCall(call, None, None)
         texts = tuple(p.value for p in call.params)
         ok = self.check_param_names(call, spec)
         key = (spec.name, call.group, texts)
         problems = self._checked.get(key)
         if problems is None:
-            problems = spec.check(texts, self._contexts[call.group])
+            problems = spec.check(texts, self._plain_contexts[call.group])
+            if problems and self.suggesting():  # again, with the 'did you mean' searches
+                problems = spec.check(texts, self._contexts[call.group])
             self._checked[key] = problems
         for problem in problems:
             if problem.index is None:
@@ -108,7 +135,7 @@ class ApplicationChecker:
             elif self.cell_broken and spec.params[problem.index].type in _REFERENCE_TYPES:
                 continue  # the cell's own errors are reported; fix those first
             else:
-                self.error(self.attribute(call.params[problem.index].at, "value"), problem.message)
+                self.error_at_attribute(call.params[problem.index].at, "value", problem.message)
                 ok = False
         ok = self.check_joint_pose_groups(call, spec, texts) and ok
         if not ok or len(texts) > len(spec.params):
@@ -123,12 +150,11 @@ class ApplicationChecker:
         for index, param in enumerate(call.params):
             if param.name is None or (index < len(names) and names[index] == param.name):
                 continue
-            where = self.attribute(param.at, "name")
             if param.name not in names:
-                self.error(where, f"{spec.name} has no param named {param.name!r}; its params are {spec.signature()}")
+                self.error_at_attribute(param.at, "name", f"{spec.name} has no param named {param.name!r}; its params are {spec.signature()}")
                 ok = False
             elif index < len(names):
-                self.error(where, (
+                self.error_at_attribute(param.at, "name", (
                     f"param {index + 1} is named {param.name!r}, but {spec.name} takes {param.name!r} as param "
                     f"{names.index(param.name) + 1} and {names[index]!r} here: params bind by position ({spec.signature()})"
                 ))
@@ -146,8 +172,8 @@ class ApplicationChecker:
                 continue
             pose_group = self.cell.joint_pose(name).group
             if pose_group is not None and pose_group != call.group:
-                self.error(
-                    self.attribute(call.params[index].at, "value"),
+                self.error_at_attribute(
+                    call.params[index].at, "value",
                     f"param {index + 1} ({param.name}) of {spec.name}: joint pose {name!r} is for {pose_group}, not {call.group}",
                 )
                 ok = False
@@ -270,7 +296,7 @@ class ApplicationChecker:
         if safe_pose is not None and safe_pose not in self.robot.poses and not self.cell_broken:
             if self.cell is None or not self.cell.has_joint_pose(safe_pose):
                 cell_poses = sorted(self.cell.joint_poses) if self.cell is not None else []
-                self.error(self.attribute(policy.at, "safe_pose"), (
+                self.error_at_attribute(policy.at, "safe_pose", (
                     f"unknown safe_pose {safe_pose!r} (robot poses: {', '.join(sorted(self.robot.poses)) or 'none'}; "
                     f"cell joint poses: {', '.join(cell_poses) or 'none'})"
                 ))
