@@ -16,12 +16,14 @@ import numpy as np
 import pytest
 
 from core_functions.geometry import Pose
+from execution_engine.clock import Clock
 from robot_bridges.kuka_rsi.codec import PacketCodec
 from robot_bridges.kuka_rsi.config import RsiConfig, default_config, default_config_path, parse_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RsiInterface
 from robot_bridges.kuka_rsi.kinematics import KukaArm
 from robot_bridges.kuka_rsi.simulator import Faults, Quirks, RsiContext, SimulatorThread
+from robot_bridges.kuka_rsi.spoofer import Flood
 from robot_bridges.kuka_rsi.streaming import ToolPathError
 
 CONFIG = default_config()
@@ -50,16 +52,22 @@ class Rig:
         link: dict[str, Any] | None = None,
         settings: LoopSettings = LoopSettings(port=0, silence_timeout=0.3),
         reply_grace: float = 0.25,
+        flood: Flood = Flood(),
+        clock: Clock | None = None,
     ) -> None:
         """``quirks`` shape how the simulated controller reports, ``link`` overrides RobotLink fields
-        (tolerances, limits) of every robot."""
+        (tolerances, limits) of every robot, ``flood`` adds a second sender on each controller's IP,
+        ``clock`` runs the simulators in real time on it (default: lockstep)."""
         links = [RobotLink(f"kr{i}", host, config=config, correction_mode=context.correction_mode, **(link or {})) for i, host in enumerate(hosts)]
         kwargs = {} if now_ns is None else {"now_ns": now_ns}
         self.iface = RsiInterface(links, settings, mode="thread", **kwargs)  # type: ignore[arg-type]
         self.iface.start()
         self.address = self.iface.wait_ready(WAIT)
         self.sims = [
-            SimulatorThread(config, self.address, context=context, faults=faults, cycles=cycles, bind=(host, 0), quirks=quirks, reply_grace=reply_grace)
+            SimulatorThread(
+                config, self.address, context=context, faults=faults, cycles=cycles, bind=(host, 0), quirks=quirks, reply_grace=reply_grace,
+                flood=flood, clock=clock,
+            )
             for host in hosts
         ]
         for sim in self.sims:
@@ -145,23 +153,26 @@ def test_malformed_packets_are_rejected_without_disturbing_the_loop(rig: Callabl
     stats = r.sim.model.stats
     assert stats.garbage_sent > 400 and stats.late == 0 and stats.accepted == 2000
     assert r.iface.loop is not None and r.iface.loop.stats.rejected == stats.garbage_sent
-    r.wait(lambda: any("rejected a packet from kr0" in w for w in r.iface.events.warnings), "the warning")
+    source = f"{r.sim.address[0]}:{r.sim.address[1]}"  # the robot's own port: it sent them
+    r.wait(lambda: any(f"rejected a packet from {source} (robot kr0's address)" in w for w in r.iface.events.warnings), "the warning")
 
 
-def test_oversized_datagrams_from_the_robot_address_are_rejected(rig: Callable[..., Rig]) -> None:
-    r = rig().start()
-    r.wait(lambda: r.iface.events.connected[0], "the robot")
-    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sender.bind(("127.0.0.1", 0))  # the robot's IP: the link accepts any port of it
+def test_oversized_datagrams_from_the_robot_address_are_rejected() -> None:
+    """From the robot's address and port (before its port is known, any port of its IP): counted
+    per reason and refused, never decoded into what the robot reported."""
+    from robot_bridges.kuka_rsi.external import RsiLoop
+    from robot_bridges.kuka_rsi.pipe import FramedPipe
+    from robot_bridges.kuka_rsi.slots import layout, robot_block_size
+
+    ours, theirs = FramedPipe.pair()
+    loop = RsiLoop([RobotLink("kr0", "127.0.0.1")], LoopSettings(port=0), layout(memoryview(bytearray(robot_block_size())), 1), FramedPipe(theirs, blocking_send=False))
     try:
-        sender.sendto(b"<Rob>" + b" " * 9000 + b"</Rob>", r.address)
-        r.wait(lambda: r.iface.loop is not None and r.iface.loop.stats.oversized == 1, "the oversized datagram")
-        sender.setblocking(False)
-        with pytest.raises(BlockingIOError):
-            sender.recv(4096)
+        assert loop._packets([(b"<Rob>" + b" " * 9000 + b"</Rob>", ("127.0.0.1", 5000))]) == []
+        assert loop.stats.oversized == 1 and loop.channels[0].refused == {"size": 1}
     finally:
-        sender.close()
-    assert r.sim.model.stats.late == 0
+        loop.logger.close()
+        ours.close()
+        theirs.close()
 
 
 def test_replies_withheld_below_the_timeout_are_only_counted(rig: Callable[..., Rig]) -> None:

@@ -24,3 +24,31 @@ def test_defaults_start_the_simulator_and_a_real_controller_is_named(run_sim: An
             declare_kuka_parameters(bus.create_node("typed", parameters={"cycle": "4"}))
 
     run_sim(main)
+
+
+def test_the_trust_and_start_up_options_are_node_parameters(run_sim: Any) -> None:
+    """What a ROS user of a real controller must be able to set: the cross-check's tolerances, the
+    wait for the first packet, and the port the controller sends from."""
+    from execution_engine.clock import real_clock, run_with_clock
+    from robot_bridges.backend import BackendOptions
+    from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
+
+    async def declare(clock: Clock) -> BackendOptions:
+        bus = LocalTransport(clock)
+        defaults = declare_kuka_parameters(bus.create_node("kuka_rsi_bridge")).options
+        assert (defaults.extra["tolerance"], defaults.extra["tolerance_mm"], defaults.extra["connect_timeout"]) == ("0.1", "1.0", "10.0")
+        assert defaults.port is None
+        with pytest.raises(TransportError, match="port"):
+            declare_kuka_parameters(bus.create_node("typed", parameters={"port": "6008"}))
+        parameters = {"rsi_listen": "127.0.0.1:0", "host": "localhost", "port": 6008, "tolerance": 0.05, "tolerance_mm": 0.5, "connect_timeout": 3.0}
+        return declare_kuka_parameters(bus.create_node("real", parameters=parameters)).options
+
+    options = run_sim(declare)
+
+    async def build(clock: Clock) -> KukaRsiBackend:
+        return await create(clock, options)
+
+    backend = run_with_clock(build, real_clock())  # built, not started: nothing is bound
+    link, settings = backend.link, backend.settings
+    assert (link.host, link.port, link.setpoint_tolerance_deg, link.tcp_tolerance_mm) == ("127.0.0.1", 6008, (0.05,) * 6, 0.5)
+    assert settings.connect_timeout == 3.0

@@ -10,11 +10,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from robot_bridges.kuka_rsi.link import RobotLink
-from robot_bridges.kuka_rsi.streaming import StreamCursor, ToolPathError, check_tool_path, parse_tool_path, ramp_rate, resample
+from robot_bridges.kuka_rsi.replay import resample
+from robot_bridges.kuka_rsi.streaming import StreamCursor, ToolPathError, check_tool_path, parse_tool_path, ramp_rate
 
 LINK = RobotLink("kr", "127.0.0.1")
 DT = 0.004
 ACCEL = np.array(LINK.max_joint_accel)
+SPEED = np.array(LINK.max_joint_speed)
 BUDGET = ACCEL * DT * DT  # rad: how much a step may change per cycle
 
 
@@ -33,22 +35,29 @@ def test_a_path_that_ends_at_speed_is_refused() -> None:
     _check("0 0 0 0 0 0\n0.02 0 0 0 0 0\n0.03 0 0 0 0 0\n0.03 0 0 0 0 0\n")
 
 
-def test_a_trajectory_is_resampled_from_rest_to_rest_without_overshoot() -> None:
-    """Straight lines between points would change speed in one cycle at every point; the
-    resampled path keeps the acceleration of the motion and never leaves the points' range."""
+def test_a_trajectory_is_replayed_on_its_chords_from_rest_to_rest_within_the_axes() -> None:
+    """Every set point lies on a chord between two samples (what a recording's tolerance is about);
+    straight lines between the points at their own speeds would change speed in one cycle at every
+    point, so the timing is smoothed -- and where the path turns a corner at speed, slowed there."""
     times = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
     points = np.zeros((5, 6))
     points[:, 0] = [0.0, 0.075, 0.15, 0.225, 0.3]  # constant speed, as a sampled cruise
-    points[:, 4] = [0.0, 0.2, 0.2, 0.1, 0.1]  # a plateau and a step back
-    out = resample(times, points, DT)
-    assert len(out) == 251 and np.allclose(out[0], points[0]) and np.allclose(out[-1], points[-1])
-    assert np.all(out[:, 4] <= 0.2 + 1e-12) and np.all(out[:, 4] >= -1e-12)  # shape-preserving
+    points[:, 4] = [0.0, 0.2, 0.2, 0.1, 0.1]  # corners at speed: a plateau and a step back
+    out = resample(times, points, DT, SPEED, ACCEL)
+    assert len(out) > 251 and np.allclose(out[0], points[0]) and np.allclose(out[-1], points[-1])
+    for q in out:  # on the polygon of the samples: within one chord's box, on its line
+        k = min(3, int(np.searchsorted(points[:, 0], q[0], side="right")) - 1)
+        a, b = points[k], points[k + 1]
+        w = (q[0] - a[0]) / (b[0] - a[0])
+        assert np.allclose(q, a + w * (b - a), atol=1e-12)
     steps = np.diff(out, axis=0)
     assert np.all(np.abs(steps[[0, -1]]) <= BUDGET)  # leaves and reaches rest
-    assert np.all(np.abs(np.diff(steps, axis=0)) <= BUDGET)
+    assert np.all(np.abs(np.diff(steps, axis=0)) <= BUDGET * (1 + 1e-9))
     check_tool_path(parse_tool_path("\n".join(" ".join(str(math.degrees(v)) for v in p) for p in out), "joint"), DT, max_joint_accel=ACCEL)
+    straight = resample(times, np.outer(times, np.full(6, 0.3)), DT, SPEED, ACCEL)
+    assert len(straight) == 251  # no corner: the recorded times exactly
     with pytest.raises(ValueError, match="increase strictly"):
-        resample(np.array([0.0, 0.5, 0.5]), points[:3], DT)
+        resample(np.array([0.0, 0.5, 0.5]), points[:3], DT, SPEED, ACCEL)
 
 
 @given(st.integers(min_value=0, max_value=10_000), st.floats(min_value=0.05, max_value=0.95))

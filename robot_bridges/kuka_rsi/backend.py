@@ -3,9 +3,10 @@
 Primitives become commands of the external-system loop (:mod:`.interface`): a joint move and a
 point-to-point Cartesian move (inverse kinematics once, here) go to the joint generator and
 ``AK``; a linear move and a relative linear move go to the Cartesian generator and ``RKorr``; a
-recorded trajectory is resampled at the RSI cycle and streamed point by point; a dwell counts
-robot cycles (IPOC), not wall time; a hand action sets a tool output of the ``<Sen>`` packet and
-waits until the robot echoes it.
+recording samples straight legs within its tolerance (:mod:`.recording`); a recorded trajectory is
+replayed on the chords between its samples at the RSI cycle (:mod:`.replay`) and streamed point by
+point; a dwell counts robot cycles (IPOC), not wall time; a hand action sets a tool output of the
+``<Sen>`` packet and waits until the robot echoes it.
 
 Every wait is bounded by the robot itself: a move ends when the loop reports it done or failed
 (it gives up after ``settle_cycles``), a handshake or a tool output gets a budget of cycles, and
@@ -30,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core_functions.geometry import Pose
+from core_functions.motion_profile import TcpLimits
 from core_functions.primitives import (
     Dwell,
     EndEffector,
@@ -53,9 +55,12 @@ from robot_bridges.kuka_rsi.config import ConfigError, load_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface, RunnerMode
 from robot_bridges.kuka_rsi.kinematics import KR6_R900, URDF_PATH, KukaArm
-from robot_bridges.kuka_rsi.otg import CartesianOTG, VectorOTG
+from robot_bridges.kuka_rsi.recording import RecordingPlanner
+from robot_bridges.kuka_rsi.peer import resolve_ipv4
 from robot_bridges.kuka_rsi.simulator import Endpoint, Faults, Quirks, RsiContext, SimulatorThread
-from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError, resample
+from robot_bridges.kuka_rsi.spoofer import Flood
+from robot_bridges.kuka_rsi.replay import resample
+from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +97,7 @@ class SimulatorSpec:
     context: RsiContext = RsiContext()
     faults: Faults = Faults()
     quirks: Quirks = Quirks()  # a misbehaving peer, for tests and demonstrations
+    flood: Flood = Flood()  # a second sender on the controller's host (another port), for tests and demonstrations
 
 
 class RsiStartError(BridgeError, ConnectionError):
@@ -155,6 +161,7 @@ class KukaRsiBackend(RobotBackend):
         self._readers: list[int] = []
         self._dt = self.link.cycle_ms / 1000.0
         self._starting = False
+        self.summary: str | None = None  # the loop's end-of-run account, after close()
 
     @property
     def groups(self) -> tuple[str, ...]:
@@ -205,7 +212,7 @@ class KukaRsiBackend(RobotBackend):
                 clock = real_clock().bind(self._sim_clock_loop)
             self._sim_thread = SimulatorThread(
                 self.config, address, context=spec.context, roles=self.roles, faults=spec.faults, clock=clock,
-                bind=(self.link.host, self.link.port or 0), quirks=spec.quirks,
+                bind=(self.link.host, self.link.port or 0), quirks=spec.quirks, flood=spec.flood,
             ).start()
             return
         ctx = spec.context
@@ -214,7 +221,7 @@ class KukaRsiBackend(RobotBackend):
             "--bind", f"{self.link.host}:{self.link.port or 0}", "--cycle", str(ctx.cycle_ms), "--timeout", str(ctx.timeout),
             "--mode", ctx.correction_mode, "--seed", str(spec.faults.seed), "--axis-monitor", str(ctx.axis_monitor_deg[0]),
         ]
-        args += _quirk_arguments(spec.faults, spec.quirks)
+        args += _quirk_arguments(spec.faults, spec.quirks, spec.flood)
         if self.link.config is not None:
             args += ["--config", self.link.config.source]
         self._sim_process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
@@ -253,6 +260,9 @@ class KukaRsiBackend(RobotBackend):
                 self._sim_process = None
             if iface is not None:
                 iface.close()
+                self.summary = iface.events.summary
+                if self.summary is not None:  # the loop's account of the run: every other sender named by address
+                    log.log(logging.WARNING if iface.events.suspicious else logging.INFO, "%s: %s", self.name, self.summary)
             self.iface = None
 
     # ------------------------------------------------------------------------------ events
@@ -278,6 +288,8 @@ class KukaRsiBackend(RobotBackend):
                 log.warning("%s: %s", self.name, message[2])
             elif message[0] == "late":
                 log.warning("%s: the controller counts %d late replies (IPOC %d)", self.name, message[2], message[3])
+            elif message[0] == "peer":
+                log.info("%s: the controller speaks from %s (%s); datagrams from any other port are ignored", self.name, message[2], message[3])
             elif message[0] == "stopped" and self._fault is None:
                 self._set_fault(BridgeError(FaultKind.CONNECTION, f"{self.name}: the RSI loop stopped"))
         self._changed.set()
@@ -547,7 +559,7 @@ class KukaRsiBackend(RobotBackend):
         await self._move_joints(points[0])
         if len(points) > 1 and times[-1] > times[0]:
             try:
-                sampled = resample(times, points, self._dt)
+                sampled = resample(times, points, self._dt, np.array(self.link.max_joint_speed), np.array(self.link.max_joint_accel))
             except ValueError as error:
                 raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: trajectory {primitive.name!r}: {error}") from None
             path = ToolPath("joint", sampled, f"trajectory {primitive.name}")
@@ -574,69 +586,15 @@ class KukaRsiBackend(RobotBackend):
         return self._plan(primitive)
 
     def _plan(self, primitive: RecordTrajectory) -> TrajectoryResult:
-        """Run the generators cycle by cycle through the waypoints; keep one point per sample period.
-
-        Inverse kinematics only for the kept points of linear legs (a handful, not one per cycle),
-        since this runs on the application's thread; consecutive kept points farther apart than the
-        axes can move in between mean the line leaves the workspace or passes a singularity.
-        """
-        q = self._commanded()
-        start = q
-        timeline: list[tuple[bool, np.ndarray]] = [(False, q)]  # (is a pose, joints or 4x4 pose)
-        for waypoint in primitive.waypoints:
-            goal = self.arm.ik(waypoint.matrix(), q)
-            if goal is None:
-                raise BridgeError(FaultKind.UNREACHABLE, f"{self.name}: waypoint {waypoint} of {primitive.name!r} is out of reach")
-            if primitive.interpolation == "linear":
-                timeline += [(True, pose) for pose in self._line_poses(q, waypoint)]
-            else:
-                timeline += [(False, joints) for joints in self._joint_states(q, goal)]
-            q = goal
-        step = max(1, round(primitive.sample_period / self._dt))
-        kept = list(range(0, len(timeline), step))
-        if kept[-1] != len(timeline) - 1:
-            kept.append(len(timeline) - 1)
-        vmax = np.array([j.max_velocity for j in self.spec.joints])
-        points: list[np.ndarray] = []
-        reference, before = start, 0
-        for i in kept:
-            is_pose, value = timeline[i]
-            joints = self.arm.ik(value, reference) if is_pose else value
-            if joints is None or np.any(np.abs(joints - reference) > vmax * max(1, i - before) * self._dt * 1.5 + 1e-9):
-                raise BridgeError(
-                    FaultKind.UNREACHABLE,
-                    f"{self.name}: the straight line of {primitive.name!r} leaves the workspace or passes a singularity "
-                    f"{(i * self._dt):.2f} s along",
-                )
-            points.append(joints)
-            reference, before = joints, i
-        times = tuple(i * self._dt for i in kept)
-        return TrajectoryResult(self.spec.joint_names, tuple(tuple(map(float, p)) for p in points), times)
-
-    def _joint_states(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
-        otg = VectorOTG([1] * 6, self._dt)
-        otg.reset(start)
-        otg.set_target(goal, np.array([j.max_velocity for j in self.spec.joints]), self.limits.joint_accel)
-        out = []
-        while not otg.step():
-            out.append(otg.position.copy())
-        out.append(otg.position.copy())
-        return out
-
-    def _line_poses(self, start: np.ndarray, target: Pose) -> list[np.ndarray]:
-        t0 = self.arm.fk(start)
-        otg = CartesianOTG(self._dt)
-        otg.reset(t0[:3, 3], t0[:3, :3])
+        """Plan from the commanded set point (never the reported one): straight legs sampled within the
+        recording's tolerance, ptp legs as the joint generator moves (:mod:`.recording`)."""
         lim = self.limits
-        otg.set_target(np.array(target.position), target.matrix()[:3, :3], (lim.linear_speed, lim.linear_accel, lim.angular_speed, lim.angular_accel))
-        out = []
-        while True:
-            done = otg.step()
-            m = np.eye(4)
-            m[:3, :3], m[:3, 3] = otg.rotation, otg.position
-            out.append(m)
-            if done:
-                return out
+        planner = RecordingPlanner(
+            self.arm, self.spec.joint_names, np.array([j.max_velocity for j in self.spec.joints]), lim.joint_accel,
+            TcpLimits(linear_velocity=lim.linear_speed, angular_velocity=lim.angular_speed, linear_acceleration=lim.linear_accel, angular_acceleration=lim.angular_accel),
+            self._dt,
+        )
+        return planner.plan(self.name, self._commanded(), primitive)
 
     async def _end_effector(self, action: str) -> EndEffectorResult:
         assert self.iface is not None
@@ -715,6 +673,7 @@ def _fault_kind(kind: str) -> FaultKind:
 _EXTRAS = (
     "runner", "simulator", "config", "mode", "cycle", "timeout", "axis_monitor", "silence", "connect_timeout", "feedback",
     "linear_speed", "linear_accel", "tolerance", "tolerance_mm", "sim_frozen_setpoint", "sim_drop", "sim_drift", "sim_root_attribute",
+    "sim_flood",
 )
 
 
@@ -722,9 +681,11 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     """Registry factory (``kuka-rsi``): the simulated KR C4, or a real one with ``rsi_listen``.
 
     Without ``rsi_listen`` a simulator is started (its own process, real time) and the loop
-    listens on 127.0.0.1.  With ``rsi_listen=HOST:PORT`` -- the address in the controller's RSI
-    configuration -- no simulator starts and ``host`` must name the controller, the only address
-    whose packets are answered.  Extras: ``runner`` (``process`` | ``thread``: where the real-time
+    listens on 127.0.0.1 (on ``port``, or a free one).  With ``rsi_listen=HOST:PORT`` -- the address
+    in the controller's RSI configuration -- no simulator starts and ``host`` must name the
+    controller, the only address whose packets are answered, and of it only the port ``port`` (or,
+    without one, the port its first valid packet comes from).  Names in both are resolved once,
+    here; one that does not resolve is a ``ValueError`` naming the option.  Extras: ``runner`` (``process`` | ``thread``: where the real-time
     loop runs), ``simulator`` (``process`` | ``thread``: real time; ``accelerated``: in-process
     lockstep, the robot as fast as the loop answers -- for tests), ``config`` (RSI Ethernet XML),
     ``mode`` (``absolute`` | ``relative``, as the RSI context corrects), ``cycle`` (4 | 12 ms),
@@ -736,7 +697,9 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     commanded one.  A simulated controller can misbehave on purpose: ``sim_frozen_setpoint``
     (1: ASPos stays at the start pose), ``sim_drop`` (probability a reply is discarded),
     ``sim_drift`` (``A3:0.01``: the reported ASPos drifts, deg per cycle), ``sim_root_attribute``
-    (``TYPE``: how ``<Rob>`` spells its type attribute).
+    (``TYPE``: how ``<Rob>`` spells its type attribute), ``sim_flood`` (``10:packet``: a second
+    sender on the controller's IP, another port, sends ten forged packets -- or ``garbage``, or
+    ``mixed`` -- per cycle).
 
     RSI runs on the robot's clock, so the application must too: a simulated or scaled clock
     would let the engine's timeouts run ahead of the robot.
@@ -776,14 +739,22 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
         raise ValueError(str(error)) from None
     settings = LoopSettings(silence_timeout=silence, connect_timeout=connect)
     trust = {"setpoint_tolerance_deg": (tolerance,) * 6, "tcp_tolerance_mm": tolerance_mm}
+    if options.port is not None and not 0 <= options.port < 65536:
+        raise ValueError(f"kuka-rsi: port must be 0..65535, got {options.port}")
     if options.rsi_listen is not None:
-        listen = Endpoint.parse(options.rsi_listen)
+        try:
+            listen = Endpoint.parse(options.rsi_listen)
+        except ValueError as error:
+            raise ValueError(f"kuka-rsi: rsi_listen (--rsi-listen): {error}") from None
         if options.host is None:
             raise ValueError("kuka-rsi: with rsi_listen, give the controller's address as host: only its packets are answered")
         if any(key.startswith("sim_") for key in extra):
             raise ValueError("kuka-rsi: the sim_ options shape the simulated controller; a real one (rsi_listen) takes none")
-        link = RobotLink("kuka", options.host, options.port, config=config, correction_mode=mode, cycle_ms=cycle, **trust)  # type: ignore[arg-type]
-        backend = KukaRsiBackend(listen=(listen.host, listen.port), link=link, simulator=None, runner=runner, settings=settings,  # type: ignore[arg-type]
+        # Names are resolved once, here; from now on the loop compares IPs.
+        listen_ip = resolve_ipv4(listen.host, f"kuka-rsi: rsi_listen (--rsi-listen) {options.rsi_listen!r}")
+        host_ip = resolve_ipv4(options.host, f"kuka-rsi: host (--host) {options.host!r}")
+        link = RobotLink("kuka", host_ip, options.port or None, config=config, correction_mode=mode, cycle_ms=cycle, **trust)  # type: ignore[arg-type]
+        backend = KukaRsiBackend(listen=(listen_ip, listen.port), link=link, simulator=None, runner=runner, settings=settings,  # type: ignore[arg-type]
                                  limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
     else:
         if options.host is not None:
@@ -795,29 +766,34 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
             # In-process, the lockstep controller shares the application's GIL: a long computation
             # there can hold it back for a while.  That is silence the loop must not take for a stop.
             settings = LoopSettings(silence_timeout=2.0, connect_timeout=connect)
-        faults, quirks = _misbehaviour(extra, options.seed)
-        spec = SimulatorSpec(runner="thread" if accelerated else sim_runner, accelerated=accelerated, context=context, faults=faults, quirks=quirks)
+        faults, quirks, flood = _misbehaviour(extra, options.seed)
+        spec = SimulatorSpec(
+            runner="thread" if accelerated else sim_runner, accelerated=accelerated, context=context, faults=faults, quirks=quirks, flood=flood,
+        )
         backend = KukaRsiBackend(listen=("127.0.0.1", options.port or 0), link=link, simulator=spec, runner=runner,  # type: ignore[arg-type]
                                  settings=settings, limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
     return backend  # the bridge node starts it
 
 
-def _misbehaviour(extra: dict[str, str], seed: int) -> tuple[Faults, Quirks]:
-    """The simulated controller's deliberate faults and quirks from the ``sim_`` options."""
+def _misbehaviour(extra: dict[str, str], seed: int) -> tuple[Faults, Quirks, Flood]:
+    """The simulated controller's deliberate faults and quirks, and a flooder beside it, from the ``sim_`` options."""
     try:
         drop = float(extra.get("sim_drop", "0"))
         axis, deg = Quirks.parse_drift(extra["sim_drift"]) if "sim_drift" in extra else (0, 0.0)
         frozen = extra.get("sim_frozen_setpoint", "0")
         if frozen not in ("0", "1"):
             raise ValueError(f"sim_frozen_setpoint is 0 or 1, got {frozen!r}")
-        return Faults(seed=seed, drop=drop), Quirks(frozen == "1", axis, deg, extra.get("sim_root_attribute", "Type"))
+        flood = Flood.parse(extra["sim_flood"]) if "sim_flood" in extra else Flood()
+        return Faults(seed=seed, drop=drop), Quirks(frozen == "1", axis, deg, extra.get("sim_root_attribute", "Type")), flood
     except ValueError as error:
         raise ValueError(f"kuka-rsi: {error}") from None
 
 
-def _quirk_arguments(faults: Faults, quirks: Quirks) -> list[str]:
+def _quirk_arguments(faults: Faults, quirks: Quirks, flood: Flood = Flood()) -> list[str]:
     """The simulator's command-line options for a misbehaving peer."""
     args = ["--drop", str(faults.drop)] if faults.drop else []
+    if flood.rate:
+        args += ["--flood", f"{flood.rate!r}:{flood.content}", "--flood-port", str(flood.port)]
     if quirks.frozen_setpoint:
         args.append("--frozen-setpoint")
     if quirks.drift_axis:

@@ -26,6 +26,7 @@ from robot_bridges.kuka_rsi.feedback import FeedbackLogger
 from robot_bridges.kuka_rsi.kinematics import abc_to_matrix, rotation_angle
 from robot_bridges.kuka_rsi.link import RobotLink, require_feedback
 from robot_bridges.kuka_rsi.motion import Motion
+from robot_bridges.kuka_rsi.peer import PeerGate
 from robot_bridges.kuka_rsi.setpoint import CycleAccount
 from robot_bridges.kuka_rsi.slots import CommandKind, RobotSlots, SeqSlot, Status, bits
 from robot_bridges.kuka_rsi.streaming import ToolPath
@@ -64,7 +65,11 @@ class Channel:
         self.rob = PacketCodec.rob(config)
         self.sen = PacketCodec.sen(config)
         self.rx: list[Value] = list(self.rob.defaults)
+        self.spare: list[Value] = list(self.rob.defaults)  # a datagram is decoded here; rx takes it once it is accepted
         self.tx: list[Value] = list(self.sen.defaults)
+        self.gate = PeerGate(link.port, link.ipoc_step)
+        self.pinned_now = False  # the packet just taken pinned the port the robot speaks from
+        self.spoofed = 0  # datagrams from this robot's IP but another port
         roles = link.roles
         ri = self.rob.index
         self._i_rist = [ri[f"RIst.{a}"] for a in "XYZABC"]
@@ -154,6 +159,17 @@ class Channel:
             self.motion.withheld()
             return None
         return self.sen.encode(self.tx, ipoc)
+
+    def take(self, ipoc: int, port: int) -> str | None:
+        """Make the packet just decoded into :attr:`spare` this robot's latest, unless its IPOC and
+        Delay cannot follow the last one's (then why not; nothing changes)."""
+        delay = None if self._i_delay is None else int(self.spare[self._i_delay])  # type: ignore[call-overload]
+        problem = self.gate.check(ipoc, delay)
+        if problem is not None:
+            return problem
+        self.rx, self.spare = self.spare, self.rx
+        self.pinned_now = self.gate.accept(ipoc, delay, port)
+        return None
 
     def refuse(self, reason: str, message: str, source: str) -> None:
         """Count a datagram from this robot's address that was not a packet."""

@@ -24,7 +24,7 @@ import subprocess
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
@@ -32,6 +32,7 @@ import numpy as np
 from core_functions.geometry import Pose
 from robot_bridges.kuka_rsi.codec import PacketCodec
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink, RsiLoop
+from robot_bridges.kuka_rsi.peer import resolve_ipv4
 from robot_bridges.kuka_rsi.pipe import FramedPipe, PipeClosed
 from robot_bridges.kuka_rsi.rt_process import spawn
 from robot_bridges.kuka_rsi.slots import CommandKind, RobotSlots, Status, layout, robot_block_size
@@ -101,6 +102,9 @@ class LoopEvents:
         self.flags_sent: list[int] = [0] * robots  # the <Sen> BOOLs of the latest reply that changed them
         self.stopped = False
         self.stats: tuple[Any, ...] | None = None
+        self.peers: list[str | None] = [None] * robots  # the address each robot speaks from, once it has
+        self.summary: str | None = None  # the loop's account of the run, when it has ended
+        self.suspicious = False  # the summary names senders that are not the robots, or refusals
 
     def absorb(self, message: tuple[Any, ...]) -> None:
         kind = message[0]
@@ -127,6 +131,10 @@ class LoopEvents:
             self.stopped = True
         elif kind == "stats":
             self.stats = message[1:]
+        elif kind == "peer":
+            self.peers[int(message[1])] = str(message[2])
+        elif kind == "summary":
+            self.summary, self.suspicious = str(message[1]), bool(message[2])
 
 
 class RsiInterface:
@@ -158,8 +166,9 @@ class RsiInterface:
                     "realtime_priority": priority or None,
                 }
             )
-        self.links = tuple(links)
-        self.settings = settings
+        # Names are resolved once, here: the loop compares the addresses datagrams come from as IPs.
+        self.links = tuple(replace(link, host=resolve_ipv4(link.host, f"the address of robot {link.name}")) for link in links)
+        self.settings = replace(settings, host=resolve_ipv4(settings.host, "the RSI listen address"))
         self.mode = mode
         self.now_ns = now_ns
         configs = [link.rsi_config() for link in self.links]

@@ -22,8 +22,8 @@ class RobotLink:
     """One robot controller served by the loop."""
 
     name: str
-    host: str  # the IP its packets come from; packets from anywhere else are ignored
-    port: int | None = None  # and the port, when several controllers share an IP (simulators)
+    host: str  # the IP its packets come from (a name is resolved once, at start); packets from anywhere else are ignored
+    port: int | None = None  # the port it sends from; None: the port of its first valid packet, pinned from then on
     config: RsiConfig | None = None  # None: the package's default configuration
     roles: RsiRoles = RsiRoles()
     correction_mode: str = "absolute"  # must match the RSI context: "absolute" or "relative"

@@ -27,7 +27,7 @@ from robot_bridges.kuka_rsi.kinematics import KukaArm, abc_to_matrix, matrix_to_
 from robot_bridges.kuka_rsi.link import RobotLink
 from robot_bridges.kuka_rsi.otg import CartesianOTG, VectorOTG, matrix_to_rotvec, rotvec_to_matrix
 from robot_bridges.kuka_rsi.setpoint import CorrectionModel, cartesian_increment, compose_cartesian
-from robot_bridges.kuka_rsi.streaming import StreamCursor, ToolPath, ramp_rate
+from robot_bridges.kuka_rsi.streaming import STILL, StreamCursor, ToolPath, ramp_rate
 
 Vector = NDArray[np.float64]
 Matrix = NDArray[np.float64]
@@ -366,7 +366,7 @@ class Motion:
         opening = np.abs(points[1] - points[0])
         if len(points) > 2:
             opening = np.maximum(opening, np.abs(points[2] - 2 * points[1] + points[0]))
-        moving = opening > 0
+        moving = opening > STILL
         ratio = float(np.min(budget[moving] / opening[moving])) if np.any(moving) else math.inf
         self.cursor = StreamCursor(points, ramp, 1.0 if ratio >= 1.0 else max(0.0, ratio - ramp))
         self.path, self.stream_space, self.mode = path, space, "stream"

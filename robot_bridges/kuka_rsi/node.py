@@ -6,7 +6,9 @@
     ros2 run dual_arm_executive kuka_rsi_bridge          # no rsi_listen: a KR C4 RSI simulator is started
 
 It serves group ``arm``.  RSI runs on the robot's own 4 ms (or 12 ms) clock, so this node always
-runs in real time.
+runs in real time.  Every option of the back end a ROS user sets is a parameter (listed with its
+default in ``config/kuka_rsi.yaml``); the ``sim_`` options, which make the simulated controller
+misbehave on purpose for tests and demonstrations, are left to the command line.
 """
 from __future__ import annotations
 
@@ -31,15 +33,22 @@ _NUMBER_OPTIONS = {
     "timeout": (100, "late packets in a row after which the simulated RSI stops"),
     "axis_monitor": (360.0, "simulated AXISCORRMON limit (deg)"),
     "silence": (0.0, "seconds without packets that mean the robot is lost (0 = the back end's default: 0.1 s, 2 s for an accelerated simulator)"),
+    "connect_timeout": (10.0, "seconds to the controller's first valid packet before the bridge gives up, saying what arrived instead"),
     "linear_speed": (1.0, "Cartesian speed at 100 % (m/s)"),
     "linear_accel": (2.0, "Cartesian acceleration at 100 % (m/s^2)"),
+    "tolerance": (0.1, "deg, every axis: how far the controller's reported set point (ASPos) may lie from the commanded one before the robot is held"),
+    "tolerance_mm": (1.0, "mm: the same for the reported TCP (RSol) under Cartesian corrections"),
 }
 
 
 def declare_kuka_parameters(node: Node) -> BridgeSetup:
     """The RSI bridge's parameters; an empty rsi_listen starts the simulator."""
     rsi_listen = str(node.declare_parameter("rsi_listen", "", "HOST:PORT of the controller's RSI configuration ('' = start a simulator)"))
-    host = str(node.declare_parameter("host", "", "the controller's address: only its packets are answered (with rsi_listen)"))
+    host = str(node.declare_parameter("host", "", "the controller's address (IP or name, resolved once at start): only its packets are answered (with rsi_listen)"))
+    port = int(node.declare_parameter(
+        "port", 0,
+        "with rsi_listen: the UDP port the controller sends from (0 = the port of its first valid packet); without: the port the loop listens on (0 = a free one)",
+    ))
     extra: dict[str, str] = {}
     for name, (default, description) in _TEXT_OPTIONS.items():
         value = str(node.declare_parameter(name, default, description))
@@ -49,7 +58,9 @@ def declare_kuka_parameters(node: Node) -> BridgeSetup:
         value = node.declare_parameter(name, number, description)
         if not (name == "silence" and value == 0.0):
             extra[name] = str(value)
-    options = BackendOptions(robot=KUKA_KR, host=host or None, rsi_listen=rsi_listen or None, extra=extra)
+    if not 0 <= port < 65536:
+        raise ValueError(f"port must be 0..65535, got {port}")
+    options = BackendOptions(robot=KUKA_KR, host=host or None, port=port or None, rsi_listen=rsi_listen or None, extra=extra)
     return BridgeSetup(options)
 
 

@@ -21,7 +21,9 @@ What it reproduces, because the bridge must cope with it (seed 003; ARCHITECTURE
 * peers that report what they like (:class:`Quirks`), as the external system meets them: a set
   point frozen at the start pose (ROS-Industrial's ``kuka_rsi_simulator`` never updates ``ASPos``),
   a reported set point drifting away from the real one, ``<Rob TYPE="KUKA">`` (ROS-I's spelling),
-  an IPOC counting packets instead of milliseconds.
+  an IPOC counting packets instead of milliseconds;
+* a second sender on the controller's host (:class:`~.spoofer.Flood`): forged packets or garbage
+  from another port of the controller's IP, at many times the cycle rate.
 
 :class:`KrcModel` is the controller without I/O, stepped cycle by cycle.  Two drivers put it on
 a UDP socket: :func:`run_lockstep` (accelerated: the next packet goes out as soon as the reply
@@ -56,6 +58,7 @@ from robot_bridges.kuka_rsi.codec import PacketCodec, PacketError, Value
 from robot_bridges.kuka_rsi.config import RsiConfig, RsiRoles, load_config, default_config
 from robot_bridges.kuka_rsi.kinematics import KukaArm, abc_to_matrix, matrix_to_abc, rotation_angle
 from robot_bridges.kuka_rsi.setpoint import compose_cartesian
+from robot_bridges.kuka_rsi.spoofer import Flood, Flooder, garbage_datagram
 
 HOME_DEG = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
 
@@ -166,6 +169,8 @@ class SimStats:
     lateness_ns: list[int] = field(default_factory=list)  # real time: how far past its deadline each discarded reply came
     overruns: int = 0
     latencies_ns: list[int] = field(default_factory=list)
+    flood_sent: int = 0  # datagrams the second sender on the controller's host sent (Flood)
+    flood_replies: int = 0  # replies that reached it: none, unless the external system took it for the controller
 
 
 class KrcModel:
@@ -252,6 +257,15 @@ class KrcModel:
             packet = packet.replace(b'<Rob Type="', f'<Rob {self.quirks.root_attribute}="'.encode("ascii"), 1)
         self._last_packet = packet
         return packet
+
+    def forged_packet(self, delay_jump: int, cycles_ahead: int) -> bytes:
+        """This cycle's packet as a forger on the controller's host would send it: its values, but
+        ``Delay`` ``delay_jump`` higher and the IPOC ``cycles_ahead`` cycles on."""
+        values = list(self._send_values)
+        at = self.rob.index.get("Delay.D")
+        if at is not None:
+            values[at] = self.delay + delay_jump
+        return self.rob.encode(values, self.ipoc + cycles_ahead * (self.quirks.ipoc_step or self.context.cycle_ms))
 
     def _reported_setpoint(self) -> np.ndarray:
         """The set point the packet reports: the real one, unless a quirk says otherwise."""
@@ -476,16 +490,6 @@ def latency_summary(latencies_ns: Sequence[int]) -> dict[str, float]:
     return {"n": float(len(values)), "p50": pick(0.5), "p99": pick(0.99), "p99.9": pick(0.999), "max": float(values[-1])}
 
 
-def _garbage(rng: random.Random) -> bytes:
-    choices = (
-        b"<Rob Type=\"KUKA\"><RIst X=\"1\"",  # truncated
-        bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 64))),
-        b"<?xml version=\"1.0\"?><!DOCTYPE x [<!ENTITY a \"b\">]><Rob/>",
-        b"<Rob Type=\"KUKA\"><IPOC>nan</IPOC></Rob>",
-    )
-    return rng.choice(choices)
-
-
 _SO_TIMESTAMPNS = 35  # Linux <asm-generic/socket.h>; not exported by the socket module
 _TIMESPEC = struct.Struct("qq")
 
@@ -527,7 +531,7 @@ class _Link:
         packet = self.model.packet()
         if self.faults.garbage and self.rng.random() < self.faults.garbage:
             self.model.stats.garbage_sent += 1
-            self.sock.sendto(_garbage(self.rng), self.peer)
+            self.sock.sendto(garbage_datagram(self.rng), self.peer)
         if self.faults.loss and self.rng.random() < self.faults.loss:
             self.model.stats.lost += 1
             return False
@@ -584,6 +588,7 @@ def run_lockstep(
     reply_grace: float = 0.25,
     stop: threading.Event | None = None,
     now_ns: Callable[[], int] | None = None,
+    flooder: Flooder | None = None,
 ) -> RsiStopped | None:
     """Accelerated mode: each packet goes out as soon as the previous cycle's fate is decided.
 
@@ -591,13 +596,21 @@ def run_lockstep(
     not come within ``reply_grace`` wall seconds is late (a lost packet is late at once).  So the
     outcome depends on what the external system answered, not on how fast the machine is.
     ``now_ns`` (for benchmarks) records each reply's round trip in ``model.stats.latencies_ns``.
-    Returns why RSI stopped, or None when ``cycles`` ran out or ``stop`` was set.
+    A ``flooder`` sends its cycle's datagrams half just before the packet, half just after it, so
+    they compete with the packet and with the reply.  Returns why RSI stopped, or None when
+    ``cycles`` ran out or ``stop`` was set.
     """
     link = _Link(sock, peer, model, faults, now_ns)
     buf = bytearray(65536)
     done = 0
     while (cycles is None or done < cycles) and not (stop is not None and stop.is_set()):
-        if link.send():
+        burst = flooder.due() if flooder is not None else 0
+        if flooder is not None:
+            flooder.send(burst // 2)
+        sent = link.send()
+        if flooder is not None:
+            flooder.send(burst - burst // 2)
+        if sent:
             while True:
                 got = link.read(reply_grace, buf)
                 if got is None or (got[0] and link.offer(*got)):
@@ -619,6 +632,7 @@ def run_realtime(
     cycles: int | None = None,
     faults: Faults = Faults(),
     stop: threading.Event | None = None,
+    flooder: Flooder | None = None,
 ) -> RsiStopped | None:
     """Real-time mode: a packet every cycle of ``clock`` run time, replies or not.
 
@@ -628,7 +642,8 @@ def run_realtime(
     counts an overrun and restarts its grid there, so its own hiccups never shorten the
     external system's cycle.  The
     waits are ``select`` timeouts computed from ``clock.now()``: microsecond resolution, where
-    asyncio timers round to the millisecond.
+    asyncio timers round to the millisecond.  A ``flooder`` sends its datagrams evenly spread
+    over every cycle from the same thread, between the waits.
     """
     link = _Link(sock, peer, model, faults, _wall_ns, kernel_stamps=True)
     buf = bytearray(65536)
@@ -637,9 +652,11 @@ def run_realtime(
     deadline_ns: int | None = None  # for the reply to the packet in flight; None: none can be on time
     in_flight = False
     done = 0
+    if flooder is not None:
+        flooder.pace(tick, cycle)
     while not (stop is not None and stop.is_set()):
         jitter = link.rng.uniform(0.0, faults.jitter_ms) / 1000.0 if faults.jitter_ms else 0.0
-        _collect(link, clock, tick + jitter, buf, deadline_ns)
+        _collect(link, clock, tick + jitter, buf, deadline_ns, flooder)
         woke = clock.now()
         if woke - tick - jitter > cycle / 8:
             # The simulator itself woke late (a controller never does): start the grid again
@@ -663,12 +680,19 @@ def run_realtime(
     return None
 
 
-def _collect(link: _Link, clock: Clock, until: float, buf: bytearray, deadline_ns: int | None) -> None:
+def _collect(link: _Link, clock: Clock, until: float, buf: bytearray, deadline_ns: int | None, flooder: Flooder | None = None) -> None:
     """Read datagrams until run time ``until`` (and whatever has arrived by then); offer the ones
-    that arrived by ``deadline_ns``, discard the rest as late."""
+    that arrived by ``deadline_ns``, discard the rest as late.  A flooder's datagrams leave at
+    their instants in between."""
     while True:
-        got = link.read(clock.to_wall(until - clock.now()), buf)
+        wake = until
+        if flooder is not None:
+            flooder.fire(clock.now())
+            wake = min(until, flooder.next_at)
+        got = link.read(clock.to_wall(wake - clock.now()), buf)
         if got is None:
+            if wake < until:
+                continue  # woke for the flood, not for the end of the wait
             return
         data, arrived = got
         if not data:
@@ -685,7 +709,8 @@ def _collect(link: _Link, clock: Clock, until: float, buf: bytearray, deadline_n
 class SimulatorThread:
     """The simulator on its own thread and socket, for tests and for an in-process bridge.
 
-    ``clock=None`` runs in accelerated (lockstep) mode; with a clock it runs in real time.
+    ``clock=None`` runs in accelerated (lockstep) mode; with a clock it runs in real time.  A
+    ``flood`` adds a second sender on the controller's IP (another port): :attr:`flooder`.
     """
 
     def __init__(
@@ -702,12 +727,14 @@ class SimulatorThread:
         reply_grace: float = 0.25,
         now_ns: Callable[[], int] | None = None,
         quirks: Quirks = Quirks(),
+        flood: Flood = Flood(),
     ) -> None:
         self.model = KrcModel(config, context, roles, quirks=quirks)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(bind)
         self.address: tuple[str, int] = self.sock.getsockname()
         self.peer = peer
+        self.flooder = Flooder(flood, self.address[0], peer, self.model, faults.seed) if flood.rate > 0 else None
         self._clock = clock
         self._faults = faults
         self._cycles = cycles
@@ -727,16 +754,19 @@ class SimulatorThread:
             if self._clock is None:
                 self.result = run_lockstep(
                     self.sock, self.peer, self.model, cycles=self._cycles, faults=self._faults, reply_grace=self._grace,
-                    stop=self._stop, now_ns=self._now_ns,
+                    stop=self._stop, now_ns=self._now_ns, flooder=self.flooder,
                 )
             else:
                 self.result = run_realtime(
-                    self.sock, self.peer, self.model, self._clock, cycles=self._cycles, faults=self._faults, stop=self._stop
+                    self.sock, self.peer, self.model, self._clock, cycles=self._cycles, faults=self._faults, stop=self._stop,
+                    flooder=self.flooder,
                 )
         except BaseException as error:  # noqa: BLE001 - kept for the test or bridge that owns the thread
             self.crash = error
         finally:
             self.sock.close()
+            if self.flooder is not None:
+                self.flooder.close()
 
     def stop(self, timeout: float = 5.0) -> None:
         self._stop.set()
@@ -779,6 +809,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--drift", default="", metavar="AXIS:DEG", help="the reported ASPos of AXIS drifts by DEG per cycle, e.g. A3:0.01")
     p.add_argument("--root-attribute", default="Type", help="how <Rob> spells its type attribute (ROS-I's simulator: TYPE)")
     p.add_argument("--ipoc-step", type=int, default=None, help="IPOC increment per cycle (default: the cycle in ms; ROS-I's simulator: 1)")
+    p.add_argument("--flood", default="", metavar="RATE[:CONTENT]", help="a second sender on the controller's IP, another port: RATE datagrams per cycle of packet (forged, Delay +50), garbage or mixed")
+    p.add_argument("--flood-port", type=int, default=0, help="the flooder's port on the controller's IP (default: any free one)")
     p.add_argument("--reply-grace", type=float, default=0.25, help="accelerated mode: wall seconds to wait for a reply")
     p.add_argument("--rt-priority", type=int, default=0, help="try SCHED_FIFO at this priority (a controller is hard real time)")
     p.add_argument("--accept-echo", action="store_true", help="benchmark baseline: a datagram equal to the packet is the reply")
@@ -798,6 +830,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         faults = Faults(args.jitter_ms, args.loss, args.garbage, args.seed, args.drop)
         axis, deg = Quirks.parse_drift(args.drift) if args.drift else (0, 0.0)
         quirks = Quirks(args.frozen_setpoint, axis, deg, args.root_attribute, args.ipoc_step)
+        flood = Flood.parse(args.flood) if args.flood else Flood()
+        flood = Flood(flood.rate, flood.content, flood.delay_jump, args.flood_port)
         model = KrcModel(config, context, accept_echo=args.accept_echo, quirks=quirks)
     except (ValueError, OSError) as error:
         print(f"kuka_rsi simulator: {error}", file=sys.stderr)
@@ -809,28 +843,37 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"kuka_rsi simulator: cannot bind {bind}: {error.strerror}", file=sys.stderr)
         return 1
     host, port = sock.getsockname()
+    peer = (to.host, to.port)
+    try:
+        flooder = Flooder(flood, host, peer, model, args.seed) if flood.rate > 0 else None
+    except OSError as error:
+        sock.close()
+        print(f"kuka_rsi simulator: cannot bind the flooder to {host}:{flood.port}: {error.strerror}", file=sys.stderr)
+        return 1
     if args.rt_priority > 0:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
         except (PermissionError, OSError) as error:
             print(f"kuka_rsi simulator: no real-time priority ({error.strerror or error})", file=sys.stderr)
-    print(f"KRC simulator {host}:{port} -> {to}, {args.cycle} ms, {'accelerated' if args.accelerated else f'x{args.speed:g}'}", flush=True)
-    peer = (to.host, to.port)
+    flooding = "" if flooder is None else f", flooding from {flooder.address[0]}:{flooder.address[1]} ({flood.rate:g} {flood.content} per cycle)"
+    print(f"KRC simulator {host}:{port} -> {to}, {args.cycle} ms, {'accelerated' if args.accelerated else f'x{args.speed:g}'}{flooding}", flush=True)
     stop = threading.Event()
     # SIGTERM / SIGINT end the run between two cycles, so the summary below is still printed.
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
 
     async def realtime(clock: Clock) -> RsiStopped | None:
-        return await asyncio.to_thread(run_realtime, sock, peer, model, clock, cycles=args.cycles, faults=faults, stop=stop)
+        return await asyncio.to_thread(run_realtime, sock, peer, model, clock, cycles=args.cycles, faults=faults, stop=stop, flooder=flooder)
 
     try:
         if args.accelerated:
-            result = run_lockstep(sock, peer, model, cycles=args.cycles, faults=faults, reply_grace=args.reply_grace, stop=stop)
+            result = run_lockstep(sock, peer, model, cycles=args.cycles, faults=faults, reply_grace=args.reply_grace, stop=stop, flooder=flooder)
         else:
             result = run_with_clock(realtime, real_clock() if args.speed == 1.0 else Clock(args.speed))
     finally:
         sock.close()
+        if flooder is not None:
+            flooder.close()
     s = model.stats
     summary = {
         "stopped": result.reason if result else None,
@@ -847,6 +890,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "late_ipocs": s.late_ipocs[:20],
         "late_replies": s.late_replies_discarded,
         "lateness_us": latency_summary(s.lateness_ns),
+        "flood_sent": s.flood_sent,
+        "flood_replies": s.flood_replies,
     }
     print(json.dumps(summary), flush=True)
     return 2 if result and result.error else 0

@@ -224,6 +224,9 @@ def _too_fast(path: ToolPath, i: int, what: str) -> None:
 MAX_RAMP_CYCLES = 1000
 
 
+STILL = 1e-12  # rad or m per cycle: a smaller step is rounding, not motion
+
+
 def ramp_rate(points: NDArray[np.float64], budget: NDArray[np.float64]) -> float:
     """How much a stream's rate (points per cycle) may grow per cycle within ``budget``.
 
@@ -236,7 +239,7 @@ def ramp_rate(points: NDArray[np.float64], budget: NDArray[np.float64]) -> float
     steps = np.abs(np.diff(points, axis=0))
     largest = steps.max(axis=0)
     change = np.abs(np.diff(points, n=2, axis=0)).max(axis=0) if len(points) > 2 else np.zeros(points.shape[1])
-    moving = largest > 0
+    moving = largest > STILL  # a step below it is no motion, and dividing by it would overflow
     if not np.any(moving):
         return 1.0
     rate = float(np.min((budget[moving] - change[moving]) / largest[moving]))
@@ -291,36 +294,3 @@ class StreamCursor:
         """The velocity of the last step, so a generator taking over brakes instead of stopping dead."""
         return (self.at(self.position) - self.at(max(0.0, self.position - self.rate))) / dt
 
-
-def resample(times: NDArray[np.float64], points: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-    """The points of a timed trajectory at every cycle ``dt``, starting and ending at rest.
-
-    Straight lines between the points would change the speed in one cycle at each point -- an
-    acceleration of (speed change) / dt, far beyond an axis's.  A shape-preserving cubic (PCHIP:
-    monotone between points, so never beyond them, hence never beyond a limit they respect) with
-    zero speed at both ends keeps the acceleration of the motion the points came from, and the
-    robot starts from and comes to rest as it must.
-    """
-    t = np.asarray(times, dtype=float)
-    p = np.asarray(points, dtype=float)
-    h = np.diff(t)
-    if len(t) != len(p) or len(t) < 2 or not np.all(h > 0):
-        raise ValueError("trajectory times must increase strictly, one per point")
-    secant = np.diff(p, axis=0) / h[:, None]
-    slope = np.zeros_like(p)
-    if len(t) > 2:
-        left, right = secant[:-1], secant[1:]
-        w1 = (2 * h[1:] + h[:-1])[:, None]
-        w2 = (h[1:] + 2 * h[:-1])[:, None]
-        same = (left * right) > 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            harmonic = (w1 + w2) / (w1 / left + w2 / right)
-        slope[1:-1] = np.where(same, harmonic, 0.0)
-    grid = np.arange(t[0], t[-1] + dt / 2, dt)
-    grid[-1] = min(grid[-1], t[-1])
-    k = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 2)
-    span = h[k][:, None]
-    u = ((grid - t[k]) / h[k])[:, None]
-    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
-    out: NDArray[np.float64] = h00 * p[k] + h10 * span * slope[k] + h01 * p[k + 1] + h11 * span * slope[k + 1]
-    return out
