@@ -38,15 +38,18 @@ def _no_gc_pauses() -> Iterator[None]:
 
 
 def read_application(
-    path: Path | str, catalog: Catalog, *, max_bytes: int = DEFAULT_MAX_BYTES
+    path: Path | str, catalog: Catalog, *, max_bytes: int = DEFAULT_MAX_BYTES, data: bytes | None = None
 ) -> tuple[Application | None, list[Diagnostic]]:
-    """The application (None if it has errors) and every diagnostic of it and its cell, sorted."""
+    """The application (None if it has errors) and every diagnostic of it and its cell, sorted.
+
+    ``data``: an edited content not saved yet, checked as if it were the file at ``path`` (its
+    cell file is looked for beside ``path``)."""
     with _no_gc_pauses():
-        return _read_application(Path(path), catalog, max_bytes)
+        return _read_application(Path(path), catalog, max_bytes, data)
 
 
-def _read_application(path: Path, catalog: Catalog, max_bytes: int) -> tuple[Application | None, list[Diagnostic]]:
-    doc, log = read_structured(path, "application", max_bytes=max_bytes)
+def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes | None = None) -> tuple[Application | None, list[Diagnostic]]:
+    doc, log = read_structured(path, "application", max_bytes=max_bytes, data=data)
     if doc is None:
         return None, capped(log)
     draft = ApplicationReader(doc, log).read()

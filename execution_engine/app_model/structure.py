@@ -34,7 +34,7 @@ from pathlib import Path
 from lxml import etree
 
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
-from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument, read_xml
+from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument, parse_bytes, read_xml
 from execution_engine.app_model.schema import _ELEMENT_MSG, PathIndex, Rewriter, SchemaInfo, load_schema
 
 #: The longest sibling list libxml2 is given; longer ones are checked in windows of this size.
@@ -259,11 +259,19 @@ def validate_structure(doc: XmlDocument, schema: str, log: DiagnosticLog | None 
     return log
 
 
-def read_structured(path: Path, schema: str, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES) -> tuple[XmlDocument | None, DiagnosticLog]:
+def read_structured(
+    path: Path, schema: str, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES, data: bytes | None = None,
+) -> tuple[XmlDocument | None, DiagnosticLog]:
     """Read ``path`` safely and check it against ``schema``: the document (None when it is unreadable
-    or has the wrong root element, as then nothing more can be said) and the problems so far."""
+    or has the wrong root element, as then nothing more can be said) and the problems so far.
+    ``data``: the file's content not yet saved (an editor's), read as if it were at ``path``."""
     log = DiagnosticLog()
-    doc, diagnostics = read_xml(path, display=display, max_bytes=max_bytes)
+    if data is None:
+        doc, diagnostics = read_xml(path, display=display, max_bytes=max_bytes)
+    elif len(data) > max_bytes:
+        doc, diagnostics = None, [Diagnostic(display or str(path), 1, 1, f"the file is {len(data)} bytes, over the limit of {max_bytes} bytes")]
+    else:
+        doc, diagnostics = parse_bytes(data, path=path, display=display or str(path))
     if doc is None:
         log.extend(diagnostics)
         return None, log
