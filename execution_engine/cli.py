@@ -28,6 +28,7 @@ from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
+from execution_engine.recorder.cli_hook import add_run_options, start_recording, stop_recording
 from robot_bridges.backend import BackendOptions
 
 EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED = 0, 1, 2, 3
@@ -193,6 +194,7 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
     backend = await create_backend(backend_name(app, args), clock, backend_options(app, args))
     machine_parameters = {"trajectory_db": args.trajectory_db} if args.trajectory_db else {}
     deployment = await deploy_local(clock, app.robot, backend, machine_parameters=machine_parameters)
+    recorder = await start_recording(args, app, deployment.transport, backend_name(app, args))
     observer = RunObserver(deployment.transport.create_node("run_observer"), app.robot.group_names)
     if not args.quiet:
         printer = LivePrinter(out, (*app.robot.group_names, "engine"))
@@ -234,6 +236,7 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
                 pass
         if interactive:
             OperatorConsole.detach_stdin(loop)
+        await stop_recording(recorder, out)
         await deployment.close()
 
 
@@ -305,6 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--interactive", action="store_true", help="read operator commands from the terminal")
     run.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     run.add_argument("--no-check", action="store_true", help="start without the dry run on the simulator (validate --simulate) that otherwise comes first")
+    add_run_options(run)
     return parser
 
 

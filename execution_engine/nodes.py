@@ -20,6 +20,7 @@ from app_functions.registry import full_catalog
 from execution_engine.app_model import Application, ApplicationError, load_application
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.machine.group_machine import GroupMachine
+from execution_engine.recorder.cli_hook import record_node, stop_recording
 from execution_engine.ros_main import (
     ENGINE_NODE,
     ExitCode,
@@ -40,6 +41,7 @@ class EngineSettings:
 
     application: str
     exit_when_done: bool
+    record: str = ""
 
 
 def declare_engine_parameters(node: Node) -> EngineSettings:
@@ -48,7 +50,10 @@ def declare_engine_parameters(node: Node) -> EngineSettings:
     exit_when_done = bool(
         node.declare_parameter("exit_when_done", False, "exit after the run (code 0 if it finished cleanly) instead of serving on")
     )
-    return EngineSettings(application, exit_when_done)
+    record = str(node.declare_parameter(
+        "record", "", "MCAP file to record every topic of the graph to while the application runs, as ros2 bag record -s mcap stores it (empty: no recording)"
+    ))
+    return EngineSettings(application, exit_when_done, record)
 
 
 def load_or_explain(path: str) -> Application:
@@ -72,7 +77,11 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     app = load_or_explain(settings.application)
     node.logger.info("%s: running %s (%d operations)", node.fully_qualified_name, app.name, len(app.operations))
     outcome.code = ExitCode.FAILED  # until the report says otherwise
-    report = await engine.run(app)
+    recorder = record_node(node, settings.record, app)
+    try:
+        report = await engine.run(app)
+    finally:
+        await stop_recording(recorder, sys.stdout)
     print("\n".join(report.summary_lines()), flush=True)
     outcome.code = ExitCode.OK if report.ok else ExitCode.FAILED
     if not settings.exit_when_done:

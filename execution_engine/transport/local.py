@@ -23,6 +23,7 @@ from execution_engine.transport.port import (
     ServiceServer,
     ServiceUnavailable,
     Subscription,
+    TopicInfo,
     Transport,
     TransportError,
 )
@@ -168,6 +169,9 @@ class LocalNode(Node):
     def create_client(self, srv_type: type, name: str) -> ServiceClient[Any, Any]:
         return _LocalClient(self, srv_type, self.resolve(name))
 
+    def topic_names_and_types(self) -> list[TopicInfo]:
+        return self.bus.topics()
+
     def destroy(self) -> None:
         for endpoint in self._endpoints:
             if isinstance(endpoint, _LocalPublisher):
@@ -258,3 +262,11 @@ class LocalTransport(Transport):
 
     def service(self, name: str) -> _LocalService | None:
         return self._services.get(name)
+
+    def topics(self) -> list[TopicInfo]:
+        """Every topic that has a live publisher, with the QoS each offers."""
+        return [
+            TopicInfo(topic, self._types[topic], tuple(p.qos for p in pubs))
+            for topic, pubs in sorted(self._publishers.items())
+            if pubs
+        ]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import re
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from typing import Any, Generic, TypeVar
 
@@ -138,6 +139,17 @@ def _matched(endpoint: Publisher[Any] | Subscription[Any]) -> int:
     return endpoint.get_publisher_count()
 
 
+@dataclass(frozen=True)
+class TopicInfo:
+    """One topic of the graph as a recorder sees it (rclpy's ``get_topic_names_and_types`` plus
+    ``get_publishers_info_by_topic``): its type and the QoS each publisher offers, so a recorder
+    can ask for what every publisher gives (a best-effort publisher only matches a best-effort reader)."""
+
+    name: str
+    msg_type: type
+    offered: tuple[QoS, ...]
+
+
 class ServiceServer(ABC):
     name: str
 
@@ -242,6 +254,11 @@ class Node(ABC):
     @abstractmethod
     def destroy(self) -> None:
         """Remove every endpoint of this node."""
+
+    def topic_names_and_types(self) -> list[TopicInfo]:
+        """Every topic with a publisher whose type is one of ours (a recorder's discovery);
+        TransportError on a transport that cannot list its graph."""
+        raise TransportError(f"{type(self).__name__} cannot list the topics of its graph")
 
     # ------------------------------------------------------------------------------ faults
     def report_fault(self, where: str, error: BaseException) -> None:

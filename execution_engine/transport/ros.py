@@ -53,7 +53,7 @@ from typing import Any, Generic, TypeVar
 
 from execution_engine.clock import Clock, FollowingClock
 from execution_engine.transport import ros_logging
-from execution_engine.transport.msgs import ClockMessage, Time
+from execution_engine.transport.msgs import MESSAGE_TYPES, ClockMessage, Time
 from execution_engine.transport.port import (
     Node,
     RosArgumentsError,
@@ -63,6 +63,7 @@ from execution_engine.transport.port import (
     ServiceServer,
     ServiceUnavailable,
     Subscription,
+    TopicInfo,
     Transport,
     TransportError,
     resolve_name,
@@ -74,6 +75,7 @@ from execution_engine.transport.wire import CLOCK_TOPIC
 from execution_engine.transport.ros_convert import (
     MessageConverter,
     failure_response,
+    offered_qos,
     parameter_type_code,
     qos_profile,
     user_overrides,
@@ -538,6 +540,19 @@ class RosNode(Node):
 
     def create_client(self, srv_type: type, name: str) -> ServiceClient[Any, Any]:
         return self._add(_RosClient(self, srv_type, self.resolve(name)))  # type: ignore[no-any-return]
+
+    def topic_names_and_types(self) -> list[TopicInfo]:
+        """The graph's topics of our types, with each publisher's offered QoS (``ros2 bag record -a``'s discovery)."""
+        known = {t.ROS_TYPE: t for t in (*MESSAGE_TYPES, ClockMessage)}
+        found = []
+        for name, types in self.ros_node.get_topic_names_and_types():
+            mirror = next((known[t] for t in types if t in known), None)
+            if mirror is None:
+                continue
+            offered = tuple(offered_qos(info.qos_profile) for info in self.ros_node.get_publishers_info_by_topic(name))
+            if offered:
+                found.append(TopicInfo(name, mirror, offered))
+        return found
 
     def destroy(self) -> None:
         """Leave the graph: every endpoint stops now; the services go as soon as none of them is

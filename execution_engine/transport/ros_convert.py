@@ -24,7 +24,7 @@ from functools import lru_cache
 from typing import Any, TypeVar, get_args, get_origin
 
 from execution_engine.transport.port import ParameterValue, TransportError
-from execution_engine.transport.qos import QoS, rclpy_qos_kwargs
+from execution_engine.transport.qos import Durability, History, QoS, Reliability, rclpy_qos_kwargs
 
 M = TypeVar("M")
 Resolver = Callable[[str], type]
@@ -243,6 +243,19 @@ def qos_profile(qos: QoS, policies: Any) -> Any:
         except AttributeError:
             raise TransportError(f"this rclpy has no {key} policy {kwargs[key]}") from None
     return policies.QoSProfile(**resolved)
+
+
+def offered_qos(profile: Any) -> QoS:
+    """Our QoS of an rclpy ``QoSProfile`` a publisher offers (``TopicEndpointInfo.qos_profile``):
+    what a recorder needs to ask for no more than it gets."""
+    reliability = getattr(getattr(profile, "reliability", None), "name", "RELIABLE")
+    durability = getattr(getattr(profile, "durability", None), "name", "VOLATILE")
+    return QoS(
+        Reliability.BEST_EFFORT if reliability == "BEST_EFFORT" else Reliability.RELIABLE,
+        Durability.TRANSIENT_LOCAL if durability == "TRANSIENT_LOCAL" else Durability.VOLATILE,
+        History.KEEP_LAST,
+        max(1, int(getattr(profile, "depth", 1) or 1)),
+    )
 
 
 # ---------------------------------------------------------------------------- parameters

@@ -1,0 +1,151 @@
+"""The flight recorder: a node that subscribes to every topic of the graph and records it as MCAP.
+
+It is a plain participant of the transport port, like ``ros2 bag record -a``: it discovers the
+topics (:meth:`Node.topic_names_and_types`) at start and then every ``poll`` run seconds, and
+subscribes to each with a QoS no stronger than its publishers offer (best effort if any publisher
+is, transient-local only when all are, so the latched state, structure and cell reach it).  The
+same code records the in-process deployment of ``run --record`` and a ROS 2 graph (the engine
+node's ``record`` parameter).  Every message is handed to an :class:`McapSink` whose thread does
+the writing; the callbacks only enqueue.
+
+What ran goes in with it: the application XML and its cell model as attachments, and a
+``dual_arm_executive`` metadata record (application, digests, robot, back end, software version,
+the recording it continues after a resume).
+"""
+from __future__ import annotations
+
+import asyncio
+import hashlib
+from collections.abc import Callable, Mapping
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from execution_engine.recorder.writer import McapSink, RecordingStats
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import String
+from execution_engine.transport.port import Node, TopicInfo, TransportError
+from execution_engine.transport.qos import Durability, History, QoS, Reliability
+from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus
+
+POLL = 0.5  # run seconds between looks for new topics (rosbag2 polls every 0.1 s of wall time)
+DEPTH = 1000  # a recorder keeps up with bursts: every state change matters
+
+
+def software_version() -> str:
+    try:
+        return metadata.version("dual_arm_executive")
+    except metadata.PackageNotFoundError:
+        return "0.1.0 (source tree)"
+
+
+def file_digest(path: Path | None) -> str:
+    """sha256 of a file's bytes, "" when there is no file."""
+    if path is None or not Path(path).is_file():
+        return ""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def reader_qos(offered: tuple[QoS, ...]) -> QoS:
+    """What a recorder asks for so that it matches every publisher of a topic."""
+    best_effort = any(q.reliability is Reliability.BEST_EFFORT for q in offered)
+    latched = bool(offered) and all(q.durability is Durability.TRANSIENT_LOCAL for q in offered)
+    return QoS(
+        Reliability.BEST_EFFORT if best_effort else Reliability.RELIABLE,
+        Durability.TRANSIENT_LOCAL if latched else Durability.VOLATILE,
+        History.KEEP_LAST,
+        max([DEPTH, *(q.depth for q in offered)]),
+    )
+
+
+class Recorder:
+    """Records every topic ``node`` can see into ``sink`` until :meth:`close`."""
+
+    def __init__(self, node: Node, sink: McapSink, poll: float = POLL) -> None:
+        self.node = node
+        self.sink = sink
+        self.poll = poll
+        self._topics: dict[str, TopicInfo] = {}
+        self._operation: str | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._engine_status = node.resolve(ENGINE_STATUS)
+
+    def start(self) -> None:
+        """Subscribe to what exists now, then keep looking for new topics."""
+        self.discover()
+        self._task = asyncio.get_running_loop().create_task(self._watch(), name="recorder discovery")
+
+    def discover(self) -> list[str]:
+        """Subscribe to topics not seen before; the new topic names."""
+        new = []
+        for info in self.node.topic_names_and_types():
+            if info.name in self._topics:
+                continue
+            self._topics[info.name] = info
+            self.node.create_subscription(info.msg_type, info.name, self._callback(info), reader_qos(info.offered))
+            new.append(info.name)
+        return new
+
+    async def _watch(self) -> None:
+        while True:
+            await self.node.clock.sleep(self.poll)
+            try:
+                self.discover()
+            except TransportError as error:  # the graph changed under us: try again next time
+                self.node.logger.warning("recorder: topic discovery failed: %s", error)
+
+    def _callback(self, info: TopicInfo) -> Callable[[Any], None]:
+        topic, offered, sink, node = info.name, info.offered, self.sink, self.node
+
+        def record(msg: Any) -> None:
+            stamp = node.now_stamp()
+            sink.put(topic, msg, offered, stamp.sec * 1_000_000_000 + stamp.nanosec)
+            if topic == self._engine_status and isinstance(msg, String):
+                self._on_engine_status(msg)
+
+        return record
+
+    def _on_engine_status(self, msg: String) -> None:
+        """An operation boundary: the chunk so far goes to disk, as the trace does."""
+        try:
+            status = codec.decode(EngineStatus, msg.data, source=self._engine_status)
+        except codec.WireError:
+            return
+        if status.operation_id != self._operation:
+            self._operation = status.operation_id
+            self.sink.sync()
+
+    def describe_run(
+        self,
+        application: Path,
+        cell: Path | None,
+        fields: Mapping[str, str],
+    ) -> None:
+        """Store what ran: the application and cell files as attachments, and a metadata record."""
+        stamp = self.node.now_stamp()
+        now_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        for path, kind in ((application, "application"), (cell, "cell")):
+            if path is not None and Path(path).is_file():
+                self.sink.add_attachment(f"{kind}/{Path(path).name}", "application/xml", Path(path).read_bytes(), now_ns)
+        self.sink.add_metadata("dual_arm_executive", {
+            "application_path": str(application),
+            "application_sha256": file_digest(application),
+            "cell_path": str(cell or ""),
+            "cell_sha256": file_digest(cell),
+            "software_version": software_version(),
+            **fields,
+        })
+
+    async def close(self) -> RecordingStats:
+        """Stop looking for topics, let the last messages arrive, finish the file."""
+        if self._task is not None:
+            self._task.cancel()
+            await asyncio.gather(self._task, return_exceptions=True)
+        await asyncio.sleep(0)  # deliveries already scheduled on the loop
+        stats = self.sink.stats
+        self.sink.add_metadata("recording_stats", {
+            "written": str(stats.written),
+            "dropped": str(sum(stats.dropped.values())),
+            "dropped_by_topic": ", ".join(f"{t}={n}" for t, n in sorted(stats.dropped.items())),
+        })
+        return await asyncio.get_running_loop().run_in_executor(None, self.sink.close)
