@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,7 @@ class TraceSummary:
     problems: list[str] = field(default_factory=list)  # lines that are not records
     problem_count: int = 0
     incomplete_tail: bool = False  # the file does not end with a newline: its last write was cut
+    on_record: Callable[[dict[str, Any]], None] | None = field(default=None, repr=False, compare=False)
 
     @property
     def cut(self) -> bool:
@@ -73,9 +75,11 @@ def _describe(record: dict[str, Any]) -> str:
     return f"{group} {event}"
 
 
-def read_trace(path: str | Path) -> TraceSummary:
-    """Read ``path`` line by line; raises OSError only when the file cannot be opened or read."""
+def read_trace(path: str | Path, on_record: Callable[[dict[str, Any]], None] | None = None) -> TraceSummary:
+    """Read ``path`` line by line; raises OSError only when the file cannot be opened or read.
+    ``on_record`` sees every valid record in order (the timeline is built from them)."""
     summary = TraceSummary(str(path))
+    summary.on_record = on_record
     with open(path, "rb") as stream:
         number = 0
         while True:
@@ -105,6 +109,8 @@ def _take(summary: TraceSummary, number: int, raw: bytes) -> None:
         _problem(summary, f"line {number}: not a trace record (needs 'event' and 't')")
         return
     summary.records += 1
+    if summary.on_record is not None:
+        summary.on_record(record)
     summary.by_event[record["event"]] += 1
     summary.by_group[str(record.get("group", "?"))] += 1
     summary.last = record

@@ -1,0 +1,245 @@
+"""The run's timeline (the paper's Fig. 12): one lane per robot group, what each did and when.
+
+A model only -- no drawing: the report renders it with matplotlib (:mod:`execution_engine.run_report`)
+and the operator station draws it live in the browser, so both show the same thing from the same
+events.  It is built from trace records (the dicts of :mod:`execution_engine.observers`, as a
+JSON-lines trace holds them and as :mod:`execution_engine.recorder.reading` rebuilds them from a
+recording), one at a time (:meth:`TimelineBuilder.add`), so a live view feeds it as events
+arrive and asks for a :meth:`TimelineBuilder.snapshot` whenever it redraws.
+
+Per lane: a bar per function (operation, function, start, end, outcome, the state it was in
+longest -- its colour), the primitives inside it (each with the working state that ran it), and
+the idle gaps between functions.  Across lanes: the operation boundaries (first start to last
+end of the operation's functions), errors, retries (a function sent again in the same
+operation) and operator actions.  A bar still open has ``t_end`` None: it ran up to ``now``.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+#: Colours of the states a bar can show (fill colours; the report and the station use the same).
+STATE_COLOURS: dict[str, str] = {
+    "Motion": "#4e79a7",
+    "FullBodyMotion": "#2f4b7c",
+    "RecordTrajectory": "#76b7b2",
+    "TrajectoryExecution": "#59a14f",
+    "EndEffector": "#f28e2b",
+    "Vision": "#b07aa1",
+    "MasterSlave": "#9c755f",
+    "Pause": "#bab0ac",
+    "Stop": "#e15759",
+    "ErrorHandling": "#e15759",
+    "Ready": "#d9d9d9",
+}
+#: Edge colours of a function bar by outcome (None: still running).
+OUTCOME_COLOURS: dict[str | None, str] = {
+    "succeeded": "#2ca02c", "aborted": "#d62728", "preempted": "#ff7f0e", None: "#1f77b4",
+}
+
+
+@dataclass
+class PrimitiveBar:
+    name: str
+    index: int
+    state: str  # the working state that ran it (Motion, Vision, ...)
+    t_start: float
+    t_end: float | None = None
+    outcome: str | None = None  # done / error / ... as the machine reported it
+    result: Mapping[str, Any] | None = None  # what the robot reported (a vision pose, joints)
+
+    @property
+    def colour(self) -> str:
+        return STATE_COLOURS.get(self.state, "#888888")
+
+
+@dataclass
+class FunctionBar:
+    group: str
+    operation: str
+    function: str
+    t_start: float
+    t_end: float | None = None
+    outcome: str | None = None  # succeeded / aborted / preempted; None while running
+    attempt: int = 1  # 2 and more: a retry of the same function in the same operation
+    error: str | None = None
+    primitives: list[PrimitiveBar] = field(default_factory=list)
+
+    def end(self, now: float) -> float:
+        return self.t_end if self.t_end is not None else now
+
+    @property
+    def state(self) -> str:
+        """The state the function spent most of its time in (its colour)."""
+        spent: dict[str, float] = {}
+        for p in self.primitives:
+            spent[p.state] = spent.get(p.state, 0.0) + ((p.t_end if p.t_end is not None else p.t_start) - p.t_start)
+        if self.outcome in ("aborted", "preempted"):
+            return "ErrorHandling"
+        return max(spent, key=lambda s: spent[s]) if spent else "Ready"
+
+    @property
+    def colour(self) -> str:
+        return STATE_COLOURS.get(self.state, "#888888")
+
+    @property
+    def edge(self) -> str:
+        return OUTCOME_COLOURS.get(self.outcome, "#1f77b4")
+
+
+@dataclass(frozen=True)
+class IdleGap:
+    group: str
+    t_start: float
+    t_end: float
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+
+@dataclass
+class Lane:
+    group: str
+    bars: list[FunctionBar] = field(default_factory=list)
+    idle: list[IdleGap] = field(default_factory=list)
+    busy: float = 0.0  # seconds inside functions
+
+
+@dataclass
+class OperationSpan:
+    id: str
+    t_start: float
+    t_end: float | None = None
+
+
+@dataclass(frozen=True)
+class Mark:
+    """A point in time worth a marker: an error, an operator action, an engine state change."""
+
+    t: float
+    kind: str  # error / operator / engine_state
+    group: str
+    text: str
+
+
+@dataclass
+class Timeline:
+    lanes: dict[str, Lane]
+    operations: list[OperationSpan]
+    marks: list[Mark]
+    t_start: float
+    t_end: float
+    retries: int = 0
+
+    def idle_total(self, group: str) -> float:
+        return sum(g.duration for g in self.lanes[group].idle)
+
+
+class TimelineBuilder:
+    """Folds trace records into a timeline, one record at a time (records of any group, in order)."""
+
+    def __init__(self, groups: Iterable[str] = ()) -> None:
+        self._lanes: dict[str, Lane] = {g: Lane(g) for g in groups}
+        self._open: dict[str, FunctionBar] = {}
+        self._operations: dict[str, OperationSpan] = {}
+        self._attempts: dict[tuple[str, str], int] = {}
+        self.marks: list[Mark] = []
+        self.retries = 0
+        self.t_first: float | None = None
+        self.t_last = 0.0
+
+    def add_all(self, records: Iterable[Mapping[str, Any]]) -> TimelineBuilder:
+        for record in records:
+            self.add(record)
+        return self
+
+    def add(self, record: Mapping[str, Any]) -> None:
+        t = float(record.get("t", 0.0))
+        self.t_first = t if self.t_first is None else min(self.t_first, t)
+        self.t_last = max(self.t_last, t)
+        event, group = record.get("event"), str(record.get("group", "?"))
+        if group == "engine":
+            self._engine(record, t)
+            return
+        lane = self._lanes.setdefault(group, Lane(group))
+        if event == "function_start":
+            self._start_function(lane, record, t)
+        elif event == "function_end":
+            self._end_function(group, record, t)
+        elif event == "primitive_start":
+            bar = self._open.get(group)
+            if bar is not None:
+                bar.primitives.append(PrimitiveBar(str(record.get("primitive", "")), int(record.get("index") or 0), str(record.get("state", "")), t))
+        elif event == "primitive_end":
+            bar = self._open.get(group)
+            if bar is not None and bar.primitives and bar.primitives[-1].t_end is None:
+                primitive = bar.primitives[-1]
+                primitive.t_end, primitive.outcome, primitive.result = t, record.get("outcome"), record.get("result")
+        elif event == "error":
+            text = str(record.get("error", ""))
+            self.marks.append(Mark(t, "error", group, text))
+            bar = self._open.get(group)
+            if bar is not None:
+                bar.error = text
+
+    def _start_function(self, lane: Lane, record: Mapping[str, Any], t: float) -> None:
+        operation, function = str(record.get("operation") or ""), str(record.get("function") or "")
+        key = (lane.group, operation)
+        attempt = self._attempts.get(key, 0) + 1
+        self._attempts[key] = attempt
+        if attempt > 1:
+            self.retries += 1
+        bar = FunctionBar(lane.group, operation, function, t, attempt=attempt)
+        lane.bars.append(bar)
+        self._open[lane.group] = bar
+        span = self._operations.setdefault(operation, OperationSpan(operation, t))
+        span.t_start = min(span.t_start, t)
+
+    def _end_function(self, group: str, record: Mapping[str, Any], t: float) -> None:
+        bar = self._open.pop(group, None)
+        if bar is None:
+            return
+        bar.t_end, bar.outcome = t, record.get("outcome")
+        if record.get("error") and bar.error is None:
+            bar.error = str(record.get("error"))
+        for primitive in bar.primitives:  # a stop abandons the primitive in flight
+            if primitive.t_end is None:
+                primitive.t_end = t
+        span = self._operations[bar.operation]
+        span.t_end = t if span.t_end is None else max(span.t_end, t)
+
+    def _engine(self, record: Mapping[str, Any], t: float) -> None:
+        event = record.get("event")
+        if event == "operator":
+            answer = "accepted" if record.get("accepted") else "refused"
+            self.marks.append(Mark(t, "operator", "engine", f"{record.get('command')} from {record.get('source')}: {answer}"))
+        elif event == "error":
+            self.marks.append(Mark(t, "error", "engine", str(record.get("error", ""))))
+        elif event == "engine_state":
+            self.marks.append(Mark(t, "engine_state", "engine", f"{record.get('from')} -> {record.get('to')}"))
+
+    def snapshot(self, now: float | None = None) -> Timeline:
+        """The timeline up to ``now`` (default: the latest record); open bars end at ``now``."""
+        t_start = self.t_first if self.t_first is not None else 0.0
+        t_end = max(self.t_last, now if now is not None else self.t_last)
+        lanes = {}
+        for group, lane in self._lanes.items():
+            copy = Lane(group, list(lane.bars))
+            cursor = t_start
+            for bar in copy.bars:
+                if bar.t_start > cursor:
+                    copy.idle.append(IdleGap(group, cursor, bar.t_start))
+                copy.busy += bar.end(t_end) - bar.t_start
+                cursor = max(cursor, bar.end(t_end))
+            if t_end > cursor:
+                copy.idle.append(IdleGap(group, cursor, t_end))
+            lanes[group] = copy
+        operations = sorted(self._operations.values(), key=lambda s: s.t_start)
+        return Timeline(lanes, operations, list(self.marks), t_start, t_end, self.retries)
+
+
+def build_timeline(records: Iterable[Mapping[str, Any]], groups: Iterable[str] = ()) -> Timeline:
+    """The whole timeline of a finished (or cut) record."""
+    return TimelineBuilder(groups).add_all(records).snapshot()
