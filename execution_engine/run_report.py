@@ -1,0 +1,117 @@
+"""``python -m execution_engine report RUN.mcap|TRACE.jsonl``: what a run did, read back from its record.
+
+The same summary whichever record is at hand -- a recording (:mod:`execution_engine.recorder`)
+or a JSON-lines trace (:mod:`execution_engine.trace_report`): whether the record is whole or was
+cut (and where), what ran (a recording says which application, robot, back end and version),
+the operations, each group's busy and idle time, errors, retries, operator actions and vision
+corrections; and the Fig. 12 timeline of every group as SVG or PNG (:mod:`.timeline_plot`).
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from execution_engine.recorder.reading import Recording, is_mcap, trace_records
+from execution_engine.timeline import Timeline, TimelineBuilder
+from execution_engine.trace_report import read_trace
+
+EXIT_OK, EXIT_UNREADABLE = 0, 1
+
+
+@dataclass
+class RunSummary:
+    source: str
+    header: list[str]  # what the record itself says: whole or cut, what ran
+    timeline: Timeline
+    cut: bool
+    extra: list[str] = field(default_factory=list)  # errors and operator actions, for a recording
+
+    def lines(self) -> list[str]:
+        t = self.timeline
+        out = list(self.header)
+        done = sum(1 for o in t.operations if o.t_end is not None)
+        out.append(f"  operations: {len(t.operations)} started, {done} complete; run time {t.t_end - t.t_start:.3f} s")
+        for group, lane in t.lanes.items():
+            total = max(t.t_end - t.t_start, 1e-9)
+            failed = sum(1 for b in lane.bars if b.outcome in ("aborted", "preempted"))
+            out.append(
+                f"  {group:<12} busy {lane.busy:9.3f} s ({100 * lane.busy / total:5.1f} %), idle {t.idle_total(group):9.3f} s, "
+                f"{len(lane.bars)} function(s)" + (f", {failed} failed" if failed else "")
+            )
+        out.append(f"  retries: {t.retries}")
+        out.extend(self.extra)
+        out.extend(vision_lines(t))
+        return out
+
+
+def vision_lines(timeline: Timeline) -> list[str]:
+    """Every located feature: where vision found it (the corrected frame the next moves used)."""
+    found: list[tuple[float, str]] = []
+    for lane in timeline.lanes.values():
+        for bar in lane.bars:
+            for p in bar.primitives:
+                result: Any = p.result or {}
+                pose = result.get("pose") if isinstance(result, dict) and result.get("kind") == "vision" else None
+                if isinstance(pose, dict):
+                    xyz = ", ".join(f"{1000 * float(pose.get(k, 0.0)):.2f}" for k in ("x", "y", "z"))
+                    found.append((p.t_start, f"  vision: {p.t_start:9.3f} s {lane.group} {p.name}: at ({xyz}) mm, score {result.get('score', '?')}"))
+    return [line for _, line in sorted(found)]
+
+
+def summarize(path: str | Path) -> RunSummary:
+    """Read a recording or a trace; OSError when the file cannot be read."""
+    builder = TimelineBuilder()
+    if is_mcap(path):
+        recording = Recording(str(path))
+        builder.add_all(trace_records(path, recording))
+        header = [f"recording {path}: {recording.messages} message(s)"]
+        meta = recording.metadata.get("dual_arm_executive", {})
+        if meta:
+            header.append(
+                f"  ran: {meta.get('application', '?')} ({meta.get('application_path', '?')}) on {meta.get('robot', '?')} "
+                f"via {meta.get('backend', '?')}, software {meta.get('software_version', '?')}"
+            )
+            if meta.get("continues"):
+                header.append(f"  continues: {meta['continues']}")
+        if recording.cut:
+            last = f" at {builder.t_last:.3f} s" if builder.t_first is not None else ""
+            header.append(f"  CUT: the recording has no end (the run was killed or crashed); readable up to its last chunk{last}")
+        timeline = builder.snapshot()
+        extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator")]
+        return RunSummary(str(path), header, timeline, recording.cut, extra)
+    trace = read_trace(path, builder.add)
+    return RunSummary(str(path), trace.lines(), builder.snapshot(), trace.cut)
+
+
+def add_report_parser(sub: Any) -> None:
+    """The ``report`` subcommand on the CLI's subparsers."""
+    report = sub.add_parser("report", help="summarise a run from its recording (.mcap) or trace (.jsonl) and draw its timeline")
+    report.add_argument("file", metavar="RUN.mcap|TRACE.jsonl")
+    report.add_argument("--timeline", metavar="OUT.svg|OUT.png", help="where to write the timeline (default: next to FILE, .timeline.svg)")
+    report.add_argument("--no-timeline", action="store_true", help="print the summary only")
+
+
+def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
+    path = Path(args.file)
+    if not path.is_file():
+        err.write(f"error: {path}: no such file\n")
+        return EXIT_UNREADABLE
+    try:
+        summary = summarize(path)
+    except OSError as error:
+        err.write(f"error: {path}: cannot read: {error.strerror or error}\n")
+        return EXIT_UNREADABLE
+    out.write("\n".join(summary.lines()) + "\n")
+    if not args.no_timeline:
+        from execution_engine.timeline_plot import plot_timeline  # matplotlib only when drawing
+
+        target = Path(args.timeline) if args.timeline else path.with_name(path.stem + ".timeline.svg")
+        try:
+            plot_timeline(summary.timeline, target, title=f"{path.name}{' (CUT)' if summary.cut else ''}")
+        except (OSError, ValueError) as error:
+            err.write(f"error: timeline {target}: {error}\n")
+            return EXIT_UNREADABLE
+        out.write(f"timeline: {target}\n")
+    return EXIT_OK
