@@ -43,7 +43,7 @@ setup(
         *tree("apps_xml"),
         *tree("schema"),
     ],
-    install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9", "mcap>=1.2", "mcap-ros2-support>=0.5", "matplotlib>=3.6"],
+    install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9", "mcap>=1.2", "mcap-ros2-support>=0.5", "matplotlib>=3.6", "opencv-python-headless>=4.8"],
     extras_require={"test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18"]},
     zip_safe=True,
     entry_points={

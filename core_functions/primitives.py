@@ -82,6 +82,28 @@ class EndEffectorResult:
 
 
 @dataclass(frozen=True)
+class VisionReport:
+    """How a vision result was measured, for the trace: camera, image, nominal vs measured, fit quality.
+
+    ``method`` is ``plane`` (one image, the ray of the hole's centre met with the part plane),
+    ``stereo`` (triangulated from a camera pair), ``sharpness`` (a focus measure of the image) or
+    ``simulated`` (a feature the cameras have no image model of: the simulator's ground truth plus
+    noise).  ``correction`` is measured minus nominal position (m, world frame); ``residual`` (m)
+    is the RMS distance of the edge points from the fitted circle, or the stereo disagreement.
+    """
+
+    camera: str
+    method: str
+    image_size: tuple[int, int] = (0, 0)
+    nominal: Pose | None = None
+    measured: Pose | None = None
+    correction: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    residual: float = 0.0
+    diameter: float = 0.0
+    sharpness: float = 0.0
+
+
+@dataclass(frozen=True)
 class VisionResult:
     """What a camera found: a measured pose (world frame), a scalar measurement, a confidence."""
 
@@ -90,6 +112,7 @@ class VisionResult:
     pose: Pose | None = None
     value: float | None = None
     score: float = 1.0
+    report: VisionReport | None = None
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,8 @@ from core_functions.primitives import (
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.clock import Clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
+from robot_bridges.camera.sources import RenderedCamera
+from robot_bridges.camera.vision import CameraVision
 from robot_bridges.nextage_sim import vision
 from robot_bridges.nextage_sim.faults import FaultPlan, FaultSpec, parse_fault
 from robot_bridges.nextage_sim.hands import HandIO
@@ -134,6 +136,8 @@ class NextageSimBackend(RobotBackend):
         self._jobs: dict[str, _Job] = {}
         self._hands = {g: HandIO() for g in self.model.arms}
         self._vision = vision.SimulatedVision(seed)
+        #: The cameras: images rendered from the cell, detected and placed in the world (robot_bridges.camera).
+        self.cameras = CameraVision(RenderedCamera(lambda: self.cameras.scene(), seed, clock.now), self._vision.fallback)
         self._faults = FaultPlan()
         for spec in faults:
             self.inject(spec)
@@ -211,6 +215,7 @@ class NextageSimBackend(RobotBackend):
 
     def set_cell(self, cell: CellSnapshot) -> None:
         self._vision.set_cell(cell)
+        self.cameras.set_cell(cell)
 
     def robot_description(self) -> str | None:
         return self.model.urdf_path.read_text(encoding="utf-8")
@@ -334,19 +339,34 @@ class NextageSimBackend(RobotBackend):
         return EndEffectorResult(io=hand.snapshot())
 
     async def _look(self, group: str, primitive: Vision) -> VisionResult:
-        cam = vision.camera(primitive.camera or NEXTAGE_OPEN.group(group).camera)
+        cameras = vision.taking_part(primitive.camera or NEXTAGE_OPEN.group(group).camera)
         with self._job(frozenset({group}), primitive) as job:
             fault = self._take_fault(job, group)
-            mount = self.model.frame_matrix(self._q, cam.link) @ cam.mount.matrix()
+            # The images are taken now, with the cameras where the kinematics put them now.
+            placed = [(cam, Pose.from_matrix(self.model.frame_matrix(self._q, cam.link) @ cam.mount.matrix())) for cam in cameras]
             observation: VisionResult | BridgeError
-            try:  # the image is taken now; what it shows is known after processing
-                observation = self._vision.observe(primitive, cam, Pose.from_matrix(mount))
+            try:
+                self._check_range(primitive, placed)
+                observation = await self.cameras.observe(primitive, placed)
             except BridgeError as error:
                 observation = error
             await self._run(job, vision.VISION_TIME, lambda t: None, fault)
         if isinstance(observation, BridgeError):
             raise observation
         return observation
+
+    def _check_range(self, primitive: Vision, placed: Sequence[tuple[vision.CameraSpec, Pose]]) -> None:
+        """A feature beyond a camera's working range is not seen (VISION naming distance and range)."""
+        nominal = primitive.nominal or self._vision.frame_pose(primitive.target)
+        if nominal is None:
+            return
+        for cam, pose in placed:
+            distance = pose.distance_to(nominal)
+            if distance > cam.max_range:
+                raise BridgeError(
+                    FaultKind.VISION,
+                    f"{primitive.target or 'the feature'} is {distance:.3f} m from {cam.name}, beyond its {cam.max_range:.2f} m working range",
+                )
 
     async def _record(self, group: str, primitive: RecordTrajectory) -> TrajectoryResult:
         if primitive.mode == "teach":

@@ -1,60 +1,72 @@
-"""Simulated cameras: where a feature *really* is, as a camera on the robot would measure it.
+"""The Nextage's cameras, and ground truth plus noise for features they have no image model of.
 
-Applications look for features (holes, parts) whose nominal poses come from the cell model; the
-real ones are somewhere else by a few millimetres, which is why the skill looks.  The engine's
-cell snapshot can carry that ground truth (``CellSnapshot.truth``); a locate returns it plus a
-small seeded noise, so a skill that corrects its approach with the measurement lands on the true
-feature, and one that does not lands beside it.
+Cameras: a stereo pair on the head (``HEAD_JOINT1_Link``; the mount offsets are hrpsys'
+CAMERA_HEAD_L/R sensor positions, looking along the link's x axis), ``head_camera`` standing for
+the pair (a locate with it triangulates from both), and one on each hand: 35 mm off the wrist
+axis, converging on the point 50 mm out along the tool axis (where the skills' clearance puts a
+hole), focused there.  Their images are rendered from the cell (:mod:`robot_bridges.camera`);
+the hand camera mounts, lenses and ranges are this simulator's assumptions (docs/vision.md).
 
-Cameras are the Nextage's: a stereo pair on the head (``HEAD_JOINT1_Link``; the mount offsets
-are hrpsys' CAMERA_HEAD_L/R sensor positions) and one on each hand.  A camera sees a feature
-only within its working range; farther away is a VISION fault, as is an unknown feature.
-The hand camera mount and all ranges are this simulator's assumptions (docs/nextage_sim.md).
+Features without an image model (a fixture, a tray: no ``diameter``) are still located the old
+way, their true pose plus a small seeded noise, and say so in the trace (method ``simulated``).
+A camera sees a feature only within its working range; farther away is a VISION fault, as is an
+unknown feature.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from core_functions.geometry import Pose
-from core_functions.primitives import Vision, VisionResult
+from core_functions.primitives import Vision, VisionReport, VisionResult
+from core_functions.vision.camera import Intrinsics
 from robot_bridges.backend import BridgeError, FaultKind
+from robot_bridges.camera.render import Optics
+from robot_bridges.camera.spec import CameraSpec, body_mount, look_at_mount
 
 if TYPE_CHECKING:  # the cell snapshot is only a parameter type here
     from execution_engine.transport.wire import CellSnapshot
 
 #: Capture plus image processing time of one vision primitive (s).
 VISION_TIME = 0.25
+#: The hand camera's frame of reference: the default TCP (z out of the hand) on the wrist flange.
+_TOOL = Pose.from_xyz_rpy(0.0, 0.0, 0.0, 0.0, -math.pi / 2, 0.0)
+#: Hand camera: 35 mm off the tool axis, aimed at the point 50 mm out along it.
+HAND_MOUNT = look_at_mount((0.035, 0.0, 0.0), (0.0, 0.0, 0.05), (0.0, 1.0, 0.0), _TOOL)
+HAND_FOCUS = math.hypot(0.035, 0.05)
+HEAD_INTRINSICS = Intrinsics.from_fov(1024, 768, math.radians(40.0))
+HAND_INTRINSICS = Intrinsics.from_fov(640, 480, math.radians(60.0))
 
+Camera = CameraSpec
 
-@dataclass(frozen=True)
-class Camera:
-    name: str
-    link: str  # the link the camera is mounted on
-    mount: Pose  # camera origin in that link
-    max_range: float  # m: farther features are not found
-
-
-CAMERAS: dict[str, Camera] = {
+CAMERAS: dict[str, CameraSpec] = {
     c.name: c
     for c in (
-        Camera("head_camera", "HEAD_JOINT1_Link", Pose(0.059959, 0.0, 0.095), 1.5),
-        Camera("head_camera_left", "HEAD_JOINT1_Link", Pose(0.059959, 0.069754, 0.095), 1.5),
-        Camera("head_camera_right", "HEAD_JOINT1_Link", Pose(0.059959, -0.069754, 0.095), 1.5),
-        Camera("left_hand_camera", "LARM_JOINT5_Link", Pose(-0.05, 0.0, 0.0), 0.6),
-        Camera("right_hand_camera", "RARM_JOINT5_Link", Pose(-0.05, 0.0, 0.0), 0.6),
+        CameraSpec("head_camera", "HEAD_JOINT1_Link", body_mount(0.059959, 0.0, 0.095), HEAD_INTRINSICS, Optics(0.5, aperture=0.002), 1.5),
+        CameraSpec("head_camera_left", "HEAD_JOINT1_Link", body_mount(0.059959, 0.069754, 0.095), HEAD_INTRINSICS, Optics(0.5, aperture=0.002), 1.5),
+        CameraSpec("head_camera_right", "HEAD_JOINT1_Link", body_mount(0.059959, -0.069754, 0.095), HEAD_INTRINSICS, Optics(0.5, aperture=0.002), 1.5),
+        CameraSpec("left_hand_camera", "LARM_JOINT5_Link", HAND_MOUNT, HAND_INTRINSICS, Optics(HAND_FOCUS, aperture=0.002), 0.6),
+        CameraSpec("right_hand_camera", "RARM_JOINT5_Link", HAND_MOUNT, HAND_INTRINSICS, Optics(HAND_FOCUS, aperture=0.002), 0.6),
     )
 }
+#: Cameras that stand for a stereo pair: a locate with them triangulates from both.
+STEREO: dict[str, tuple[str, str]] = {"head_camera": ("head_camera_left", "head_camera_right")}
 
 
-def camera(name: str) -> Camera:
+def camera(name: str) -> CameraSpec:
     try:
         return CAMERAS[name]
     except KeyError:
         raise BridgeError(FaultKind.VISION, f"no camera {name!r} (cameras: {', '.join(CAMERAS)})") from None
+
+
+def taking_part(name: str) -> tuple[CameraSpec, ...]:
+    """The cameras that take an image for a request naming ``name`` (both of a stereo pair)."""
+    pair = STEREO.get(name)
+    return tuple(camera(n) for n in pair) if pair else (camera(name),)
 
 
 class SimulatedVision:
@@ -69,7 +81,14 @@ class SimulatedVision:
     def set_cell(self, cell: CellSnapshot) -> None:
         self._cell = cell
 
-    def observe(self, primitive: Vision, cam: Camera, camera_pose: Pose) -> VisionResult:
+    def fallback(self, primitive: Vision, placed: Sequence[tuple[CameraSpec, Pose]]) -> VisionResult:
+        """For a feature without an image model: the true pose plus noise, reported as ``simulated``."""
+        cam, camera_pose = placed[0]
+        result = self.observe(primitive, cam, camera_pose)
+        report = VisionReport(cam.name, "simulated", nominal=primitive.nominal, measured=result.pose)
+        return VisionResult(pose=result.pose, value=result.value, score=result.score, report=report)
+
+    def observe(self, primitive: Vision, cam: CameraSpec, camera_pose: Pose) -> VisionResult:
         """What ``cam`` at ``camera_pose`` reports for ``primitive``; BridgeError(VISION) if nothing."""
         target = primitive.target
         actual, nominal = self._where(primitive)
@@ -95,7 +114,7 @@ class SimulatedVision:
     def _where(self, primitive: Vision) -> tuple[Pose, Pose | None]:
         """(true pose, nominal pose) of the target; VISION error when neither is known."""
         target = primitive.target
-        nominal = primitive.nominal or self._frame_pose(target)
+        nominal = primitive.nominal or self.frame_pose(target)
         truth = self._cell.truth.get(target) if (self._cell is not None and target) else None
         actual = truth or nominal
         if actual is None:
@@ -103,7 +122,7 @@ class SimulatedVision:
             raise BridgeError(FaultKind.VISION, f"feature {target!r} is unknown: not in {where} and no nominal pose given")
         return actual, nominal
 
-    def _frame_pose(self, name: str) -> Pose | None:
+    def frame_pose(self, name: str) -> Pose | None:
         if self._cell is None or not name:
             return None
         for frame in self._cell.frames:
