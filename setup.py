@@ -11,6 +11,8 @@ from pathlib import Path
 from setuptools import find_packages, setup
 
 PACKAGE = "dual_arm_executive"
+#: The operator station's web server (python -m execution_engine studio).
+STUDIO = ["starlette>=0.37", "uvicorn>=0.29", "websockets>=12"]
 HERE = Path(__file__).resolve().parent
 
 
@@ -31,9 +33,12 @@ setup(
     license="Apache-2.0",
     python_requires=">=3.10",
     packages=find_packages(
-        include=["execution_engine*", "core_functions*", "app_functions*", "robot_bridges*"]
+        include=["execution_engine*", "core_functions*", "app_functions*", "robot_bridges*", "operator_station*"]
     ),
-    package_data={f"robot_bridges.{sim}": ["urdf/*.urdf"] for sim in ("nextage_sim", "vplus", "kuka_rsi")},
+    package_data={
+        **{f"robot_bridges.{sim}": ["urdf/*.urdf"] for sim in ("nextage_sim", "vplus", "kuka_rsi")},
+        "operator_station": ["static/*.html", "static/*.css", "static/js/*.js", "static/vendor/*"],  # the page, served offline
+    },
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -44,7 +49,10 @@ setup(
         *tree("schema"),
     ],
     install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9", "mcap>=1.2", "mcap-ros2-support>=0.5", "matplotlib>=3.6", "opencv-python-headless>=4.8"],
-    extras_require={"test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18"]},
+    extras_require={
+        "studio": STUDIO,
+        "test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18", *STUDIO, "httpx>=0.24", "selenium>=4.11"],
+    },
     zip_safe=True,
     entry_points={
         "console_scripts": [

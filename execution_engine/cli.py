@@ -28,6 +28,7 @@ from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
+from operator_station import cli as studio
 from execution_engine.run_report import add_report_parser, cmd_report
 from execution_engine.recorder.cli_hook import add_run_options, start_recording, stop_recording
 from robot_bridges.backend import BackendOptions
@@ -311,6 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     run.add_argument("--no-check", action="store_true", help="start without the dry run on the simulator (validate --simulate) that otherwise comes first")
     add_run_options(run)
+    studio.add_parser(sub)
     return parser
 
 
@@ -326,6 +328,8 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
         return cmd_validate(args.files, catalog, out, err, args)
     if args.command == "functions":
         return cmd_functions(catalog, args.json, out)
+    if args.command == "studio":
+        return studio.cmd_studio(args, catalog, out, err)
     if args.command == "report":
         return cmd_report(args, out, err)
     if not Path(args.file).is_file():

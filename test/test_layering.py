@@ -7,11 +7,13 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("execution_engine", "core_functions", "app_functions", "robot_bridges")
+PACKAGES = ("execution_engine", "core_functions", "app_functions", "robot_bridges", "operator_station")
 # Wiring may import back ends; nothing else may.
 WIRING = {"execution_engine/cli.py", "execution_engine/deployment.py", "execution_engine/nodes.py", "execution_engine/ros_main.py"}
 # The dry run builds a robot's simulator and wraps its back end (docs/application_xml.md, "Checking before anything moves").
 WIRING |= {f"execution_engine/dry_run/{m}.py" for m in ("backend", "check", "runner", "simulators")}
+# The operator station runs the engine and a back end in-process (docs/studio.md): wiring too.
+WIRING |= {"operator_station/session.py"}
 ROS_ADAPTERS = {"execution_engine/transport/ros.py"}
 
 
@@ -64,4 +66,10 @@ def test_bridges_use_only_the_transport_port_and_the_clock_of_the_engine() -> No
 
 def test_nothing_but_wiring_imports_robot_bridges() -> None:
     offenders = [(f, m) for f, m in IMPORTS if m.startswith("robot_bridges") and not f.startswith("robot_bridges/") and f not in WIRING]
+    assert offenders == []
+
+
+def test_only_the_cli_reaches_up_to_the_operator_station() -> None:
+    """The station sits on top of everything; below it only the command line's one hook names it."""
+    offenders = [(f, m) for f, m in IMPORTS if m.startswith("operator_station") and not f.startswith("operator_station/") and f != "execution_engine/cli.py"]
     assert offenders == []

@@ -1,0 +1,130 @@
+"""The builder's server side (paper Figure 7): the catalog, the cell's names, validation placed at cells, open and save.
+
+The page edits an :class:`~execution_engine.app_model.document.AppDocument`; every check is the
+project's own validator (:func:`execution_engine.app_model.read_application`) run on the XML
+the document would be saved as, read as if it were the file at its path (so the cell file is
+found beside it).  Each message is then placed at the operation, group and param of the line it
+names, through the serializer's line map: the page shows it at that cell of the table.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from core_functions.catalog import Catalog
+from core_functions.robots import find_robot
+from execution_engine.app_model import Application, Diagnostic, read_application
+from execution_engine.app_model.cell import read_cell
+from execution_engine.app_model.document import AppDocument, Placement, read_document, serialize
+from execution_engine.cli import catalog_document
+
+
+@dataclass(frozen=True)
+class PlacedMessage:
+    """One validator message and the cell of the builder it belongs to."""
+
+    message: str
+    severity: str
+    file: str
+    line: int
+    col: int
+    operation: int | None  # index into the document's operations; None: the application or its cell file
+    group: str | None
+    param: int | None
+    part: str
+
+    def to_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+def catalog_view(catalog: Catalog) -> dict[str, Any]:
+    """``functions --json`` with the functions grouped by library: core first, then each application library."""
+    document = catalog_document(catalog)
+    libraries: dict[str, list[dict[str, Any]]] = {}
+    for function in document["functions"]:  # type: ignore[attr-defined]
+        libraries.setdefault(function["library"], []).append(function)
+    document["libraries"] = [{"name": name, "kind": "core" if name == "core" else "app", "functions": [f["name"] for f in functions]}
+                             for name, functions in sorted(libraries.items(), key=lambda kv: (kv[0] != "core", kv[0]))]
+    return document
+
+
+def cell_names(document: AppDocument, path: Path) -> dict[str, Any]:
+    """The names the cell offers to params (frames with their kind, elements, joint poses) and the robot's groups.
+
+    A cell that cannot be read offers nothing and says why (validation says it at its line too).
+    """
+    try:
+        robot = find_robot(document.robot)
+        groups = list(robot.group_names)
+        poses = sorted(robot.poses)
+        cameras = list(robot.cameras)
+    except KeyError:
+        groups, poses, cameras = [], [], []
+    out: dict[str, Any] = {"groups": groups, "robot_poses": poses, "cameras": cameras, "frames": [], "elements": [], "joint_poses": [], "problem": None}
+    if not document.cell:
+        return out
+    cell_path = (path.parent / document.cell).resolve()
+    cell, problems = read_cell(cell_path, display=document.cell)
+    if cell is None:
+        out["problem"] = str(problems[0]) if problems else f"cannot read {document.cell}"
+        return out
+    out["frames"] = [{"name": f.name, "kind": f.kind} for f in cell.frames.values()]
+    out["elements"] = [{"name": e.name, "kind": e.kind} for e in cell.elements.values()]
+    out["joint_poses"] = [{"name": p.name, "group": p.group} for p in cell.joint_poses.values()]
+    return out
+
+
+def place(diagnostics: list[Diagnostic], placements: list[Placement], display: str) -> list[PlacedMessage]:
+    """Each diagnostic with the cell of its line (messages of other files, the cell's, stay at the application)."""
+    out = []
+    for d in diagnostics:
+        where = placements[d.line - 1] if d.file == display and 0 < d.line <= len(placements) else Placement()
+        out.append(PlacedMessage(d.message, d.severity, d.file, d.line, d.col, where.operation, where.group, where.param, where.part))
+    return out
+
+
+def validate(document: AppDocument, path: Path, catalog: Catalog) -> tuple[Application | None, list[PlacedMessage], str]:
+    """Validate the document as the file at ``path``: the application (None with errors), the placed messages, the XML."""
+    text, placements = serialize(document)
+    display = str(path)
+    app, diagnostics = read_application(path, catalog, data=text.encode("utf-8"))
+    return app, place(diagnostics, placements, display), text
+
+
+def open_document(path: Path) -> tuple[AppDocument | None, list[Diagnostic]]:
+    return read_document(path)
+
+
+def save_document(document: AppDocument, path: Path, catalog: Catalog) -> tuple[bool, list[PlacedMessage]]:
+    """Write the document to ``path`` only if it validates there; the messages either way.
+
+    The file is replaced atomically (a temporary file beside it, then a rename), so a crash
+    never leaves half an application behind.
+    """
+    app, messages, text = validate(document, path, catalog)
+    if app is None:
+        return False, messages
+    temporary = path.with_name(f".{path.name}.studio-{os.getpid()}")
+    temporary.write_text(text, encoding="utf-8")
+    os.replace(temporary, path)
+    return True, messages
+
+
+def planned_durations(report: Any, app: Application) -> list[float]:
+    """Each operation's planned duration from a dry run's timeline: from its first span's start to the next
+    operation's (the last one's to the predicted cycle time), so the waits between operations count too."""
+    starts: dict[str, float] = {}
+    for span in report.timeline:
+        starts[span.operation] = min(starts.get(span.operation, math.inf), span.start)
+    known = [starts.get(op.id) for op in app.operations]
+    out = []
+    for i, start in enumerate(known):
+        if start is None:
+            out.append(0.0)
+            continue
+        following = next((s for s in known[i + 1:] if s is not None), float(report.cycle_time))
+        out.append(max(0.0, following - start))
+    return out

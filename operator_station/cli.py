@@ -1,0 +1,109 @@
+"""``python -m execution_engine studio [APP.xml] [--port 8080] [--host 127.0.0.1] [--robot ...] [--speed ...] [--replay TRACE.jsonl]``.
+
+Serves the operator station (builder, monitor, timeline) with uvicorn.  It binds to loopback
+unless ``--host`` names another address, and then says so: the station starts and stops robots,
+and it has no login.  The run's settings (``--robot``, ``--speed``, ``--trace``, back-end
+options) are those of ``run`` and apply to every run started from the page.
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import math
+import sys
+from pathlib import Path
+from typing import IO, Any
+
+from core_functions.catalog import Catalog
+
+log = logging.getLogger(__name__)
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+#: Options ``studio`` takes over from ``run`` (same meaning, same parsing: the two cannot drift apart).
+RUN_OPTIONS = ("robot", "speed", "trace", "rsi_listen", "fault", "seed", "backend_option", "trajectory_db", "no_check")
+
+
+def add_parser(sub: Any) -> None:
+    """Register ``studio`` on the CLI's subcommands, after ``run`` (whose run options it shares)."""
+    studio = sub.add_parser("studio", help="the operator station in the browser: build, validate, run, watch and replay applications")
+    studio.add_argument("file", nargs="?", metavar="APP.xml", help="the application to open in the builder")
+    studio.add_argument("--port", type=int, default=8080, help="HTTP port of the station (default 8080)")
+    studio.add_argument("--host", default="127.0.0.1", help="address to serve on (default loopback; anything else is reachable from the network)")
+    studio.add_argument("--replay", metavar="TRACE.jsonl", help="show a finished run's trace instead of running anything")
+    studio.add_argument("--controller-host", dest="controller_host", help="V+ controller address (none starts the simulator); run's --host")
+    studio.add_argument("--controller-port", dest="controller_port", type=int, help="V+ controller port; run's --port")
+    for action in sub.choices["run"]._actions:  # noqa: SLF001 - argparse has no public way to share options
+        if action.dest in RUN_OPTIONS:
+            studio._add_action(action)  # noqa: SLF001
+
+
+def build_station(args: argparse.Namespace, catalog: Catalog, root: Path) -> Any:
+    """The station of these arguments (no server yet): what the tests serve with Starlette's TestClient."""
+    from operator_station.feed import Feed
+    from operator_station.replay import load_replay
+    from operator_station.server import Station
+    from operator_station.session import RunSession, RunSettings
+
+    feed = Feed()
+    app_path = (root / args.file).resolve() if args.file else None
+    if args.replay:
+        load_replay(feed, Path(args.replay))
+        return Station(catalog, feed, None, root, app_path, replay=True)
+    options = {"host": args.controller_host, "port": args.controller_port, "rsi_listen": args.rsi_listen,
+               "faults": tuple(args.fault or ()), "seed": args.seed, "extra": dict(args.backend_option or ())}
+    settings = RunSettings(args.robot, options, args.speed, Path(args.trace) if args.trace else None, args.trajectory_db, not args.no_check)
+    return Station(catalog, feed, RunSession(feed, settings), root, app_path)
+
+
+def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr) -> int:
+    try:
+        import uvicorn
+    except ImportError:
+        err.write("error: studio needs the web server: pip install 'dual_arm_executive[studio]' (starlette, uvicorn)\n")
+        return 2
+    if args.file and not Path(args.file).is_file():
+        err.write(f"error: {args.file}: no such file\n")
+        return 1
+    if args.replay and not Path(args.replay).is_file():
+        err.write(f"error: {args.replay}: no such trace file\n")
+        return 1
+    if args.host not in LOOPBACK:
+        err.write(f"warning: serving on {args.host}: anyone who reaches this address can start and stop the robot (no login); use the default 127.0.0.1 unless the network is the cell's own\n")
+    if not 0 <= args.port <= 65535:
+        err.write(f"error: --port must be 0..65535, got {args.port}\n")
+        return 2
+    try:
+        station = build_station(args, catalog, Path.cwd())
+    except OSError as error:
+        err.write(f"error: {error}\n")
+        return 1
+    from operator_station.server import create_app
+
+    config = uvicorn.Config(create_app(station), host=args.host, port=args.port, log_level="warning", lifespan="off", ws="websockets")
+    server = uvicorn.Server(config)
+    speed = "max" if math.isinf(args.speed) else f"x{args.speed:g}"
+    what = f"replaying {args.replay}" if args.replay else f"runs at {speed}"
+    out.write(f"operator station on http://{args.host if ':' not in args.host else f'[{args.host}]'}:{args.port}/ ({what}); Ctrl-C ends it\n")
+    out.flush()
+    try:
+        asyncio.run(_serve(server, station))
+    except (OSError, SystemExit) as error:  # uvicorn exits when it cannot bind
+        why = error.strerror if isinstance(error, OSError) else "the address is in use or not this machine's"
+        err.write(f"error: cannot serve on {args.host}:{args.port}: {why}\n")
+        return 2
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+async def _serve(server: Any, station: Any) -> None:
+    try:
+        await server.serve()
+    finally:
+        station.stopping.set()
+        if station.session is not None and station.session.running:
+            await station.session.command("stop")
+            await asyncio.to_thread(station.session.join, 30.0)

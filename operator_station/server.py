@@ -1,0 +1,255 @@
+"""The operator station's web server: Starlette routes and one WebSocket per page, all on loopback by default.
+
+Routes (JSON unless said otherwise):
+
+* ``GET /`` the page; ``/static/...`` its scripts, styles and the vendored libraries (no CDN: the
+  page works without a network);
+* ``GET /api/catalog`` the function catalog grouped by library (``functions --json`` plus groups);
+* ``GET /api/document`` the application the station was started with (or an empty one);
+* ``POST /api/open`` ``{path}``; ``POST /api/cell`` ``{path, document}`` the cell's names;
+  ``POST /api/validate`` ``{path, document}``; ``POST /api/save`` ``{path, document}`` (only valid
+  documents are written); ``POST /api/run`` ``{path, document}`` validates, then starts the run;
+* ``POST /api/operator/{command}`` start, pause, resume, step, stop, reset; ``POST /api/safety``
+  ``{active}``;
+* ``GET /api/timeline`` the timeline model of the records so far (``?until=T`` for a replay's slider);
+* ``WS /ws`` the live feed: a snapshot, then every record and joint sample, in order, batched.
+
+Paths the page names are resolved against the directory the station was started in; only
+``.xml`` files are opened or written.
+"""
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from starlette.applications import Starlette
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Mount, Route, WebSocketRoute
+from starlette.staticfiles import StaticFiles
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from core_functions.catalog import Catalog
+from execution_engine.app_model.document import AppDocument, DocumentError, read_document
+from execution_engine.transport.wire import ENGINE_SERVICES
+from operator_station import builder
+from operator_station.feed import Feed
+from operator_station.session import RunSession
+from operator_station.timeline_view import TimelineView
+
+log = logging.getLogger(__name__)
+
+STATIC = Path(__file__).resolve().parent / "static"
+#: Largest request body taken (a 10,000-operation application as JSON is ~3 MB).
+MAX_BODY = 32 << 20
+#: Wall seconds between two pushes to a page: batches records at --speed max, keeps the page fluid.
+PUSH_PERIOD = 0.05
+#: Records sent in one WebSocket message at most.
+MAX_BATCH = 5000
+
+
+class Station:
+    """The state one station serves: catalog, the application file, the feed and the run."""
+
+    def __init__(self, catalog: Catalog, feed: Feed, session: RunSession | None, root: Path, app_path: Path | None, replay: bool = False) -> None:
+        self.catalog = catalog
+        self.catalog_json = builder.catalog_view(catalog)
+        self.feed = feed
+        self.session = session
+        self.root = root
+        self.app_path = app_path
+        self.replay = replay
+        self.timeline = TimelineView(feed)
+        self.stopping = asyncio.Event()
+
+    def resolve(self, text: Any) -> Path:
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError("a file path is needed")
+        path = (self.root / text.strip()).resolve()
+        if path.suffix.lower() != ".xml":
+            raise ValueError(f"{text}: an application file ends in .xml")
+        return path
+
+
+def _error(message: str, status: int = 400) -> JSONResponse:
+    return JSONResponse({"ok": False, "error": message}, status_code=status)
+
+
+async def _body(request: Request) -> dict[str, Any]:
+    data = await request.body()
+    if len(data) > MAX_BODY:
+        raise ValueError(f"the request is {len(data)} bytes, over the limit of {MAX_BODY}")
+    body = json.loads(data or b"{}")
+    if not isinstance(body, dict):
+        raise ValueError("the request must be a JSON object")
+    return body
+
+
+def _with_document(station: Station, handler: Callable[[Path, AppDocument], Awaitable[Response]]) -> Callable[[Request], Awaitable[Response]]:
+    """A POST route taking ``{path, document}``: bad input is one clear line and a 400, nothing else happens."""
+
+    async def route(request: Request) -> Response:
+        try:
+            body = await _body(request)
+            path = station.resolve(body.get("path"))
+            document = AppDocument.from_json(body.get("document"))
+        except (ValueError, DocumentError) as error:  # JSONDecodeError is a ValueError
+            return _error(str(error))
+        return await handler(path, document)
+
+    return route
+
+
+def create_app(station: Station) -> Starlette:
+    async def index(request: Request) -> Response:
+        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+
+    async def catalog(request: Request) -> Response:
+        return JSONResponse(station.catalog_json)
+
+    async def document(request: Request) -> Response:
+        path = station.app_path
+        if path is None:
+            return JSONResponse({"ok": True, "path": "", "document": None, "replay": station.replay})
+        doc, problems = read_document(path)
+        if doc is None:
+            return JSONResponse({"ok": False, "path": _shown(station, path), "error": "; ".join(map(str, problems)), "replay": station.replay})
+        return JSONResponse({"ok": True, "path": _shown(station, path), "document": doc.to_json(), "replay": station.replay})
+
+    async def open_(request: Request) -> Response:
+        try:
+            path = station.resolve((await _body(request)).get("path"))
+        except ValueError as error:
+            return _error(str(error))
+        doc, problems = read_document(path)
+        if doc is None:
+            return _error("; ".join(map(str, problems)))
+        return JSONResponse({"ok": True, "path": _shown(station, path), "document": doc.to_json()})
+
+    async def cell(path: Path, doc: AppDocument) -> Response:
+        return JSONResponse({"ok": True, **builder.cell_names(doc, path)})
+
+    async def validate(path: Path, doc: AppDocument) -> Response:
+        app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
+        return JSONResponse({"ok": app is not None, "messages": [m.to_json() for m in messages]})
+
+    async def save(path: Path, doc: AppDocument) -> Response:
+        try:
+            saved, messages = await asyncio.to_thread(builder.save_document, doc, path, station.catalog)
+        except OSError as error:
+            return _error(f"{_shown(station, path)}: cannot write: {error.strerror or error}")
+        return JSONResponse({"ok": saved, "path": _shown(station, path), "messages": [m.to_json() for m in messages]})
+
+    async def run(path: Path, doc: AppDocument) -> Response:
+        if station.session is None:
+            return _error("this station replays a trace; it runs nothing", 409)
+        app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
+        if app is None:
+            return JSONResponse({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
+        operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}} for op in app.operations]
+        ok, answer = station.session.start(app, operations)
+        return JSONResponse({"ok": ok, "answer": answer, "messages": [m.to_json() for m in messages]}, status_code=200 if ok else 409)
+
+    async def operator(request: Request) -> Response:
+        command = request.path_params["command"]
+        if command not in ENGINE_SERVICES:
+            return _error(f"unknown command {command!r} (commands: {', '.join(ENGINE_SERVICES)})", 404)
+        if station.session is None:
+            return _error("this station replays a trace; there is no run to command", 409)
+        ok, answer = await station.session.command(command)
+        return JSONResponse({"ok": ok, "answer": answer})
+
+    async def safety(request: Request) -> Response:
+        if station.session is None:
+            return _error("this station replays a trace; there is no run to command", 409)
+        try:
+            active = (await _body(request)).get("active")
+        except ValueError as error:
+            return _error(str(error))
+        if not isinstance(active, bool):
+            return _error("safety: give {\"active\": true} to raise the safety stop, false to clear it")
+        ok, answer = station.session.safety_stop(active)
+        return JSONResponse({"ok": ok, "answer": answer})
+
+    async def timeline(request: Request) -> Response:
+        until = request.query_params.get("until")
+        try:
+            limit = float(until) if until not in (None, "") else None
+        except ValueError:
+            return _error(f"until must be a time in seconds, got {until!r}")
+        return JSONResponse(await asyncio.to_thread(station.timeline.model, limit))
+
+    async def feed(socket: WebSocket) -> None:
+        await socket.accept()
+        waiter = station.feed.waiter()
+        run, sent, joints, last_state = -1, 0, 0, ""
+        try:
+            while not station.stopping.is_set():
+                waiter.clear()
+                if station.feed.snapshot.run != run:  # a new run or replay: the page starts over
+                    run, sent, joints, last_state = station.feed.snapshot.run, 0, 0, ""
+                    await socket.send_text(json.dumps({"type": "snapshot", "snapshot": asdict(station.feed.snapshot)}))
+                snapshot, records, samples, joint_total = station.feed.read(sent, joints)
+                if snapshot.run != run:
+                    continue
+                state = json.dumps({"type": "state", "state": _live_state(snapshot)})
+                if state != last_state:
+                    await socket.send_text(state)
+                    last_state = state
+                for start in range(0, len(records), MAX_BATCH):
+                    batch = records[start:start + MAX_BATCH]
+                    await socket.send_text(json.dumps({"type": "records", "from": sent, "records": batch}))
+                    sent += len(batch)
+                if samples:
+                    await socket.send_text(json.dumps({"type": "joints", "names": snapshot.joint_names, "samples": samples}))
+                joints = joint_total
+                await asyncio.sleep(PUSH_PERIOD)
+                await _wait_either(waiter, station.stopping)
+        except (WebSocketDisconnect, RuntimeError):
+            pass  # the page went away (RuntimeError: sending on a socket already closed)
+        finally:
+            station.feed.forget(waiter)
+
+    return Starlette(routes=[
+        Route("/", index),
+        Route("/api/catalog", catalog),
+        Route("/api/document", document),
+        Route("/api/open", open_, methods=["POST"]),
+        Route("/api/cell", _with_document(station, cell), methods=["POST"]),
+        Route("/api/validate", _with_document(station, validate), methods=["POST"]),
+        Route("/api/save", _with_document(station, save), methods=["POST"]),
+        Route("/api/run", _with_document(station, run), methods=["POST"]),
+        Route("/api/operator/{command}", operator, methods=["POST"]),
+        Route("/api/safety", safety, methods=["POST"]),
+        Route("/api/timeline", timeline),
+        WebSocketRoute("/ws", feed),
+        Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
+    ])
+
+
+async def _wait_either(first: asyncio.Event, second: asyncio.Event) -> None:
+    waits = [asyncio.ensure_future(first.wait()), asyncio.ensure_future(second.wait())]
+    try:
+        await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for wait in waits:
+            wait.cancel()
+
+
+def _live_state(snapshot: Any) -> dict[str, Any]:
+    """What changes during a run (the rest of the snapshot is sent once per run)."""
+    return {"status": snapshot.status, "messages": snapshot.messages, "ended": snapshot.ended, "structures": snapshot.structures,
+            "joint_names": snapshot.joint_names, "plan": snapshot.plan}
+
+
+def _shown(station: Station, path: Path) -> str:
+    """A path as the page shows it: relative to the station's directory when it is below it."""
+    try:
+        return str(path.relative_to(station.root))
+    except ValueError:
+        return str(path)

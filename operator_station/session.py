@@ -1,0 +1,238 @@
+"""The run the station starts: engine, group machines and bridge in-process, watched like any viewer would.
+
+The run gets a thread and an event loop of its own (``run_with_clock``: a ``--speed max`` run needs
+a virtual-time loop, which the web server's loop is not).  Everything the page shows comes from
+plain subscriptions on the run's transport -- the machines' status, structure and the engine's
+status and events (:class:`~execution_engine.observers.RunObserver`), ``joint_states`` -- so it
+sees what a tool on a ROS graph would.  Operator commands go to the engine's own entry for them
+(:meth:`ExecutionEngine.operator_command`, source ``studio``), the safety stop to the cell's
+``cell/safety_stop`` input, so the trace and the run report record both as for any other operator.
+"""
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from execution_engine.app_model import Application
+from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
+from execution_engine.deployment import Deployment, deploy_local
+from execution_engine.dry_run.runner import DryRunError, dry_run
+from execution_engine.engine.report import RunReport
+from execution_engine.observers import RunObserver, TraceWriter
+from execution_engine.transport import codec
+from execution_engine.transport.msgs import Bool, JointState, String
+from execution_engine.transport.qos import LATCHED, SENSOR
+from execution_engine.transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
+from operator_station.builder import planned_durations
+from operator_station.feed import Feed
+from robot_bridges.backend import BackendOptions
+
+log = logging.getLogger(__name__)
+
+#: How the page names itself in the trace and the run report.
+SOURCE = "studio"
+#: Exit codes as ``run`` gives them, for the trace's run_end record.
+EXIT_OK, EXIT_FAILED, EXIT_STOPPED = 0, 1, 3
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What ``studio`` was started with, for every run it starts."""
+
+    backend: str | None  # --robot; None: the application robot's usual back end
+    options: dict[str, Any]  # host, port, rsi_listen, faults, seed, extra (BackendOptions without the robot)
+    speed: float  # math.inf: simulated time
+    trace: Path | None = None
+    trajectory_db: str | None = None
+    check: bool = True  # dry-run first (as run does), refuse on findings
+
+
+class RunSession:
+    """At most one run at a time; :meth:`start` another once it has ended."""
+
+    def __init__(self, feed: Feed, settings: RunSettings) -> None:
+        self.feed = feed
+        self.settings = settings
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._deployment: Deployment | None = None
+        self._safety: Any = None  # the studio node's publisher on cell/safety_stop
+        self._ready = threading.Event()
+        self.report: RunReport | None = None
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def backend_name(self, app: Application) -> str:
+        return str(self.settings.backend or app.robot.default_backend)
+
+    def start(self, app: Application, operations: list[dict[str, Any]]) -> tuple[bool, str]:
+        """Start ``app`` (validated) on a fresh deployment; False and why when a run is still going."""
+        if self.running:
+            return False, "a run is still going: stop it first"
+        self._ready.clear()
+        self.report = None
+        self.feed.begin("live", app.name, list(app.robot.group_names), operations=operations)
+        self._thread = threading.Thread(target=self._main, args=(app,), name="studio run", daemon=True)
+        self._thread.start()
+        return True, "starting"
+
+    def join(self, timeout: float | None = None) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    # ------------------------------------------------------------------------ the run thread
+    def _options(self, app: Application) -> BackendOptions:
+        return BackendOptions(robot=app.robot, **self.settings.options)
+
+    def _main(self, app: Application) -> None:
+        try:
+            if self.settings.check and not self._checked(app):
+                return
+            clock = simulated_clock() if math.isinf(self.settings.speed) else scaled_clock(self.settings.speed)
+            trace = open(self.settings.trace, "w", encoding="utf-8") if self.settings.trace else None  # noqa: SIM115 - closed below
+            try:
+                self.report = run_with_clock(lambda c: self._run(app, c, trace), clock)
+            finally:
+                if trace is not None:
+                    trace.close()
+        except Exception as error:  # noqa: BLE001 - the page must hear of it; the thread must not die silently
+            log.exception("the studio run failed")
+            self.feed.update(messages=[{"severity": "error", "message": f"the run could not go on: {type(error).__name__}: {error}"}])
+        finally:
+            self._loop = None
+            self._deployment = None
+            self._ready.set()
+            self.feed.update(ended=True)
+
+    def _checked(self, app: Application) -> bool:
+        """The dry run ``run`` does first: its planned durations give the ETA; findings refuse the run."""
+        try:
+            report = dry_run(app, self.backend_name(app), self._options(app), self.settings.trajectory_db)
+        except (KeyError, ValueError, OSError, ConnectionError, DryRunError) as error:
+            self.feed.update(messages=[{"severity": "error", "message": f"not run: the dry run could not be done: {error}"}])
+            return False
+        if not report.ok:
+            found = [{"severity": "error", "message": str(d), "line": d.line} for d in report.diagnostics()]
+            found += [{"severity": "error", "message": f"not checked: {note}"} for note in report.notes]
+            self.feed.update(messages=[{"severity": "error", "message": f"not run: {len(report.findings)} problem(s) found by the dry run"}, *found])
+            return False
+        self.feed.update(plan=planned_durations(report, app))
+        return True
+
+    async def _run(self, app: Application, clock: Clock, trace: IO[str] | None) -> RunReport:
+        from robot_bridges.registry import create_backend
+
+        backend = await create_backend(self.backend_name(app), clock, self._options(app))
+        parameters = {"trajectory_db": self.settings.trajectory_db} if self.settings.trajectory_db else {}
+        deployment = await deploy_local(clock, app.robot, backend, machine_parameters=parameters, engine_parameters={"autostart": False})
+        deployment.engine.hold_for_operators = True  # the operator is a person at a page: simulated time waits
+        node = deployment.transport.create_node("operator_station")
+        writer = TraceWriter(trace) if trace is not None else None
+        page = TraceWriter(FeedStream(self.feed))  # the page gets the trace's records, written by the same code
+        self._observe(node, app, writer, page)
+        self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
+        self._loop, self._deployment = asyncio.get_running_loop(), deployment
+        self._ready.set()
+        run = asyncio.get_running_loop().create_task(deployment.engine.run(app))
+        try:
+            await asyncio.sleep(0)  # the engine takes its first steps: a start now is this run's
+            await deployment.engine.operator_command("start", SOURCE)
+            report = await run
+            code = EXIT_OK if report.ok else EXIT_STOPPED if report.outcome == "stopped" else EXIT_FAILED
+            for each in (writer, page):
+                if each is not None:
+                    each.finish(clock.now(), report.outcome, code, report.operations_done, report.operations_total)
+            return report
+        finally:
+            self._loop = None
+            await deployment.close()
+
+    def _observe(self, node: Any, app: Application, writer: TraceWriter | None, page: TraceWriter) -> None:
+        observer = RunObserver(node, app.robot.group_names)
+        feed = self.feed
+        for each in (writer, page):  # the trace first, as run does: what the page shows is on disk already
+            if each is not None:
+                observer.sinks.append(each.on_status)
+                observer.engine_sinks.append(each.on_engine)
+                observer.event_sinks.append(each.on_event)
+        observer.engine_sinks.append(lambda status: feed.update(status=_status_json(status)))
+        for group in app.robot.group_names:
+            node.create_subscription(String, sm_topic(group, "structure"), _decoded(SmStructure, lambda s: feed.structure(s.group, _structure_json(s))), LATCHED)
+        order = list(app.robot.joint_names)
+        feed.update(joint_names=order)
+
+        def on_joints(msg: JointState) -> None:
+            index = dict(zip(msg.name, msg.position))
+            if all(name in index for name in order):
+                feed.joint_sample(node.clock.now(), [index[name] for name in order])
+
+        node.create_subscription(JointState, JOINT_STATES, on_joints, SENSOR)
+
+    # ------------------------------------------------------------------------ the page's side
+    async def command(self, command: str) -> tuple[bool, str]:
+        """An operator command from the page, given to the engine on the run's loop; the engine's answer."""
+        loop, deployment = self._loop, self._deployment
+        if loop is None or deployment is None:
+            return False, "no run is going"
+        future: Future[tuple[bool, str]] = asyncio.run_coroutine_threadsafe(deployment.engine.operator_command(command, SOURCE), loop)
+        try:
+            return await asyncio.wait_for(asyncio.wrap_future(future), 30.0)
+        except asyncio.TimeoutError:
+            return False, f"{command}: the engine did not answer within 30 s"
+
+    def safety_stop(self, active: bool) -> tuple[bool, str]:
+        """Raise or clear the cell's safety stop input: the engine pauses every group and records it."""
+        loop, publisher = self._loop, self._safety
+        if loop is None or publisher is None:
+            return False, "no run is going"
+        loop.call_soon_threadsafe(publisher.publish, Bool(active))
+        return True, "safety stop raised: every group pauses" if active else "safety stop cleared: resume to continue"
+
+
+class FeedStream:
+    """A text stream of trace lines into the feed: the page's records are the trace's, line for line."""
+
+    def __init__(self, feed: Feed) -> None:
+        self.feed = feed
+
+    def write(self, text: str) -> int:
+        for line in text.splitlines():
+            if line:
+                self.feed.append(json.loads(line))
+        return len(text)
+
+    def flush(self) -> None:
+        """Nothing is buffered."""
+
+
+def _decoded(cls: type[Any], sink: Callable[[Any], None]) -> Callable[[String], None]:
+    def deliver(msg: String) -> None:
+        try:
+            sink(codec.decode(cls, msg.data))
+        except codec.WireError as error:
+            log.warning("studio: %s", error)
+
+    return deliver
+
+
+def _status_json(status: EngineStatus) -> dict[str, Any]:
+    return {
+        "app": status.app, "state": status.state, "operation_index": status.operation_index, "operation_count": status.operation_count,
+        "t": status.t, "operation_id": status.operation_id, "message": status.message,
+        "groups": {g: {"state": p.state, "operation": p.operation, "function": p.function} for g, p in status.groups.items()},
+    }
+
+
+def _structure_json(structure: SmStructure) -> dict[str, Any]:
+    return {"group": structure.group, "initial": structure.initial, "states": list(structure.states),
+            "transitions": [{"from": t.source, "signal": t.signal, "to": t.target} for t in structure.transitions]}

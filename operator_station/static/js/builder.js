@@ -1,0 +1,388 @@
+// The application builder (paper Figure 7): the catalog on the left, the application as a table of
+// operations x groups, the selected cell's function and typed params on the right.  Every edit is
+// validated by the project's own validator on the server; each message is shown at its cell.
+"use strict";
+
+const Builder = (() => {
+  const ROW_H = 30;
+  const b = {doc: null, path: "", messages: [], byCell: new Map(), selected: null, cellNames: null, valid: null, validating: 0};
+  const $ = (id) => document.getElementById(id);
+  const el = (tag, attrs, ...children) => {
+    const node = document.createElement(tag);
+    for (const [k, v] of Object.entries(attrs || {})) {
+      if (k === "class") node.className = v; else if (k === "text") node.textContent = v;
+      else if (k.startsWith("on")) node.addEventListener(k.slice(2), v); else node.setAttribute(k, v);
+    }
+    for (const c of children) if (c !== null && c !== undefined) node.append(c);
+    return node;
+  };
+
+  // ------------------------------------------------------------------------------ the robot and catalog
+  const robotInfo = () => {
+    const robots = (Store.catalog && Store.catalog.robots) || {};
+    const name = b.doc ? b.doc.robot : "";
+    for (const [key, robot] of Object.entries(robots)) if (key === name || (robot.aliases || []).includes(name)) return {name: key, ...robot};
+    return null;
+  };
+  const groups = () => { const r = robotInfo(); return r ? Object.keys(r.groups) : []; };
+  const groupKind = (g) => { const r = robotInfo(); return r && r.groups[g] ? r.groups[g].kind : g; };
+  const fnSpec = (name) => (Store.catalog.functions || []).find((f) => f.name === name);
+  const fits = (spec, group) => !spec.groups || spec.groups.length === 0 || spec.groups.includes(groupKind(group)) || spec.groups.includes(group);
+
+  function renderCatalog() {
+    const box = $("catalog");
+    box.replaceChildren(el("h3", {text: "Functions"}), el("input", {id: "catalog-filter", placeholder: "filter", oninput: filterCatalog}));
+    const kinds = [["core", "Core functions"], ["app", "Application functions"]];
+    for (const [kind, title] of kinds) {
+      const section = el("div", {class: `catalog-kind catalog-${kind}`}, el("h4", {text: title}));
+      for (const library of Store.catalog.libraries.filter((l) => l.kind === kind)) {
+        if (kind === "app") section.append(el("h5", {text: library.name}));
+        for (const name of library.functions) {
+          const spec = fnSpec(name);
+          const item = el("div", {class: "catalog-fn", "data-name": name, title: spec.doc, onclick: () => assignFunction(name)},
+            el("code", {text: spec.signature}), el("div", {class: "fn-doc", text: spec.doc.split("\n")[0]}),
+            el("div", {class: "fn-groups", text: `groups: ${spec.groups.join(", ")}`}));
+          section.append(item);
+        }
+      }
+      box.append(section);
+    }
+  }
+  function filterCatalog(event) {
+    const text = event.target.value.toLowerCase();
+    for (const item of document.querySelectorAll(".catalog-fn")) item.style.display = item.textContent.toLowerCase().includes(text) ? "" : "none";
+  }
+
+  // ------------------------------------------------------------------------------ the document
+  function setDocument(doc, path) {
+    b.doc = doc;
+    b.path = path || "";
+    b.selected = null;
+    $("doc-path").value = b.path;
+    renderAppFields();
+    renderTable();
+    renderInspector();
+    loadCellNames();
+    validateSoon(0);
+  }
+  function renderAppFields() {
+    const robots = Object.keys((Store.catalog && Store.catalog.robots) || {});
+    const robot = robotInfo();
+    $("app-robot").replaceChildren(...robots.map((r) => el("option", {value: r, text: r})));
+    if (robot && !robots.includes(b.doc.robot)) $("app-robot").append(el("option", {value: b.doc.robot, text: b.doc.robot}));
+    $("app-robot").value = b.doc.robot;
+    $("app-name").value = b.doc.name || "";
+    $("app-cell").value = b.doc.cell || "";
+    $("app-description").value = b.doc.description || "";
+    const policy = b.doc.error_policy || {};
+    $("policy-action").value = policy.action || "";
+    $("policy-retries").value = policy.retries || "";
+    $("policy-safe-pose").value = policy.safe_pose || "";
+    $("robot-poses").replaceChildren(...(robot ? Object.keys(robot.joint_poses_deg) : []).map((p) => el("option", {value: p})));
+  }
+  function bindAppFields() {
+    const text = (id, apply) => $(id).addEventListener("input", () => { apply($(id).value); edited(); });
+    text("app-name", (v) => { b.doc.name = v; });
+    text("app-cell", (v) => { b.doc.cell = v === "" ? null : v; loadCellNamesSoon(); });
+    text("app-description", (v) => { b.doc.description = v === "" ? null : v; });
+    $("app-robot").addEventListener("change", () => { b.doc.robot = $("app-robot").value; renderTable(); renderInspector(); loadCellNames(); edited(); });
+    const policy = (id, key) => text(id, (v) => {
+      const p = Object.assign({}, b.doc.error_policy || {});
+      if (v === "") delete p[key]; else p[key] = v;
+      b.doc.error_policy = Object.keys(p).length ? p : null;
+    });
+    policy("policy-retries", "retries"); policy("policy-safe-pose", "safe_pose");
+    $("policy-action").addEventListener("change", () => {
+      const p = Object.assign({}, b.doc.error_policy || {});
+      if ($("policy-action").value === "") delete p.action; else p.action = $("policy-action").value;
+      b.doc.error_policy = Object.keys(p).length ? p : null;
+      edited();
+    });
+  }
+
+  // ------------------------------------------------------------------------------ the table (virtual rows)
+  const cellKey = (op, group) => `${op}|${group || ""}`;
+  function renderTable() {
+    const gs = groups();
+    const columns = `40px 70px 140px repeat(${Math.max(gs.length, 1)}, minmax(180px, 1fr)) 80px`;
+    $("ops-header").style.gridTemplateColumns = columns;
+    $("ops-header").replaceChildren(el("div", {text: "#"}), el("div", {text: "id"}), el("div", {text: "name"}),
+      ...gs.map((g) => el("div", {text: g, class: "group-head"})), el("div", {text: ""}));
+    $("ops-spacer").style.height = `${b.doc.operations.length * ROW_H}px`;
+    $("op-count").textContent = `${b.doc.operations.length} operation(s)`;
+    b.columns = columns;
+    renderRows();
+  }
+  function renderRows() {
+    if (!b.doc) return;
+    const scroll = $("ops-scroll");
+    const first = Math.max(0, Math.floor(scroll.scrollTop / ROW_H) - 5);
+    const count = Math.ceil((scroll.clientHeight || 600) / ROW_H) + 10;
+    const rows = [];
+    const gs = groups();
+    for (let i = first; i < Math.min(b.doc.operations.length, first + count); i++) rows.push(renderRow(i, gs));
+    $("ops-rows").style.transform = `translateY(${first * ROW_H}px)`;
+    $("ops-rows").replaceChildren(...rows);
+  }
+  function renderRow(i, gs) {
+    const op = b.doc.operations[i];
+    const opMessages = b.byCell.get(cellKey(i, null)) || [];
+    const id = el("input", {class: "op-id", value: op.id, "data-op": i});
+    id.addEventListener("change", () => { op.id = id.value; edited(); });
+    const name = el("input", {class: "op-name", value: op.name || "", "data-op": i});
+    name.addEventListener("change", () => { op.name = name.value === "" ? null : name.value; edited(); });
+    const idCell = el("div", {class: `op-idcell${opMessages.length ? " has-error" : ""}`, title: opMessages.map((m) => m.message).join("\n")}, id,
+      opMessages.length ? el("div", {class: "cell-msg", text: opMessages[0].message}) : null);
+    const row = el("div", {class: "ops-row", "data-op": i}, el("div", {class: "op-index", text: String(i + 1)}), idCell, name);
+    row.style.gridTemplateColumns = b.columns;
+    for (const g of gs) row.append(renderCell(i, g, op));
+    row.append(el("div", {class: "row-tools"},
+      el("button", {class: "op-up", title: "move up", text: "▲", onclick: () => move(i, -1)}),
+      el("button", {class: "op-down", title: "move down", text: "▼", onclick: () => move(i, 1)}),
+      el("button", {class: "op-del", title: "remove", text: "✕", onclick: () => remove(i)})));
+    return row;
+  }
+  function renderCell(i, g, op) {
+    const call = op.calls.find((c) => c.group === g);
+    const messages = b.byCell.get(cellKey(i, g)) || [];
+    const text = call ? `${call.function}(${call.params.map((p) => p.value).join(", ")})` : "— waits";
+    const selected = b.selected && b.selected.op === i && b.selected.group === g;
+    const errors = messages.filter((m) => m.severity === "error");
+    const cell = el("div", {class: `op-cell${call ? "" : " empty"}${selected ? " selected" : ""}${errors.length ? " has-error" : messages.length ? " has-warning" : ""}`,
+      "data-op": i, "data-group": g, title: [text, ...messages.map((m) => m.message)].join("\n"), onclick: () => select(i, g)},
+      el("span", {class: "cell-call", text}), messages.length ? el("div", {class: "cell-msg", text: messages[0].message}) : null);
+    return cell;
+  }
+  function move(i, delta) {
+    const j = i + delta;
+    if (j < 0 || j >= b.doc.operations.length) return;
+    const ops = b.doc.operations;
+    [ops[i], ops[j]] = [ops[j], ops[i]];
+    if (b.selected && b.selected.op === i) b.selected.op = j;
+    edited();
+  }
+  function remove(i) {
+    b.doc.operations.splice(i, 1);
+    if (b.selected && b.selected.op === i) b.selected = null;
+    renderTable();
+    edited();
+  }
+  function addOperation() {
+    const ids = new Set(b.doc.operations.map((o) => o.id));
+    let n = b.doc.operations.length + 1;
+    while (ids.has(String(n))) n++;
+    b.doc.operations.push({id: String(n), name: null, calls: [], comments: []});
+    renderTable();
+    select(b.doc.operations.length - 1, groups()[0]);
+    $("ops-scroll").scrollTop = $("ops-scroll").scrollHeight;
+    edited();
+  }
+  function select(op, group) {
+    b.selected = {op, group};
+    renderRows();
+    renderInspector();
+  }
+  function scrollTo(op) {
+    $("ops-scroll").scrollTop = Math.max(0, op * ROW_H - 60);
+    renderRows();
+  }
+
+  // ------------------------------------------------------------------------------ the inspector: typed params
+  function namesFor(param) {
+    const c = b.cellNames || {};
+    const kinds = param.kinds || [];
+    const ofKind = (items) => items.filter((x) => kinds.length === 0 || kinds.includes(x.kind)).map((x) => x.name);
+    switch (param.type) {
+      case "frame": case "frames": case "target": return ofKind(c.frames || []);
+      case "element": return ofKind(c.elements || []);
+      case "joint_pose": return [...(c.robot_poses || []), ...(c.joint_poses || []).map((p) => p.name)];
+      case "camera": return ["auto", ...(c.cameras || [])];
+      case "group": return c.groups || groups();
+      default: return [];
+    }
+  }
+  // The unit check the page can do at once (the validator repeats it with the physical bounds).
+  function unitProblem(param, value) {
+    if (value.trim() === "" || !["number"].includes(param.type)) return null;
+    const m = value.trim().match(/^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*([A-Za-z%]*)$/);
+    if (!m) return `${param.name}: not a number`;
+    const suffix = m[3];
+    if (suffix && !(param.unit_suffixes || []).includes(suffix) && suffix !== "%") {
+      return `${param.name}: unit '${suffix}' does not fit ${param.unit || "a plain number"} (use ${(param.unit_suffixes || []).join(", ") || "no unit"})`;
+    }
+    return null;
+  }
+  function paramValues(call, spec) {
+    const values = spec.params.map(() => "");
+    if (!call) return values;
+    const named = call.params.some((p) => p.name);
+    call.params.forEach((p, i) => {
+      const index = named && p.name ? spec.params.findIndex((s) => s.name === p.name) : i;
+      if (index >= 0 && index < values.length) values[index] = p.value;
+    });
+    return values;
+  }
+  function writeParams(call, spec, values) {
+    const named = call.params.some((p) => p.name);
+    let last = -1;
+    values.forEach((v, i) => { if (v !== "" || spec.params[i].required) last = i; });
+    call.params = values.slice(0, last + 1).map((v, i) => ({value: v === "" && spec.params[i].default !== undefined ? spec.params[i].default : v,
+                                                          name: named ? spec.params[i].name : null}));
+  }
+  function renderInspector() {
+    const box = $("inspector");
+    if (!b.doc || !b.selected || !b.doc.operations[b.selected.op]) {
+      box.replaceChildren(el("p", {class: "hint", text: "Select a cell of the table (an operation and a group), then pick a function from the catalog or the list here."}));
+      return;
+    }
+    const {op, group} = b.selected;
+    const operation = b.doc.operations[op];
+    const call = operation.calls.find((c) => c.group === group);
+    const select = el("select", {id: "fn-select"}, el("option", {value: "", text: "(none: the group waits)"}));
+    for (const f of Store.catalog.functions) if (fits(f, group)) select.append(el("option", {value: f.name, text: f.name}));
+    if (call && !fnSpec(call.function)) select.append(el("option", {value: call.function, text: `${call.function} (not in the catalog)`}));
+    select.value = call ? call.function : "";
+    select.addEventListener("change", () => assignFunction(select.value));
+    const parts = [el("h3", {text: `operation ${operation.id} · ${group}`}), el("label", {}, "function ", select)];
+    const spec = call && fnSpec(call.function);
+    if (spec) {
+      parts.push(el("p", {class: "fn-doc", text: spec.doc}));
+      const values = paramValues(call, spec);
+      spec.params.forEach((param, i) => {
+        const listId = `param-list-${i}`;
+        const options = param.type === "choice" ? param.choices : param.type === "boolean" ? ["true", "false"] : namesFor(param);
+        let input;
+        if (param.type === "choice" || param.type === "boolean" || param.type === "group") {
+          input = el("select", {id: `param-${i}`, class: "param-input", "data-param": i},
+            el("option", {value: "", text: param.required ? "(choose)" : `(default ${param.default})`}), ...options.map((o) => el("option", {value: o, text: o})));
+          if (values[i] && !options.includes(values[i])) input.append(el("option", {value: values[i], text: values[i]}));
+        } else {
+          input = el("input", {id: `param-${i}`, class: "param-input", "data-param": i, list: listId,
+            placeholder: param.required ? "required" : `default ${param.default}`});
+        }
+        input.value = values[i];
+        const problem = el("div", {class: "unit-problem", id: `param-problem-${i}`});
+        const check = () => { const p = unitProblem(param, input.value); problem.textContent = p || ""; input.classList.toggle("bad", !!p); };
+        input.addEventListener(input.tagName === "SELECT" ? "change" : "input", () => {
+          values[i] = input.value;
+          writeParams(call, spec, values);
+          check();
+          edited();
+        });
+        check();
+        const unit = param.unit ? ` [${param.unit}; ${(param.unit_suffixes || []).join(" ")}]` : "";
+        const range = param.minimum !== undefined || param.maximum !== undefined ? ` range ${param.minimum ?? ""}..${param.maximum ?? ""}` : "";
+        parts.push(el("div", {class: "param"}, el("label", {for: `param-${i}`, text: `${param.name} (${param.type}${unit}${range})`}), input,
+          el("datalist", {id: listId}, ...options.map((o) => el("option", {value: o}))), problem,
+          el("div", {class: "param-doc", text: param.doc})));
+      });
+    }
+    const messages = b.byCell.get(cellKey(op, group)) || [];
+    if (messages.length) parts.push(el("div", {class: "messages"}, ...messages.map((m) => el("div", {class: `msg ${m.severity}`, text: `line ${m.line}: ${m.message}`}))));
+    box.replaceChildren(...parts);
+  }
+  function assignFunction(name) {
+    if (!b.selected) return;
+    const {op, group} = b.selected;
+    const operation = b.doc.operations[op];
+    const index = operation.calls.findIndex((c) => c.group === group);
+    if (!name) { if (index >= 0) operation.calls.splice(index, 1); }
+    else {
+      const spec = fnSpec(name);
+      if (spec && !fits(spec, group)) { $("validation-summary").textContent = `${name} is not for ${group} (groups: ${spec.groups.join(", ")})`; return; }
+      const params = spec ? spec.params.filter((p) => p.required).map(() => ({value: "", name: null})) : [];
+      const call = {group, function: name, params};
+      if (index >= 0) operation.calls[index] = call;
+      else {  // keep the robot's group order for new calls
+        const order = groups();
+        let at = operation.calls.findIndex((c) => order.indexOf(c.group) > order.indexOf(group));
+        if (at < 0) at = operation.calls.length;
+        operation.calls.splice(at, 0, call);
+      }
+    }
+    renderInspector();
+    edited();
+  }
+
+  // ------------------------------------------------------------------------------ validation, cell, open, save
+  let timer = null;
+  function edited() { renderRows(); validateSoon(250); }
+  function validateSoon(delay) { clearTimeout(timer); timer = setTimeout(validate, delay); }
+  function current() { return {path: $("doc-path").value.trim() || "untitled.xml", document: b.doc}; }
+  async function validate() {
+    if (!b.doc) return;
+    const ticket = ++b.validating;
+    $("validation-summary").textContent = "validating…";
+    const started = performance.now();
+    const answer = await Store.post("/api/validate", current());
+    if (ticket !== b.validating) return;  // a newer edit is being validated
+    b.lastValidationMs = performance.now() - started;
+    if (answer.error) { $("validation-summary").textContent = answer.error; return; }
+    showMessages(answer.messages || [], answer.ok);
+  }
+  function showMessages(messages, ok) {
+    b.messages = messages;
+    b.valid = ok;
+    b.byCell = new Map();
+    for (const m of messages) {
+      if (m.operation === null || m.operation === undefined) continue;
+      const key = cellKey(m.operation, m.group);
+      if (!b.byCell.has(key)) b.byCell.set(key, []);
+      b.byCell.get(key).push(m);
+    }
+    const errors = messages.filter((m) => m.severity === "error").length;
+    const summary = $("validation-summary");
+    summary.textContent = ok ? (messages.length ? `valid (${messages.length} warning(s))` : "valid") : `${errors} error(s)`;
+    summary.className = `summary ${ok ? "ok" : "bad"}`;
+    $("app-messages").replaceChildren(...messages.map((m) => {
+      const where = m.operation !== null && m.operation !== undefined ? `operation ${b.doc.operations[m.operation] ? b.doc.operations[m.operation].id : m.operation + 1}${m.group ? ` · ${m.group}` : ""}` : m.file;
+      return el("div", {class: `msg ${m.severity}`, onclick: () => { if (m.operation !== null && m.operation !== undefined) { scrollTo(m.operation); if (m.group) select(m.operation, m.group); } }},
+        `${where} (line ${m.line}): ${m.message}`);
+    }));
+    renderRows();
+    renderInspector();
+    document.body.dataset.validated = String(b.validating);
+  }
+  let cellTimer = null;
+  function loadCellNamesSoon() { clearTimeout(cellTimer); cellTimer = setTimeout(loadCellNames, 400); }
+  async function loadCellNames() {
+    if (!b.doc) return;
+    const answer = await Store.post("/api/cell", current());
+    b.cellNames = answer.ok ? answer : null;
+    renderInspector();
+  }
+  async function open() {
+    const answer = await Store.post("/api/open", {path: $("doc-path").value});
+    if (!answer.ok) { $("validation-summary").textContent = answer.error; $("validation-summary").className = "summary bad"; return; }
+    setDocument(answer.document, answer.path);
+  }
+  async function save() {
+    const answer = await Store.post("/api/save", current());
+    if (answer.error) { $("validation-summary").textContent = answer.error; $("validation-summary").className = "summary bad"; return; }
+    showMessages(answer.messages || [], answer.ok);
+    const summary = $("validation-summary");
+    summary.textContent = answer.ok ? `saved ${answer.path}` : `not saved: ${summary.textContent}`;
+    summary.className = `summary ${answer.ok ? "ok" : "bad"}`;
+  }
+  function fresh() {
+    const robot = b.doc ? b.doc.robot : Object.keys(Store.catalog.robots)[0];
+    setDocument({name: "new_application", robot, cell: b.doc ? b.doc.cell : null, version: null, description: null, error_policy: null,
+                 operations: [{id: "1", name: null, calls: [], comments: []}], header: [], trailer: []}, $("doc-path").value);
+  }
+
+  Store.on("catalog", async () => {
+    renderCatalog();
+    bindAppFields();
+    $("ops-scroll").addEventListener("scroll", renderRows);
+    $("add-op").addEventListener("click", addOperation);
+    $("open-btn").addEventListener("click", open);
+    $("save-btn").addEventListener("click", save);
+    $("new-btn").addEventListener("click", fresh);
+    const start = await Store.get("/api/document");
+    if (start.document) setDocument(start.document, start.path);
+    else { $("doc-path").value = start.path || ""; fresh(); if (start.error) $("validation-summary").textContent = start.error; }
+    document.body.dataset.ready = "true";
+  });
+  Store.on("view", (view) => { if (view === "builder") renderRows(); });
+  return {current, showMessages, select, scrollTo, state: b};
+})();
