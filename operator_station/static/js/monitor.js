@@ -17,7 +17,7 @@ const Monitor = (() => {
 
   function layout(structure) {
     const g = new dagre.graphlib.Graph({multigraph: true});
-    g.setGraph({rankdir: "LR", nodesep: 14, ranksep: 46, marginx: 6, marginy: 6});
+    g.setGraph({rankdir: "LR", nodesep: 10, ranksep: 70, marginx: 8, marginy: 8});
     g.setDefaultEdgeLabel(() => ({}));
     for (const s of structure.states) g.setNode(s, {label: s, width: Math.max(60, s.length * 7.5 + 16), height: 26});
     structure.transitions.forEach((t, i) => {
@@ -31,7 +31,7 @@ const Monitor = (() => {
   function drawGraph(group, structure, box) {
     const g = layout(structure);
     const info = g.graph();
-    const root = svg("svg", {class: "state-graph", width: info.width, height: info.height, viewBox: `0 0 ${info.width} ${info.height}`, "data-group": group});
+    const root = svg("svg", {class: "state-graph", viewBox: `0 0 ${info.width} ${info.height}`, preserveAspectRatio: "xMidYMin meet", "data-group": group});
     const defs = svg("defs");
     const marker = svg("marker", {id: `arrow-${group}`, markerWidth: 8, markerHeight: 8, refX: 7, refY: 3, orient: "auto"});
     marker.append(svg("path", {d: "M0,0 L7,3 L0,6 z", class: "arrow"}));

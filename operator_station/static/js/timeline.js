@@ -10,7 +10,7 @@ const Timeline = (() => {
   const SVG = "http://www.w3.org/2000/svg";
   const svg = (tag, attrs, text) => { const n = document.createElementNS(SVG, tag); for (const [k, v] of Object.entries(attrs || {})) n.setAttribute(k, v); if (text !== undefined) n.textContent = text; return n; };
   const LANE = 46, LEFT = 110, TOP = 26, PRIMITIVES_FROM = 25;  // px per second from which primitives are drawn
-  let model = null, scale = null, pending = false, timer = null;
+  let model = null, zoomFactor = 1, scale = 1, pending = false, timer = null;
 
   async function refresh() {
     pending = false;
@@ -28,9 +28,9 @@ const Timeline = (() => {
   function draw() {
     if (!model) return;
     const box = $("timeline");
-    const width = Math.max(box.clientWidth || 1000, 400);
+    const width = Math.max(box.clientWidth || window.innerWidth - 40, 400);
     const end = Math.max(model.end || 0, 1e-3);
-    if (scale === null) scale = (width - LEFT - 20) / end;
+    scale = (width - LEFT - 20) / end * zoomFactor;  // zoom is relative to the whole run fitting the width
     const px = (t) => LEFT + t * scale;
     const height = TOP + model.groups.length * LANE + 20;
     const root = svg("svg", {id: "timeline-svg", width: Math.max(width, px(end) + 20), height, "data-end": end});
@@ -74,15 +74,15 @@ const Timeline = (() => {
     document.body.dataset.timelineRecords = String(model.records);
   }
 
-  function zoom(factor) { scale = (scale || 1) * factor; draw(); }
+  function zoom(factor) { zoomFactor *= factor; draw(); }
   document.addEventListener("DOMContentLoaded", () => {
     $("tl-zoom-in").addEventListener("click", () => zoom(2));
     $("tl-zoom-out").addEventListener("click", () => zoom(0.5));
-    $("tl-fit").addEventListener("click", () => { scale = null; draw(); });
+    $("tl-fit").addEventListener("click", () => { zoomFactor = 1; draw(); });
     $("tl-slider").addEventListener("input", () => Store.setCursor(parseFloat($("tl-slider").value)));
     $("tl-live").addEventListener("click", () => Store.setCursor(null));
   });
-  Store.on("snapshot", () => { scale = null; refreshSoon(0); });
+  Store.on("snapshot", () => { zoomFactor = 1; refreshSoon(0); });
   Store.on("records", () => refreshSoon(300));
   Store.on("cursor", () => refreshSoon(0));
   Store.on("view", (view) => { if (view === "timeline") refreshSoon(0); });
