@@ -86,6 +86,10 @@ class RunSession:
         self._thread.start()
         return True, "starting"
 
+    def wait_started(self, timeout: float) -> bool:
+        """Wait until the run's nodes are up (or it was refused or failed); False if neither within ``timeout`` s."""
+        return self._ready.wait(timeout) and self._deployment is not None
+
     def join(self, timeout: float | None = None) -> None:
         if self._thread is not None:
             self._thread.join(timeout)
