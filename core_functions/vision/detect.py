@@ -26,7 +26,10 @@ Polarity = Literal["dark", "bright"]
 Array = NDArray[np.float64]
 
 #: Candidates refined per image at most (the largest first): bounds the work on a noisy image.
-MAX_CANDIDATES = 64
+MAX_CANDIDATES = 128
+#: A filled ellipse covers pi/4 of its bounding box when upright, less when turned and elongated;
+#: a component covering less than this share is a streak.
+MIN_FILL = 0.3
 #: A candidate's contrast must exceed this many standard deviations of the image noise.
 NOISE_FACTOR = 6.0
 #: ... and at least this relative contrast.
@@ -65,26 +68,30 @@ def to_gray(image: NDArray[np.generic]) -> NDArray[np.float32]:
     raise ValueError(f"unsupported image type {array.dtype}")
 
 
-def relative_contrast(gray: NDArray[np.float32], polarity: Polarity, max_size: float) -> NDArray[np.float32]:
-    """Feature strength per pixel: how much darker (or brighter) than the local background, relative to it."""
+def relative_contrast(gray: NDArray[np.float32], polarity: Polarity, max_size: float) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Feature strength per pixel (how much darker or brighter than the local background, relative to it), and that background."""
     kernel = max_size * 1.4 + 3.0
     scale = max(1, int(kernel // 15))
-    small = cv2.resize(gray, (max(1, gray.shape[1] // scale), max(1, gray.shape[0] // scale)), interpolation=cv2.INTER_AREA)
+    # Smoothed first: a closing picks the brightest pixel around, which on a noisy image is noise.
+    small = cv2.resize(cv2.GaussianBlur(gray, (0, 0), 1.5), (max(1, gray.shape[1] // scale), max(1, gray.shape[0] // scale)), interpolation=cv2.INTER_AREA)
     size = int(math.ceil(kernel / scale)) | 1
     element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
     op = cv2.MORPH_CLOSE if polarity == "dark" else cv2.MORPH_OPEN
-    background = cv2.morphologyEx(small, op, element, borderType=cv2.BORDER_REPLICATE)
-    background = cv2.GaussianBlur(background, (0, 0), max(1.0, size / 4.0))
+    closed = cv2.morphologyEx(small, op, element, borderType=cv2.BORDER_REPLICATE)
+    smoothed = cv2.GaussianBlur(closed, (0, 0), max(1.0, size / 4.0))
+    # Smoothing spreads a bright surface into the dark around it, where that would look like a dark
+    # feature: never let it raise (dark) or lower (bright) the closing itself.
+    background = np.minimum(smoothed, closed) if polarity == "dark" else np.maximum(smoothed, closed)
     background = cv2.resize(background, (gray.shape[1], gray.shape[0]), interpolation=cv2.INTER_LINEAR)
     denominator = np.maximum(background, 0.02)
     if polarity == "dark":
-        return (background - gray) / denominator
-    return (gray - background) / denominator
+        return (background - gray) / denominator, denominator
+    return (gray - background) / denominator, denominator
 
 
-def noise_level(strength: NDArray[np.float32]) -> float:
-    """Robust standard deviation of the pixel noise (median absolute deviation of a high-pass)."""
-    high = strength - cv2.GaussianBlur(strength, (0, 0), 1.0)
+def noise_level(gray: NDArray[np.float32]) -> float:
+    """Robust standard deviation of the pixel noise (median absolute deviation of a high-pass), in image units."""
+    high = gray - cv2.GaussianBlur(gray, (0, 0), 1.0)
     return float(1.4826 * np.median(np.abs(high - np.median(high))) * 1.6)
 
 
@@ -93,17 +100,24 @@ def find_blobs(image: NDArray[np.generic], polarity: Polarity = "dark", min_size
     if not (0 < min_size <= max_size and math.isfinite(max_size)):
         raise ValueError(f"blob sizes must satisfy 0 < min_size <= max_size, got {min_size}, {max_size}")
     gray = to_gray(image)
-    strength = relative_contrast(gray, polarity, max_size)
+    strength, background = relative_contrast(gray, polarity, max_size)
     smooth = cv2.GaussianBlur(strength, (0, 0), 1.0)
-    threshold = max(NOISE_FACTOR * noise_level(strength) / 2.5, MIN_CONTRAST)
+    # The same sensor noise is a larger relative contrast where the background is dark: threshold per pixel.
+    threshold = np.maximum(NOISE_FACTOR * noise_level(gray) / 2.5 / background, MIN_CONTRAST)
     mask = (smooth > threshold).astype(np.uint8)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     order = sorted(range(1, count), key=lambda i: -int(stats[i, cv2.CC_STAT_AREA]))
     blobs: list[Blob] = []
-    for label in order[:MAX_CANDIDATES]:
+    refined = 0
+    for label in order:
+        if refined >= MAX_CANDIDATES:
+            break
         x, y, w, h, area = (int(v) for v in stats[label])
         if max(w, h) < 0.5 * min_size or max(w, h) > 1.6 * max_size or area < 8:
             continue
+        if area < MIN_FILL * w * h:
+            continue  # a thin streak (the dark side of a bright edge), not a filled ellipse
+        refined += 1
         blob = _refine(strength, smooth, labels, label, (x, y, w, h))
         if blob is not None and 0.7 * min_size <= blob.axes[0] <= 1.3 * max_size:
             blobs.append(blob)

@@ -69,6 +69,18 @@ def _in_view(view: View, target: str, nominal: Pose, model: FeatureModel) -> NDA
     return plane
 
 
+def feature_roi(view: View, nominal: Pose, diameter: float, size: float = 3.0) -> tuple[int, int, int, int] | None:
+    """The image box (x, y, w, h) of ``size`` diameters around the feature's nominal position, None if not in view."""
+    centre = (np.linalg.inv(view.pose.matrix()) @ np.append(nominal.position, 1.0))[:3]
+    if centre[2] <= 1e-6:
+        return None
+    u, v = view.intrinsics.project(centre)[0]
+    half = 0.5 * size * diameter * view.intrinsics.fx / centre[2]
+    if not view.intrinsics.contains(np.array([u, v])):
+        return None
+    return int(u - half), int(v - half), int(2 * half) + 1, int(2 * half) + 1
+
+
 def _one_view(view: View, target: str, nominal: Pose, model: FeatureModel) -> Hole:
     plane = _in_view(view, target, nominal, model)
     holes = find_holes(view.image, view.intrinsics, plane, model.diameter, model.polarity)

@@ -17,7 +17,7 @@ from core_functions.cell_index import CellFrame
 from core_functions.geometry import Pose
 from core_functions.primitives import Vision, VisionReport, VisionResult
 from core_functions.vision.features import FeatureModel, feature_model
-from core_functions.vision.locate import View, VisionFault, locate
+from core_functions.vision.locate import View, VisionFault, feature_roi, locate
 from core_functions.vision.sharpness import sharpness
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.camera.render import Scene
@@ -91,7 +91,9 @@ class CameraVision:
         camera = "+".join(spec.name for spec, _ in placed)
         if primitive.task == "measure" and (model is not None or self._frames.get(target, _NO_FRAME).attributes.get("measure") == "sharpness"):
             views = await self.capture(placed[:1])
-            value = sharpness(views[0].image)
+            # Around the feature when it is in view: its edges, not the noise of a plain surface, then rule the measure.
+            roi = feature_roi(views[0], nominal, model.diameter) if (model is not None and nominal is not None) else None
+            value = sharpness(views[0].image, roi)
             size = (views[0].intrinsics.width, views[0].intrinsics.height)
             return VisionResult(value=value, report=VisionReport(camera, "sharpness", size, nominal, sharpness=value))
         if model is None or nominal is None or primitive.task == "measure":

@@ -37,7 +37,7 @@ _TOOL = Pose.from_xyz_rpy(0.0, 0.0, 0.0, 0.0, -math.pi / 2, 0.0)
 #: Hand camera: 35 mm off the tool axis, aimed at the point 50 mm out along it.
 HAND_MOUNT = look_at_mount((0.035, 0.0, 0.0), (0.0, 0.0, 0.05), (0.0, 1.0, 0.0), _TOOL)
 HAND_FOCUS = math.hypot(0.035, 0.05)
-HEAD_INTRINSICS = Intrinsics.from_fov(1024, 768, math.radians(40.0))
+HEAD_INTRINSICS = Intrinsics.from_fov(1024, 768, math.radians(50.0))
 HAND_INTRINSICS = Intrinsics.from_fov(640, 480, math.radians(60.0))
 
 Camera = CameraSpec
