@@ -28,6 +28,7 @@ from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
+from execution_engine.vision_cli import add_vision_parser, cmd_vision
 from operator_station import cli as studio
 from execution_engine.run_report import add_report_parser, cmd_report
 from execution_engine.recorder.cli_hook import add_run_options, start_recording, stop_recording
@@ -296,6 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
     functions = sub.add_parser("functions", help="list the function catalog")
     functions.add_argument("--json", action="store_true", help="machine-readable catalog")
     add_report_parser(sub)
+    add_vision_parser(sub)
     run = sub.add_parser("run", help="run an application (default: on the Nextage kinematic simulator)")
     run.add_argument("file", metavar="FILE")
     run.add_argument("--speed", type=parse_speed, default=1.0, help="run-time speed factor (default 1 = real time), or 'max'")
@@ -332,6 +334,8 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
         return studio.cmd_studio(args, catalog, out, err)
     if args.command == "report":
         return cmd_report(args, out, err)
+    if args.command == "vision":
+        return cmd_vision(args, out, err)
     if not Path(args.file).is_file():
         err.write(f"error: {args.file}: no such file\n")
         return EXIT_INVALID

@@ -13,18 +13,14 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from core_functions.geometry import Pose
 from core_functions.vision.camera import Intrinsics
+from core_functions.vision.image_file import ImageFileError, read_image
 from robot_bridges.camera.render import Scene, render
 from robot_bridges.camera.spec import CameraSpec
-
-#: Largest image file read (bytes): a camera image, not whatever a path points at.
-MAX_IMAGE_BYTES = 64 * 1024 * 1024
-
 
 class CaptureError(Exception):
     """No image: the camera did not deliver, the file is missing or unreadable, sizes disagree."""
@@ -58,23 +54,6 @@ class RenderedCamera(CameraSource):
         return Frame(image, spec.intrinsics, self._now())
 
 
-def read_image(path: Path) -> NDArray[np.uint8]:
-    """An image file as an 8-bit mono array; CaptureError naming the file when that cannot be."""
-    try:
-        size = path.stat().st_size
-    except OSError as error:
-        raise CaptureError(f"{path}: {error.strerror or error}") from None
-    if not path.is_file():
-        raise CaptureError(f"{path}: not a file")
-    if size > MAX_IMAGE_BYTES:
-        raise CaptureError(f"{path}: {size} bytes, larger than the {MAX_IMAGE_BYTES} bytes an image may have")
-    data = np.fromfile(str(path), dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
-    if image is None:
-        raise CaptureError(f"{path}: not an image OpenCV can read (PNG, JPEG, TIFF, BMP, PGM, ...)")
-    return image
-
-
 class FileCamera(CameraSource):
     """Images from files, one per capture in the given order (cycling): offline tests, replayed sessions."""
 
@@ -86,7 +65,10 @@ class FileCamera(CameraSource):
 
     async def capture(self, spec: CameraSpec, pose: Pose) -> Frame:
         path = next(self._next)
-        image = read_image(path)
+        try:
+            image = read_image(path)
+        except ImageFileError as error:
+            raise CaptureError(str(error)) from None
         intr = spec.intrinsics
         if image.shape != (intr.height, intr.width):
             raise CaptureError(f"{path}: {image.shape[1]}x{image.shape[0]} px, but camera {spec.name} takes {intr.width}x{intr.height}")

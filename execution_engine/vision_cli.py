@@ -1,0 +1,76 @@
+"""``python -m execution_engine vision detect``: the hole detector on an image file, for integrators.
+
+The image shows a plane seen head-on at ``--distance`` (m) by a camera with the given pinhole
+intrinsics (px); holes of ``--diameter`` (m) are found by :func:`core_functions.vision.holes.find_holes`,
+the very function the Vision state uses, and printed in the camera's optical frame (x right,
+y down, z along the optical axis; metres).
+
+Exit codes: 0 detection ran (whatever it found, ``{"holes": []}`` included); 1 the image file is
+missing, too large or unreadable; 2 a bad command line (a number that is not a positive finite
+number, a missing option).  Errors are one line on stderr, naming the file or option.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import IO
+
+from core_functions.vision.camera import Intrinsics
+from core_functions.vision.holes import Hole, detect_head_on
+from core_functions.vision.image_file import ImageFileError, read_image
+
+EXIT_OK, EXIT_IMAGE, EXIT_USAGE = 0, 1, 2
+_NUMBERS = (("fx", "focal length along x (px)"), ("fy", "focal length along y (px)"), ("cx", "principal point x (px)"), ("cy", "principal point y (px)"), ("distance", "distance of the plane along the optical axis (m)"), ("diameter", "expected hole diameter (m)"))
+
+
+def add_vision_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    vision = sub.add_parser("vision", help="camera tools: detect holes in an image file")
+    tools = vision.add_subparsers(dest="vision_command", required=True)
+    detect = tools.add_parser("detect", help="find holes of a diameter on a plane seen head-on; print centres (px, m) and diameters")
+    detect.add_argument("image", metavar="IMAGE", help="image file (PNG, JPEG, TIFF, BMP, PGM, ...)")
+    for name, text in _NUMBERS:
+        detect.add_argument(f"--{name}", required=True, metavar=name.upper(), help=text)  # parsed here: one-line errors
+    detect.add_argument("--json", action="store_true", help='print {"holes": [{"center_px": [u, v], "center_m": [x, y, z], "diameter_m": d, "score": s}, ...]}')
+
+
+def _number(name: str, text: str, positive: bool) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or (positive and value <= 0):
+        raise ValueError(f"--{name}: {text!r} is not a {'positive ' if positive else ''}finite number")
+    return value
+
+
+def cmd_vision(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
+    try:
+        values = {name: _number(name, getattr(args, name), name not in ("cx", "cy")) for name, _ in _NUMBERS}
+    except ValueError as error:
+        err.write(f"error: {error}\n")
+        return EXIT_USAGE
+    try:
+        image = read_image(Path(args.image))
+    except ImageFileError as error:
+        err.write(f"error: {error}\n")
+        return EXIT_IMAGE
+    height, width = image.shape
+    intrinsics = Intrinsics(width, height, values["fx"], values["fy"], values["cx"], values["cy"])
+    holes = detect_head_on(image, intrinsics, values["distance"], values["diameter"])
+    if args.json:
+        out.write(json.dumps({"holes": [h.as_json() for h in holes]}) + "\n")
+    else:
+        out.write(f"{args.image}: {len(holes)} hole(s) of {values['diameter'] * 1000:g} mm at {values['distance']:g} m\n")
+        for i, hole in enumerate(holes, start=1):
+            out.write(_line(i, hole))
+    return EXIT_OK
+
+
+def _line(i: int, hole: Hole) -> str:
+    x, y, z = (v * 1000 for v in hole.center_m)
+    return (
+        f"  {i}: ({hole.center_px[0]:.2f}, {hole.center_px[1]:.2f}) px  ({x:.3f}, {y:.3f}, {z:.3f}) mm  "
+        f"diameter {hole.diameter_m * 1000:.3f} mm  score {hole.score:.2f}\n"
+    )
