@@ -33,6 +33,7 @@ from execution_engine.transport.wire import (
     tcp_pose_topic,
 )
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
+from robot_bridges.camera.ros_camera import attach_cameras
 from robot_bridges.robot_state import RobotStatePublisher
 
 log = logging.getLogger(__name__)
@@ -63,6 +64,7 @@ class BridgeNode:
                 String, bridge_topic(group, "command"), lambda msg, g=group: self._on_command(g, msg), COMMANDS
             )
         node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
+        self._camera = attach_cameras(node, backend)  # camera parameters: publish_images, camera_source (ROS image topics)
         self._state_task: asyncio.Task[None] | None = None
         self.errors: list[str] = []
 

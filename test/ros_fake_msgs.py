@@ -12,6 +12,8 @@ import array
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 # ================================================================================= messages
 _DEFAULTS: dict[str, Callable[[], Any]] = {
     "string": str,
@@ -26,6 +28,9 @@ _DEFAULTS: dict[str, Callable[[], Any]] = {
     "int64": int,
     "sequence<boolean>": list,
     "sequence<int64>": lambda: array.array("q"),
+    "sequence<uint8>": lambda: array.array("B"),  # uint8[] (image data): array.array('B')
+    "double[9]": lambda: np.zeros(9),  # fixed-size arrays are numpy arrays in rosidl Python
+    "double[12]": lambda: np.zeros(12),
 }
 _INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint8": (0, 255)}
 
@@ -55,11 +60,17 @@ class FakeMessage:
         return dict(cls._fields_and_field_types)
 
     def __eq__(self, other: object) -> bool:
-        return type(other) is type(self) and all(getattr(self, n) == getattr(other, n) for n in self._fields_and_field_types)
+        return type(other) is type(self) and all(_same(getattr(self, n), getattr(other, n)) for n in self._fields_and_field_types)
 
     def __repr__(self) -> str:
         inner = ", ".join(f"{n}={getattr(self, n)!r}" for n in self._fields_and_field_types)
         return f"{type(self).__name__}({inner})"
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return bool(np.array_equal(a, b))
+    return bool(a == b)
 
 
 def _check(kind: str, nested: type | None, name: str, value: Any) -> Any:
@@ -95,6 +106,21 @@ def _check(kind: str, nested: type | None, name: str, value: Any) -> Any:
     elif kind == "sequence<boolean>":
         assert all(isinstance(v, bool) for v in value), f"The '{name}' field must be a sequence of 'bool'"
         return list(value)
+    elif kind == "sequence<uint8>":
+        if isinstance(value, array.array):
+            assert value.typecode == "B", f"The '{name}' array.array() must have the type code of 'B'"
+            return value
+        assert not isinstance(value, str) and all(isinstance(v, int) and 0 <= v < 256 for v in value), (
+            f"The '{name}' field must be a set or sequence and each value of type 'int' and each unsigned integer in [0, 255]"
+        )
+        return array.array("B", value)
+    elif kind in ("double[9]", "double[12]"):
+        size = int(kind[7:-1])
+        if isinstance(value, np.ndarray):
+            assert value.dtype == np.float64 and value.size == size, f"The '{name}' numpy.ndarray() must have the dtype of 'numpy.float64' and a size of {size}"
+            return value
+        assert len(value) == size and all(isinstance(v, float) for v in value), f"The '{name}' field must be a set or sequence with length {size} and each value of type 'float'"
+        return np.array(value, dtype=np.float64)
     elif kind == "sequence<int64>":
         assert all(isinstance(v, int) and not isinstance(v, bool) for v in value), f"The '{name}' field must be a sequence of 'int'"
         return array.array("q", value)
@@ -158,6 +184,21 @@ DiagnosticArray = message_class(
     "DiagnosticArray", {"header": "std_msgs/Header", "status": "sequence<diagnostic_msgs/DiagnosticStatus>"}, {"header": Header, "status": DiagnosticStatus}
 )
 
+RegionOfInterest = message_class(
+    "RegionOfInterest", {"x_offset": "uint32", "y_offset": "uint32", "height": "uint32", "width": "uint32", "do_rectify": "boolean"}
+)
+Image = message_class(
+    "Image",
+    {"header": "std_msgs/Header", "height": "uint32", "width": "uint32", "encoding": "string", "is_bigendian": "uint8", "step": "uint32", "data": "sequence<uint8>"},
+    {"header": Header},
+)
+CameraInfo = message_class(
+    "CameraInfo",
+    {"header": "std_msgs/Header", "height": "uint32", "width": "uint32", "distortion_model": "string", "d": "sequence<double>",
+     "k": "double[9]", "r": "double[9]", "p": "double[12]", "binning_x": "uint32", "binning_y": "uint32", "roi": "sensor_msgs/RegionOfInterest"},
+    {"header": Header, "roi": RegionOfInterest},
+)
+
 
 class Trigger:
     """std_srvs/srv/Trigger: an empty request still has one placeholder field, as rosidl generates."""
@@ -181,7 +222,7 @@ INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "builtin_interfaces.msg": {"Time": Time},
     "rosgraph_msgs.msg": {"Clock": ClockMessage},
     "std_msgs.msg": {"Header": Header, "String": String, "Bool": Bool},
-    "sensor_msgs.msg": {"JointState": JointState},
+    "sensor_msgs.msg": {"JointState": JointState, "Image": Image, "CameraInfo": CameraInfo, "RegionOfInterest": RegionOfInterest},
     "geometry_msgs.msg": {
         "Point": Point, "Quaternion": Quaternion, "Pose": Pose, "PoseStamped": PoseStamped,
         "Vector3": Vector3, "Transform": Transform, "TransformStamped": TransformStamped,

@@ -215,5 +215,60 @@ class Trigger:
     Response: ClassVar[type[TriggerResponse]] = TriggerResponse
 
 
+class ByteBuffer(bytes):
+    """A ROS ``uint8[]`` buffer (image data): rclpy holds it as ``array.array('B')``, we as bytes.
+
+    A distinct type so the converter moves the whole buffer at once instead of one int per byte.
+    """
+
+
+@dataclass(frozen=True)
+class RegionOfInterest:
+    """sensor_msgs/RegionOfInterest (px); all zero: the full image."""
+
+    ROS_TYPE: ClassVar[str] = "sensor_msgs/msg/RegionOfInterest"
+    x_offset: int = 0
+    y_offset: int = 0
+    height: int = 0
+    width: int = 0
+    do_rectify: bool = False
+
+
+@dataclass(frozen=True)
+class Image:
+    """sensor_msgs/Image: ``height`` rows of ``step`` bytes each, pixels as ``encoding`` says (mono8, bgr8, ...)."""
+
+    ROS_TYPE: ClassVar[str] = "sensor_msgs/msg/Image"
+    header: Header = field(default_factory=Header)
+    height: int = 0
+    width: int = 0
+    encoding: str = ""
+    is_bigendian: int = 0
+    step: int = 0
+    data: ByteBuffer = ByteBuffer()
+
+
+@dataclass(frozen=True)
+class CameraInfo:
+    """sensor_msgs/CameraInfo: intrinsics ``k`` (3x3, row-major, px), rectification ``r``, projection ``p`` (3x4)."""
+
+    ROS_TYPE: ClassVar[str] = "sensor_msgs/msg/CameraInfo"
+    header: Header = field(default_factory=Header)
+    height: int = 0
+    width: int = 0
+    distortion_model: str = ""
+    d: tuple[float, ...] = ()
+    k: tuple[float, ...] = (0.0,) * 9
+    r: tuple[float, ...] = (0.0,) * 9
+    p: tuple[float, ...] = (0.0,) * 12
+    binning_x: int = 0
+    binning_y: int = 0
+    roi: RegionOfInterest = field(default_factory=RegionOfInterest)
+
+
+#: Camera messages (robot_bridges.camera.ros_camera), published only when asked.
+CAMERA_TYPES: tuple[type, ...] = (Image, CameraInfo)
+
+
 MESSAGE_TYPES: tuple[type, ...] = (String, Bool, JointState, PoseStamped, TFMessage, DiagnosticArray)
 SERVICE_TYPES: tuple[type, ...] = (Trigger,)

@@ -23,6 +23,9 @@ from collections.abc import Callable, Iterable, Mapping
 from functools import lru_cache
 from typing import Any, TypeVar, get_args, get_origin
 
+import numpy as np
+
+from execution_engine.transport.msgs import ByteBuffer
 from execution_engine.transport.port import ParameterValue, TransportError
 from execution_engine.transport.qos import Durability, History, QoS, Reliability, rclpy_qos_kwargs
 
@@ -169,6 +172,10 @@ class MessageConverter:
             raise TransportError(f"cannot build {mirror.ROS_TYPE} from {mirror.__name__}: {error or type(error).__name__}") from None
 
     def _value_to_ros(self, hint: Any, value: Any, path: str) -> Any:
+        if hint is ByteBuffer:  # uint8[]: rosidl takes an array.array('B') as it is, without a check per byte
+            if not isinstance(value, (bytes, bytearray)):
+                raise TransportError(f"field {path!r}: expected bytes, got {type(value).__name__}")
+            return array.array("B", value)
         item = _sequence_item(hint)
         if item is not None:
             if not isinstance(value, (tuple, list)):
@@ -197,14 +204,32 @@ class MessageConverter:
         return mirror(**kwargs)
 
     def _value_from_ros(self, hint: Any, value: Any, path: str) -> Any:
+        if hint is ByteBuffer:
+            return _byte_buffer(value, path)
         item = _sequence_item(hint)
-        if item is not None:
-            if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array)):
+        if item is not None:  # fixed-size arrays (CameraInfo.k) arrive as numpy arrays
+            if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array, np.ndarray)):
                 raise TransportError(f"field {path!r}: expected a sequence, got {type(value).__name__}")
             return tuple(self._value_from_ros(item, v, f"{path}[{i}]") for i, v in enumerate(value))
         if _is_mirror(hint):
             return self._from_ros(hint, value, path)
         return _scalar(hint, value, path)
+
+
+def _byte_buffer(value: Any, path: str) -> ByteBuffer:
+    """A received ``uint8[]`` (rclpy: ``array.array('B')``; bytes or a list of ints accepted too) as bytes."""
+    if isinstance(value, array.array):
+        if value.typecode != "B":
+            raise TransportError(f"field {path!r}: expected an array of type code 'B', got {value.typecode!r}")
+        return ByteBuffer(value.tobytes())
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        return ByteBuffer(bytes(value))
+    if isinstance(value, (list, tuple)):
+        try:
+            return ByteBuffer(bytes(value))
+        except (TypeError, ValueError):
+            raise TransportError(f"field {path!r}: expected integers in [0, 255]") from None
+    raise TransportError(f"field {path!r}: expected a byte sequence, got {type(value).__name__}")
 
 
 def _declared_fields(cls: type) -> set[str] | None:

@@ -10,7 +10,7 @@ end's ``fallback`` if it has one; every result carries a :class:`VisionReport` f
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from core_functions.cell_index import CellFrame
@@ -38,13 +38,21 @@ CaptureHook = Callable[[CameraSpec, Pose, Frame], None]
 class CameraVision:
     """Answers Vision primitives from camera images."""
 
-    def __init__(self, source: CameraSource | Callable[[str], CameraSource], fallback: Fallback | None = None) -> None:
+    def __init__(
+        self, source: CameraSource | Callable[[str], CameraSource], fallback: Fallback | None = None, specs: Mapping[str, CameraSpec] | None = None
+    ) -> None:
         self._source = source
         self._fallback = fallback
+        #: The real cameras (not the names standing for a pair), for wiring topics to them.
+        self.specs: Mapping[str, CameraSpec] = dict(specs or {})
         self._cell: CellSnapshot | None = None
         self._frames: dict[str, CellFrame] = {}
         self._scene: Scene | None = None
         self.on_capture: CaptureHook | None = None
+
+    def use_source(self, source: CameraSource | Callable[[str], CameraSource]) -> None:
+        """Take images from ``source`` from now on (a ROS camera instead of the renderer)."""
+        self._source = source
 
     # ------------------------------------------------------------------------ the cell
     def set_cell(self, cell: CellSnapshot) -> None:

@@ -137,7 +137,7 @@ class NextageSimBackend(RobotBackend):
         self._hands = {g: HandIO() for g in self.model.arms}
         self._vision = vision.SimulatedVision(seed)
         #: The cameras: images rendered from the cell, detected and placed in the world (robot_bridges.camera).
-        self.cameras = CameraVision(RenderedCamera(lambda: self.cameras.scene(), seed, clock.now), self._vision.fallback)
+        self.cameras = CameraVision(RenderedCamera(lambda: self.cameras.scene(), seed, clock.now), self._vision.fallback, vision.REAL_CAMERAS)
         self._faults = FaultPlan()
         for spec in faults:
             self.inject(spec)

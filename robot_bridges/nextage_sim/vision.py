@@ -54,6 +54,8 @@ CAMERAS: dict[str, CameraSpec] = {
 }
 #: Cameras that stand for a stereo pair: a locate with them triangulates from both.
 STEREO: dict[str, tuple[str, str]] = {"head_camera": ("head_camera_left", "head_camera_right")}
+#: The cameras that take images (the pair's stand-in takes none of its own).
+REAL_CAMERAS: dict[str, CameraSpec] = {n: c for n, c in CAMERAS.items() if n not in STEREO}
 
 
 def camera(name: str) -> CameraSpec:
