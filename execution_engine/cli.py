@@ -1,8 +1,19 @@
 """``python -m execution_engine``: validate applications, list the function catalog, run applications.
 
-Exit codes: 0 success (``run``: every group reached Finish cleanly); 1 invalid application, problems
-found by the dry run (``validate --simulate``, and ``run`` before it starts unless ``--no-check``) or a
-failed run; 2 bad command line or back-end setup; 3 run stopped by the operator.
+Exit codes (docs/faults.md lists every refusal with its message and code):
+
+* 0 success (``run``: every group reached Finish cleanly);
+* 1 invalid application, problems found by the dry run (``validate --simulate``, and ``run`` before
+  it starts unless ``--no-check``) or a failed run (an alarm nobody can answer included);
+* 2 bad command line or an option refused before anything runs (files, names, back-end setup);
+* 3 run stopped by the operator (or abandoned with a second Ctrl-C);
+* 4 the run finished but its trace could not be written (the summary is still printed);
+* 5 the controller could not be reached or refused the run (connection refused, no answer, all
+  client slots taken, an RSI peer that never spoke);
+* 70 a defect of this program (one line; ``-v`` shows the traceback).
+
+Every failure ends in one line naming the file, option or peer and what to do; a traceback only with
+``-v``.
 """
 from __future__ import annotations
 
@@ -13,10 +24,10 @@ import logging
 import math
 import signal
 import sys
+import traceback
 from collections.abc import Sequence
-from contextlib import ExitStack
 from pathlib import Path
-from typing import IO
+from typing import IO, NoReturn
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import Catalog, ParamType
@@ -28,13 +39,14 @@ from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
+from execution_engine.run_checks import Refused, preflight
 from execution_engine.vision_cli import add_vision_parser, cmd_vision
 from operator_station import cli as studio
 from execution_engine.run_report import add_report_parser, cmd_report
 from execution_engine.recorder.cli_hook import add_run_options, start_recording, stop_recording
-from robot_bridges.backend import BackendOptions
+from robot_bridges.backend import BackendOptions, BridgeError
 
-EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED = 0, 1, 2, 3
+EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_TRACE, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
 
 XML_USAGE = """\
 An application is an XML file: <application name=".." robot="nextage" cell="cells/your_cell.xml">, holding
@@ -191,27 +203,32 @@ def backend_options(app: Application, args: argparse.Namespace) -> BackendOption
     )
 
 
-async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], trace: IO[str] | None) -> RunReport:
+async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], writer: TraceWriter | None) -> RunReport:
     from robot_bridges.registry import create_backend
 
     backend = await create_backend(backend_name(app, args), clock, backend_options(app, args))
     machine_parameters = {"trajectory_db": args.trajectory_db} if args.trajectory_db else {}
-    deployment = await deploy_local(clock, app.robot, backend, machine_parameters=machine_parameters)
+    # An alarm waits only when someone can answer it: in this process, an operator at a terminal
+    # (--interactive); nobody else reaches the in-process engine.  While that person is waited
+    # for, simulated time stands still instead of racing on.
+    operators = bool(args.interactive) and sys.stdin.isatty()
+    deployment = await deploy_local(
+        clock, app.robot, backend, machine_parameters=machine_parameters, operators=operators, hold_for_operators=operators and clock.simulated,
+    )
     recorder = await start_recording(args, app, deployment.transport, backend_name(app, args))
     observer = RunObserver(deployment.transport.create_node("run_observer"), app.robot.group_names)
+    if writer is not None:  # before the console: whatever the console shows is in the trace already
+        observer.sinks.append(writer.on_status)
+        observer.engine_sinks.append(writer.on_engine)
+        observer.event_sinks.append(writer.on_event)
     if not args.quiet:
         printer = LivePrinter(out, (*app.robot.group_names, "engine"))
         observer.sinks.append(printer.on_status)
         observer.engine_sinks.append(printer.on_engine)
         observer.event_sinks.append(printer.on_event)
-    if trace is not None:
-        writer = TraceWriter(trace)
-        observer.sinks.append(writer.on_status)
-        observer.engine_sinks.append(writer.on_engine)
-        observer.event_sinks.append(writer.on_event)
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
     loop = asyncio.get_running_loop()
-    interactive = console.attach_stdin(loop) if args.interactive else False
+    interactive = console.attach_stdin(loop) if operators else False
     run_task = loop.create_task(deployment.engine.run(app))
     interrupts = 0
 
@@ -251,27 +268,85 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
             err.write(f"{diagnostic}\n")
         err.write(f"{args.file}: not run: {len(error.diagnostics)} problem(s)\n")
         return EXIT_INVALID
+    try:
+        preflight(app, args)  # files and peers, before anything runs and without writing a byte
+    except Refused as refusal:
+        err.write(f"error: {refusal}\n")
+        return EXIT_USAGE
     if not args.no_check:
         code, checked = dry_run_check(app, args.file, backend_name(app, args), backend_options(app, args), args.trajectory_db, out, err, summary=not args.quiet)
         if code != EXIT_OK:
             found = f"{len(checked.findings)} problem(s) found by the dry run" if checked is not None else "the dry run did not pass"
             err.write(f"{args.file}: not run: {found}; use --no-check to run anyway\n")
             return code
+    try:
+        trace = open(args.trace, "w", encoding="utf-8") if args.trace else None
+    except OSError as error:
+        err.write(f"error: --trace {args.trace}: cannot be written ({error.strerror or error}); give a writable file\n")
+        return EXIT_USAGE
+    writer = TraceWriter(trace) if trace is not None else None
+    try:
+        return _run_recorded(app, args, out, err, writer)
+    finally:
+        if trace is not None:
+            try:
+                trace.close()
+            except OSError:  # already counted by the writer: its records were lost, not the run
+                pass
+
+
+def _run_recorded(app: Application, args: argparse.Namespace, out: IO[str], err: IO[str], writer: TraceWriter | None) -> int:
+    """Run, print the summary, close the trace with its run_end record; the exit code."""
     clock = simulated_clock() if math.isinf(args.speed) else scaled_clock(args.speed)
-    with ExitStack() as stack:
-        trace = stack.enter_context(open(args.trace, "w", encoding="utf-8")) if args.trace else None
-        try:
-            report = run_with_clock(lambda c: _run(app, args, c, out, trace), clock)
-        except (KeyError, ValueError, OSError, ConnectionError) as error:
-            err.write(f"error: cannot run {args.file}: {error}\n")
-            return EXIT_USAGE
-        except asyncio.CancelledError:
-            err.write("run abandoned\n")
-            return EXIT_STOPPED
-    out.write("\n" + "\n".join(report.summary_lines()) + "\n")
-    if report.ok:
-        return EXIT_OK
-    return EXIT_STOPPED if report.outcome == "stopped" else EXIT_INVALID
+    report: RunReport | None = None
+    outcome = "error"
+    try:
+        report = run_with_clock(lambda c: _run(app, args, c, out, writer), clock)
+    except BridgeError as error:  # the controller refused or never answered, before the first primitive
+        code = EXIT_PEER
+        err.write(f"error: cannot run {args.file}: {error}; {PEER_ADVICE}\n")
+        _explain(error, args, err)
+    except (KeyError, ValueError, OSError, ConnectionError) as error:
+        code = EXIT_USAGE
+        err.write(f"error: cannot run {args.file}: {error}\n")
+        _explain(error, args, err)
+    except asyncio.CancelledError:
+        code, outcome = EXIT_STOPPED, "abandoned"
+        err.write("run abandoned\n")
+    except Exception as error:  # noqa: BLE001 - a defect: one line, the trace still closed, the traceback with -v
+        code = EXIT_INTERNAL
+        err.write(f"error: the run of {args.file} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
+        _explain(error, args, err)
+    if report is not None:
+        out.write("\n" + "\n".join(report.summary_lines()) + "\n")
+        outcome = report.outcome
+        code = EXIT_OK if report.ok else EXIT_STOPPED if report.outcome == "stopped" else EXIT_INVALID
+    if writer is None:
+        return code
+    t = report.t_end if report is not None else writer.last_t
+    done, total = (report.operations_done, report.operations_total) if report is not None else (0, len(app.operations))
+    writer.finish(t, outcome, code, done, total)
+    if writer.error is None:
+        return code
+    reason = writer.error.strerror or str(writer.error)
+    err.write(
+        f"error: --trace {args.trace}: could not be written ({reason}): {writer.lost} record(s) lost, the trace is incomplete; "
+        f"the run itself: {outcome.upper()} (summary above); free space or give another --trace\n"
+    )
+    return EXIT_TRACE if code == EXIT_OK else code
+
+
+#: What an operator can do about a controller that would not take the run (exit 5).
+PEER_ADVICE = (
+    "check that the controller is on, reachable from this machine and serving on that address and port "
+    "(--host/--port, --rsi-listen) and that no other client holds it, then run again"
+)
+
+
+def _explain(error: BaseException, args: argparse.Namespace, err: IO[str]) -> None:
+    """The traceback, for a developer, only with ``-v``."""
+    if getattr(args, "verbose", False):
+        traceback.print_exception(error, file=err)
 
 
 def parse_option(text: str) -> tuple[str, str]:
@@ -282,8 +357,15 @@ def parse_option(text: str) -> tuple[str, str]:
 
 
 # ---------------------------------------------------------------------------------- main
+class OneLineParser(argparse.ArgumentParser):
+    """A bad command line is one line (exit 2): what is wrong, and where the usage is."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m execution_engine", description="Skill-based robot applications in XML.")
+    parser = OneLineParser(prog="python -m execution_engine", description="Skill-based robot applications in XML.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = parser.add_subparsers(dest="command", required=True)
     validate = sub.add_parser("validate", help="check application files; FILE:LINE:COL messages on problems")
@@ -325,6 +407,19 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
     except SystemExit as exit_:
         return EXIT_USAGE if exit_.code else EXIT_OK
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s", stream=err)
+    try:
+        return dispatch(args, out, err)
+    except KeyboardInterrupt:
+        err.write("interrupted\n")
+        return EXIT_STOPPED
+    except Exception as error:  # noqa: BLE001 - a defect: one line for the operator, the traceback with -v
+        err.write(f"error: {args.command} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
+        _explain(error, args, err)
+        return EXIT_INTERNAL
+
+
+def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
+    """Run the chosen subcommand."""
     catalog = full_catalog()
     if args.command == "validate":
         return cmd_validate(args.files, catalog, out, err, args)
@@ -336,6 +431,9 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
         return cmd_report(args, out, err)
     if args.command == "vision":
         return cmd_vision(args, out, err)
+    if Path(args.file).is_dir():
+        err.write(f"error: {args.file}: is a directory, not an application file\n")
+        return EXIT_INVALID
     if not Path(args.file).is_file():
         err.write(f"error: {args.file}: no such file\n")
         return EXIT_INVALID

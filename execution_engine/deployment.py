@@ -51,8 +51,14 @@ async def deploy_local(
     engine_parameters: Mapping[str, ParameterValue] | None = None,
     bridge_parameters: Mapping[str, ParameterValue] | None = None,
     transport: LocalTransport | None = None,
+    operators: bool = True,
+    hold_for_operators: bool = False,
 ) -> Deployment:
-    """Start every node of a robot cell on one in-process transport."""
+    """Start every node of a robot cell on one in-process transport.
+
+    ``operators`` and ``hold_for_operators`` go to :class:`ExecutionEngine`: whether anyone can
+    answer an alarm, and whether simulated time stands still while they are waited for.
+    """
     transport = transport or LocalTransport(clock)
     node_name = re.sub(r"\W+", "_", backend.name).strip("_") or "robot"
     bridge = BridgeNode(transport.create_node(f"{node_name}_bridge", parameters=bridge_parameters), backend)
@@ -61,7 +67,9 @@ async def deploy_local(
     for group in robot.group_names:
         params = {"group": group, "robot": robot.name, **(machine_parameters or {})}
         machines[group] = GroupMachine(transport.create_node(f"{group}_machine", parameters=params))
-    engine = ExecutionEngine(transport.create_node("execution_engine", parameters=engine_parameters))
+    engine = ExecutionEngine(
+        transport.create_node("execution_engine", parameters=engine_parameters), operators=operators, hold_for_operators=hold_for_operators,
+    )
     deployment = Deployment(transport, engine, machines, bridge)
     loop = asyncio.get_running_loop()
     for group, machine in machines.items():

@@ -126,6 +126,7 @@ class TraceWriter:
         self.lines = 0
         self.lost = 0
         self.error: OSError | None = None
+        self.last_t = 0.0  # run time of the latest record: where a run that broke off ended
         self._last_engine_message = ""
         self._operation: str | None = None
 
@@ -170,6 +171,7 @@ class TraceWriter:
                 self.error = error
 
     def _write(self, record: dict[str, Any]) -> None:
+        self.last_t = max(self.last_t, float(record["t"]))
         if self.error is not None:
             self.lost += 1
             return

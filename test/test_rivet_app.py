@@ -71,6 +71,11 @@ def test_the_demonstrator_reaches_finish(clean_run: tuple[int, str, list[dict[st
 
 def test_the_trace_has_the_documented_fields(clean_run: tuple[int, str, list[dict[str, Any]]]) -> None:
     _, _, events = clean_run
+    *events, end = events  # the run's end closes the trace: outcome, exit code, counts
+    assert end == {
+        "t": end["t"], "event": "run_end", "group": "engine", "outcome": "finished", "exit_code": 0,
+        "operations_done": 10, "operations_total": 10, "records": len(events) + 1,
+    } and end["t"] >= events[-1]["t"]
     assert {e["event"] for e in events} <= TRACE_EVENTS
     for e in events:
         assert {"t", "event", "group", "operation"} <= set(e) and isinstance(e["t"], float)

@@ -16,6 +16,10 @@ from core_functions.robots import RobotModel
 from execution_engine.app_model.cell import Cell
 
 ErrorAction = Literal["abort", "safe_pose", "alarm"]
+#: How long an alarm waits for an operator by default: ten minutes of wall time, time enough to walk
+#: to the cell and look, short enough that an unattended cell does not sit in an alarm for a shift.
+#: (Nobody to answer at all -- no terminal, no service client -- ends the run at once.)
+ALARM_TIMEOUT = 600.0
 WAIT = "wait"
 
 
@@ -26,7 +30,7 @@ class ErrorPolicy:
     retries: int = 0
     action: ErrorAction = "abort"
     safe_pose: str | None = None  # a robot pose or a cell <joint_pose>; None when the robot has none
-    alarm_timeout: float = 0.0  # wall seconds an alarm waits for an operator reset; 0 = forever
+    alarm_timeout: float = ALARM_TIMEOUT  # wall seconds an alarm waits for an operator reset; 0 = the longest, a day
     safe_speed: float = 0.3  # speed fraction of the move to the safe pose (after the retreat)
     retreat: float = 0.05  # m an arm backs out along its tool axis before the safe pose; 0 = none
 

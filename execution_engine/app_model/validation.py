@@ -304,7 +304,7 @@ class ApplicationChecker:
             retries=policy.retries or 0,
             action=action,
             safe_pose=safe_pose or default_pose,
-            alarm_timeout=policy.alarm_timeout or 0.0,
+            alarm_timeout=ErrorPolicy.alarm_timeout if policy.alarm_timeout is None else policy.alarm_timeout,
             safe_speed=ErrorPolicy.safe_speed if policy.safe_speed is None else policy.safe_speed,
             retreat=ErrorPolicy.retreat if policy.retreat is None else policy.retreat,
         )

@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import BindContext, Catalog
+from core_functions.limits import DURATION
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from execution_engine.engine.faults import verdict
@@ -410,12 +411,17 @@ class ExecutionEngine:
 
     async def _alarm(self, group: str, error: str, plan: str, timeout: float) -> tuple[bool, str]:
         """Hold for an operator reset: (True, "") to retry; (False, why) to give up -- a stop, or
-        ``timeout`` seconds of the operator's wall clock without an answer."""
+        ``timeout`` seconds of the operator's wall clock without an answer (0: the longest
+        duration there is, a day -- no wait is without a bound)."""
         self._alarm_reset = False
+        timeout = timeout if timeout > 0 else DURATION.upper
         self._set_state("alarm", self.alarm_message(group, error, plan, timeout))
         if not self.operators:  # nobody can answer: say so now rather than wait for no one
             self._note_recovery(f"{plan}; alarm cannot be answered: no operator console and no service client can reach this engine")
-            return False, "; no operator can answer the alarm (run with --interactive at a terminal, or on ROS)"
+            return False, (
+                "; the alarm asks an operator: retry (reset) or abort (stop)? - and no operator can answer it here: "
+                "run with --interactive at a terminal, or on ROS, where the engine's services answer"
+            )
         expired = False
 
         def expire() -> None:
@@ -423,14 +429,13 @@ class ExecutionEngine:
             expired = True
             self._poke()
 
-        timer = self.wall_clock.call_later(timeout, wake_loop(asyncio.get_running_loop(), expire)) if timeout > 0 else None
+        timer = self.wall_clock.call_later(timeout, wake_loop(asyncio.get_running_loop(), expire))
         try:
             with self._operator_wait():  # the robot waits for a person: simulated time must not race on
                 while not self._alarm_reset and self._stop_reason is None and not expired:
                     await self._wait_control()
         finally:
-            if timer is not None:
-                timer.cancel()
+            timer.cancel()
         if self._alarm_reset and self._stop_reason is None:
             self._note_recovery(f"{plan}; alarm reset by an operator: retried")
             return True, ""

@@ -724,11 +724,15 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     except ValueError:
         raise ValueError(f"nextage-sim: control_period {options.extra['control_period']!r} is not a number") from None
     tool = parse_tool(options.extra["tool"]) if "tool" in options.extra else HAND_TOOL
+    faults = [parse_fault(text) for text in options.faults]
+    for spec, text in zip(faults, options.faults):  # an option error now, not a BridgeError out of the start
+        if spec.group not in GROUPS:
+            raise ValueError(f"nextage-sim: fault {text!r}: no group {spec.group!r} (groups: {', '.join(GROUPS)})")
     return NextageSimBackend(
         clock,
         initial_pose=options.extra.get("initial_pose", "initial"),
         control_period=period,
         seed=options.seed,
-        faults=[parse_fault(text) for text in options.faults],
+        faults=faults,
         tools={"left_arm": tool, "right_arm": tool},
     )
