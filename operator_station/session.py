@@ -153,9 +153,10 @@ class RunSession:
             await deployment.engine.operator_command("start", SOURCE)
             report = await run
             code = EXIT_OK if report.ok else EXIT_STOPPED if report.outcome == "stopped" else EXIT_FAILED
+            t_end = clock.now()
             for each in (writer, page):
                 if each is not None:
-                    each.finish(clock.now(), report.outcome, code, report.operations_done, report.operations_total)
+                    each.finish(t_end, report.outcome, code, report.operations_done, report.operations_total)
             return report
         finally:
             self._loop = None

@@ -277,9 +277,16 @@ const Builder = (() => {
           el("div", {class: "param-doc", text: param.doc})));
       });
     }
-    const messages = b.byCell.get(cellKey(op, group)) || [];
-    if (messages.length) parts.push(el("div", {class: "messages"}, ...messages.map((m) => el("div", {class: `msg ${m.severity}`, text: `line ${m.line}: ${m.message}`}))));
+    parts.push(el("div", {id: "inspector-messages", class: "messages"}));
     box.replaceChildren(...parts);
+    renderInspectorMessages();
+  }
+  // Only the messages: a validation answer must not rebuild the inputs the user is typing into.
+  function renderInspectorMessages() {
+    const box = $("inspector-messages");
+    if (!box || !b.selected) return;
+    const messages = b.byCell.get(cellKey(b.selected.op, b.selected.group)) || [];
+    box.replaceChildren(...messages.map((m) => el("div", {class: `msg ${m.severity}`, text: `line ${m.line}: ${m.message}`})));
   }
   function assignFunction(name) {
     if (!b.selected) return;
@@ -340,7 +347,7 @@ const Builder = (() => {
         `${where} (line ${m.line}): ${m.message}`);
     }));
     renderRows();
-    renderInspector();
+    renderInspectorMessages();
     document.body.dataset.validated = String(b.validating);
   }
   let cellTimer = null;
@@ -349,7 +356,7 @@ const Builder = (() => {
     if (!b.doc) return;
     const answer = await Store.post("/api/cell", current());
     b.cellNames = answer.ok ? answer : null;
-    renderInspector();
+    if (!$("inspector").contains(document.activeElement)) renderInspector();  // never under the user's typing
   }
   async function open() {
     const answer = await Store.post("/api/open", {path: $("doc-path").value});

@@ -1,0 +1,177 @@
+"""The operator station in a real headless Chromium (Selenium): build, save, validate, run, pause, resume, check.
+
+Skipped only where no Chromium can be driven (the reason says what is missing); ``.ci/run``
+installs Debian's chromium and chromium-driver.  Waits are bounded polls of a condition the
+page shows (WebDriverWait), never a fixed sleep.
+"""
+from __future__ import annotations
+
+import io
+import json
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
+from operator_station import browser  # noqa: E402
+
+if browser.missing() is not None:
+    pytest.skip(f"no browser to drive: {browser.missing()}", allow_module_level=True)
+
+from selenium.common.exceptions import NoSuchElementException, StaleElementReferenceException  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support.ui import Select, WebDriverWait  # noqa: E402
+
+from app_functions.registry import full_catalog  # noqa: E402
+from execution_engine.cli import main as cli_main  # noqa: E402
+from execution_engine.timeline import build_timeline  # noqa: E402
+from operator_station.cli import build_station  # noqa: E402
+from operator_station.testing import ServedStation, serve  # noqa: E402
+from test_studio_server import station_args  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+WAIT = 90.0  # wall seconds any one condition may take (a loaded CI machine), then the test fails
+
+
+@pytest.fixture(scope="module")
+def driver() -> Iterator[Any]:
+    chrome = browser.chromium()
+    try:
+        yield chrome
+    finally:
+        chrome.quit()
+
+
+@pytest.fixture
+def folder(tmp_path: Path) -> Path:
+    shutil.copytree(ROOT / "apps_xml" / "cells", tmp_path / "cells")
+    shutil.copy(ROOT / "apps_xml" / "rivet_installation.xml", tmp_path / "rivet_installation.xml")
+    return tmp_path
+
+
+def open_station(driver: Any, folder: Path, **changes: Any) -> ServedStation:
+    served = serve(build_station(station_args(**changes), full_catalog(), folder))
+    driver.get(served.url)
+    until(driver, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "true")
+    return served
+
+
+def until(driver: Any, condition: Any, timeout: float = WAIT) -> Any:
+    """Poll ``condition`` until it holds; the page re-renders rows as it goes, so a stale element means: look again."""
+    return WebDriverWait(driver, timeout, poll_frequency=0.05, ignored_exceptions=(NoSuchElementException, StaleElementReferenceException)).until(condition)
+
+
+def cell(driver: Any, op: int, group: str) -> Any:
+    return driver.find_element(By.CSS_SELECTOR, f'.op-cell[data-op="{op}"][data-group="{group}"]')
+
+
+def choose(driver: Any, op: int, group: str, function: str, *params: str) -> None:
+    """Select a cell, pick its function from the catalog, type its params into the typed inputs."""
+    until(driver, lambda d: cell(d, op, group).click() or True)
+    driver.find_element(By.CSS_SELECTOR, f'.catalog-fn[data-name="{function}"]').click()
+    until(driver, lambda d: d.find_element(By.ID, "fn-select").get_attribute("value") == function)
+    for index, value in enumerate(params):
+        field = driver.find_element(By.ID, f"param-{index}")
+        field.clear()
+        field.send_keys(value)
+
+
+def text(driver: Any, element_id: str) -> str:
+    return str(driver.find_element(By.ID, element_id).text)
+
+
+def group_state(driver: Any, group: str) -> str:
+    return str(driver.find_element(By.CSS_SELECTOR, f'.group-card[data-group="{group}"] .g-state').text)
+
+
+def validated(driver: Any) -> str:
+    """The validation summary once the validation of the last edit is in."""
+    until(driver, lambda d: text(d, "validation-summary") not in ("", "validating…"))
+    return text(driver, "validation-summary")
+
+
+def test_built_in_the_page_saved_validated_run_paused_resumed_and_checked_against_the_trace(driver: Any, folder: Path) -> None:
+    trace = folder / "run.jsonl"
+    served = open_station(driver, folder, speed=2.0, trace=str(trace))
+    try:
+        # ---- build from scratch: the new application, the rivet cell, two operations
+        driver.find_element(By.ID, "new-btn").click()
+        Select(driver.find_element(By.ID, "app-robot")).select_by_value("nextage_open")
+        for field, value in (("doc-path", "built.xml"), ("app-name", "built_in_the_page"), ("app-cell", "cells/rivet_cell.xml")):
+            driver.find_element(By.ID, field).clear()
+            driver.find_element(By.ID, field).send_keys(value)
+        choose(driver, 0, "left_arm", "debur_drilling", "drill_1")
+        choose(driver, 0, "right_arm", "pick_rivet", "rivet_1", "ref_R10")
+        driver.find_element(By.ID, "add-op").click()
+        choose(driver, 1, "right_arm", "insert_rivet", "drill_1")
+        until(driver, lambda d: validated(d) == "valid")
+        driver.find_element(By.ID, "save-btn").click()
+        until(driver, lambda d: text(d, "validation-summary") == "saved built.xml")
+        assert cli_main(["validate", str(folder / "built.xml")], out=io.StringIO(), err=io.StringIO()) == 0
+        saved = (folder / "built.xml").read_text(encoding="utf-8")
+        assert "<function name='debur_drilling'>" in saved and "<param value='ref_R10'></param>" in saved
+
+        # ---- run, pause both arms mid-motion from the page, resume
+        driver.find_element(By.ID, "ctl-start").click()
+        working = lambda d: all(group_state(d, g) not in ("Ready", "Pause", "Finish", "") for g in ("left_arm", "right_arm"))  # noqa: E731
+        until(driver, working)
+        driver.find_element(By.ID, "ctl-pause").click()
+        until(driver, lambda d: text(d, "engine-state") == "paused" and all(group_state(d, g) == "Pause" for g in ("left_arm", "right_arm")))
+        driver.find_element(By.ID, "ctl-resume").click()
+        until(driver, lambda d: text(d, "engine-state") == "finished")
+        served.station.session.join(WAIT)  # type: ignore[union-attr]
+
+        # ---- the page against the trace
+        records = [json.loads(line) for line in trace.read_text(encoding="utf-8").splitlines()]
+        assert records[-1]["event"] == "run_end" and records[-1]["outcome"] == "finished"
+        until(driver, lambda d: d.execute_script("return Store.records.length") == len(records))
+        assert driver.execute_script("return Store.records") == records
+        for group in ("left_arm", "right_arm", "torso_head"):
+            last = [r["to"] for r in records if r["event"] == "transition" and r["group"] == group]
+            until(driver, lambda d, g=group, s=(last[-1] if last else "Ready"): group_state(d, g) == s)
+        operator = [(r["command"], r["source"]) for r in records if r["event"] == "operator"]
+        assert operator == [("start", "studio"), ("pause", "studio"), ("resume", "studio")]
+        for group in ("left_arm", "right_arm"):  # paused in a motion, resumed into it, and that function finished
+            moves = [r for r in records if r["event"] == "transition" and r["group"] == group]
+            paused = next(i for i, r in enumerate(moves) if r["to"] == "Pause")
+            assert moves[paused + 1]["from"] == "Pause" and moves[paused + 1]["to"] == moves[paused]["from"]
+            request = moves[paused]["request_id"]
+            assert any(r["event"] == "function_end" and r.get("request_id") == request and r["outcome"] == "succeeded" for r in records)
+
+        driver.find_element(By.ID, "tab-timeline").click()
+        until(driver, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-timeline-records") == str(len(records)))
+        timeline = build_timeline(records)
+        bars = driver.find_elements(By.CSS_SELECTOR, "#timeline-svg g.bar")
+        shown = sorted((b.get_attribute("data-group"), b.get_attribute("data-operation"), b.get_attribute("data-function")) for b in bars)
+        assert shown == sorted((g, bar.operation, bar.function) for g, lane in timeline.lanes.items() for bar in lane.bars)
+        assert len(driver.find_elements(By.CSS_SELECTOR, "#timeline-svg line.op-boundary")) == len(timeline.operations)
+        assert not [e for e in driver.get_log("browser") if e["level"] == "SEVERE" and "favicon" not in e["message"]]
+    finally:
+        served.close()
+
+
+def test_a_bad_edit_shows_the_validators_message_at_its_cell_and_nothing_runs(driver: Any, folder: Path) -> None:
+    served = open_station(driver, folder, file="rivet_installation.xml")
+    try:
+        until(driver, lambda d: validated(d) == "valid")
+        until(driver, lambda d: cell(d, 1, "left_arm").click() or True)  # debur_drilling(drill_1) in operation 2
+        field = driver.find_element(By.ID, "param-0")
+        field.clear()
+        field.send_keys("drill_99")
+        until(driver, lambda d: "has-error" in (cell(d, 1, "left_arm").get_attribute("class") or ""))
+        until(driver, lambda d: "unknown frame 'drill_99'" in cell(d, 1, "left_arm").text)
+        until(driver, lambda d: cell(d, 0, "left_arm").click() or True)  # set_speed(0.8): a fraction, given an angle's unit
+        field = driver.find_element(By.ID, "param-0")
+        field.clear()
+        field.send_keys("0.8 deg")
+        assert "deg" in text(driver, "param-problem-0")  # the page's own unit check, at once
+        until(driver, lambda d: "has-error" in (cell(d, 0, "left_arm").get_attribute("class") or "") and "deg" in cell(d, 0, "left_arm").text)
+        until(driver, lambda d: "has-error" not in (cell(d, 0, "right_arm").get_attribute("class") or ""))
+        driver.find_element(By.ID, "ctl-start").click()
+        until(driver, lambda d: "not run" in text(d, "control-answer"))
+        assert served.station.feed.snapshot.run == 0 and not served.station.session.running  # type: ignore[union-attr]
+    finally:
+        served.close()
