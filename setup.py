@@ -47,11 +47,13 @@ setup(
         *tree("config"),
         *tree("apps_xml"),
         *tree("schema"),
+        *tree("interfaces"),
     ],
     install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9", "mcap>=1.2", "mcap-ros2-support>=0.5", "matplotlib>=3.6", "opencv-python-headless>=4.8"],
     extras_require={
         "studio": STUDIO,
-        "test": ["pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18", *STUDIO, "httpx>=0.24", "selenium>=4.11"],
+        "dds": ["cyclonedds>=11,<12", "pyyaml>=6"],
+        "test": ["cyclonedds>=11,<12", "pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18", *STUDIO, "httpx>=0.24", "selenium>=4.11"],
     },
     zip_safe=True,
     entry_points={

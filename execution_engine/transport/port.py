@@ -101,6 +101,18 @@ class Publisher(ABC, Generic[M]):
 class Subscription(ABC, Generic[M]):
     topic: str
     msg_type: type[M]
+    node: Node
+    alive: bool
+    _callback: Callable[[M], None]
+
+    def _deliver(self, msg: M) -> None:
+        """Loop thread: one message to the callback; a fault goes to the node, never up the loop."""
+        if not self.alive:
+            return
+        try:
+            self._callback(msg)
+        except Exception as error:  # noqa: BLE001 - reported, never swallowed
+            self.node.report_fault(f"subscription {self.topic}", error)
 
     @abstractmethod
     def destroy(self) -> None:
@@ -122,15 +134,23 @@ async def wait_until_matched(
     its answer comes back on), bounded by the same timeout it gives the answer.
     """
     pending = list(endpoints)
+
+    def all_matched() -> bool:
+        pending[:] = [e for e in pending if _matched(e) == 0]
+        return not pending
+
+    return await poll_until(clock, all_matched, timeout, poll)
+
+
+async def poll_until(clock: Clock, condition: Callable[[], bool], timeout: float, poll: float = 0.01) -> bool:
+    """True once ``condition()`` holds; False after ``timeout`` run seconds (checked every ``poll``)."""
     deadline = clock.now() + timeout
-    while True:
-        pending = [e for e in pending if _matched(e) == 0]
-        if not pending:
-            return True
+    while not condition():
         remaining = deadline - clock.now()
         if remaining <= 0:
             return False
         await clock.sleep(min(poll, remaining))
+    return True
 
 
 def _matched(endpoint: Publisher[Any] | Subscription[Any]) -> int:
@@ -271,6 +291,37 @@ class Node(ABC):
     def _log_fault(self, where: str, error: BaseException) -> None:
         self.logger.error("%s: fault in %s: %s: %s", self.fully_qualified_name, where, type(error).__name__, error)
 
+
+class EndpointNode(Node):
+    """A node whose endpoint classes are built as ``cls(node, type, resolved name, ...)``: the
+    middleware adapters (rclpy, DDS) name their four classes and share the rest."""
+
+    publisher_class: type
+    subscription_class: type
+    service_class: type
+    client_class: type
+    _endpoints: list[Any]
+    destroyed: bool
+
+    def _add(self, endpoint: Any) -> Any:
+        if self.destroyed:
+            raise TransportError(f"{self.fully_qualified_name} was destroyed")
+        self._endpoints.append(endpoint)
+        return endpoint
+
+    def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]:
+        return self._add(self.publisher_class(self, msg_type, self.resolve(topic), qos))  # type: ignore[no-any-return]
+
+    def create_subscription(
+        self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS
+    ) -> Subscription[M]:
+        return self._add(self.subscription_class(self, msg_type, self.resolve(topic), callback, qos))  # type: ignore[no-any-return]
+
+    def create_service(self, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> ServiceServer:
+        return self._add(self.service_class(self, srv_type, self.resolve(name), handler))  # type: ignore[no-any-return]
+
+    def create_client(self, srv_type: type, name: str) -> ServiceClient[Any, Any]:
+        return self._add(self.client_class(self, srv_type, self.resolve(name)))  # type: ignore[no-any-return]
 
 
 class Transport(ABC):

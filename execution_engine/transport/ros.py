@@ -55,7 +55,7 @@ from execution_engine.clock import Clock, FollowingClock
 from execution_engine.transport import ros_logging
 from execution_engine.transport.msgs import MESSAGE_TYPES, ClockMessage, Time
 from execution_engine.transport.port import (
-    Node,
+    EndpointNode,
     RosArgumentsError,
     ParameterValue,
     Publisher,
@@ -69,7 +69,7 @@ from execution_engine.transport.port import (
     resolve_name,
     validate_node_name,
 )
-from execution_engine.transport.qos import CLOCK, COMMANDS, Durability, QoS
+from execution_engine.transport.qos import CLOCK, Durability, QoS
 from execution_engine.transport.ros_args import raw_parameter_texts
 from execution_engine.transport.wire import CLOCK_TOPIC
 from execution_engine.transport.ros_convert import (
@@ -243,15 +243,6 @@ class _RosSubscription(_TopicEndpoint[M], Subscription[M]):
             except Exception as error:  # noqa: BLE001 - a bad message must not end the executor
                 self.node.report_fault_threadsafe(f"subscription {self.topic}", error)
 
-    def _deliver(self, msg: M) -> None:
-        """Loop thread."""
-        if not self.alive:
-            return
-        try:
-            self._callback(msg)
-        except Exception as error:  # noqa: BLE001 - reported, never swallowed
-            self.node.report_fault(f"subscription {self.topic}", error)
-
     def destroy(self) -> None:
         if not self.alive:
             return
@@ -419,7 +410,7 @@ def _settle(answer: asyncio.Future[Any], ros_future: Any) -> None:
 
 
 # ======================================================================================= node
-class RosNode(Node):
+class RosNode(EndpointNode):
     """One rclpy node behind the port; its callbacks run on the transport's asyncio loop."""
 
     def __init__(
@@ -520,27 +511,6 @@ class RosNode(Node):
             )
         return result(successful=True)
 
-    # ------------------------------------------------------------------------- endpoints
-    def _add(self, endpoint: Any) -> Any:
-        if self.destroyed:
-            raise TransportError(f"{self.fully_qualified_name} was destroyed")
-        self._endpoints.append(endpoint)
-        return endpoint
-
-    def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]:
-        return self._add(_RosPublisher(self, msg_type, self.resolve(topic), qos))  # type: ignore[no-any-return]
-
-    def create_subscription(
-        self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS
-    ) -> Subscription[M]:
-        return self._add(_RosSubscription(self, msg_type, self.resolve(topic), callback, qos))  # type: ignore[no-any-return]
-
-    def create_service(self, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> ServiceServer:
-        return self._add(_RosService(self, srv_type, self.resolve(name), handler))  # type: ignore[no-any-return]
-
-    def create_client(self, srv_type: type, name: str) -> ServiceClient[Any, Any]:
-        return self._add(_RosClient(self, srv_type, self.resolve(name)))  # type: ignore[no-any-return]
-
     def topic_names_and_types(self) -> list[TopicInfo]:
         """The graph's topics of our types, with each publisher's offered QoS (``ros2 bag record -a``'s discovery)."""
         known = {t.ROS_TYPE: t for t in (*MESSAGE_TYPES, ClockMessage)}
@@ -589,6 +559,10 @@ class RosNode(Node):
         """From the executor thread: report on the loop, where the fault handler lives."""
         if not self.transport.call_soon(self.report_fault, where, error):
             self.logger.error("%s: fault in %s after the loop closed: %r", self.fully_qualified_name, where, error)
+
+
+RosNode.publisher_class, RosNode.subscription_class = _RosPublisher, _RosSubscription
+RosNode.service_class, RosNode.client_class = _RosService, _RosClient
 
 
 def _parameter_value(api: _Rclpy, code: int, value: ParameterValue) -> Any:

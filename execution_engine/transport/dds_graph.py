@@ -1,0 +1,159 @@
+"""What makes plain DDS a ROS 2 graph: names, QoS, domain configuration, ``ros_discovery_info``.
+
+Pure data and small helpers for :mod:`execution_engine.transport.dds`, each matching what
+``rmw_cyclonedds_cpp`` (ROS 2 Jazzy) does, so that ROS 2 tools see our nodes as their own:
+
+* topic names: ``rt/<topic>``, services ``rq/<service>Request`` and ``rr/<service>Reply``;
+* QoS: reliability, durability (with Cyclone's durability service for transient local), history,
+  no autodispose, plain CDR (XCDR1), ``serviceid=``/``clientid=`` user data pairing a service's
+  request reader with its reply writer;
+* the domain: ``ROS_DOMAIN_ID`` (0..232), ``ROS_AUTOMATIC_DISCOVERY_RANGE`` (SUBNET, LOCALHOST,
+  OFF, SYSTEM_DEFAULT), ``ROS_STATIC_PEERS`` (``;``-separated), then ``CYCLONEDDS_URI`` appended
+  as rmw does, so a Cyclone configuration for networks without multicast applies unchanged;
+* node discovery: ``rmw_dds_common/msg/ParticipantEntitiesInfo`` on ``ros_discovery_info``, GIDs
+  the 16-byte DDS GUIDs of the participant and of every reader and writer of each node.
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from typing import Any
+
+from execution_engine.transport.port import TransportError
+from execution_engine.transport.qos import Durability, History, QoS, Reliability
+
+MAX_DOMAIN_ID = 232  # rcl's limit for the default port mapping
+DISCOVERY_TOPIC = "ros_discovery_info"  # the DDS name itself: rmw publishes it without "rt/"
+DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
+ENCLAVE_USER_DATA = b"enclave=/;"  # what rmw puts in the participant's user data
+DISCOVERY_RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
+#: rmw_qos_profile_services_default
+SERVICES = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 10)
+#: what rmw publishes ros_discovery_info with
+DISCOVERY = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
+
+
+def topic_name(resolved: str) -> str:
+    """``/joint_states`` -> ``rt/joint_states``."""
+    return "rt" + resolved
+
+
+def request_topic(service: str) -> str:
+    return f"rq{service}Request"
+
+
+def reply_topic(service: str) -> str:
+    return f"rr{service}Reply"
+
+
+def domain_id(env: Mapping[str, str] = os.environ) -> int:
+    """``ROS_DOMAIN_ID`` (default 0), checked as rcl checks it."""
+    text = env.get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return 0
+    try:
+        value = int(text)
+    except ValueError:
+        raise TransportError(f"ROS_DOMAIN_ID={text!r} is not an integer") from None
+    if not 0 <= value <= MAX_DOMAIN_ID:
+        raise TransportError(f"ROS_DOMAIN_ID={value} is outside 0..{MAX_DOMAIN_ID}")
+    return value
+
+
+def domain_config(env: Mapping[str, str] = os.environ) -> str | None:
+    """The Cyclone configuration rmw_cyclonedds_cpp would use, or None for Cyclone's default."""
+    range_ = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip().upper() or "SUBNET"
+    if range_ not in DISCOVERY_RANGES:
+        raise TransportError(f"ROS_AUTOMATIC_DISCOVERY_RANGE={range_!r}: use one of {', '.join(DISCOVERY_RANGES)}")
+    peers = [p.strip() for p in env.get("ROS_STATIC_PEERS", "").split(";") if p.strip()]
+    for peer in peers:
+        if any(c in peer for c in "<>\"&'"):
+            raise TransportError(f"ROS_STATIC_PEERS: {peer!r} is not a host name or address")
+    localhost_peer = range_ == "LOCALHOST"
+    use_peers = range_ in ("SUBNET", "LOCALHOST")
+    no_multicast = range_ in ("LOCALHOST", "OFF")
+    parts: list[str] = []
+    if localhost_peer or (use_peers and peers) or no_multicast:
+        xml = "<CycloneDDS><Domain>"
+        if no_multicast:
+            xml += "<General><AllowMulticast>false</AllowMulticast></General>"
+        if range_ == "OFF":
+            xml += f"<Discovery><ParticipantIndex>none</ParticipantIndex><Tag>ros_discovery_off_{os.getpid()}</Tag>"
+        else:
+            xml += "<Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
+        listed = (["localhost"] if localhost_peer else []) + (peers if use_peers else [])
+        if listed:
+            xml += "<Peers>" + "".join(f'<Peer address="{p}"/>' for p in listed) + "</Peers>"
+        xml += "</Discovery></Domain></CycloneDDS>"
+        parts.append(xml)
+    uri = env.get("CYCLONEDDS_URI", "").strip()
+    if uri:
+        parts.append(uri)
+    return ",".join(parts) if parts else None
+
+
+def dds_qos(qos: QoS, *, user_data: bytes = b"", lease: float | None = None) -> Any:
+    """The cyclonedds ``Qos`` of a ROS endpoint with ``qos``; ``lease`` (s): automatic liveliness."""
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.util import duration
+
+    history = Policy.History.KeepAll if qos.history is History.KEEP_ALL else Policy.History.KeepLast(qos.depth)
+    policies: list[Any] = [
+        Policy.Reliability.Reliable(max_blocking_time=duration(infinite=True))
+        if qos.reliability is Reliability.RELIABLE else Policy.Reliability.BestEffort,
+        history,
+        Policy.WriterDataLifecycle(autodispose=False),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+    ]
+    if qos.durability is Durability.TRANSIENT_LOCAL:
+        policies.append(Policy.Durability.TransientLocal)
+        policies.append(Policy.DurabilityService(
+            cleanup_delay=0, history=history, max_samples=-1, max_instances=-1, max_samples_per_instance=-1,
+        ))
+    else:
+        policies.append(Policy.Durability.Volatile)
+    if lease is not None:
+        policies.append(Policy.Liveliness.Automatic(lease_duration=duration(seconds=lease)))
+    if user_data:
+        policies.append(Policy.Userdata(data=user_data))
+    return Qos(*policies)
+
+
+def user_data_value(qos: Any, key: str) -> str | None:
+    """``key=value;`` from an endpoint's user data (``serviceid``, ``clientid``), or None."""
+    from cyclonedds.qos import Policy
+
+    try:
+        data = qos[Policy.Userdata].data
+    except (KeyError, TypeError, AttributeError):
+        return None
+    for item in bytes(data).decode("utf-8", "replace").split(";"):
+        name, sep, value = item.partition("=")
+        if sep and name.strip() == key:
+            return value
+    return None
+
+
+def gid(guid_bytes: bytes) -> list[int]:
+    """rmw_dds_common/Gid ``data`` (16 octets) of a DDS GUID."""
+    data = list(guid_bytes[:16])
+    return data + [0] * (16 - len(data))
+
+
+def discovery_message(
+    registry: Any, participant_guid: bytes, nodes: Mapping[tuple[str, str], tuple[list[bytes], list[bytes]]]
+) -> Any:
+    """The ParticipantEntitiesInfo of this process: each node (namespace, name) with the GUIDs of
+    its readers and writers."""
+    gid_cls = registry.message("rmw_dds_common/msg/Gid")
+    node_cls = registry.message("rmw_dds_common/msg/NodeEntitiesInfo")
+    info_cls = registry.message(DISCOVERY_TYPE)
+    infos = [
+        node_cls(
+            node_namespace=namespace, node_name=name,
+            reader_gid_seq=[gid_cls(data=gid(g)) for g in readers],
+            writer_gid_seq=[gid_cls(data=gid(g)) for g in writers],
+        )
+        for (namespace, name), (readers, writers) in sorted(nodes.items())
+    ]
+    return info_cls(gid=gid_cls(data=gid(participant_guid)), node_entities_info_seq=infos)
