@@ -97,6 +97,7 @@ from robot_bridges.vplus.kinematics import (
     location_to_pose,
     pose_to_location,
 )
+from robot_bridges.vplus.camera_port import rendered_focus_camera
 from robot_bridges.vplus.measurement import MeasurementError, MeasurementPort, SimulatedFocusCamera
 from robot_bridges.vplus.simulator import DEFAULT_PORT, VPlusSimulator
 from robot_bridges.vplus.trajectory import TrajectoryPlanner, plan_replay
@@ -506,9 +507,11 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     Without a host an AdeptServer simulator is started in-process on 127.0.0.1 (``port``, or a
     free one) and a simulated focus camera answers vision requests.  Extras: ``timeout`` (s, ack
     allowance per command on top of the motion time), ``retries`` (connection attempts after the
-    first), ``linear`` (``joint`` or ``reject``), ``camera`` (``simulated`` or ``none``: what answers
-    vision requests; default ``simulated`` without a host, ``none`` with one -- a real cell plugs its
-    vision pipeline in as a :class:`MeasurementPort`).
+    first), ``linear`` (``joint`` or ``reject``), ``camera`` (``simulated``, ``rendered`` or ``none``:
+    what answers vision requests -- the sharpness model of the focus camera, the sharpness of its
+    rendered images (:mod:`robot_bridges.vplus.camera_port`), nothing; default ``simulated`` without
+    a host, ``none`` with one -- a real cell plugs its vision pipeline in as a :class:`MeasurementPort`,
+    e.g. a :class:`~robot_bridges.vplus.camera_port.CameraMeasurement` on a ROS camera).
     """
     options.check("vplus", ADEPT_VIPER_S850, _EXTRAS)
     if options.host is not None:
@@ -542,9 +545,13 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     if options.port is not None and not (0 <= options.port <= 65535):
         raise ValueError(f"vplus: port must be 0..65535, got {options.port}")
     camera = options.extra.get("camera", "none" if options.host is not None else "simulated")
-    if camera not in ("simulated", "none"):
-        raise ValueError(f"vplus: camera must be 'simulated' or 'none', got {camera!r}")
-    measurement = SimulatedFocusCamera(seed=options.seed) if camera == "simulated" else None
+    if camera not in ("simulated", "rendered", "none"):
+        raise ValueError(f"vplus: camera must be 'simulated', 'rendered' or 'none', got {camera!r}")
+    measurement: MeasurementPort | None = None
+    if camera == "simulated":
+        measurement = SimulatedFocusCamera(seed=options.seed)
+    elif camera == "rendered":
+        measurement = rendered_focus_camera(options.seed)
     if options.host is not None:
         port = DEFAULT_PORT if options.port is None else options.port
         return VPlusBackend(

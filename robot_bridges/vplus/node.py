@@ -27,7 +27,7 @@ def declare_vplus_parameters(node: Node) -> BridgeSetup:
     timeout = float(node.declare_parameter("timeout", 5.0, "ack allowance per command on top of its motion time (s)"))
     retries = int(node.declare_parameter("retries", 3, "connection attempts after the first"))
     linear = str(node.declare_parameter("linear", "joint", "linear moves: 'joint' (run joint-interpolated) or 'reject'"))
-    camera = str(node.declare_parameter("camera", "", "what answers vision requests: simulated, none ('' = simulated without host)"))
+    camera = str(node.declare_parameter("camera", "", "what answers vision requests: simulated, rendered (images of the focus camera), none ('' = simulated without host)"))
     if not 0 < port < 65536:
         raise ValueError(f"port must be 1..65535, got {port}")
     extra = {"timeout": repr(timeout), "retries": str(retries), "linear": linear}
