@@ -111,3 +111,45 @@ def test_measure_on_a_feature_is_the_sharpness_of_the_live_image(run_sim) -> Non
 
     values = run_sim(main)
     assert values[0] > values[1] > values[2]  # leaving the focus plane blurs the image
+
+
+def test_the_hand_eye_mount_is_configurable(run_sim) -> None:  # type: ignore[no-untyped-def]
+    from robot_bridges.backend import BackendOptions
+    from robot_bridges.nextage_sim import vision
+    from robot_bridges.registry import create_backend
+
+    default = vision.CAMERAS["left_hand_camera"].mount
+    text = " ".join(f"{v:.12g}" for v in (*default.position, *default.rpy()))
+    shifted = " ".join(f"{v:.12g}" for v in (*default.compose(Pose(0.005, 0.0, 0.0)).position, *default.rpy()))
+
+    async def located(clock: Clock, mount: str) -> tuple[Pose, tuple[float, float]]:
+        backend = await create_backend("nextage-sim", clock, BackendOptions(robot=APP.robot, extra={"left_hand_camera_mount": mount}))
+        backend.set_cell(SNAPSHOT)
+        await backend.execute("left_arm", MoveCartesian(CELL.pose("drill_2").offset_local(dz=-0.05), "ptp"))
+        images: list[object] = []
+        backend.cameras.on_capture = lambda spec, pose, frame: images.append(pose)
+        result = await backend.execute("left_arm", Vision("locate", "drill_2", nominal=CELL.pose("drill_2")))
+        assert result.pose is not None
+        camera = images[0]
+        assert isinstance(camera, Pose)
+        return result.pose, (camera.x, camera.y)
+
+    async def main(clock: Clock) -> tuple[tuple[Pose, tuple[float, float]], tuple[Pose, tuple[float, float]]]:
+        return await located(clock, text), await located(clock, shifted)
+
+    (as_default, camera_a), (moved, camera_b) = run_sim(main)
+    truth = CELL.true_pose("drill_2")
+    assert math.dist(camera_a, camera_b) == pytest.approx(0.005, abs=1e-6)  # the camera sits where its mount says
+    assert as_default.distance_to(truth) < 0.05e-3 and moved.distance_to(truth) < 0.05e-3
+
+
+def test_a_bad_mount_option_is_a_one_line_error(run_sim) -> None:  # type: ignore[no-untyped-def]
+    from robot_bridges.backend import BackendOptions
+    from robot_bridges.registry import create_backend
+
+    async def main(clock: Clock) -> str:
+        with pytest.raises(ValueError) as error:
+            await create_backend("nextage-sim", clock, BackendOptions(robot=APP.robot, extra={"right_hand_camera_mount": "1 2 3"}))
+        return str(error.value)
+
+    assert run_sim(main) == "nextage-sim: right_hand_camera_mount: six numbers x y z roll pitch yaw (m, rad) expected, got '1 2 3'"

@@ -47,3 +47,12 @@ def look_at_mount(position: tuple[float, float, float], target: tuple[float, flo
     m[:3, 3] = p
     return base.compose(Pose.from_matrix(m))
 
+
+def parse_mount(text: str, what: str) -> Pose:
+    """A hand-eye calibration given as text: ``x y z roll pitch yaw`` (m, rad) of the optical frame in its link."""
+    parts = text.replace(",", " ").split()
+    try:
+        x, y, z, roll, pitch, yaw = (float(p) for p in parts)
+        return Pose.from_xyz_rpy(x, y, z, roll, pitch, yaw)
+    except ValueError:  # not six numbers, or a non-finite one
+        raise ValueError(f"{what}: six numbers x y z roll pitch yaw (m, rad) expected, got {text!r}") from None

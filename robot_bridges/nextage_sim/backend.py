@@ -49,6 +49,7 @@ from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.clock import Clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
 from robot_bridges.camera.sources import RenderedCamera
+from robot_bridges.camera.spec import parse_mount
 from robot_bridges.camera.vision import CameraVision
 from robot_bridges.nextage_sim import vision
 from robot_bridges.nextage_sim.faults import FaultPlan, FaultSpec, parse_fault
@@ -124,6 +125,7 @@ class NextageSimBackend(RobotBackend):
         cartesian_limits: CartesianLimits | None = None,
         faults: Iterable[FaultSpec] = (),
         model: NextageModel | None = None,
+        camera_mounts: Mapping[str, Pose] | None = None,
     ) -> None:
         if not (control_period > 0 and math.isfinite(control_period)):
             raise ValueError(f"control period must be a positive number of seconds, got {control_period!r}")
@@ -136,8 +138,11 @@ class NextageSimBackend(RobotBackend):
         self._jobs: dict[str, _Job] = {}
         self._hands = {g: HandIO() for g in self.model.arms}
         self._vision = vision.SimulatedVision(seed)
+        #: This robot's cameras: the simulator's, with the hand-eye mounts given instead of the defaults.
+        self.camera_specs = vision.cameras_with(camera_mounts or {})
         #: The cameras: images rendered from the cell, detected and placed in the world (robot_bridges.camera).
-        self.cameras = CameraVision(RenderedCamera(lambda: self.cameras.scene(), seed, clock.now), self._vision.fallback, vision.REAL_CAMERAS)
+        real = {n: c for n, c in self.camera_specs.items() if n not in vision.STEREO}
+        self.cameras = CameraVision(RenderedCamera(lambda: self.cameras.scene(), seed, clock.now), self._vision.fallback, real)
         self._faults = FaultPlan()
         for spec in faults:
             self.inject(spec)
@@ -339,7 +344,7 @@ class NextageSimBackend(RobotBackend):
         return EndEffectorResult(io=hand.snapshot())
 
     async def _look(self, group: str, primitive: Vision) -> VisionResult:
-        cameras = vision.taking_part(primitive.camera or NEXTAGE_OPEN.group(group).camera)
+        cameras = vision.taking_part(primitive.camera or NEXTAGE_OPEN.group(group).camera, self.camera_specs)
         with self._job(frozenset({group}), primitive) as job:
             fault = self._take_fault(job, group)
             # The images are taken now, with the cameras where the kinematics put them now.
@@ -692,7 +697,8 @@ class NextageSimBackend(RobotBackend):
 #: (the flange's -x, the wrist roll axis), so a frame whose z points into a hole is approached along
 #: +z by the tool -- the convention of the cell models and skills.
 HAND_TOOL = Pose.from_xyz_rpy(0.0, 0.0, 0.0, 0.0, -math.pi / 2, 0.0)
-_EXTRAS = ("initial_pose", "control_period", "tool")
+#: ``<camera>_mount``: a camera's hand-eye calibration, its optical frame in its link (x y z roll pitch yaw; m, rad).
+_EXTRAS = ("initial_pose", "control_period", "tool", *(f"{name}_mount" for name in vision.REAL_CAMERAS))
 
 
 def parse_tool(text: str) -> Pose:
@@ -711,8 +717,9 @@ def parse_tool(text: str) -> Pose:
 async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     """Registry factory (``nextage-sim``): the simulator from CLI / launch options.
 
-    Understands ``faults``, ``seed`` and the extras ``initial_pose``, ``control_period`` and
-    ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`); a controller address makes
+    Understands ``faults``, ``seed`` and the extras ``initial_pose``, ``control_period``,
+    ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`) and ``<camera>_mount`` (a
+    camera's hand-eye calibration, six numbers x y z roll pitch yaw in its link); a controller address makes
     no sense for a simulator and is refused rather than ignored.
     """
     options.check("nextage-sim", NEXTAGE_OPEN, _EXTRAS)
@@ -724,6 +731,7 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     except ValueError:
         raise ValueError(f"nextage-sim: control_period {options.extra['control_period']!r} is not a number") from None
     tool = parse_tool(options.extra["tool"]) if "tool" in options.extra else HAND_TOOL
+    mounts = {n: parse_mount(options.extra[f"{n}_mount"], f"nextage-sim: {n}_mount") for n in vision.REAL_CAMERAS if f"{n}_mount" in options.extra}
     faults = [parse_fault(text) for text in options.faults]
     for spec, text in zip(faults, options.faults):  # an option error now, not a BridgeError out of the start
         if spec.group not in GROUPS:
@@ -735,4 +743,5 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
         seed=options.seed,
         faults=faults,
         tools={"left_arm": tool, "right_arm": tool},
+        camera_mounts=mounts,
     )

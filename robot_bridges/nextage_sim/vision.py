@@ -14,8 +14,9 @@ unknown feature.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,17 +59,25 @@ STEREO: dict[str, tuple[str, str]] = {"head_camera": ("head_camera_left", "head_
 REAL_CAMERAS: dict[str, CameraSpec] = {n: c for n, c in CAMERAS.items() if n not in STEREO}
 
 
-def camera(name: str) -> CameraSpec:
+def camera(name: str, cameras: Mapping[str, CameraSpec] = CAMERAS) -> CameraSpec:
     try:
-        return CAMERAS[name]
+        return cameras[name]
     except KeyError:
-        raise BridgeError(FaultKind.VISION, f"no camera {name!r} (cameras: {', '.join(CAMERAS)})") from None
+        raise BridgeError(FaultKind.VISION, f"no camera {name!r} (cameras: {', '.join(cameras)})") from None
 
 
-def taking_part(name: str) -> tuple[CameraSpec, ...]:
+def taking_part(name: str, cameras: Mapping[str, CameraSpec] = CAMERAS) -> tuple[CameraSpec, ...]:
     """The cameras that take an image for a request naming ``name`` (both of a stereo pair)."""
     pair = STEREO.get(name)
-    return tuple(camera(n) for n in pair) if pair else (camera(name),)
+    return tuple(camera(n, cameras) for n in pair) if pair else (camera(name, cameras),)
+
+
+def cameras_with(mounts: Mapping[str, Pose]) -> dict[str, CameraSpec]:
+    """The cameras, with these hand-eye mounts (optical frame in the link) instead of the defaults."""
+    unknown = sorted(set(mounts) - set(REAL_CAMERAS))
+    if unknown:
+        raise ValueError(f"no camera {', '.join(unknown)} to mount (cameras: {', '.join(REAL_CAMERAS)})")
+    return {n: (dataclasses.replace(c, mount=mounts[n]) if n in mounts else c) for n, c in CAMERAS.items()}
 
 
 class SimulatedVision:
