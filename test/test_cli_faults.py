@@ -1,0 +1,200 @@
+"""Every fault and bad option of docs/faults.md, row by row: its one-line message, its exit code, no traceback.
+
+The table in docs/faults.md is the single source: this module reads it, so a row cannot be
+documented and untested, nor a message changed without the doc.  Each row's command runs
+in-process (``main([...])`` on a worker thread, joined with the row's bound) or, where the
+process itself matters, as ``python -m execution_engine`` with the bound as its timeout.  Peers
+are loopback: a closed port, a server that never answers, a V+ simulator whose only client slot
+is taken, a UDP port no controller sends to.  Runs use simulated time (``--speed max``) except
+where the back end needs the robot's real clock (a controller named by ``--host``, KUKA RSI).
+"""
+from __future__ import annotations
+
+import io
+import logging
+import re
+import shlex
+import socket
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from execution_engine.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "faults.md"
+PREFIX = ["python", "-m", "execution_engine"]
+RIVET = (ROOT / "apps_xml" / "rivet_installation.xml").read_text()
+CELL = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
+
+
+def app(body: str, head: str = "", robot: str = "nextage", cell: str | None = None) -> str:
+    cell_attr = f' cell="{cell if cell is not None else CELL}"'
+    return f'<?xml version="1.0"?>\n<application name="t" robot="{robot}"{cell_attr}>\n{head}{body}</application>\n'
+
+
+def op(group: str, function: str, *params: str) -> str:
+    inner = "".join(f'<param value="{p}"/>' for p in params)
+    return f'  <operation id="1">\n    <{group}><function name="{function}"><params>{inner}</params></function></{group}>\n  </operation>\n'
+
+
+#: The files rows name under {tmp}, as docs/faults.md describes them.
+FILES: dict[str, str | bytes] = {
+    "not_xml.xml": "this is not XML at all\n",
+    "truncated.xml": RIVET[: len(RIVET) // 2],
+    "entity.xml": '<?xml version="1.0"?>\n<!DOCTYPE a [<!ENTITY big "xxxxxxxx">]>\n<application name="t" robot="nextage">&big;</application>\n',
+    "unknown_function.xml": app(op("left_arm", "fly_away")),
+    "bad_param.xml": app(op("left_arm", "wait", "soon")),
+    "missing_param.xml": app(op("right_arm", "pick_rivet")),
+    "unknown_group.xml": app(op("left_leg", "gripper_open")),
+    "missing_cell.xml": app(op("left_arm", "gripper_open"), cell="cells/nowhere.xml"),
+    "unknown_robot.xml": app(op("arm", "gripper_open"), robot="r2d2"),
+    "far_target.xml": app(op("left_arm", "move_to", "1e308,0,0.3,0,0,0")),
+    "century_alarm.xml": app(op("left_arm", "gripper_open"), head='<error_policy action="alarm" alarm_timeout="3e9"/>\n'),
+    "alarm.xml": RIVET.replace('cell="cells/rivet_cell.xml"', f'cell="{CELL}"').replace(
+        '<error_policy retries="1" action="safe_pose" safe_pose="initial"/>', '<error_policy action="alarm"/>'
+    ),
+    "rivet.xml": RIVET.replace('cell="cells/rivet_cell.xml"', f'cell="{CELL}"'),
+    "not_a_db.sqlite": "SQLite format? no: plain text\n",
+    "huge.xml": b"<application>" + b" " * (33 * 1024 * 1024) + b"</application>",
+}
+
+
+@dataclass(frozen=True)
+class Row:
+    number: int
+    fault: str
+    command: str
+    message: str
+    exit_code: int
+    bound: float
+    how: str
+
+    @property
+    def id(self) -> str:
+        return f"{self.number:02d}-{re.sub(r'[^a-z0-9]+', '-', self.fault.lower()).strip('-')[:40]}"
+
+
+def rows() -> list[Row]:
+    """The table under '## The table' in docs/faults.md."""
+    text = DOC.read_text()
+    table = text[text.index("## The table"):]
+    found = []
+    for line in table.splitlines():
+        if not re.match(r"^\| \d+ \|", line):
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split(" | ")]
+        number, fault, command, message, code, bound, how = cells
+        found.append(Row(int(number), fault, command.strip("`"), message.strip("`"), int(code), float(bound.rstrip(" s")), how))
+    return found
+
+
+def pattern(message: str, values: dict[str, str]) -> re.Pattern[str]:
+    """The documented line as a regular expression: ``…`` stands for any text."""
+    parts = [re.escape(fill(part, values)) for part in message.split("…")]
+    return re.compile("^" + ".*".join(parts) + "$", re.MULTILINE)
+
+
+def fill(text: str, values: dict[str, str]) -> str:
+    for key, value in values.items():
+        text = text.replace("{" + key + "}", value)
+    return text
+
+
+# ------------------------------------------------------------------------------ peers
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+@pytest.fixture
+def peers() -> Iterator[dict[str, str]]:
+    """Loopback peers: a silent TCP server, a full V+ simulator, a closed port, a quiet UDP port."""
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(8)  # the kernel completes the handshake; nobody ever reads or answers
+    simulator = subprocess.Popen(
+        [sys.executable, "-m", "robot_bridges.vplus.simulator", "--port", "0", "--max-clients", "1"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
+    )
+    holder = socket.socket()
+    try:
+        assert simulator.stdout is not None
+        banner = simulator.stdout.readline()  # "V+ simulator on 127.0.0.1:PORT (x1); Ctrl-C stops it"
+        full_port = re.search(r":(\d+) ", banner)
+        assert full_port, banner
+        holder.connect(("127.0.0.1", int(full_port.group(1))))  # takes the only client slot
+        yield {
+            "silent_port": str(silent.getsockname()[1]),
+            "full_port": full_port.group(1),
+            "closed_port": str(free_port()),
+            "udp_port": str(free_port(socket.SOCK_DGRAM)),
+        }
+    finally:
+        holder.close()
+        silent.close()
+        simulator.terminate()
+        simulator.wait(timeout=10)
+
+
+def needs_peers(row: Row) -> bool:
+    return any(f"{{{k}}}" in row.command for k in ("silent_port", "full_port", "closed_port", "udp_port"))
+
+
+# ------------------------------------------------------------------------------ running
+def run_in_process(argv: list[str], bound: float) -> tuple[int, str]:
+    """``main(argv)`` on a worker thread, joined within ``bound`` s; everything it printed or logged."""
+    out, err = io.StringIO(), io.StringIO()
+    handler = logging.StreamHandler(err)  # a logged traceback would count as one
+    logging.getLogger().addHandler(handler)
+    result: list[int] = []
+    worker = threading.Thread(target=lambda: result.append(main(argv, out, err)), name="cli row", daemon=True)
+    try:
+        worker.start()
+        worker.join(bound)
+    finally:
+        logging.getLogger().removeHandler(handler)
+    assert not worker.is_alive(), f"{argv} did not end within {bound:g} s"
+    return result[0], out.getvalue() + err.getvalue()
+
+
+def run_process(argv: list[str], bound: float) -> tuple[int, str]:
+    done = subprocess.run([sys.executable, "-m", "execution_engine", *argv], cwd=ROOT, capture_output=True, text=True, timeout=bound)
+    return done.returncode, done.stdout + done.stderr
+
+
+ROWS = rows()
+
+
+def test_the_table_has_at_least_40_kinds_of_fault_and_every_file_it_names_exists() -> None:
+    assert len(ROWS) >= 40
+    assert [r.number for r in ROWS] == list(range(1, len(ROWS) + 1))
+    assert len({r.fault for r in ROWS}) == len(ROWS)
+    used = {name for r in ROWS for name in re.findall(r"\{tmp\}/([\w.]+)", r.command)}
+    assert used - set(FILES) == {"nowhere.xml", "no"}  # paths that must not exist
+    assert set(FILES) <= used
+    assert all(r.how in ("in-process", "subprocess") for r in ROWS)
+
+
+@pytest.mark.parametrize("row", ROWS, ids=[r.id for r in ROWS])
+def test_row(row: Row, tmp_path: Path, request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(ROOT)
+    for name, content in FILES.items():
+        if f"{{tmp}}/{name}" in row.command:
+            (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+    values = {"tmp": str(tmp_path)}
+    if needs_peers(row):
+        values.update(request.getfixturevalue("peers"))
+    argv = shlex.split(fill(row.command, values))
+    assert argv[:3] == PREFIX, row.command
+    runner = run_in_process if row.how == "in-process" else run_process
+    code, output = runner(argv[3:], row.bound)
+    assert "Traceback" not in output, output
+    assert pattern(row.message, values).search(output), f"expected a line {row.message!r}, got:\n{output}"
+    assert code == row.exit_code, output
