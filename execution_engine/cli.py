@@ -44,7 +44,8 @@ from execution_engine.run_checks import Refused, preflight
 from execution_engine.vision_cli import add_vision_parser, cmd_vision
 from operator_station import cli as studio
 from execution_engine.run_report import add_report_parser, cmd_report
-from execution_engine.recorder.cli_hook import add_run_options, start_recording, stop_recording
+from execution_engine.checkpoint.store import CheckpointError
+from execution_engine.recorder.cli_hook import add_run_options, prepare_flight, start_recording, stop_recording
 from robot_bridges.backend import BackendOptions, BridgeError
 
 EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_TRACE, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
@@ -216,7 +217,6 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
     deployment = await deploy_local(
         clock, app.robot, backend, machine_parameters=machine_parameters, operators=operators, hold_for_operators=operators and clock.simulated,
     )
-    recorder = await start_recording(args, app, deployment.transport, backend_name(app, args))
     observer = RunObserver(deployment.transport.create_node("run_observer"), app.robot.group_names)
     if writer is not None:  # before the console: whatever the console shows is in the trace already
         observer.sinks.append(writer.on_status)
@@ -227,10 +227,11 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
         observer.sinks.append(printer.on_status)
         observer.engine_sinks.append(printer.on_engine)
         observer.event_sinks.append(printer.on_event)
+    recorder = await start_recording(args, app, deployment.transport, backend_name(app, args), observer)  # checkpoints after the trace
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
     loop = asyncio.get_running_loop()
     interactive = console.attach_stdin(loop) if operators else False
-    run_task = loop.create_task(deployment.engine.run(app))
+    run_task = loop.create_task(deployment.engine.run(app, recorder.resume))
     interrupts = 0
 
     def on_interrupt() -> None:
@@ -272,6 +273,11 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
     try:
         preflight(app, args)  # files and peers, before anything runs and without writing a byte
     except Refused as refusal:
+        err.write(f"error: {refusal}\n")
+        return EXIT_USAGE
+    try:
+        prepare_flight(app, args)  # --resume: refuse a changed application or cell before any file is written
+    except CheckpointError as refusal:
         err.write(f"error: {refusal}\n")
         return EXIT_USAGE
     if not args.no_check:

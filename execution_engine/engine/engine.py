@@ -23,6 +23,7 @@ import asyncio
 import contextlib
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import BindContext, Catalog
@@ -68,6 +69,14 @@ class _Dispatch:
 
 class ApplicationAborted(Exception):
     """The run cannot go on (policy exhausted, operator stop); the report says why."""
+
+
+class ResumePoint(Protocol):
+    """Where a resumed run starts (:class:`execution_engine.checkpoint.resume.ResumePlan`)."""
+
+    index: int
+
+    async def first_operation(self, engine: ExecutionEngine, operation: Operation) -> Operation: ...
 
 
 class ExecutionEngine:
@@ -120,12 +129,17 @@ class ExecutionEngine:
         self._control = asyncio.Event()  # set whenever pause/resume/stop/step/reset/start happens
         self._start_requested = False
         self._alarm_reset = False
+        self._alarm_skip = self._skippable = False  # an interrupted function's alarm can be answered with skip
         self._progress: dict[str, GroupProgress] = {}
         self._tasks: set[asyncio.Task[tuple[bool, str]]] = set()  # safety-stop pauses under way
 
     # ============================================================================ running
-    async def run(self, app: Application) -> RunReport:
-        """Run ``app`` to its end; always returns a report, never raises for robot faults."""
+    async def run(self, app: Application, resume: ResumePoint | None = None) -> RunReport:
+        """Run ``app`` to its end; always returns a report, never raises for robot faults.
+
+        ``resume`` (after a crash, :mod:`execution_engine.checkpoint.resume`): operations before
+        ``resume.index`` completed in an earlier run and are not run again; the operation at it is
+        run as ``resume.first_operation`` makes it, which first asks about interrupted groups."""
         self._reset_run_state()
         self.app = app
         report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
@@ -147,6 +161,10 @@ class ExecutionEngine:
             await self._await_start()
             self._set_state("running")
             for index, operation in enumerate(app.operations):
+                if resume is not None and index < resume.index:
+                    continue
+                if resume is not None and index == resume.index:
+                    operation = await resume.first_operation(self, operation)
                 if not await self._gate():
                     break
                 self._op_index, self._operation = index, operation
@@ -443,6 +461,26 @@ class ExecutionEngine:
         self._note_recovery(f"{plan}{unanswered or '; alarm answered with stop'}")
         return False, unanswered
 
+    async def hold_for_answer(self, message: str) -> str:
+        """An alarm that only an operator ends: "reset", "skip" or "stop"; "unanswerable" at once
+        when nobody can answer (a resumed run's interrupted functions)."""
+        self._alarm_reset = self._alarm_skip = False
+        self._skippable = True
+        self._set_state("alarm", message)
+        try:
+            if not self.operators:
+                return "unanswerable"
+            with self._operator_wait():
+                while not self._alarm_reset and not self._alarm_skip and self._stop_reason is None:
+                    await self._wait_control()
+        finally:
+            self._skippable = False
+        return "stop" if self._stop_reason is not None else "skip" if self._alarm_skip else "reset"
+
+    def announce(self, message: str) -> None:
+        """Say something about the run in the engine's status and events (and so in the trace)."""
+        self._set_state("running", message)
+
     async def _stop_groups(self, groups: list[str], pending: dict[str, _Dispatch]) -> None:
         """Stop running groups and wait (bounded) for their preempted results."""
         for group in groups:
@@ -519,7 +557,7 @@ class ExecutionEngine:
         ``source`` says where it came from: the services pass their resolved name, the terminal
         console of ``run --interactive`` (in this process) the key that was pressed.
         """
-        ok, answer = decide(command, self.state, Flags(self._start_requested, self._safety_active))
+        ok, answer = decide(command, self.state, Flags(self._start_requested, self._safety_active, self._skippable))
         self._record(OperatorAction(self.clock.now(), command, source, self.state, ok, answer))
         if not ok:
             return False, answer
@@ -574,6 +612,10 @@ class ExecutionEngine:
 
     async def _cmd_reset(self, source: str) -> list[str]:
         self._alarm_reset = True
+        return []
+
+    async def _cmd_skip(self, source: str) -> list[str]:
+        self._alarm_skip = True
         return []
 
     def _on_safety(self, msg: Bool) -> None:

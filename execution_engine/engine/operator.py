@@ -15,7 +15,7 @@ from execution_engine.transport.wire import ENGINE_SERVICES
 ENDED = ("finished", "failed", "stopped")
 
 #: The terminal console's key for each command (``run --interactive``); a whole word works too.
-CONSOLE_KEYS: dict[str, str] = {"pause": "p", "resume": "r", "stop": "s", "step": "t", "reset": "x"}
+CONSOLE_KEYS: dict[str, str] = {"pause": "p", "resume": "r", "stop": "s", "step": "t", "reset": "x", "skip": "k"}
 
 
 @dataclass(frozen=True)
@@ -24,6 +24,7 @@ class Flags:
 
     start_requested: bool
     safety_active: bool
+    skippable: bool = False  # the alarm is a resumed run's interrupted function: skip answers it
 
 
 def decide(command: str, state: str, flags: Flags) -> tuple[bool, str]:
@@ -36,6 +37,10 @@ def decide(command: str, state: str, flags: Flags) -> tuple[bool, str]:
         return True, "started"
     if command == "stop":
         return (False, f"already {state}") if state in ENDED else (True, "stopping")
+    if command == "skip":
+        if state == "alarm" and flags.skippable:
+            return True, "alarm acknowledged: the interrupted function is skipped (taken as done)"
+        return False, "nothing to skip: skip answers the alarm of a function a crash interrupted" + (" (use reset or stop)" if state == "alarm" else f" ({state})")
     if command == "reset":
         return (True, "alarm acknowledged: retrying") if state == "alarm" else (False, f"no alarm to reset ({state})")
     if state in (*ENDED, "stopping", "alarm"):  # an alarm holds every group already; it wants an answer

@@ -1,36 +1,126 @@
-"""What ``run`` needs of the recorder: its command-line options and start/stop around a run.
+"""What ``run`` needs of the flight recorder: its options, and start/stop around a run.
 
-Kept here so ``cli.py`` only calls :func:`add_run_options`, :func:`start_recording` and
-:func:`stop_recording`.
+Recording (``--record``), checkpoints (``--checkpoint``, by default next to the trace or the
+recording) and resuming (``--resume``, ``--on-interrupted``) are set up here, so ``cli.py`` only
+calls :func:`add_run_options`, :func:`prepare_flight` (before any file is written),
+:func:`start_recording` and :func:`stop_recording`.
 """
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
+from pathlib import Path
 from typing import IO
 
+from app_functions.registry import full_catalog
 from execution_engine.app_model import Application
+from execution_engine.app_model.model import Operation
+from execution_engine.checkpoint.resume import ANSWERS, ResumePlan, app_meta, check_same, next_name, plan_resume
+from execution_engine.checkpoint.store import SKIPPED, CheckpointError, CheckpointStore
+from execution_engine.checkpoint.writer import CheckpointWriter
+from execution_engine.observers import RunObserver
 from execution_engine.recorder.recorder import Recorder
 from execution_engine.recorder.writer import McapSink
 from execution_engine.transport.port import Node, Transport
 
 
 def add_run_options(run: argparse.ArgumentParser) -> None:
-    """``--record PATH``: every topic of the run as MCAP (ROS 2 schemas and CDR, as ``ros2 bag record -s mcap``)."""
     run.add_argument(
         "--record", metavar="RUN.mcap",
         help="record every topic of the run to an MCAP file that Foxglove, PlotJuggler and ros2 bag open "
              "(read it back with: python -m execution_engine report RUN.mcap)",
     )
+    run.add_argument(
+        "--checkpoint", metavar="PATH",
+        help="SQLite file of the run's progress after every function result (default: next to --trace or --record, "
+             "NAME.checkpoint.sqlite; none without them)",
+    )
+    run.add_argument("--resume", metavar="CHECKPOINT", help="go on with a run that crashed or was killed, from its checkpoint")
+    run.add_argument(
+        "--on-interrupted", choices=ANSWERS, default="ask",
+        help="with --resume: what to do with a function the crash interrupted: ask the operator (default), redo it, or skip it",
+    )
+
+
+def checkpoint_path(args: argparse.Namespace) -> str | None:
+    """``--checkpoint``, else the resumed checkpoint, else next to the trace or the recording."""
+    if getattr(args, "checkpoint", None):
+        return str(args.checkpoint)
+    if getattr(args, "resume", None):
+        return str(args.resume)
+    base = getattr(args, "trace", None) or getattr(args, "record", None)
+    if not base:
+        return None
+    path = Path(base)
+    return str(path.with_name(path.name.split(".")[0] + ".checkpoint.sqlite"))
+
+
+def prepare_flight(app: Application, args: argparse.Namespace) -> None:
+    """Before anything is written: check ``--resume`` (CheckpointError naming what is wrong) and
+    name the resumed run's trace and recording, never the files of the run it continues."""
+    args.checkpoint = checkpoint_path(args)
+    resume = getattr(args, "resume", None)
+    if not resume:
+        return
+    if not Path(resume).is_file():
+        raise CheckpointError(f"--resume {resume}: no such checkpoint file")
+    store = CheckpointStore(resume)
+    try:
+        check_same(store, app)
+        runs = store.runs()
+    finally:
+        store.close()
+    earlier = {p for _, trace, record in runs for p in (trace, record) if p}
+    for option in ("trace", "record"):
+        given = getattr(args, option, None)
+        last = next((r[1] if option == "trace" else r[2] for r in reversed(runs) if (r[1] if option == "trace" else r[2])), "")
+        if given and str(Path(given)) in {str(Path(p)) for p in earlier}:
+            raise CheckpointError(f"--{option} {given}: that file holds the run being resumed; give a new file (or leave it out: {next_name(given, len(runs) + 1)})")
+        if not given and last:
+            setattr(args, option, next_name(last, len(runs) + 1))
+
+
+@dataclass
+class Flight:
+    """The recorder, checkpoint and resume plan of one run (each None when not asked for)."""
+
+    recorder: Recorder | None = None
+    store: CheckpointStore | None = None
+    writer: CheckpointWriter | None = None
+    resume: ResumePlan | None = None
 
 
 async def start_recording(
-    args: argparse.Namespace, app: Application, transport: Transport, backend: str, continues: str = ""
-) -> Recorder | None:
-    """A recorder node on ``transport`` writing ``args.record``, or None without ``--record``."""
-    path = getattr(args, "record", None)
-    if not path:
-        return None
-    return record_node(transport.create_node("recorder"), path, app, backend, continues)
+    args: argparse.Namespace, app: Application, transport: Transport, backend: str, observer: RunObserver | None = None
+) -> Flight:
+    """Start what the options ask for: a recorder node, checkpoints fed by ``observer``, the resume plan."""
+    flight = Flight()
+    path = checkpoint_path(args)
+    continues = ""
+    if path:
+        resuming = bool(getattr(args, "resume", None))
+        if not resuming:
+            for suffix in ("", "-wal", "-shm"):  # a fresh run starts a fresh checkpoint
+                Path(path + suffix).unlink(missing_ok=True)
+        catalog = full_catalog()
+        store = flight.store = CheckpointStore(path)
+        if resuming:
+            flight.resume = plan_resume(store, app, catalog, getattr(args, "on_interrupted", "ask"))
+            flight.resume.on_skip = lambda index, op, group: _skipped(store, index, op, group)
+            continues = flight.resume.continues
+        store.begin_run(app_meta(app), getattr(args, "trace", None) or "", getattr(args, "record", None) or "", continues)
+        flight.writer = CheckpointWriter(store, app, catalog)
+        if observer is not None:
+            observer.sinks.append(flight.writer.on_status)
+            observer.event_sinks.append(flight.writer.on_event)
+    if getattr(args, "record", None):
+        flight.recorder = record_node(transport.create_node("recorder"), args.record, app, backend, continues)
+    return flight
+
+
+def _skipped(store: CheckpointStore, index: int, operation: Operation, group: str) -> None:
+    """An operator skipped an interrupted function: it counts as done for any later resume."""
+    store.function_event(index, operation.id, group, operation.calls[group].function, 0, SKIPPED, 0.0)
 
 
 def record_node(node: Node, path: str, app: Application, backend: str = "ROS 2 bridge node", continues: str = "") -> Recorder | None:
@@ -47,10 +137,18 @@ def record_node(node: Node, path: str, app: Application, backend: str = "ROS 2 b
     return recorder
 
 
-async def stop_recording(recorder: Recorder | None, out: IO[str]) -> bool:
-    """Finish the file and say what it holds; False when messages were lost."""
-    if recorder is None:
-        return True
-    stats = await recorder.close()
-    out.write("\n".join(stats.lines()) + "\n")
-    return not stats.dropped and not stats.error
+async def stop_recording(flight: Flight | Recorder | None, out: IO[str]) -> bool:
+    """Finish the recording and close the checkpoint; say what they hold. False when something was lost."""
+    if isinstance(flight, Recorder) or flight is None:
+        flight = Flight(recorder=flight)
+    ok = True
+    if flight.recorder is not None:
+        stats = await flight.recorder.close()
+        out.write("\n".join(stats.lines()) + "\n")
+        ok = not stats.dropped and not stats.error
+    if flight.store is not None:
+        if flight.writer is not None and flight.writer.error:
+            out.write(f"CHECKPOINT FAILED: {flight.writer.error}\n")
+            ok = False
+        flight.store.close()
+    return ok

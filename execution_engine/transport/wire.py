@@ -298,7 +298,7 @@ DIAGNOSTICS_TOPIC = "diagnostics"
 SAFETY_STOP = "cell/safety_stop"
 SYNC_TOPIC = "coordination/sync"
 CLOCK_TOPIC = "/clock"  # absolute, as rclpy's TimeSource reads it; a launch namespace remaps it to <ns>/clock
-ENGINE_SERVICES = ("start", "pause", "resume", "stop", "step", "reset")
+ENGINE_SERVICES = ("start", "pause", "resume", "stop", "step", "reset", "skip")
 MACHINE_SERVICES = ("pause", "resume", "stop", "reset")
 
 

@@ -1,0 +1,1 @@
+"""Checkpoints of a run in SQLite and resuming a run after a crash from them."""

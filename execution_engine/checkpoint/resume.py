@@ -1,0 +1,168 @@
+"""Resuming a run from its checkpoint: where to start, and what to ask the operator first.
+
+The rules (issue 11): a checkpoint of another application or cell is refused, naming the file
+that changed; a function that completed (or that an operator skipped) is never run again; in the
+operation that was in flight, every group whose function had not completed was *interrupted*:
+it may have moved half-way, inserted half a rivet, so it is brought back under operator control
+before anything moves -- the engine raises an alarm "interrupted: ... — reset to redo the
+function, or skip" -- unless the answer was given in advance (``--on-interrupted redo|skip``).
+Groups of that operation that completed, and groups that sit it out, wait; operations after it
+run as usual.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from core_functions.catalog import BindContext, Catalog
+from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.checkpoint.store import SUCCEEDED, CheckpointError, CheckpointStore
+from execution_engine.engine.engine import ApplicationAborted
+from execution_engine.engine.operator import CONSOLE_KEYS
+from execution_engine.recorder.recorder import file_digest
+from execution_engine.trace_report import read_trace
+from execution_engine.transport.wire import engine_service
+
+if TYPE_CHECKING:
+    from execution_engine.engine.engine import ExecutionEngine
+
+ANSWERS = ("ask", "redo", "skip")
+
+
+def sits_out(app: Application, catalog: Catalog, call: Call) -> bool:
+    """A ``wait`` without seconds is never sent to the machine: nothing of it can be interrupted."""
+    if call.function != "wait":
+        return False
+    if call.params in ((), ("0",)):
+        return True
+    spec = catalog.get("wait")
+    return spec is not None and spec.bind(call.params, BindContext(app.robot, call.group, app.cell))[0] == 0
+
+
+def app_meta(app: Application) -> dict[str, str]:
+    """What a checkpoint remembers of the application, to refuse resuming another one."""
+    cell = app.cell.path if app.cell is not None else None
+    return {
+        "application": app.name,
+        "application_path": str(app.path),
+        "application_sha256": file_digest(app.path),
+        "cell_path": str(cell or ""),
+        "cell_sha256": file_digest(cell),
+        "robot": app.robot.name,
+    }
+
+
+def check_same(store: CheckpointStore, app: Application) -> None:
+    """CheckpointError naming what changed since the checkpoint was written."""
+    then, now = store.meta(), app_meta(app)
+    if not then:
+        raise CheckpointError(f"{store.path}: holds no run to resume")
+    changed = []
+    if then.get("application_sha256") != now["application_sha256"]:
+        changed.append(f"the application {now['application_path']} (was {then.get('application_path')}, sha256 "
+                       f"{then.get('application_sha256', '?')[:12]}… then, {now['application_sha256'][:12]}… now)")
+    if then.get("cell_sha256") != now["cell_sha256"]:
+        changed.append(f"the cell model {now['cell_path'] or '(none)'} (was {then.get('cell_path') or '(none)'}, sha256 "
+                       f"{then.get('cell_sha256', '?')[:12] or '-'}… then, {now['cell_sha256'][:12] or '-'}… now)")
+    if changed:
+        raise CheckpointError(
+            f"{store.path}: cannot resume: {' and '.join(changed)} changed since the checkpoint; resuming would skip or repeat "
+            "the wrong functions. Restore the files, or start the run afresh without --resume"
+        )
+
+
+@dataclass
+class ResumePlan:
+    """Where a resumed run starts and what it must ask first (the engine calls :meth:`first_operation`)."""
+
+    index: int  # the first operation not complete (len(operations): nothing left)
+    done: frozenset[str]  # groups of that operation that completed
+    interrupted: dict[str, Call]  # groups whose function was in flight when the run stopped
+    answer: str  # ask / redo / skip
+    checkpoint: str
+    continues: str  # the trace / recording this run continues
+    on_skip: Callable[[int, Operation, str], None] = field(default=lambda index, op, group: None)
+
+    def message(self, engine: ExecutionEngine, operation: Operation, group: str) -> str:
+        call = self.interrupted[group]
+        where = f"{call.file}:{call.line}" if call.file else f"operation {operation.id}"
+        reset, skip, stop = (engine.node.resolve(engine_service(c)) for c in ("reset", "skip", "stop"))
+        return (
+            f"interrupted: {group} was running {call.function} of operation {operation.id} ({where}) when the run stopped "
+            f"— reset to redo the function, or skip (keys {CONSOLE_KEYS['reset']!r} / {CONSOLE_KEYS['skip']!r} of run --interactive, "
+            f"or call {reset} / {skip}; {stop} ends the run)"
+        )
+
+    async def first_operation(self, engine: ExecutionEngine, operation: Operation) -> Operation:
+        """The operation to run first, once every interrupted group has its answer; ApplicationAborted on stop."""
+        calls = dict(operation.calls)
+        for group in self.done:
+            calls[group] = Call(group, "wait", (), implicit=True)
+        for group in sorted(self.interrupted):
+            answer = self.answer
+            if answer == "ask":
+                reply = await engine.hold_for_answer(self.message(engine, operation, group))
+                if reply == "unanswerable":
+                    raise ApplicationAborted(
+                        f"{group} was interrupted and nobody can answer (run with --interactive at a terminal, "
+                        "or give the answer in advance: --on-interrupted redo|skip)"
+                    )
+                if reply == "stop":
+                    raise ApplicationAborted(f"stopped while {group} waited for an answer to its interruption")
+                answer = "redo" if reply == "reset" else "skip"
+            if answer == "skip":
+                calls[group] = Call(group, "wait", (), implicit=True)
+                self.on_skip(self.index, operation, group)
+        engine.announce(f"resumed from {self.checkpoint} at operation {operation.id}; continues {self.continues or '(no earlier record)'}")
+        return replace(operation, calls=calls)
+
+
+def reconcile(store: CheckpointStore, app: Application) -> int:
+    """Take over results that reached an earlier run's trace but not the checkpoint.
+
+    The trace is written first, the checkpoint right after (a kill can land between the two); a
+    trace line is only there if the function completed, so such a function counts as done.
+    The number of results taken over."""
+    index = {op.id: i for i, op in enumerate(app.operations)}
+    done = store.done()
+    taken = 0
+
+    def take(record: dict[str, object], run: int) -> None:
+        nonlocal taken
+        operation, group = str(record.get("operation")), str(record.get("group"))
+        if record.get("event") == "function_end" and record.get("outcome") == SUCCEEDED and operation in index:
+            if (index[operation], group) not in done:
+                done.add((index[operation], group))
+                store.function_event(index[operation], operation, group, str(record.get("function", "")), 0, SUCCEEDED, float(str(record.get("t", 0.0))), run)
+                taken += 1
+
+    for run, trace, _ in store.runs():
+        if trace and Path(trace).is_file():
+            read_trace(trace, lambda record, run=run: take(record, run))
+    return taken
+
+
+def plan_resume(store: CheckpointStore, app: Application, catalog: Catalog, answer: str) -> ResumePlan:
+    """Where to start: the first operation with a group whose function has not completed."""
+    check_same(store, app)
+    reconcile(store, app)
+    done = store.done()
+    touched = {r.op_index for r in store.functions()}
+    runs = store.runs()
+    continues = ", ".join(p for _, trace, record in runs[-1:] for p in (trace, record) if p)
+    for index, operation in enumerate(app.operations):
+        needed = {g for g, call in operation.calls.items() if not sits_out(app, catalog, call)}
+        finished = {g for g in needed if (index, g) in done}
+        if needed - finished:
+            interrupted = {g: operation.calls[g] for g in needed - finished} if index in touched else {}
+            return ResumePlan(index, frozenset(finished), interrupted, answer, str(store.path), continues)
+    return ResumePlan(len(app.operations), frozenset(), {}, answer, str(store.path), continues)
+
+
+def next_name(path: str, run: int) -> str:
+    """The file a resumed run writes instead of ``path``: ``run.jsonl`` -> ``run.resume2.jsonl``."""
+    p = Path(path)
+    stem = p.stem.split(".resume")[0]
+    return str(p.with_name(f"{stem}.resume{run}{p.suffix}"))

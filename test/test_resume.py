@@ -1,0 +1,124 @@
+"""Crash resume: kill -9 a run anywhere, resume it from its checkpoint, every function runs exactly once."""
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from app_functions.registry import full_catalog
+from execution_engine.app_model import load_application
+from execution_engine.checkpoint.resume import sits_out
+from execution_engine.checkpoint.store import CheckpointStore
+from execution_engine.cli import main
+
+RIVET = "apps_xml/rivet_installation.xml"
+ROOT = Path(__file__).resolve().parent.parent
+TRACE_LINES = 480  # about what a whole rivet run writes
+
+
+def records(path: Path) -> list[dict[str, Any]]:
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:  # the line the kill cut
+            continue
+    return out
+
+
+def required() -> set[tuple[str, str]]:
+    catalog = full_catalog()
+    app = load_application(RIVET, catalog)
+    return {(op.id, g) for op in app.operations for g, call in op.calls.items() if not sits_out(app, catalog, call)}
+
+
+def start_and_kill(folder: Path, after_lines: int) -> Path:
+    """Start a run in its own process and kill -9 it once its trace holds ``after_lines`` lines."""
+    trace = folder / "run.jsonl"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "execution_engine", "run", RIVET, "--speed", "max", "-q", "--no-check",
+         "--trace", str(trace), "--checkpoint", str(folder / "run.sqlite")],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    )
+    deadline = time.monotonic() + 120
+    while process.poll() is None and time.monotonic() < deadline:
+        if trace.exists() and trace.read_bytes().count(b"\n") >= after_lines:
+            break
+        time.sleep(0.002)  # polling the file the run writes, not waiting for a guess
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait(30)
+    return trace
+
+
+@pytest.mark.parametrize("moment", range(20))
+def test_kill_anywhere_then_resume_runs_every_function_once(tmp_path: Path, moment: int) -> None:
+    trace = start_and_kill(tmp_path, 5 + moment * (TRACE_LINES - 10) // 19)
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", str(tmp_path / "run.sqlite"),
+                 "--on-interrupted", "redo", "--trace", str(tmp_path / "resumed.jsonl")], out, err)
+    assert code == 0, err.getvalue()
+    first, second = records(trace), records(tmp_path / "resumed.jsonl")
+    done = Counter((r["operation"], r["group"]) for r in first + second if r["event"] == "function_end" and r["outcome"] == "succeeded")
+    assert set(done) == required() and set(done.values()) == {1}, "every function completed exactly once across the two runs"
+    inserted = [r["operation"] for r in first + second if r["event"] == "function_end" and r.get("function") == "insert_rivet" and r["outcome"] == "succeeded"]
+    assert len(inserted) == len(set(inserted)) == 4  # no rivet twice
+    assert second[-1]["event"] == "run_end" and second[-1]["outcome"] == "finished"
+    resumed = [r for r in second if r["event"] == "engine_state" and str(r.get("message", "")).startswith("resumed from")]
+    if any(r["event"] == "function_start" for r in second):
+        assert resumed and str(trace) in resumed[0]["message"]  # the new trace names the one it continues
+
+
+def test_an_interrupted_function_waits_for_the_operator(tmp_path: Path) -> None:
+    trace = start_and_kill(tmp_path, 150)
+    checkpoint = str(tmp_path / "run.sqlite")
+    store = CheckpointStore(checkpoint)
+    in_flight = {(r.operation, r.group) for r in store.functions() if r.outcome == "started"} - {(r.operation, r.group) for r in store.functions() if r.outcome == "succeeded"}
+    store.close()
+    assert in_flight, "the kill landed inside an operation"
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", checkpoint, "--trace", str(tmp_path / "asked.jsonl")], out, err)
+    assert code == 1  # nobody at a terminal can answer: the run ends before anything moves
+    asked = records(tmp_path / "asked.jsonl")
+    assert not [r for r in asked if r["event"] == "function_start"]
+    alarm = [r for r in asked if r["event"] == "engine_state" and r["to"] == "alarm"]
+    assert alarm and alarm[0]["message"].startswith("interrupted: ") and "reset to redo the function, or skip" in alarm[0]["message"]
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", checkpoint, "--on-interrupted", "skip",
+                 "--trace", str(tmp_path / "skipped.jsonl")], out, err)
+    assert code == 0, err.getvalue()
+    skipped = records(tmp_path / "skipped.jsonl")
+    assert not {(r["operation"], r["group"]) for r in skipped if r["event"] == "function_start"} & in_flight
+    assert records(trace)
+
+
+def test_a_changed_application_or_cell_is_refused(tmp_path: Path) -> None:
+    app = tmp_path / "app.xml"
+    text = (ROOT / RIVET).read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{ROOT / "apps_xml/cells/rivet_cell.xml"}"')
+    app.write_text(text)
+    err = io.StringIO()
+    assert main(["run", str(app), "--speed", "max", "-q", "--no-check", "--trace", str(tmp_path / "a.jsonl")], io.StringIO(), err) == 0, err.getvalue()
+    checkpoint = tmp_path / "a.checkpoint.sqlite"
+    assert checkpoint.is_file()
+    with sqlite3.connect(checkpoint) as db:
+        assert db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+        assert db.execute("SELECT count(*) FROM functions WHERE outcome = 'succeeded'").fetchone()[0] == len(required())
+        assert dict(db.execute("SELECT grp, holds FROM hands").fetchall()).get("right_arm")
+    app.write_text(text.replace("Debur four drilled holes", "Debur 4 drilled holes"))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", str(checkpoint)], out, err)
+    assert code == 2 and err.getvalue().count("\n") == 1
+    assert "the application" in err.getvalue() and "changed since the checkpoint" in err.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written
+    code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", str(checkpoint), "--trace", str(tmp_path / "a.jsonl")], io.StringIO(), io.StringIO())
+    assert code == 2  # never the file being resumed
