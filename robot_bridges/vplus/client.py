@@ -238,6 +238,11 @@ class VPlusClient:
             except OSError as error:
                 errors.append(f"attempt {attempt + 1}: {error.strerror or error}")
             else:
+                if link.transport is None or link.transport.is_closing() or link.closed.done():
+                    # accepted and closed at once (every client slot taken): what the server said is the reason
+                    said = f"; the server said: {self.server_said}" if self.server_said else ""
+                    errors.append(f"attempt {attempt + 1}: the server closed the connection at once{said}")
+                    continue
                 self._link = link
                 self.last_failure = ""
                 log.info("connected to V+ server %s", self.peer)
@@ -385,7 +390,9 @@ class VPlusClient:
         try:
             ack = decode_ack(line)
         except DecodeError as error:
-            if not self._pending:  # nothing asked: the server speaks first, e.g. to refuse us or to close an idle link
+            if not self._pending or not self._answers_a_message(line):
+                # not an ack of anything asked: the server speaks, e.g. to refuse us or to close an idle
+                # link; it closes the connection next, and the loss is reported with these words
                 self.server_said = line.decode("utf-8", "replace")[:200]
                 log.warning("V+ server %s says: %s", self.peer, self.server_said)
                 return
@@ -408,6 +415,11 @@ class VPlusClient:
         batch.acks[ack.id] = ack
         if len(batch.acks) == len(batch.messages) and not batch.future.done():
             batch.future.set_result(None)
+
+    def _answers_a_message(self, line: bytes) -> bool:
+        """Whether ``line`` (not a well-formed ack) starts with the id of a message sent: a garbled ack."""
+        head = line.split(b":", 1)[0].decode("ascii", "replace").strip()
+        return head in self._pending or head in self._expired
 
     def _link_down(self, link: _Link, reason: str, kind: type[VPlusError] = ConnectionLost) -> None:
         if link is not self._link:
