@@ -198,3 +198,28 @@ def test_row(row: Row, tmp_path: Path, request: pytest.FixtureRequest, monkeypat
     assert "Traceback" not in output, output
     assert pattern(row.message, values).search(output), f"expected a line {row.message!r}, got:\n{output}"
     assert code == row.exit_code, output
+
+
+def test_a_traceback_only_with_v(peers: dict[str, str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same refused connection: one line for the operator; with -v, the traceback for a developer too."""
+    monkeypatch.chdir(ROOT)
+    argv = ["run", "apps_xml/vplus_pick_inspect.xml", "--no-check", "--host", "127.0.0.1", "--port", peers["closed_port"], "--backend-option", "retries=0"]
+    code, quiet = run_in_process(argv, 60.0)
+    verbose_code, verbose = run_in_process(["-v", *argv], 60.0)
+    assert code == verbose_code == 5
+    assert "Traceback" not in quiet and "Traceback (most recent call last)" in verbose
+    line = next(line for line in quiet.splitlines() if line.startswith("error: cannot run"))
+    assert line in verbose.splitlines()
+
+
+def test_a_run_that_could_not_start_still_closes_its_trace_with_how_it_ended(peers: dict[str, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from execution_engine.trace_report import read_trace
+
+    monkeypatch.chdir(ROOT)
+    trace = tmp_path / "run.jsonl"
+    argv = ["run", "apps_xml/vplus_pick_inspect.xml", "--no-check", "--host", "127.0.0.1", "--port", peers["closed_port"],
+            "--backend-option", "retries=0", "--trace", str(trace)]
+    code, _ = run_in_process(argv, 60.0)
+    summary = read_trace(trace)
+    assert code == 5 and not summary.cut and summary.end is not None
+    assert (summary.end["outcome"], summary.end["exit_code"], summary.end["operations_done"]) == ("error", 5, 0)
