@@ -36,6 +36,7 @@ from core_functions.robots import ROBOTS, RobotModel
 from execution_engine.app_model import Application, ApplicationError, load_application, read_application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.deployment import deploy_local
+from execution_engine import launcher
 from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
@@ -404,6 +405,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-check", action="store_true", help="start without the dry run on the simulator (validate --simulate) that otherwise comes first")
     add_run_options(run)
     studio.add_parser(sub)
+    launcher.add_parser(sub)  # one process per node, over DDS or rclpy
     return parser
 
 
@@ -433,6 +435,8 @@ def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
         return cmd_validate(args.files, catalog, out, err, args)
     if args.command == "functions":
         return cmd_functions(catalog, args.json, out)
+    if args.command == "launch":
+        return launcher.cmd_launch(args, out, err)
     if args.command == "studio":
         return studio.cmd_studio(args, catalog, out, err)
     if args.command == "report":

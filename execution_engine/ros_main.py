@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport.port import Node, RosArgumentsError, TransportError
+from execution_engine.transport.selection import dds_transport, split_transport
 
 if TYPE_CHECKING:  # imported only when a node really runs: it needs rclpy
     from execution_engine.transport.ros import RosTransport
@@ -116,8 +117,12 @@ def run_node(
     """
     # No Python log handler here: on ROS every record goes to the node's rclpy logger, which
     # prints it, publishes it on /rosout and honours --log-level (transport/ros_logging.py).
-    args = list(sys.argv if argv is None else argv)
-    factory = transport_factory or _ros_transport
+    try:  # --transport dds: the same node over Cyclone DDS, without a ROS install
+        chosen, args = split_transport(sys.argv if argv is None else argv)
+    except RosArgumentsError as error:
+        print(f"{default_name}: {error}", file=sys.stderr)
+        return int(ExitCode.USAGE)
+    factory = transport_factory or (dds_transport if chosen == "dds" else _ros_transport)
 
     async def main(run_clock: Clock) -> int:
         return await serve_node(run_clock, default_name, body, args, factory)

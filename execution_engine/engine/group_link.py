@@ -1,7 +1,12 @@
 """The engine's handle on one group machine: requests out, results and state in, operator services.
 
 Results are matched to requests by id; a result for a request the engine no longer waits for
-(a retried or abandoned one) is dropped.  The group's state arrives on its latched state topic,
+(a retried or abandoned one) is dropped.  While a request waits, the link watches that the machine
+is still there: its result publisher must stay matched (over DDS: hold its liveliness lease), or
+every waiting request ends at once as preempted (a CONNECTION fault) naming the machine's node, and
+the link answers no more: a machine process killed or cut off mid-run is noticed within the lease
+plus :data:`WATCH_PERIOD` and ends the run (the engine stops the other groups), instead of
+waiting out the function timeout and retrying into a machine that is not there.  The group's state arrives on its latched state topic,
 so the engine knows where each machine is even if it started after them.
 """
 from __future__ import annotations
@@ -11,11 +16,14 @@ import itertools
 import uuid
 
 from execution_engine.clock import Clock
+from execution_engine.ros_main import machine_node_name
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String, Trigger
 from execution_engine.transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
 from execution_engine.transport.qos import COMMANDS, LATCHED
-from execution_engine.transport.wire import SmRequest, SmResult, sm_service, sm_topic
+from execution_engine.transport.wire import FaultKind, SmRequest, SmResult, sm_service, sm_topic
+
+WATCH_PERIOD = 0.1  # run seconds between checks that a machine with waiting requests is still there
 
 
 class GroupLink:
@@ -34,6 +42,8 @@ class GroupLink:
         node.create_subscription(String, sm_topic(group, "state"), self._on_state, LATCHED)
         self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
         self.rejected: list[str] = []
+        self._watch: asyncio.Task[None] | None = None
+        self.lost: str | None = None  # why the machine is gone, once it is
 
     def new_id(self) -> str:
         return f"engine-{self._session}-{self.group}-{next(self._ids)}"
@@ -48,7 +58,27 @@ class GroupLink:
         future: asyncio.Future[SmResult] = asyncio.get_running_loop().create_future()
         self._pending[request.id] = future
         self._requests.publish(String(codec.encode(request)))
+        if self._watch is None or self._watch.done():
+            self._watch = asyncio.get_running_loop().create_task(self._watch_machine(), name=f"{self.group} machine watch")
         return future
+
+    async def _watch_machine(self) -> None:
+        """Fail every waiting request once the machine's result publisher is gone."""
+        topic = self.node.resolve(sm_topic(self.group, "result"))
+        while self._pending:
+            if self._results.get_publisher_count() == 0:
+                error = self.lost = (
+                    f"group machine {self.group} (node {machine_node_name(self.group)}) lost: no live publisher "
+                    f"on {topic} (its process died or was cut off from this one)"
+                )
+                self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
+                self._state_changed.set()
+                for request_id, future in list(self._pending.items()):
+                    if not future.done():
+                        future.set_result(SmResult(id=request_id, group=self.group, outcome="preempted", error=error, fault=FaultKind.CONNECTION))
+                self._pending.clear()
+                return
+            await self.clock.sleep(WATCH_PERIOD)
 
     def send_end(self) -> None:
         self._requests.publish(String(codec.encode(SmRequest(id=self.new_id(), kind="end"))))
@@ -78,6 +108,8 @@ class GroupLink:
         """True once the machine is in one of ``states``; False after ``timeout`` run seconds."""
         deadline = self.clock.now() + timeout
         while self.state not in states:
+            if self.lost is not None:
+                return False
             remaining = deadline - self.clock.now()
             if remaining <= 0:
                 return False
@@ -91,6 +123,8 @@ class GroupLink:
     # --------------------------------------------------------------------------- services
     async def command(self, name: str) -> tuple[bool, str]:
         """Call the machine's pause/resume/stop/reset; never raises (a failure is the answer)."""
+        if self.lost is not None:
+            return False, self.lost
         try:
             response = await self._clients[name].call(Trigger.Request(), timeout=self.service_timeout)
         except (ServiceUnavailable, TransportError, asyncio.TimeoutError) as error:

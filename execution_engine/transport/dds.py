@@ -73,6 +73,21 @@ def _import_cyclonedds() -> Any:
     return cyclonedds
 
 
+_DOMAINS: dict[int, tuple[str | None, Any]] = {}  # one Cyclone domain per id and process, kept alive
+
+
+def _domain(dds: Any, domain_id: int, config: str | None) -> Any:
+    """The process's Cyclone domain ``domain_id`` with ``config`` (made once; Cyclone refuses a second)."""
+    known = _DOMAINS.get(domain_id)
+    if known is not None:
+        if known[0] != config:
+            raise TransportError(f"DDS domain {domain_id} is already configured differently in this process")
+        return known[1]
+    domain = dds.domain.Domain(domain_id, config) if config else None
+    _DOMAINS[domain_id] = (config, domain)
+    return domain
+
+
 def _delete(entity: Any) -> None:
     """Delete a Cyclone entity now (its listener callbacks are finished when this returns)."""
     try:
@@ -440,7 +455,7 @@ class DdsTransport(Transport):
         self.domain_id = graph.domain_id(environment)
         config = graph.domain_config(environment)
         try:
-            self.domain = self.dds.domain.Domain(self.domain_id, config) if config else None
+            self.domain = _domain(self.dds, self.domain_id, config)
             self.participant = self.dds.domain.DomainParticipant(
                 self.domain_id, qos=self.dds.qos.Qos(self.dds.qos.Policy.Userdata(data=graph.ENCLAVE_USER_DATA))
             )

@@ -1,0 +1,254 @@
+"""``python -m execution_engine launch APP``: the cell as one process per node, supervised.
+
+::
+
+    python -m execution_engine launch apps_xml/rivet_installation.xml --transport dds --speed 2
+    python -m execution_engine launch app.xml --nodes nextage_sim_bridge          # this PC: the bridge
+    python -m execution_engine launch app.xml --nodes left_arm_machine,right_arm_machine,torso_head_machine,execution_engine
+
+The nodes are those of ``launch/<back end>.launch.py`` with the same names and the same
+parameters (``config/<back end>.yaml`` as params file): the bridge of the application robot's back
+end, one ``group_machine`` per group, and the engine running APP with ``exit_when_done``.  Each is
+the installed executable's code in its own Python process with ``--transport dds`` (no ROS
+install) or ``--transport ros`` (rclpy).  ``--nodes`` starts only some of them, so a cell can be
+split across machines that share a DDS domain.
+
+Supervision: each line a node prints is prefixed with its name.  The launch ends when the engine
+ends (its exit code is the launch's), or at once when any other node dies: the launch names it
+and how it died, gives the engine ``--grace`` seconds to end its run on its own (it notices a
+lost machine within the DDS liveliness lease, ends the run in error naming the node and stops the
+other groups), then stops every node, engine first and bridge last (SIGTERM, SIGKILL after
+``--stop-timeout``), and exits with :data:`EXIT_NODE_DIED`.  SIGINT/SIGTERM stop the cell the same
+way.  Without the engine among ``--nodes``, the launch serves until a node dies or it is stopped.
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+from app_functions.registry import full_catalog
+from execution_engine.app_model import ApplicationError, load_application
+from execution_engine.clock import Clock, real_clock, run_with_clock
+from execution_engine.resources import share_path
+from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_node_name
+
+EXIT_NODE_DIED = 6  # a node other than the engine ended before the engine did
+EXIT_USAGE = 2
+EXIT_INVALID = 1
+_SPEED_PARAMETER = {"nextage-sim": "speed", "kuka-rsi": "speed"}  # back ends whose bridge can run faster than real time
+_ENTRY = {"engine": ("execution_engine.nodes", "engine_main"), "machine": ("execution_engine.nodes", "group_machine_main")}
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One process of the cell: its node name and its command line."""
+
+    name: str
+    argv: tuple[str, ...]
+
+
+@dataclass
+class Running:
+    spec: NodeSpec
+    process: asyncio.subprocess.Process
+    pumps: list[asyncio.Task[None]] = field(default_factory=list)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    launch = sub.add_parser("launch", help="start the cell as one process per node (over DDS without ROS, or rclpy), supervised")
+    launch.add_argument("file", metavar="FILE", help="application XML file the engine runs")
+    launch.add_argument("--transport", choices=("dds", "ros"), default="dds", help="dds: Cyclone DDS without a ROS install (default); ros: rclpy")
+    launch.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second of a simulator back end (default 1)")
+    launch.add_argument("--nodes", help="comma-separated node names to start (default: every node of the cell)")
+    launch.add_argument("--grace", type=float, default=5.0, help="seconds the engine gets to end its run by itself after another node died (default 5)")
+    launch.add_argument("--stop-timeout", type=float, default=10.0, help="seconds a node gets to stop on SIGTERM before SIGKILL (default 10)")
+
+
+def cell_nodes(app_file: Path, transport: str, speed: float) -> list[NodeSpec]:
+    """The cell of ``app_file``'s robot, bridge first and engine last (the order they start in)."""
+    app = load_application(app_file, full_catalog())
+    backend = app.robot.default_backend
+    module = backend.replace("-", "_")
+    config = str(share_path("config", f"{module}.yaml"))
+    common = ("--transport", transport, "--ros-args", "--params-file", config)
+    bridge = [*common]
+    if speed != 1.0:
+        parameter = _SPEED_PARAMETER.get(backend)
+        if parameter is None:
+            raise ValueError(f"--speed {speed:g}: the {backend} bridge drives a real controller in real time (no speed parameter)")
+        bridge += ["-p", f"{parameter}:={speed!r}"]
+    specs = [NodeSpec(bridge_node_name(backend), (*_python(f"robot_bridges.{module}.node", "main"), *bridge))]
+    for group in app.robot.group_names:
+        name = machine_node_name(group)
+        specs.append(NodeSpec(name, (
+            *_python(*_ENTRY["machine"]), *common, "-r", f"__node:={name}", "-p", f"group:={group}", "-p", f"robot:={app.robot.name}",
+        )))
+    specs.append(NodeSpec(ENGINE_NODE, (
+        *_python(*_ENTRY["engine"]), *common, "-p", f"application:={app_file.resolve()}", "-p", "exit_when_done:=true",
+    )))
+    return specs
+
+
+def _python(module: str, function: str) -> tuple[str, ...]:
+    """The interpreter running ``module.function(sys.argv)`` as its own process (the console script's code)."""
+    return (sys.executable, "-c", f"import sys; from {module} import {function}; sys.exit({function}(sys.argv))")
+
+
+def select(specs: list[NodeSpec], nodes: str | None) -> list[NodeSpec]:
+    if not nodes:
+        return specs
+    wanted = [n.strip() for n in nodes.split(",") if n.strip()]
+    known = {s.name for s in specs}
+    unknown = [n for n in wanted if n not in known]
+    if unknown or not wanted:
+        raise ValueError(f"--nodes: unknown node(s) {', '.join(unknown) or '(none given)'}; this cell has {', '.join(s.name for s in specs)}")
+    return [s for s in specs if s.name in wanted]
+
+
+def describe_exit(code: int) -> str:
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"
+
+
+class Supervisor:
+    """Starts the nodes, prefixes their output, ends them in order; one instance per launch."""
+
+    def __init__(self, clock: Clock, out: IO[str], grace: float, stop_timeout: float) -> None:
+        self.clock = clock
+        self.out = out
+        self.grace = grace
+        self.stop_timeout = stop_timeout
+        self.running: dict[str, Running] = {}
+
+    def say(self, text: str) -> None:
+        self.out.write(f"[launch] {text}\n")
+        self.out.flush()
+
+    async def start(self, spec: NodeSpec) -> None:
+        process = await asyncio.create_subprocess_exec(
+            *spec.argv, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT, stdin=asyncio.subprocess.DEVNULL,
+        )
+        running = Running(spec, process)
+        assert process.stdout is not None
+        running.pumps.append(asyncio.get_running_loop().create_task(self._pump(spec.name, process.stdout)))
+        self.running[spec.name] = running
+        self.say(f"{spec.name} started (pid {process.pid})")
+
+    async def _pump(self, name: str, stream: asyncio.StreamReader) -> None:
+        while line := await stream.readline():
+            self.out.write(f"[{name}] {line.decode('utf-8', 'replace').rstrip()}\n")
+            self.out.flush()
+
+    async def run(self, stop: asyncio.Event) -> int:
+        """Until the engine ends, a node dies or ``stop`` is set; then every node is stopped."""
+        waits = {asyncio.ensure_future(r.process.wait()): name for name, r in self.running.items()}
+        stopping = asyncio.ensure_future(stop.wait())
+        code: int | None = None
+        try:
+            while code is None:
+                done, _ = await asyncio.wait({*waits, stopping}, return_when=asyncio.FIRST_COMPLETED)
+                if stopping in done:
+                    self.say("stopping on request")
+                    code = 0
+                    break
+                for task in done:
+                    name = waits.pop(task)
+                    rc = self.running[name].process.returncode
+                    assert rc is not None
+                    if name == ENGINE_NODE:
+                        self.say(f"{name} ended ({describe_exit(rc)})")
+                        code = rc if rc >= 0 else EXIT_NODE_DIED
+                    elif code is None:
+                        self.say(f"{name} died ({describe_exit(rc)}, pid {self.running[name].process.pid}); stopping the cell")
+                        await self._let_engine_end()
+                        code = EXIT_NODE_DIED
+        finally:
+            stopping.cancel()
+            await self.stop_all()
+        return code
+
+    async def _let_engine_end(self) -> None:
+        engine = self.running.get(ENGINE_NODE)
+        if engine is None or engine.process.returncode is not None:
+            return
+        with contextlib.suppress(asyncio.TimeoutError):
+            await self.clock.wait_for(engine.process.wait(), self.grace)
+        if engine.process.returncode is not None:
+            self.say(f"{ENGINE_NODE} ended its run ({describe_exit(engine.process.returncode)})")
+
+    async def stop_all(self) -> None:
+        """SIGTERM in reverse start order (engine first, bridge last), SIGKILL after the stop timeout."""
+        for name in reversed(list(self.running)):
+            process = self.running[name].process
+            if process.returncode is None:
+                with contextlib.suppress(ProcessLookupError):
+                    process.terminate()
+                try:
+                    await self.clock.wait_for(process.wait(), self.stop_timeout)
+                except asyncio.TimeoutError:
+                    self.say(f"{name} did not stop within {self.stop_timeout:g} s: killed")
+                    with contextlib.suppress(ProcessLookupError):
+                        process.kill()
+                    await process.wait()
+        for running in self.running.values():
+            await asyncio.gather(*running.pumps, return_exceptions=True)
+
+
+async def launch(clock: Clock, specs: list[NodeSpec], out: IO[str], grace: float, stop_timeout: float) -> int:
+    supervisor = Supervisor(clock, out, grace, stop_timeout)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    installed = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+            loop.add_signal_handler(sig, stop.set)
+            installed.append(sig)
+    try:
+        try:
+            for spec in specs:
+                await supervisor.start(spec)
+        except OSError as error:
+            supervisor.say(f"cannot start a node: {error}")
+            await supervisor.stop_all()
+            return EXIT_NODE_DIED
+        return await supervisor.run(stop)
+    finally:
+        for sig in installed:
+            loop.remove_signal_handler(sig)
+
+
+def cmd_launch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
+    path = Path(args.file)
+    if not path.is_file():
+        err.write(f"error: {args.file}: no such file\n")
+        return EXIT_INVALID
+    if not args.speed > 0 or args.grace < 0 or args.stop_timeout <= 0:
+        err.write("error: --speed and --stop-timeout must be > 0, --grace >= 0\n")
+        return EXIT_USAGE
+    try:
+        specs = select(cell_nodes(path, args.transport, args.speed), args.nodes)
+    except ApplicationError as error:
+        err.write(f"error: cannot launch {args.file}:\n" + "\n".join(str(d) for d in error.diagnostics) + "\n")
+        return EXIT_INVALID
+    except (ValueError, FileNotFoundError) as error:
+        err.write(f"error: {error}\n")
+        return EXIT_USAGE
+    return int(run_with_clock(lambda clock: launch(clock, specs, out, args.grace, args.stop_timeout), real_clock()))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """For tests and scripts: the ``launch`` subcommand alone."""
+    parser = argparse.ArgumentParser(prog="python -m execution_engine")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    return cmd_launch(parser.parse_args(["launch", *(argv or [])]), sys.stdout, sys.stderr)
