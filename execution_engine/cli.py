@@ -41,7 +41,7 @@ from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
-from execution_engine.run_checks import Refused, preflight
+from execution_engine.run_checks import Refused, check_trajectory_db, preflight
 from execution_engine.vision_cli import add_vision_parser, cmd_vision
 from operator_station import cli as studio
 from execution_engine.run_report import add_report_parser, cmd_report
@@ -81,6 +81,12 @@ PARAM_TYPE_HELP = {
 # ------------------------------------------------------------------------------ validate
 def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[str], args: argparse.Namespace | None = None) -> int:
     """Check each file; with ``--simulate`` (``args.simulate``) also dry-run each valid one."""
+    if args is not None and args.simulate and args.trajectory_db:
+        try:  # the database the run will use: refused here as run refuses it
+            check_trajectory_db(args.trajectory_db, [Path(f) for f in files])
+        except Refused as refusal:
+            err.write(f"error: {refusal}\n")
+            return EXIT_USAGE
     status = EXIT_OK
     for file in files:
         app, diagnostics = read_application(file, catalog)

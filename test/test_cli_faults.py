@@ -165,7 +165,9 @@ def run_in_process(argv: list[str], bound: float) -> tuple[int, str]:
 
 
 def run_process(argv: list[str], bound: float) -> tuple[int, str]:
-    done = subprocess.run([sys.executable, "-m", "execution_engine", *argv], cwd=ROOT, capture_output=True, text=True, timeout=bound)
+    done = subprocess.run(  # stdin is no terminal: nobody at this run can answer an operator question
+        [sys.executable, "-m", "execution_engine", *argv], cwd=ROOT, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=bound,
+    )
     return done.returncode, done.stdout + done.stderr
 
 
