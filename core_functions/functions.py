@@ -50,6 +50,9 @@ _REACH_DISTANCE = ParamSpec(
 _INTERPOLATION = ParamSpec(
     "interpolation", ParamType.CHOICE, "ptp: joint-interpolated (fastest); linear: straight TCP line", default="ptp", choices=("ptp", "linear")
 )
+_OVERWRITE = ParamSpec(
+    "overwrite", ParamType.BOOLEAN, "true: replace a trajectory already recorded under this name (otherwise that is an error)", default="false"
+)
 
 
 @dataclass
@@ -257,25 +260,29 @@ class CoreFunctions:
         ParamSpec("name", ParamType.NAME, "the name to store the trajectory under"),
         ParamSpec("waypoints", ParamType.FRAMES, "cell frames to pass through, in order"),
         _INTERPOLATION,
+        _OVERWRITE,
         states=("RecordTrajectory",),
     )
-    def record_trajectory(self, name: str, waypoints: tuple[str, ...], interpolation: str = "ptp") -> Skill:
+    def record_trajectory(self, name: str, waypoints: tuple[str, ...], interpolation: str = "ptp", overwrite: bool = False) -> Skill:
         """Plan a trajectory through cell frames (without moving) and store it in the trajectory database."""
+        self.ctx.trajectories.check_overwrite(self.ctx.group, name, overwrite)
         poses = tuple(self.resolve(w) for w in waypoints)
         result: TrajectoryResult = yield RecordTrajectory(name, "plan", poses, interpolation)  # type: ignore[arg-type]
-        self.ctx.trajectories.save(self.ctx.group, name, result, "plan", self.ctx.now())
+        self.ctx.trajectories.save(self.ctx.group, name, result, "plan", self.ctx.now(), overwrite)
 
     @skill(
         ParamSpec("name", ParamType.NAME, "the name to store the trajectory under"),
         ParamSpec("duration", ParamType.NUMBER, "how long to record", unit="s", minimum=0.1, maximum=600.0),
         ParamSpec("sample_period", ParamType.NUMBER, "time between samples", unit="s", default="0.1", minimum=0.004, maximum=10.0),
+        _OVERWRITE,
         groups=ANY_GROUP,
         states=("RecordTrajectory",),
     )
-    def teach_trajectory(self, name: str, duration: float, sample_period: float = 0.1) -> Skill:
+    def teach_trajectory(self, name: str, duration: float, sample_period: float = 0.1, overwrite: bool = False) -> Skill:
         """Teach by demonstration: sample the group's joints while it is guided, and store the trajectory."""
+        self.ctx.trajectories.check_overwrite(self.ctx.group, name, overwrite)
         result: TrajectoryResult = yield RecordTrajectory(name, "teach", duration=duration, sample_period=sample_period)
-        self.ctx.trajectories.save(self.ctx.group, name, result, "teach", self.ctx.now())
+        self.ctx.trajectories.save(self.ctx.group, name, result, "teach", self.ctx.now(), overwrite)
 
     @skill(
         ParamSpec("name", ParamType.NAME, "a trajectory recorded earlier for this group"),

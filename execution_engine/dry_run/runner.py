@@ -20,6 +20,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from core_functions.catalog import Catalog
+from core_functions.trajectory_store import application_store
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
 from execution_engine.clock import Clock, real_clock, run_with_clock, simulated_clock
 from execution_engine.deployment import Deployment, deploy_local
@@ -27,7 +28,6 @@ from execution_engine.dry_run.backend import DryRunBackend, DryRunTrajectoryStor
 from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
 from execution_engine.dry_run.report import DryRunReport, group_times
 from execution_engine.dry_run.simulators import DryRunSetup, setup_for
-from execution_engine.machine.group_machine import default_trajectory_db
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
 from execution_engine.transport.qos import COMMANDS
@@ -65,7 +65,7 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
     recorder = Recorder(app, timing)
     backend = DryRunBackend(inner, recorder)
     with tempfile.TemporaryDirectory(prefix="dry_run_") as folder:
-        db = _copy_store(trajectory_db or default_trajectory_db(), Path(folder) / "trajectories.sqlite")
+        db = _copy_store(trajectory_db or str(application_store(app.path)), Path(folder) / "trajectories.sqlite")
         try:
             deployment = await deploy_local(clock, app.robot, backend, machine_parameters={"trajectory_db": db}, bridge_parameters=_QUIET_BRIDGE)
         except BaseException:

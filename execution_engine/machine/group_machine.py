@@ -13,6 +13,7 @@ engine's cell model (latched).
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import os
 from pathlib import Path
 
@@ -79,6 +80,7 @@ _VALID_IN = {
 
 
 def default_trajectory_db() -> str:
+    """The per-user database a machine falls back to when nobody names one (it says so when it does)."""
     base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
     return str(Path(base) / "dual_arm_executive" / "trajectories.sqlite")
 
@@ -92,7 +94,10 @@ class GroupMachine:
         self.group = str(node.declare_parameter("group", "left_arm", "the robot group this machine drives"))
         robot_name = str(node.declare_parameter("robot", "nextage_open", "robot model (nextage_open, adept_viper_s850, kuka_kr)"))
         libraries = str(node.declare_parameter("libraries", "all", "comma-separated function libraries, or all"))
-        db = str(node.declare_parameter("trajectory_db", "", "SQLite file of recorded trajectories ('' = per-user default)"))
+        db = str(node.declare_parameter(
+            "trajectory_db", "", "SQLite file of recorded trajectories, best next to the application (APP.trajectories.sqlite); "
+            "'' = the per-user default, with a warning"
+        ))
         config = MachineConfig(
             bridge_timeout=float(node.declare_parameter("bridge_timeout", MachineConfig.bridge_timeout)),
             primitive_timeout=float(node.declare_parameter("primitive_timeout", MachineConfig.primitive_timeout)),
@@ -102,7 +107,13 @@ class GroupMachine:
         if self.group not in self.robot.group_names:
             raise ValueError(f"{node.fully_qualified_name}: group {self.group!r} is not a group of {self.robot.name} ({', '.join(self.robot.group_names)})")
         chosen = None if libraries.strip() == "all" else [x.strip() for x in libraries.split(",") if x.strip()]
-        self.store = TrajectoryStore(db or default_trajectory_db())
+        if not db:
+            db = default_trajectory_db()
+            node.logger.warning(
+                "%s: no trajectory_db given: trajectories are read from and recorded to %s in your home directory; "
+                "set trajectory_db to keep them with the application", node.fully_qualified_name, db,
+            )
+        self.store = TrajectoryStore(db)
         skill_context = SkillContext(self.group, self.robot, None, self.store, self.clock.now)
         functions = functions_class(chosen)(skill_context)
         self.events = EventQueue(self.clock)
@@ -222,6 +233,7 @@ class GroupMachine:
             self.ctx.status("error", error=f"ignored cell model: {error}")
             return
         self.ctx.set_cell(snapshot.index())
+        self.store.cell_sha256 = hashlib.sha256(msg.data.encode()).hexdigest()  # stamped on what is recorded for it
         self._located.attach(self.ctx.cell)
 
     async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import IO
 
 from app_functions.registry import full_catalog
+from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
 from execution_engine.app_model.model import Operation
 from execution_engine.checkpoint.resume import ANSWERS, ResumePlan, app_meta, check_same, next_name, plan_resume
@@ -59,6 +60,8 @@ def prepare_flight(app: Application, args: argparse.Namespace) -> None:
     """Before anything is written: check ``--resume`` (CheckpointError naming what is wrong) and
     name the resumed run's trace and recording, never the files of the run it continues."""
     args.checkpoint = checkpoint_path(args)
+    if not getattr(args, "trajectory_db", None):  # the application's own, never a home directory's
+        args.trajectory_db = str(application_store(app.path))
     resume = getattr(args, "resume", None)
     if not resume:
         return
