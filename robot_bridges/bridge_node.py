@@ -23,6 +23,7 @@ from execution_engine.transport import codec
 from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, String
 from execution_engine.transport.port import Node, Publisher
 from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
+from execution_engine.transport.qos import JOINT_STATES as JOINT_STATES_QOS
 from execution_engine.transport.wire import (
     ENGINE_CELL,
     JOINT_STATES,
@@ -55,7 +56,7 @@ class BridgeNode:
         self._answered: OrderedDict[str, String | None] = OrderedDict()  # command id -> latest feedback
         self._running: dict[str, asyncio.Task[None]] = {}
         self._tasks: set[asyncio.Task[None]] = set()
-        self._joint_pub = node.create_publisher(JointState, JOINT_STATES, SENSOR)
+        self._joint_pub = node.create_publisher(JointState, JOINT_STATES, JOINT_STATES_QOS)
         self._tcp_pubs = {g: node.create_publisher(PoseStamped, tcp_pose_topic(g), SENSOR) for g in backend.groups}
         self._robot_state = RobotStatePublisher.for_backend(node, backend)  # robot_description, tf: for RViz
         for group in backend.groups:

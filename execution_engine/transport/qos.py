@@ -67,6 +67,9 @@ ROBOT_DESCRIPTION = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, Histor
 DIAGNOSTICS = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 10)
 #: Periodic sensor data (joint_states, tcp_pose): the newest sample wins.
 SENSOR = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, History.KEEP_LAST, 5)
+#: ``joint_states`` as the bridge offers it: reliable like joint_state_publisher's, so robot_state_publisher
+#: (which asks reliable, hence RViz's robot model) matches; best-effort readers match a reliable writer too.
+JOINT_STATES = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 10)
 #: ``/clock``: only the newest time matters (rclpy's TimeSource and rclcpp's ClockQoS ask this).
 CLOCK = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, History.KEEP_LAST, 1)
 
