@@ -90,6 +90,19 @@ def test_images_stay_in_the_process_unless_asked(run_sim) -> None:  # type: igno
     assert run_sim(main) == (0, 0)
 
 
+@pytest.mark.parametrize("setting", [{"camera_source": "ros"}, {"publish_images": True}])
+def test_a_camera_setting_for_a_back_end_without_cameras_is_refused(setting: dict[str, object], run_sim) -> None:  # type: ignore[no-untyped-def]
+    """Every bridge declares the camera parameters (one config for all); a back end without cameras refuses them."""
+
+    async def main(clock: Clock) -> str:
+        node = LocalTransport(clock).create_node("vplus_bridge", parameters=setting)
+        with pytest.raises(ValueError) as refused:
+            attach_cameras(node, object())
+        return str(refused.value)
+
+    assert run_sim(main) == "/vplus_bridge: this back end has no cameras; leave publish_images false and camera_source ''"
+
+
 def test_no_image_on_the_topic_is_a_vision_fault_after_the_timeout(run_sim) -> None:  # type: ignore[no-untyped-def]
     async def main(clock: Clock) -> tuple[str, float]:
         transport = LocalTransport(clock)

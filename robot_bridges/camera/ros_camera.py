@@ -166,15 +166,20 @@ class RosCamera(CameraSource):
 
 
 def attach_cameras(node: Node, backend: object) -> RosCamera | None:
-    """Declare the camera parameters on a bridge node and wire them to the back end's cameras, if it has any."""
-    cameras = getattr(backend, "cameras", None)
-    if not isinstance(cameras, CameraVision) or not cameras.specs:
-        return None
+    """Declare the camera parameters on a bridge node and wire them to the back end's cameras, if it has any.
+
+    Every bridge declares them, cameras or not, so that one parameter file describes every bridge
+    and a camera setting given to a back end without cameras is refused rather than ignored."""
     publish = bool(node.declare_parameter("publish_images", False, "publish every image the cameras take on <camera>/image_raw and <camera>/camera_info"))
     source = str(node.declare_parameter("camera_source", "", "'' = the back end's own cameras (the simulator renders the cell); 'ros' = <camera>/image_raw + camera_info topics"))
     timeout = float(node.declare_parameter("camera_timeout", 2.0, "longest wait for an image from a ROS camera (s)"))
     if source not in ("", "ros"):
         raise ValueError(f"{node.fully_qualified_name}: camera_source must be '' or 'ros', got {source!r}")
+    cameras = getattr(backend, "cameras", None)
+    if not isinstance(cameras, CameraVision) or not cameras.specs:
+        if source or publish:
+            raise ValueError(f"{node.fully_qualified_name}: this back end has no cameras; leave publish_images false and camera_source ''")
+        return None
     names = list(cameras.specs)
     ros = None
     if source == "ros":
