@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from core_functions.catalog import Hold, ParamSpec, ParamType, skill
 from core_functions.functions import CoreFunctions, Skill, SkillContext
+from core_functions.geometry import Pose
 from core_functions.primitives import Dwell, EndEffector, MoveCartesian, SetSpeed
 
 #: Distance above a hole or slot where every skill starts and ends (m).
@@ -27,6 +28,9 @@ PROCESS_SPEED = 0.1
 DEBURR_TIME = 0.8
 #: Allowed difference between rivet and hole diameters (m).
 DIAMETER_TOLERANCE = 0.0002
+#: How far an arm of a dual-arm robot moves aside, towards its own side, when it leaves a hole (m):
+#: the other arm works on the same hole next, and two hands do not fit above one hole.
+PARK_ASIDE = 0.10
 
 
 class RivetInstallation(CoreFunctions):
@@ -36,6 +40,14 @@ class RivetInstallation(CoreFunctions):
         super().__init__(context)
         #: The rivet reference in the gripper (set by pick_rivet, cleared by insert_rivet).
         self.held_rivet: str | None = None
+
+    def _leave(self, above: Pose, frame: str) -> Skill:
+        """Leave a hole: straight up to ``above``, then aside towards the arm's own side (a dual-arm robot's
+        other arm works on this hole next); a single arm stays above it."""
+        yield MoveCartesian(above, "linear", frame=f"{frame} clearance")
+        side = {"left_arm": 1.0, "right_arm": -1.0}.get(self.ctx.group, 0.0)
+        if side:
+            yield MoveCartesian(above.translated(dy=side * PARK_ASIDE), "ptp", frame=f"{frame} aside")
 
     def _process(self, *moves: MoveCartesian) -> Skill:
         """Run contact moves slowly, then restore full speed for the free moves that follow."""
@@ -59,7 +71,7 @@ class RivetInstallation(CoreFunctions):
         yield Dwell(DEBURR_TIME)
         yield MoveCartesian(found.offset_local(dz=-STANDOFF), "linear", frame=f"{hole} stand-off")
         yield EndEffector("tool_off")
-        yield MoveCartesian(found.offset_local(dz=-CLEARANCE), "linear", frame=f"{hole} clearance")
+        yield from self._leave(found.offset_local(dz=-CLEARANCE), hole)
 
     @skill(
         ParamSpec("rivet", ParamType.FRAME, "the tray slot holding the rivet", kinds=("rivet_slot",)),
@@ -108,4 +120,4 @@ class RivetInstallation(CoreFunctions):
         yield from self._process(MoveCartesian(found.offset_local(dz=-grip_depth), "linear", frame=f"{hole} inserted"))
         yield EndEffector("gripper_open")
         self.held_rivet = None
-        yield MoveCartesian(found.offset_local(dz=-CLEARANCE), "linear", frame=f"{hole} clearance")
+        yield from self._leave(found.offset_local(dz=-CLEARANCE), hole)

@@ -108,6 +108,30 @@ class CellReader:
                 return None
         return scaled  # unreachable: some axis was out of bounds
 
+    def solid(self, element: etree._Element, at: int, attributes: dict[str, str], label: str) -> None:
+        """``box`` (side lengths, each > 0) and ``box_xyz`` (its centre in the frame), in the file's
+        length unit: checked like ``xyz`` and kept in metres for the collision model."""
+        for name in ("box", "box_xyz"):
+            text = attributes.get(name)
+            if text is None:
+                continue
+            values = _numbers3(text)
+            if values is None:
+                self.report(at, name, f"{name} of <{element.tag}> {label} must be three numbers (x y z, {self.length_unit}), got {text!r}")
+                del attributes[name]
+                continue
+            scale = _LENGTH[self.length_unit]
+            problem = next((p for axis, v in zip(_AXES["xyz"], values) if (p := limits.LENGTH.violation(axis, v, scale, self.length_unit))), None)
+            if problem is None and name == "box" and min(values) <= 0.0:
+                problem = f"every side must be longer than 0 {self.length_unit}"
+            if problem is not None:
+                self.report(at, name, f"{name} of <{element.tag}> {label}: {problem}")
+                del attributes[name]
+                continue
+            attributes[name] = " ".join(repr(v * scale) for v in values)
+        if "box_xyz" in attributes and "box" not in attributes:
+            self.report(at, "box_xyz", f"box_xyz of <{element.tag}> {label} places a box, but the frame has no box", "warning")
+
     def pose(self, element: etree._Element, at: int, label: str) -> Pose | None:
         xyz = self.vector(element, at, "xyz", label)
         rpy = self.vector(element, at, "rpy", label)
@@ -205,12 +229,14 @@ class CellReader:
             first = self.source.line_col(drafts[name].at)[0]
             self.report(at, "name", f"frame {name!r} is defined twice (first on line {first})")
             return None
+        attributes = self.free_attributes(element, at, _FRAME_ATTRIBUTES)
+        self.solid(element, at, attributes, repr(name))
         draft = _FrameDraft(
             name=name,
             parent=enclosing if enclosing is not None else (parent or WORLD),
             local=local or Pose(),
             kind=element.get("kind", "frame"),
-            attributes=self.free_attributes(element, at, _FRAME_ATTRIBUTES),
+            attributes=attributes,
             at=at,
             nested=enclosing is not None,
         )
@@ -292,6 +318,17 @@ class CellReader:
             name, tuple(v * scale for v in written), group, self.source.at_offset(at), self.source.attribute_at(at, "joints"),
             self.source.attribute_at(at, "group") if group is not None else None,
         )
+
+
+def _numbers3(text: str) -> tuple[float, float, float] | None:
+    """Three finite numbers separated by spaces, or None."""
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        return None
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        return None
+    return values[0], values[1], values[2]
 
 
 def _one_edit_apart(a: str, b: str) -> bool:

@@ -21,11 +21,15 @@ from dataclasses import replace
 
 from core_functions.geometry import Pose
 from core_functions.primitives import (
+    EndEffector,
     EndEffectorResult,
     ExecuteTrajectory,
     FullBodyMove,
     MasterSlaveMove,
     MotionResult,
+    MoveCartesian,
+    MoveJoints,
+    MoveRelative,
     Primitive,
     PrimitiveResult,
     RecordTrajectory,
@@ -35,6 +39,7 @@ from core_functions.primitives import (
     describe,
 )
 from core_functions.trajectory_store import StoredTrajectory, TrajectoryStore
+from execution_engine.dry_run.motions import GripRecord, MotionRecord, planned, straight
 from execution_engine.dry_run.recorder import Recorder
 from execution_engine.transport.wire import CellSnapshot
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
@@ -43,6 +48,8 @@ MISSING_TRAJECTORY = "missing_trajectory"
 #: The controller (or the link to it) failed rather than the application: the same one twice in a
 #: row means it will not recover within this run.
 _CONTROLLER_KINDS = (FaultKind.CONTROLLER, FaultKind.CONNECTION, FaultKind.TIMEOUT, FaultKind.PROTOCOL, FaultKind.INTERNAL)
+#: Primitives that move joints: each is kept for the collision sweep (execution_engine/dry_run/collisions.py).
+_MOTIONS = (MoveJoints, MoveCartesian, MoveRelative, ExecuteTrajectory, FullBodyMove, MasterSlaveMove)
 
 
 class DryRunBackend(RobotBackend):
@@ -57,6 +64,15 @@ class DryRunBackend(RobotBackend):
         self.stuck_at: str | None = None  # the operation it stopped in
         self._last_controller_error: tuple[str, str | None] | None = None  # (message, operation) of the latest
         self._skip: set[tuple[str, str]] = set()  # (group, trajectory) replays to answer without moving
+        self.motions: list[MotionRecord] = []  # every motion that ran, for the collision sweep
+        self.grips: list[GripRecord] = []
+        self._planned: dict[str, tuple[tuple[str, ...], object, float]] = {}  # group -> (joints, motion, duration)
+        if hasattr(inner, "motion_observer"):  # a simulator that shows its planned motions: the exact path
+            inner.motion_observer = self._observe
+
+    def _observe(self, groups: frozenset[str], joints: tuple[str, ...], motion: object, duration: float) -> None:
+        for group in groups:
+            self._planned[group] = (joints, motion, duration)
 
     @property
     def groups(self) -> tuple[str, ...]:
@@ -107,6 +123,8 @@ class DryRunBackend(RobotBackend):
         if isinstance(primitive, RecordTrajectory) and primitive.mode == "teach":
             primitive = replace(primitive, sample_period=primitive.duration)
         start = timing.now()
+        before = self.inner.joint_state() if isinstance(primitive, _MOTIONS) else None
+        self._planned.pop(group, None)
         try:
             result = await self.inner.execute(group, primitive)
         except BridgeError as error:
@@ -117,8 +135,28 @@ class DryRunBackend(RobotBackend):
                 span = self.recorder.span(group, held, what, start, timing.now(), error.kind.value)
                 self.recorder.finding(group, error.kind.value, what, error.detail, span.end)
             return self.as_if_done(group, primitive)
-        self.recorder.span(group, held, what, start, timing.now())
+        span = self.recorder.span(group, held, what, start, timing.now())
+        if before is not None:
+            self._keep_motion(group, held, what, span.start, span.end, before)
+        elif isinstance(primitive, EndEffector) and primitive.action in ("gripper_close", "gripper_open"):
+            self.grips.append(GripRecord(group, span.operation, span.function, span.end, primitive.action == "gripper_close"))
         return result
+
+    def _keep_motion(self, group: str, held: tuple[str, ...], what: str, start: float, end: float, before: tuple[tuple[str, ...], tuple[float, ...]]) -> None:
+        located = self.recorder.locate(group) or ("?", "?")
+        plan = self._planned.pop(group, None)
+        if plan is not None:
+            joints, motion, duration = plan
+            sampler = planned(motion, duration)
+            end = start + duration
+        else:
+            names, after = self.inner.joint_state()
+            moved = [k for k, (a, b) in enumerate(zip(before[1], after)) if a != b]
+            if not moved:
+                return
+            joints = tuple(names[k] for k in moved)
+            sampler = straight([before[1][k] for k in moved], [after[k] for k in moved], end - start)
+        self.motions.append(MotionRecord(group, held, located[0], located[1], what, start, end, joints, sampler))
 
     def _note_controller(self, group: str, error: BridgeError) -> None:
         """Give the controller up when it fails twice in a row with the same controller fault."""

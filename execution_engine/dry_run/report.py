@@ -84,6 +84,15 @@ class GroupTime:
 
 
 @dataclass(frozen=True)
+class CollisionCheck:
+    """What the collision sweep covered: motions, configurations checked, the margin every pair keeps (m)."""
+
+    motions: int
+    samples: int
+    margin: float
+
+
+@dataclass(frozen=True)
 class DryRunReport:
     """The outcome of one dry run of an application.
 
@@ -105,6 +114,7 @@ class DryRunReport:
     operations_checked: int
     complete: bool = True
     notes: tuple[str, ...] = ()
+    collisions: CollisionCheck | None = None  # None: the robot has no collision model
 
     @property
     def ok(self) -> bool:
@@ -124,6 +134,11 @@ class DryRunReport:
         for group, time in self.groups.items():
             share = 100.0 * time.busy / self.cycle_time if self.cycle_time > 0 else 0.0
             lines.append(f"  {group:<12} busy {time.busy:8.2f} s ({share:5.1f} %), idle {time.idle:8.2f} s, {time.primitives} primitives")
+        if self.collisions is not None:
+            c = self.collisions
+            lines.append(f"  collisions checked: {c.motions} motions, {c.samples} configurations, margin {c.margin * 1000:.0f} mm")
+        else:
+            lines.append("  collisions not checked: the robot has no collision model")
         lines += [f"  not checked: {note}" for note in self.notes]
         return lines
 

@@ -25,8 +25,9 @@ from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolic
 from execution_engine.clock import Clock, real_clock, run_with_clock, simulated_clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
+from execution_engine.dry_run.collisions import scene_of, sweep
 from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
-from execution_engine.dry_run.report import DryRunReport, group_times
+from execution_engine.dry_run.report import CollisionCheck, DryRunReport, group_times
 from execution_engine.dry_run.simulators import DryRunSetup, setup_for
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
@@ -72,12 +73,15 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
             await inner.close()
             raise
         store = DryRunTrajectoryStore(db, backend)
+        initial = backend.joint_state()
         try:
             _attach(deployment, recorder, store)
             total = await _run_operations(app, deployment, recorder)
         finally:
             await deployment.close()
             store.close()
+    scene = scene_of(app)
+    stats = sweep(app, scene, initial, backend.motions, backend.grips, recorder) if scene is not None else None
     checked, notes = len(app.operations), []
     if backend.stuck is not None:
         notes.append(backend.stuck)
@@ -98,6 +102,7 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
         operations_checked=checked,
         complete=not notes,
         notes=tuple(notes),
+        collisions=None if stats is None else CollisionCheck(stats.motions, stats.samples, scene.margin if scene else 0.0),
     )
 
 

@@ -133,6 +133,8 @@ class NextageSimBackend(RobotBackend):
         self.control_period = float(control_period)
         self.model = model or NextageModel()
         self.cartesian_limits = cartesian_limits or CartesianLimits()
+        #: Told of every motion as it starts: (groups, joint names, motion with ``at(t)``, duration).
+        self.motion_observer: Callable[[frozenset[str], tuple[str, ...], Any, float], None] | None = None
         self._q = self.model.named_pose(initial_pose)
         self._speed = dict.fromkeys(GROUPS, 1.0)
         self._jobs: dict[str, _Job] = {}
@@ -511,6 +513,8 @@ class NextageSimBackend(RobotBackend):
     async def _play(self, job: _Job, motion: Motion, fault: FaultSpec | None) -> None:
         """Drive the joints along ``motion`` on the clock, checking limits every period."""
         group = sorted(job.groups)[0]
+        if self.motion_observer is not None:  # the dry run keeps the exact path for its collision sweep
+            self.motion_observer(job.groups, tuple(self.model.joint_names[int(i)] for i in motion.indices), motion, motion.duration)
 
         def tick(t: float) -> None:
             positions = motion.at(t)

@@ -1,0 +1,285 @@
+"""Collision checking of a robot and its cell with coal, through pinocchio's GeometryModel.
+
+The robot's collision geometry is the ``<collision>`` of each link of its URDF (boxes, and
+cylinders read as capsules of the same radius and length -- URDF has no capsule, and a capsule's
+distance is exact and cheap); pinocchio places it for a joint vector and coal measures the
+distance between each pair of bodies that can meet:
+
+* arm against arm (the two arms of a Nextage, with their hands, tools and held parts),
+* arm against the rest of the robot (torso, head, base), except the links next to the arm's
+  mount: links at most :data:`NEIGHBOUR_JOINTS` joints apart touch by construction,
+* every moving body against the cell's boxes (fixtures, parts, trays).
+
+A pair closer than the margin (default :data:`DEFAULT_MARGIN`) is a :class:`Contact`: a
+collision when the bodies touch or overlap, a near miss otherwise.  Work is contact: while an
+arm's current motion ends within :data:`WORK_REACH` of a cell box (it deburs, inserts, picks
+there), its hand, tool and held part may touch that box; the rest of the arm may not.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from core_functions.geometry import Pose
+from core_functions.robots import RobotModel
+from robot_bridges.collision.bodies import CellBox, HeldPart
+
+Vector = NDArray[np.float64]
+
+#: Distance every pair of bodies keeps, unless a function works there (m): the stated margin.
+DEFAULT_MARGIN = 0.01
+#: An arm whose motion ends this close to a cell box works on it (m).
+WORK_REACH = 0.02
+#: Links this many joints apart or fewer are neighbours on the robot and are not checked.
+NEIGHBOUR_JOINTS = 2
+STATIC = "body"  # the group of links no joint of a group moves (a robot's base)
+_CELL = "cell"
+
+
+@dataclass(frozen=True)
+class Body:
+    """One solid: who it belongs to (a group, ``body`` for the robot's fixed base, ``cell``) and its name."""
+
+    group: str
+    name: str
+    end_effector: bool = False  # a hand, tool or held part: may touch the work
+
+    def label(self) -> str:
+        if self.group == _CELL:
+            return f"cell {self.name}"
+        if self.group == STATIC:
+            return f"robot {self.name}"
+        if self.end_effector and self.name.endswith("_Link") or self.name in ("flange", "tool0", "link_6"):
+            return f"{self.group} hand ({self.name})"
+        return f"{self.group} {self.name}"
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Two bodies closer than the margin; ``distance`` <= 0 is a collision, otherwise a near miss."""
+
+    a: Body
+    b: Body
+    distance: float
+
+    @property
+    def collision(self) -> bool:
+        return self.distance <= 0.0
+
+    def describe(self, margin: float) -> str:
+        if self.collision:
+            return f"collision between {self.a.label()} and {self.b.label()}"
+        return f"collision margin: {self.a.label()} and {self.b.label()} {self.distance * 1000:.1f} mm apart, below the {margin * 1000:.0f} mm safety margin"
+
+
+@dataclass(frozen=True)
+class ArmTcp:
+    """Where an arm's TCP is: a frame of the URDF and the tool pose in it (z out of the tool)."""
+
+    frame: str
+    tool: Pose = Pose()
+
+
+class _Solid:
+    """A coal geometry with a bounding radius about its own origin (for the broad phase)."""
+
+    def __init__(self, body: Body, geometry: coal.CollisionGeometry, radius: float) -> None:
+        self.body = body
+        self.geometry = geometry
+        self.radius = radius
+
+
+def _box_radius(size: Sequence[float]) -> float:
+    return 0.5 * float(np.linalg.norm(size))
+
+
+def _transform(m: NDArray[np.float64]) -> coal.Transform3s:
+    return coal.Transform3s(np.ascontiguousarray(m[:3, :3]), np.ascontiguousarray(m[:3, 3]))
+
+
+class CollisionScene:
+    """A robot's collision model from its URDF; the cell and held parts are set as they change."""
+
+    def __init__(self, robot: RobotModel, urdf: Path | str, tcps: Mapping[str, ArmTcp], margin: float = DEFAULT_MARGIN) -> None:
+        if not margin >= 0.0:
+            raise ValueError(f"collision margin must be a distance >= 0 m, got {margin!r}")
+        self.robot = robot
+        self.margin = float(margin)
+        self.model = pin.buildModelFromUrdf(str(urdf))
+        self.geom = pin.buildGeomFromUrdf(self.model, str(urdf), pin.GeometryType.COLLISION)
+        self.data = self.model.createData()
+        self.gdata = pin.GeometryData(self.geom)
+        #: The model's joint order (pinocchio's): what :meth:`contacts` takes.
+        self.joint_names = tuple(self.model.names[j] for j in range(1, self.model.njoints))
+        owner = {j: g.name for g in robot.groups for j in g.joint_names}
+        self._links: list[_Solid] = []
+        self._link_joint: list[int] = []
+        for obj in self.geom.geometryObjects:
+            link = self.model.frames[obj.parentFrame].name
+            group = owner.get(self.model.names[obj.parentJoint], STATIC) if obj.parentJoint > 0 else STATIC
+            shape = obj.geometry
+            if isinstance(shape, coal.Cylinder):  # URDF has no capsule: the cylinder with round ends
+                shape = coal.Capsule(shape.radius, 2.0 * shape.halfLength)
+                radius = shape.halfLength + shape.radius
+            elif isinstance(shape, coal.Box):
+                radius = _box_radius(2.0 * np.asarray(shape.halfSide))
+            elif isinstance(shape, coal.Sphere):
+                radius = shape.radius
+            else:
+                raise ValueError(f"{urdf}: collision geometry of {link} must be a box, cylinder or sphere, not {type(shape).__name__}")
+            tcp = tcps.get(group)
+            self._links.append(_Solid(Body(group, link, tcp is not None and tcp.frame == link), shape, radius))
+            self._link_joint.append(obj.parentJoint)
+        self.tcps = dict(tcps)
+        self._tcp_frame = {g: self.model.getFrameId(t.frame) for g, t in self.tcps.items()}
+        self._tools: dict[str, _Solid] = {}
+        for group, tcp in self.tcps.items():
+            self.set_tool(group, tcp.tool)
+        self._held: dict[str, tuple[HeldPart, _Solid]] = {}
+        self._boxes: list[tuple[CellBox, _Solid, NDArray[np.float64]]] = []
+        self._link_pairs = self._robot_pairs()
+
+    # ------------------------------------------------------------------ what is in the scene
+    def set_tool(self, group: str, tool: Pose) -> None:
+        """The arm's TCP in its frame; a tool longer than 5 mm is a capsule from the flange to the TCP."""
+        self.tcps[group] = ArmTcp(self.tcps[group].frame, tool)
+        length = float(np.linalg.norm(tool.position))
+        if length > 0.005:
+            self._tools[group] = _Solid(Body(group, "tool", True), coal.Capsule(0.015, length), 0.5 * length + 0.015)
+        else:
+            self._tools.pop(group, None)
+
+    def set_cell(self, boxes: Sequence[CellBox]) -> None:
+        self._boxes = [(box, _Solid(Body(_CELL, box.frame), coal.Box(*box.size), _box_radius(box.size)), box.pose.matrix()) for box in boxes]
+
+    def set_held(self, group: str, part: HeldPart | None) -> None:
+        """What the arm's gripper holds now (None: nothing)."""
+        if part is None:
+            self._held.pop(group, None)
+            return
+        solid = _Solid(Body(group, f"held {part.element}", True), coal.Capsule(part.radius, part.length), 0.5 * part.length + part.radius)
+        self._held[group] = (part, solid)
+
+    def held(self, group: str) -> HeldPart | None:
+        entry = self._held.get(group)
+        return None if entry is None else entry[0]
+
+    @property
+    def boxes(self) -> tuple[CellBox, ...]:
+        return tuple(b for b, _, _ in self._boxes)
+
+    def _robot_pairs(self) -> list[tuple[int, int]]:
+        """Link pairs of different groups, not neighbours on the robot, not both fixed."""
+        parents = self.model.parents
+
+        def chain(j: int) -> list[int]:
+            out = [j]
+            while j > 0:
+                j = parents[j]
+                out.append(j)
+            return out
+
+        pairs = []
+        for i, a in enumerate(self._links):
+            for k in range(i + 1, len(self._links)):
+                b = self._links[k]
+                if a.body.group == b.body.group or STATIC == a.body.group == b.body.group:
+                    continue
+                ca, cb = chain(self._link_joint[i]), chain(self._link_joint[k])
+                common = next(j for j in ca if j in cb)
+                if ca.index(common) + cb.index(common) <= NEIGHBOUR_JOINTS:
+                    continue
+                pairs.append((i, k))
+        return pairs
+
+    # ------------------------------------------------------------------ the check
+    def tcp_matrix(self, group: str) -> NDArray[np.float64]:
+        """The TCP of ``group`` at the configuration of the last :meth:`place`."""
+        frame = self.data.oMf[self._tcp_frame[group]]
+        return frame.homogeneous @ self.tcps[group].tool.matrix()
+
+    def place(self, q: Vector) -> None:
+        """Put every link where joint vector ``q`` (:attr:`joint_names` order) puts it."""
+        pin.updateGeometryPlacements(self.model, self.data, self.geom, self.gdata, q)
+        pin.updateFramePlacements(self.model, self.data)
+
+    def contacts(self, q: Vector, work: Mapping[str, Sequence[Pose]] | None = None) -> list[Contact]:
+        """Every pair of bodies closer than the margin at ``q``, closest pair of each body pair.
+
+        ``work`` maps an arm to where its current motion starts and ends (its TCP there): the arm
+        works on the cell boxes within :data:`WORK_REACH` of either point (going in, coming out).
+        """
+        self.place(q)
+        solids: list[_Solid] = []
+        placements: list[NDArray[np.float64]] = []
+        for i, link in enumerate(self._links):
+            solids.append(link)
+            placements.append(self.gdata.oMg[i].homogeneous)
+        extra: list[int] = []
+        for group in self.tcps:
+            tcp = self.tcp_matrix(group)
+            tool = self._tools.get(group)
+            if tool is not None:
+                back = np.eye(4)
+                back[2, 3] = -0.5 * float(np.linalg.norm(self.tcps[group].tool.position))
+                extra.append(len(solids))
+                solids.append(tool)
+                placements.append(tcp @ back)
+            held = self._held.get(group)
+            if held is not None:
+                part, solid = held
+                along = np.eye(4)
+                along[2, 3] = 0.5 * (part.tip - part.top)
+                extra.append(len(solids))
+                solids.append(solid)
+                placements.append(tcp @ along)
+        box_start = len(solids)
+        for _, solid, matrix in self._boxes:
+            solids.append(solid)
+            placements.append(matrix)
+        pairs = list(self._link_pairs)
+        for e in extra:  # tools and held parts against everything not of their own group
+            group = solids[e].body.group
+            pairs += [(i, e) for i in range(box_start) if i != e and solids[i].body.group != group]
+        movers = [i for i in range(box_start) if solids[i].body.group != STATIC]
+        pairs += [(i, b) for i in movers for b in range(box_start, len(solids))]
+        return self._measure(solids, placements, pairs, self._working(work or {}, box_start, solids))
+
+    def _working(self, work: Mapping[str, Sequence[Pose]], box_start: int, solids: list[_Solid]) -> set[tuple[str, int]]:
+        """(arm, box index) pairs where the arm's end effector may touch: the box it works on."""
+        out: set[tuple[str, int]] = set()
+        for group, targets in work.items():
+            for target, (k, (box, _, matrix)) in ((t, b) for t in targets for b in enumerate(self._boxes)):
+                point = np.array(target.position)
+                local = matrix[:3, :3].T @ (point - matrix[:3, 3])
+                outside = np.maximum(np.abs(local) - 0.5 * np.array(box.size), 0.0)
+                if float(np.linalg.norm(outside)) <= WORK_REACH:
+                    out.add((group, box_start + k))
+        return out
+
+    def _measure(self, solids: list[_Solid], placements: list[NDArray[np.float64]], pairs: list[tuple[int, int]], working: set[tuple[str, int]]) -> list[Contact]:
+        if not pairs:
+            return []
+        centres = np.array([p[:3, 3] for p in placements])
+        radii = np.array([s.radius for s in solids])
+        ia = np.fromiter((p[0] for p in pairs), dtype=np.int64, count=len(pairs))
+        ib = np.fromiter((p[1] for p in pairs), dtype=np.int64, count=len(pairs))
+        gaps = np.linalg.norm(centres[ia] - centres[ib], axis=1) - radii[ia] - radii[ib]
+        near = np.nonzero(gaps < self.margin)[0]
+        request, found = coal.DistanceRequest(), []
+        for n in near:
+            i, k = int(ia[n]), int(ib[n])
+            a, b = solids[i], solids[k]
+            if (a.body.end_effector and (a.body.group, k) in working) or (b.body.end_effector and (b.body.group, i) in working):
+                continue
+            result = coal.DistanceResult()
+            distance = coal.distance(a.geometry, _transform(placements[i]), b.geometry, _transform(placements[k]), request, result)
+            if distance < self.margin:
+                found.append(Contact(a.body, b.body, float(distance)))
+        return found
