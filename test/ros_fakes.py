@@ -37,6 +37,7 @@ import types
 from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -310,6 +311,15 @@ class _Entity:
 
     def run(self, item: Any) -> None:
         raise NotImplementedError
+
+
+def ros_type_name(msg_type: type) -> str:
+    """``std_msgs/msg/String`` for the fake String class (what rclpy's graph calls reports)."""
+    for module, classes in INTERFACE_MODULES.items():
+        for name, cls in classes.items():
+            if cls is msg_type:
+                return module.replace(".", "/") + "/" + name
+    return "unknown/msg/Unknown"
 
 
 class FakePublisher:
@@ -588,6 +598,20 @@ class FakeNode:
 
     def get_name(self) -> str:
         return self._name
+
+    def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every topic with a publisher or a subscription, with its ROS type names (as rclpy)."""
+        with GRAPH.lock:
+            endpoints = [(t, e.msg_type) for table in (GRAPH.publishers, GRAPH.subscriptions) for t, es in table.items() for e in es]
+        found: dict[str, set[str]] = {}
+        for topic, msg_type in endpoints:
+            found.setdefault(topic, set()).add(ros_type_name(msg_type))
+        return sorted((topic, sorted(types)) for topic, types in found.items())
+
+    def get_publishers_info_by_topic(self, topic_name: str) -> list[Any]:
+        """rclpy's TopicEndpointInfo, as far as a recorder reads it: the offered QoS."""
+        with GRAPH.lock:
+            return [SimpleNamespace(qos_profile=p.qos, node_name=p.node._name) for p in GRAPH.publishers.get(topic_name, []) if not p.destroyed]
 
     def get_namespace(self) -> str:
         return self._namespace

@@ -182,3 +182,40 @@ def test_a_cell_of_ros_nodes_runs_an_application_and_reports(fake_rclpy: Any, tm
     out = capsys.readouterr().out
     assert "application ros smoke: FINISHED" in out and "operations: 2/2" in out
     assert stopped_cleanly()
+
+
+def test_the_engine_records_the_ros_graph_with_its_record_parameter(fake_rclpy: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from execution_engine.recorder.reading import Recording, iter_messages, trace_records
+
+    app = tmp_path / "smoke.xml"
+    app.write_text(SMOKE_APP)
+    record = tmp_path / "ros.mcap"
+
+    async def main(clock: Clock) -> ExitCode:
+        transport = RosTransport(clock, ["cell"])
+        tasks: list[asyncio.Task[None]] = []
+        try:
+            bridge = transport.create_node("nextage_sim_bridge", parameters={"speed": 20.0})
+            tasks.append(asyncio.ensure_future(run_bridge("nextage-sim", declare_nextage_parameters, bridge, Outcome())))
+            for group in NEXTAGE_OPEN.group_names:
+                machine = transport.create_node(machine_node_name(group), parameters={"group": group})
+                tasks.append(asyncio.ensure_future(nodes.run_group_machine(machine, Outcome())))
+            engine = transport.create_node("execution_engine", parameters={"application": str(app), "exit_when_done": True, "record": str(record)})
+            outcome = Outcome()
+            await clock.wait_for(nodes.run_engine(engine, outcome), BOUND)
+            return outcome.code
+        finally:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            await transport.shutdown()
+
+    assert run_with_clock(main, real_clock()) == ExitCode.OK
+    assert f"recording {record}:" in capsys.readouterr().out
+    recording = Recording(str(record))
+    types = {m.topic: m.ros_type for m in iter_messages(record, recording)}
+    assert not recording.cut
+    assert types["/joint_states"] == "sensor_msgs/msg/JointState" and types["/left_arm/sm/status"] == "std_msgs/msg/String"
+    events = list(trace_records(record, Recording(str(record))))
+    assert [r for r in events if r["event"] == "function_end" and r["outcome"] == "succeeded"]
+    assert stopped_cleanly()

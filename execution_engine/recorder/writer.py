@@ -17,10 +17,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-import queue
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import IO, Any
@@ -37,6 +36,7 @@ log = logging.getLogger(__name__)
 CHUNK_SIZE = 256 * 1024  # bytes before a chunk is closed by size (rosbag2's default is 768 KiB)
 QUEUE_SIZE = 20_000  # messages waiting for the writer thread before new ones are dropped
 FLUSH_PERIOD = 1.0  # wall seconds: the most a crash loses of what was already received
+POLL = 0.05  # wall seconds between the writer's looks at its queue
 _STOP = object()
 
 
@@ -96,7 +96,13 @@ def to_ros_dict(value: Any) -> Any:
 
 
 class McapSink:
-    """One MCAP file and the thread that writes it."""
+    """One MCAP file and the thread that writes it.
+
+    The queue is a deque the callers append to (atomic under the GIL, no lock, no wake-up): the
+    writer thread looks every ``poll`` wall seconds and writes what has gathered, yielding the
+    interpreter between messages, so a busy control loop waits neither for a lock nor for the
+    writer's turn on the GIL.
+    """
 
     def __init__(
         self,
@@ -106,12 +112,16 @@ class McapSink:
         queue_size: int = QUEUE_SIZE,
         chunk_size: int = CHUNK_SIZE,
         flush_period: float = FLUSH_PERIOD,
+        poll: float = POLL,
         compression: CompressionType = CompressionType.ZSTD,
     ) -> None:
         self.stats = RecordingStats(path)
         self._stream = stream
-        self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_size)
+        self._queue: deque[Any] = deque()
+        self._queue_size = queue_size
+        self._wake = threading.Event()  # only for sync and close: messages never wake the writer
         self._flush_period = flush_period
+        self._poll = poll
         self._writer = Writer(stream, chunk_size=chunk_size, compression=compression)
         self._writer.start(profile="ros2", library="dual_arm_executive recorder (mcap, mcap-ros2-support)")
         self._schemas: dict[str, tuple[int, EncoderFunction]] = {}
@@ -119,6 +129,7 @@ class McapSink:
         self._sequence: Counter[str] = Counter()
         self._warned = False
         self._closed = False
+        self._failed = False
         self._thread = threading.Thread(target=self._work, name=f"mcap writer {path}", daemon=True)
         self._thread.start()
 
@@ -127,32 +138,33 @@ class McapSink:
         """Hand one message to the writer; never blocks (a full queue drops it and says so once)."""
         if self._closed:
             return
-        try:
-            self._queue.put_nowait((topic, msg, offered, log_time_ns))
-        except queue.Full:
+        if len(self._queue) >= self._queue_size or self._failed:
             self.stats.dropped[topic] += 1
             if not self._warned:
                 self._warned = True
                 log.warning("recording %s: the writer cannot keep up; dropping messages (first on %s)", self.stats.path, topic)
+            return
+        self._queue.append((topic, msg, offered, log_time_ns))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        self._enqueue(("metadata", name, dict(data)))
+        self._control(("metadata", name, dict(data)))
 
     def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int) -> None:
-        self._enqueue(("attachment", name, media_type, data, log_time_ns))
+        self._control(("attachment", name, media_type, data, log_time_ns))
 
     def sync(self) -> threading.Event:
         """Close the chunk in progress and put the file on disk (operation boundaries); the event
         is set once that is done."""
         done = threading.Event()
-        self._enqueue(done)
+        self._control(done)
         return done
 
     def close(self, timeout: float = 30.0) -> RecordingStats:
         """Write what is queued, the summary and the index; wait (bounded) for the thread."""
         if not self._closed:
             self._closed = True
-            self._queue.put(_STOP)
+            self._queue.append(_STOP)
+            self._wake.set()
             self._thread.join(timeout)
             if self._thread.is_alive():
                 self.stats.error = self.stats.error or f"the writer did not finish within {timeout:g} s"
@@ -160,13 +172,12 @@ class McapSink:
                 self._stream.close()
         return self.stats
 
-    def _enqueue(self, item: Any) -> None:
-        """Control items are few and must not be dropped: they wait for room (bounded)."""
+    def _control(self, item: Any) -> None:
+        """Control items are few and never dropped (they may go past the bound)."""
         if not self._closed:
-            try:
-                self._queue.put(item, timeout=5.0)
-            except queue.Full:
-                self.stats.error = self.stats.error or "the writer's queue stayed full for 5 s"
+            self._queue.append(item)
+            if isinstance(item, threading.Event):
+                self._wake.set()
 
     # ---------------------------------------------------------------- the writer thread
     def _work(self) -> None:
@@ -174,38 +185,45 @@ class McapSink:
         pending = False
         try:
             while True:
-                try:
-                    item = self._queue.get(timeout=self._flush_period)
-                except queue.Empty:
-                    item = None
-                if item is _STOP:
-                    break
-                if isinstance(item, threading.Event):  # a sync
-                    self._flush(sync=True)
-                    item.set()
-                    pending, last_flush = False, time.monotonic()
-                elif item is not None:
+                self._wake.wait(self._poll)
+                self._wake.clear()
+                while self._queue:
+                    item = self._queue.popleft()
+                    if item is _STOP:
+                        self._writer.finish()
+                        self._stream.flush()
+                        self._fsync()
+                        return
+                    if isinstance(item, threading.Event):  # a sync
+                        self._flush(sync=True)
+                        item.set()
+                        pending, last_flush = False, time.monotonic()
+                        continue
                     self._write(item)
                     pending = True
+                    time.sleep(0)  # let the control loop have the interpreter if it wants it
                 if pending and time.monotonic() - last_flush >= self._flush_period:
                     self._flush(sync=True)
                     pending, last_flush = False, time.monotonic()
-            self._writer.finish()
-            self._stream.flush()
-            self._fsync()
         except Exception as error:  # noqa: BLE001 - a full disk, a bad message: said, never silent
             self.stats.error = f"{type(error).__name__}: {error}"
+            self._failed = True
             log.error("recording %s failed: %s", self.stats.path, self.stats.error)
             self._drain()
 
     def _drain(self) -> None:
-        """After a failure: count what could not be written and let ``close`` return."""
+        """After a failure: count what could not be written, release waiters, let ``close`` return."""
         while True:
-            item = self._queue.get()
-            if item is _STOP:
-                return
-            if isinstance(item, tuple) and len(item) == 4:
-                self.stats.dropped[item[0]] += 1
+            while self._queue:
+                item = self._queue.popleft()
+                if item is _STOP:
+                    return
+                if isinstance(item, threading.Event):
+                    item.set()
+                elif isinstance(item, tuple) and len(item) == 4:
+                    self.stats.dropped[item[0]] += 1
+            self._wake.wait(self._poll)
+            self._wake.clear()
 
     def _write(self, item: tuple[Any, ...]) -> None:
         if item[0] == "metadata":

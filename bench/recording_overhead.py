@@ -1,0 +1,189 @@
+"""What the flight recorder costs: time per primitive with ``--record`` against the same run without it.
+
+    python bench/recording_overhead.py [N]          # per-primitive overhead, N primitives (default 2000)
+    python bench/recording_overhead.py --rsi 20     # + the KUKA RSI 4 ms loop, 20 s without and 20 s with recording
+
+1. Per primitive, in one process on real (wall) time, on the Nextage simulator back end: the
+   applications of ``bench/primitive_overhead.py`` (one ``set_speed`` primitive per function -- the
+   engine, machine, transport and bridge paid per primitive, the worst case -- and N primitives in
+   one skill), each run without and with a :class:`~execution_engine.recorder.recorder.Recorder`
+   node on the same transport writing every topic to an MCAP file; the runs alternate (without,
+   with, without, ...) and the medians are compared: the ratio is time with / time without.
+   ``set_speed`` does not move the arm, so there is no motion time to hide the recorder's cost in.
+2. ``--rsi S``: ``bench/rsi_latency.py``'s real-time phase (the engine runs ``kuka_rsi_demo.xml``
+   over and over against a simulated KR C4 at a real 4 ms cycle, the RSI loop in its own process)
+   for S seconds without and S seconds with every topic recorded; the controller's count of late
+   replies for each.
+
+The last line is one JSON object with every figure.
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
+
+from primitive_overhead import BenchFunctions, app  # noqa: E402
+
+from app_functions.registry import LIBRARIES  # noqa: E402
+from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
+from execution_engine.clock import Clock, run_with_clock  # noqa: E402
+from execution_engine.deployment import Deployment, deploy_local  # noqa: E402
+from execution_engine.recorder.recorder import Recorder  # noqa: E402
+from execution_engine.recorder.writer import McapSink, RecordingStats  # noqa: E402
+from robot_bridges.backend import BackendOptions  # noqa: E402
+from robot_bridges.registry import create_backend  # noqa: E402
+
+
+def attach_recorder(deployment: Deployment, path: Path) -> Recorder:
+    recorder = Recorder(deployment.transport.create_node("recorder"), McapSink(open(path, "wb"), str(path)))
+    recorder.start()
+    return recorder
+
+
+async def measure(clock: Clock, n: int, record: Path | None) -> dict[str, Any]:
+    backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN))
+    deployment = await deploy_local(clock, NEXTAGE_OPEN, backend, machine_parameters={"trajectory_db": ":memory:"}, bridge_parameters={"state_period": 1.0})
+    recorder = attach_recorder(deployment, record) if record is not None else None
+    stats: RecordingStats | None = None
+    try:
+        engine = deployment.engine
+        t0 = time.perf_counter()
+        report = await engine.run(app([{"left_arm": ("set_speed", "0.5")} for _ in range(n)]))
+        function = (time.perf_counter() - t0) / n
+        assert report.ok, report.summary_lines()
+        t0 = time.perf_counter()
+        report = await engine.run(app([{"left_arm": ("speed_sweep", str(n))}]))
+        in_skill = (time.perf_counter() - t0) / n
+        assert report.ok, report.summary_lines()
+    finally:
+        if recorder is not None:
+            stats = await recorder.close()
+        await deployment.close()
+    return {"function": function, "skill": in_skill, "messages": stats.written if stats else 0, "dropped": sum(stats.dropped.values()) if stats else 0}
+
+
+def per_primitive(n: int, rounds: int) -> dict[str, Any]:
+    LIBRARIES["bench"] = BenchFunctions
+    plain: list[dict[str, Any]] = []
+    recorded: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as folder:
+        for i in range(rounds):  # alternate, so drift of this shared machine hits both sides alike
+            plain.append(run_with_clock(lambda c: measure(c, n, None), Clock(1.0)))
+            recorded.append(run_with_clock(lambda c: measure(c, n, Path(folder) / f"run{i}.mcap"), Clock(1.0)))
+    out: dict[str, Any] = {"primitives": n, "rounds": rounds}
+    for kind in ("function", "skill"):
+        without = statistics.median(r[kind] for r in plain) * 1e6
+        with_ = statistics.median(r[kind] for r in recorded) * 1e6
+        out[f"{kind}_us_without"] = round(without, 2)
+        out[f"{kind}_us_recorded"] = round(with_, 2)
+        out[f"{kind}_ratio"] = round(with_ / without, 3)
+    out["messages_per_run"] = int(statistics.median(r["messages"] for r in recorded))
+    out["dropped"] = sum(r["dropped"] for r in recorded)
+    return out
+
+
+def demo(speed: str, rounds: int) -> dict[str, Any]:
+    """The rivet demonstrator through the CLI, without and with ``--record``: wall and CPU time per primitive."""
+    import resource
+    import subprocess
+
+    sides: dict[str, list[tuple[float, float, int]]] = {"without": [], "recorded": []}
+    with tempfile.TemporaryDirectory() as folder:
+        for i in range(rounds):
+            for label in ("without", "recorded"):
+                trace = Path(folder) / f"{label}{i}.jsonl"
+                command = [sys.executable, "-m", "execution_engine", "run", "apps_xml/rivet_installation.xml", "--speed", speed,
+                           "-q", "--no-check", "--trace", str(trace)]
+                if label == "recorded":
+                    command += ["--record", str(Path(folder) / f"run{i}.mcap")]
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                t0 = time.perf_counter()
+                subprocess.run(command, cwd=HERE.parent, check=True, stdout=subprocess.DEVNULL)
+                wall = time.perf_counter() - t0
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+                primitives = trace.read_text().count('"event":"primitive_end"')
+                sides[label].append((wall, cpu, primitives))
+    out: dict[str, Any] = {"speed": speed, "rounds": rounds, "primitives": sides["without"][0][2]}
+    for label, runs in sides.items():
+        out[f"wall_ms_per_primitive_{label}"] = round(statistics.median(w / n for w, _, n in runs) * 1e3, 2)
+        out[f"cpu_ms_per_primitive_{label}"] = round(statistics.median(c / n for _, c, n in runs) * 1e3, 2)
+    out["wall_ratio"] = round(out["wall_ms_per_primitive_recorded"] / out["wall_ms_per_primitive_without"], 3)
+    out["cpu_ratio"] = round(out["cpu_ms_per_primitive_recorded"] / out["cpu_ms_per_primitive_without"], 3)
+    return out
+
+
+def rsi(seconds: float) -> dict[str, Any]:
+    """The 4 ms loop's late replies without and with the recorder in the engine's process."""
+    import execution_engine.deployment as deployment_module
+    import rsi_latency
+
+    original: Callable[..., Awaitable[Deployment]] = deployment_module.deploy_local
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for label in ("without", "recorded"):
+            recorders: list[Recorder] = []
+
+            async def deploy(*args: Any, **kwargs: Any) -> Deployment:
+                deployment = await original(*args, **kwargs)
+                if label == "recorded":
+                    recorders.append(attach_recorder(deployment, Path(folder) / "rsi.mcap"))
+                    close = deployment.close
+
+                    async def close_all() -> None:
+                        for recorder in recorders:
+                            await recorder.close()
+                        await close()
+
+                    deployment.close = close_all  # type: ignore[method-assign]
+                return deployment
+
+            deployment_module.deploy_local = deploy  # type: ignore[assignment]
+            try:
+                result = rsi_latency.real_time(seconds, Path(folder) / f"feedback_{label}.csv")
+            finally:
+                deployment_module.deploy_local = original
+            out[label] = {k: result.get(k) for k in ("packets", "late", "app_runs", "app_runs_ok", "rsi_round_trip_us", "echo_late")}
+            if recorders:
+                out[label]["messages"] = recorders[0].sink.stats.written
+                out[label]["dropped"] = sum(recorders[0].sink.stats.dropped.values())
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("primitives", nargs="?", type=int, default=2000)
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--demo-rounds", type=int, default=3, help="rounds of the rivet demonstrator at each speed (0: skip)")
+    parser.add_argument("--rsi", type=float, default=0.0, metavar="SECONDS", help="also the RSI loop's late packets, SECONDS each way")
+    args = parser.parse_args()
+    result: dict[str, Any] = {"bench": "recording_overhead", **per_primitive(args.primitives, args.rounds)}
+    print(f"one primitive per function: {result['function_us_without']:9.2f} us without, {result['function_us_recorded']:9.2f} us recorded, ratio {result['function_ratio']:.3f}")
+    print(f"primitives within a skill:  {result['skill_us_without']:9.2f} us without, {result['skill_us_recorded']:9.2f} us recorded, ratio {result['skill_ratio']:.3f}")
+    print(f"recorded {result['messages_per_run']} messages per run, {result['dropped']} dropped")
+    if args.demo_rounds > 0:
+        result["demo"] = [demo(speed, args.demo_rounds) for speed in ("10", "max")]
+        for d in result["demo"]:
+            print(f"rivet demonstrator --speed {d['speed']:>3}: wall {d['wall_ms_per_primitive_without']:8.2f} / {d['wall_ms_per_primitive_recorded']:8.2f} ms "
+                  f"per primitive (ratio {d['wall_ratio']:.3f}), CPU {d['cpu_ms_per_primitive_without']:7.2f} / {d['cpu_ms_per_primitive_recorded']:7.2f} ms (ratio {d['cpu_ratio']:.3f})")
+    if args.rsi > 0:
+        result["rsi"] = rsi(args.rsi)
+        for label, figures in result["rsi"].items():
+            print(f"RSI 4 ms, {label:<8}: {figures['late']} late of {figures['packets']} packets, demo runs {figures['app_runs_ok']}/{figures['app_runs']}")
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
