@@ -9,7 +9,9 @@
    one skill), each run without and with a :class:`~execution_engine.recorder.recorder.Recorder`
    node on the same transport writing every topic to an MCAP file; the runs alternate (without,
    with, without, ...) and the medians are compared: the ratio is time with / time without.
-   ``set_speed`` does not move the arm, so there is no motion time to hide the recorder's cost in.
+   ``set_speed`` does not move the arm, so there is no motion time to hide the recorder's cost in. Both sides
+   have the run observer ``run`` always has (console and trace): without any subscriber the machines would not
+   even encode their status events, and the difference would not be the recorder's.
 2. ``--rsi S``: ``bench/rsi_latency.py``'s real-time phase (the engine runs ``kuka_rsi_demo.xml``
    over and over against a simulated KR C4 at a real 4 ms cycle, the RSI loop in its own process)
    for S seconds without and S seconds with every topic recorded; the controller's count of late
@@ -40,6 +42,7 @@ from app_functions.registry import LIBRARIES  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
 from execution_engine.clock import Clock, run_with_clock  # noqa: E402
 from execution_engine.deployment import Deployment, deploy_local  # noqa: E402
+from execution_engine.observers import RunObserver  # noqa: E402
 from execution_engine.recorder.recorder import Recorder  # noqa: E402
 from execution_engine.recorder.writer import McapSink, RecordingStats  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
@@ -55,6 +58,9 @@ def attach_recorder(deployment: Deployment, path: Path) -> Recorder:
 async def measure(clock: Clock, n: int, record: Path | None) -> dict[str, Any]:
     backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN))
     deployment = await deploy_local(clock, NEXTAGE_OPEN, backend, machine_parameters={"trajectory_db": ":memory:"}, bridge_parameters={"state_period": 1.0})
+    # Both sides watch the run as ``run`` always does (the observer behind the console and the trace), so the
+    # machines encode their status events either way: the difference is the recorder's alone.
+    RunObserver(deployment.transport.create_node("run_observer"), NEXTAGE_OPEN.group_names).sinks.append(lambda status: None)
     recorder = attach_recorder(deployment, record) if record is not None else None
     stats: RecordingStats | None = None
     try:

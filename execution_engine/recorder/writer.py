@@ -37,6 +37,7 @@ CHUNK_SIZE = 256 * 1024  # bytes before a chunk is closed by size (rosbag2's def
 QUEUE_SIZE = 20_000  # messages waiting for the writer thread before new ones are dropped
 FLUSH_PERIOD = 1.0  # wall seconds: the most a crash loses of what was already received
 POLL = 0.05  # wall seconds between the writer's looks at its queue
+YIELD_AFTER = 0.002  # wall seconds of writing before the writer lets the control loop take the interpreter
 _STOP = object()
 
 
@@ -99,9 +100,9 @@ class McapSink:
     """One MCAP file and the thread that writes it.
 
     The queue is a deque the callers append to (atomic under the GIL, no lock, no wake-up): the
-    writer thread looks every ``poll`` wall seconds and writes what has gathered, yielding the
-    interpreter between messages, so a busy control loop waits neither for a lock nor for the
-    writer's turn on the GIL.
+    writer thread looks every ``poll`` wall seconds and writes what has gathered, handing the
+    interpreter back after at most ``YIELD_AFTER`` of work, so a control loop waits neither for a
+    lock nor long for the writer's turn on the GIL.
     """
 
     def __init__(
@@ -187,6 +188,7 @@ class McapSink:
             while True:
                 self._wake.wait(self._poll)
                 self._wake.clear()
+                burst = time.perf_counter()
                 while self._queue:
                     item = self._queue.popleft()
                     if item is _STOP:
@@ -201,7 +203,9 @@ class McapSink:
                         continue
                     self._write(item)
                     pending = True
-                    time.sleep(0)  # let the control loop have the interpreter if it wants it
+                    if time.perf_counter() - burst > YIELD_AFTER:  # let a waiting control loop have the interpreter
+                        time.sleep(0)
+                        burst = time.perf_counter()
                 if pending and time.monotonic() - last_flush >= self._flush_period:
                     self._flush(sync=True)
                     pending, last_flush = False, time.monotonic()
