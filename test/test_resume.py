@@ -1,6 +1,7 @@
 """Crash resume: kill -9 a run anywhere, resume it from its checkpoint, every function runs exactly once."""
 from __future__ import annotations
 
+import asyncio
 import io
 import json
 import os
@@ -122,3 +123,58 @@ def test_a_changed_application_or_cell_is_refused(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written
     code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", str(checkpoint), "--trace", str(tmp_path / "a.jsonl")], io.StringIO(), io.StringIO())
     assert code == 2  # never the file being resumed
+
+
+OPS3 = [{"left_arm": ("gripper_open",), "right_arm": ("gripper_open",)}, {"right_arm": ("gripper_close",), "left_arm": ("gripper_close",)},
+        {"left_arm": ("gripper_open",)}]
+
+
+@pytest.mark.parametrize("answer", ["skip", "reset"])
+def test_nothing_moves_until_the_operator_answers_for_an_interrupted_function(run_sim: Any, answer: str) -> None:
+    from app_builder import Cell, make_app
+
+    from execution_engine.app_model.model import Call
+    from execution_engine.checkpoint.resume import ResumePlan
+    from execution_engine.transport.msgs import Trigger
+    from execution_engine.transport.wire import engine_service
+
+    app = make_app(OPS3)
+    skipped: list[str] = []
+
+    async def main(clock: Any) -> tuple[str, Any, list[Any], list[Any]]:
+        cell = await Cell(clock).start()
+        interrupted = {"right_arm": app.operations[1].calls["right_arm"]}
+        plan = ResumePlan(1, frozenset({"left_arm"}), interrupted, "ask", "run.sqlite", "run.jsonl",
+                          on_skip=lambda index, op, group: skipped.append(f"{op.id}:{group}"))
+        skip = cell.node.create_client(Trigger, engine_service("skip"))
+        run = asyncio.ensure_future(cell.deployment.engine.run(app, plan))
+        while not any(s["state"] == "alarm" for s in cell.engine_states):
+            await clock.sleep(0.1)
+        message = next(s["message"] for s in cell.engine_states if s["state"] == "alarm")
+        await clock.sleep(30.0)  # however long the operator takes
+        before = cell.functions("right_arm") + cell.functions("left_arm")
+        reply = await (skip.call(Trigger.Request(), timeout=5.0) if answer == "skip" else cell.operator("reset"))
+        await run
+        await cell.deployment.close()
+        return message, reply, before, cell.functions("right_arm") + cell.functions("left_arm")
+
+    message, reply, before, after = run_sim(main)
+    assert message.startswith("interrupted: right_arm was running gripper_close of operation 2") and "reset to redo the function, or skip" in message
+    assert before == []  # nothing ran while the alarm waited
+    assert reply.success
+    ran = {(op, function) for op, function, _, _ in after}
+    assert ("1", "gripper_open") not in ran  # completed before the crash: never again
+    assert ("3", "gripper_open") in ran
+    if answer == "skip":
+        assert ("2", "gripper_close") not in ran and skipped == ["2:right_arm"]
+    else:
+        assert ("2", "gripper_close") in ran and skipped == []
+
+
+def test_skip_answers_only_the_alarm_of_an_interrupted_function() -> None:
+    from execution_engine.engine.operator import Flags, decide
+
+    assert decide("skip", "running", Flags(False, False))[0] is False
+    ok, answer = decide("skip", "alarm", Flags(False, False))  # a failed function's alarm: retry or stop, not skip
+    assert not ok and "use reset or stop" in answer
+    assert decide("skip", "alarm", Flags(False, False, skippable=True)) == (True, "alarm acknowledged: the interrupted function is skipped (taken as done)")
