@@ -201,6 +201,7 @@ class Supervisor:
                     with contextlib.suppress(ProcessLookupError):
                         process.kill()
                     await process.wait()
+                self.say(f"{name} stopped ({describe_exit(process.returncode)})")
         for running in self.running.values():
             await asyncio.gather(*running.pumps, return_exceptions=True)
 

@@ -57,15 +57,15 @@ def test_a_node_that_dies_is_named_the_others_stop_and_the_exit_code_says_so() -
     ])
     assert code == EXIT_NODE_DIED
     assert "[launch] left_arm_machine died (killed by SIGKILL" in text
-    assert text.count("] stopping\n") == 2  # the engine and the bridge were stopped, not killed
-    assert text.index("[execution_engine] stopping") < text.index("[robot_bridge] stopping")  # engine first, bridge last
+    assert "[launch] execution_engine stopped" in text and "[launch] robot_bridge stopped" in text
+    assert text.index("[launch] execution_engine stopped") < text.index("[launch] robot_bridge stopped")  # engine first, bridge last
 
 
 def test_the_launch_ends_with_the_engine_and_its_exit_code() -> None:
     code, text = _launch([_node("robot_bridge", SERVE), _node("execution_engine", "print('application x: FAILED'); raise SystemExit(1)")])
     assert code == 1
     assert "[execution_engine] application x: FAILED" in text and "[launch] execution_engine ended (exit code 1)" in text
-    assert "[robot_bridge] stopping" in text
+    assert "[launch] robot_bridge stopped" in text
 
 
 def test_a_lost_machine_ends_the_run_naming_its_node_within_the_watch_period(run_sim: Any) -> None:
@@ -94,3 +94,14 @@ def test_a_lost_machine_ends_the_run_naming_its_node_within_the_watch_period(run
     assert error.group == "left_arm" and error.t - lost_at <= WATCH_PERIOD + 1e-6
     right = cell.backend.executed("right_arm")
     assert right and right[0].outcome == "stopped" and right[0].t_end is not None and right[0].t_end < 10.0  # stopped, not left to finish
+
+
+def test_launch_is_a_subcommand_with_one_line_errors(tmp_path: Path) -> None:
+    from execution_engine.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["launch", str(tmp_path / "missing.xml")], out, err) == 1
+    assert err.getvalue() == f"error: {tmp_path / 'missing.xml'}: no such file\n"
+    err = io.StringIO()
+    assert main(["launch", str(RIVET), "--nodes", "nobody"], out, err) == 2
+    assert err.getvalue().startswith("error: --nodes: unknown node(s) nobody; this cell has nextage_sim_bridge, ")
