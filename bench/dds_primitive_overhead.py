@@ -35,39 +35,14 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from primitive_overhead import BenchFunctions  # noqa: E402
-from ros_primitive_overhead import ECHO_TEXT, ENGINE_PARAMETERS, in_process, time_runs  # noqa: E402
+from ros_primitive_overhead import ECHO_TEXT, in_process, per_process, start_nodes  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
-from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
 from execution_engine.clock import Clock, real_clock, run_with_clock  # noqa: E402
-from execution_engine.engine.engine import ExecutionEngine  # noqa: E402
+from execution_engine.transport.dds import DdsTransport  # noqa: E402
 
 LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
-ROS_BENCH = str(ROOT / "bench" / "ros_primitive_overhead.py")
 THROUGHPUT_MESSAGES = 20_000
-
-
-def start_nodes(env: dict[str, str]) -> list[subprocess.Popen[bytes]]:
-    bridge = [sys.executable, "-c", "import sys; from robot_bridges.nextage_sim.node import main; sys.exit(main(sys.argv))",
-              "--transport", "dds", "--ros-args", "-p", "state_period:=1.0"]
-    processes = [subprocess.Popen(bridge, env=env, cwd=ROOT)]
-    for group in NEXTAGE_OPEN.group_names:
-        machine = [sys.executable, ROS_BENCH, "--machine", "--transport", "dds", "--ros-args", "-r", f"__node:={group}_machine",
-                   "-p", f"group:={group}", "-p", "trajectory_db:=':memory:'", "--log-level", "warn"]
-        processes.append(subprocess.Popen(machine, env=env, cwd=ROOT))
-    return processes
-
-
-async def per_process(clock: Clock, n: int) -> dict[str, float]:
-    from execution_engine.transport.dds import DdsTransport
-
-    transport = DdsTransport(clock, ["bench"])
-    try:
-        engine = ExecutionEngine(transport.create_node("execution_engine", parameters=ENGINE_PARAMETERS))
-        await time_runs(engine, max(10, n // 10))
-        return await time_runs(engine, n)
-    finally:
-        await transport.shutdown()
 
 
 def _raw_participant() -> object:
@@ -215,12 +190,12 @@ def main() -> None:
     os.environ.update(ROS_DOMAIN_ID=str(random.randint(100, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", CYCLONEDDS_URI=LOOPBACK)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     local_runs, dds_runs, raw_runs = [], [], []
-    processes = start_nodes(env)
+    processes = start_nodes(env, ("--transport", "dds"))
     processes.append(subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--echo"], env=env, cwd=ROOT))
     try:
         for _ in range(3):  # interleaved, so all see the same machine load
             local_runs.append(run_with_clock(lambda c: in_process(c, n), real_clock()))
-            dds_runs.append(run_with_clock(lambda c: per_process(c, n), real_clock()))
+            dds_runs.append(run_with_clock(lambda c: per_process(c, n, DdsTransport), real_clock()))
             raw_runs.append(raw_round_trip(n))
     finally:
         for process in processes:

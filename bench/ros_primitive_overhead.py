@@ -29,6 +29,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -78,22 +79,25 @@ async def in_process(clock: Clock, n: int) -> dict[str, float]:
         await deployment.close()
 
 
-def start_nodes(env: dict[str, str]) -> list[subprocess.Popen[bytes]]:
-    """The simulator bridge and one machine per group, each its own process, as a launch file starts them."""
+def start_nodes(env: dict[str, str], transport: tuple[str, ...] = ()) -> list[subprocess.Popen[bytes]]:
+    """The simulator bridge and one machine per group, each its own process, as a launch file starts them
+    (``transport``: e.g. ``("--transport", "dds")``; by default rclpy)."""
     bridge = [sys.executable, "-c", "import sys; from robot_bridges.nextage_sim.node import main; sys.exit(main(sys.argv))",
-              "--ros-args", "-p", "state_period:=1.0"]
+              *transport, "--ros-args", "-p", "state_period:=1.0"]
     processes = [subprocess.Popen(bridge, env=env, cwd=ROOT)]
     for group in NEXTAGE_OPEN.group_names:
-        machine = [sys.executable, str(Path(__file__).resolve()), "--machine", "--ros-args", "-r", f"__node:={group}_machine",
+        machine = [sys.executable, str(Path(__file__).resolve()), "--machine", *transport, "--ros-args", "-r", f"__node:={group}_machine",
                    "-p", f"group:={group}", "-p", "trajectory_db:=':memory:'"]
         processes.append(subprocess.Popen(machine, env=env, cwd=ROOT))
     return processes
 
 
-async def per_process(clock: Clock, n: int) -> dict[str, float]:
-    from execution_engine.transport.ros import RosTransport
+async def per_process(clock: Clock, n: int, transport_class: Any = None) -> dict[str, float]:
+    """Seconds per primitive with the engine in this process on ``transport_class`` (default: rclpy)."""
+    if transport_class is None:
+        from execution_engine.transport.ros import RosTransport as transport_class
 
-    transport = RosTransport(clock, ["bench"])
+    transport = transport_class(clock, ["bench"])
     try:
         engine = ExecutionEngine(transport.create_node("execution_engine", parameters=ENGINE_PARAMETERS))
         await time_runs(engine, max(10, n // 10))
