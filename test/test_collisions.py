@@ -142,3 +142,16 @@ def test_a_near_miss_is_reported_exactly_below_the_margin(gap: float, dx: float)
         assert len(hits) == 1 and hits[0].distance == pytest.approx(distance, abs=1e-4)
     elif distance > scene.margin + 1e-4:
         assert hits == []
+
+
+def test_the_simulator_stops_the_cell_when_two_arms_collide_at_run_time(tmp_path: Path) -> None:
+    """With the dry run skipped (--no-check) the Nextage simulator itself finds the collision and stops."""
+    app, _ = write_app(tmp_path, "nextage", RIVET_CELL, [
+        {"left_arm": call("approach", param("drill_2")), "right_arm": call("approach", param("drill_2"))},
+    ])
+    code, out, err = cli("run", str(app), "--speed", "max", "--no-check")
+    text = out + err
+    assert code == 1
+    assert "-> ErrorHandling (error)" in text
+    assert "collision: " in text and "collision between left_arm hand (LARM_JOINT5_Link) and right_arm hand (RARM_JOINT5_Link)" in text
+    assert "not retried: collision is deterministic" in text

@@ -69,6 +69,8 @@ class DryRunBackend(RobotBackend):
         self._planned: dict[str, tuple[tuple[str, ...], object, float]] = {}  # group -> (joints, motion, duration)
         if hasattr(inner, "motion_observer"):  # a simulator that shows its planned motions: the exact path
             inner.motion_observer = self._observe
+        if hasattr(inner, "collisions"):  # swept afterwards with the whole time line instead (dry_run/collisions.py)
+            inner.collisions = None
 
     def _observe(self, groups: frozenset[str], joints: tuple[str, ...], motion: object, duration: float) -> None:
         for group in groups:

@@ -51,6 +51,7 @@ from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotB
 from robot_bridges.camera.sources import RenderedCamera
 from robot_bridges.camera.spec import parse_mount
 from robot_bridges.camera.vision import CameraVision
+from robot_bridges.collision import CollisionScene, cell_boxes, held_part, scene_for
 from robot_bridges.nextage_sim import vision
 from robot_bridges.nextage_sim.faults import FaultPlan, FaultSpec, parse_fault
 from robot_bridges.nextage_sim.hands import HandIO
@@ -126,6 +127,7 @@ class NextageSimBackend(RobotBackend):
         faults: Iterable[FaultSpec] = (),
         model: NextageModel | None = None,
         camera_mounts: Mapping[str, Pose] | None = None,
+        check_collisions: bool = False,
     ) -> None:
         if not (control_period > 0 and math.isfinite(control_period)):
             raise ValueError(f"control period must be a positive number of seconds, got {control_period!r}")
@@ -135,6 +137,11 @@ class NextageSimBackend(RobotBackend):
         self.cartesian_limits = cartesian_limits or CartesianLimits()
         #: Told of every motion as it starts: (groups, joint names, motion with ``at(t)``, duration).
         self.motion_observer: Callable[[frozenset[str], tuple[str, ...], Any, float], None] | None = None
+        #: The collision model checked every control period (None: not checked; the dry run sweeps instead).
+        #: ``run`` turns it on (the ``collision_check`` option); a bare simulator for kinematics tests has it off.
+        self.collisions: CollisionScene | None = scene_for(NEXTAGE_OPEN) if check_collisions else None
+        self._cell: CellSnapshot | None = None
+        self._work: dict[str, tuple[Pose, ...]] = {}  # arm -> where its current motion starts and ends
         self._q = self.model.named_pose(initial_pose)
         self._speed = dict.fromkeys(GROUPS, 1.0)
         self._jobs: dict[str, _Job] = {}
@@ -221,6 +228,9 @@ class NextageSimBackend(RobotBackend):
         return None if arm is None else arm.tcp_pose(self._q)
 
     def set_cell(self, cell: CellSnapshot) -> None:
+        self._cell = cell
+        if self.collisions is not None:
+            self.collisions.set_cell(cell_boxes(cell))
         self._vision.set_cell(cell)
         self.cameras.set_cell(cell)
 
@@ -231,6 +241,8 @@ class NextageSimBackend(RobotBackend):
     def set_tool(self, group: str, tool: Pose) -> None:
         """Make the arm's TCP ``tool`` (a pose in ``*ARM_JOINT5_Link``) instead of the flange."""
         self._arm(group).tool = tool
+        if self.collisions is not None:
+            self.collisions.set_tool(group, tool)
 
     def inject(self, spec: FaultSpec) -> None:
         """Queue ``spec``; the group's next primitive it applies to fails with it."""
@@ -343,6 +355,10 @@ class NextageSimBackend(RobotBackend):
         with self._job(frozenset({group}), primitive) as job:
             action = hand.apply(primitive.action)  # the output switches now; the hardware takes a moment
             await self._run(job, action.duration, lambda t: None)
+        if self.collisions is not None and primitive.action in ("gripper_close", "gripper_open"):
+            tcp = self._arm(group).tcp_pose(self._q)
+            closed = primitive.action == "gripper_close" and self._cell is not None
+            self.collisions.set_held(group, held_part(self._cell, tcp) if closed and self._cell is not None else None)
         return EndEffectorResult(io=hand.snapshot())
 
     async def _look(self, group: str, primitive: Vision) -> VisionResult:
@@ -516,12 +532,15 @@ class NextageSimBackend(RobotBackend):
         if self.motion_observer is not None:  # the dry run keeps the exact path for its collision sweep
             self.motion_observer(job.groups, tuple(self.model.joint_names[int(i)] for i in motion.indices), motion, motion.duration)
 
+        self._note_work(job.groups, motion)
+
         def tick(t: float) -> None:
             positions = motion.at(t)
             problem = self._violation(motion.indices, positions)
             if problem:
                 raise BridgeError(FaultKind.JOINT_LIMIT, f"{group}: {describe(job.primitive)} at t = {t:.3f} s: {problem}")
             self._q[motion.indices] = positions
+            self._check_collisions(job, t)
 
         await self._run(job, motion.duration, tick, fault)
 
@@ -569,6 +588,27 @@ class NextageSimBackend(RobotBackend):
             tick(job.progress)
             await clock.sleep(min(self.control_period, job.horizon - job.progress))
             job.advance(clock.now())
+
+    def _note_work(self, groups: frozenset[str], motion: Motion) -> None:
+        """Where each arm of a motion starts and ends: the work its hand may touch (robot_bridges/collision)."""
+        end = self._q.copy()
+        end[motion.indices] = motion.end
+        for g in groups:
+            arm = self.model.arms.get(g)
+            if arm is not None:
+                self._work[g] = (arm.tcp_pose(self._q), arm.tcp_pose(end))
+
+    def _check_collisions(self, job: _Job, t: float) -> None:
+        """Stop the motion when two bodies touch (a vision-corrected target the dry run never saw, say)."""
+        if self.collisions is None:
+            return
+        hits = [c for c in self.collisions.contacts(self._q, self._work) if c.collision]
+        if hits:
+            worst = min(hits, key=lambda c: c.distance)
+            raise BridgeError(
+                FaultKind.COLLISION,
+                f"{', '.join(sorted(job.groups))}: {describe(job.primitive)} at t = {t:.3f} s: {worst.describe(self.collisions.margin)}",
+            )
 
     # -------------------------------------------------------------------- job control
     @contextmanager
@@ -702,7 +742,7 @@ class NextageSimBackend(RobotBackend):
 #: +z by the tool -- the convention of the cell models and skills.
 HAND_TOOL = Pose.from_xyz_rpy(0.0, 0.0, 0.0, 0.0, -math.pi / 2, 0.0)
 #: ``<camera>_mount``: a camera's hand-eye calibration, its optical frame in its link (x y z roll pitch yaw; m, rad).
-_EXTRAS = ("initial_pose", "control_period", "tool", *(f"{name}_mount" for name in vision.REAL_CAMERAS))
+_EXTRAS = ("initial_pose", "control_period", "tool", "collision_check", *(f"{name}_mount" for name in vision.REAL_CAMERAS))
 
 
 def parse_tool(text: str) -> Pose:
@@ -722,7 +762,8 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     """Registry factory (``nextage-sim``): the simulator from CLI / launch options.
 
     Understands ``faults``, ``seed`` and the extras ``initial_pose``, ``control_period``,
-    ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`) and ``<camera>_mount`` (a
+    ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`), ``collision_check`` (``on``, the
+    default: two bodies touching stop the motion with a ``collision`` fault; ``off``) and ``<camera>_mount`` (a
     camera's hand-eye calibration, six numbers x y z roll pitch yaw in its link); a controller address makes
     no sense for a simulator and is refused rather than ignored.
     """
@@ -735,6 +776,9 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     except ValueError:
         raise ValueError(f"nextage-sim: control_period {options.extra['control_period']!r} is not a number") from None
     tool = parse_tool(options.extra["tool"]) if "tool" in options.extra else HAND_TOOL
+    check = options.extra.get("collision_check", "on")
+    if check not in ("on", "off"):
+        raise ValueError(f"nextage-sim: collision_check must be on or off, got {check!r}")
     mounts = {n: parse_mount(options.extra[f"{n}_mount"], f"nextage-sim: {n}_mount") for n in vision.REAL_CAMERAS if f"{n}_mount" in options.extra}
     faults = [parse_fault(text) for text in options.faults]
     for spec, text in zip(faults, options.faults):  # an option error now, not a BridgeError out of the start
@@ -748,4 +792,5 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
         faults=faults,
         tools={"left_arm": tool, "right_arm": tool},
         camera_mounts=mounts,
+        check_collisions=check == "on",
     )
