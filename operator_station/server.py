@@ -20,13 +20,14 @@ Paths the page names are resolved against the directory the station was started 
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
+import os
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+import orjson
 from starlette.applications import Starlette
 from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response
@@ -65,7 +66,27 @@ class Station:
         self.app_path = app_path
         self.replay = replay
         self.timeline = TimelineView(feed)
-        self.stopping = asyncio.Event()
+        self.stopping = asyncio.Event()  # set when the server ends: every page's feed loop stops
+        self._opened: tuple[tuple[float, int], bytes] | None = None  # the start file's answer, by (mtime, size)
+
+    def opened(self) -> bytes:
+        """The ``/api/document`` answer for the start file, read once per change of the file (a 10,000-operation
+        file takes a second to read; every page load would pay it)."""
+        path = self.app_path
+        if path is None:
+            return orjson.dumps({"ok": True, "path": "", "document": None, "replay": self.replay})
+        try:
+            info = os.stat(path)
+            key = (info.st_mtime, info.st_size)
+        except OSError:
+            key = (0.0, -1)
+        if self._opened is None or self._opened[0] != key:
+            doc, problems = read_document(path)
+            shown = _shown(self, path)
+            answer = ({"ok": True, "path": shown, "document": doc.to_json(), "replay": self.replay} if doc is not None
+                      else {"ok": False, "path": shown, "error": "; ".join(map(str, problems)), "replay": self.replay})
+            self._opened = (key, orjson.dumps(answer))
+        return self._opened[1]
 
     def resolve(self, text: Any) -> Path:
         if not isinstance(text, str) or not text.strip():
@@ -76,15 +97,25 @@ class Station:
         return path
 
 
+class FastJSON(JSONResponse):
+    """orjson instead of json: a 10,000-operation application is 4 MB of JSON, five times faster."""
+
+    def render(self, content: Any) -> bytes:
+        return orjson.dumps(content)
+
+
 def _error(message: str, status: int = 400) -> JSONResponse:
-    return JSONResponse({"ok": False, "error": message}, status_code=status)
+    return FastJSON({"ok": False, "error": message}, status_code=status)
 
 
 async def _body(request: Request) -> dict[str, Any]:
     data = await request.body()
     if len(data) > MAX_BODY:
         raise ValueError(f"the request is {len(data)} bytes, over the limit of {MAX_BODY}")
-    body = json.loads(data or b"{}")
+    try:
+        body = orjson.loads(data or b"{}")
+    except orjson.JSONDecodeError as error:
+        raise ValueError(f"the request is not JSON: {error}") from None
     if not isinstance(body, dict):
         raise ValueError("the request must be a JSON object")
     return body
@@ -110,16 +141,10 @@ def create_app(station: Station) -> Starlette:
         return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
 
     async def catalog(request: Request) -> Response:
-        return JSONResponse(station.catalog_json)
+        return FastJSON(station.catalog_json)
 
     async def document(request: Request) -> Response:
-        path = station.app_path
-        if path is None:
-            return JSONResponse({"ok": True, "path": "", "document": None, "replay": station.replay})
-        doc, problems = read_document(path)
-        if doc is None:
-            return JSONResponse({"ok": False, "path": _shown(station, path), "error": "; ".join(map(str, problems)), "replay": station.replay})
-        return JSONResponse({"ok": True, "path": _shown(station, path), "document": doc.to_json(), "replay": station.replay})
+        return Response(await asyncio.to_thread(station.opened), media_type="application/json")
 
     async def open_(request: Request) -> Response:
         try:
@@ -129,31 +154,31 @@ def create_app(station: Station) -> Starlette:
         doc, problems = read_document(path)
         if doc is None:
             return _error("; ".join(map(str, problems)))
-        return JSONResponse({"ok": True, "path": _shown(station, path), "document": doc.to_json()})
+        return FastJSON({"ok": True, "path": _shown(station, path), "document": doc.to_json()})
 
     async def cell(path: Path, doc: AppDocument) -> Response:
-        return JSONResponse({"ok": True, **builder.cell_names(doc, path)})
+        return FastJSON({"ok": True, **builder.cell_names(doc, path)})
 
     async def validate(path: Path, doc: AppDocument) -> Response:
         app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
-        return JSONResponse({"ok": app is not None, "messages": [m.to_json() for m in messages]})
+        return FastJSON({"ok": app is not None, "messages": [m.to_json() for m in messages]})
 
     async def save(path: Path, doc: AppDocument) -> Response:
         try:
             saved, messages = await asyncio.to_thread(builder.save_document, doc, path, station.catalog)
         except OSError as error:
             return _error(f"{_shown(station, path)}: cannot write: {error.strerror or error}")
-        return JSONResponse({"ok": saved, "path": _shown(station, path), "messages": [m.to_json() for m in messages]})
+        return FastJSON({"ok": saved, "path": _shown(station, path), "messages": [m.to_json() for m in messages]})
 
     async def run(path: Path, doc: AppDocument) -> Response:
         if station.session is None:
             return _error("this station replays a trace; it runs nothing", 409)
         app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
         if app is None:
-            return JSONResponse({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
+            return FastJSON({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
         operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}} for op in app.operations]
         ok, answer = station.session.start(app, operations)
-        return JSONResponse({"ok": ok, "answer": answer, "messages": [m.to_json() for m in messages]}, status_code=200 if ok else 409)
+        return FastJSON({"ok": ok, "answer": answer, "messages": [m.to_json() for m in messages]}, status_code=200 if ok else 409)
 
     async def operator(request: Request) -> Response:
         command = request.path_params["command"]
@@ -162,7 +187,7 @@ def create_app(station: Station) -> Starlette:
         if station.session is None:
             return _error("this station replays a trace; there is no run to command", 409)
         ok, answer = await station.session.command(command)
-        return JSONResponse({"ok": ok, "answer": answer})
+        return FastJSON({"ok": ok, "answer": answer})
 
     async def safety(request: Request) -> Response:
         if station.session is None:
@@ -174,7 +199,7 @@ def create_app(station: Station) -> Starlette:
         if not isinstance(active, bool):
             return _error("safety: give {\"active\": true} to raise the safety stop, false to clear it")
         ok, answer = station.session.safety_stop(active)
-        return JSONResponse({"ok": ok, "answer": answer})
+        return FastJSON({"ok": ok, "answer": answer})
 
     async def timeline(request: Request) -> Response:
         until = request.query_params.get("until")
@@ -182,7 +207,7 @@ def create_app(station: Station) -> Starlette:
             limit = float(until) if until not in (None, "") else None
         except ValueError:
             return _error(f"until must be a time in seconds, got {until!r}")
-        return JSONResponse(await asyncio.to_thread(station.timeline.model, limit))
+        return FastJSON(await asyncio.to_thread(station.timeline.model, limit))
 
     async def feed(socket: WebSocket) -> None:
         await socket.accept()
@@ -193,20 +218,20 @@ def create_app(station: Station) -> Starlette:
                 waiter.clear()
                 if station.feed.snapshot.run != run:  # a new run or replay: the page starts over
                     run, sent, joints, last_state = station.feed.snapshot.run, 0, 0, ""
-                    await socket.send_text(json.dumps({"type": "snapshot", "snapshot": asdict(station.feed.snapshot)}))
+                    await socket.send_text(orjson.dumps({"type": "snapshot", "snapshot": asdict(station.feed.snapshot)}).decode())
                 snapshot, records, samples, joint_total = station.feed.read(sent, joints)
                 if snapshot.run != run:
                     continue
-                state = json.dumps({"type": "state", "state": _live_state(snapshot)})
+                state = orjson.dumps({"type": "state", "state": _live_state(snapshot)}).decode()
                 if state != last_state:
                     await socket.send_text(state)
                     last_state = state
                 for start in range(0, len(records), MAX_BATCH):
                     batch = records[start:start + MAX_BATCH]
-                    await socket.send_text(json.dumps({"type": "records", "from": sent, "records": batch}))
+                    await socket.send_text(orjson.dumps({"type": "records", "from": sent, "records": batch}).decode())
                     sent += len(batch)
                 if samples:
-                    await socket.send_text(json.dumps({"type": "joints", "names": snapshot.joint_names, "samples": samples}))
+                    await socket.send_text(orjson.dumps({"type": "joints", "names": snapshot.joint_names, "samples": samples}).decode())
                 joints = joint_total
                 await asyncio.sleep(PUSH_PERIOD)
                 await _wait_either(waiter, station.stopping)

@@ -19,9 +19,9 @@ document is not validated here -- :func:`execution_engine.app_model.read_applica
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from lxml import etree
 
@@ -32,13 +32,13 @@ from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, parse_bytes
 POLICY_ATTRIBUTES = ("retries", "action", "safe_pose", "alarm_timeout", "safe_speed", "retreat")
 
 
-@dataclass
+@dataclass(slots=True)
 class ParamEntry:
     value: str
     name: str | None = None
 
 
-@dataclass
+@dataclass(slots=True)
 class CallEntry:
     """One group's function in one operation, as written."""
 
@@ -47,7 +47,7 @@ class CallEntry:
     params: list[ParamEntry] = field(default_factory=list)
 
 
-@dataclass
+@dataclass(slots=True)
 class OperationEntry:
     id: str
     name: str | None = None
@@ -71,7 +71,16 @@ class AppDocument:
     trailer: list[str] = field(default_factory=list)  # comments after the last operation
 
     def to_json(self) -> dict[str, Any]:
-        return asdict(self)
+        """Plain dicts and lists (``asdict`` without its deep copies: a 10,000-operation file in a tenth of the time)."""
+        return {
+            "name": self.name, "robot": self.robot, "cell": self.cell, "version": self.version, "description": self.description,
+            "error_policy": None if self.error_policy is None else dict(self.error_policy),
+            "operations": [{
+                "id": op.id, "name": op.name, "comments": list(op.comments),
+                "calls": [{"group": c.group, "function": c.function, "params": [{"value": p.value, "name": p.name} for p in c.params]} for c in op.calls],
+            } for op in self.operations],
+            "header": list(self.header), "trailer": list(self.trailer),
+        }
 
     @staticmethod
     def from_json(data: Any) -> AppDocument:
@@ -123,19 +132,22 @@ def _texts(data: dict[str, Any], key: str, where: str) -> list[str]:
 
 
 def _operation(data: Any, index: int) -> OperationEntry:
-    where = f"operation {index}"
+    """One operation of a client's document; checked inline (a 10,000-operation document goes through here per edit)."""
     if not isinstance(data, dict) or not isinstance(data.get("calls"), list):
-        raise DocumentError(f"{where}: an object with calls is needed")
+        raise DocumentError(f"operation {index}: an object with calls is needed")
     calls = []
     for call in data["calls"]:
-        if not isinstance(call, dict) or not isinstance(call.get("params", []), list):
-            raise DocumentError(f"{where}: each call needs group, function and params")
-        params = []
-        for p in call.get("params", []):
-            if not isinstance(p, dict):
-                raise DocumentError(f"{where}: each param needs a value")
-            params.append(ParamEntry(_text(p, "value", where), _optional(p, "name", where)))
-        calls.append(CallEntry(_text(call, "group", where), _text(call, "function", where), params))
+        group, function, params = (call.get("group"), call.get("function"), call.get("params", [])) if isinstance(call, dict) else (None, None, None)
+        if not (isinstance(group, str) and isinstance(function, str) and isinstance(params, list)):
+            raise DocumentError(f"operation {index}: each call needs group, function and params")
+        entries = []
+        for p in params:
+            value, name = (p.get("value"), p.get("name")) if isinstance(p, dict) else (None, None)
+            if not isinstance(value, str) or not (name is None or isinstance(name, str)):
+                raise DocumentError(f"operation {index}: each param needs a text value (and a text name or none)")
+            entries.append(ParamEntry(value, name))
+        calls.append(CallEntry(group, function, entries))
+    where = f"operation {index}"
     return OperationEntry(_text(data, "id", where), _optional(data, "name", where), calls, _texts(data, "comments", where))
 
 
@@ -207,9 +219,10 @@ def read_document(path: Path | str, *, max_bytes: int = DEFAULT_MAX_BYTES) -> tu
 
 
 # ------------------------------------------------------------------------------ writing
-@dataclass(frozen=True)
-class Placement:
-    """What a written line belongs to: the application (operation None), an operation, a group's call, a param."""
+class Placement(NamedTuple):
+    """What a written line belongs to: the application (operation None), an operation, a group's call, a param.
+
+    A tuple, not a dataclass: a 10,000-operation application writes 150,000 lines, each with one."""
 
     operation: int | None = None  # index into AppDocument.operations
     group: str | None = None
@@ -217,9 +230,13 @@ class Placement:
     part: str = "application"  # application, description, error_policy, operation, call, function, param
 
 
+#: Attribute escapes in one pass (str.translate): markup, and the whitespace XML would otherwise normalise.
+_COMMON = {ord("&"): "&amp;", ord("<"): "&lt;", ord(">"): "&gt;", ord("\n"): "&#10;", ord("\t"): "&#9;", ord("\r"): "&#13;"}
+_ESCAPES = {"'": str.maketrans({**_COMMON, ord("'"): "&apos;"}), '"': str.maketrans({**_COMMON, ord('"'): "&quot;"})}
+
+
 def _attr(value: str, quote: str) -> str:
-    text = value.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace("\n", "&#10;").replace("\t", "&#9;").replace("\r", "&#13;")
-    return quote + (text.replace("'", "&apos;") if quote == "'" else text.replace('"', "&quot;")) + quote
+    return quote + value.translate(_ESCAPES[quote]) + quote
 
 
 def _escape_text(text: str) -> str:
@@ -237,8 +254,12 @@ def serialize(document: AppDocument) -> tuple[str, list[Placement]]:
     where: list[Placement] = []
 
     def emit(text: str, placement: Placement) -> None:
-        for line in text.split("\n"):
-            lines.append(line)
+        if "\n" in text:  # a comment or description over several lines: one placement per line
+            for line in text.split("\n"):
+                lines.append(line)
+                where.append(placement)
+        else:
+            lines.append(text)
             where.append(placement)
 
     top = Placement()
@@ -253,25 +274,33 @@ def serialize(document: AppDocument) -> tuple[str, list[Placement]]:
         ordered = [k for k in POLICY_ATTRIBUTES if k in document.error_policy]
         emit("  <error_policy" + "".join(f" {k}={_attr(document.error_policy[k], chr(34))}" for k in ordered) + "/>", Placement(part="error_policy"))
     for index, operation in enumerate(document.operations):
+        at_operation = Placement(index, part="operation")
         for comment in operation.comments:
-            emit(_comment_lines(comment, "  ")[0], Placement(index, part="operation"))
+            emit(_comment_lines(comment, "  ")[0], at_operation)
         name = f" name={_attr(operation.name, chr(39))}" if operation.name is not None else ""
-        emit(f"  <operation id={_attr(operation.id, chr(39))}{name}>", Placement(index, part="operation"))
+        emit(f"  <operation id={_attr(operation.id, chr(39))}{name}>", at_operation)
         for call in operation.calls:
-            emit(f"    <{call.group}>", Placement(index, call.group, part="call"))
-            at = Placement(index, call.group, part="function")
+            at_call, at_function = Placement(index, call.group, part="call"), Placement(index, call.group, part="function")
+            lines.append(f"    <{call.group}>")
+            where.append(at_call)
+            function = _attr(call.function, chr(39))
             if not call.params:
-                emit(f"      <function name={_attr(call.function, chr(39))}></function>", at)
+                lines.append(f"      <function name={function}></function>")
+                where.append(at_function)
             else:
-                emit(f"      <function name={_attr(call.function, chr(39))}>", at)
-                emit("        <params>", at)
+                lines.append(f"      <function name={function}>")
+                lines.append("        <params>")
+                where.extend((at_function, at_function))
                 for i, param in enumerate(call.params):
                     named = f"name={_attr(param.name, chr(39))} " if param.name is not None else ""
                     emit(f"          <param {named}value={_attr(param.value, chr(39))}></param>", Placement(index, call.group, i, "param"))
-                emit("        </params>", at)
-                emit("      </function>", at)
-            emit(f"    </{call.group}>", Placement(index, call.group, part="call"))
-        emit("  </operation>", Placement(index, part="operation"))
+                lines.append("        </params>")
+                lines.append("      </function>")
+                where.extend((at_function, at_function))
+            lines.append(f"    </{call.group}>")
+            where.append(at_call)
+        lines.append("  </operation>")
+        where.append(at_operation)
     for comment in document.trailer:
         emit(_comment_lines(comment, "  ")[0], top)
     emit("</application>", top)

@@ -117,7 +117,7 @@ const Builder = (() => {
     if (!b.doc) return;
     const scroll = $("ops-scroll");
     const first = Math.max(0, Math.floor(scroll.scrollTop / ROW_H) - 5);
-    const count = Math.ceil((scroll.clientHeight || 600) / ROW_H) + 10;
+    const count = Math.min(Math.ceil((scroll.clientHeight || 600) / ROW_H) + 10, 200);  // never the whole table
     const rows = [];
     const gs = groups();
     for (let i = first; i < Math.min(b.doc.operations.length, first + count); i++) rows.push(renderRow(i, gs));
@@ -324,6 +324,7 @@ const Builder = (() => {
     const answer = await Store.post("/api/validate", current());
     if (ticket !== b.validating) return;  // a newer edit is being validated
     b.lastValidationMs = performance.now() - started;
+    if (b.firstValidatedAt === undefined) b.firstValidatedAt = performance.now();  // since navigation (bench/studio_page.py)
     if (answer.error) { $("validation-summary").textContent = answer.error; return; }
     showMessages(answer.messages || [], answer.ok);
   }
@@ -354,7 +355,8 @@ const Builder = (() => {
   function loadCellNamesSoon() { clearTimeout(cellTimer); cellTimer = setTimeout(loadCellNames, 400); }
   async function loadCellNames() {
     if (!b.doc) return;
-    const answer = await Store.post("/api/cell", current());
+    const {path, document: doc} = current();  // the cell's names need the robot and the cell only, not the operations
+    const answer = await Store.post("/api/cell", {path, document: {...doc, operations: []}});
     b.cellNames = answer.ok ? answer : null;
     if (!$("inspector").contains(document.activeElement)) renderInspector();  // never under the user's typing
   }
@@ -388,7 +390,10 @@ const Builder = (() => {
     const start = await Store.get("/api/document");
     if (start.document) setDocument(start.document, start.path);
     else { $("doc-path").value = start.path || ""; fresh(); if (start.error) $("validation-summary").textContent = start.error; }
-    document.body.dataset.ready = "true";
+    requestAnimationFrame(() => setTimeout(() => {  // after the frame that paints the table (bench/studio_page.py)
+      b.shownAt = performance.now();
+      document.body.dataset.ready = "true";
+    }));
   });
   Store.on("view", (view) => { if (view === "builder") renderRows(); });
   return {current, showMessages, select, scrollTo, state: b};
