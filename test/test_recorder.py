@@ -115,6 +115,10 @@ SAMPLES: list[Any] = [
                                           msgs.Transform(msgs.Vector3(0.1, 0.2, 0.3), msgs.Quaternion(0, 1, 0, 0))),)),
     msgs.DiagnosticArray(msgs.Header(msgs.Time(9, 10)), (msgs.DiagnosticStatus(b"\x02", "left", "ErrorHandling", "hw",
                                                                                 (msgs.KeyValue("state", "x"),)),)),
+    msgs.Image(msgs.Header(msgs.Time(11, 12), "head_camera"), 2, 3, "mono8", 0, 3, msgs.ByteBuffer(bytes([0, 9, 255, 1, 2, 3]))),
+    msgs.CameraInfo(msgs.Header(msgs.Time(13, 14), "head_camera"), 480, 640, "plumb_bob", (0.1, 0.0, 0.0, 0.0, 0.0),
+                    (500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0), (1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0),
+                    (500.0, 0, 320.0, 0, 0, 500.0, 240.0, 0, 0, 0, 1.0, 0), 1, 1, msgs.RegionOfInterest(1, 2, 3, 4, True)),
 ]
 
 
@@ -127,6 +131,8 @@ def _same(mirror: Any, decoded: Any) -> None:
                 _same(w, g)
         elif hasattr(want, "__dataclass_fields__"):
             _same(want, got)
+        elif isinstance(want, msgs.ByteBuffer):
+            assert bytes(got) == want, name
         elif isinstance(want, bytes):
             assert got == want[0], name
         elif isinstance(want, tuple):
@@ -208,3 +214,32 @@ def test_the_recorder_asks_no_more_than_publishers_offer() -> None:
     assert mixed.durability is Durability.VOLATILE and mixed.reliability is Reliability.RELIABLE
     assert all(q.compatible_with(o) for q, o in ((reader_qos((SENSOR,)), SENSOR), (reader_qos((LATCHED,)), LATCHED)))
     assert not math.isnan(reader_qos((EVENTS,)).depth)
+
+
+@dataclasses.dataclass(frozen=True)
+class Unknown:
+    ROS_TYPE = "foo_msgs/msg/Bar"
+    value: int = 0
+
+
+def test_a_topic_of_a_type_without_definition_is_skipped_and_said(run_sim: Any, caplog: pytest.LogCaptureFixture) -> None:
+    from execution_engine.recorder.recorder import Recorder
+    from execution_engine.transport.local import LocalTransport
+
+    stream = io.BytesIO()
+    stream.close = lambda: None  # type: ignore[method-assign]
+
+    async def main(clock: Any) -> Any:
+        transport = LocalTransport(clock)
+        talker = transport.create_node("talker")
+        known, odd = talker.create_publisher(msgs.String, "a", EVENTS), talker.create_publisher(Unknown, "b", EVENTS)
+        recorder = Recorder(transport.create_node("recorder"), McapSink(stream, "memory"))
+        recorder.start()
+        known.publish(msgs.String("kept"))
+        odd.publish(Unknown(3))
+        await clock.sleep(0.1)
+        return await recorder.close()
+
+    stats = run_sim(main)
+    assert dict(stats.by_topic) == {"/a": 1} and not stats.error
+    assert "/b is not recorded: no message definition of foo_msgs/msg/Bar" in caplog.text

@@ -34,7 +34,7 @@ STARTED, SUCCEEDED, SKIPPED = "started", "succeeded", "skipped"
 DONE = (SUCCEEDED, SKIPPED)
 
 
-class CheckpointError(Exception):
+class CheckpointError(ValueError):
     """A checkpoint that cannot be used; the message names the file and what is wrong."""
 
 

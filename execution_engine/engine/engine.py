@@ -162,6 +162,7 @@ class ExecutionEngine:
             self._set_state("running")
             for index, operation in enumerate(app.operations):
                 if resume is not None and index < resume.index:
+                    report.operations_done = index + 1  # done before the crash
                     continue
                 if resume is not None and index == resume.index:
                     operation = await resume.first_operation(self, operation)

@@ -23,6 +23,14 @@ DEFINITIONS: dict[str, str] = {
     "sensor_msgs/JointState": (
         "std_msgs/Header header\n\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n"
     ),
+    "sensor_msgs/RegionOfInterest": "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n",
+    "sensor_msgs/Image": (
+        "std_msgs/Header header\n\nuint32 height\nuint32 width\n\nstring encoding\n\nuint8 is_bigendian\nuint32 step\n\nuint8[] data\n"
+    ),
+    "sensor_msgs/CameraInfo": (
+        "std_msgs/Header header\n\nuint32 height\nuint32 width\n\nstring distortion_model\n\nfloat64[] d\n\nfloat64[9]  k\n\n"
+        "float64[9]  r\n\nfloat64[12] p\n\nuint32 binning_x\nuint32 binning_y\n\nRegionOfInterest roi\n"
+    ),
     "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
     "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
     "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
@@ -72,6 +80,11 @@ def dependencies(name: str) -> list[str]:
 
     visit(name)
     return seen
+
+
+def known(ros_type: str) -> bool:
+    """Whether this table can describe ``ros_type`` (a recorder skips, and says so, what it cannot)."""
+    return short_name(ros_type) in DEFINITIONS
 
 
 def schema_text(ros_type: str) -> str:

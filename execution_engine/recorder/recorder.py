@@ -21,6 +21,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from execution_engine.recorder.definitions import known
 from execution_engine.recorder.writer import McapSink, RecordingStats
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
@@ -82,6 +83,10 @@ class Recorder:
             if info.name in self._topics:
                 continue
             self._topics[info.name] = info
+            ros_type = str(getattr(info.msg_type, "ROS_TYPE", ""))
+            if not known(ros_type):
+                self.node.logger.warning("recorder: %s is not recorded: no message definition of %s", info.name, ros_type or info.msg_type.__name__)
+                continue
             self.node.create_subscription(info.msg_type, info.name, self._callback(info), reader_qos(info.offered))
             new.append(info.name)
         return new

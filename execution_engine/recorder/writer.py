@@ -29,6 +29,7 @@ from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import EncoderFunction, serialize_dynamic
 
 from execution_engine.recorder.definitions import schema_text
+from execution_engine.transport.msgs import ByteBuffer
 from execution_engine.transport.qos import Durability, QoS, Reliability
 
 log = logging.getLogger(__name__)
@@ -88,7 +89,9 @@ def to_ros_dict(value: Any) -> Any:
         return value
     if cls is tuple or cls is list:
         return [to_ros_dict(v) for v in value]
-    if cls is bytes:
+    if cls is ByteBuffer:  # uint8[] (image data): the encoder takes bytes whole
+        return value
+    if cls is bytes:  # a ROS ``byte`` (DiagnosticStatus.level) is bytes of length 1 in the mirrors
         return value[0] if len(value) == 1 else value
     names = _FIELDS.get(cls)
     if names is None:
