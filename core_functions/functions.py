@@ -201,6 +201,27 @@ class CoreFunctions:
         if seconds > 0:
             yield Dwell(seconds)
 
+    # ------------------------------------------------------------------------ flags
+    @skill(ParamSpec("name", ParamType.NAME, "the flag: groups waiting for it go on"), groups=ANY_GROUP)
+    def set_flag(self, name: str) -> Skill:
+        """Synchronisation (paper §2.2.3, "flags"): say that this group got here; every group waiting
+        for the flag goes on.  A flag stays set until the application ends.  The execution engine
+        carries it out (it takes no time and moves nothing)."""
+        raise RuntimeError(f"set_flag({name}) is carried out by the execution engine, not by a group machine")
+        yield  # pragma: no cover - a generator, like every skill
+
+    @skill(
+        ParamSpec("name", ParamType.NAME, "the flag to wait for"),
+        ParamSpec("timeout", ParamType.NUMBER, "longest wait before the function fails (fault: timeout)", unit="s", default="600", minimum=0.001, maximum=86400.0),
+        groups=ANY_GROUP,
+    )
+    def wait_flag(self, name: str, timeout: float = 600.0) -> Skill:
+        """Synchronisation: hold still until another group sets the flag (at once if it is set
+        already).  ``validate`` refuses a wait no other group's set_flag can end, and circular
+        waits.  The execution engine carries it out."""
+        raise RuntimeError(f"wait_flag({name}) is carried out by the execution engine, not by a group machine")
+        yield  # pragma: no cover - a generator, like every skill
+
     # ------------------------------------------------------------------------ end effector
     @skill(states=("EndEffector",), leaves=Hold.NOTHING)
     def gripper_open(self) -> Skill:

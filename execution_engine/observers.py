@@ -36,7 +36,7 @@ from execution_engine.transport.wire import ENGINE_EVENTS, ENGINE_STATUS, Engine
 M = TypeVar("M")
 
 TRACE_EVENTS = (
-    "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "run_end",
+    "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag", "run_end",
 )
 
 
@@ -71,6 +71,8 @@ def engine_record(event: EngineEvent) -> dict[str, Any]:
     record: dict[str, Any] = {"t": round(event.t, 6), "group": "engine", "operation": event.operation}
     if event.event == "state":
         record.update({"event": "engine_state", "from": event.from_state, "to": event.state, "message": event.message})
+    elif event.event == "flag":  # a flag set, or a group's wait for one starting (waiting) or ending: on the group's lane
+        record.update({"event": "flag", "group": event.source, "flag": event.command, "state": event.state, "message": event.message})
     else:
         record.update({
             "event": "operator", "command": event.command, "source": event.source,
@@ -231,6 +233,8 @@ class LivePrinter:
         if event.event == "operator":
             answer = "accepted" if event.accepted else "refused"
             self._print(event.t, "engine", f"operator {event.command} from {event.source}: {answer} - {event.answer}")
+        elif event.event == "flag" and event.source:
+            self._print(event.t, event.source, event.message)
 
     def _print(self, t: float, who: str, text: str) -> None:
         self.stream.write(f"[{t:9.3f} s] {who:<{self.width}}  {text}\n")

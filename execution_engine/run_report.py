@@ -40,6 +40,14 @@ class RunSummary:
                 f"  {group:<12} busy {lane.busy:9.3f} s ({100 * lane.busy / total:5.1f} %), idle {t.idle_total(group):9.3f} s, "
                 f"{len(lane.bars)} function(s)" + (f", {failed} failed" if failed else "")
             )
+            waited: dict[str, float] = {}
+            for gap in lane.idle:
+                if gap.waiting:
+                    waited[gap.waiting] = waited.get(gap.waiting, 0.0) + gap.duration
+            if waited:  # sync="flags": the idle time the waits for flags and zones account for
+                rest = t.idle_total(group) - sum(waited.values())
+                parts = ", ".join(f"waiting for {what} {d:.3f} s" for what, d in sorted(waited.items(), key=lambda kv: -kv[1]))
+                out.append(f"  {'':<12} idle: {parts}, the rest {max(0.0, rest):.3f} s")
         out.append(f"  retries: {t.retries}")
         out.extend(self.extra)
         out.extend(vision_lines(t))

@@ -93,6 +93,7 @@ class IdleGap:
     group: str
     t_start: float
     t_end: float
+    waiting: str | None = None  # "flag X" / "zone Z": the group waited for it here (sync="flags"); None: just idle
 
     @property
     def duration(self) -> float:
@@ -105,6 +106,7 @@ class Lane:
     bars: list[FunctionBar] = field(default_factory=list)
     idle: list[IdleGap] = field(default_factory=list)
     busy: float = 0.0  # seconds inside functions
+    waits: list[list[Any]] = field(default_factory=list)  # [what, t_start, t_end or None]: flag and zone waits
 
 
 @dataclass
@@ -119,7 +121,7 @@ class Mark:
     """A point in time worth a marker: an error, an operator action, an engine state change."""
 
     t: float
-    kind: str  # error / operator / engine_state
+    kind: str  # error / operator / engine_state / flag
     group: str
     text: str
 
@@ -164,7 +166,9 @@ class TimelineBuilder:
             self._engine(record, t)
             return
         lane = self._lanes.setdefault(group, Lane(group))
-        if event == "function_start":
+        if event == "flag":
+            self._flag(lane, record, t)
+        elif event == "function_start":
             self._start_function(lane, record, t)
         elif event == "function_end":
             self._end_function(group, record, t)
@@ -210,6 +214,19 @@ class TimelineBuilder:
         span = self._operations[bar.operation]
         span.t_end = t if span.t_end is None else max(span.t_end, t)
 
+    def _flag(self, lane: Lane, record: Mapping[str, Any], t: float) -> None:
+        """A wait for a flag (or zone) opens at ``waiting`` and closes at passed/timeout/stopped; a set is a mark."""
+        state, what = record.get("state"), f"{record.get('kind', 'flag')} {record.get('flag')}"
+        if state == "waiting":
+            lane.waits.append([what, t, None])
+        elif state == "set":
+            self.marks.append(Mark(t, "flag", lane.group, str(record.get("message") or f"set {what}")))
+        else:
+            for wait in reversed(lane.waits):
+                if wait[0] == what and wait[2] is None:
+                    wait[2] = t
+                    break
+
     def _engine(self, record: Mapping[str, Any], t: float) -> None:
         event = record.get("event")
         if event == "operator":
@@ -235,9 +252,27 @@ class TimelineBuilder:
                 cursor = max(cursor, bar.end(t_end))
             if t_end > cursor:
                 copy.idle.append(IdleGap(group, cursor, t_end))
+            copy.waits = [list(w) for w in lane.waits]
+            copy.idle = [piece for gap in copy.idle for piece in _split(gap, copy.waits, t_end)]
             lanes[group] = copy
         operations = sorted(self._operations.values(), key=lambda s: s.t_start)
         return Timeline(lanes, operations, list(self.marks), t_start, t_end, self.retries)
+
+
+def _split(gap: IdleGap, waits: list[list[Any]], now: float) -> list[IdleGap]:
+    """An idle gap cut where the group waited for a flag or zone: each wait's share named, the rest plain idle."""
+    pieces, cursor = [], gap.t_start
+    for what, start, end in sorted(waits, key=lambda w: w[1]):
+        a, b = max(cursor, start), min(gap.t_end, now if end is None else end)
+        if b <= a:
+            continue
+        if a > cursor:
+            pieces.append(IdleGap(gap.group, cursor, a))
+        pieces.append(IdleGap(gap.group, a, b, what))
+        cursor = b
+    if gap.t_end > cursor:
+        pieces.append(IdleGap(gap.group, cursor, gap.t_end))
+    return pieces
 
 
 def build_timeline(records: Iterable[Mapping[str, Any]], groups: Iterable[str] = ()) -> Timeline:

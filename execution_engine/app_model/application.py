@@ -14,6 +14,7 @@ from types import MappingProxyType
 from core_functions.catalog import Catalog
 from execution_engine.app_model import wire_fit
 from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell_log
+from execution_engine.app_model.flag_check import check_waits
 from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, DiagnosticLog, capped, has_errors
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
 from execution_engine.app_model.positions import SourceMap
@@ -67,6 +68,7 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
     checked = checker.check()
     policy = checker.check_policy(draft.policy)
     _check_requests(draft, checked, catalog, cell, policy, log)
+    check_waits(draft, checked, catalog, log)
     if log.has_errors:
         return None, capped(log)
     application = Application(
@@ -78,6 +80,7 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
         operations=tuple(_freeze(op_site, calls, draft.source) for op_site, calls in zip(draft.operations, checked)),
         description=draft.description,
         version=draft.version,
+        sync=draft.sync,
     )
     return application, capped(log)
 

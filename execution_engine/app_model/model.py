@@ -75,6 +75,9 @@ class Application:
     operations: tuple[Operation, ...]
     description: str = ""
     version: str | None = None
+    #: ``operation`` (lock-step: every operation a barrier) or ``flags`` (each group in its own
+    #: order, waiting only at wait_flag, synchronised functions and zones).
+    sync: str = "operation"
 
     def operation(self, operation_id: str) -> Operation:
         for operation in self.operations:

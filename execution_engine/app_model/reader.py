@@ -77,6 +77,7 @@ class ApplicationDraft:
     cell_where: Location | None = None
     description: str = ""
     version: str | None = None
+    sync: str = "operation"  # how the groups keep together: "operation" (lock-step) or "flags"
     policy: PolicySite | None = None
     operations: list[OperationSite] = field(default_factory=list)
 
@@ -100,6 +101,7 @@ class ApplicationReader:
         root_at = self.walk.visit(root)
         draft = ApplicationDraft(source=self.source, name=root.get("name", ""), robot=self.read_robot(root, root_at))
         draft.version = root.get("version")
+        draft.sync = root.get("sync", "operation") if root.get("sync") in ("operation", "flags") else "operation"
         self.read_cell_reference(root, root_at, draft)
         if draft.robot is not None:
             self.groups = frozenset(draft.robot.group_names)

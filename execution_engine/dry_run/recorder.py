@@ -14,6 +14,7 @@ from core_functions.robots import RobotModel
 from execution_engine.app_model.model import Application, Call
 from execution_engine.clock import Clock
 from execution_engine.dry_run.report import Finding, Span, TimeBase
+from execution_engine.engine.flags import FlagWait
 
 #: Where a group is: (operation id, function) of the function its machine runs, or None.
 CallLocator = Callable[[str], tuple[str, str] | None]
@@ -98,6 +99,8 @@ class Recorder:
         self._findings: dict[tuple[str, str, str], Finding] = {}  # (operation, group, kind) -> the first one
         self._counts: dict[tuple[str, str, str], int] = {}
         self.spans: list[Span] = []
+        self.waits: list[FlagWait] = []  # the engine's waits for flags and zones (sync="flags")
+        self.notes: list[str] = []  # what could not be checked
 
     # ---------------------------------------------------------------------------- findings
     def finding(self, group: str, kind: str, primitive: str, message: str, t: float | None = None) -> None:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from execution_engine.app_model.diagnostics import Diagnostic
+from execution_engine.engine.flags import FlagWait
 
 #: How the timeline's seconds were measured: the application's simulated clock (a simulator that
 #: runs on it: every wait of the engine and the machines is in it too), or the robot's own cycles
@@ -115,6 +116,7 @@ class DryRunReport:
     complete: bool = True
     notes: tuple[str, ...] = ()
     collisions: CollisionCheck | None = None  # None: the robot has no collision model
+    waits: tuple[FlagWait, ...] = ()  # every wait for a flag or a zone, on the application's clock
 
     @property
     def ok(self) -> bool:
@@ -134,6 +136,7 @@ class DryRunReport:
         for group, time in self.groups.items():
             share = 100.0 * time.busy / self.cycle_time if self.cycle_time > 0 else 0.0
             lines.append(f"  {group:<12} busy {time.busy:8.2f} s ({share:5.1f} %), idle {time.idle:8.2f} s, {time.primitives} primitives")
+        lines += self.wait_lines()
         if self.collisions is not None:
             c = self.collisions
             lines.append(f"  collisions checked: {c.motions} motions, {c.samples} configurations, margin {c.margin * 1000:.0f} mm")
@@ -141,6 +144,29 @@ class DryRunReport:
             lines.append("  collisions not checked: the robot has no collision model")
         lines += [f"  not checked: {note}" for note in self.notes]
         return lines
+
+
+    def wait_lines(self) -> list[str]:
+        """Idle time split into flag and zone waits, and the waits that cost the cycle most."""
+        if not self.waits:
+            return []
+        out = []
+        for group, time in self.groups.items():
+            waited: dict[str, float] = {}
+            for wait in self.waits:
+                if wait.group == group:
+                    key = f"{wait.kind} {wait.flag!r}"
+                    waited[key] = waited.get(key, 0.0) + wait.duration
+            if waited:
+                parts = ", ".join(f"waiting for {what} {d:.2f} s" for what, d in sorted(waited.items(), key=lambda kv: -kv[1]))
+                out.append(f"  {group:<12} idle: {parts}, the rest {max(0.0, time.idle - sum(waited.values())):.2f} s")
+        totals: dict[str, float] = {}
+        for wait in self.waits:
+            key = f"{wait.kind} {wait.flag!r}"
+            totals[key] = totals.get(key, 0.0) + wait.duration
+        costly = sorted(totals.items(), key=lambda kv: -kv[1])[:3]
+        out.append("  waits that cost most: " + ", ".join(f"{what} {d:.2f} s" for what, d in costly))
+        return out
 
 
 def group_times(groups: tuple[str, ...], timeline: tuple[Span, ...], cycle_time: float) -> dict[str, GroupTime]:

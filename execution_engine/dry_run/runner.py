@@ -82,7 +82,7 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
             store.close()
     scene = scene_of(app)
     stats = sweep(app, scene, initial, backend.motions, backend.grips, recorder) if scene is not None else None
-    checked, notes = len(app.operations), []
+    checked, notes = len(app.operations), list(recorder.notes)
     if backend.stuck is not None:
         notes.append(backend.stuck)
         ids = [op.id for op in app.operations]
@@ -102,6 +102,7 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
         operations_checked=checked,
         complete=not notes,
         notes=tuple(notes),
+        waits=tuple(recorder.waits),
         collisions=None if stats is None else CollisionCheck(stats.motions, stats.samples, scene.margin if scene else 0.0),
     )
 
@@ -134,10 +135,16 @@ async def _run_operations(app: Application, deployment: Deployment, recorder: Re
         part = replace(app, operations=tuple(operations[offset:]), error_policy=_ABORT)
         report = await deployment.engine.run(part)
         total += report.total
+        recorder.waits.extend(report.flag_waits)
         if report.outcome == "finished":
             break
         if report.outcome == "stopped" or not report.errors:
             raise DryRunError(f"the engine gave up on {app.name}: {report.message}")
+        if app.sync == "flags":  # no operation boundary to go on from: the failure ends the check
+            for error in report.errors:
+                recorder.add(error.group, error.operation, error.function, getattr(error, "fault", None) or FUNCTION, "", error.error, recorder.timing.of_clock(error.t))
+            recorder.notes.append(f"sync=\"flags\": after {report.errors[0].group}'s {report.errors[0].function} of operation {report.errors[0].operation} failed, the rest of the application was not checked")
+            break
         offset += report.operations_done
         failed = operations[offset]
         for error in report.errors:

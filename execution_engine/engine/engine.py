@@ -31,6 +31,7 @@ from core_functions.limits import DURATION
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from execution_engine.engine.faults import verdict
+from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard, run_groups
 from execution_engine.engine.group_link import GroupLink
 from execution_engine.engine.operator import CONSOLE_KEYS, ENDED, Flags, decide
 from execution_engine.engine.report import GroupError, OperatorAction, RunReport
@@ -132,6 +133,7 @@ class ExecutionEngine:
         self._alarm_skip = self._skippable = False  # an interrupted function's alarm can be answered with skip
         self._progress: dict[str, GroupProgress] = {}
         self._tasks: set[asyncio.Task[tuple[bool, str]]] = set()  # safety-stop pauses under way
+        self.flags = FlagBoard(self.clock, self._publish_flag)  # set_flag / wait_flag (engine/flags.py)
 
     # ============================================================================ running
     async def run(self, app: Application, resume: ResumePoint | None = None) -> RunReport:
@@ -160,7 +162,10 @@ class ExecutionEngine:
             await self._await_machines()
             await self._await_start()
             self._set_state("running")
-            for index, operation in enumerate(app.operations):
+            if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags.py)
+                await run_groups(self, app)
+                report.operations_done = len(app.operations)
+            for index, operation in enumerate(app.operations if app.sync != "flags" else ()):
                 if resume is not None and index < resume.index:
                     report.operations_done = index + 1  # done before the crash
                     continue
@@ -182,6 +187,7 @@ class ExecutionEngine:
         self._set_state("stopping")
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
+        report.flag_waits = list(self.flags.waits)
         self._set_state({"finished": "finished", "failed": "failed", "stopped": "stopped"}[report.outcome], report.message)
         return report
 
@@ -192,6 +198,7 @@ class ExecutionEngine:
         self._stop_reason = None
         self._start_requested = False
         self._progress.clear()
+        self.flags = FlagBoard(self.clock, self._publish_flag)
 
     async def _await_machines(self) -> None:
         """Every group machine must be up (Ready, or Finish from an earlier run) before we start."""
@@ -281,11 +288,18 @@ class ExecutionEngine:
             )
         return requests
 
-    def _dispatch(self, operation: Operation, calls: dict[str, Call], attempt: int) -> dict[str, _Dispatch]:
+    def _dispatch(self, operation: Operation, calls: dict[str, Call], attempt: int, only: str | None = None) -> dict[str, _Dispatch]:
+        """Send each call's request (``only``: just that group's, the others only share its barrier key)."""
         sent = {}
         deadline = self.clock.now() + self.function_timeout
         for group, request in self._requests(operation, calls, attempt).items():
-            future = self.links[group].send(request)
+            if only is not None and group != only:
+                continue
+            if request.function in ENGINE_FUNCTIONS:  # flags are the engine's own
+                assert self.app is not None
+                future = self.flags.result(request, group, self.catalog, self.app)
+            else:
+                future = self.links[group].send(request)
             sent[group] = _Dispatch(calls[group], request, future, deadline)
             self._progress[group] = GroupProgress(self.links[group].state, operation.id, request.function)
         self._publish_status()
@@ -648,6 +662,12 @@ class ExecutionEngine:
             self._publish_event(EngineEvent("state", self.clock.now(), state, operation, from_state=previous, message=self._message))
         self._publish_status()
 
+    def _publish_flag(self, group: str, flag: str, state: str, operation: str | None) -> None:
+        """A flag set, or a group's wait for one starting or ending: an EngineEvent (trace, timeline) and the status."""
+        words = {"set": "sets flag", "waiting": "waits for flag", "passed": "passes flag", "timeout": "gave up waiting for flag", "stopped": "stopped waiting for flag"}
+        self._publish_event(EngineEvent("flag", self.clock.now(), state, operation, message=f"{group} {words.get(state, state)} {flag!r}", command=flag, source=group))
+        self._publish_status()
+
     def _publish_event(self, event: EngineEvent) -> None:
         if self._events_pub.get_subscription_count() > 0:
             self._events_pub.publish(String(codec.encode(event)))
@@ -657,7 +677,10 @@ class ExecutionEngine:
             return
         app = self.app
         groups = {
-            g: GroupProgress(link.state, *(self._progress[g].operation, self._progress[g].function) if g in self._progress else (None, None))
+            g: GroupProgress(
+                f"waiting for flag {self.flags.waiting[g]}" if g in self.flags.waiting else link.state,
+                *(self._progress[g].operation, self._progress[g].function) if g in self._progress else (None, None),
+            )
             for g, link in self.links.items()
         }
         status = EngineStatus(

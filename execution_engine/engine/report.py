@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from execution_engine.engine.flags import FlagWait
+
 RunOutcome = Literal["finished", "failed", "stopped"]
 StepOutcome = Literal["done", "skipped", "failed"]
 
@@ -67,6 +69,7 @@ class RunReport:
     safe_pose_steps: list[SafePoseStep] = field(default_factory=list)
     operator_actions: list[OperatorAction] = field(default_factory=list)
     finished_cleanly: bool = False  # every group reached Finish
+    flag_waits: list[FlagWait] = field(default_factory=list)  # every wait for a flag or a zone (engine/flags.py)
 
     @property
     def total(self) -> float:
@@ -93,6 +96,7 @@ class RunReport:
             share = 100.0 * busy / self.total if self.total > 0 else 0.0
             lines.append(f"  {group:<12} busy {busy:8.2f} s ({share:5.1f} %), {self.group_functions.get(group, 0)} functions")
         lines.append(f"  total        {self.total:8.2f} s")
+        lines += self.wait_lines()
         if self.retries:
             lines.append(f"  retries: {self.retries}")
         for err in self.errors:
@@ -104,6 +108,29 @@ class RunReport:
             lines.append(f"  operator: {action.command} at {action.t:.2f} s from {action.source} (in {action.state}): {answer} - {action.answer}")
         if not self.finished_cleanly:
             lines.append("  not every group reached Finish")
+        return lines
+
+    def wait_lines(self) -> list[str]:
+        """Each group's idle time split into its waits for flags and zones and the rest; the costliest waits."""
+        if not self.flag_waits:
+            return []
+        lines = []
+        for group in sorted(self.group_busy):
+            idle = max(0.0, self.total - self.group_busy[group])
+            waited: dict[str, float] = {}
+            for wait in self.flag_waits:
+                if wait.group == group:
+                    key = f"waiting for {wait.kind} {wait.flag!r}"
+                    waited[key] = waited.get(key, 0.0) + wait.duration
+            if not waited:
+                continue
+            parts = ", ".join(f"{t:.2f} s {what}" for what, t in sorted(waited.items(), key=lambda kv: -kv[1]))
+            lines.append(f"  {group:<12} idle {idle:8.2f} s: {parts}, {max(0.0, idle - sum(waited.values())):.2f} s the rest")
+        totals: dict[tuple[str, str], float] = {}
+        for wait in self.flag_waits:
+            totals[(wait.kind, wait.flag)] = totals.get((wait.kind, wait.flag), 0.0) + wait.duration
+        costly = sorted(totals.items(), key=lambda kv: -kv[1])[:3]
+        lines.append("  waits that cost most: " + ", ".join(f"{kind} {name!r} {t:.2f} s" for (kind, name), t in costly))
         return lines
 
     def _safe_pose_lines(self) -> list[str]:
