@@ -72,7 +72,7 @@ def engine_record(event: EngineEvent) -> dict[str, Any]:
     if event.event == "state":
         record.update({"event": "engine_state", "from": event.from_state, "to": event.state, "message": event.message})
     elif event.event == "flag":  # a flag set, or a group's wait for one starting (waiting) or ending: on the group's lane
-        record.update({"event": "flag", "group": event.source, "flag": event.command, "state": event.state, "message": event.message})
+        record.update({"event": "flag", "group": event.source, "flag": event.command, "kind": event.answer or "flag", "state": event.state, "message": event.message})
     else:
         record.update({
             "event": "operator", "command": event.command, "source": event.source,

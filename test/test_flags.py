@@ -150,3 +150,48 @@ def test_a_master_slave_pair_meets_its_partner_in_flags_mode(tmp_path: Path) -> 
     starts = {r["group"]: r["t"] for r in records if r["event"] == "function_start" and r.get("operation") == "3"}
     assert set(ends) == {"left_arm", "right_arm"} and abs(ends["left_arm"] - ends["right_arm"]) < 0.05  # one motion of both
     assert starts["right_arm"] < starts["left_arm"]  # the slave got there first and waited for its master
+
+
+# ------------------------------------------------------------------ interference zones
+ZONE = '  <zone name="at_part" parent="part" xyz="0 0 0.05" size="0.16 0.22 0.14"/>\n'
+
+
+def zoned_cell(folder: Path) -> Path:
+    cell = folder / "zoned_cell.xml"
+    text = RIVET_CELL.read_text(encoding="utf-8")
+    cell.write_text(text.replace("  <element ", ZONE + "  <element ", 1), encoding="utf-8")
+    return cell
+
+
+def write_zoned(folder: Path, operations: list[dict[str, str]]) -> tuple[Path, dict[tuple[int, str], int]]:
+    path, where = write(folder, operations)
+    path.write_text(path.read_text().replace(f'cell="{RIVET_CELL}"', f'cell="{zoned_cell(folder)}"'))
+    return path, where
+
+
+def test_a_zone_lets_one_group_in_at_a_time_in_application_order(tmp_path: Path) -> None:
+    path, _ = write_zoned(tmp_path, [
+        {"left_arm": wait(2), "right_arm": call("approach", param("drill_4"))},
+        {"left_arm": call("approach", param("drill_1")), "right_arm": call("move_to_joint_pose", param("initial"))},
+    ])
+    code, text, records = run(path, tmp_path)
+    assert code == 0, text
+    right_done = max(r["t"] for r in records if r["group"] == "right_arm" and r["event"] == "function_end" and r.get("operation") == "1")
+    zone = [(r["group"], r["state"], r["t"]) for r in records if r["event"] == "flag"]
+    assert zone[0] == ("left_arm", "waiting", 2.0) and zone[1][:2] == ("left_arm", "passed") and abs(zone[1][2] - right_done) < 1e-6
+    left_start = min(r["t"] for r in records if r["group"] == "left_arm" and r["event"] == "function_start" and r.get("operation") == "2")
+    assert left_start >= right_done  # not inside while the right arm still works there
+    assert "waiting for zone 'at_part'" in text
+
+
+def test_a_zone_order_that_deadlocks_with_a_flag_is_refused(tmp_path: Path) -> None:
+    path, where = write_zoned(tmp_path, [
+        {"left_arm": call("wait_flag", param("go"))},
+        {"left_arm": call("approach", param("drill_1")), "right_arm": call("approach", param("drill_4"))},
+        {"right_arm": call("set_flag", param("go"))},
+    ])
+    code, _, err = cli("validate", str(path))
+    assert code == 1
+    message = next(x for x in err.splitlines() if x.startswith(f"{path}:{where[(2, 'right_arm')]}:"))
+    assert f"waits for zone 'at_part', where left_arm works first, at line {where[(2, 'left_arm')]}" in message
+    assert f"waits for flag 'go', which right_arm sets only at line {where[(3, 'right_arm')]}" in message

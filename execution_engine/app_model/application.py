@@ -68,7 +68,7 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
     checked = checker.check()
     policy = checker.check_policy(draft.policy)
     _check_requests(draft, checked, catalog, cell, policy, log)
-    check_waits(draft, checked, catalog, log)
+    check_waits(draft, checked, catalog, log, cell)
     if log.has_errors:
         return None, capped(log)
     application = Application(

@@ -24,6 +24,7 @@ from core_functions.robots import RobotModel
 from core_functions.suggest import NameIndex
 from execution_engine.app_model.diagnostics import Diagnostic, Location
 from execution_engine.app_model.frame_tree import WORLD, order_frames
+from execution_engine.app_model.zones import Zone
 from execution_engine.transport.wire import CellSnapshot
 
 
@@ -71,6 +72,7 @@ class Cell(FrameLookup):
     elements: Mapping[str, Element] = field(default_factory=dict)
     joint_poses: Mapping[str, JointPose] = field(default_factory=dict)
     path: Path | None = None
+    zones: Mapping[str, Zone] = field(default_factory=dict)  # interference zones (app_model/zones.py)
     robot: RobotModel | None = None
     # Caches, filled on demand: world poses cost a matrix product each, and a cell too large to
     # run is refused having composed only the frames that fit in a message (app_model.wire_fit).

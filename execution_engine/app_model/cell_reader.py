@@ -28,6 +28,7 @@ from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Se
 from execution_engine.app_model.frame_tree import WORLD, order_frames
 from execution_engine.app_model.positions import DocumentWalk
 from execution_engine.app_model.safe_xml import XmlDocument
+from execution_engine.app_model.zones import Zone
 
 _LENGTH = {"m": 1.0, "mm": 1e-3}
 _ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -69,6 +70,7 @@ class CellReader:
         self.length_unit = root.get("length_unit", "m") if root.get("length_unit") in _LENGTH else "m"
         self.angle_unit = root.get("angle_unit", "rad") if root.get("angle_unit") in _ANGLE else "rad"
         self.suggestions_left = MAX_SUGGESTIONS
+        self._zone_at: dict[str, int] = {}  # where each zone is written
 
     # ------------------------------------------------------------------ reporting
     def report(self, at: int, attribute: str | None, message: str, severity: Severity = "error") -> None:
@@ -173,6 +175,7 @@ class CellReader:
         drafts: dict[str, _FrameDraft] = {}
         elements: dict[str, Element] = {}
         joint_poses: dict[str, JointPose] = {}
+        zones: dict[str, Zone] = {}
         for child, at in self.children(root):
             if child.tag == "frame":
                 self.read_frame(child, at, None, drafts)
@@ -181,13 +184,18 @@ class CellReader:
                 self.read_element(child, at, elements)
             elif child.tag == "joint_pose":
                 self.read_joint_pose(child, at, joint_poses)
+            elif child.tag == "zone":
+                self.read_zone(child, at, zones)
             self.walk.skip(child)
         frames = self.check_tree(drafts)
         self.check_element_references(drafts, elements)
+        for zone in zones.values():
+            if zone.parent != WORLD and zone.parent not in drafts:
+                self.report(self._zone_at[zone.name], "parent", f"zone {zone.name!r}: unknown parent frame {zone.parent!r}")
         if self.log.has_errors or frames is None or not structure_ok:
             return None
         try:
-            return Cell(name=root.get("name", ""), frames=frames, elements=elements, joint_poses=joint_poses, path=self.doc.path)
+            return Cell(name=root.get("name", ""), frames=frames, elements=elements, joint_poses=joint_poses, path=self.doc.path, zones=zones)
         except ValueError as error:  # the checks above should make this unreachable
             self.report(root_at, None, str(error))
             return None
@@ -289,6 +297,25 @@ class CellReader:
             self.report(at, "name", f"element {name!r} is defined twice (first on line {first.line if first else '?'})")
             return
         elements[name] = Element(name, element.get("kind", "element"), self.free_attributes(element, at, _ELEMENT_ATTRIBUTES), self.source.at_offset(at))
+
+    def read_zone(self, element: etree._Element, at: int, zones: dict[str, Zone]) -> None:
+        """``<zone name parent xyz size>``: a box in the parent frame, in the file's length unit."""
+        name = element.get("name")
+        if not name:
+            return
+        if name in zones:
+            self.report(at, "name", f"zone {name!r} is defined twice")
+            return
+        centre = self.vector(element, at, "xyz", repr(name))
+        size = _numbers3(element.get("size", ""))
+        scale = _LENGTH[self.length_unit]
+        if size is None or min(size) <= 0 or max(size) * scale > limits.LENGTH.upper:
+            self.report(at, "size", f"size of <zone> {name!r} must be three side lengths > 0 (x y z, {self.length_unit}), within the bound of a length")
+            return
+        if centre is None:
+            return
+        self._zone_at[name] = at
+        zones[name] = Zone(name, element.get("parent", WORLD), centre, (size[0] * scale, size[1] * scale, size[2] * scale), self.source.at_offset(at))
 
     def read_joint_pose(self, element: etree._Element, at: int, poses: dict[str, JointPose]) -> None:
         name = element.get("name")

@@ -17,6 +17,7 @@ from core_functions.catalog import Catalog
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog
 from execution_engine.app_model.reader import ApplicationDraft
 from execution_engine.app_model.validation import CheckedCall
+from execution_engine.app_model.zones import call_zones
 
 SET, WAIT = "set_flag", "wait_flag"
 
@@ -29,6 +30,7 @@ class _Step:
     operation: str
     call: CheckedCall
     line: int
+    zones: tuple[str, ...] = ()
 
     @property
     def flag(self) -> str | None:
@@ -36,17 +38,19 @@ class _Step:
         return params[0] if self.call.site.function in (SET, WAIT) and params else None
 
 
-def check_waits(draft: ApplicationDraft, checked: list[list[CheckedCall]], catalog: Catalog, log: DiagnosticLog) -> None:
-    """Report unsatisfiable ``wait_flag`` calls and deadlocks of ``draft`` into ``log``."""
-    if draft.robot is None or not any(c.site.function in (SET, WAIT) for calls in checked for c in calls) and not _has_sync(checked, catalog):
-        return
+def check_waits(draft: ApplicationDraft, checked: list[list[CheckedCall]], catalog: Catalog, log: DiagnosticLog, cell: object = None) -> None:
+    """Report unsatisfiable ``wait_flag`` calls and deadlocks of ``draft`` into ``log`` (zones: with ``sync="flags"``)."""
     flags_mode = draft.sync == "flags"
+    zoned = flags_mode and bool(getattr(cell, "zones", None))
+    if draft.robot is None or not zoned and not any(c.site.function in (SET, WAIT) for calls in checked for c in calls) and not _has_sync(checked, catalog):
+        return
     steps: dict[str, list[_Step]] = {g: [] for g in draft.robot.group_names}
     for index, (operation, calls) in enumerate(zip(draft.operations, checked)):
         for call in calls:
             if call.site.group not in steps or (flags_mode and call.site.implicit):
                 continue
-            steps[call.site.group].append(_Step(index, operation.id, call, draft.source.at_offset(call.site.at).line))
+            zones = call_zones(cell, call.params) if zoned and call.params else ()
+            steps[call.site.group].append(_Step(index, operation.id, call, draft.source.at_offset(call.site.at).line, zones))
     if _unsatisfiable(steps, draft, log):
         return  # a flag nobody sets is the thing to fix; the deadlock it causes would only repeat it
     stuck = _advance(steps, catalog, lock_step=not flags_mode)
@@ -92,11 +96,14 @@ def _advance(steps: dict[str, list[_Step]], catalog: Catalog, lock_step: bool) -
     """Run every group as far as the waits let it; the groups left short, at the call they wait in."""
     position = dict.fromkeys(steps, 0)
     flags: set[str] = set()
+    order = _zone_order(steps)
 
     def blocked(group: str) -> bool:
         step = steps[group][position[group]]
         if lock_step and any(position[g] < len(steps[g]) and steps[g][position[g]].index < step.index for g in steps):
             return True  # the operation before is not over
+        if any(_before_in_zone(zone, step, order, steps, position) for zone in step.zones):
+            return True  # an earlier call in the zone has not ended
         if step.call.site.function == WAIT and step.flag:
             return step.flag not in flags
         return False
@@ -118,6 +125,28 @@ def _advance(steps: dict[str, list[_Step]], catalog: Catalog, lock_step: bool) -
                 position[group] += 1
                 moved = True
     return {g: p for g, p in position.items() if p < len(steps[g])}
+
+
+def _zone_order(steps: dict[str, list[_Step]]) -> dict[str, list[tuple[int, int, str, int]]]:
+    """Each zone's calls in application order: (operation index, group rank, group, position in its group)."""
+    order: dict[str, list[tuple[int, int, str, int]]] = {}
+    for rank, (group, sequence) in enumerate(steps.items()):
+        for k, step in enumerate(sequence):
+            for zone in step.zones:
+                order.setdefault(zone, []).append((step.index, rank, group, k))
+    for entries in order.values():
+        entries.sort()
+    return order
+
+
+def _before_in_zone(zone: str, step: _Step, order: dict, steps: dict[str, list[_Step]], position: dict[str, int]) -> tuple[str, int] | None:
+    """The earlier call in ``zone`` that has not ended yet (group, line), or None."""
+    for index, _, group, k in order[zone]:
+        if group == step.call.site.group and steps[group][k] is step:
+            return None
+        if position[group] <= k:
+            return group, steps[group][k].line
+    return None
 
 
 def _partners(step: _Step, steps: dict[str, list[_Step]], catalog: Catalog) -> list[str]:
@@ -142,6 +171,12 @@ def _why(group: str, steps: dict[str, list[_Step]], stuck: dict[str, int]) -> st
     """What ``group`` waits for at the call it is stuck in, and who would end the wait."""
     step = steps[group][stuck[group]]
     here = f"{group} at line {step.line} ({step.call.site.function}"
+    position = {g: stuck.get(g, len(s)) for g, s in steps.items()}
+    order = _zone_order(steps)
+    for zone in step.zones:
+        first = _before_in_zone(zone, step, order, steps, position)
+        if first is not None:
+            return f"{here}) waits for zone {zone!r}, where {first[0]} works first, at line {first[1]}"
     if step.call.site.function == WAIT and step.flag:
         setters = [
             f"{g} sets only at line {s.line}"

@@ -662,10 +662,11 @@ class ExecutionEngine:
             self._publish_event(EngineEvent("state", self.clock.now(), state, operation, from_state=previous, message=self._message))
         self._publish_status()
 
-    def _publish_flag(self, group: str, flag: str, state: str, operation: str | None) -> None:
-        """A flag set, or a group's wait for one starting or ending: an EngineEvent (trace, timeline) and the status."""
-        words = {"set": "sets flag", "waiting": "waits for flag", "passed": "passes flag", "timeout": "gave up waiting for flag", "stopped": "stopped waiting for flag"}
-        self._publish_event(EngineEvent("flag", self.clock.now(), state, operation, message=f"{group} {words.get(state, state)} {flag!r}", command=flag, source=group))
+    def _publish_flag(self, group: str, flag: str, state: str, operation: str | None, kind: str = "flag") -> None:
+        """A flag set, or a group's wait for a flag or zone starting or ending: an EngineEvent (trace, timeline) and the status."""
+        words = {"set": "sets", "waiting": "waits for", "passed": "passes", "timeout": "gave up waiting for", "stopped": "stopped waiting for"}
+        message = f"{group} {words.get(state, state)} {kind} {flag!r}" if kind == "flag" or state != "passed" else f"{group} enters zone {flag!r}"
+        self._publish_event(EngineEvent("flag", self.clock.now(), state, operation, message=message, command=flag, source=group, answer=kind))
         self._publish_status()
 
     def _publish_event(self, event: EngineEvent) -> None:
@@ -678,7 +679,7 @@ class ExecutionEngine:
         app = self.app
         groups = {
             g: GroupProgress(
-                f"waiting for flag {self.flags.waiting[g]}" if g in self.flags.waiting else link.state,
+                f"waiting for {self.flags.waiting_for(g)}" if self.flags.waiting_for(g) else link.state,
                 *(self._progress[g].operation, self._progress[g].function) if g in self._progress else (None, None),
             )
             for g, link in self.links.items()

@@ -27,6 +27,7 @@ from execution_engine.transport.wire import FaultKind, SmRequest, SmResult
 
 if TYPE_CHECKING:
     from execution_engine.engine.engine import ExecutionEngine
+    from execution_engine.engine.zones import ZoneBoard
 
 SET_FLAG, WAIT_FLAG = "set_flag", "wait_flag"
 ENGINE_FUNCTIONS = (SET_FLAG, WAIT_FLAG)
@@ -52,12 +53,17 @@ class FlagWait:
 class FlagBoard:
     """The flags of one run and the waits for them."""
 
-    def __init__(self, clock: Clock, publish: Callable[[str, str, str, str | None], None]) -> None:
+    def __init__(self, clock: Clock, publish: Callable[..., None]) -> None:
         self.clock = clock
-        self.publish = publish  # (group, flag, state, operation) -> an EngineEvent
+        self.publish = publish  # (group, flag, state, operation[, kind]) -> an EngineEvent
         self._set: dict[str, asyncio.Event] = {}
         self.waits: list[FlagWait] = []
-        self.waiting: dict[str, str] = {}  # group -> the flag it waits for now
+        self.waiting: dict[str, str] = {}  # group -> "flag X" it waits for now
+        self.zones: ZoneBoard | None = None  # sync="flags": the zones (their waits are kept in ``waits`` too)
+
+    def waiting_for(self, group: str) -> str | None:
+        """What ``group`` waits for now: "flag X", "zone Z" or None."""
+        return self.waiting.get(group) or (self.zones.waiting.get(group) if self.zones is not None else None)
 
     def _event(self, name: str) -> asyncio.Event:
         return self._set.setdefault(name, asyncio.Event())
@@ -75,7 +81,7 @@ class FlagBoard:
         if event.is_set():
             return True
         start = self.clock.now()
-        self.waiting[group] = name
+        self.waiting[group] = f"flag {name}"
         self.publish(group, name, "waiting", operation)
         outcome = "stopped"
         try:
@@ -134,8 +140,12 @@ def group_steps(app: Application, group: str, sits_out: Callable[[Call], bool]) 
 
 async def run_groups(engine: ExecutionEngine, app: Application) -> None:
     """``sync="flags"``: each group through its own calls at once; the first failure ends them all."""
+    from execution_engine.engine.zones import ZoneBoard  # zones build on this module's FlagWait
+
+    zones = ZoneBoard(app, engine.clock, engine._publish_flag, engine.flags.waits)
+    engine.flags.zones = zones
     groups = [g for g in app.robot.group_names if group_steps(app, g, engine._sits_out)]
-    tasks = {g: asyncio.ensure_future(run_group(engine, g, group_steps(app, g, engine._sits_out))) for g in groups}
+    tasks = {g: asyncio.ensure_future(run_group(engine, g, group_steps(app, g, engine._sits_out), zones)) for g in groups}
     try:
         done, _ = await asyncio.wait(tasks.values(), return_when=asyncio.FIRST_EXCEPTION)
         failed = next((t for t in done if not t.cancelled() and t.exception() is not None), None)
@@ -159,7 +169,7 @@ def _meeting(operation: Operation, call: Call, catalog: Catalog) -> dict[str, Ca
     return {g: c for g, c in operation.calls.items() if (s := catalog.get(c.function)) is not None and s.sync == spec.sync}
 
 
-async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Operation, Call]]) -> None:
+async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Operation, Call]], zones: ZoneBoard) -> None:
     """One group's calls in order, each when the one before succeeded (retried as the policy says)."""
     from execution_engine.engine.engine import ApplicationAborted  # the engine imports this module
 
@@ -169,7 +179,9 @@ async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Opera
         if not await engine._gate():
             raise ApplicationAborted(engine._stop_reason or "stopped")
         engine._operation = operation
-        engine._op_index = engine.app.operations.index(operation) if engine.app is not None else 0
+        index = engine.app.operations.index(operation) if engine.app is not None else 0
+        engine._op_index = index
+        await zones.enter(index, group, operation.id)
         attempt = 1
         while True:
             dispatch = engine._dispatch(operation, _meeting(operation, call, engine.catalog), attempt, only=group)[group]
@@ -184,6 +196,7 @@ async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Opera
             if result.outcome == "succeeded":
                 if call.function not in ENGINE_FUNCTIONS:
                     await engine._await_ready((group,))
+                zones.leave(index, group)
                 break
             await _on_failure(engine, group, operation, dispatch.request, result)
             attempt += 1

@@ -196,7 +196,7 @@ class EngineEvent:
     Not latched, unlike :class:`EngineStatus`: these are events for traces and logs, each once.
     """
 
-    event: Literal["state", "operator", "flag"]  # flag: ``source`` the group, ``command`` the flag, ``state`` set/waiting/passed/timeout/stopped
+    event: Literal["state", "operator", "flag"]  # flag: ``source`` the group, ``command`` the flag or zone, ``answer`` which (flag/zone), ``state`` set/waiting/passed/timeout/stopped
     t: float
     state: str  # the engine's state after a state change; the state a command arrived in
     operation: str | None = None
