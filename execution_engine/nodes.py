@@ -19,6 +19,7 @@ from pathlib import Path
 from app_functions.registry import full_catalog
 from execution_engine.app_model import Application, ApplicationError, load_application
 from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.engine.run_action import RunApplicationServer
 from execution_engine.machine.group_machine import GroupMachine
 from execution_engine.recorder.cli_hook import record_node, stop_recording
 from execution_engine.ros_main import (
@@ -32,7 +33,7 @@ from execution_engine.ros_main import (
     startup_errors,
     warn_undeclared,
 )
-from execution_engine.transport.port import Node
+from execution_engine.transport.port import Node, TransportError
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,7 @@ class EngineSettings:
     application: str
     exit_when_done: bool
     record: str = ""
+    wait_for_goals: bool = False
 
 
 def declare_engine_parameters(node: Node) -> EngineSettings:
@@ -53,7 +55,10 @@ def declare_engine_parameters(node: Node) -> EngineSettings:
     record = str(node.declare_parameter(
         "record", "", "MCAP file to record every topic of the graph to while the application runs, as ros2 bag record -s mcap stores it (empty: no recording)"
     ))
-    return EngineSettings(application, exit_when_done, record)
+    wait_for_goals = bool(
+        node.declare_parameter("wait_for_goals", False, "with no application: serve RunApplication goals on execution_engine/run_application")
+    )
+    return EngineSettings(application, exit_when_done, record, wait_for_goals)
 
 
 def load_or_explain(path: str) -> Application:
@@ -68,12 +73,29 @@ def load_or_explain(path: str) -> Application:
         raise StartupError("\n".join(lines), ExitCode.FAILED) from None
 
 
+def serve_goals(node: Node, engine: ExecutionEngine) -> RunApplicationServer | None:
+    """The RunApplication action server, or None where the transport cannot carry its types (rclpy
+    without the built dual_arm_executive_interfaces package): the engine runs on without it."""
+    try:
+        return RunApplicationServer(node, engine)
+    except TransportError as error:
+        node.logger.info("%s: no RunApplication action here: %s", node.fully_qualified_name, error)
+        return None
+
+
 async def run_engine(node: Node, outcome: Outcome) -> None:
-    """Load the application, run it, print the report, then keep the operator services up."""
+    """Load the application, run it, print the report, then keep the operator services and the
+    RunApplication action up (or, with ``wait_for_goals`` and no application, only serve goals)."""
     with startup_errors():
         settings = declare_engine_parameters(node)
         engine = ExecutionEngine(node)
+    goals = serve_goals(node, engine)
     warn_undeclared(node)
+    if not settings.application and settings.wait_for_goals:
+        if goals is None:
+            raise StartupError("wait_for_goals: the RunApplication action is not available on this transport")
+        node.logger.info("%s: waiting for RunApplication goals on %s", node.fully_qualified_name, goals.server.name)
+        await serve_forever()
     app = load_or_explain(settings.application)
     node.logger.info("%s: running %s (%d operations)", node.fully_qualified_name, app.name, len(app.operations))
     outcome.code = ExitCode.FAILED  # until the report says otherwise

@@ -35,6 +35,24 @@ JAZZY_HASHES = {
 
 
 @pytest.fixture(scope="module")
+def action_registry(tmp_path_factory: pytest.TempPathFactory) -> InterfaceRegistry:
+    """With tf2_msgs/action/LookupTransform from Jazzy, whose derived types' hashes Jazzy lists."""
+    root = tmp_path_factory.mktemp("interfaces")
+    (root / "tf2_msgs" / "action").mkdir(parents=True)
+    (root / "tf2_msgs" / "msg").mkdir(parents=True)
+    (root / "tf2_msgs" / "action" / "LookupTransform.action").write_text(
+        "string target_frame\nstring source_frame\nbuiltin_interfaces/Time source_time\nbuiltin_interfaces/Duration timeout\n"
+        "builtin_interfaces/Time target_time\nstring fixed_frame\nbool advanced\n---\n"
+        "geometry_msgs/TransformStamped transform\ntf2_msgs/TF2Error error\n---\n"
+    )
+    (root / "tf2_msgs" / "msg" / "TF2Error.msg").write_text(
+        "uint8 NO_ERROR = 0\nuint8 LOOKUP_ERROR = 1\nuint8 CONNECTIVITY_ERROR = 2\nuint8 EXTRAPOLATION_ERROR = 3\n"
+        "uint8 INVALID_ARGUMENT_ERROR = 4\nuint8 TIMEOUT_ERROR = 5\nuint8 TRANSFORM_ERROR = 6\nuint8 error\nstring error_string\n"
+    )
+    return InterfaceRegistry([root, *InterfaceRegistry().roots])
+
+
+@pytest.fixture(scope="module")
 def registry() -> InterfaceRegistry:
     return InterfaceRegistry()
 
@@ -64,7 +82,7 @@ def test_type_names_follow_rosidl(registry: InterfaceRegistry) -> None:
     request, reply = registry.wire_service("std_srvs/srv/Trigger")
     assert request.__idl_typename__ == "std_srvs::srv::dds_::Trigger_Request_"
     assert reply.__idl_typename__ == "std_srvs::srv::dds_::Trigger_Response_"
-    action = registry.action_types("dual_arm_executive_interfaces/action/RunApplication")
+    action = registry.wire_action("dual_arm_executive_interfaces/action/RunApplication")
     assert action["SendGoal_Request"].__idl_typename__ == "dual_arm_executive_interfaces::action::dds_::RunApplication_SendGoal_Request_"
     assert action["FeedbackMessage"].__idl_typename__ == "dual_arm_executive_interfaces::action::dds_::RunApplication_FeedbackMessage_"
 
@@ -170,3 +188,33 @@ def test_parser_never_fails_other_than_with_interface_error(text: str) -> None:
         parse_message(text, "p/msg/X")
     except InterfaceError:
         pass
+
+
+JAZZY_ACTION_HASHES = {
+    "tf2_msgs/action/LookupTransform_Goal": "RIHS01_815efc294ad17c813c6043cdde781ff55810d49da02ed07f9237dcd20e88d498",
+    "tf2_msgs/action/LookupTransform_Result": "RIHS01_061d4423af5352ff5314c8effef8faab133991a78f1b2bcd1fecabad80871225",
+    "tf2_msgs/action/LookupTransform_Feedback": "RIHS01_2da0b02f990f04404ab8c98a2a68cf5bbc773ae747f96911f2d55499cfb51542",
+    "tf2_msgs/action/LookupTransform_SendGoal_Request": "RIHS01_eb1312eb7aab35e35c71bb87c2ba3a94747c5a6544ea32bb2b32b0f75775b8ca",
+    "tf2_msgs/action/LookupTransform_SendGoal_Response": "RIHS01_c1ada93304793c08813657255e7bde2e40e2114aa634b702c3f8d4b72ae098bc",
+    "tf2_msgs/action/LookupTransform_GetResult_Request": "RIHS01_148f9bdc01f98922d6fb2072cb64468b89c57c7825d9d83b932c183deaa4697d",
+    "tf2_msgs/action/LookupTransform_GetResult_Response": "RIHS01_954de3efc36b164c4d21116abdbdcc52746e454fd9c169b55d9cfd89e83d299d",
+    "tf2_msgs/action/LookupTransform_FeedbackMessage": "RIHS01_10cb89922dcb103e95c185d43e8a5efa3d38db996f733151a2f3e2ac133f4839",
+}
+
+
+@pytest.mark.parametrize("ros_type", sorted(JAZZY_ACTION_HASHES))
+def test_action_type_hashes_are_those_of_jazzy(action_registry: InterfaceRegistry, ros_type: str) -> None:
+    assert type_hash(action_registry, ros_type) == JAZZY_ACTION_HASHES[ros_type]
+
+
+def test_action_requests_round_trip_with_the_request_header(registry: InterfaceRegistry) -> None:
+    """A RunApplication goal as `ros2 action send_goal` writes it: header, 16-octet goal id, goal."""
+    from execution_engine.engine.run_action import RunApplicationGoal, SendGoal
+    from execution_engine.transport.action import UUID
+
+    converter = DdsConverter(registry)
+    request_type, _ = registry.wire_service(SendGoal.ROS_TYPE)
+    request = SendGoal.Request(UUID(tuple(range(16))), RunApplicationGoal("/apps/rivet.xml", "", "nextage-sim", 0.0))
+    sample = request_type.deserialize(converter.to_wire_service(request_type, request, 7, 3).serialize())
+    assert (sample.guid, sample.seq) == (7, 3)
+    assert converter.from_wire(SendGoal.Request, sample) == request

@@ -266,7 +266,9 @@ class _DdsService(ServiceServer):
     async def _serve(self, request: Any, guid: int, seq: int, client_id: str | None) -> None:
         transport = self.node.transport
         try:
-            response = await transport.clock.wait_for(self._handler(request), transport.handler_timeout)
+            # a handler that waits for a long job on purpose (an action's get_result) says so
+            timeout = None if getattr(self._handler, "long_running", False) else transport.handler_timeout
+            response = await transport.clock.wait_for(self._handler(request), timeout)
             if type(response) is not self.srv_type.Response:
                 raise TransportError(f"handler answered {type(response).__name__}, not {self.srv_type.Response.__name__}")
         except asyncio.CancelledError:

@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
 from execution_engine.transport.port import TransportError
-from execution_engine.transport.ros_convert import MessageConverter, _mirror_fields
+from execution_engine.transport.ros_convert import MessageConverter, _mirror_fields, _sequence_item
 
 M = TypeVar("M")
 
@@ -25,15 +25,9 @@ class DdsConverter(MessageConverter):
 
     def _resolve(self, ros_type: str) -> type:
         try:
-            cls = self.registry.message(ros_type) if "/msg/" in ros_type else self._part(ros_type)
+            return self.registry.message(ros_type)
         except InterfaceError as error:
             raise TransportError(str(error)) from None
-        return cls
-
-    def _part(self, ros_type: str) -> type:
-        """A service's request or response type without the wire header (for field checks)."""
-        self.registry.spec(ros_type)
-        return self.registry._build(ros_type, ros_type.replace("/", "::"), self.registry.spec(ros_type).fields, ())
 
     def wire_class(self, mirror: type) -> type:
         """The DDS type of a message mirror; TransportError when its .msg lacks a mirror field."""
@@ -71,6 +65,8 @@ class DdsConverter(MessageConverter):
         return super()._value_to_ros(hint, value, path)
 
     def _value_from_ros(self, hint: Any, value: Any, path: str) -> Any:
+        if isinstance(value, (bytes, bytearray)) and _sequence_item(hint) is int:
+            return tuple(value)  # cyclonedds gives an octet array (uint8[16] of a goal id) as bytes
         if hint is bytes:
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 255:
                 raise TransportError(f"field {path!r}: expected an octet, got {value!r}")

@@ -29,6 +29,8 @@ from typing import Any
 from execution_engine.resources import share_roots
 
 MAX_FILE = 64 * 1024  # bytes of one interface file; ROS's largest are a few kB
+# the parts of an action, longest suffix first: what rosidl generates for pkg/action/Name
+_ACTION_PARTS = ("SendGoal_Request", "SendGoal_Response", "GetResult_Request", "GetResult_Response", "FeedbackMessage", "Goal", "Result", "Feedback")
 
 _PRIMITIVES: dict[str, str] = {
     "bool": "bool", "byte": "uint8", "char": "uint8", "float32": "float32", "float64": "float64",
@@ -180,15 +182,19 @@ class InterfaceRegistry:
         if kind == "msg":
             text, source = self._read(package, kind, name)
             self._specs[ros_type] = parse_message(text, ros_type, source)
-        elif kind in ("srv", "action"):
+        elif kind == "srv":
             base, _, part = name.rpartition("_")
-            parts = ("Request", "Response") if kind == "srv" else ("Goal", "Result", "Feedback")
-            if part not in parts:
-                raise InterfaceError(f"{ros_type}: a {kind} part is one of {', '.join(parts)}")
+            if part not in ("Request", "Response"):
+                raise InterfaceError(f"{ros_type}: a srv part is Request or Response")
             text, source = self._read(package, kind, base)
-            for section_name, (section, offset) in zip(parts, _sections(text, len(parts), source)):
+            for section_name, (section, offset) in zip(("Request", "Response"), _sections(text, 2, source)):
                 key = f"{package}/{kind}/{base}_{section_name}"
                 self._specs[key] = parse_message(section, key, source, offset)
+        elif kind == "action":
+            base = next((name[: -len(p) - 1] for p in _ACTION_PARTS if name.endswith("_" + p)), None)
+            if not base:
+                raise InterfaceError(f"{ros_type}: an action part is one of {', '.join(_ACTION_PARTS)}")
+            self._register_action(package, base)
         else:
             raise InterfaceError(f"{ros_type}: kind must be msg, srv or action")
         return self._specs[ros_type]
@@ -219,26 +225,32 @@ class InterfaceRegistry:
             made.append(cls)
         return made[0], made[1]
 
-    def action_types(self, ros_type: str) -> dict[str, type]:
-        """The wire classes of action ``pkg/action/Name``: its services (send_goal, get_result,
-        cancel) as (request, reply) pairs and its topics (feedback, status), as rosidl derives them."""
-        package, _, name = ros_type.split("/")
-        goal, result, feedback = (f"{ros_type}_{p}" for p in ("Goal", "Result", "Feedback"))
+    def _register_action(self, package: str, name: str) -> None:
+        """The specs of an action's Goal, Result, Feedback and of the types rosidl derives from them."""
+        text, source = self._read(package, "action", name)
+        prefix = f"{package}/action/{name}"
+        for section_name, (section, offset) in zip(("Goal", "Result", "Feedback"), _sections(text, 3, source)):
+            self._specs[f"{prefix}_{section_name}"] = parse_message(section, f"{prefix}_{section_name}", source, offset)
         uuid = FieldSpec("unique_identifier_msgs/msg/UUID", "goal_id")
         derived: dict[str, tuple[FieldSpec, ...]] = {
-            "SendGoal_Request": (uuid, FieldSpec(goal, "goal")),
+            "SendGoal_Request": (uuid, FieldSpec(f"{prefix}_Goal", "goal")),
             "SendGoal_Response": (FieldSpec("bool", "accepted"), FieldSpec("builtin_interfaces/msg/Time", "stamp")),
             "GetResult_Request": (uuid,),
-            "GetResult_Response": (FieldSpec("int8", "status"), FieldSpec(result, "result")),
-            "FeedbackMessage": (uuid, FieldSpec(feedback, "feedback")),
+            "GetResult_Response": (FieldSpec("int8", "status"), FieldSpec(f"{prefix}_Result", "result")),
+            "FeedbackMessage": (uuid, FieldSpec(f"{prefix}_Feedback", "feedback")),
         }
-        header = (FieldSpec("uint64", "guid"), FieldSpec("int64", "seq"))
-        out: dict[str, type] = {}
         for part, fields in derived.items():
-            wire = header + fields if "_" in part else fields
-            out[part] = self._build(f"{ros_type}_{part}", f"{package}::action::dds_::{name}_{part}_", wire, ())
-        cancel_request, cancel_reply = self.wire_service("action_msgs/srv/CancelGoal")
-        out["CancelGoal_Request"], out["CancelGoal_Response"] = cancel_request, cancel_reply
+            self._specs[f"{prefix}_{part}"] = MessageSpec(f"{prefix}_{part}", fields)
+
+    def wire_action(self, ros_type: str) -> dict[str, type]:
+        """The wire classes of action ``pkg/action/Name``, as rcl_action puts it on DDS: its services
+        (``SendGoal``, ``GetResult``, ``CancelGoal``) as ``<service>_Request``/``_Response`` with the
+        request header, ``FeedbackMessage`` and ``GoalStatusArray``."""
+        out: dict[str, type] = {}
+        for service in ("SendGoal", "GetResult"):
+            out[f"{service}_Request"], out[f"{service}_Response"] = self.wire_service(f"{ros_type}_{service}")
+        out["CancelGoal_Request"], out["CancelGoal_Response"] = self.wire_service("action_msgs/srv/CancelGoal")
+        out["FeedbackMessage"] = self.message(f"{ros_type}_FeedbackMessage")
         out["GoalStatusArray"] = self.message("action_msgs/msg/GoalStatusArray")
         return out
 

@@ -1,0 +1,198 @@
+"""``execution_engine/run_application``: the RunApplication action, so any ROS 2 client runs applications.
+
+::
+
+    ros2 action send_goal /execution_engine/run_application dual_arm_executive_interfaces/action/RunApplication \\
+        "{application_file: /path/rivet_installation.xml}" --feedback
+
+The goal names an application file, or carries the XML text (its cell file is then looked for in the
+working directory of the engine).  A goal is refused while a run is in progress.  The application is
+validated first: one with errors ends the goal aborted, its diagnostics in ``report``.  Feedback is
+the engine's status as it changes (operation, index, count, each group's state and function);
+the result is the outcome (``finished``, ``failed``, ``stopped``, ``invalid``), ``ok`` and the
+run's report.  A cancel is the operator's stop: every group's motion stopped, then Finish, and the
+goal ends cancelled with the report of what was done.  ``backend`` must be empty or the back end
+the cell runs (the application robot's); ``speed`` is the bridge's own parameter (``--speed`` of the
+launch, ``-p speed:=F``), so a goal may only leave it 0.
+"""
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
+
+from app_functions.registry import full_catalog
+from execution_engine.app_model import Application, read_application
+from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.transport import codec
+from execution_engine.transport.action import UUID, ActionServer, GoalHandle
+from execution_engine.transport.msgs import String, Time
+from execution_engine.transport.port import Node
+from execution_engine.transport.qos import EVENTS
+from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus
+
+ACTION_NAME = "execution_engine/run_application"
+_PACKAGE = "dual_arm_executive_interfaces"
+_BUSY = ("running", "paused", "stepping", "error", "alarm", "stopping")
+
+
+@dataclass(frozen=True)
+class GroupProgressMsg:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/msg/GroupProgress"
+    group: str = ""
+    state: str = ""
+    operation: str = ""
+    function: str = ""
+
+
+@dataclass(frozen=True)
+class RunApplicationGoal:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_Goal"
+    application_file: str = ""
+    application_xml: str = ""
+    backend: str = ""
+    speed: float = 0.0
+
+
+@dataclass(frozen=True)
+class RunApplicationResult:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_Result"
+    outcome: str = ""
+    ok: bool = False
+    report: str = ""
+
+
+@dataclass(frozen=True)
+class RunApplicationFeedback:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_Feedback"
+    operation: str = ""
+    operation_index: int = 0
+    operation_count: int = 0
+    groups: tuple[GroupProgressMsg, ...] = ()
+
+
+@dataclass(frozen=True)
+class SendGoalRequest:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_SendGoal_Request"
+    goal_id: UUID = field(default_factory=UUID)
+    goal: RunApplicationGoal = field(default_factory=RunApplicationGoal)
+
+
+@dataclass(frozen=True)
+class SendGoalResponse:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_SendGoal_Response"
+    accepted: bool = False
+    stamp: Time = field(default_factory=Time)
+
+
+@dataclass(frozen=True)
+class SendGoal:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_SendGoal"
+    Request: ClassVar[type] = SendGoalRequest
+    Response: ClassVar[type] = SendGoalResponse
+
+
+@dataclass(frozen=True)
+class GetResultRequest:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_GetResult_Request"
+    goal_id: UUID = field(default_factory=UUID)
+
+
+@dataclass(frozen=True)
+class GetResultResponse:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_GetResult_Response"
+    status: int = 0
+    result: RunApplicationResult = field(default_factory=RunApplicationResult)
+
+
+@dataclass(frozen=True)
+class GetResult:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_GetResult"
+    Request: ClassVar[type] = GetResultRequest
+    Response: ClassVar[type] = GetResultResponse
+
+
+@dataclass(frozen=True)
+class FeedbackMessage:
+    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_FeedbackMessage"
+    goal_id: UUID = field(default_factory=UUID)
+    feedback: RunApplicationFeedback = field(default_factory=RunApplicationFeedback)
+
+
+class RunApplication:
+    """The mirror bundle of ``dual_arm_executive_interfaces/action/RunApplication``."""
+
+    ROS_TYPE = f"{_PACKAGE}/action/RunApplication"
+    Goal, Result, Feedback = RunApplicationGoal, RunApplicationResult, RunApplicationFeedback
+    SendGoal, GetResult, FeedbackMessage = SendGoal, GetResult, FeedbackMessage
+
+
+def feedback_of(status: EngineStatus) -> RunApplicationFeedback:
+    return RunApplicationFeedback(
+        operation=status.operation_id or "",
+        operation_index=max(0, status.operation_index),
+        operation_count=max(0, status.operation_count),
+        groups=tuple(GroupProgressMsg(g, p.state, p.operation or "", p.function or "") for g, p in sorted(status.groups.items())),
+    )
+
+
+class RunApplicationServer:
+    """Runs goals on ``engine`` (one at a time) and reports them back."""
+
+    def __init__(self, node: Node, engine: ExecutionEngine) -> None:
+        self.node = node
+        self.engine = engine
+        self.catalog = full_catalog()
+        self.current: GoalHandle | None = None
+        self.server = ActionServer(node, RunApplication, ACTION_NAME, execute=self._execute, accept=self._accept, cancel=self._cancel)
+        self._stops: set[asyncio.Task[object]] = set()
+        node.create_subscription(String, ENGINE_STATUS, self._on_status, EVENTS)
+
+    def _accept(self, goal: RunApplicationGoal) -> str | None:
+        if self.current is not None or self.engine.state in _BUSY:
+            return f"a run is in progress (engine {self.engine.state})"
+        if not goal.application_file and not goal.application_xml:
+            return "the goal names no application (application_file or application_xml)"
+        return None
+
+    def _cancel(self, handle: GoalHandle) -> None:
+        task = asyncio.get_running_loop().create_task(self.engine.operator_command("stop", f"action {self.server.name} cancel"))
+        self._stops.add(task)
+        task.add_done_callback(self._stops.discard)
+
+    def _on_status(self, msg: String) -> None:
+        if self.current is None:
+            return
+        try:
+            status = codec.decode(EngineStatus, msg.data, source=self.node.resolve(ENGINE_STATUS))
+        except codec.WireError as error:
+            self.node.logger.warning("%s: %s", self.node.fully_qualified_name, error)
+            return
+        self.server.publish_feedback(self.current, feedback_of(status))
+
+    def _load(self, goal: RunApplicationGoal) -> tuple[Application | None, str]:
+        if goal.application_file:
+            app, diagnostics = read_application(Path(goal.application_file), self.catalog)
+        else:
+            app, diagnostics = read_application(Path.cwd() / "goal.xml", self.catalog, data=goal.application_xml.encode("utf-8"))
+        text = "\n".join(str(d) for d in diagnostics if d.is_error)
+        if app is not None and goal.backend and goal.backend != app.robot.default_backend:
+            return None, f"this cell runs the {app.robot.default_backend} back end, not {goal.backend}"
+        if app is not None and goal.speed != 0.0:
+            return None, "speed is the bridge's parameter (launch --speed, -p speed:=F); leave it 0 in the goal"
+        return app, text
+
+    async def _execute(self, handle: GoalHandle) -> RunApplicationResult:
+        goal: RunApplicationGoal = handle.goal
+        app, problems = self._load(goal)
+        if app is None:
+            handle.aborted = True
+            return RunApplicationResult("invalid", False, problems)
+        self.current = handle
+        try:
+            report = await self.engine.run(app)
+        finally:
+            self.current = None
+        handle.aborted = not report.ok
+        return RunApplicationResult(report.outcome, report.ok, "\n".join(report.summary_lines()))

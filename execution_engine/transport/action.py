@@ -1,0 +1,207 @@
+"""ROS 2 actions over the port: rcl_action's server, made of three services and two topics.
+
+An action ``<name>`` of type ``pkg/action/Name`` is, on the wire, what rcl_action makes of it:
+services ``<name>/_action/send_goal``, ``<name>/_action/get_result`` and
+``<name>/_action/cancel_goal`` (``action_msgs/srv/CancelGoal``), and topics
+``<name>/_action/feedback`` and ``<name>/_action/status`` (``action_msgs/msg/GoalStatusArray``,
+reliable and transient local, depth 1).  Built only from the port's services and publishers, the
+server works on every transport that can carry the types: over DDS ``ros2 action send_goal``
+reaches it, on the local transport the tests drive it.
+
+The owner supplies ``execute(handle) -> result`` (a coroutine; its return ends the goal as
+succeeded, or aborted when ``handle.aborted`` is set; cancelled when a cancel was accepted),
+``accept(goal) -> reason or None`` and ``cancel(handle)`` (start stopping; ``execute`` returns when
+stopped).  ``get_result`` waits for the goal's end, however long the job: its handler is marked
+``long_running`` so a transport does not time it out.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from execution_engine.transport.msgs import Time
+from execution_engine.transport.port import Node
+from execution_engine.transport.qos import COMMANDS, Durability, History, QoS, Reliability
+
+log = logging.getLogger(__name__)
+
+#: rcl_action_qos_profile_status_default
+STATUS_QOS = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
+
+
+@dataclass(frozen=True)
+class UUID:
+    ROS_TYPE: ClassVar[str] = "unique_identifier_msgs/msg/UUID"
+    uuid: tuple[int, ...] = (0,) * 16
+
+
+@dataclass(frozen=True)
+class GoalInfo:
+    ROS_TYPE: ClassVar[str] = "action_msgs/msg/GoalInfo"
+    goal_id: UUID = field(default_factory=UUID)
+    stamp: Time = field(default_factory=Time)
+
+
+@dataclass(frozen=True)
+class GoalStatus:
+    ROS_TYPE: ClassVar[str] = "action_msgs/msg/GoalStatus"
+    UNKNOWN: ClassVar[int] = 0
+    ACCEPTED: ClassVar[int] = 1
+    EXECUTING: ClassVar[int] = 2
+    CANCELING: ClassVar[int] = 3
+    SUCCEEDED: ClassVar[int] = 4
+    CANCELED: ClassVar[int] = 5
+    ABORTED: ClassVar[int] = 6
+    goal_info: GoalInfo = field(default_factory=GoalInfo)
+    status: int = 0
+
+
+@dataclass(frozen=True)
+class GoalStatusArray:
+    ROS_TYPE: ClassVar[str] = "action_msgs/msg/GoalStatusArray"
+    status_list: tuple[GoalStatus, ...] = ()
+
+
+@dataclass(frozen=True)
+class CancelGoalRequest:
+    ROS_TYPE: ClassVar[str] = "action_msgs/srv/CancelGoal_Request"
+    goal_info: GoalInfo = field(default_factory=GoalInfo)
+
+
+@dataclass(frozen=True)
+class CancelGoalResponse:
+    ROS_TYPE: ClassVar[str] = "action_msgs/srv/CancelGoal_Response"
+    ERROR_NONE: ClassVar[int] = 0
+    ERROR_REJECTED: ClassVar[int] = 1
+    ERROR_UNKNOWN_GOAL_ID: ClassVar[int] = 2
+    ERROR_GOAL_TERMINATED: ClassVar[int] = 3
+    return_code: int = 0
+    goals_canceling: tuple[GoalInfo, ...] = ()
+
+
+@dataclass(frozen=True)
+class CancelGoal:
+    ROS_TYPE: ClassVar[str] = "action_msgs/srv/CancelGoal"
+    Request: ClassVar[type] = CancelGoalRequest
+    Response: ClassVar[type] = CancelGoalResponse
+
+
+_ENDED = (GoalStatus.SUCCEEDED, GoalStatus.CANCELED, GoalStatus.ABORTED)
+
+
+@dataclass
+class GoalHandle:
+    """One accepted goal: its id, goal, status, and how it ended."""
+
+    goal_id: UUID
+    goal: Any
+    stamp: Time
+    status: int = GoalStatus.ACCEPTED
+    result: Any = None
+    aborted: bool = False  # execute() sets it for a goal that failed
+    cancel_requested: bool = False
+    done: asyncio.Event = field(default_factory=asyncio.Event)
+
+    @property
+    def info(self) -> GoalInfo:
+        return GoalInfo(self.goal_id, self.stamp)
+
+
+class ActionServer:
+    """The server side of action ``name`` (mirror bundle ``action``: Goal, Result, Feedback,
+    SendGoal, GetResult, FeedbackMessage) on ``node``."""
+
+    def __init__(
+        self,
+        node: Node,
+        action: type,
+        name: str,
+        *,
+        execute: Callable[[GoalHandle], Awaitable[Any]],
+        accept: Callable[[Any], str | None],
+        cancel: Callable[[GoalHandle], None],
+    ) -> None:
+        self.node = node
+        self.action = action
+        self.name = node.resolve(name)
+        self._execute, self._accept, self._cancel = execute, accept, cancel
+        self.goals: dict[tuple[int, ...], GoalHandle] = {}
+        self._tasks: set[asyncio.Task[None]] = set()
+        base = f"{self.name}/_action"
+        node.create_service(action.SendGoal, f"{base}/send_goal", self._on_send_goal)
+        get_result = self._on_get_result
+        node.create_service(action.GetResult, f"{base}/get_result", get_result)
+        node.create_service(CancelGoal, f"{base}/cancel_goal", self._on_cancel_goal)
+        self._feedback = node.create_publisher(action.FeedbackMessage, f"{base}/feedback", COMMANDS)
+        self._status = node.create_publisher(GoalStatusArray, f"{base}/status", STATUS_QOS)
+
+    # ------------------------------------------------------------------------- services
+    async def _on_send_goal(self, request: Any) -> Any:
+        stamp = self.node.now_stamp()
+        reason = self._accept(request.goal)
+        if reason is not None or request.goal_id.uuid in self.goals:
+            self.node.logger.warning("%s: goal refused: %s", self.name, reason or "its id is in use")
+            return self.action.SendGoal.Response(False, stamp)
+        handle = GoalHandle(request.goal_id, request.goal, stamp)
+        self.goals[request.goal_id.uuid] = handle
+        self._publish_status()
+        task = asyncio.get_running_loop().create_task(self._run(handle), name=f"{self.name} goal")
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return self.action.SendGoal.Response(True, stamp)
+
+    async def _run(self, handle: GoalHandle) -> None:
+        handle.status = GoalStatus.EXECUTING
+        self._publish_status()
+        try:
+            handle.result = await self._execute(handle)
+            if handle.cancel_requested:
+                handle.status = GoalStatus.CANCELED
+            else:
+                handle.status = GoalStatus.ABORTED if handle.aborted else GoalStatus.SUCCEEDED
+        except Exception as error:  # noqa: BLE001 - the goal ends aborted; the node hears why
+            self.node.report_fault(f"action {self.name}", error)
+            handle.result = self.action.Result()
+            handle.status = GoalStatus.ABORTED
+        handle.done.set()
+        self._publish_status()
+
+    async def _on_get_result(self, request: Any) -> Any:
+        handle = self.goals.get(request.goal_id.uuid)
+        if handle is None:
+            return self.action.GetResult.Response(GoalStatus.UNKNOWN, self.action.Result())
+        await handle.done.wait()
+        return self.action.GetResult.Response(handle.status, handle.result)
+
+    _on_get_result.long_running = True  # type: ignore[attr-defined]
+
+    async def _on_cancel_goal(self, request: CancelGoalRequest) -> CancelGoalResponse:
+        wanted = request.goal_info.goal_id.uuid
+        everything = not any(wanted)
+        chosen = [h for h in self.goals.values() if everything or h.goal_id.uuid == wanted]
+        if not chosen:
+            return CancelGoalResponse(CancelGoalResponse.ERROR_UNKNOWN_GOAL_ID)
+        active = [h for h in chosen if h.status not in _ENDED]
+        if not active:
+            return CancelGoalResponse(CancelGoalResponse.ERROR_GOAL_TERMINATED)
+        for handle in active:
+            handle.cancel_requested = True
+            handle.status = GoalStatus.CANCELING
+            self._cancel(handle)
+        self._publish_status()
+        return CancelGoalResponse(CancelGoalResponse.ERROR_NONE, tuple(h.info for h in active))
+
+    # --------------------------------------------------------------------------- topics
+    def publish_feedback(self, handle: GoalHandle, feedback: Any) -> None:
+        self._feedback.publish(self.action.FeedbackMessage(handle.goal_id, feedback))
+
+    def _publish_status(self) -> None:
+        self._status.publish(GoalStatusArray(tuple(GoalStatus(h.info, h.status) for h in self.goals.values())))
+
+    async def close(self) -> None:
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
