@@ -218,3 +218,16 @@ def test_action_requests_round_trip_with_the_request_header(registry: InterfaceR
     sample = request_type.deserialize(converter.to_wire_service(request_type, request, 7, 3).serialize())
     assert (sample.guid, sample.seq) == (7, 3)
     assert converter.from_wire(SendGoal.Request, sample) == request
+
+
+def test_mirrors_generated_from_the_files_use_the_written_ones_where_they_exist() -> None:
+    from execution_engine.transport import mirrors
+
+    assert mirrors.mirror("builtin_interfaces/msg/Time") is msgs.Time
+    status = mirrors.mirror("action_msgs/msg/GoalStatus")
+    assert status.STATUS_CANCELED == 5 and status().goal_info.stamp == msgs.Time()
+    assert mirrors.mirror("unique_identifier_msgs/msg/UUID")().uuid == (0,) * 16
+    assert mirrors.mirror("diagnostic_msgs/msg/DiagnosticStatus") is msgs.DiagnosticStatus
+    goal = mirrors.action("dual_arm_executive_interfaces/action/RunApplication").Goal
+    assert [f.name for f in dataclasses.fields(goal)] == ["application_file", "application_xml", "backend", "speed"]
+    assert goal().speed == 0.0

@@ -56,13 +56,13 @@ def test_a_goal_runs_the_application_with_feedback_and_a_result(run_sim: Any) ->
 
     accepted, answer, client = run_sim(main)
     assert accepted
-    assert answer.status == GoalStatus.SUCCEEDED and answer.result.outcome == "finished" and answer.result.ok
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED and answer.result.outcome == "finished" and answer.result.ok
     assert "application tiny: FINISHED" in answer.result.report
     counts = {(f.feedback.operation_index, f.feedback.operation_count) for f in client.feedback}
     assert (1, 2) in counts or (0, 2) in counts
     right = [g for f in client.feedback for g in f.feedback.groups if g.group == "right_arm" and g.function == "move_to_joint_pose"]
     assert right, "feedback names each group's function"
-    assert [s.status for s in client.status[-1].status_list] == [GoalStatus.SUCCEEDED]
+    assert [s.status for s in client.status[-1].status_list] == [GoalStatus.STATUS_SUCCEEDED]
 
 
 def test_a_cancel_stops_the_run_through_the_engine(run_sim: Any) -> None:
@@ -81,7 +81,7 @@ def test_a_cancel_stops_the_run_through_the_engine(run_sim: Any) -> None:
     busy, cancelled, answer, cell = run_sim(main)
     assert busy is False  # one run at a time
     assert cancelled.return_code == 0 and len(cancelled.goals_canceling) == 1
-    assert answer.status == GoalStatus.CANCELED and answer.result.outcome == "stopped" and not answer.result.ok
+    assert answer.status == GoalStatus.STATUS_CANCELED and answer.result.outcome == "stopped" and not answer.result.ok
     moves = cell.backend.executed("right_arm")
     assert moves and moves[-1].outcome == "stopped" and moves[-1].t_end is not None and moves[-1].t_end < 30.0
 
@@ -100,6 +100,6 @@ def test_an_invalid_application_ends_the_goal_aborted_with_its_diagnostics(run_s
             await cell.deployment.close()
 
     first, second, empty = run_sim(main)
-    assert first.status == GoalStatus.ABORTED and first.result.outcome == "invalid" and "set_sped" in first.result.report
-    assert second.status == GoalStatus.ABORTED and "runs the nextage-sim back end, not kuka-rsi" in second.result.report
+    assert first.status == GoalStatus.STATUS_ABORTED and first.result.outcome == "invalid" and "set_sped" in first.result.report
+    assert second.status == GoalStatus.STATUS_ABORTED and "runs the nextage-sim back end, not kuka-rsi" in second.result.report
     assert empty[0] is False

@@ -18,16 +18,16 @@ launch, ``-p speed:=F``), so a goal may only leave it 0.
 from __future__ import annotations
 
 import asyncio
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import Any
 
 from app_functions.registry import full_catalog
 from execution_engine.app_model import Application, read_application
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.transport import codec
-from execution_engine.transport.action import UUID, ActionServer, GoalHandle
-from execution_engine.transport.msgs import String, Time
+from execution_engine.transport import mirrors
+from execution_engine.transport.action import ActionServer, GoalHandle
+from execution_engine.transport.msgs import String
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS
 from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus
@@ -37,98 +37,13 @@ _PACKAGE = "dual_arm_executive_interfaces"
 _BUSY = ("running", "paused", "stepping", "error", "alarm", "stopping")
 
 
-@dataclass(frozen=True)
-class GroupProgressMsg:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/msg/GroupProgress"
-    group: str = ""
-    state: str = ""
-    operation: str = ""
-    function: str = ""
+RunApplication = mirrors.action(f"{_PACKAGE}/action/RunApplication")
+RunApplicationGoal, RunApplicationResult, RunApplicationFeedback = RunApplication.Goal, RunApplication.Result, RunApplication.Feedback
+SendGoal, GetResult = RunApplication.SendGoal, RunApplication.GetResult
+GroupProgressMsg = mirrors.mirror(f"{_PACKAGE}/msg/GroupProgress")
 
 
-@dataclass(frozen=True)
-class RunApplicationGoal:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_Goal"
-    application_file: str = ""
-    application_xml: str = ""
-    backend: str = ""
-    speed: float = 0.0
-
-
-@dataclass(frozen=True)
-class RunApplicationResult:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_Result"
-    outcome: str = ""
-    ok: bool = False
-    report: str = ""
-
-
-@dataclass(frozen=True)
-class RunApplicationFeedback:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_Feedback"
-    operation: str = ""
-    operation_index: int = 0
-    operation_count: int = 0
-    groups: tuple[GroupProgressMsg, ...] = ()
-
-
-@dataclass(frozen=True)
-class SendGoalRequest:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_SendGoal_Request"
-    goal_id: UUID = field(default_factory=UUID)
-    goal: RunApplicationGoal = field(default_factory=RunApplicationGoal)
-
-
-@dataclass(frozen=True)
-class SendGoalResponse:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_SendGoal_Response"
-    accepted: bool = False
-    stamp: Time = field(default_factory=Time)
-
-
-@dataclass(frozen=True)
-class SendGoal:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_SendGoal"
-    Request: ClassVar[type] = SendGoalRequest
-    Response: ClassVar[type] = SendGoalResponse
-
-
-@dataclass(frozen=True)
-class GetResultRequest:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_GetResult_Request"
-    goal_id: UUID = field(default_factory=UUID)
-
-
-@dataclass(frozen=True)
-class GetResultResponse:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_GetResult_Response"
-    status: int = 0
-    result: RunApplicationResult = field(default_factory=RunApplicationResult)
-
-
-@dataclass(frozen=True)
-class GetResult:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_GetResult"
-    Request: ClassVar[type] = GetResultRequest
-    Response: ClassVar[type] = GetResultResponse
-
-
-@dataclass(frozen=True)
-class FeedbackMessage:
-    ROS_TYPE: ClassVar[str] = f"{_PACKAGE}/action/RunApplication_FeedbackMessage"
-    goal_id: UUID = field(default_factory=UUID)
-    feedback: RunApplicationFeedback = field(default_factory=RunApplicationFeedback)
-
-
-class RunApplication:
-    """The mirror bundle of ``dual_arm_executive_interfaces/action/RunApplication``."""
-
-    ROS_TYPE = f"{_PACKAGE}/action/RunApplication"
-    Goal, Result, Feedback = RunApplicationGoal, RunApplicationResult, RunApplicationFeedback
-    SendGoal, GetResult, FeedbackMessage = SendGoal, GetResult, FeedbackMessage
-
-
-def feedback_of(status: EngineStatus) -> RunApplicationFeedback:
+def feedback_of(status: EngineStatus) -> Any:
     return RunApplicationFeedback(
         operation=status.operation_id or "",
         operation_index=max(0, status.operation_index),
@@ -149,7 +64,7 @@ class RunApplicationServer:
         self._stops: set[asyncio.Task[object]] = set()
         node.create_subscription(String, ENGINE_STATUS, self._on_status, EVENTS)
 
-    def _accept(self, goal: RunApplicationGoal) -> str | None:
+    def _accept(self, goal: Any) -> str | None:
         if self.current is not None or self.engine.state in _BUSY:
             return f"a run is in progress (engine {self.engine.state})"
         if not goal.application_file and not goal.application_xml:
@@ -171,7 +86,7 @@ class RunApplicationServer:
             return
         self.server.publish_feedback(self.current, feedback_of(status))
 
-    def _load(self, goal: RunApplicationGoal) -> tuple[Application | None, str]:
+    def _load(self, goal: Any) -> tuple[Application | None, str]:
         if goal.application_file:
             app, diagnostics = read_application(Path(goal.application_file), self.catalog)
         else:
@@ -183,8 +98,8 @@ class RunApplicationServer:
             return None, "speed is the bridge's parameter (launch --speed, -p speed:=F); leave it 0 in the goal"
         return app, text
 
-    async def _execute(self, handle: GoalHandle) -> RunApplicationResult:
-        goal: RunApplicationGoal = handle.goal
+    async def _execute(self, handle: GoalHandle) -> Any:
+        goal = handle.goal
         app, problems = self._load(goal)
         if app is None:
             handle.aborted = True

@@ -20,8 +20,9 @@ import asyncio
 import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
+from execution_engine.transport import mirrors
 from execution_engine.transport.msgs import Time
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import COMMANDS, Durability, History, QoS, Reliability
@@ -32,81 +33,31 @@ log = logging.getLogger(__name__)
 STATUS_QOS = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
 
 
-@dataclass(frozen=True)
-class UUID:
-    ROS_TYPE: ClassVar[str] = "unique_identifier_msgs/msg/UUID"
-    uuid: tuple[int, ...] = (0,) * 16
+UUID = mirrors.mirror("unique_identifier_msgs/msg/UUID")
+GoalInfo = mirrors.mirror("action_msgs/msg/GoalInfo")
+GoalStatus = mirrors.mirror("action_msgs/msg/GoalStatus")
+GoalStatusArray = mirrors.mirror("action_msgs/msg/GoalStatusArray")
+CancelGoal = mirrors.service("action_msgs/srv/CancelGoal")
+CancelGoalRequest, CancelGoalResponse = CancelGoal.Request, CancelGoal.Response
 
-
-@dataclass(frozen=True)
-class GoalInfo:
-    ROS_TYPE: ClassVar[str] = "action_msgs/msg/GoalInfo"
-    goal_id: UUID = field(default_factory=UUID)
-    stamp: Time = field(default_factory=Time)
-
-
-@dataclass(frozen=True)
-class GoalStatus:
-    ROS_TYPE: ClassVar[str] = "action_msgs/msg/GoalStatus"
-    UNKNOWN: ClassVar[int] = 0
-    ACCEPTED: ClassVar[int] = 1
-    EXECUTING: ClassVar[int] = 2
-    CANCELING: ClassVar[int] = 3
-    SUCCEEDED: ClassVar[int] = 4
-    CANCELED: ClassVar[int] = 5
-    ABORTED: ClassVar[int] = 6
-    goal_info: GoalInfo = field(default_factory=GoalInfo)
-    status: int = 0
-
-
-@dataclass(frozen=True)
-class GoalStatusArray:
-    ROS_TYPE: ClassVar[str] = "action_msgs/msg/GoalStatusArray"
-    status_list: tuple[GoalStatus, ...] = ()
-
-
-@dataclass(frozen=True)
-class CancelGoalRequest:
-    ROS_TYPE: ClassVar[str] = "action_msgs/srv/CancelGoal_Request"
-    goal_info: GoalInfo = field(default_factory=GoalInfo)
-
-
-@dataclass(frozen=True)
-class CancelGoalResponse:
-    ROS_TYPE: ClassVar[str] = "action_msgs/srv/CancelGoal_Response"
-    ERROR_NONE: ClassVar[int] = 0
-    ERROR_REJECTED: ClassVar[int] = 1
-    ERROR_UNKNOWN_GOAL_ID: ClassVar[int] = 2
-    ERROR_GOAL_TERMINATED: ClassVar[int] = 3
-    return_code: int = 0
-    goals_canceling: tuple[GoalInfo, ...] = ()
-
-
-@dataclass(frozen=True)
-class CancelGoal:
-    ROS_TYPE: ClassVar[str] = "action_msgs/srv/CancelGoal"
-    Request: ClassVar[type] = CancelGoalRequest
-    Response: ClassVar[type] = CancelGoalResponse
-
-
-_ENDED = (GoalStatus.SUCCEEDED, GoalStatus.CANCELED, GoalStatus.ABORTED)
+_ENDED = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
 
 
 @dataclass
 class GoalHandle:
     """One accepted goal: its id, goal, status, and how it ended."""
 
-    goal_id: UUID
+    goal_id: Any  # a UUID mirror
     goal: Any
     stamp: Time
-    status: int = GoalStatus.ACCEPTED
+    status: int = 1  # GoalStatus.STATUS_ACCEPTED
     result: Any = None
     aborted: bool = False  # execute() sets it for a goal that failed
     cancel_requested: bool = False
     done: asyncio.Event = field(default_factory=asyncio.Event)
 
     @property
-    def info(self) -> GoalInfo:
+    def info(self) -> Any:
         return GoalInfo(self.goal_id, self.stamp)
 
 
@@ -154,42 +105,42 @@ class ActionServer:
         return self.action.SendGoal.Response(True, stamp)
 
     async def _run(self, handle: GoalHandle) -> None:
-        handle.status = GoalStatus.EXECUTING
+        handle.status = GoalStatus.STATUS_EXECUTING
         self._publish_status()
         try:
             handle.result = await self._execute(handle)
             if handle.cancel_requested:
-                handle.status = GoalStatus.CANCELED
+                handle.status = GoalStatus.STATUS_CANCELED
             else:
-                handle.status = GoalStatus.ABORTED if handle.aborted else GoalStatus.SUCCEEDED
+                handle.status = GoalStatus.STATUS_ABORTED if handle.aborted else GoalStatus.STATUS_SUCCEEDED
         except Exception as error:  # noqa: BLE001 - the goal ends aborted; the node hears why
             self.node.report_fault(f"action {self.name}", error)
             handle.result = self.action.Result()
-            handle.status = GoalStatus.ABORTED
+            handle.status = GoalStatus.STATUS_ABORTED
         handle.done.set()
         self._publish_status()
 
     async def _on_get_result(self, request: Any) -> Any:
         handle = self.goals.get(request.goal_id.uuid)
         if handle is None:
-            return self.action.GetResult.Response(GoalStatus.UNKNOWN, self.action.Result())
+            return self.action.GetResult.Response(GoalStatus.STATUS_UNKNOWN, self.action.Result())
         await handle.done.wait()
         return self.action.GetResult.Response(handle.status, handle.result)
 
     _on_get_result.long_running = True  # type: ignore[attr-defined]
 
-    async def _on_cancel_goal(self, request: CancelGoalRequest) -> CancelGoalResponse:
+    async def _on_cancel_goal(self, request: Any) -> Any:
         wanted = request.goal_info.goal_id.uuid
         everything = not any(wanted)
         chosen = [h for h in self.goals.values() if everything or h.goal_id.uuid == wanted]
         if not chosen:
-            return CancelGoalResponse(CancelGoalResponse.ERROR_UNKNOWN_GOAL_ID)
+            return CancelGoalResponse(CancelGoalResponse.ERROR_UNKNOWN_GOAL_ID, ())
         active = [h for h in chosen if h.status not in _ENDED]
         if not active:
-            return CancelGoalResponse(CancelGoalResponse.ERROR_GOAL_TERMINATED)
+            return CancelGoalResponse(CancelGoalResponse.ERROR_GOAL_TERMINATED, ())
         for handle in active:
             handle.cancel_requested = True
-            handle.status = GoalStatus.CANCELING
+            handle.status = GoalStatus.STATUS_CANCELING
             self._cancel(handle)
         self._publish_status()
         return CancelGoalResponse(CancelGoalResponse.ERROR_NONE, tuple(h.info for h in active))
