@@ -31,6 +31,8 @@ DIAMETER_TOLERANCE = 0.0002
 #: How far an arm of a dual-arm robot moves aside, towards its own side, when it leaves a hole (m):
 #: the other arm works on the same hole next, and two hands do not fit above one hole.
 PARK_ASIDE = 0.10
+#: ... and at least this far from the robot's middle plane (y = 0, m), out of a zone around the part.
+PARK_Y = 0.14
 
 
 class RivetInstallation(CoreFunctions):
@@ -47,7 +49,8 @@ class RivetInstallation(CoreFunctions):
         yield MoveCartesian(above, "linear", frame=f"{frame} clearance")
         side = {"left_arm": 1.0, "right_arm": -1.0}.get(self.ctx.group, 0.0)
         if side:
-            yield MoveCartesian(above.translated(dy=side * PARK_ASIDE), "ptp", frame=f"{frame} aside")
+            aside = side * max(side * above.y + PARK_ASIDE, PARK_Y)
+            yield MoveCartesian(above.translated(dy=aside - above.y), "ptp", frame=f"{frame} aside")
 
     def _process(self, *moves: MoveCartesian) -> Skill:
         """Run contact moves slowly, then restore full speed for the free moves that follow."""
