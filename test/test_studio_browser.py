@@ -97,7 +97,9 @@ def test_built_in_the_page_saved_validated_run_paused_resumed_and_checked_agains
     trace = folder / "run.jsonl"
     served = open_station(driver, folder, speed=2.0, trace=str(trace))
     try:
-        # ---- build from scratch: the new application, the rivet cell, two operations
+        # ---- the catalog lists every function; build from scratch: a new application, the rivet cell, two operations
+        listed = {e.get_attribute("data-name") for e in driver.find_elements(By.CSS_SELECTOR, ".catalog-fn")}
+        assert listed == set(full_catalog().names())
         driver.find_element(By.ID, "new-btn").click()
         Select(driver.find_element(By.ID, "app-robot")).select_by_value("nextage_open")
         for field, value in (("doc-path", "built.xml"), ("app-name", "built_in_the_page"), ("app-cell", "cells/rivet_cell.xml")):

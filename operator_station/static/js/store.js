@@ -63,13 +63,13 @@ const Store = (() => {
     if (store.cursor === null && store.snapshot && store.snapshot.mode === "live") return status;
     let state = "idle", operation = null;
     const ops = (store.snapshot && store.snapshot.operations) || [];
+    const seen = new Set();  // a replay knows no operation list: the operations met so far, in order
     for (const r of store.visible()) {
       if (r.event === "engine_state") state = r.to;
-      if (r.operation && r.group !== "engine") operation = r.operation;
+      if (r.operation && r.group !== "engine") { operation = r.operation; seen.add(r.operation); }
     }
-    const index = ops.findIndex((o) => o.id === operation);
-    return {state, operation_id: operation, operation_index: index >= 0 ? index + 1 : 0,
-            operation_count: ops.length || status.operation_count || 0, t: store.now()};
+    const index = ops.length ? ops.findIndex((o) => o.id === operation) + 1 : seen.size;
+    return {state, operation_id: operation, operation_index: index, operation_count: ops.length || status.operation_count || 0, t: store.now()};
   };
 
   function connect() {

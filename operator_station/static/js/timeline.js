@@ -67,7 +67,7 @@ const Timeline = (() => {
     box.replaceChildren(root);
     const slider = $("tl-slider");
     slider.max = String(Math.max(model.total_end || end, end));
-    if (Store.cursor === null) slider.value = slider.max;
+    slider.value = Store.cursor === null ? slider.max : String(Store.cursor);
     $("tl-cursor").textContent = Store.cursor === null ? `live (${end.toFixed(2)} s)` : `${Store.cursor.toFixed(2)} s`;
     $("tl-legend").replaceChildren(`${model.bars} function bar(s), ${model.records} record(s) `,
       ...Object.entries(model.colours).map(([state, colour]) => Object.assign(document.createElement("span"), {className: "swatch", textContent: state, style: `background:${colour}`})));

@@ -1,0 +1,116 @@
+"""The screenshots of docs/studio.md, taken in headless Chromium with the tests' own driver.
+
+Usage: python -m operator_station.screenshots [docs/img]
+
+Serves a station on the rivet demonstrator (a copy, in a temporary folder) at 4x, shows the
+builder with a cell selected and a bad edit, runs the application and shoots the monitor while
+both arms work, the timeline when it has finished, then replays the trace and shoots the monitor
+and the timeline with the time slider put back to the middle of the run.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from app_functions.registry import full_catalog
+from operator_station import browser
+from operator_station.cli import build_station
+from operator_station.testing import serve
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _args(**changes: Any) -> argparse.Namespace:
+    args = argparse.Namespace(file=None, replay=None, controller_host=None, controller_port=None, rsi_listen=None, fault=None, seed=0,
+                              backend_option=None, robot=None, speed=math.inf, trace=None, trajectory_db=":memory:", no_check=False)
+    vars(args).update(changes)
+    return args
+
+
+def _until(driver: Any, script: str, timeout: float = 120.0) -> None:
+    """Poll a page expression until it holds (bounded; wall time: the page is real)."""
+    deadline = time.monotonic() + timeout
+    while not driver.execute_script(f"try {{ return !!({script}); }} catch (e) {{ return false; }}"):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the page never showed: {script}")
+        time.sleep(0.05)
+
+
+def _tab(driver: Any, name: str) -> None:
+    driver.find_element("id", f"tab-{name}").click()
+    time.sleep(0.5)  # a frame or two for the view to lay out before the picture (a picture, not a test)
+
+
+def shoot(out: Path) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    shots: list[Path] = []
+    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
+        folder = Path(name)
+        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
+        shutil.copy(ROOT / "apps_xml" / "rivet_installation.xml", folder / "rivet_installation.xml")
+        trace = folder / "run.jsonl"
+        driver = browser.chromium(1600, 1000)
+        served = serve(build_station(_args(file="rivet_installation.xml", speed=4.0, trace=str(trace)), full_catalog(), folder))
+        take: Callable[[str], None] = lambda name: (driver.save_screenshot(str(out / name)), shots.append(out / name))  # noqa: E731
+        try:
+            driver.get(served.url)
+            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
+            driver.execute_script("Builder.select(1, 'left_arm')")
+            field = driver.find_element("id", "param-0")
+            field.clear()
+            field.send_keys("drill_9")
+            _until(driver, "document.querySelector('.op-cell.has-error') !== null")
+            take("studio_builder.png")
+            field = driver.find_element("id", "param-0")
+            field.clear()
+            field.send_keys("drill_1")
+            _until(driver, "Builder.state.valid === true")
+            driver.find_element("id", "ctl-start").click()
+            _until(driver, "['Motion','Vision','EndEffector'].includes(Store.groupView().left_arm.state) && Store.groupView().right_arm.state === 'Motion'")
+            take("studio_monitor.png")
+            _until(driver, "document.getElementById('engine-state').textContent === 'finished'", 300.0)
+            served.station.session.join(60.0)  # type: ignore[union-attr]
+            _tab(driver, "timeline")
+            _until(driver, "Timeline.model() && Timeline.model().bars > 0")
+            take("studio_timeline.png")
+        finally:
+            served.close()
+        replay = serve(build_station(_args(replay=str(trace)), full_catalog(), folder))
+        try:
+            driver.get(replay.url)
+            _until(driver, "Store.snapshot && Store.snapshot.mode === 'replay' && Store.records.length > 0")
+            _tab(driver, "timeline")
+            _until(driver, "Timeline.model() && Timeline.model().bars > 0")
+            middle = driver.execute_script("return Timeline.model().end / 2")
+            driver.execute_script(f"Store.setCursor({middle})")
+            _until(driver, f"Timeline.model() && Math.abs(Timeline.model().end - {middle}) < 1e-6")
+            take("studio_replay_timeline.png")
+            _tab(driver, "monitor")
+            take("studio_replay_monitor.png")
+        finally:
+            replay.close()
+            driver.quit()
+    return shots
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", nargs="?", default=str(ROOT / "docs" / "img"))
+    args = parser.parse_args()
+    if browser.missing():
+        print(f"cannot take screenshots: {browser.missing()}", file=sys.stderr)
+        return 2
+    for path in shoot(Path(args.out)):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
