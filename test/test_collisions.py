@@ -155,3 +155,63 @@ def test_the_simulator_stops_the_cell_when_two_arms_collide_at_run_time(tmp_path
     assert "-> ErrorHandling (error)" in text
     assert "collision: " in text and "collision between left_arm hand (LARM_JOINT5_Link) and right_arm hand (RARM_JOINT5_Link)" in text
     assert "not retried: collision is deterministic" in text
+
+
+# ------------------------------------------------------------------ the cell's boxes and zones, read
+def cell_file(folder: Path, body: str, unit: str = "mm") -> Path:
+    path = folder / "cell.xml"
+    path.write_text(f'<?xml version="1.0"?>\n<cell name="c" length_unit="{unit}">\n{body}</cell>\n', encoding="utf-8")
+    return path
+
+
+def test_boxes_and_zones_are_read_in_the_length_unit_and_reach_the_collision_model(tmp_path: Path) -> None:
+    from execution_engine.app_model import load_cell
+
+    path = cell_file(tmp_path, '<frame name="part" xyz="340 0 0" box="120 200 10" box_xyz="0 0 -5"/>\n<zone name="z" parent="part" xyz="0 0 50" size="160 220 140"/>\n')
+    cell = load_cell(path)
+    assert [float(v) for v in cell.frame("part").attributes["box"].split()] == pytest.approx([0.12, 0.2, 0.01])
+    zone = cell.zones["z"]
+    assert zone.size == pytest.approx((0.16, 0.22, 0.14)) and zone.centre == pytest.approx((0.0, 0.0, 0.05))
+    assert zone.contains(cell.pose("part"), (0.34, 0.1, 0.1)) and not zone.contains(cell.pose("part"), (0.34, 0.12, 0.1))
+    from robot_bridges.collision import cell_boxes
+
+    (box,) = cell_boxes(cell.to_snapshot())
+    assert box.frame == "part" and box.size == pytest.approx((0.12, 0.2, 0.01)) and box.pose.position == pytest.approx((0.34, 0.0, -0.005))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**9, 10**9)), min_size=0, max_size=4), st.sampled_from(["box", "box_xyz"]))
+def test_a_bad_box_is_one_line_at_its_attribute_and_a_good_one_is_metres(values: list[float], attribute: str) -> None:
+    """Random numbers: either a box within the bounds (kept in metres) or one error naming the attribute."""
+    import tempfile
+
+    from execution_engine.app_model import validate_cell
+
+    text = " ".join(str(v) for v in values)
+    extra = ' box="1 1 1"' if attribute == "box_xyz" else ""
+    with tempfile.TemporaryDirectory() as folder:
+        path = cell_file(Path(folder), f'<frame name="f"{extra} {attribute}="{text}"/>\n')
+        found = [d for d in validate_cell(path) if d.severity == "error"]
+    ok = len(values) == 3 and all(math.isfinite(v) and abs(v) <= 100_000 for v in values) and (attribute == "box_xyz" or min(values) > 0)
+    if ok:
+        assert found == []
+    else:
+        assert found and all(d.line == 3 and attribute in d.message for d in found)  # the schema and the bounds may both say it
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**9, 10**9)), min_size=0, max_size=4))
+def test_a_bad_zone_size_is_one_line_and_a_good_one_a_zone(values: list[float]) -> None:
+    import tempfile
+
+    from execution_engine.app_model import load_cell, validate_cell
+
+    text = " ".join(str(v) for v in values)
+    with tempfile.TemporaryDirectory() as folder:
+        path = cell_file(Path(folder), f'<zone name="z" size="{text}"/>\n')
+        found = [d for d in validate_cell(path) if d.severity == "error"]
+        ok = len(values) == 3 and all(math.isfinite(v) and 0 < v <= 100_000 for v in values)
+        if ok:
+            assert found == [] and load_cell(path).zones["z"].size == pytest.approx(tuple(v / 1000 for v in values))
+        else:
+            assert found and all(d.line == 3 and "size" in d.message for d in found)

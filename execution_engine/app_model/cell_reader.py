@@ -117,9 +117,12 @@ class CellReader:
             text = attributes.get(name)
             if text is None:
                 continue
-            values = _numbers3(text)
-            if values is None:
-                self.report(at, name, f"{name} of <{element.tag}> {label} must be three numbers (x y z, {self.length_unit}), got {text!r}")
+            values = _numbers3(text, finite=False)
+            if values is None:  # not three numbers: the schema says so
+                del attributes[name]
+                continue
+            if not all(math.isfinite(v) for v in values):
+                self.report(at, name, f"{name} of <{element.tag}> {label} must be finite numbers, got {text!r}")
                 del attributes[name]
                 continue
             scale = _LENGTH[self.length_unit]
@@ -307,9 +310,11 @@ class CellReader:
             self.report(at, "name", f"zone {name!r} is defined twice")
             return
         centre = self.vector(element, at, "xyz", repr(name))
-        size = _numbers3(element.get("size", ""))
+        size = _numbers3(element.get("size", ""), finite=False)
         scale = _LENGTH[self.length_unit]
-        if size is None or min(size) <= 0 or max(size) * scale > limits.LENGTH.upper:
+        if size is None:
+            return  # not three numbers: the schema says so
+        if not (min(size) > 0 and max(size) * scale <= limits.LENGTH.upper):  # false for nan and inf too
             self.report(at, "size", f"size of <zone> {name!r} must be three side lengths > 0 (x y z, {self.length_unit}), within the bound of a length")
             return
         if centre is None:
@@ -347,13 +352,13 @@ class CellReader:
         )
 
 
-def _numbers3(text: str) -> tuple[float, float, float] | None:
-    """Three finite numbers separated by spaces, or None."""
+def _numbers3(text: str, finite: bool = True) -> tuple[float, float, float] | None:
+    """Three numbers separated by spaces (finite ones unless ``finite`` is False), or None."""
     try:
         values = [float(v) for v in text.split()]
     except ValueError:
         return None
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+    if len(values) != 3 or finite and not all(math.isfinite(v) for v in values):
         return None
     return values[0], values[1], values[2]
 
