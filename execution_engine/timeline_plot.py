@@ -37,10 +37,17 @@ def _draw(timeline: Timeline, out: Path, title: str, groups: list[str], span: fl
     figure, axes = plt.subplots(figsize=(max(8.0, min(24.0, span / 4)), 1.2 + 0.9 * len(groups)))
     try:
         used: set[str] = set()
+        waited = False
         for row, group in enumerate(groups):
             lane = timeline.lanes[group]
             y = len(groups) - 1 - row
             for gap in lane.idle:
+                if gap.waiting:  # sync="flags": a wait for a flag or zone, named on the bar
+                    waited = True
+                    axes.barh(y, gap.duration, left=gap.t_start, height=0.5, color="#fff2cc", edgecolor="#c9a227", hatch="..", linewidth=0.5)
+                    if gap.duration > span / 40:
+                        axes.text(gap.t_start + gap.duration / 2, y, f"waiting for {gap.waiting}", ha="center", va="center", fontsize=6, clip_on=True)
+                    continue
                 axes.barh(y, gap.duration, left=gap.t_start, height=0.5, color="#f4f4f4", edgecolor="#cccccc", hatch="//", linewidth=0.3)
             for bar in lane.bars:
                 end = bar.end(timeline.t_end)
@@ -68,6 +75,8 @@ def _draw(timeline: Timeline, out: Path, title: str, groups: list[str], span: fl
         axes.set_title(title or "timeline")
         handles = [Patch(color=STATE_COLOURS[s], label=s) for s in STATE_COLOURS if s in used]
         handles.append(Patch(facecolor="#f4f4f4", edgecolor="#cccccc", hatch="//", label="idle"))
+        if waited:
+            handles.append(Patch(facecolor="#fff2cc", edgecolor="#c9a227", hatch="..", label="waiting (flag, zone)"))
         axes.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=7, frameon=False)
         figure.tight_layout()
         figure.savefig(out)

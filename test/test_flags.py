@@ -14,6 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from execution_engine.timeline import build_timeline
+from execution_engine.timeline_plot import plot_timeline
 from test_dry_run import RIVET_CELL, call, cli, param
 
 GROUPS = ("left_arm", "right_arm")
@@ -85,6 +86,8 @@ def test_no_group_passes_a_wait_flag_before_the_flag_is_set(tmp_path: Path) -> N
     timeline = build_timeline(records, GROUPS)
     waits = [g for g in timeline.lanes["right_arm"].idle if g.waiting]
     assert [(g.waiting, g.t_start, g.t_end) for g in waits] == [("flag left_ready", 0.0, 3.0)]
+    svg = plot_timeline(timeline, tmp_path / "timeline.svg").read_text()  # the Fig. 12 plot names the wait
+    assert "waiting for flag left_ready" in svg and "waiting (flag, zone)" in svg
 
 
 def test_a_wait_flag_that_times_out_fails_the_function(tmp_path: Path) -> None:
@@ -153,20 +156,10 @@ def test_a_master_slave_pair_meets_its_partner_in_flags_mode(tmp_path: Path) -> 
 
 
 # ------------------------------------------------------------------ interference zones
-ZONE = '  <zone name="at_part" parent="part" xyz="0 0 0.05" size="0.16 0.22 0.14"/>\n'
-
-
-def zoned_cell(folder: Path) -> Path:
-    cell = folder / "zoned_cell.xml"
-    text = RIVET_CELL.read_text(encoding="utf-8")
-    cell.write_text(text.replace("  <element ", ZONE + "  <element ", 1), encoding="utf-8")
-    return cell
-
-
 def write_zoned(folder: Path, operations: list[dict[str, str]]) -> tuple[Path, dict[tuple[int, str], int]]:
-    path, where = write(folder, operations)
-    path.write_text(path.read_text().replace(f'cell="{RIVET_CELL}"', f'cell="{zoned_cell(folder)}"'))
-    return path, where
+    """The rivet cell has the zone ``at_part`` over the part's holes."""
+    assert '<zone name="at_part"' in RIVET_CELL.read_text(encoding="utf-8")
+    return write(folder, operations)
 
 
 def test_a_zone_lets_one_group_in_at_a_time_in_application_order(tmp_path: Path) -> None:
