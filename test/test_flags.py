@@ -15,25 +15,16 @@ from hypothesis import strategies as st
 
 from execution_engine.timeline import build_timeline
 from execution_engine.timeline_plot import plot_timeline
-from test_dry_run import RIVET_CELL, call, cli, param
+from test_dry_run import RIVET_CELL, call, cli, param, write_app
 
 GROUPS = ("left_arm", "right_arm")
 
 
 def write(folder: Path, operations: list[dict[str, str]], sync: str = "flags") -> tuple[Path, dict[tuple[int, str], int]]:
-    """An application with one line per call; (operation number, group) -> line."""
-    path = folder / "app.xml"
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>', f'<application name="flags" robot="nextage" cell="{RIVET_CELL}" sync="{sync}">']
-    where: dict[tuple[int, str], int] = {}
-    for number, calls in enumerate(operations, start=1):
-        lines.append(f'  <operation id="{number}">')
-        for group, function in calls.items():
-            lines.append(f"    <{group}>{function}</{group}>")
-            where[(number, group)] = len(lines)
-        lines.append("  </operation>")
-    lines.append("</application>")
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path, where
+    """An application with one line per call (test_dry_run's), in ``sync`` mode; (operation number, group) -> line."""
+    path, where = write_app(folder, "nextage", RIVET_CELL, operations)
+    path.write_text(path.read_text(encoding="utf-8").replace('robot="nextage"', f'robot="nextage" sync="{sync}"', 1), encoding="utf-8")
+    return path, {(int(op), group): int(place.split(":")[-2]) for (op, group), place in where.items()}
 
 
 def wait(seconds: float) -> str:

@@ -41,6 +41,7 @@ from core_functions.primitives import (
 from core_functions.trajectory_store import StoredTrajectory, TrajectoryStore
 from execution_engine.dry_run.motions import GripRecord, MotionRecord, planned, straight
 from execution_engine.dry_run.recorder import Recorder
+from execution_engine.dry_run.report import Span
 from execution_engine.transport.wire import CellSnapshot
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 
@@ -139,26 +140,25 @@ class DryRunBackend(RobotBackend):
             return self.as_if_done(group, primitive)
         span = self.recorder.span(group, held, what, start, timing.now())
         if before is not None:
-            self._keep_motion(group, held, what, span.start, span.end, before)
+            self._keep_motion(span, before)
         elif isinstance(primitive, EndEffector) and primitive.action in ("gripper_close", "gripper_open"):
             self.grips.append(GripRecord(group, span.operation, span.function, span.end, primitive.action == "gripper_close"))
         return result
 
-    def _keep_motion(self, group: str, held: tuple[str, ...], what: str, start: float, end: float, before: tuple[tuple[str, ...], tuple[float, ...]]) -> None:
-        located = self.recorder.locate(group) or ("?", "?")
-        plan = self._planned.pop(group, None)
+    def _keep_motion(self, span: Span, before: tuple[tuple[str, ...], tuple[float, ...]]) -> None:
+        plan = self._planned.pop(span.group, None)
         if plan is not None:
             joints, motion, duration = plan
             sampler = planned(motion, duration)
-            end = start + duration
+            span = replace(span, end=span.start + duration)
         else:
             names, after = self.inner.joint_state()
             moved = [k for k, (a, b) in enumerate(zip(before[1], after)) if a != b]
             if not moved:
                 return
             joints = tuple(names[k] for k in moved)
-            sampler = straight([before[1][k] for k in moved], [after[k] for k in moved], end - start)
-        self.motions.append(MotionRecord(group, held, located[0], located[1], what, start, end, joints, sampler))
+            sampler = straight([before[1][k] for k in moved], [after[k] for k in moved], span.duration)
+        self.motions.append(MotionRecord(span, joints, sampler))
 
     def _note_controller(self, group: str, error: BridgeError) -> None:
         """Give the controller up when it fails twice in a row with the same controller fault."""

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from execution_engine.dry_run.report import Span
+
 Vector = NDArray[np.float64]
 #: Positions of a motion's joints ``t`` seconds into it.
 Sampler = Callable[[float], Vector]
@@ -22,21 +24,28 @@ Sampler = Callable[[float], Vector]
 
 @dataclass(frozen=True)
 class MotionRecord:
-    """One motion of ``group`` (holding ``groups``) in call (``operation``, ``function``)."""
+    """One motion: its span on the timeline (who, which call, when: ending at the motion's own end),
+    the joints it moves, by name, and their positions ``t`` seconds after its start (held at the end)."""
 
-    group: str
-    groups: tuple[str, ...]
-    operation: str
-    function: str
-    primitive: str
-    start: float
-    end: float
-    joints: tuple[str, ...]  # the joints it moves, by name
-    at: Sampler  # their positions ``t`` seconds after ``start`` (held at the end after it)
+    span: Span
+    joints: tuple[str, ...]
+    at: Sampler
+
+    @property
+    def group(self) -> str:
+        return self.span.group
+
+    @property
+    def start(self) -> float:
+        return self.span.start
+
+    @property
+    def end(self) -> float:
+        return self.span.end
 
     @property
     def duration(self) -> float:
-        return self.end - self.start
+        return self.span.duration
 
 
 @dataclass(frozen=True)
