@@ -53,9 +53,13 @@ def start_and_kill(folder: Path, after_lines: int) -> Path:
     )
     deadline = time.monotonic() + 120
     while process.poll() is None and time.monotonic() < deadline:
-        if trace.exists() and trace.read_bytes().count(b"\n") >= after_lines:
-            break
+        try:
+            if trace.read_bytes().count(b"\n") >= after_lines:
+                break
+        except FileNotFoundError:  # not created yet
+            pass
         time.sleep(0.002)  # polling the file the run writes, not waiting for a guess
+    assert process.poll() is None, f"the run ended before the kill: {process.stderr.read().decode() if process.stderr else ''}"
     os.kill(process.pid, signal.SIGKILL)
     process.wait(30)
     return trace
