@@ -64,7 +64,9 @@ def vision_lines(timeline: Timeline) -> list[str]:
                 pose = result.get("pose") if isinstance(result, dict) and result.get("kind") == "vision" else None
                 if isinstance(pose, dict):
                     xyz = ", ".join(f"{1000 * float(pose.get(k, 0.0)):.2f}" for k in ("x", "y", "z"))
-                    found.append((p.t_start, f"  vision: {p.t_start:9.3f} s {lane.group} {p.name}: at ({xyz}) mm, score {result.get('score', '?')}"))
+                    score = result.get("score")
+                    score_text = f"{score:.3f}" if isinstance(score, (int, float)) else "?"
+                    found.append((p.t_start, f"  vision: {p.t_start:9.3f} s {lane.group} {p.name}: at ({xyz}) mm, score {score_text}"))
     return [line for _, line in sorted(found)]
 
 
