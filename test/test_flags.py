@@ -179,3 +179,40 @@ def test_a_zone_order_that_deadlocks_with_a_flag_is_refused(tmp_path: Path) -> N
     message = next(x for x in err.splitlines() if x.startswith(f"{path}:{where[(2, 'right_arm')]}:"))
     assert f"waits for zone 'at_part', where left_arm works first, at line {where[(2, 'left_arm')]}" in message
     assert f"waits for flag 'go', which right_arm sets only at line {where[(3, 'right_arm')]}" in message
+
+
+def test_an_operator_stop_ends_a_wait_for_a_flag(tmp_path: Path) -> None:
+    """A group waiting for a flag nobody will set soon: a stop ends the run at once, not at the timeout."""
+    import asyncio
+
+    from app_functions.registry import full_catalog
+    from execution_engine.app_model import load_application
+    from execution_engine.clock import run_with_clock, simulated_clock
+    from execution_engine.deployment import deploy_local
+    from robot_bridges.backend import BackendOptions
+    from robot_bridges.registry import create_backend
+
+    path, _ = write(tmp_path, [
+        {"left_arm": wait(500), "right_arm": call("wait_flag", param("late"))},
+        {"left_arm": call("set_flag", param("late"))},
+    ])
+    app = load_application(path, full_catalog())
+
+    async def main(clock):  # type: ignore[no-untyped-def]
+        backend = await create_backend("nextage-sim", clock, BackendOptions(app.robot))
+        deployment = await deploy_local(clock, app.robot, backend)
+        try:
+            engine = deployment.engine
+            running = asyncio.ensure_future(engine.run(app))
+            await clock.sleep(5.0)
+            assert engine.flags.waiting_for("right_arm") == "flag late"
+            ok, answer = await engine.operator_command("stop", "test")
+            assert ok, answer
+            report = await clock.wait_for(running, 30.0)
+            return report, clock.now()
+        finally:
+            await deployment.close()
+
+    report, t = run_with_clock(main, simulated_clock())
+    assert report.outcome == "stopped" and t < 10.0
+    assert [w.outcome for w in report.flag_waits] == ["stopped"]

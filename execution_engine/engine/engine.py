@@ -133,7 +133,7 @@ class ExecutionEngine:
         self._alarm_skip = self._skippable = False  # an interrupted function's alarm can be answered with skip
         self._progress: dict[str, GroupProgress] = {}
         self._tasks: set[asyncio.Task[tuple[bool, str]]] = set()  # safety-stop pauses under way
-        self.flags = FlagBoard(self.clock, self._publish_flag)  # set_flag / wait_flag (engine/flags.py)
+        self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)  # set_flag / wait_flag (engine/flags.py)
 
     # ============================================================================ running
     async def run(self, app: Application, resume: ResumePoint | None = None) -> RunReport:
@@ -198,7 +198,7 @@ class ExecutionEngine:
         self._stop_reason = None
         self._start_requested = False
         self._progress.clear()
-        self.flags = FlagBoard(self.clock, self._publish_flag)
+        self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)
 
     async def _await_machines(self) -> None:
         """Every group machine must be up (Ready, or Finish from an earlier run) before we start."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from core_functions.catalog import BindContext, Catalog
@@ -53,9 +53,10 @@ class FlagWait:
 class FlagBoard:
     """The flags of one run and the waits for them."""
 
-    def __init__(self, clock: Clock, publish: Callable[..., None]) -> None:
+    def __init__(self, clock: Clock, publish: Callable[..., None], stopped: Callable[[], bool] = lambda: False) -> None:
         self.clock = clock
         self.publish = publish  # (group, flag, state, operation[, kind]) -> an EngineEvent
+        self.stopped = stopped  # an operator stopped the run: every wait ends
         self._set: dict[str, asyncio.Event] = {}
         self.waits: list[FlagWait] = []
         self.waiting: dict[str, str] = {}  # group -> "flag X" it waits for now
@@ -75,22 +76,19 @@ class FlagBoard:
         self._event(name).set()
         self.publish(group, name, "set", operation)
 
-    async def wait(self, group: str, name: str, timeout: float, operation: str) -> bool:
-        """Wait until ``name`` is set (True) or ``timeout`` seconds of run time passed (False)."""
+    async def wait(self, group: str, name: str, timeout: float, operation: str) -> str:
+        """Wait until ``name`` is set ("passed"), ``timeout`` seconds of run time passed ("timeout") or
+        the run is stopped ("stopped": looked at every :data:`STOP_POLL` seconds)."""
         event = self._event(name)
         if event.is_set():
-            return True
+            return "passed"
         start = self.clock.now()
         self.waiting[group] = f"flag {name}"
         self.publish(group, name, "waiting", operation)
         outcome = "stopped"
         try:
-            await self.clock.wait_for(event.wait(), timeout)
-            outcome = "passed"
-            return True
-        except asyncio.TimeoutError:
-            outcome = "timeout"
-            return False
+            outcome = await until(self.clock, event, start + timeout, self.stopped)
+            return outcome
         finally:
             self.waiting.pop(group, None)
             self.waits.append(FlagWait(group, operation, name, start, self.clock.now(), outcome))
@@ -121,16 +119,39 @@ class FlagBoard:
         async def waiting() -> None:
             name, timeout = values[0], float(values[1])
             try:
-                ok = await self.wait(group, name, timeout, request.operation)
+                outcome = await self.wait(group, name, timeout, request.operation)
             except asyncio.CancelledError:
                 future.cancel()
                 raise
             waited = self.clock.now() - t0
+            if outcome == "stopped":
+                future.set_result(replace(answer(False, f"stopped while waiting for flag {name!r}"), outcome="preempted", fault=FaultKind.STOPPED))
+                return
+            ok = outcome == "passed"
             future.set_result(answer(ok, "" if ok else f"flag {name!r} was not set within {timeout:g} s (waited {waited:.2f} s)"))
 
         task = loop.create_task(waiting())
         future.add_done_callback(lambda f: task.cancel() if f.cancelled() else None)
         return future
+
+
+#: How often a wait looks whether the run was stopped (run seconds).
+STOP_POLL = 0.5
+
+
+async def until(clock: Clock, event: asyncio.Event, deadline: float, stopped: Callable[[], bool]) -> str:
+    """Wait for ``event``: "passed", "timeout" at ``deadline`` (run time) or "stopped" when ``stopped()``."""
+    while not event.is_set():
+        if stopped():
+            return "stopped"
+        left = deadline - clock.now()
+        if left <= 0:
+            return "timeout"
+        try:
+            await clock.wait_for(event.wait(), min(left, STOP_POLL))
+        except asyncio.TimeoutError:
+            continue
+    return "passed"
 
 
 def group_steps(app: Application, group: str, sits_out: Callable[[Call], bool]) -> list[tuple[Operation, Call]]:
@@ -142,7 +163,7 @@ async def run_groups(engine: ExecutionEngine, app: Application) -> None:
     """``sync="flags"``: each group through its own calls at once; the first failure ends them all."""
     from execution_engine.engine.zones import ZoneBoard  # zones build on this module's FlagWait
 
-    zones = ZoneBoard(app, engine.clock, engine._publish_flag, engine.flags.waits)
+    zones = ZoneBoard(app, engine.clock, engine._publish_flag, engine.flags.waits, engine.flags.stopped)
     engine.flags.zones = zones
     groups = [g for g in app.robot.group_names if group_steps(app, g, engine._sits_out)]
     tasks = {g: asyncio.ensure_future(run_group(engine, g, group_steps(app, g, engine._sits_out), zones)) for g in groups}

@@ -11,19 +11,24 @@ sweep checks that it really does).  Waits are kept and published like flag waits
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable
 
 from execution_engine.app_model.model import Application
 from execution_engine.app_model.zones import call_zones
 from execution_engine.clock import Clock
-from execution_engine.engine.flags import FlagWait
+from execution_engine.engine.flags import FlagWait, until
 
 
 class ZoneBoard:
     """The zones of one run: which calls work in each, in application order, and which have ended."""
 
-    def __init__(self, app: Application, clock: Clock, publish: Callable[[str, str, str, str | None, str], None], waits: list[FlagWait]) -> None:
+    def __init__(
+        self, app: Application, clock: Clock, publish: Callable[[str, str, str, str | None, str], None], waits: list[FlagWait],
+        stopped: Callable[[], bool] = lambda: False,
+    ) -> None:
         self.clock = clock
+        self.stopped = stopped  # an operator stopped the run: the waits end
         self.publish = publish  # (group, zone, state, operation, kind)
         self.waits = waits
         self.order: dict[str, list[tuple[int, str]]] = {}
@@ -43,7 +48,8 @@ class ZoneBoard:
         return all(k in self.ended for k in earlier)
 
     async def enter(self, index: int, group: str, operation: str) -> None:
-        """Wait until every earlier call in each zone of this call has ended."""
+        """Wait until every earlier call in each zone of this call has ended (ApplicationAborted on a stop)."""
+        from execution_engine.engine.engine import ApplicationAborted  # the engine imports the flags module
         key = (index, group)
         for zone in self.calls.get(key, ()):
             if self._free(zone, key):
@@ -54,8 +60,10 @@ class ZoneBoard:
             outcome = "stopped"
             try:
                 while not self._free(zone, key):
+                    if self.stopped():
+                        raise ApplicationAborted(f"{group} was stopped while waiting for zone {zone!r}")
                     self._changed.clear()
-                    await self._changed.wait()
+                    await until(self.clock, self._changed, math.inf, self.stopped)
                 outcome = "passed"
             finally:
                 self.waiting.pop(group, None)
