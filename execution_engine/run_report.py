@@ -88,6 +88,8 @@ def summarize(path: str | Path) -> RunSummary:
         if recording.cut:
             last = f" at {builder.t_last:.3f} s" if builder.t_first is not None else ""
             header.append(f"  CUT: the recording has no end (the run was killed or crashed); readable up to its last chunk{last}")
+            if recording.problem:
+                header.append(f"  reading stopped at damaged data: {recording.problem}")
         timeline = builder.snapshot()
         extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator")]
         return RunSummary(str(path), header, timeline, recording.cut, extra)

@@ -4,18 +4,20 @@ recording and a JSON-lines trace alike).
 
 The file is read as a stream from the start (never through its summary), so a recording cut by a
 crash yields every message up to its last whole chunk and then says it was cut; one without a
-footer was cut.  Messages come in file order, which is the order they were received.
+footer was cut.  Messages come in file order, which is the order they were received.  The file
+is outside input: whatever the libraries raise on damaged bytes (a bad CRC, a broken zstd frame,
+a schema that does not parse) ends the reading there, marked cut, never with a traceback.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import re
-import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap.records import Footer
 from mcap.stream_reader import StreamReader
@@ -60,15 +62,21 @@ def iter_messages(path: str | Path, recording: Recording) -> Iterator[DecodedMes
     """Every message of ``path`` decoded, in file order; fills ``recording`` as it goes."""
     with open(path, "rb") as stream:
         reader = NonSeekingReader(stream, decoder_factories=[DecoderFactory()])
-        try:
-            for schema, channel, message, decoded in reader.iter_decoded_messages(log_time_order=False):
-                recording.messages += 1
-                if recording.start_ns is None:
-                    recording.start_ns = message.log_time
-                yield DecodedMessage(channel.topic, schema.name if schema else "", message.log_time, decoded)
-        except (McapError, ValueError, EOFError, struct.error) as error:  # a cut or damaged file: keep what came before
-            recording.cut = True
-            recording.problem = f"{type(error).__name__}: {error}".rstrip(": ")
+        messages = reader.iter_decoded_messages(log_time_order=False)
+        while True:
+            try:
+                with contextlib.redirect_stderr(io.StringIO()):  # the schema parser prints what it refuses
+                    schema, channel, message, decoded = next(messages)
+            except StopIteration:
+                break
+            except Exception as error:  # noqa: BLE001 - a cut or damaged file (any of the libraries' errors): keep what came before
+                recording.cut = True
+                recording.problem = f"{type(error).__name__}: {error}".rstrip(": ")[:300]
+                break
+            recording.messages += 1
+            if recording.start_ns is None:
+                recording.start_ns = message.log_time
+            yield DecodedMessage(channel.topic, schema.name if schema else "", message.log_time, decoded)
     _read_extras(path, recording)
 
 
@@ -85,7 +93,7 @@ def _read_extras(path: str | Path, recording: Recording) -> None:
                     recording.attachments[record.name] = bytes(record.data)
                 elif isinstance(record, Footer):
                     footer = True
-        except (McapError, ValueError, EOFError, struct.error):
+        except Exception:  # noqa: BLE001 - damaged: what was read so far stands, and the file counts as cut
             pass
     if not footer:
         recording.cut = True
@@ -94,13 +102,14 @@ def _read_extras(path: str | Path, recording: Recording) -> None:
 def trace_records(path: str | Path, recording: Recording) -> Iterator[dict[str, Any]]:
     """The run's machine status and engine events as trace records (:mod:`execution_engine.observers`)."""
     for message in iter_messages(path, recording):
-        if message.ros_type != "std_msgs/msg/String":
+        data = getattr(message.msg, "data", None)
+        if message.ros_type != "std_msgs/msg/String" or not isinstance(data, str):  # (a damaged schema may lack the field)
             continue
         match = _STATUS.match(message.topic)
         try:
             if match is not None:
-                yield trace_record(codec.decode(SmStatus, message.msg.data, source=message.topic))
+                yield trace_record(codec.decode(SmStatus, data, source=message.topic))
             elif _EVENTS.match(message.topic):
-                yield engine_record(codec.decode(EngineEvent, message.msg.data, source=message.topic))
+                yield engine_record(codec.decode(EngineEvent, data, source=message.topic))
         except codec.WireError:
             continue
