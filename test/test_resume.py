@@ -182,3 +182,23 @@ def test_skip_answers_only_the_alarm_of_an_interrupted_function() -> None:
     ok, answer = decide("skip", "alarm", Flags(False, False))  # a failed function's alarm: retry or stop, not skip
     assert not ok and "use reset or stop" in answer
     assert decide("skip", "alarm", Flags(False, False, skippable=True)) == (True, "alarm acknowledged: the interrupted function is skipped (taken as done)")
+
+
+@pytest.mark.parametrize("content", [b"", b"not a database at all", "trajectories"])
+def test_resume_from_something_that_is_not_a_checkpoint_is_one_line_and_changes_nothing(tmp_path: Path, content: Any) -> None:
+    path = tmp_path / "cp.sqlite"
+    if content == "trajectories":  # another database of this program: the trajectory store
+        from core_functions.primitives import TrajectoryResult
+        from core_functions.trajectory_store import TrajectoryStore
+
+        store = TrajectoryStore(path)
+        store.save("right_arm", "sweep", TrajectoryResult(("a",), ((0.0,),), (0.0,)), "plan", 0.0)
+        store.close()
+    else:
+        path.write_bytes(content)
+    before = path.read_bytes()
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", str(path), "--trace", str(tmp_path / "t.jsonl")], out, err)
+    assert code == 2 and err.getvalue().count("\n") == 1 and "Traceback" not in err.getvalue()
+    assert ("not a checkpoint" in err.getvalue()) or ("holds no run" in err.getvalue())
+    assert path.read_bytes() == before and not (tmp_path / "t.jsonl").exists()

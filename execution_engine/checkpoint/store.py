@@ -52,14 +52,24 @@ class FunctionRow:
 class CheckpointStore:
     """One checkpoint file, opened for a run (``run`` is this run's number in it)."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, read_only: bool = False) -> None:
+        """Open (or create) a checkpoint; ``read_only`` only looks, and refuses a file that is not one
+        (a resume must never add tables to some other database it was pointed at)."""
         self.path = Path(path)
         try:
-            self._db = sqlite3.connect(str(self.path), isolation_level=None, timeout=5.0)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            self._db.executescript(SCHEMA)
-        except sqlite3.DatabaseError as error:
+            if read_only:
+                self._db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True, isolation_level=None, timeout=5.0)
+                tables = {row[0] for row in self._db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+                missing = {"meta", "runs", "functions", "hands", "trajectories", "counters"} - tables
+                if missing:
+                    self._db.close()
+                    raise CheckpointError(f"{self.path}: not a checkpoint file (it has no {', '.join(sorted(missing))} table)")
+            else:
+                self._db = sqlite3.connect(str(self.path), isolation_level=None, timeout=5.0)
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute("PRAGMA synchronous=FULL")
+                self._db.executescript(SCHEMA)
+        except sqlite3.Error as error:
             raise CheckpointError(f"{self.path}: not a checkpoint file ({error})") from None
         self.run = 0
 

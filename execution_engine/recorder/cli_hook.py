@@ -8,6 +8,7 @@ calls :func:`add_run_options`, :func:`prepare_flight` (before any file is writte
 from __future__ import annotations
 
 import argparse
+import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -67,10 +68,12 @@ def prepare_flight(app: Application, args: argparse.Namespace) -> None:
         return
     if not Path(resume).is_file():
         raise CheckpointError(f"--resume {resume}: no such checkpoint file")
-    store = CheckpointStore(resume)
+    store = CheckpointStore(resume, read_only=True)
     try:
         check_same(store, app)
         runs = store.runs()
+    except sqlite3.Error as error:  # tables of the right names, not of the right shape
+        raise CheckpointError(f"--resume {resume}: not a checkpoint of this program ({error})") from None
     finally:
         store.close()
     earlier = {p for _, trace, record in runs for p in (trace, record) if p}
