@@ -65,7 +65,7 @@ def load_replay(feed: Feed, path: Path) -> int:
         messages.append({"severity": "warning", "message": f"{path}: no run_end record: the run was cut (killed or crashed)"})
     feed.begin("replay", path.name, groups, structures={g: table_structure(g) for g in groups}, messages=messages, ended=True,
                status={"state": "replay", "operation_count": total, "t": records[-1]["t"] if records else 0.0})
-    joint_names = list(dict.fromkeys(n for r in records for n in _result(r).get("joint_names") or () if isinstance(n, str)))
+    joint_names = list(dict.fromkeys(n for r in records for n in _names(_result(r).get("joint_names")) if isinstance(n, str)))
     known = {name: float("nan") for name in joint_names}
     for record in records:
         feed.append(record)
@@ -75,6 +75,10 @@ def load_replay(feed: Feed, path: Path) -> int:
             feed.joint_sample(float(record["t"]), list(known.values()), force=True)
     feed.update(joint_names=joint_names)
     return len(records)
+
+
+def _names(value: Any) -> list[Any]:
+    return value if isinstance(value, list) else []
 
 
 def _result(record: dict[str, Any]) -> dict[str, Any]:

@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
 from starlette.testclient import TestClient  # noqa: E402
@@ -20,7 +22,10 @@ from app_functions.registry import full_catalog  # noqa: E402
 from execution_engine.cli import main as cli_main  # noqa: E402
 from execution_engine.timeline import build_timeline  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
+from operator_station.feed import Feed  # noqa: E402
+from operator_station.replay import load_replay  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
+from operator_station.timeline_view import TimelineView  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CATALOG = full_catalog()
@@ -219,3 +224,20 @@ def test_serving_beyond_loopback_warns(capsys: pytest.CaptureFixture[str]) -> No
     assert code == 2
     warning, error = err.getvalue().splitlines()
     assert warning.startswith("warning: serving on 0.0.0.0") and error.startswith("error: --port")
+
+
+_RECORD = st.fixed_dictionaries({"t": st.floats(0, 1e6) | st.text(max_size=3), "event": st.sampled_from(["transition", "function_start", "primitive_end", "run_end", "x"]),
+                                 "group": st.sampled_from(["left_arm", "engine", 3]), "result": st.none() | st.dictionaries(st.sampled_from(["joint_names", "positions"]), st.text(max_size=3) | st.lists(st.integers(), max_size=3))})
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(_RECORD, max_size=20).map(lambda rs: "".join(json.dumps(r) + "\n" for r in rs).encode()) | st.binary(max_size=400), st.integers(0, 400))
+def test_any_trace_file_even_cut_is_replayed_or_refused_line_by_line(tmp_path_factory: pytest.TempPathFactory, data: bytes, cut: int) -> None:
+    path = tmp_path_factory.mktemp("replay") / "trace.jsonl"
+    path.write_bytes(data[:cut])
+    feed = Feed()
+    count = load_replay(feed, path)
+    assert count == len(feed.records) and feed.snapshot.mode == "replay"
+    assert all(isinstance(r["t"], (int, float)) and isinstance(r["event"], str) for r in feed.records)
+    timeline = TimelineView(feed).model()
+    assert timeline["records"] == count
