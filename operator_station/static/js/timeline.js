@@ -83,7 +83,8 @@ const Timeline = (() => {
     $("tl-live").addEventListener("click", () => Store.setCursor(null));
   });
   Store.on("snapshot", () => { zoomFactor = 1; refreshSoon(0); });
-  Store.on("records", () => refreshSoon(300));
+  const shown = () => document.getElementById("view-timeline").classList.contains("active");
+  Store.on("records", () => { if (shown()) refreshSoon(300); });  // the model is asked for only while it is looked at
   Store.on("cursor", () => refreshSoon(0));
   Store.on("view", (view) => { if (view === "timeline") refreshSoon(0); });
   return {refresh, zoom, model: () => model};
