@@ -148,7 +148,8 @@ def test_pause_mid_skill_then_resume_runs_each_remaining_primitive_once_in_order
 
     executed, result = run_sim(main)
     kinds = [e.kind for e in executed]
-    assert kinds == ["move_cartesian", "vision", "move_cartesian", "end_effector", "set_speed", "move_cartesian", "set_speed", "dwell", "move_cartesian", "end_effector", "move_cartesian"]
+    # ... the last two: up to the clearance, then aside (the other arm works at this hole next)
+    assert kinds == ["move_cartesian", "vision", "move_cartesian", "end_effector", "set_speed", "move_cartesian", "set_speed", "dwell", "move_cartesian", "end_effector", "move_cartesian", "move_cartesian"]
     assert result.outcome == "succeeded" and result.primitives == len(kinds)
     # the vision-corrected hole is used for every contact move after the vision step
     nominal = CELL.frames[0].pose
@@ -331,10 +332,10 @@ def test_status_events_carry_operation_function_and_primitive_index(run_sim: Any
 
     events = run_sim(main)
     starts = [e for e in events if e["event"] == "primitive_start"]
-    assert [e["index"] for e in starts] == list(range(1, 12))
+    assert [e["index"] for e in starts] == list(range(1, 13))
     assert all(e["operation"] == "op7" and e["function"] == "debur_drilling" for e in events if e["event"] != "transition" or e["to"] != READY)
     end = [e for e in events if e["event"] == "function_end"][0]
-    assert end["count"] == 11 and end["outcome"] == "succeeded"
+    assert end["count"] == 12 and end["outcome"] == "succeeded"
     times = [e["t"] for e in events]
     assert times == sorted(times)
     json.dumps(events)

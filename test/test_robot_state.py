@@ -64,7 +64,8 @@ class Inbox:
 
 async def nextage_cell(clock: Clock) -> tuple[LocalTransport, NextageSimBackend, BridgeNode]:
     transport = LocalTransport(clock)
-    backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN))
+    # random joint values pass through the robot's own body: this is about tf, not collisions
+    backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN, extra={"collision_check": "off"}))
     assert isinstance(backend, NextageSimBackend)
     bridge = BridgeNode(transport.create_node("nextage_sim_bridge"), backend)
     await bridge.start()
