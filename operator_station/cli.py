@@ -33,6 +33,8 @@ def add_parser(sub: Any) -> None:
     studio.add_argument("--port", type=int, default=8080, help="HTTP port of the station (default 8080)")
     studio.add_argument("--host", default="127.0.0.1", help="address to serve on (default loopback; anything else is reachable from the network)")
     studio.add_argument("--replay", metavar="TRACE.jsonl", help="show a finished run's trace instead of running anything")
+    studio.add_argument("--transport", choices=("local", "ros"), default="local",
+                        help="local: run the application in this process (default); ros: watch and command a cell running on the ROS graph (needs APP.xml for its groups, and rclpy)")
     studio.add_argument("--controller-host", dest="controller_host", help="V+ controller address (none starts the simulator); run's --host")
     studio.add_argument("--controller-port", dest="controller_port", type=int, help="V+ controller port; run's --port")
     for action in sub.choices["run"]._actions:  # noqa: SLF001 - argparse has no public way to share options
@@ -52,10 +54,41 @@ def build_station(args: argparse.Namespace, catalog: Catalog, root: Path) -> Any
     if args.replay:
         load_replay(feed, Path(args.replay))
         return Station(catalog, feed, None, root, app_path, replay=True)
+    if getattr(args, "transport", "local") == "ros":
+        return _attached(args, catalog, feed, root, app_path)
     options = {"host": args.controller_host, "port": args.controller_port, "rsi_listen": args.rsi_listen,
                "faults": tuple(args.fault or ()), "seed": args.seed, "extra": dict(args.backend_option or ())}
     settings = RunSettings(args.robot, options, args.speed, Path(args.trace) if args.trace else None, args.trajectory_db, not args.no_check)
     return Station(catalog, feed, RunSession(feed, settings), root, app_path)
+
+
+class StudioError(Exception):
+    """A setting the station cannot work with: one line for the operator."""
+
+
+def _attached(args: argparse.Namespace, catalog: Catalog, feed: Any, root: Path, app_path: Path | None) -> Any:
+    """A station watching a cell on the ROS graph: the application names the robot (its groups)."""
+    import importlib.util
+
+    from core_functions.robots import find_robot
+    from execution_engine.app_model.document import read_document
+    from operator_station.attach import AttachedSession, ros_connect
+    from operator_station.server import Station
+
+    if app_path is None:
+        raise StudioError("--transport ros needs the application the cell runs (APP.xml): it names the robot and its groups")
+    if importlib.util.find_spec("rclpy") is None:
+        raise StudioError("--transport ros needs rclpy: source a ROS 2 installation first (docs/ros2.md)")
+    document, problems = read_document(app_path)
+    if document is None:
+        raise StudioError(str(problems[0]) if problems else f"{app_path}: cannot be read")
+    try:
+        robot = find_robot(document.robot)
+    except KeyError as error:
+        raise StudioError(f"{app_path}: {error.args[0]}") from None
+    session = AttachedSession(feed, robot, document.name, ros_connect(["operator_station"]))
+    session.attach()
+    return Station(catalog, feed, session, root, app_path)
 
 
 def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr) -> int:
@@ -77,6 +110,9 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
         return 2
     try:
         station = build_station(args, catalog, Path.cwd())
+    except StudioError as error:
+        err.write(f"error: {error}\n")
+        return 2
     except OSError as error:
         err.write(f"error: {error}\n")
         return 1
@@ -104,6 +140,8 @@ async def _serve(server: Any, station: Any) -> None:
         await server.serve()
     finally:
         station.stopping.set()
-        if station.session is not None and station.session.running:
+        if station.session is not None and station.session.running:  # a run of its own: stopped with the station
             await station.session.command("stop")
             await asyncio.to_thread(station.session.join, 30.0)
+        elif station.session is not None:  # an attached cell goes on; the station leaves its graph
+            await asyncio.to_thread(station.session.join, 10.0)

@@ -40,6 +40,7 @@ from execution_engine.app_model.document import AppDocument, DocumentError, read
 from execution_engine.transport.wire import ENGINE_SERVICES
 from operator_station import builder
 from operator_station.feed import Feed
+from operator_station.attach import AttachedSession
 from operator_station.session import RunSession
 from operator_station.timeline_view import TimelineView
 
@@ -57,7 +58,9 @@ MAX_BATCH = 5000
 class Station:
     """The state one station serves: catalog, the application file, the feed and the run."""
 
-    def __init__(self, catalog: Catalog, feed: Feed, session: RunSession | None, root: Path, app_path: Path | None, replay: bool = False) -> None:
+    def __init__(
+        self, catalog: Catalog, feed: Feed, session: RunSession | AttachedSession | None, root: Path, app_path: Path | None, replay: bool = False,
+    ) -> None:
         self.catalog = catalog
         self.catalog_json = builder.catalog_view(catalog)
         self.feed = feed
@@ -173,6 +176,9 @@ def create_app(station: Station) -> Starlette:
     async def run(path: Path, doc: AppDocument) -> Response:
         if station.session is None:
             return _error("this station replays a trace; it runs nothing", 409)
+        if isinstance(station.session, AttachedSession):  # the cell runs elsewhere: its engine's start service
+            ok, answer = await station.session.command("start")
+            return FastJSON({"ok": ok, "answer": answer, "messages": []}, status_code=200 if ok else 409)
         app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
         if app is None:
             return FastJSON({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from core_functions.robots import RobotModel
 from execution_engine.app_model import Application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.deployment import Deployment, deploy_local
@@ -29,6 +30,7 @@ from execution_engine.engine.report import RunReport
 from execution_engine.observers import RunObserver, TraceWriter
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import Bool, JointState, String
+from execution_engine.transport.port import Node
 from execution_engine.transport.qos import LATCHED, SENSOR
 from execution_engine.transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
@@ -143,7 +145,7 @@ class RunSession:
         node = deployment.transport.create_node("operator_station")
         writer = TraceWriter(trace) if trace is not None else None
         page = TraceWriter(FeedStream(self.feed))  # the page gets the trace's records, written by the same code
-        self._observe(node, app, writer, page)
+        observe(node, app.robot, self.feed, [w for w in (writer, page) if w is not None])
         self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
         self._loop, self._deployment = asyncio.get_running_loop(), deployment
         self._ready.set()
@@ -162,27 +164,6 @@ class RunSession:
             self._loop = None
             await deployment.close()
 
-    def _observe(self, node: Any, app: Application, writer: TraceWriter | None, page: TraceWriter) -> None:
-        observer = RunObserver(node, app.robot.group_names)
-        feed = self.feed
-        for each in (writer, page):  # the trace first, as run does: what the page shows is on disk already
-            if each is not None:
-                observer.sinks.append(each.on_status)
-                observer.engine_sinks.append(each.on_engine)
-                observer.event_sinks.append(each.on_event)
-        observer.engine_sinks.append(lambda status: feed.update(status=_status_json(status)))
-        for group in app.robot.group_names:
-            node.create_subscription(String, sm_topic(group, "structure"), _decoded(SmStructure, lambda s: feed.structure(s.group, _structure_json(s))), LATCHED)
-        order = list(app.robot.joint_names)
-        feed.update(joint_names=order)
-
-        def on_joints(msg: JointState) -> None:
-            index = dict(zip(msg.name, msg.position))
-            if all(name in index for name in order):
-                feed.joint_sample(node.clock.now(), [index[name] for name in order])
-
-        node.create_subscription(JointState, JOINT_STATES, on_joints, SENSOR)
-
     # ------------------------------------------------------------------------ the page's side
     async def command(self, command: str) -> tuple[bool, str]:
         """An operator command from the page, given to the engine on the run's loop; the engine's answer."""
@@ -197,11 +178,37 @@ class RunSession:
 
     def safety_stop(self, active: bool) -> tuple[bool, str]:
         """Raise or clear the cell's safety stop input: the engine pauses every group and records it."""
-        loop, publisher = self._loop, self._safety
-        if loop is None or publisher is None:
-            return False, "no run is going"
-        loop.call_soon_threadsafe(publisher.publish, Bool(active))
-        return True, "safety stop raised: every group pauses" if active else "safety stop cleared: resume to continue"
+        return publish_safety(self._loop, self._safety, active, "no run is going")
+
+
+def publish_safety(loop: asyncio.AbstractEventLoop | None, publisher: Any, active: bool, absent: str) -> tuple[bool, str]:
+    """Raise or clear the cell's safety stop from the page's thread, on the loop of the node that publishes it."""
+    if loop is None or publisher is None:
+        return False, absent
+    loop.call_soon_threadsafe(publisher.publish, Bool(active))
+    return True, "safety stop raised: every group pauses" if active else "safety stop cleared: resume to continue"
+
+
+def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter]) -> None:
+    """Subscribe ``node`` to what the page shows of a cell: every record through ``writers`` (the trace file
+    first, as run does, then the page's feed), the engine's status, each machine's structure, joint positions."""
+    observer = RunObserver(node, robot.group_names)
+    for writer in writers:
+        observer.sinks.append(writer.on_status)
+        observer.engine_sinks.append(writer.on_engine)
+        observer.event_sinks.append(writer.on_event)
+    observer.engine_sinks.append(lambda status: feed.update(status=_status_json(status)))
+    for group in robot.group_names:
+        node.create_subscription(String, sm_topic(group, "structure"), _decoded(SmStructure, lambda s: feed.structure(s.group, _structure_json(s))), LATCHED)
+    order = list(robot.joint_names)
+    feed.update(joint_names=order)
+
+    def on_joints(msg: JointState) -> None:
+        index = dict(zip(msg.name, msg.position))
+        if all(name in index for name in order):
+            feed.joint_sample(node.clock.now(), [index[name] for name in order])
+
+    node.create_subscription(JointState, JOINT_STATES, on_joints, SENSOR)
 
 
 class FeedStream:

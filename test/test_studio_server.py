@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import asyncio
 import io
 import json
 import math
@@ -22,7 +23,15 @@ from app_functions.registry import full_catalog  # noqa: E402
 from execution_engine.cli import main as cli_main  # noqa: E402
 from execution_engine.timeline import build_timeline  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
+from operator_station.attach import AttachedSession  # noqa: E402
 from operator_station.feed import Feed  # noqa: E402
+from execution_engine.app_model import load_application  # noqa: E402
+from execution_engine.clock import Clock, scaled_clock  # noqa: E402
+from execution_engine.deployment import deploy_local  # noqa: E402
+from execution_engine.transport.local import LocalTransport  # noqa: E402
+from execution_engine.transport.port import Transport  # noqa: E402
+from robot_bridges.backend import BackendOptions  # noqa: E402
+from robot_bridges.registry import create_backend  # noqa: E402
 from operator_station.replay import load_replay  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
 from operator_station.timeline_view import TimelineView  # noqa: E402
@@ -241,3 +250,44 @@ def test_any_trace_file_even_cut_is_replayed_or_refused_line_by_line(tmp_path_fa
     assert all(isinstance(r["t"], (int, float)) and isinstance(r["event"], str) for r in feed.records)
     timeline = TimelineView(feed).model()
     assert timeline["records"] == count
+
+
+def test_attached_through_the_transport_port_the_page_sees_and_commands_a_cell_it_does_not_run(cell_dir: Path) -> None:
+    """``--transport ros`` with the in-process transport standing in for the ROS graph: the cell is started by
+    someone else (autostart off), the station joins as one more node, starts it through the engine's service,
+    sees every record, pauses and resumes it and sees it finish."""
+    app = load_application(cell_dir / "rivet_installation.xml", CATALOG)
+    cell_done: list[Any] = []
+
+    async def connect(clock: Clock) -> Transport:
+        transport = LocalTransport(clock)
+        backend = await create_backend("nextage-sim", clock, BackendOptions(robot=app.robot))
+        deployment = await deploy_local(clock, app.robot, backend, transport=transport, engine_parameters={"autostart": False})
+        cell_done.append(asyncio.get_running_loop().create_task(deployment.engine.run(app)))
+        return transport
+
+    feed = Feed()
+    session = AttachedSession(feed, app.robot, app.name, connect, scaled_clock(20.0))  # the cell simulated at 20x
+    session.attach()
+    client = client_for(Station(CATALOG, feed, session, cell_dir, cell_dir / "rivet_installation.xml"))
+    try:
+        assert session.wait_started(60.0)
+        assert client.post("/api/run", json={"path": "rivet_installation.xml", "document": client.get("/api/document").json()["document"]}).json()["ok"]
+        assert wait_until(lambda: any(r["event"] == "function_start" for r in feed.records))
+        assert client.post("/api/operator/pause").json()["ok"]
+        assert wait_until(lambda: (feed.snapshot.status or {}).get("state") == "paused")
+        assert client.post("/api/operator/resume").json()["ok"]
+        assert wait_until(lambda: (feed.snapshot.status or {}).get("state") == "finished", 120.0)
+        operator = [(r["command"], r["source"], r["accepted"]) for r in feed.records if r["event"] == "operator"]
+        assert operator == [(c, f"service /execution_engine/{c}", True) for c in ("start", "pause", "resume")]
+        assert set(feed.snapshot.structures) == {"left_arm", "right_arm", "torso_head"} and feed.joints
+        model = client.get("/api/timeline").json()
+        assert model["bars"] == sum(1 for r in feed.records if r["event"] == "function_end")
+    finally:
+        session.join(30.0)
+
+
+def test_attaching_without_the_application_is_one_line() -> None:
+    err = io.StringIO()
+    assert cli_main(["studio", "--transport", "ros"], out=io.StringIO(), err=err) == 2
+    assert err.getvalue() == "error: --transport ros needs the application the cell runs (APP.xml): it names the robot and its groups\n"
