@@ -248,6 +248,7 @@ def create_app(station: Station) -> Starlette:
 
     return Starlette(routes=[
         Route("/", index),
+        Route("/favicon.ico", lambda request: Response(status_code=204)),  # no icon: say so, not 404 in the console
         Route("/api/catalog", catalog),
         Route("/api/document", document),
         Route("/api/open", open_, methods=["POST"]),
