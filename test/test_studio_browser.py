@@ -23,6 +23,7 @@ if browser.missing() is not None:
 
 from selenium.common.exceptions import (  # noqa: E402
     ElementClickInterceptedException,
+    ElementNotInteractableException,
     NoSuchElementException,
     StaleElementReferenceException,
     TimeoutException,
@@ -67,7 +68,7 @@ def open_station(driver: Any, folder: Path, **changes: Any) -> ServedStation:
 def until(driver: Any, condition: Any, timeout: float = WAIT) -> Any:
     """Poll ``condition`` until it holds; the page re-renders rows as it goes, so a stale element means: look again
     (and a click landing on an input's suggestion list: click again)."""
-    ignored = (NoSuchElementException, StaleElementReferenceException, ElementClickInterceptedException)
+    ignored = (NoSuchElementException, StaleElementReferenceException, ElementClickInterceptedException, ElementNotInteractableException)
     return WebDriverWait(driver, timeout, poll_frequency=0.05, ignored_exceptions=ignored).until(condition)
 
 
@@ -86,9 +87,21 @@ def choose(driver: Any, op: int, group: str, function: str, *params: str) -> Non
     until(driver, lambda d: d.find_element(By.CSS_SELECTOR, f'.catalog-fn[data-name="{function}"]').click() or True)
     until(driver, lambda d: d.find_element(By.ID, "fn-select").get_attribute("value") == function)
     for index, value in enumerate(params):
-        field = driver.find_element(By.ID, f"param-{index}")
-        field.clear()
-        field.send_keys(value)
+        type_into(driver, f"param-{index}", value)
+
+
+def type_into(driver: Any, element_id: str, value: str) -> None:
+    """Type into an input until it holds ``value`` (the inspector may be redrawn under the typing, e.g. when
+    the cell's names arrive): then type again into the new input."""
+
+    def typed(d: Any) -> bool:
+        field = d.find_element(By.ID, element_id)
+        if field.get_attribute("value") != value:
+            field.clear()
+            field.send_keys(value)
+        return bool(d.find_element(By.ID, element_id).get_attribute("value") == value)
+
+    until(driver, typed)
 
 
 def text(driver: Any, element_id: str) -> str:
@@ -115,8 +128,7 @@ def test_built_in_the_page_saved_validated_run_paused_resumed_and_checked_agains
         press(driver, "new-btn")
         Select(driver.find_element(By.ID, "app-robot")).select_by_value("nextage_open")
         for field, value in (("doc-path", "built.xml"), ("app-name", "built_in_the_page"), ("app-cell", "cells/rivet_cell.xml")):
-            driver.find_element(By.ID, field).clear()
-            driver.find_element(By.ID, field).send_keys(value)
+            type_into(driver, field, value)
         choose(driver, 0, "left_arm", "debur_drilling", "drill_1")
         choose(driver, 0, "right_arm", "pick_rivet", "rivet_1", "ref_R10")
         press(driver, "add-op")
@@ -182,15 +194,11 @@ def test_a_bad_edit_shows_the_validators_message_at_its_cell_and_nothing_runs(dr
     try:
         until(driver, lambda d: validated(d) == "valid")
         until(driver, lambda d: cell(d, 1, "left_arm").click() or True)  # debur_drilling(drill_1) in operation 2
-        field = driver.find_element(By.ID, "param-0")
-        field.clear()
-        field.send_keys("drill_99")
+        type_into(driver, "param-0", "drill_99")
         until(driver, lambda d: "has-error" in (cell(d, 1, "left_arm").get_attribute("class") or ""))
         until(driver, lambda d: "unknown frame 'drill_99'" in cell(d, 1, "left_arm").text)
         until(driver, lambda d: cell(d, 0, "left_arm").click() or True)  # set_speed(0.8): a fraction, given an angle's unit
-        field = driver.find_element(By.ID, "param-0")
-        field.clear()
-        field.send_keys("0.8 deg")
+        type_into(driver, "param-0", "0.8 deg")
         assert "deg" in text(driver, "param-problem-0")  # the page's own unit check, at once
         until(driver, lambda d: "has-error" in (cell(d, 0, "left_arm").get_attribute("class") or "") and "deg" in cell(d, 0, "left_arm").text)
         until(driver, lambda d: "has-error" not in (cell(d, 0, "right_arm").get_attribute("class") or ""))
