@@ -79,7 +79,11 @@ def serve_goals(node: Node, engine: ExecutionEngine) -> RunApplicationServer | N
     try:
         return RunApplicationServer(node, engine)
     except TransportError as error:
-        node.logger.info("%s: no RunApplication action here: %s", node.fully_qualified_name, error)
+        node.logger.info(
+            "%s: the RunApplication action is not served on this transport (it is on --transport dds; "
+            "here the operator services start/pause/resume/stop run the application): %s",
+            node.fully_qualified_name, error,
+        )
         return None
 
 

@@ -61,9 +61,6 @@ class BridgeNode:
         self._robot_state = RobotStatePublisher.for_backend(node, backend)  # robot_description, tf: for RViz
         for group in backend.groups:
             self._feedback[group] = node.create_publisher(String, bridge_topic(group, "feedback"), COMMANDS)
-            node.create_subscription(
-                String, bridge_topic(group, "command"), lambda msg, g=group: self._on_command(g, msg), COMMANDS
-            )
         node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
         self._camera = attach_cameras(node, backend)  # camera parameters: publish_images, camera_source (ROS image topics)
         self._state_task: asyncio.Task[None] | None = None
@@ -71,7 +68,18 @@ class BridgeNode:
 
     # ---------------------------------------------------------------------------- lifecycle
     async def start(self) -> None:
+        """Start the back end, then listen for commands.
+
+        The command subscriptions exist only once the robot is ready: a machine uses a bridge
+        only after discovery has matched it, so no primitive reaches a back end still in its
+        start-up (the KUKA RSI handshake takes seconds; a move sent into it was never carried
+        out), and a bridge that fails to start is never matched at all.
+        """
         await self.backend.start()
+        for group in self.backend.groups:
+            self.node.create_subscription(
+                String, bridge_topic(group, "command"), lambda msg, g=group: self._on_command(g, msg), COMMANDS
+            )
         self._state_task = asyncio.get_running_loop().create_task(self._publish_state_loop(), name="bridge state")
 
     async def close(self) -> None:

@@ -19,6 +19,7 @@ from typing import Any
 import pytest
 import ros_fakes
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
+from scripted_backend import ScriptedBackend
 from test_ros_nodes import SMOKE_APP
 from test_ros_transport import BOUND, Inbox, matched, run_real, with_transport
 
@@ -30,10 +31,12 @@ from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.clock import Clock, FollowingClock
 from execution_engine.ros_main import ExitCode, Outcome, machine_node_name, run_node
 from execution_engine.transport.msgs import ClockMessage, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
-from execution_engine.transport.port import Node
+from execution_engine.transport.local import LocalTransport
+from execution_engine.transport.port import Node, wait_until_matched
 from execution_engine.transport.qos import CLOCK, COMMANDS, EVENTS, SENSOR
 from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.wire import sm_topic
+from execution_engine.transport.wire import bridge_topic, sm_topic
+from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.nextage_sim.node import declare_nextage_parameters
 from robot_bridges.nextage_sim.node import main as nextage_main
 from robot_bridges.node import run_bridge
@@ -94,6 +97,37 @@ async def run_cell(clock: Clock, app: Path) -> tuple[Any, list[dict[str, Any]]]:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         await transport.shutdown()
+
+
+class _SlowStart(ScriptedBackend):
+    """A robot whose start-up takes 2 s, as the KUKA RSI handshake takes its time."""
+
+    started_at: float | None = None
+
+    async def start(self) -> None:
+        await self.clock.sleep(2.0)
+        self.started_at = self.clock.now()
+
+
+def test_a_bridge_is_matched_for_commands_only_once_its_robot_has_started(run_sim: Any) -> None:
+    """On Jazzy the KUKA launch hung: the machine's first move reached the bridge during the RSI
+    handshake and was accepted, never carried out.  A machine sends only after the match, so the
+    bridge subscribes to commands only once its back end has started."""
+
+    async def main(clock: Clock) -> tuple[bool, float, float | None]:
+        transport = LocalTransport(clock)
+        backend = _SlowStart(clock, NEXTAGE_OPEN)
+        bridge = BridgeNode(transport.create_node("bridge"), backend)
+        command = transport.create_node("left_arm_machine").create_publisher(String, bridge_topic("left_arm", "command"), COMMANDS)
+        starting = asyncio.ensure_future(bridge.start())
+        matched = await wait_until_matched(clock, [command], 5.0)
+        matched_at = clock.now()
+        await starting
+        await bridge.close()
+        return matched, matched_at, backend.started_at
+
+    matched, matched_at, started_at = run_sim(main)
+    assert matched and started_at is not None and matched_at >= started_at
 
 
 # ============================================================================== 2. ROS time
