@@ -20,10 +20,15 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-import coal
 import numpy as np
 import pinocchio as pin
+
+try:
+    import coal
+except ImportError:  # pinocchio before 3.0 ships coal under its former name: ROS 2 Jazzy's numpy 1.26 needs pin 2.7
+    import hppfcl as coal  # type: ignore[no-redef]
 from numpy.typing import NDArray
 
 from core_functions.geometry import Pose
@@ -31,6 +36,7 @@ from core_functions.robots import RobotModel
 from robot_bridges.collision.bodies import CellBox, HeldPart
 
 Vector = NDArray[np.float64]
+_Transform = getattr(coal, "Transform3s", None) or coal.Transform3f  # hpp-fcl's name for it
 
 #: Distance every pair of bodies keeps, unless a function works there (m): the stated margin.
 DEFAULT_MARGIN = 0.01
@@ -99,8 +105,8 @@ def _box_radius(size: Sequence[float]) -> float:
     return 0.5 * float(np.linalg.norm(size))
 
 
-def _transform(m: NDArray[np.float64]) -> coal.Transform3s:
-    return coal.Transform3s(np.ascontiguousarray(m[:3, :3]), np.ascontiguousarray(m[:3, 3]))
+def _transform(m: NDArray[np.float64]) -> Any:
+    return _Transform(np.ascontiguousarray(m[:3, :3]), np.ascontiguousarray(m[:3, 3]))
 
 
 class CollisionScene:
