@@ -132,8 +132,14 @@ class Generator:
         return '<?xml version="1.0" encoding="UTF-8"?>\n<cell name="bench_cell">\n' + "\n".join(frames + elements) + "\n</cell>\n"
 
 
+COORDINATION = frozenset({"set_flag", "wait_flag"})  # a wait needs its partner's set: left out of a generated cycle
+
+
 def plain(function: FunctionSpec, kind: str) -> bool:
-    return kind in function.group_kinds and function.sync is None and function.requires is None and function.leaves is None
+    return (
+        kind in function.group_kinds and function.sync is None and function.requires is None and function.leaves is None
+        and function.name not in COORDINATION
+    )
 
 
 def generate(catalog: Catalog, operations: int, folder: Path) -> Path:
