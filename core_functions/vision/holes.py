@@ -26,6 +26,9 @@ Array = NDArray[np.float64]
 DIAMETER_TOLERANCE = 0.25
 #: A circle on the plane is round: major/minor axis ratio above this is not a hole.
 MAX_ROUNDNESS = 1.25
+#: Share of its rim a hole must show: less (a dark image corner under uneven light, a hole cut by the image border)
+#: fits any circle, and its centre is no measurement.
+MIN_COVERAGE = 0.5
 
 
 @dataclass(frozen=True)
@@ -101,6 +104,8 @@ def find_holes(
 
 
 def _on_plane(blob: Blob, intrinsics: Intrinsics, plane: Array, diameter: float, tolerance: float) -> Hole | None:
+    if blob.coverage < MIN_COVERAGE:
+        return None
     xy = plane_points(intrinsics, plane, blob.edge)
     xy = xy[np.all(np.isfinite(xy), axis=1)]
     if len(xy) < 8:
