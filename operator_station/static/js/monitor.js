@@ -123,7 +123,10 @@ const Monitor = (() => {
     const items = [];
     const action = (label, command) => { const b = document.createElement("button"); b.textContent = label; b.onclick = () => Control.command(command); return b; };
     const safety = (snap.status && snap.status.message) || "";
-    if (engine.state === "alarm") items.push([`ALARM: ${safety}`, [action("Reset (retry)", "reset"), action("Stop", "stop")]]);
+    // A resumed run's interrupted function is redone by reset or left out by skip (docs/recording.md).
+    const interrupted = /interrupted:/.test(safety);
+    const answers = interrupted ? [action("Reset (redo)", "reset"), action("Skip", "skip")] : [action("Reset (retry)", "reset")];
+    if (engine.state === "alarm") items.push([`ALARM: ${safety}`, [...answers, action("Stop", "stop")]]);
     if (engine.state === "paused" && /safety stop/.test(safety)) items.push([`paused by the safety stop: ${safety}`, [Control.safetyButton(false), action("Resume", "resume")]]);
     else if (engine.state === "paused") items.push([`paused: ${safety}`, [action("Resume", "resume"), action("Step", "step"), action("Stop", "stop")]]);
     if (engine.state === "failed") items.push([`the run failed: ${safety}`, [Object.assign(document.createElement("button"), {textContent: "Open the builder", onclick: () => document.getElementById("tab-builder").click()})]]);
