@@ -93,9 +93,11 @@ def _attached(args: argparse.Namespace, catalog: Catalog, feed: Any, root: Path,
 
 def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr) -> int:
     try:
+        import starlette  # noqa: F401
         import uvicorn
-    except ImportError:
-        err.write("error: studio needs the web server: pip install 'dual_arm_executive[studio]' (starlette, uvicorn)\n")
+        import websockets  # noqa: F401 - uvicorn's WebSocket protocol: without it the live feed is refused
+    except ImportError as missing:
+        err.write(f"error: studio needs the web server: pip install 'dual_arm_executive[studio]' (starlette, uvicorn, websockets; missing {missing.name})\n")
         return 2
     if args.file and not Path(args.file).is_file():
         err.write(f"error: {args.file}: no such file\n")

@@ -291,3 +291,19 @@ def test_attaching_without_the_application_is_one_line() -> None:
     err = io.StringIO()
     assert cli_main(["studio", "--transport", "ros"], out=io.StringIO(), err=err) == 2
     assert err.getvalue() == "error: --transport ros needs the application the cell runs (APP.xml): it names the robot and its groups\n"
+
+
+@pytest.mark.parametrize("module", ["starlette", "uvicorn", "websockets"])
+def test_studio_without_its_extra_says_what_to_install(module: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without websockets uvicorn serves the page but refuses the live feed; the command says so at once."""
+    import sys
+
+    from operator_station.cli import cmd_studio
+
+    monkeypatch.setitem(sys.modules, module, None)  # as if not installed: importing it raises ImportError
+    err = io.StringIO()
+    assert cmd_studio(argparse.Namespace(file=None), full_catalog(), io.StringIO(), err) == 2
+    assert err.getvalue() == (
+        "error: studio needs the web server: pip install 'dual_arm_executive[studio]' "
+        f"(starlette, uvicorn, websockets; missing {module})\n"
+    )
