@@ -154,9 +154,9 @@ def test_body_errors_become_exit_codes(fake_rclpy: Any, capsys: pytest.CaptureFi
 
 
 # ================================================================================ a whole cell
-def test_a_cell_of_ros_nodes_runs_an_application_and_reports(fake_rclpy: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    app = tmp_path / "smoke.xml"
-    app.write_text(SMOKE_APP)
+def _run_ros_cell(app: Path, **engine_parameters: Any) -> ExitCode:
+    """The simulator, one machine per group and the engine running ``app`` as ROS nodes; the
+    engine's exit code (the machines and the bridge must still be serving when it ends)."""
 
     async def main(clock: Clock) -> ExitCode:
         transport = RosTransport(clock, ["cell"])
@@ -167,7 +167,8 @@ def test_a_cell_of_ros_nodes_runs_an_application_and_reports(fake_rclpy: Any, tm
             for group in NEXTAGE_OPEN.group_names:
                 machine = transport.create_node(machine_node_name(group), parameters={"group": group})
                 tasks.append(asyncio.ensure_future(nodes.run_group_machine(machine, Outcome())))
-            engine = transport.create_node("execution_engine", parameters={"application": str(app), "exit_when_done": True})
+            parameters = {"application": str(app), "exit_when_done": True, **engine_parameters}
+            engine = transport.create_node("execution_engine", parameters=parameters)
             outcome = Outcome()
             await clock.wait_for(nodes.run_engine(engine, outcome), BOUND)
             assert all(not task.done() for task in tasks)  # machines and bridge serve on
@@ -178,7 +179,13 @@ def test_a_cell_of_ros_nodes_runs_an_application_and_reports(fake_rclpy: Any, tm
             await asyncio.gather(*tasks, return_exceptions=True)
             await transport.shutdown()
 
-    assert run_with_clock(main, real_clock()) == ExitCode.OK
+    return run_with_clock(main, real_clock())
+
+
+def test_a_cell_of_ros_nodes_runs_an_application_and_reports(fake_rclpy: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    app = tmp_path / "smoke.xml"
+    app.write_text(SMOKE_APP)
+    assert _run_ros_cell(app) == ExitCode.OK
     out = capsys.readouterr().out
     assert "application ros smoke: FINISHED" in out and "operations: 2/2" in out
     assert stopped_cleanly()
@@ -190,27 +197,7 @@ def test_the_engine_records_the_ros_graph_with_its_record_parameter(fake_rclpy: 
     app = tmp_path / "smoke.xml"
     app.write_text(SMOKE_APP)
     record = tmp_path / "ros.mcap"
-
-    async def main(clock: Clock) -> ExitCode:
-        transport = RosTransport(clock, ["cell"])
-        tasks: list[asyncio.Task[None]] = []
-        try:
-            bridge = transport.create_node("nextage_sim_bridge", parameters={"speed": 20.0})
-            tasks.append(asyncio.ensure_future(run_bridge("nextage-sim", declare_nextage_parameters, bridge, Outcome())))
-            for group in NEXTAGE_OPEN.group_names:
-                machine = transport.create_node(machine_node_name(group), parameters={"group": group})
-                tasks.append(asyncio.ensure_future(nodes.run_group_machine(machine, Outcome())))
-            engine = transport.create_node("execution_engine", parameters={"application": str(app), "exit_when_done": True, "record": str(record)})
-            outcome = Outcome()
-            await clock.wait_for(nodes.run_engine(engine, outcome), BOUND)
-            return outcome.code
-        finally:
-            for task in tasks:
-                task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
-            await transport.shutdown()
-
-    assert run_with_clock(main, real_clock()) == ExitCode.OK
+    assert _run_ros_cell(app, record=str(record)) == ExitCode.OK
     assert f"recording {record}:" in capsys.readouterr().out
     recording = Recording(str(record))
     types = {m.topic: m.ros_type for m in iter_messages(record, recording)}

@@ -125,12 +125,12 @@ const Monitor = (() => {
     const safety = (snap.status && snap.status.message) || "";
     // A resumed run's interrupted function is redone by reset or left out by skip (docs/recording.md).
     const interrupted = /interrupted:/.test(safety);
-    const answers = interrupted ? [action("Reset (redo)", "reset"), action("Skip", "skip")] : [action("Reset (retry)", "reset")];
-    if (engine.state === "alarm") items.push([`ALARM: ${safety}`, [...answers, action("Stop", "stop")]]);
+    const answers = () => interrupted ? [action("Reset (redo)", "reset"), action("Skip", "skip")] : [action("Reset (retry)", "reset")];  // fresh buttons per item
+    if (engine.state === "alarm") items.push([`ALARM: ${safety}`, [...answers(), action("Stop", "stop")]]);
     if (engine.state === "paused" && /safety stop/.test(safety)) items.push([`paused by the safety stop: ${safety}`, [Control.safetyButton(false), action("Resume", "resume")]]);
     else if (engine.state === "paused") items.push([`paused: ${safety}`, [action("Resume", "resume"), action("Step", "step"), action("Stop", "stop")]]);
     if (engine.state === "failed") items.push([`the run failed: ${safety}`, [Object.assign(document.createElement("button"), {textContent: "Open the builder", onclick: () => document.getElementById("tab-builder").click()})]]);
-    for (const [group, view] of Object.entries(views)) if (view.error) items.push([`${group}: ${view.error}`, engine.state === "alarm" ? [action("Reset (retry)", "reset")] : []]);
+    for (const [group, view] of Object.entries(views)) if (view.error) items.push([`${group}: ${view.error}`, engine.state === "alarm" ? answers() : []]);
     for (const m of snap.messages || []) items.push([m.message, []]);
     const box = $("alarms");
     box.replaceChildren(...items.map(([text, actions]) => {
