@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_rsi_loop import READY, WAIT, Rig
+from test_rsi_loop import GRACE, READY, WAIT, Rig
 
 from core_functions.primitives import MoveJoints
 from core_functions.robots import KUKA_KR
@@ -199,7 +199,7 @@ def test_a_controller_given_by_name_is_answered_by_its_ip() -> None:
     sim = None
     try:
         address = iface.wait_ready(WAIT)
-        sim = SimulatorThread(CONFIG, address, context=RsiContext(start_deg=READY), cycles=50).start()
+        sim = SimulatorThread(CONFIG, address, context=RsiContext(start_deg=READY), cycles=50, reply_grace=GRACE).start()
         assert sim.join(WAIT) and sim.model.stats.accepted == 50 and sim.model.stats.late == 0
     finally:
         if sim is not None:
