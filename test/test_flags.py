@@ -153,21 +153,6 @@ def write_zoned(folder: Path, operations: list[dict[str, str]]) -> tuple[Path, d
     return write(folder, operations)
 
 
-def test_a_zone_lets_one_group_in_at_a_time_in_application_order(tmp_path: Path) -> None:
-    path, _ = write_zoned(tmp_path, [
-        {"left_arm": wait(2), "right_arm": call("approach", param("drill_4"))},
-        {"left_arm": call("approach", param("drill_1")), "right_arm": call("move_to_joint_pose", param("initial"))},
-    ])
-    code, text, records = run(path, tmp_path)
-    assert code == 0, text
-    right_done = max(r["t"] for r in records if r["group"] == "right_arm" and r["event"] == "function_end" and r.get("operation") == "1")
-    zone = [(r["group"], r["state"], r["t"]) for r in records if r["event"] == "flag"]
-    assert zone[0] == ("left_arm", "waiting", 2.0) and zone[1][:2] == ("left_arm", "passed") and abs(zone[1][2] - right_done) < 1e-6
-    left_start = min(r["t"] for r in records if r["group"] == "left_arm" and r["event"] == "function_start" and r.get("operation") == "2")
-    assert left_start >= right_done  # not inside while the right arm still works there
-    assert "waiting for zone 'at_part'" in text
-
-
 def test_a_zone_order_that_deadlocks_with_a_flag_is_refused(tmp_path: Path) -> None:
     path, where = write_zoned(tmp_path, [
         {"left_arm": call("wait_flag", param("go"))},

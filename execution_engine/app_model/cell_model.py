@@ -12,6 +12,7 @@ once an application names the robot.  Reading the XML is :mod:`execution_engine.
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -24,7 +25,7 @@ from core_functions.robots import RobotModel
 from core_functions.suggest import NameIndex
 from execution_engine.app_model.diagnostics import Diagnostic, Location
 from execution_engine.app_model.frame_tree import WORLD, order_frames
-from execution_engine.app_model.zones import Zone
+from execution_engine.app_model.zones import ZONE_KIND, Zone, zone_frame
 from execution_engine.transport.wire import CellSnapshot
 
 
@@ -196,14 +197,19 @@ class Cell(FrameLookup):
         (key, value) pairs.  :meth:`to_snapshot` collects them; the validator sizes them one by one
         and stops at the message limit (app_model.wire_fit) without building a snapshot too big
         to send."""
-        frames = (
-            CellFrame(name=f.name, pose=self.pose(f.name), kind=f.kind, parent=f.parent, attributes=dict(f.attributes))
-            for f in self.frames.values()
+        frames = itertools.chain(
+            (CellFrame(name=f.name, pose=self.pose(f.name), kind=f.kind, parent=f.parent, attributes=dict(f.attributes)) for f in self.frames.values()),
+            (_zone_frame_of(self, z) for z in self.zones.values()),  # for the machines' zone gates
         )
         elements = ((e.name, {"kind": e.kind, **e.attributes}) for e in self.elements.values())
         joint_poses = ((name, self.joint_values(name, robot)) for name in self.joint_poses)
         groups = ((name, pose.group) for name, pose in self.joint_poses.items() if pose.group)
         return {"frames": frames, "elements": elements, "joint_poses": joint_poses, "truth": ((n, t) for n in self.frames if (t := self._true(n)) is not None), "joint_pose_groups": groups}
+
+
+def _zone_frame_of(cell: Cell, zone: Zone) -> CellFrame:
+    pose, attributes = zone_frame(zone, cell.pose(zone.parent))
+    return CellFrame(name=zone.name, pose=pose, kind=ZONE_KIND, parent=zone.parent, attributes=attributes)
 
 
 def _check_tree(frames: Mapping[str, Frame]) -> None:

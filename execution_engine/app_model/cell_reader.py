@@ -193,7 +193,9 @@ class CellReader:
         frames = self.check_tree(drafts)
         self.check_element_references(drafts, elements)
         for zone in zones.values():
-            if zone.parent != WORLD and zone.parent not in drafts:
+            if zone.name in drafts:  # the machines see zones as frames of the snapshot: one name, one thing
+                self.report(self._zone_at[zone.name], "name", f"zone {zone.name!r} has the name of a frame (line {self.source.at_offset(drafts[zone.name].at).line}): name it apart")
+            elif zone.parent != WORLD and zone.parent not in drafts:
                 self.report(self._zone_at[zone.name], "parent", f"zone {zone.name!r}: unknown parent frame {zone.parent!r}")
         if self.log.has_errors or frames is None or not structure_ok:
             return None

@@ -6,7 +6,8 @@ synchronised function (master/slave, full body) only when its partners reach it,
 are never cleared, so whether an application can get stuck does not depend on timing: each group
 is advanced through its calls as far as these rules let it, until nobody can move.  A group left
 short of its end is waiting in a cycle (or for a group that is): each stuck call is reported at
-its line, naming every flag and line of the cycle.  Both modes are checked.
+its line, naming every flag and line of the cycle.  Interference zones (one call at a time, in
+application order) are waits too.  Both modes are checked.
 """
 from __future__ import annotations
 
@@ -39,9 +40,13 @@ class _Step:
 
 
 def check_waits(draft: ApplicationDraft, checked: list[list[CheckedCall]], catalog: Catalog, log: DiagnosticLog, cell: object = None) -> None:
-    """Report unsatisfiable ``wait_flag`` calls and deadlocks of ``draft`` into ``log`` (zones: with ``sync="flags"``)."""
+    """Report unsatisfiable ``wait_flag`` calls and deadlocks of ``draft`` into ``log`` (zones too, both modes).
+
+    A call in a zone is taken to hold it from its start to its end: at run time it holds it only
+    from the motion that enters to the motion that leaves (engine/zones.py), so every wait the
+    run can have is one this check has looked at."""
     flags_mode = draft.sync == "flags"
-    zoned = flags_mode and bool(getattr(cell, "zones", None))
+    zoned = bool(getattr(cell, "zones", None))
     if draft.robot is None or not zoned and not any(c.site.function in (SET, WAIT) for calls in checked for c in calls) and not _has_sync(checked, catalog):
         return
     steps: dict[str, list[_Step]] = {g: [] for g in draft.robot.group_names}
@@ -49,7 +54,8 @@ def check_waits(draft: ApplicationDraft, checked: list[list[CheckedCall]], catal
         for call in calls:
             if call.site.group not in steps or (flags_mode and call.site.implicit):
                 continue
-            zones = call_zones(cell, call.params) if zoned and call.params else ()
+            synchronised = call.spec is not None and bool(call.spec.sync)  # partners move as one: not gated
+            zones = call_zones(cell, call.params) if zoned and call.params and not synchronised else ()
             steps[call.site.group].append(_Step(index, operation.id, call, draft.source.at_offset(call.site.at).line, zones))
     if _unsatisfiable(steps, draft, log):
         return  # a flag nobody sets is the thing to fix; the deadlock it causes would only repeat it

@@ -2,10 +2,14 @@
 
 ``<zone name="at_part" parent="part" xyz="0 0 0.05" size="0.16 0.24 0.14"/>`` is a box with the
 axes of its parent frame (default ``world``), centred at ``xyz`` in it (the cell's length unit).
-A call works in a zone when a frame it names (a hole, a slot, a target) lies inside the box; with
-``sync="flags"`` the engine lets one group at a time into a zone, in application order
-(execution_engine/engine/zones.py), and ``validate`` checks that the order cannot deadlock with
-the flags (app_model/flag_check.py).
+A call works in a zone when a frame it names (a hole, a slot, a target) lies inside the box.  In
+both modes the engine lets one group at a time into a zone, in application order
+(execution_engine/engine/zones.py): a group's motion that ends in the box waits until no other
+group is inside, and the group holds the zone until a motion of it ends outside the box again
+(execution_engine/machine/zone_gate.py).  ``validate`` checks that the order cannot deadlock with
+the flags and the operations (app_model/flag_check.py).  The group machines learn the boxes from
+the cell snapshot: each zone is a frame of kind ``zone`` there (:func:`zone_frame`), its pose the
+box's centre and axes in the world, its ``size`` attribute the sides in metres.
 """
 from __future__ import annotations
 
@@ -30,9 +34,39 @@ class Zone:
 
     def contains(self, parent_pose: Pose, point: tuple[float, float, float]) -> bool:
         """Whether a world point lies in the box, the parent frame being at ``parent_pose``."""
-        m = parent_pose.matrix()
-        local = m[:3, :3].T @ (np.array(point) - m[:3, 3]) - np.array(self.centre)
-        return bool(np.all(np.abs(local) <= 0.5 * np.array(self.size) + 1e-9))
+        return inside_box(parent_pose.compose(Pose.from_xyz_rpy(*self.centre)), self.size, point)
+
+
+ZONE_KIND = "zone"  # the kind of a zone's frame in the cell snapshot
+#: The sender of the engine's zone grants on the coordination topic (engine/zones.py).
+ENGINE = "execution_engine"
+_PREFIX = "zone:"
+
+
+def zone_key(zone: str, request_id: str) -> str:
+    """The coordination key of a group's request for ``zone`` during request ``request_id``."""
+    return f"{_PREFIX}{zone}:{request_id}"
+
+
+def parse_key(key: str) -> tuple[str, str] | None:
+    """(zone, request id) of a zone key, None for any other key (a barrier's)."""
+    if not key.startswith(_PREFIX):
+        return None
+    zone, _, request_id = key[len(_PREFIX):].rpartition(":")
+    return (zone, request_id) if zone and request_id else None
+
+
+def zone_frame(zone: Zone, parent_pose: Pose) -> tuple[Pose, dict[str, str]]:
+    """A zone as a snapshot frame: its centre and axes in the world, and its sides (m) as attributes."""
+    pose = parent_pose.compose(Pose.from_xyz_rpy(*zone.centre))
+    return pose, {"size": " ".join(repr(float(x)) for x in zone.size)}
+
+
+def inside_box(pose: Pose, size: tuple[float, float, float], point: tuple[float, float, float]) -> bool:
+    """Whether a world point lies in the box centred at ``pose`` (its axes) with sides ``size``."""
+    m = pose.matrix()
+    local = m[:3, :3].T @ (np.array(point) - m[:3, 3])
+    return bool(np.all(np.abs(local) <= 0.5 * np.array(size) + 1e-9))
 
 
 def call_zones(cell: object, params: Iterable[str]) -> tuple[str, ...]:

@@ -37,6 +37,7 @@ from execution_engine.engine.operator import CONSOLE_KEYS, ENDED, Flags, decide
 from execution_engine.engine.report import GroupError, OperatorAction, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
 from execution_engine.engine.wall_clock import RealWallClock, WallClock, wake_loop
+from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import Bool, String, Trigger, TriggerRequest, TriggerResponse
@@ -134,6 +135,7 @@ class ExecutionEngine:
         self._progress: dict[str, GroupProgress] = {}
         self._tasks: set[asyncio.Task[tuple[bool, str]]] = set()  # safety-stop pauses under way
         self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)  # set_flag / wait_flag (engine/flags.py)
+        self.zones = ZoneBoard(node, self.catalog, self._publish_flag)  # interference zones, both modes (engine/zones.py)
 
     # ============================================================================ running
     async def run(self, app: Application, resume: ResumePoint | None = None) -> RunReport:
@@ -146,6 +148,8 @@ class ExecutionEngine:
         self.app = app
         report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
         self.report = report
+        self.zones.start(app, self.flags.waits, resume.index if resume is not None else 0)
+        self.flags.zones = self.zones
         self._set_state("idle", "")
         for group in app.robot.group_names:
             if group not in self.links:
@@ -187,6 +191,7 @@ class ExecutionEngine:
         self._set_state("stopping")
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
+        self.zones.close()
         report.flag_waits = list(self.flags.waits)
         self._set_state({"finished": "finished", "failed": "failed", "stopped": "stopped"}[report.outcome], report.message)
         return report
@@ -301,6 +306,7 @@ class ExecutionEngine:
             else:
                 future = self.links[group].send(request)
             sent[group] = _Dispatch(calls[group], request, future, deadline)
+            self.zones.register(request.id, operation.id, group)
             self._progress[group] = GroupProgress(self.links[group].state, operation.id, request.function)
         self._publish_status()
         return sent
@@ -327,6 +333,7 @@ class ExecutionEngine:
                 report.group_functions[group] += 1
                 if result.outcome == "succeeded":
                     del pending[group]
+                    self.zones.ended(operation.id, group)
                 else:
                     failed.append((group, future))
             for group, future in failed:

@@ -7,7 +7,8 @@ group in the operation until another group of it, or of an earlier one, set the 
 ``sync="flags"`` :func:`run_groups` drives every group through its own functions in document
 order, each in its own task, with no barrier per operation: a group waits only where the
 application says so -- a ``wait_flag``, a synchronised function (its machine meets the partners
-at the barrier, as in lock-step: same barrier key, same partner list) or a zone.
+at the barrier, as in lock-step: same barrier key, same partner list) or, before a motion, a zone
+(engine/zones.py, in both modes).
 
 Every wait is kept (:class:`FlagWait`) for the run report's idle split and published as an
 EngineEvent (``event="flag"``: ``source`` the group, ``command`` the flag, ``state`` waiting /
@@ -60,7 +61,7 @@ class FlagBoard:
         self._set: dict[str, asyncio.Event] = {}
         self.waits: list[FlagWait] = []
         self.waiting: dict[str, str] = {}  # group -> "flag X" it waits for now
-        self.zones: ZoneBoard | None = None  # sync="flags": the zones (their waits are kept in ``waits`` too)
+        self.zones: ZoneBoard | None = None  # the run's zones (their waits are kept in ``waits`` too)
 
     def waiting_for(self, group: str) -> str | None:
         """What ``group`` waits for now: "flag X", "zone Z" or None."""
@@ -161,12 +162,8 @@ def group_steps(app: Application, group: str, sits_out: Callable[[Call], bool]) 
 
 async def run_groups(engine: ExecutionEngine, app: Application) -> None:
     """``sync="flags"``: each group through its own calls at once; the first failure ends them all."""
-    from execution_engine.engine.zones import ZoneBoard  # zones build on this module's FlagWait
-
-    zones = ZoneBoard(app, engine.clock, engine._publish_flag, engine.flags.waits, engine.flags.stopped)
-    engine.flags.zones = zones
     groups = [g for g in app.robot.group_names if group_steps(app, g, engine._sits_out)]
-    tasks = {g: asyncio.ensure_future(run_group(engine, g, group_steps(app, g, engine._sits_out), zones)) for g in groups}
+    tasks = {g: asyncio.ensure_future(run_group(engine, g, group_steps(app, g, engine._sits_out))) for g in groups}
     try:
         done, _ = await asyncio.wait(tasks.values(), return_when=asyncio.FIRST_EXCEPTION)
         failed = next((t for t in done if not t.cancelled() and t.exception() is not None), None)
@@ -190,7 +187,7 @@ def _meeting(operation: Operation, call: Call, catalog: Catalog) -> dict[str, Ca
     return {g: c for g, c in operation.calls.items() if (s := catalog.get(c.function)) is not None and s.sync == spec.sync}
 
 
-async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Operation, Call]], zones: ZoneBoard) -> None:
+async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Operation, Call]]) -> None:
     """One group's calls in order, each when the one before succeeded (retried as the policy says)."""
     from execution_engine.engine.engine import ApplicationAborted  # the engine imports this module
 
@@ -202,7 +199,6 @@ async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Opera
         engine._operation = operation
         index = engine.app.operations.index(operation) if engine.app is not None else 0
         engine._op_index = index
-        await zones.enter(index, group, operation.id)
         attempt = 1
         while True:
             dispatch = engine._dispatch(operation, _meeting(operation, call, engine.catalog), attempt, only=group)[group]
@@ -217,7 +213,7 @@ async def run_group(engine: ExecutionEngine, group: str, steps: list[tuple[Opera
             if result.outcome == "succeeded":
                 if call.function not in ENGINE_FUNCTIONS:
                     await engine._await_ready((group,))
-                zones.leave(index, group)
+                engine.zones.ended(operation.id, group)
                 break
             await _on_failure(engine, group, operation, dispatch.request, result)
             attempt += 1

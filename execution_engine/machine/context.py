@@ -21,6 +21,7 @@ from core_functions.robots import RobotModel
 from execution_engine.clock import Clock
 from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
+from execution_engine.machine.zone_gate import ZoneGate
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
 from execution_engine.transport.port import Node, Publisher, Subscription, wait_until_matched
@@ -89,6 +90,7 @@ class MachineContext:
         self._bridge_linked = False  # both directions to the bridge have matched
         self._sent: dict[str, String] = {}  # unacknowledged bridge commands, for resending
         self.cell_arrived = asyncio.Event()
+        self.zones = ZoneGate(self)  # interference zones: ask before a motion enters one
 
     # --------------------------------------------------------------------------- identity
     def new_id(self) -> str:

@@ -154,11 +154,16 @@ class ReadyState(MachineState):
             if run is not None and run.finished:
                 ctx.finish_function("succeeded")
                 continue
+            gated = False  # the next motion waits for a zone (machine/zone_gate.py)
             if run is not None and run.next_primitive is not None and not ctx.hold:
-                primitive = run.take()
-                userdata["primitive"] = primitive
-                return primitive.STATE.request_signal
-            event = await ctx.events.get()
+                if ctx.zones.admits(run.next_primitive):
+                    primitive = run.take()
+                    userdata["primitive"] = primitive
+                    return primitive.STATE.request_signal
+                gated = True
+            event = await ctx.events.get(ctx.zones.wake_in() if gated else None)
+            if event is None:
+                continue
             if isinstance(event, RequestEvent):
                 if event.request.kind == "end":
                     if run is not None:
@@ -291,6 +296,7 @@ class WorkingState(MachineState):
             answered = f"the bridge answered a {type(result).__name__}, not a {primitive.RESULT.__name__}"
             return fail(userdata, FaultKind.PROTOCOL, f"{describe(primitive)}: {answered}")
         ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done", result=result)
+        ctx.zones.moved(primitive, result)
         try:
             ctx.run.advance(result)
         except SkillError as error:
