@@ -9,7 +9,8 @@ the wire is what ``rmw_cyclonedds_cpp`` of ROS 2 Jazzy puts there, so ``ros2 nod
   :mod:`~execution_engine.transport.dds_graph`;
 * services carry rmw_cyclonedds_cpp's request header (the client's 64-bit id and a sequence
   number); a server answers only once its reply writer has matched the client's reply reader
-  (the ``clientid=`` user data), as rmw does, so the first answer to ``ros2 service call`` is not lost;
+  (the ``clientid=`` user data, as rmw does; for a client without it, such as ros2-client on
+  RustDDS, a reply reader of the caller's participant), so a first answer is not lost;
 * every writer asserts automatic liveliness with a lease of ``lease`` seconds (1 s by default):
   a subscription's :meth:`get_publisher_count` counts only *live* publishers, so a peer killed or
   cut off drops out of it within the lease -- that is how the engine notices a lost machine
@@ -29,6 +30,7 @@ import logging
 import os
 from collections import Counter
 from collections.abc import Awaitable, Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from execution_engine.clock import Clock
@@ -59,6 +61,7 @@ log = logging.getLogger(__name__)
 _TAKE_LIMIT = 10_000  # samples taken in one listener call; the rest wait for the next
 _POLL = 0.02  # run seconds between discovery checks
 _FAILURE_LIMIT = 1000  # undecodable samples in a row before a listener call gives up until the next
+_REPLY_MATCH_WAIT = 1.0  # wall seconds a reply waits at most for the caller's reply reader to match
 
 
 def _import_cyclonedds() -> Any:
@@ -231,6 +234,29 @@ class _ServiceEndpoints:
         _delete(self.writer)
 
 
+@dataclass(frozen=True)
+class _Caller:
+    """Who sent a request, as its request writer's discovery data tells: the reply goes to this
+    caller's reply reader.  An rmw client names that reader in ``clientid=`` user data; a client
+    without it (ros2-client on RustDDS, or any plain DDS peer using rmw_cyclonedds_cpp's header)
+    is known only by its participant, so any reply reader of that participant will do."""
+
+    client_id: str | None
+    participant: Any  # the request writer's participant key (a UUID), None when unknown
+
+    @classmethod
+    def of(cls, publication: Any) -> _Caller:
+        if publication is None:
+            return cls(None, None)
+        return cls(graph.user_data_value(publication.qos, "clientid"), getattr(publication, "participant_key", None))
+
+    def reads(self, subscription: Any) -> bool:
+        """Whether a matched reply reader is this caller's."""
+        if self.client_id is not None:
+            return graph.user_data_value(subscription.qos, "clientid") == self.client_id
+        return self.participant is not None and getattr(subscription, "participant_key", None) == self.participant
+
+
 class _DdsService(ServiceServer):
     def __init__(self, node: DdsNode, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> None:
         self.node, self.srv_type, self.name = node, srv_type, name
@@ -250,20 +276,19 @@ class _DdsService(ServiceServer):
         for sample in self._taker.take(reader):
             try:
                 request = transport.converter.from_wire(self.srv_type.Request, sample)
-                client = reader.get_matched_publication_data(sample.sample_info.publication_handle)
-                client_id = graph.user_data_value(client.qos, "clientid") if client is not None else None
+                client = _Caller.of(reader.get_matched_publication_data(sample.sample_info.publication_handle))
             except Exception as error:  # noqa: BLE001
                 transport.reject(f"{self.name} (request)", f"{type(error).__name__}: {error}")
                 continue
-            transport.call_soon(self._start, request, int(sample.guid), int(sample.seq), client_id)
+            transport.call_soon(self._start, request, int(sample.guid), int(sample.seq), client)
 
-    def _start(self, request: Any, guid: int, seq: int, client_id: str | None) -> None:
+    def _start(self, request: Any, guid: int, seq: int, client: _Caller) -> None:
         if self.alive:
-            task = self.node.transport.loop.create_task(self._serve(request, guid, seq, client_id), name=f"service {self.name}")
+            task = self.node.transport.loop.create_task(self._serve(request, guid, seq, client), name=f"service {self.name}")
             self.node.transport.handlers.add(task)
             task.add_done_callback(self.node.transport.handlers.discard)
 
-    async def _serve(self, request: Any, guid: int, seq: int, client_id: str | None) -> None:
+    async def _serve(self, request: Any, guid: int, seq: int, client: _Caller) -> None:
         transport = self.node.transport
         try:
             # a handler that waits for a long job on purpose (an action's get_result) says so
@@ -278,22 +303,19 @@ class _DdsService(ServiceServer):
             from execution_engine.transport.ros_convert import failure_response
 
             response = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}")
-        await self._wait_for_client(client_id)
+        await self._wait_for_client(client)
         if self.alive:
             self.ends.writer.write(transport.converter.to_wire_service(self.ends.reply_type, response, guid, seq))
 
-    async def _wait_for_client(self, client_id: str | None) -> None:
-        """Until the reply writer has matched the caller's reply reader (bounded, as rmw does)."""
-        if client_id is None:
-            return
+    async def _wait_for_client(self, client: _Caller) -> None:
+        """Until the reply writer has matched the caller's reply reader (bounded, 1 s): a reply
+        written before that is lost (volatile), and the caller waits in vain."""
         clock = self.node.transport.clock
-        deadline = clock.now() + clock.speed * 1.0
+        deadline = clock.now() + clock.speed * _REPLY_MATCH_WAIT
         writer = self.ends.writer
         while clock.now() < deadline:
-            for handle in writer.get_matched_subscriptions():
-                data = writer.get_matched_subscription_data(handle)
-                if data is not None and graph.user_data_value(data.qos, "clientid") == client_id:
-                    return
+            if any(client.reads(data) for data in _matched(writer, subscriptions=True)):
+                return
             await clock.sleep(_POLL)
 
     def destroy(self) -> None:

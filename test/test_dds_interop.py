@@ -1,0 +1,89 @@
+"""What a ROS 2 client that is neither Python nor rmw (ros2-client on RustDDS) relies on, byte by byte.
+
+ros2-client's ``ServiceMapping::Cyclone`` writes a request as rmw_cyclonedds_cpp does: the 8 low
+bytes of its request writer's GUID and the sequence number (as the RTPS high ``int32`` then low
+``uint32``), then the request; it matches a reply by those 16 bytes, so the server must echo them
+verbatim.  It puts no ``clientid=`` in its endpoints' user data.  These tests play such a client
+with raw CDR on plain Cyclone endpoints: loopback, a random domain id, every wait bounded.
+"""
+from __future__ import annotations
+
+import random
+import struct
+from typing import Any
+
+import pytest
+
+from execution_engine.clock import Clock, real_clock, run_with_clock
+from execution_engine.transport import dds_graph
+from execution_engine.transport.dds import DdsTransport
+from execution_engine.transport.msgs import Trigger, TriggerResponse
+from execution_engine.transport.port import poll_until
+
+LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
+BOUND = 10.0  # seconds any one condition may take on a loaded machine
+XCDR1_LE = b"\x00\x01"  # the encapsulation kind RustDDS and rmw write: plain CDR, little endian
+
+
+@pytest.fixture(scope="module")
+def env() -> dict[str, str]:
+    return {"ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK}
+
+
+def take_raw(reader: Any) -> list[bytes]:
+    """Serialized samples as they came off the wire (encapsulation header first)."""
+    from cyclonedds._clayer import ddspy_take
+    from cyclonedds.core import InstanceState, SampleState, ViewState
+
+    taken = ddspy_take(reader._ref, SampleState.Any | ViewState.Any | InstanceState.Any, 16)
+    return [bytes(data) for data, info in taken if info.valid_data]
+
+
+def cdr_string(text: str) -> bytes:
+    data = text.encode() + b"\0"
+    return struct.pack("<I", len(data)) + data
+
+
+def test_a_client_without_clientid_gets_its_header_echoed_even_when_its_reply_reader_matches_late(env: dict[str, str]) -> None:
+    """The request header comes back byte for byte (a GUID half with its top bit set, a sequence
+    number with both RTPS halves non-zero), followed by the Trigger response in plain CDR; and the
+    reply reader, created only after the server got the request (as a peer whose discovery is
+    slower than its request), still gets the answer: the server waits for a reply reader of the
+    caller's participant instead of writing into the void."""
+    async def main(clock: Clock) -> tuple[list[bytes], list[str]]:
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.sub import DataReader
+
+        server, peer = DdsTransport(clock, env=env), DdsTransport(clock, env=env)
+        calls: list[str] = []
+        try:
+            async def pause(_request: Any) -> TriggerResponse:
+                calls.append("pause")
+                return TriggerResponse(True, "paused")
+
+            server.create_node("execution_engine").create_service(Trigger, "execution_engine/pause", pause)
+            request_type, reply_type = peer.registry.wire_service("std_srvs/srv/Trigger")
+            qos = dds_graph.dds_qos(dds_graph.SERVICES)  # no user data, as RustDDS
+            writer = DataWriter(peer.participant, peer.topic("rq/execution_engine/pauseRequest", request_type), qos=qos)
+            assert await poll_until(clock, lambda: bool(writer.get_matched_subscriptions()), BOUND, 0.01)
+            from cyclonedds._clayer import ddspy_write
+
+            header = bytes([0x01, 0x0F, 0xA2, 0x9C, 0x11, 0x22, 0x80, 0x83]) + struct.pack("<iI", 1, 2)
+            assert ddspy_write(writer._ref, XCDR1_LE + b"\x00\x00" + header + b"\x00\x00\x00\x00") >= 0
+            assert await poll_until(clock, lambda: calls == ["pause"], BOUND, 0.01)
+            reader = DataReader(peer.participant, peer.topic("rr/execution_engine/pauseReply", reply_type), qos=qos)
+            replies: list[bytes] = []
+            assert await poll_until(clock, lambda: bool(replies.extend(take_raw(reader)) or replies), BOUND, 0.01), "no reply"
+            return [r for r in replies], calls
+        finally:
+            await server.shutdown()
+            await peer.shutdown()
+
+    replies, calls = run_with_clock(main, real_clock())
+    assert calls == ["pause"]
+    assert len(replies) == 1
+    reply = replies[0]
+    header = bytes([0x01, 0x0F, 0xA2, 0x9C, 0x11, 0x22, 0x80, 0x83]) + struct.pack("<iI", 1, 2)
+    assert reply[:2] == XCDR1_LE
+    # header echoed; success (bool) then three bytes of padding to the string's 4-byte length
+    assert reply[4:].startswith(header + b"\x01\x00\x00\x00" + cdr_string("paused"))
