@@ -49,68 +49,113 @@ from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 
 
-def attach_recorder(deployment: Deployment, path: Path) -> Recorder:
-    recorder = Recorder(deployment.transport.create_node("recorder"), McapSink(open(path, "wb"), str(path)))
+class NullSink:
+    """A sink that keeps nothing: the recorder's subscriptions and callbacks without the recording,
+    so the table can tell what listening to every topic costs from what writing the file costs."""
+
+    def __init__(self) -> None:
+        self.stats = RecordingStats("(nothing)")
+
+    def put(self, topic: str, msg: Any, offered: Any, log_time_ns: int) -> None:
+        pass
+
+    def add_metadata(self, name: str, data: Any) -> None:
+        pass
+
+    def add_attachment(self, *args: Any) -> None:
+        pass
+
+    def sync(self) -> None:
+        pass
+
+    def close(self) -> RecordingStats:
+        return self.stats
+
+
+def attach_recorder(deployment: Deployment, path: Path | None) -> Recorder:
+    """A recorder node on the deployment's transport writing ``path`` (None: subscribed, nothing written)."""
+    sink: Any = McapSink(open(path, "wb"), str(path)) if path is not None else NullSink()
+    recorder = Recorder(deployment.transport.create_node("recorder"), sink)
     recorder.start()
     return recorder
 
 
-async def measure(clock: Clock, n: int, record: Path | None) -> dict[str, Any]:
+async def measure(clock: Clock, n: int, record: Path | None | bool) -> dict[str, Any]:
     backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN))
     deployment = await deploy_local(clock, NEXTAGE_OPEN, backend, machine_parameters={"trajectory_db": ":memory:"}, bridge_parameters={"state_period": 1.0})
     # Both sides watch the run as ``run`` always does (the observer behind the console and the trace), so the
     # machines encode their status events either way: the difference is the recorder's alone.
     RunObserver(deployment.transport.create_node("run_observer"), NEXTAGE_OPEN.group_names).sinks.append(lambda status: None)
-    recorder = attach_recorder(deployment, record) if record is not None else None
+    recorder = attach_recorder(deployment, record if isinstance(record, Path) else None) if record is not False else None
     stats: RecordingStats | None = None
     try:
         engine = deployment.engine
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         report = await engine.run(app([{"left_arm": ("set_speed", "0.5")} for _ in range(n)]))
-        function = (time.perf_counter() - t0) / n
+        function, function_cpu = (time.perf_counter() - t0) / n, (time.process_time() - c0) / n
         assert report.ok, report.summary_lines()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         report = await engine.run(app([{"left_arm": ("speed_sweep", str(n))}]))
-        in_skill = (time.perf_counter() - t0) / n
+        in_skill, in_skill_cpu = (time.perf_counter() - t0) / n, (time.process_time() - c0) / n
         assert report.ok, report.summary_lines()
     finally:
         if recorder is not None:
             stats = await recorder.close()
         await deployment.close()
-    return {"function": function, "skill": in_skill, "messages": stats.written if stats else 0, "dropped": sum(stats.dropped.values()) if stats else 0}
+    return {
+        "function": function, "skill": in_skill, "function_cpu": function_cpu, "skill_cpu": in_skill_cpu,
+        "messages": stats.written if stats else 0, "dropped": sum(stats.dropped.values()) if stats else 0,
+    }
+
+
+SIDES = ("without", "subscribed", "recorded")
 
 
 def per_primitive(n: int, rounds: int) -> dict[str, Any]:
+    """Wall and CPU time (of this process: the encoder's is not in it) per primitive, three sides:
+    no recorder; a recorder subscribed to every topic that keeps nothing; the recording."""
     LIBRARIES["bench"] = BenchFunctions
-    plain: list[dict[str, Any]] = []
-    recorded: list[dict[str, Any]] = []
+    runs: dict[str, list[dict[str, Any]]] = {side: [] for side in SIDES}
     with tempfile.TemporaryDirectory() as folder:
-        for i in range(rounds):  # alternate, so drift of this shared machine hits both sides alike
-            plain.append(run_with_clock(lambda c: measure(c, n, None), Clock(1.0)))
-            recorded.append(run_with_clock(lambda c: measure(c, n, Path(folder) / f"run{i}.mcap"), Clock(1.0)))
+        for i in range(rounds):  # alternate, so drift of this shared machine hits every side alike
+            for side, record in zip(SIDES, (False, None, Path(folder) / f"run{i}.mcap")):
+                runs[side].append(run_with_clock(lambda c, r=record: measure(c, n, r), Clock(1.0)))  # type: ignore[misc]
     out: dict[str, Any] = {"primitives": n, "rounds": rounds}
-    for kind in ("function", "skill"):
-        without = statistics.median(r[kind] for r in plain) * 1e6
-        with_ = statistics.median(r[kind] for r in recorded) * 1e6
-        out[f"{kind}_us_without"] = round(without, 2)
-        out[f"{kind}_us_recorded"] = round(with_, 2)
-        out[f"{kind}_ratio"] = round(with_ / without, 3)
-    out["messages_per_run"] = int(statistics.median(r["messages"] for r in recorded))
-    out["dropped"] = sum(r["dropped"] for r in recorded)
+    for kind in ("function", "skill", "function_cpu", "skill_cpu"):
+        without = statistics.median(r[kind] for r in runs["without"]) * 1e6
+        for side in SIDES:
+            out[f"{kind}_us_{side}"] = round(statistics.median(r[kind] for r in runs[side]) * 1e6, 2)
+        out[f"{kind}_ratio"] = round(out[f"{kind}_us_recorded"] / without, 3)
+        out[f"{kind}_ratio_subscribed"] = round(out[f"{kind}_us_subscribed"] / without, 3)
+    out["messages_per_run"] = int(statistics.median(r["messages"] for r in runs["recorded"]))
+    out["dropped"] = sum(r["dropped"] for r in runs["recorded"])
     return out
 
 
+_SELF_CPU = (
+    "import atexit, resource, runpy, sys\n"
+    "out = sys.argv.pop(1)\n"
+    "def said():\n"
+    "    usage = resource.getrusage(resource.RUSAGE_SELF)\n"
+    "    open(out, 'w').write(str(usage.ru_utime + usage.ru_stime))\n"
+    "atexit.register(said)\n"
+    "sys.argv[0] = 'execution_engine'\n"
+    "runpy.run_module('execution_engine', run_name='__main__', alter_sys=True)\n"
+)
+
+
 def demo(speed: str, rounds: int) -> dict[str, Any]:
-    """The rivet demonstrator through the CLI, without and with ``--record``: wall and CPU time per primitive."""
+    """The rivet demonstrator through the CLI, without and with ``--record``: wall time per primitive,
+    CPU time of the run's own process (the control path) and of every process (with the encoder)."""
     import resource
     import subprocess
 
-    sides: dict[str, list[tuple[float, float, int]]] = {"without": [], "recorded": []}
+    sides: dict[str, list[tuple[float, float, float, int]]] = {"without": [], "recorded": []}
     with tempfile.TemporaryDirectory() as folder:
         for i in range(rounds):
             for label in ("without", "recorded"):
-                trace = Path(folder) / f"{label}{i}.jsonl"
-                command = [sys.executable, "-m", "execution_engine", "run", "apps_xml/rivet_installation.xml", "--speed", speed,
+                trace, own = Path(folder) / f"{label}{i}.jsonl", Path(folder) / f"{label}{i}.cpu"
+                command = [sys.executable, "-c", _SELF_CPU, str(own), "run", "apps_xml/rivet_installation.xml", "--speed", speed,
                            "-q", "--no-check", "--trace", str(trace)]
                 if label == "recorded":
                     command += ["--record", str(Path(folder) / f"run{i}.mcap")]
@@ -119,15 +164,16 @@ def demo(speed: str, rounds: int) -> dict[str, Any]:
                 subprocess.run(command, cwd=HERE.parent, check=True, stdout=subprocess.DEVNULL)
                 wall = time.perf_counter() - t0
                 after = resource.getrusage(resource.RUSAGE_CHILDREN)
-                cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+                total = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
                 primitives = trace.read_text().count('"event":"primitive_end"')
-                sides[label].append((wall, cpu, primitives))
-    out: dict[str, Any] = {"speed": speed, "rounds": rounds, "primitives": sides["without"][0][2]}
+                sides[label].append((wall, float(own.read_text()), total, primitives))
+    out: dict[str, Any] = {"speed": speed, "rounds": rounds, "primitives": sides["without"][0][3]}
     for label, runs in sides.items():
-        out[f"wall_ms_per_primitive_{label}"] = round(statistics.median(w / n for w, _, n in runs) * 1e3, 2)
-        out[f"cpu_ms_per_primitive_{label}"] = round(statistics.median(c / n for _, c, n in runs) * 1e3, 2)
-    out["wall_ratio"] = round(out["wall_ms_per_primitive_recorded"] / out["wall_ms_per_primitive_without"], 3)
-    out["cpu_ratio"] = round(out["cpu_ms_per_primitive_recorded"] / out["cpu_ms_per_primitive_without"], 3)
+        out[f"wall_ms_per_primitive_{label}"] = round(statistics.median(w / n for w, _, _, n in runs) * 1e3, 2)
+        out[f"cpu_ms_per_primitive_{label}"] = round(statistics.median(c / n for _, c, _, n in runs) * 1e3, 2)
+        out[f"all_cpu_ms_per_primitive_{label}"] = round(statistics.median(c / n for _, _, c, n in runs) * 1e3, 2)
+    for figure in ("wall", "cpu", "all_cpu"):
+        out[f"{figure}_ratio"] = round(out[f"{figure}_ms_per_primitive_recorded"] / out[f"{figure}_ms_per_primitive_without"], 3)
     return out
 
 
@@ -176,14 +222,18 @@ def main() -> None:
     parser.add_argument("--rsi", type=float, default=0.0, metavar="SECONDS", help="also the RSI loop's late packets, SECONDS each way")
     args = parser.parse_args()
     result: dict[str, Any] = {"bench": "recording_overhead", **per_primitive(args.primitives, args.rounds)}
-    print(f"one primitive per function: {result['function_us_without']:9.2f} us without, {result['function_us_recorded']:9.2f} us recorded, ratio {result['function_ratio']:.3f}")
-    print(f"primitives within a skill:  {result['skill_us_without']:9.2f} us without, {result['skill_us_recorded']:9.2f} us recorded, ratio {result['skill_ratio']:.3f}")
+    for kind, label in (("function", "one primitive per function"), ("skill", "primitives within a skill")):
+        for measure_, unit in ((kind, "wall"), (f"{kind}_cpu", "CPU ")):
+            print(f"{label:<27} {unit}: {result[f'{measure_}_us_without']:9.2f} us without, {result[f'{measure_}_us_subscribed']:9.2f} subscribed "
+                  f"(ratio {result[f'{measure_}_ratio_subscribed']:.3f}), {result[f'{measure_}_us_recorded']:9.2f} recorded (ratio {result[f'{measure_}_ratio']:.3f})")
     print(f"recorded {result['messages_per_run']} messages per run, {result['dropped']} dropped")
     if args.demo_rounds > 0:
         result["demo"] = [demo(speed, args.demo_rounds) for speed in ("10", "max")]
         for d in result["demo"]:
-            print(f"rivet demonstrator --speed {d['speed']:>3}: wall {d['wall_ms_per_primitive_without']:8.2f} / {d['wall_ms_per_primitive_recorded']:8.2f} ms "
-                  f"per primitive (ratio {d['wall_ratio']:.3f}), CPU {d['cpu_ms_per_primitive_without']:7.2f} / {d['cpu_ms_per_primitive_recorded']:7.2f} ms (ratio {d['cpu_ratio']:.3f})")
+            print(f"rivet demonstrator --speed {d['speed']:>3}, ms per primitive without / recorded: "
+                  f"wall {d['wall_ms_per_primitive_without']:.2f} / {d['wall_ms_per_primitive_recorded']:.2f} (ratio {d['wall_ratio']:.3f}), "
+                  f"CPU of the run's process {d['cpu_ms_per_primitive_without']:.2f} / {d['cpu_ms_per_primitive_recorded']:.2f} (ratio {d['cpu_ratio']:.3f}), "
+                  f"CPU of all processes {d['all_cpu_ms_per_primitive_without']:.2f} / {d['all_cpu_ms_per_primitive_recorded']:.2f} (ratio {d['all_cpu_ratio']:.3f})")
     if args.rsi > 0:
         result["rsi"] = rsi(args.rsi)
         for label, figures in result["rsi"].items():

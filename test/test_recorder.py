@@ -5,7 +5,9 @@ import dataclasses
 import io
 import json
 import math
+import random
 import shutil
+import tempfile
 import threading
 from pathlib import Path
 from typing import Any
@@ -178,14 +180,39 @@ def test_a_full_queue_drops_and_reports_never_blocks() -> None:
     stream = Stalled()
     sink = McapSink(stream, "stalled.mcap", queue_size=10, flush_period=0.01)
     stream.armed = True
-    sink.put("/a", msgs.String("first"), (EVENTS,), 1)
-    assert stream.entered.wait(10)  # the writer is stuck on the disk now
-    for i in range(100):
-        sink.put("/a", msgs.String(str(i)), (EVENTS,), 2 + i)  # returns at once every time
-    assert sink.stats.dropped["/a"] == 90
+    sink.put("/a", msgs.String("first"), (EVENTS,), 0)
+    assert stream.entered.wait(10)  # the file's first bytes reached the disk, which hangs from now on
+    noise = random.Random(7)
+    for i in range(1000):  # 4 MB: more than the queue, the pipes and the encoder hold while the disk hangs
+        sink.put("/a", msgs.String(noise.randbytes(2048).hex()), (EVENTS,), 1 + i)  # returns at once every time
+    dropped = sink.stats.dropped["/a"]
+    assert dropped > 0
     stream.release.set()
     stats = sink.close()
-    assert stats.written == 11 and "DROPPED 90 message(s)" in "\n".join(stats.lines())
+    assert not stats.error and stats.written + dropped == 1001
+    assert f"DROPPED {dropped} message(s)" in "\n".join(stats.lines())
+    recording = Recording("memory")
+    path = Path(tempfile.mkdtemp()) / "stalled.mcap"
+    path.write_bytes(stream.getvalue())
+    times = [m.log_time_ns for m in iter_messages(path, recording)]
+    assert len(times) == stats.written and times == sorted(times) and not recording.cut
+    assert recording.metadata["recording_stats"]["dropped"] == str(dropped)
+
+
+def test_an_encoder_that_dies_is_said_and_never_blocks_the_run() -> None:
+    stream = io.BytesIO()
+    stream.close = lambda: None  # type: ignore[method-assign]
+    sink = McapSink(stream, "dying.mcap")
+    sink.put("/a", msgs.String("before"), (EVENTS,), 1)
+    assert sink.sync().wait(10)
+    sink._process.kill()  # noqa: SLF001 - what an out-of-memory kill does to it
+    sink._process.wait(10)  # noqa: SLF001
+    assert sink.sync().wait(10)  # a sync after the death is released, not left hanging
+    for i in range(100):
+        sink.put("/a", msgs.String(str(i)), (EVENTS,), 2 + i)
+    stats = sink.close()
+    assert "the encoder process ended" in stats.error
+    assert "RECORDING FAILED: the encoder process ended" in "\n".join(stats.lines())
 
 
 def test_a_cut_recording_reads_back_to_its_last_flushed_chunk(tmp_path: Path) -> None:

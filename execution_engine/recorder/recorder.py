@@ -5,8 +5,8 @@ topics (:meth:`Node.topic_names_and_types`) at start and then every ``poll`` run
 subscribes to each with a QoS no stronger than its publishers offer (best effort if any publisher
 is, transient-local only when all are, so the latched state, structure and cell reach it).  The
 same code records the in-process deployment of ``run --record`` and a ROS 2 graph (the engine
-node's ``record`` parameter).  Every message is handed to an :class:`McapSink` whose thread does
-the writing; the callbacks only enqueue.
+node's ``record`` parameter).  Every message is handed to an :class:`McapSink`, whose encoder process
+does the converting, encoding and writing; the callbacks only enqueue the message and its stamp.
 
 What ran goes in with it: the application XML and its cell model as attachments, and a
 ``dual_arm_executive`` metadata record (application, digests, robot, back end, software version,
@@ -142,15 +142,10 @@ class Recorder:
         })
 
     async def close(self) -> RecordingStats:
-        """Stop looking for topics, let the last messages arrive, finish the file."""
+        """Stop looking for topics, let the last messages arrive, finish the file (the sink adds
+        the ``recording_stats`` metadata: what was written and dropped)."""
         if self._task is not None:
             self._task.cancel()
             await asyncio.gather(self._task, return_exceptions=True)
         await asyncio.sleep(0)  # deliveries already scheduled on the loop
-        stats = self.sink.stats
-        self.sink.add_metadata("recording_stats", {
-            "written": str(stats.written),
-            "dropped": str(sum(stats.dropped.values())),
-            "dropped_by_topic": ", ".join(f"{t}={n}" for t, n in sorted(stats.dropped.items())),
-        })
         return await asyncio.get_running_loop().run_in_executor(None, self.sink.close)

@@ -1,22 +1,35 @@
-"""The MCAP file of a recording, written by its own thread so no machine ever waits for a disk.
+"""The MCAP file of a recording, made off the control path so no machine ever waits for it.
 
-Callers (subscription callbacks on the control loop) only :meth:`McapSink.put` a message into a
-bounded queue; a full queue counts the message as dropped (per topic) and warns once -- it never
-blocks.  The writer thread serialises to CDR with ``mcap-ros2-support``'s encoder (the schema
-texts of :mod:`.definitions`) and writes through ``mcap``'s chunked, indexed writer, as
-``ros2 bag record -s mcap`` does: profile ``ros2``, schema encoding ``ros2msg``, message
-encoding ``cdr``, the publishers' QoS in each channel's ``offered_qos_profiles``.
+Callers (subscription callbacks on the control loop) only :meth:`McapSink.put` a message and its
+stamp into a bounded queue; a full queue counts the message as dropped (per topic) and warns once
+-- it never blocks.  Everything else happens elsewhere:
 
-A run can be cut at any moment (``kill -9``, a power loss): the thread closes the chunk in
-progress and flushes it to the operating system at least every ``flush_period`` wall seconds
-and on :meth:`sync` (every operation boundary), and syncs the file to disk then, so a cut
-recording reads back up to its last flushed chunk (``mcap recover`` rebuilds its index).
+* a feeder thread takes what has gathered every ``poll`` wall seconds and hands it, pickled in
+  small batches, to the encoder process (:mod:`.encoder`) through a pipe;
+* the encoder process converts and serialises to CDR with ``mcap-ros2-support`` (schemas and
+  encoders made once per type) and writes through ``mcap``'s chunked, indexed writer, as
+  ``ros2 bag record -s mcap`` does: profile ``ros2``, schema encoding ``ros2msg``, message
+  encoding ``cdr``, the publishers' QoS in each channel's ``offered_qos_profiles``;
+* a reader thread copies the file's bytes the encoder sends back to ``stream``.
+
+Why a process: encoding costs some 30 µs a message in pure Python, and a thread of the run's
+process would take it from the control loop through the interpreter lock (a rivet run publishes
+about 24 messages a primitive).  Pickling a message costs about 1.5 µs, copying bytes nothing.
+
+A run can be cut at any moment (``kill -9``, a power loss): the chunk in progress is closed and
+the file flushed and synced to disk at least every ``flush_period`` wall seconds and on
+:meth:`sync` (every operation boundary), so a cut recording reads back up to its last flushed
+chunk (``mcap recover`` rebuilds its index).  When the run's process dies, the encoder sees its
+input end and stops too.
 """
 from __future__ import annotations
 
-import dataclasses
+import itertools
 import logging
 import os
+import pickle
+import subprocess
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -24,21 +37,19 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import IO, Any
 
-from mcap.well_known import MessageEncoding, SchemaEncoding
-from mcap.writer import CompressionType, Writer
-from mcap_ros2._dynamic import EncoderFunction, serialize_dynamic
 
-from execution_engine.recorder.definitions import schema_text
-from execution_engine.transport.msgs import ByteBuffer
-from execution_engine.transport.qos import Durability, QoS, Reliability
+from execution_engine.recorder.frames import frame, pickled, read_frame
+from execution_engine.transport.qos import QoS
 
 log = logging.getLogger(__name__)
 
 CHUNK_SIZE = 256 * 1024  # bytes before a chunk is closed by size (rosbag2's default is 768 KiB)
-QUEUE_SIZE = 20_000  # messages waiting for the writer thread before new ones are dropped
+QUEUE_SIZE = 20_000  # messages waiting for the feeder before new ones are dropped
 FLUSH_PERIOD = 1.0  # wall seconds: the most a crash loses of what was already received
-POLL = 0.05  # wall seconds between the writer's looks at its queue
-YIELD_AFTER = 0.002  # wall seconds of writing before the writer lets the control loop take the interpreter
+POLL = 0.05  # wall seconds between the feeder's looks at its queue
+SYNC_GAP = 0.1  # wall seconds at least between two syncs asked for (each closes a chunk and syncs the disk)
+BATCH = 256  # items pickled at once: the feeder holds the interpreter for well under a millisecond
+PIPE_SIZE = 1 << 20  # bytes a pipe to or from the encoder holds (Linux), so bursts do not stall it
 _STOP = object()
 
 
@@ -50,7 +61,7 @@ class RecordingStats:
     written: int = 0
     by_topic: Counter[str] = field(default_factory=Counter)
     dropped: Counter[str] = field(default_factory=Counter)  # queue full: never written
-    error: str = ""  # the writer thread's failure, if any (then later messages are lost)
+    error: str = ""  # the writer's failure, if any (then later messages are lost)
 
     def lines(self) -> list[str]:
         out = [f"recording {self.path}: {self.written} message(s) on {len(self.by_topic)} topic(s)"]
@@ -64,49 +75,28 @@ class RecordingStats:
         return out
 
 
-def qos_yaml(offered: tuple[QoS, ...]) -> str:
-    """A channel's ``offered_qos_profiles`` as rosbag2 (Jazzy) writes it: one YAML entry per publisher."""
-    infinite = "    sec: 2147483647\n    nsec: 4294967295\n"
-    entries = []
-    for qos in offered:
-        entries.append(
-            f"- history: keep_last\n  depth: {qos.depth}\n"
-            f"  reliability: {'best_effort' if qos.reliability is Reliability.BEST_EFFORT else 'reliable'}\n"
-            f"  durability: {'transient_local' if qos.durability is Durability.TRANSIENT_LOCAL else 'volatile'}\n"
-            f"  deadline:\n{infinite}  lifespan:\n{infinite}  liveliness: automatic\n"
-            f"  liveliness_lease_duration:\n{infinite}  avoid_ros_namespace_conventions: false"
-        )
-    return "\n".join(entries)
+def _encoder_command(chunk_size: int, compression: str) -> list[str]:
+    """``compression``: an ``mcap`` ``CompressionType`` name (``ZSTD``, ``LZ4``, ``NONE``)."""
+    return [sys.executable, "-m", "execution_engine.recorder.encoder", str(chunk_size), compression]
 
 
-_FIELDS: dict[type, tuple[str, ...]] = {}
+def _encoder_env() -> dict[str, str]:
+    """The encoder imports this process's own modules (the same source tree or install)."""
+    paths = [os.path.abspath(p or os.curdir) for p in sys.path]
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(dict.fromkeys(paths))}
 
 
-def to_ros_dict(value: Any) -> Any:
-    """A message mirror as the CDR encoder takes it: nested dicts, lists, a ``byte`` as an int."""
-    cls = type(value)
-    if cls in (str, float, int, bool):
-        return value
-    if cls is tuple or cls is list:
-        return [to_ros_dict(v) for v in value]
-    if cls is ByteBuffer:  # uint8[] (image data): the encoder takes bytes whole
-        return value
-    if cls is bytes:  # a ROS ``byte`` (DiagnosticStatus.level) is bytes of length 1 in the mirrors
-        return value[0] if len(value) == 1 else value
-    names = _FIELDS.get(cls)
-    if names is None:
-        names = _FIELDS[cls] = tuple(f.name for f in dataclasses.fields(value))
-    return {name: to_ros_dict(getattr(value, name)) for name in names}
+def _widen(pipe: IO[bytes] | None) -> None:
+    try:
+        import fcntl
+
+        fcntl.fcntl(pipe.fileno(), getattr(fcntl, "F_SETPIPE_SZ", 1031), PIPE_SIZE)  # type: ignore[union-attr]
+    except (ImportError, OSError, AttributeError, ValueError):  # not Linux, or over the system's limit: the default
+        pass
 
 
 class McapSink:
-    """One MCAP file and the thread that writes it.
-
-    The queue is a deque the callers append to (atomic under the GIL, no lock, no wake-up): the
-    writer thread looks every ``poll`` wall seconds and writes what has gathered, handing the
-    interpreter back after at most ``YIELD_AFTER`` of work, so a control loop waits neither for a
-    lock nor long for the writer's turn on the GIL.
-    """
+    """One MCAP file, the encoder process that makes it and the two threads that talk to it."""
 
     def __init__(
         self,
@@ -117,25 +107,31 @@ class McapSink:
         chunk_size: int = CHUNK_SIZE,
         flush_period: float = FLUSH_PERIOD,
         poll: float = POLL,
-        compression: CompressionType = CompressionType.ZSTD,
+        compression: str = "ZSTD",
     ) -> None:
         self.stats = RecordingStats(path)
         self._stream = stream
         self._queue: deque[Any] = deque()
         self._queue_size = queue_size
-        self._wake = threading.Event()  # only for sync and close: messages never wake the writer
+        self._wake = threading.Event()  # only for sync and close: messages never wake the feeder
         self._flush_period = flush_period
         self._poll = poll
-        self._writer = Writer(stream, chunk_size=chunk_size, compression=compression)
-        self._writer.start(profile="ros2", library="dual_arm_executive recorder (mcap, mcap-ros2-support)")
-        self._schemas: dict[str, tuple[int, EncoderFunction]] = {}
-        self._channels: dict[str, int] = {}
-        self._sequence: Counter[str] = Counter()
+        self._syncs: dict[int, list[threading.Event]] = {}  # sync number -> who waits for it
+        self._numbers = itertools.count()
+        self._sent: Counter[str] = Counter()
         self._warned = False
         self._closed = False
         self._failed = False
-        self._thread = threading.Thread(target=self._work, name=f"mcap writer {path}", daemon=True)
-        self._thread.start()
+        self._finished = False
+        self._process = subprocess.Popen(  # noqa: S603 - this interpreter, our own module
+            _encoder_command(chunk_size, compression), stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=_encoder_env()
+        )
+        _widen(self._process.stdin)
+        _widen(self._process.stdout)
+        self._feeder = threading.Thread(target=self._feed, name=f"mcap feeder {path}", daemon=True)
+        self._reader = threading.Thread(target=self._read, name=f"mcap reader {path}", daemon=True)
+        self._feeder.start()
+        self._reader.start()
 
     # ---------------------------------------------------------------- the caller's side
     def put(self, topic: str, msg: Any, offered: tuple[QoS, ...], log_time_ns: int) -> None:
@@ -148,32 +144,41 @@ class McapSink:
                 self._warned = True
                 log.warning("recording %s: the writer cannot keep up; dropping messages (first on %s)", self.stats.path, topic)
             return
-        self._queue.append((topic, msg, offered, log_time_ns))
+        self._queue.append(("m", topic, msg, offered, log_time_ns))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        self._control(("metadata", name, dict(data)))
+        self._control(("meta", name, dict(data)))
 
     def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int) -> None:
-        self._control(("attachment", name, media_type, data, log_time_ns))
+        self._control(("att", name, media_type, data, log_time_ns))
 
     def sync(self) -> threading.Event:
         """Close the chunk in progress and put the file on disk (operation boundaries); the event
-        is set once that is done."""
+        is set once that is done (or the recording failed).  Syncs asked for within ``SYNC_GAP``
+        of the last one wait for the next: a run of short operations must not sync a disk a
+        thousand times a second, nor make a chunk of every few messages."""
         done = threading.Event()
         self._control(done)
+        if self._closed or self._failed:
+            done.set()
         return done
 
     def close(self, timeout: float = 30.0) -> RecordingStats:
-        """Write what is queued, the summary and the index; wait (bounded) for the thread."""
+        """Write what is queued, the summary (with ``recording_stats``) and the index; wait
+        (bounded) for the encoder and the threads."""
         if not self._closed:
             self._closed = True
             self._queue.append(_STOP)
             self._wake.set()
-            self._thread.join(timeout)
-            if self._thread.is_alive():
+            deadline = time.monotonic() + timeout
+            self._feeder.join(timeout)
+            self._reader.join(max(0.0, deadline - time.monotonic()))
+            if self._reader.is_alive() or self._feeder.is_alive():
                 self.stats.error = self.stats.error or f"the writer did not finish within {timeout:g} s"
+                self._process.kill()
             else:
                 self._stream.close()
+            self._process.wait(max(0.1, deadline - time.monotonic()))
         return self.stats
 
     def _control(self, item: Any) -> None:
@@ -183,85 +188,117 @@ class McapSink:
             if isinstance(item, threading.Event):
                 self._wake.set()
 
-    # ---------------------------------------------------------------- the writer thread
-    def _work(self) -> None:
+    def _fail(self, reason: str) -> None:
+        if not self._failed:
+            self._failed = True
+            self.stats.error = self.stats.error or reason
+            log.error("recording %s failed: %s", self.stats.path, self.stats.error)
+        for events in list(self._syncs.values()):
+            for event in events:
+                event.set()
+
+    # ---------------------------------------------------------------- the feeder thread
+    def _feed(self) -> None:
         last_flush = time.monotonic()
-        pending = False
+        pending = False  # messages sent since the last sync
+        waiting: list[threading.Event] = []  # syncs asked for and not yet sent
         try:
             while True:
                 self._wake.wait(self._poll)
                 self._wake.clear()
-                burst = time.perf_counter()
-                while self._queue:
+                items: list[tuple[Any, ...]] = []
+                stop = False
+                while self._queue and not stop:
                     item = self._queue.popleft()
                     if item is _STOP:
-                        self._writer.finish()
+                        stop = True
+                    elif isinstance(item, threading.Event):  # a sync asked for
+                        waiting.append(item)
+                    elif item[0] == "m":
+                        _, topic, msg, offered, log_time = item
+                        items.append(("m", topic, type(msg).ROS_TYPE, msg, offered, log_time))
+                        pending = True
+                    else:
+                        items.append(item)
+                    if len(items) >= BATCH:
+                        self._send(items)
+                        items = []
+                since = time.monotonic() - last_flush
+                if stop or (waiting and since >= SYNC_GAP) or (pending and since >= self._flush_period):
+                    items.append(self._sync_item(waiting))
+                    waiting, pending, last_flush = [], False, time.monotonic()
+                if stop:
+                    items.append(("stop", Counter(self.stats.dropped)))
+                if items:
+                    self._send(items)
+                if stop:
+                    return
+        except Exception as error:  # noqa: BLE001 - said, never silent
+            self._fail(f"{type(error).__name__}: {error}")
+        finally:
+            for event in waiting:
+                event.set()
+            try:
+                self._process.stdin.close()  # type: ignore[union-attr]  # the encoder ends at the end of its input
+            except OSError:
+                pass
+
+    def _sync_item(self, events: list[threading.Event]) -> tuple[str, int]:
+        number = next(self._numbers)
+        self._syncs[number] = events
+        return ("sync", number)
+
+    def _send(self, items: list[tuple[Any, ...]]) -> None:
+        messages = [item[1] for item in items if item[0] == "m"]
+        if self._failed:
+            self.stats.dropped.update(messages)
+            return
+        data = frame(b"B", pickled(items))
+        try:
+            self._process.stdin.write(data)  # type: ignore[union-attr]
+            self._process.stdin.flush()  # type: ignore[union-attr]
+        except OSError:  # the encoder is gone: the reader says why
+            self.stats.dropped.update(messages)
+            self._fail(f"the encoder process ended (exit code {self._process.poll()})")
+            return
+        self._sent.update(messages)
+
+    # ---------------------------------------------------------------- the reader thread
+    def _read(self) -> None:
+        stdout = self._process.stdout
+        assert stdout is not None
+        try:
+            while (got := read_frame(stdout)) is not None:
+                kind, payload = got
+                if kind == b"D" and not self._failed:
+                    self._write(payload)
+                elif kind == b"S":
+                    if not self._failed:
                         self._stream.flush()
                         self._fsync()
-                        return
-                    if isinstance(item, threading.Event):  # a sync
-                        self._flush(sync=True)
-                        item.set()
-                        pending, last_flush = False, time.monotonic()
-                        continue
-                    self._write(item)
-                    pending = True
-                    if time.perf_counter() - burst > YIELD_AFTER:  # let a waiting control loop have the interpreter
-                        time.sleep(0)
-                        burst = time.perf_counter()
-                if pending and time.monotonic() - last_flush >= self._flush_period:
-                    self._flush(sync=True)
-                    pending, last_flush = False, time.monotonic()
-        except Exception as error:  # noqa: BLE001 - a full disk, a bad message: said, never silent
-            self.stats.error = f"{type(error).__name__}: {error}"
-            self._failed = True
-            log.error("recording %s failed: %s", self.stats.path, self.stats.error)
-            self._drain()
+                    for event in self._syncs.pop(int(payload), []):
+                        event.set()
+                elif kind == b"E":
+                    self._fail(payload.decode(errors="replace"))
+                elif kind == b"T":
+                    self.stats.by_topic = Counter(pickle.loads(payload))
+                    self.stats.written = sum(self.stats.by_topic.values())
+                    self._finished = True
+                    if not self._failed:
+                        self._stream.flush()
+                        self._fsync()
+        except Exception as error:  # noqa: BLE001 - said, never silent
+            self._fail(f"{type(error).__name__}: {error}")
+        if not self._finished:
+            self.stats.by_topic = self.stats.by_topic or Counter(self._sent)
+            self.stats.written = self.stats.written or sum(self.stats.by_topic.values())
+            self._fail(f"the encoder process ended before the recording did (exit code {self._process.wait()})")
 
-    def _drain(self) -> None:
-        """After a failure: count what could not be written, release waiters, let ``close`` return."""
-        while True:
-            while self._queue:
-                item = self._queue.popleft()
-                if item is _STOP:
-                    return
-                if isinstance(item, threading.Event):
-                    item.set()
-                elif isinstance(item, tuple) and len(item) == 4:
-                    self.stats.dropped[item[0]] += 1
-            self._wake.wait(self._poll)
-            self._wake.clear()
-
-    def _write(self, item: tuple[Any, ...]) -> None:
-        if item[0] == "metadata":
-            self._writer.add_metadata(item[1], item[2])
-            return
-        if item[0] == "attachment":
-            _, name, media_type, data, log_time = item
-            self._writer.add_attachment(log_time, log_time, name, media_type, data)
-            return
-        topic, msg, offered, log_time = item
-        ros_type: str = type(msg).ROS_TYPE
-        schema = self._schemas.get(ros_type)
-        if schema is None:
-            text = schema_text(ros_type)
-            schema_id = self._writer.register_schema(ros_type, SchemaEncoding.ROS2, text.encode())
-            schema = self._schemas[ros_type] = (schema_id, serialize_dynamic(ros_type, text)[ros_type])
-        channel = self._channels.get(topic)
-        if channel is None:
-            channel = self._channels[topic] = self._writer.register_channel(
-                topic, MessageEncoding.CDR, schema[0], {"offered_qos_profiles": qos_yaml(offered)}
-            )
-        data = schema[1](to_ros_dict(msg))
-        self._writer.add_message(channel, log_time, data, log_time, self._sequence[topic])
-        self._sequence[topic] += 1
-        self.stats.written += 1
-        self.stats.by_topic[topic] += 1
-
-    def _flush(self, sync: bool) -> None:
-        self._writer.flush()
-        if sync:
-            self._fsync()
+    def _write(self, data: bytes) -> None:
+        try:
+            self._stream.write(data)
+        except Exception as error:  # noqa: BLE001 - a full or failing disk stops the recording, not the run
+            self._fail(f"{type(error).__name__}: {error}")
 
     def _fsync(self) -> None:
         try:
