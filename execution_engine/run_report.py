@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from execution_engine.recorder.reading import Recording, is_mcap, trace_records
+from execution_engine.recorder.safe_read import NotARecording
 from execution_engine.timeline import Timeline, TimelineBuilder
 from execution_engine.trace_report import read_trace
 
@@ -71,7 +72,8 @@ def vision_lines(timeline: Timeline) -> list[str]:
 
 
 def summarize(path: str | Path) -> RunSummary:
-    """Read a recording or a trace; OSError when the file cannot be read."""
+    """Read a recording or a trace; OSError when the file cannot be read, NotARecording (one line
+    naming the file) when it is neither."""
     builder = TimelineBuilder()
     if is_mcap(path):
         recording = Recording(str(path))
@@ -94,6 +96,9 @@ def summarize(path: str | Path) -> RunSummary:
         extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator")]
         return RunSummary(str(path), header, timeline, recording.cut, extra)
     trace = read_trace(path, builder.add)
+    if trace.records == 0:  # not one line of a trace: garbage, or nothing at all
+        why = trace.problems[0] if trace.problems else "it is empty" if Path(path).stat().st_size == 0 else "no whole line"
+        raise NotARecording(f"{path}: neither an MCAP recording nor a JSON-lines trace: {why}")
     return RunSummary(str(path), trace.lines(), builder.snapshot(), trace.cut)
 
 
@@ -114,6 +119,9 @@ def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
         summary = summarize(path)
     except OSError as error:
         err.write(f"error: {path}: cannot read: {error.strerror or error}\n")
+        return EXIT_UNREADABLE
+    except NotARecording as error:
+        err.write(f"error: {error}\n")
         return EXIT_UNREADABLE
     out.write("\n".join(summary.lines()) + "\n")
     if not args.no_timeline:

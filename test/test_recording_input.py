@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,7 @@ from hypothesis import strategies as st
 
 from execution_engine.recorder.reading import MAGIC
 from execution_engine.recorder.writer import McapSink
+from execution_engine.recorder.safe_read import NotARecording
 from execution_engine.run_report import summarize
 from execution_engine.transport import codec, msgs
 from execution_engine.transport.qos import EVENTS, SENSOR
@@ -48,8 +50,12 @@ def test_the_whole_recording_reads(folder: Path) -> None:
 def test_a_cut_recording_reads_up_to_the_cut_and_says_so(folder: Path, cut: int) -> None:
     path = folder / "cut.mcap"
     path.write_bytes(WHOLE[:cut])
-    summary = summarize(path)
-    assert summary.cut or not WHOLE[:cut].startswith(MAGIC)
+    header_end = len(MAGIC) + 9 + int.from_bytes(WHOLE[len(MAGIC) + 1:len(MAGIC) + 9], "little")
+    if cut < header_end:  # no whole header: no recording (nor a trace), refused in one line naming the file
+        with pytest.raises(NotARecording, match=f"^{re.escape(str(path))}: [^\n]*$"):
+            summarize(path)
+        return
+    assert summarize(path).cut
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -57,5 +63,9 @@ def test_a_cut_recording_reads_up_to_the_cut_and_says_so(folder: Path, cut: int)
 def test_damaged_or_random_bytes_never_raise(folder: Path, data: bytes, at: int, prefix: bool) -> None:
     path = folder / "damaged.mcap"
     path.write_bytes(MAGIC + data if prefix else WHOLE[:at] + data + WHOLE[at + len(data):])
-    summary = summarize(path)  # a summary, whatever the bytes
+    try:
+        summary = summarize(path)  # a summary, whatever the bytes ...
+    except NotARecording as error:  # ... or, for bytes that are no record at all, one line naming the file
+        assert str(error).startswith(f"{path}: ") and "\n" not in str(error)
+        return
     assert summary.lines()

@@ -5,25 +5,27 @@ recording and a JSON-lines trace alike).
 The file is read as a stream from the start (never through its summary), so a recording cut by a
 crash yields every message up to its last whole chunk and then says it was cut; one without a
 footer was cut.  Messages come in file order, which is the order they were received.  The file
-is outside input: whatever the libraries raise on damaged bytes (a bad CRC, a broken zstd frame,
-a schema that does not parse) ends the reading there, marked cut, never with a traceback.
+is outside input: its sizes are not trusted (:mod:`.safe_read`: no read past the file's end, no
+chunk past a bound); whatever the libraries raise on damaged bytes (a bad CRC, a broken zstd
+frame, a schema that does not parse) ends the reading there, marked cut, never with a traceback;
+a file that is no recording at all (no header after the magic) is refused in one line naming it.
 """
 from __future__ import annotations
 
 import contextlib
 import io
+import os
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.reader import NonSeekingReader
-from mcap.records import Footer
-from mcap.stream_reader import StreamReader
+from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
 from mcap_ros2.decoder import DecoderFactory
 
 from execution_engine.observers import engine_record, trace_record
+from execution_engine.recorder.safe_read import DamagedRecord, NotARecording, records
 from execution_engine.transport import codec
 from execution_engine.transport.wire import EngineEvent, SmStatus
 
@@ -59,44 +61,70 @@ def is_mcap(path: str | Path) -> bool:
 
 
 def iter_messages(path: str | Path, recording: Recording) -> Iterator[DecodedMessage]:
-    """Every message of ``path`` decoded, in file order; fills ``recording`` as it goes."""
+    """Every message of ``path`` decoded, in file order; fills ``recording`` (metadata,
+    attachments, whether it was cut and why) as it goes.  NotARecording, one line naming the file,
+    when it is no MCAP recording at all."""
+    reading = _Reading(recording)
     with open(path, "rb") as stream:
-        reader = NonSeekingReader(stream, decoder_factories=[DecoderFactory()])
-        messages = reader.iter_decoded_messages(log_time_order=False)
+        every = records(stream, os.fstat(stream.fileno()).st_size)
         while True:
             try:
                 with contextlib.redirect_stderr(io.StringIO()):  # the schema parser prints what it refuses
-                    schema, channel, message, decoded = next(messages)
+                    message = reading.take(next(every))
             except StopIteration:
                 break
+            except NotARecording as error:
+                raise NotARecording(f"{path}: not an MCAP recording: {error}") from None
             except Exception as error:  # noqa: BLE001 - a cut or damaged file (any of the libraries' errors): keep what came before
                 recording.cut = True
-                recording.problem = f"{type(error).__name__}: {error}".rstrip(": ")[:300]
+                recording.problem = f"{type(error).__name__}: {error}".rstrip(": ").splitlines()[0][:300]
                 break
-            recording.messages += 1
-            if recording.start_ns is None:
-                recording.start_ns = message.log_time
-            yield DecodedMessage(channel.topic, schema.name if schema else "", message.log_time, decoded)
-    _read_extras(path, recording)
-
-
-def _read_extras(path: str | Path, recording: Recording) -> None:
-    """Metadata, attachments and the footer (present only in a whole file)."""
-    footer = False
-    with open(path, "rb") as stream:
-        try:
-            for record in StreamReader(stream, skip_magic=False).records:
-                name = type(record).__name__
-                if name == "Metadata":
-                    recording.metadata[record.name] = dict(record.metadata)
-                elif name == "Attachment":
-                    recording.attachments[record.name] = bytes(record.data)
-                elif isinstance(record, Footer):
-                    footer = True
-        except Exception:  # noqa: BLE001 - damaged: what was read so far stands, and the file counts as cut
-            pass
-    if not footer:
+            if message is not None:
+                recording.messages += 1
+                if recording.start_ns is None:
+                    recording.start_ns = message.log_time_ns
+                yield message
+    if not reading.footer:
         recording.cut = True
+
+
+class _Reading:
+    """What one pass over a file has seen: schemas, channels and their decoders, the footer."""
+
+    def __init__(self, recording: Recording) -> None:
+        self.recording = recording
+        self.schemas: dict[int, Schema] = {}
+        self.channels: dict[int, Channel] = {}
+        self.decoders: dict[int, Callable[[bytes], Any]] = {}
+        self.factory = DecoderFactory()
+        self.footer = False
+
+    def take(self, record: Any) -> DecodedMessage | None:
+        """One record; the decoded message when it is a message."""
+        if isinstance(record, Message):
+            channel = self.channels.get(record.channel_id)
+            if channel is None:
+                raise DamagedRecord(f"a message on channel {record.channel_id}, which no channel record named")
+            schema = self.schemas.get(channel.schema_id)
+            decoder = self.decoders.get(channel.id)
+            if decoder is None:
+                decoder = self.factory.decoder_for(channel.message_encoding, schema)
+                if decoder is None:
+                    raise DamagedRecord(f"no decoder for {channel.topic}'s encoding {channel.message_encoding[:40]!r}")
+                self.decoders[channel.id] = decoder
+            return DecodedMessage(channel.topic, schema.name if schema else "", record.log_time, decoder(record.data))
+        if isinstance(record, Schema):
+            self.schemas[record.id] = record
+        elif isinstance(record, Channel):
+            self.channels[record.id] = record
+            self.decoders.pop(record.id, None)
+        elif isinstance(record, Metadata):
+            self.recording.metadata[record.name] = dict(record.metadata)
+        elif isinstance(record, Attachment):
+            self.recording.attachments[record.name] = bytes(record.data)
+        elif isinstance(record, Footer):
+            self.footer = True
+        return None
 
 
 def trace_records(path: str | Path, recording: Recording) -> Iterator[dict[str, Any]]:
