@@ -205,6 +205,8 @@ def test_a_killed_peer_leaves_the_publisher_count_within_the_liveliness_lease(en
             try:
                 sub = transport.create_node("engine").create_subscription(String, "left_arm/sm/result", lambda _m: None, COMMANDS)
                 await until(clock, lambda: sub.get_publisher_count() == 1, "the publisher matched and alive")
+                # who publishes, from the peer's ros_discovery_info: a watcher names the node it loses
+                await until(clock, lambda: sub.publisher_nodes() == ["/doomed"], "the publisher's node named")
                 child.send_signal(signal.SIGKILL)
                 killed = clock.now()
                 await until(clock, lambda: sub.get_publisher_count() == 0, "the killed publisher dropped out")

@@ -5,6 +5,7 @@ import asyncio
 import io
 import sys
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -12,6 +13,7 @@ from app_builder import Cell, make_app
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.engine.group_link import WATCH_PERIOD
+from execution_engine.machine.bridge_watch import WATCH_PERIOD as BRIDGE_WATCH_PERIOD
 from execution_engine.launcher import EXIT_NODE_DIED, NodeSpec, cell_nodes, launch, select
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -68,32 +70,51 @@ def test_the_launch_ends_with_the_engine_and_its_exit_code() -> None:
     assert "[launch] robot_bridge stopped" in text
 
 
-def test_a_lost_machine_ends_the_run_naming_its_node_within_the_watch_period(run_sim: Any) -> None:
-    """The machine's node leaves mid-function (its process died): the engine does not wait for the
-    function timeout, stops the other groups and ends the run naming the node."""
+def _lose_mid_motion(run_sim: Any, leaving: Callable[[Cell], Any]) -> tuple[Any, float, Cell]:
+    """Both arms start a 10 s motion; at 2 s the node ``leaving(cell)`` leaves the graph (as when its
+    process dies).  The run's report, the moment of the loss, the cell."""
     async def main(clock: Clock) -> tuple[Any, float, Cell]:
         cell = await Cell(clock, durations={"move_joints": 10.0}).start()
-        machine = cell.deployment.machines["left_arm"]
         lost_at: list[float] = []
 
-        async def kill_left_machine() -> None:
+        async def kill() -> None:
             await clock.sleep(2.0)
-            machine.node.destroy()
+            leaving(cell).destroy()
             lost_at.append(clock.now())
 
-        killer = asyncio.get_running_loop().create_task(kill_left_machine())
+        killer = asyncio.get_running_loop().create_task(kill())
         ops = [{"left_arm": ("move_to_joint_pose", "initial"), "right_arm": ("move_to_joint_pose", "initial")}]
         report = await cell.run(make_app(ops))
         await killer
         return report, lost_at[0], cell
 
-    report, lost_at, cell = run_sim(main)
+    return run_sim(main)  # type: ignore[no-any-return]
+
+
+def test_a_lost_machine_ends_the_run_naming_its_node_within_the_watch_period(run_sim: Any) -> None:
+    """The machine's node leaves mid-function (its process died): the engine does not wait for the
+    function timeout, stops the other groups and ends the run naming the node."""
+    report, lost_at, cell = _lose_mid_motion(run_sim, lambda cell: cell.deployment.machines["left_arm"].node)
     assert report.outcome == "failed"
     assert "left_arm_machine" in report.message and "lost" in report.message
     error = report.errors[0]
     assert error.group == "left_arm" and error.t - lost_at <= WATCH_PERIOD + 1e-6
     right = cell.backend.executed("right_arm")
     assert right and right[0].outcome == "stopped" and right[0].t_end is not None and right[0].t_end < 10.0  # stopped, not left to finish
+
+
+def test_a_lost_bridge_ends_the_working_groups_in_error_handling_naming_its_node(run_sim: Any) -> None:
+    """The bridge's node leaves mid-motion (its process killed): each machine waiting on it does not
+    wait out the primitive timeout but fails within the watch period with a CONNECTION fault that
+    names the bridge's node, lands in ErrorHandling, and the run fails."""
+    report, lost_at, cell = _lose_mid_motion(run_sim, lambda cell: cell.deployment.bridge.node)
+    assert report.outcome == "failed"
+    error = report.errors[0]
+    assert error.fault == "connection" and error.t - lost_at <= BRIDGE_WATCH_PERIOD + 1e-6
+    assert "bridge /scripted_bridge lost" in error.error and "/bridge/feedback" in error.error
+    for group in ("left_arm", "right_arm"):
+        ends = [e for e in cell.events if e["group"] == group and e["event"] == "function_end"]
+        assert ends and ends[0]["state"] == "ErrorHandling" and ends[0]["t"] - lost_at <= BRIDGE_WATCH_PERIOD + 1e-6
 
 
 def test_launch_is_a_subcommand_with_one_line_errors(tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ from core_functions.functions import CoreFunctions
 from core_functions.primitives import Primitive
 from core_functions.robots import RobotModel
 from execution_engine.clock import Clock
+from execution_engine.machine.bridge_watch import BridgeWatch
 from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
 from execution_engine.machine.zone_gate import ZoneGate
@@ -87,6 +88,7 @@ class MachineContext:
         self._session = uuid.uuid4().hex[:6]
         self.state_name = "Ready"
         self._feedback = feedback
+        self.bridge_watch = BridgeWatch(node, feedback)  # a working state's check that the bridge is alive
         self._bridge_linked = False  # both directions to the bridge have matched
         self._sent: dict[str, String] = {}  # unacknowledged bridge commands, for resending
         self.cell_arrived = asyncio.Event()

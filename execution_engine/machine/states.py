@@ -16,6 +16,7 @@ from collections.abc import MutableMapping
 from typing import Any
 
 from core_functions.primitives import MasterSlaveMove, describe
+from execution_engine.machine.bridge_watch import WATCH_PERIOD
 from execution_engine.machine.context import MachineContext
 from execution_engine.machine.events import (
     Event,
@@ -116,7 +117,11 @@ class MachineState(State):
             if now >= resend_at - _EPSILON:
                 ctx.resend_bridge(control_id)
                 resend_at = now + ctx.config.resend_interval
-            event = await ctx.events.get(max(0.0, min(deadline, resend_at) - ctx.clock.now()))
+            lost = ctx.bridge_watch.lost()
+            if lost is not None:
+                problem = FaultKind.CONNECTION, lost
+                break
+            event = await ctx.events.get(max(0.0, min(deadline, resend_at, now + WATCH_PERIOD) - ctx.clock.now()))
             if event is None:
                 continue
             if isinstance(event, FeedbackEvent) and event.feedback.id == control_id:
@@ -248,7 +253,11 @@ class WorkingState(MachineState):
             if not accepted and now >= resend_at - _EPSILON:  # lost before the bridge matched: same id again
                 ctx.resend_bridge(command_id)
                 resend_at = now + ctx.config.resend_interval
-            wake = deadline if accepted else min(deadline, resend_at)
+            lost = ctx.bridge_watch.lost()
+            if lost is not None:
+                ctx.active_command = None
+                return fail(userdata, FaultKind.CONNECTION, f"{describe(primitive)}: {lost}")
+            wake = min(deadline if accepted else min(deadline, resend_at), now + WATCH_PERIOD)
             event = await ctx.events.get(max(0.0, wake - ctx.clock.now()))
             if event is None:
                 continue

@@ -192,6 +192,13 @@ class _DdsSubscription(Subscription[M], Generic[M]):
             return 0
         return int(self.reader.get_liveliness_changed_status().alive_count)
 
+    def publisher_nodes(self) -> list[str]:
+        """The nodes of the matched publishers, from what their processes put on ros_discovery_info."""
+        if not self.alive:
+            return []
+        owners = self.node.transport.owners
+        return sorted({owners[d.key.bytes] for d in _matched(self.reader, subscriptions=False) if d.key.bytes in owners})
+
     def destroy(self) -> None:
         if self.alive:
             self.alive = False
@@ -497,11 +504,17 @@ class DdsTransport(Transport):
         self.spin_error: BaseException | None = None
         self._closed = asyncio.Event()
         self._graph_pending = False
-        self._discovery = self.dds.pub.DataWriter(
-            self.participant,
-            self.topic(graph.DISCOVERY_TOPIC, self.registry.message(graph.DISCOVERY_TYPE)),
-            qos=graph.dds_qos(graph.DISCOVERY, user_data=self.type_hash(graph.DISCOVERY_TYPE)),
+        discovery_topic = self.topic(graph.DISCOVERY_TOPIC, self.registry.message(graph.DISCOVERY_TYPE))
+        discovery_qos = graph.dds_qos(graph.DISCOVERY, user_data=self.type_hash(graph.DISCOVERY_TYPE))
+        self._discovery = self.dds.pub.DataWriter(self.participant, discovery_topic, qos=discovery_qos)
+        #: writer GUID (16 bytes) -> fully qualified name of its node, from every process's ros_discovery_info
+        self.owners = graph.WriterOwners()
+        self._discovery_taker = _Taker(self, graph.DISCOVERY_TOPIC)
+        self._discovery_reader = self.dds.sub.DataReader(
+            self.participant, discovery_topic, qos=discovery_qos,
+            listener=self.dds.core.Listener(on_data_available=self._on_discovery),
         )
+        self._on_discovery()  # what came while the reader was being made
         self.stopping = False
 
     # ------------------------------------------------------------------------- plumbing
@@ -538,6 +551,17 @@ class DdsTransport(Transport):
         self.rejected[topic] += 1
         if self.rejected[topic] == 1 or self.rejected[topic] % 1000 == 0:
             log.warning("dds: %d sample(s) on %s rejected; last: %s", self.rejected[topic], topic, why)
+
+    def _on_discovery(self, _reader: Any = None) -> None:
+        """Cyclone's thread: remember which node each writer of the graph belongs to. Never raises."""
+        reader = getattr(self, "_discovery_reader", None)
+        if reader is None or self._deleted:
+            return
+        for sample in self._discovery_taker.take(reader):
+            try:
+                self.owners.update(sample)
+            except Exception as error:  # noqa: BLE001 - a peer's garbage costs only its sample
+                self.reject(graph.DISCOVERY_TOPIC, f"{type(error).__name__}: {error}")
 
     def graph_changed(self) -> None:
         """Publish ros_discovery_info once this loop pass has made its changes."""
@@ -592,6 +616,7 @@ class DdsTransport(Transport):
         await asyncio.gather(*self.handlers, return_exceptions=True)
         self._publish_graph()
         self._deleted = True
+        _delete(self._discovery_reader)
         _delete(self._discovery)
         _delete(self.participant)
         self._closed.set()

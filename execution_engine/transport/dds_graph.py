@@ -16,6 +16,8 @@ Pure data and small helpers for :mod:`execution_engine.transport.dds`, each matc
 from __future__ import annotations
 
 import os
+import threading
+from collections import OrderedDict
 from collections.abc import Mapping
 from typing import Any
 
@@ -157,3 +159,40 @@ def discovery_message(
         for (namespace, name), (readers, writers) in sorted(nodes.items())
     ]
     return info_cls(gid=gid_cls(data=gid(participant_guid)), node_entities_info_seq=infos)
+
+
+class WriterOwners:
+    """Writer GUID -> the fully qualified name of its node, read from ``ros_discovery_info``.
+
+    Entries outlive their writers (a killed process sends no last update), so a watcher can still
+    name the node of a publisher it has lost; the oldest are forgotten past :attr:`LIMIT`.
+    Updated on Cyclone's listener thread, read on the loop: one lock.
+    """
+
+    LIMIT = 10_000
+
+    def __init__(self) -> None:
+        self._names: OrderedDict[bytes, str] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def update(self, info: Any) -> None:
+        """Take one ParticipantEntitiesInfo sample."""
+        found: list[tuple[bytes, str]] = []
+        for node in info.node_entities_info_seq:
+            namespace = str(node.node_namespace)
+            fqn = f"{namespace.rstrip('/')}/{node.node_name}"
+            found.extend((bytes(g.data)[:16], fqn) for g in node.writer_gid_seq)
+        with self._lock:
+            for guid, fqn in found:
+                self._names.pop(guid, None)
+                self._names[guid] = fqn
+            while len(self._names) > self.LIMIT:
+                self._names.popitem(last=False)
+
+    def __contains__(self, guid: object) -> bool:
+        with self._lock:
+            return guid in self._names
+
+    def __getitem__(self, guid: bytes) -> str:
+        with self._lock:
+            return self._names[guid]

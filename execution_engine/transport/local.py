@@ -69,6 +69,9 @@ class _LocalSubscription(Subscription[M], Generic[M]):
     def get_publisher_count(self) -> int:
         return len(self.node.bus.matching_publishers(self)) if self.alive else 0
 
+    def publisher_nodes(self) -> list[str]:
+        return sorted({p.node.fully_qualified_name for p in self.node.bus.matching_publishers(self)}) if self.alive else []
+
 
 class _LocalPublisher(Publisher[M], Generic[M]):
     def __init__(self, node: LocalNode, msg_type: type[M], topic: str, qos: QoS):

@@ -122,6 +122,11 @@ class Subscription(ABC, Generic[M]):
     def get_publisher_count(self) -> int:
         """How many publishers match (rclpy's Subscription.get_publisher_count)."""
 
+    def publisher_nodes(self) -> list[str]:
+        """Fully qualified names of the nodes whose publishers this subscription matches now, as
+        far as the transport can tell (``[]`` when it cannot): lets a watcher name a lost peer."""
+        return []
+
 
 async def wait_until_matched(
     clock: Clock, endpoints: Iterable[Publisher[Any] | Subscription[Any]], timeout: float, poll: float = 0.01
