@@ -29,10 +29,14 @@ for _arm in MODEL.arms.values():
 INITIAL = MODEL.named_pose("initial")
 
 
-def test_two_arms_driven_to_the_same_point_are_refused_at_both_lines(tmp_path: Path) -> None:
+@pytest.mark.parametrize("sync", ["operation", "flags"])
+def test_two_arms_driven_to_the_same_point_are_refused_at_both_lines(tmp_path: Path, sync: str) -> None:
+    """In both modes; the zone at the part lets the right arm in once the left arm's call has
+    ended -- with the left arm still at the hole, which the sweep finds."""
     app, where = write_app(tmp_path, "nextage", RIVET_CELL, [
         {"left_arm": call("approach", param("drill_2")), "right_arm": call("approach", param("drill_2"))},
     ])
+    app.write_text(app.read_text(encoding="utf-8").replace('robot="nextage"', f'robot="nextage" sync="{sync}"', 1), encoding="utf-8")
     code, _, err = cli("validate", "--simulate", str(app))
     found = findings(err)
     assert code == 1

@@ -314,3 +314,34 @@ def test_the_documented_dry_run_is_real(tmp_path: Path, monkeypatch: pytest.Monk
     refused = next(b for lang, b in blocks if lang == "text" and "not run:" in b).strip()
     assert code == 1 and refused in err
 
+
+
+# ------------------------------------------------------------------ every problem, both modes
+def test_flags_mode_reports_every_failure_not_only_the_first(tmp_path: Path) -> None:
+    """sync="flags": two wait_flag calls that time out, one in each arm; both are reported at their
+    lines (the application is run again without the first), and the rest is checked to its end."""
+    path, where = write_app(tmp_path, "nextage", RIVET_CELL, [
+        {"left_arm": call("wait_flag", param("a"), param("1")), "right_arm": call("wait", param("3"))},
+        {"left_arm": call("wait", param("6")), "right_arm": call("set_flag", param("a"))},
+        {"left_arm": call("set_flag", param("b")), "right_arm": call("wait_flag", param("b"), param("1"))},
+        {"left_arm": call("approach", param("drill_1"))},
+    ])
+    path.write_text(path.read_text(encoding="utf-8").replace('robot="nextage"', 'robot="nextage" sync="flags"', 1), encoding="utf-8")
+    code, out, err = cli("validate", "--simulate", str(path))
+    assert code == 1
+    found = findings(err)
+    assert any(f.startswith(f"{where[('1', 'left_arm')]}: operation 1 left_arm wait_flag: timeout: flag 'a'") for f in found), err
+    assert any(f.startswith(f"{where[('3', 'right_arm')]}: operation 3 right_arm wait_flag: timeout: flag 'b'") for f in found), err
+    assert "operations checked 4/4" in out and "not checked" not in out + err
+    assert "collisions checked: 1 motions" in out  # the last run's motion was swept
+
+
+def test_the_dry_run_report_stops_after_its_limit_with_how_many_more() -> None:
+    from execution_engine.app_model.diagnostics import MAX_DIAGNOSTICS
+    from execution_engine.dry_run.report import DryRunReport, Finding
+
+    found = tuple(Finding("collision", "left_arm", str(k), "approach", "", "collision between a and b", "app.xml", k + 1, 5, 1.0) for k in range(MAX_DIAGNOSTICS + 37))
+    report = DryRunReport("a", "app.xml", "nextage-sim", "simulated clock", found, (), 1.0, {}, len(found), len(found))
+    lines = [str(d) for d in report.diagnostics()]
+    assert len(lines) == MAX_DIAGNOSTICS + 1
+    assert "and 37 more problems" in lines[-1] and lines[0].startswith("app.xml:1:5: operation 0 left_arm approach: collision: ")

@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
-from execution_engine.app_model.diagnostics import Diagnostic
+from execution_engine.app_model.diagnostics import Diagnostic, capped
 from execution_engine.engine.flags import FlagWait
 
 #: How the timeline's seconds were measured: the application's simulated clock (a simulator that
@@ -123,8 +123,8 @@ class DryRunReport:
         return not self.findings and self.complete
 
     def diagnostics(self) -> list[Diagnostic]:
-        """The findings as diagnostics, by file, line and column."""
-        return sorted((f.diagnostic() for f in self.findings), key=Diagnostic.sort_key)
+        """The findings as diagnostics, by file, line and column: at most MAX_DIAGNOSTICS, then "and N more"."""
+        return capped(f.diagnostic() for f in self.findings)
 
     def summary_lines(self) -> list[str]:
         """The prediction an integrator reads before the robot moves."""

@@ -7,8 +7,11 @@ Only the edges differ: the back end is wrapped by :class:`DryRunBackend` (proble
 findings and the run goes on), the groups share a throw-away copy of the trajectory database
 (what earlier runs recorded is there, what this one records is thrown away), and the error
 policy is ``abort``: when a function itself fails, the failure is a finding and the dry run goes
-on: the operation again without the failed calls (the groups stopped beside them are checked
-to their end), then the next one.
+on.  In lock-step: the operation again without the failed calls (the groups stopped beside them
+are checked to their end), then the next one.  With ``sync="flags"`` there is no operation to go
+on from: the application is run again from its start without the failed calls (and their
+synchronised partners), at most :data:`MAX_RERUNS` times, so every failure is reported, not only
+the first; the timeline, the prediction and the collision sweep are the last run's.
 """
 from __future__ import annotations
 
@@ -19,15 +22,17 @@ from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 
+from app_functions.registry import full_catalog
 from core_functions.catalog import Catalog
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
 from execution_engine.clock import Clock, real_clock, run_with_clock, simulated_clock
 from execution_engine.deployment import Deployment, deploy_local
+from execution_engine.engine.report import GroupError
 from execution_engine.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
 from execution_engine.dry_run.collisions import scene_of, sweep
 from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
-from execution_engine.dry_run.report import CollisionCheck, DryRunReport, group_times
+from execution_engine.dry_run.report import CollisionCheck, DryRunReport, Finding, group_times
 from execution_engine.dry_run.simulators import DryRunSetup, setup_for
 from execution_engine.transport import codec
 from execution_engine.transport.msgs import String
@@ -41,6 +46,8 @@ log = logging.getLogger(__name__)
 FUNCTION = "function"
 _ABORT = ErrorPolicy(retries=0, action="abort")  # a retry would fail the same way; a safe pose would move
 _QUIET_BRIDGE = {"state_period": 3600.0}  # nobody watches joint_states in a dry run
+#: sync="flags": runs again without the calls that failed, at most this many times.
+MAX_RERUNS = 25
 
 
 class DryRunError(Exception):
@@ -60,7 +67,44 @@ def dry_run(app: Application, backend: str, options: BackendOptions, trajectory_
 
 
 async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None) -> DryRunReport:
-    """The dry run on ``clock`` (the caller's loop); see :func:`dry_run`."""
+    """The dry run on ``clock`` (the caller's loop); see :func:`dry_run` (and the module, for sync="flags")."""
+    left_out: dict[str, set[str]] = {}  # operation id -> groups whose failed call is left out
+    earlier: list[Finding] = []  # the failures of the runs before
+    for _ in range(MAX_RERUNS):
+        report, failed = await _run_once(_leave_out(app, left_out), setup, clock, trajectory_db)
+        fresh = {(f.operation, f.group) for f in failed} - {(op, g) for op, groups in left_out.items() for g in groups}
+        if not fresh:
+            break
+        earlier += failed
+        for operation, group in fresh:
+            left_out.setdefault(operation, set()).add(group)
+    else:
+        report = replace(report, complete=False, notes=(*report.notes, f"sync=\"flags\": the application was run {MAX_RERUNS} times, each without the calls that had failed; the rest was not checked"))
+    return replace(report, findings=(*earlier, *report.findings)) if earlier else report
+
+
+def _leave_out(app: Application, left_out: dict[str, set[str]]) -> Application:
+    """``app`` with the failed calls (and, for a synchronised one, its partners) as the implicit wait of a left-out group."""
+    if not left_out:
+        return app
+    catalog = full_catalog()
+
+    def sync(call: Call) -> bool:
+        spec = catalog.get(call.function)
+        return spec is not None and bool(spec.sync)
+
+    operations = []
+    for operation in app.operations:
+        groups = left_out.get(operation.id, set())
+        broken = any(sync(operation.calls[g]) for g in groups if g in operation.calls)
+        out = {g for g, c in operation.calls.items() if g in groups or (broken and sync(c))}
+        calls = {g: Call(g, WAIT, (), implicit=True, file=c.file, line=c.line, col=c.col) if g in out else c for g, c in operation.calls.items()}
+        operations.append(replace(operation, calls=calls) if out else operation)
+    return replace(app, operations=tuple(operations))
+
+
+async def _run_once(app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None) -> tuple[DryRunReport, list[Finding]]:
+    """One dry run; with sync="flags" also the findings of the calls that failed (then not swept: it runs again)."""
     inner = await create_backend(setup.backend, clock, setup.options)
     timing: Timing = ClockTiming(clock) if setup.robot_seconds is None else CycleTiming(setup.robot_seconds(inner))
     recorder = Recorder(app, timing)
@@ -76,11 +120,11 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
         initial = backend.joint_state()
         try:
             _attach(deployment, recorder, store)
-            total = await _run_operations(app, deployment, recorder)
+            total, failed = await _run_operations(app, deployment, recorder)
         finally:
             await deployment.close()
             store.close()
-    scene = scene_of(app)
+    scene = scene_of(app) if not failed else None
     stats = sweep(app, scene, initial, backend.motions, backend.grips, recorder) if scene is not None else None
     checked, notes = len(app.operations), list(recorder.notes)
     if backend.stuck is not None:
@@ -89,12 +133,13 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
         checked = ids.index(backend.stuck_at) + 1 if backend.stuck_at in ids else checked
     cycle_time = total if isinstance(timing, ClockTiming) else timing.elapsed()
     timeline = tuple(recorder.spans)
+    found = recorder.findings()
     return DryRunReport(
         app=app.name,
         file=str(app.path),
         backend=setup.backend,
         time_base=timing.base,
-        findings=recorder.findings(),
+        findings=found,
         timeline=timeline,
         cycle_time=cycle_time,
         groups=group_times(app.robot.group_names, timeline, cycle_time),
@@ -104,7 +149,7 @@ async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory
         notes=tuple(notes),
         waits=tuple(recorder.waits),
         collisions=None if stats is None else CollisionCheck(stats.motions, stats.samples, scene.margin if scene else 0.0),
-    )
+    ), [f for f in found if (f.operation, f.group) in failed]
 
 
 def _attach(deployment: Deployment, recorder: Recorder, store: DryRunTrajectoryStore) -> None:
@@ -121,10 +166,11 @@ def _attach(deployment: Deployment, recorder: Recorder, store: DryRunTrajectoryS
         machine.ctx.functions.ctx.trajectories = store
 
 
-async def _run_operations(app: Application, deployment: Deployment, recorder: Recorder) -> float:
+async def _run_operations(app: Application, deployment: Deployment, recorder: Recorder) -> tuple[float, set[tuple[str, str]]]:
     """Run every operation, going on after function failures (see the module's docstring).
 
-    Returns the application's time: the engine's own total, summed over the parts it ran in.
+    Returns the application's time: the engine's own total, summed over the parts it ran in; and
+    with sync="flags", the calls (operation, group) that failed (the run ends at them).
     """
     results = _Results(deployment)
     total, offset = 0.0, 0
@@ -140,18 +186,15 @@ async def _run_operations(app: Application, deployment: Deployment, recorder: Re
             break
         if report.outcome == "stopped" or not report.errors:
             raise DryRunError(f"the engine gave up on {app.name}: {report.message}")
-        if app.sync == "flags":  # no operation boundary to go on from: the failure ends the check
+        if app.sync == "flags":  # no operation boundary to go on from: run_dry runs it again without these calls
             for error in report.errors:
-                recorder.add(error.group, error.operation, error.function, getattr(error, "fault", None) or FUNCTION, "", error.error, recorder.timing.of_clock(error.t))
-            recorder.notes.append(f"sync=\"flags\": after {report.errors[0].group}'s {report.errors[0].function} of operation {report.errors[0].operation} failed, the rest of the application was not checked")
-            break
+                recorder.add(error.group, error.operation, error.function, getattr(error, "fault", None) or FUNCTION, "", _own(error), recorder.timing.of_clock(error.t))
+            return total, {(e.operation, e.group) for e in report.errors if getattr(e, "fault", None) != "stopped"}  # not the groups stopped with it
         offset += report.operations_done
         failed = operations[offset]
         for error in report.errors:
-            label = f"{error.function} (operation {error.operation}): "
-            message = error.error[len(label):] if error.error.startswith(label) else error.error
             kind = getattr(error, "fault", None) or FUNCTION  # the fault's kind where the engine reports it
-            recorder.add(error.group, error.operation, error.function, kind, "", message, recorder.timing.of_clock(error.t))
+            recorder.add(error.group, error.operation, error.function, kind, "", _own(error), recorder.timing.of_clock(error.t))
         out = dropped.setdefault(failed.id, set())
         known = len(out)
         out.update(e.group for e in report.errors if e.operation == failed.id)
@@ -160,7 +203,13 @@ async def _run_operations(app: Application, deployment: Deployment, recorder: Re
             offset += 1
         else:
             operations[offset] = again
-    return total
+    return total, set()
+
+
+def _own(error: GroupError) -> str:
+    """An engine error's message without the function label the finding shows anyway."""
+    label = f"{error.function} (operation {error.operation}): "
+    return error.error[len(label):] if error.error.startswith(label) else error.error
 
 
 def _without(operation: Operation, failed: set[str], done: set[str], catalog: Catalog) -> Operation | None:

@@ -138,6 +138,8 @@ class FlagBoard:
 
 #: How often a wait looks whether the run was stopped (run seconds).
 STOP_POLL = 0.5
+#: Run seconds: a deadline this close is reached (a wait of 1e-16 s would never let simulated time move).
+_EPSILON = 1e-9
 
 
 async def until(clock: Clock, event: asyncio.Event, deadline: float, stopped: Callable[[], bool]) -> str:
@@ -146,7 +148,7 @@ async def until(clock: Clock, event: asyncio.Event, deadline: float, stopped: Ca
         if stopped():
             return "stopped"
         left = deadline - clock.now()
-        if left <= 0:
+        if left <= _EPSILON:  # float sums never land on a deadline exactly: closer than this is reached
             return "timeout"
         try:
             await clock.wait_for(event.wait(), min(left, STOP_POLL))
