@@ -1,6 +1,6 @@
-"""``validate --simulate`` against plain ``validate``: the rivet demonstrator and a 10,000-operation application.
+"""``validate --simulate`` against plain ``validate``: the rivet demonstrator and generated applications of growing size.
 
-Usage: python bench/dry_run.py [--operations 10000] [--repeat 5] [--repeat-large 1]
+Usage: python bench/dry_run.py [--operations 250 500 1000] [--repeat 5] [--repeat-large 1]
 
 Both commands run in this process through the CLI's ``main`` (the catalog is built by each call,
 as on the command line), side by side on the same files.  The large application is the one
@@ -8,8 +8,9 @@ as on the command line), side by side on the same files.  The large application 
 pointing down (load_validate's cell only has to be valid: its frames lie beyond the arms, and a
 dry run of it would measure nothing but failing inverse kinematics).  The dry run still finds the
 problems the generator writes, such as replays of trajectory names never recorded.  For each
-file: wall and CPU time of both commands, the dry run's predicted robot time, and how many times
-faster than the robot the dry run is.  Last line: JSON.
+file: wall and CPU time of both commands, the dry run's predicted robot time, how many times
+faster than the robot the dry run is, and the dry run's CPU time per operation and per motion it
+checked for collisions (the sizes side by side show whether the cost grows linearly).  Last line: JSON.
 """
 from __future__ import annotations
 
@@ -67,6 +68,9 @@ def compare(path: Path, repeat: int, db: str) -> dict[str, object]:
         raise SystemExit(f"the dry run of {path} printed no prediction (exit {code}):\n{err[-2000:]}")
     findings = len([line for line in err.splitlines() if re.match(r".+:\d+:\d+: operation ", line)])
     robot = float(predicted.group(1))
+    swept = re.search(r"collisions checked: (\d+) motions, (\d+) configurations", out)
+    motions = int(swept.group(1)) if swept else 0
+    operations = len(etree.parse(str(path)).getroot().findall("operation"))
     med = statistics.median
     return {
         "file": path.name,
@@ -79,12 +83,17 @@ def compare(path: Path, repeat: int, db: str) -> dict[str, object]:
         "faster_than_robot": round(robot / med(dry), 1),
         "findings": findings,
         "exit": code,
+        "operations": operations,
+        "motions": motions,
+        "configurations": int(swept.group(2)) if swept else 0,
+        "cpu_ms_per_operation": round(med(dry_cpu) * 1000 / operations, 2),
+        "cpu_ms_per_motion": round(med(dry_cpu) * 1000 / motions, 2) if motions else None,
     }
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--operations", type=int, default=10_000)
+    parser.add_argument("--operations", type=int, nargs="+", default=[250, 500, 1000], help="sizes of the generated applications")
     parser.add_argument("--repeat", type=int, default=5, help="runs of each command on the rivet demonstrator (median)")
     parser.add_argument("--repeat-large", type=int, default=1, help="runs of each command on the large application")
     args = parser.parse_args()
@@ -93,14 +102,17 @@ def main() -> int:
         folder = Path(tmp)
         db = str(folder / "none.sqlite")  # no trajectories recorded before: what this run records is thrown away
         rows = [compare(RIVET, args.repeat, db)]
-        large = generate(functions, args.operations, folder)
-        within_reach(folder / "cells" / "bench_cell.xml")
-        rows.append(compare(large, args.repeat_large, db))
-    print(f"catalog: {source}; large application: {args.operations} operations")
-    print(f"{'file':<26} {'validate':>10} {'--simulate':>12} {'ratio':>7} {'robot time':>12} {'x robot':>8} {'findings':>9}")
+        for size in args.operations:
+            sub = folder / str(size)
+            sub.mkdir()
+            large = generate(functions, size, sub)
+            within_reach(sub / "cells" / "bench_cell.xml")
+            rows.append(compare(large, args.repeat_large, db))
+    print(f"catalog: {source}; generated applications: {', '.join(map(str, args.operations))} operations")
+    print(f"{'file':<26} {'ops':>6} {'validate':>10} {'--simulate':>12} {'ratio':>7} {'robot time':>12} {'x robot':>8} {'findings':>9} {'motions':>8} {'cpu/op':>9} {'cpu/motion':>11}")
     for r in rows:
-        print(f"{r['file']:<26} {r['validate_ms']:>8} ms {r['simulate_ms']:>9} ms {r['ratio_simulate_vs_validate']:>6}x "
-              f"{r['predicted_robot_s']:>10} s {r['faster_than_robot']:>7}x {r['findings']:>9}")
+        print(f"{r['file']:<26} {r['operations']:>6} {r['validate_ms']:>8} ms {r['simulate_ms']:>9} ms {r['ratio_simulate_vs_validate']:>6}x "
+              f"{r['predicted_robot_s']:>10} s {r['faster_than_robot']:>7}x {r['findings']:>9} {r['motions']:>8} {r['cpu_ms_per_operation']:>6} ms {r['cpu_ms_per_motion']:>8} ms")
         print(f"{'':<26} cpu {r['validate_cpu_ms']:>7} ms cpu {r['simulate_cpu_ms']:>7} ms")
     print(json.dumps({"bench": "dry_run", "catalog": source, "operations": args.operations, "repeat": args.repeat,
                       "repeat_large": args.repeat_large, "rows": rows}))
