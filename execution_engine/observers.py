@@ -27,8 +27,7 @@ import os
 from collections.abc import Callable, Iterable
 from typing import IO, Any, TypeVar
 
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import String
+from execution_engine.transport import codec, typed
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS
 from execution_engine.transport.wire import ENGINE_EVENTS, ENGINE_STATUS, EngineEvent, EngineStatus, SmStatus, sm_topic
@@ -99,16 +98,16 @@ class RunObserver:
         """Decode each message of ``topic`` and hand it to every sink; garbage is kept in ``rejected``."""
         source = self.node.resolve(topic)
 
-        def deliver(msg: String) -> None:
+        def deliver(msg: Any) -> None:
             try:
-                message = codec.decode(cls, msg.data, source=source)
+                message = typed.from_msg(cls, msg, self.node.clock, source=source)
             except codec.WireError as error:
                 self.rejected.append(str(error))
                 return
             for sink in sinks:
                 sink(message)
 
-        self.node.create_subscription(String, topic, deliver, EVENTS)
+        self.node.create_subscription(typed.msg_type(cls), topic, deliver, EVENTS)
 
 
 class TraceWriter:

@@ -28,8 +28,8 @@ from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.dry_run.runner import DryRunError, dry_run
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import RunObserver, TraceWriter
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import Bool, JointState, String
+from execution_engine.transport import codec, typed
+from execution_engine.transport.msgs import Bool, JointState
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import LATCHED, SENSOR
 from execution_engine.transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
@@ -199,7 +199,7 @@ def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter
         observer.event_sinks.append(writer.on_event)
     observer.engine_sinks.append(lambda status: feed.update(status=_status_json(status)))
     for group in robot.group_names:
-        node.create_subscription(String, sm_topic(group, "structure"), _decoded(SmStructure, lambda s: feed.structure(s.group, _structure_json(s))), LATCHED)
+        node.create_subscription(typed.MachineStructureMsg, sm_topic(group, "structure"), _decoded(node, SmStructure, lambda s: feed.structure(s.group, _structure_json(s))), LATCHED)
     order = list(robot.joint_names)
     feed.update(joint_names=order)
 
@@ -227,10 +227,10 @@ class FeedStream:
         """Nothing is buffered."""
 
 
-def _decoded(cls: type[Any], sink: Callable[[Any], None]) -> Callable[[String], None]:
-    def deliver(msg: String) -> None:
+def _decoded(node: Node, cls: type[Any], sink: Callable[[Any], None]) -> Callable[[Any], None]:
+    def deliver(msg: Any) -> None:
         try:
-            sink(codec.decode(cls, msg.data))
+            sink(typed.from_msg(cls, msg, node.clock))
         except codec.WireError as error:
             log.warning("studio: %s", error)
 

@@ -17,9 +17,10 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections import OrderedDict
+from typing import Any
 
 from core_functions.primitives import PrimitiveResult, describe
-from execution_engine.transport import codec
+from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, String
 from execution_engine.transport.port import Node, Publisher
 from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
@@ -52,15 +53,15 @@ class BridgeNode:
         self.stop_timeout = float(node.declare_parameter("stop_timeout", 5.0, "longest a stopped primitive may take to end (s)"))
         if self.state_period <= 0:
             raise ValueError(f"{node.fully_qualified_name}: state_period must be > 0, got {self.state_period}")
-        self._feedback: dict[str, Publisher[String]] = {}
-        self._answered: OrderedDict[str, String | None] = OrderedDict()  # command id -> latest feedback
+        self._feedback: dict[str, Publisher[Any]] = {}  # typed.BridgeFeedbackMsg
+        self._answered: OrderedDict[str, Any | None] = OrderedDict()  # command id -> latest feedback
         self._running: dict[str, asyncio.Task[None]] = {}
         self._tasks: set[asyncio.Task[None]] = set()
         self._joint_pub = node.create_publisher(JointState, JOINT_STATES, JOINT_STATES_QOS)
         self._tcp_pubs = {g: node.create_publisher(PoseStamped, tcp_pose_topic(g), SENSOR) for g in backend.groups}
         self._robot_state = RobotStatePublisher.for_backend(node, backend)  # robot_description, tf: for RViz
         for group in backend.groups:
-            self._feedback[group] = node.create_publisher(String, bridge_topic(group, "feedback"), COMMANDS)
+            self._feedback[group] = node.create_publisher(typed.BridgeFeedbackMsg, bridge_topic(group, "feedback"), COMMANDS)
         node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
         self._camera = attach_cameras(node, backend)  # camera parameters: publish_images, camera_source (ROS image topics)
         self._state_task: asyncio.Task[None] | None = None
@@ -78,7 +79,7 @@ class BridgeNode:
         await self.backend.start()
         for group in self.backend.groups:
             self.node.create_subscription(
-                String, bridge_topic(group, "command"), lambda msg, g=group: self._on_command(g, msg), COMMANDS
+                typed.BridgeCommandMsg, bridge_topic(group, "command"), lambda msg, g=group: self._on_command(g, msg), COMMANDS
             )
         self._state_task = asyncio.get_running_loop().create_task(self._publish_state_loop(), name="bridge state")
 
@@ -102,10 +103,10 @@ class BridgeNode:
             return
         self.backend.set_cell(cell)
 
-    def _on_command(self, group: str, msg: String) -> None:
+    def _on_command(self, group: str, msg: Any) -> None:
         source = self.node.resolve(bridge_topic(group, "command"))
         try:
-            command = codec.decode(BridgeCommand, msg.data, source=source)
+            command = typed.from_msg(BridgeCommand, msg, self.clock, source=source)
         except codec.WireError as error:
             self._report(f"rejected command: {error}")
             return
@@ -189,7 +190,7 @@ class BridgeNode:
     ) -> None:
         """One feedback message; an error carries its FaultKind, so the machine need not parse text."""
         feedback = BridgeFeedback(id=command_id, group=group, status=status, error=error, fault=fault, result=result, t=self.clock.now())  # type: ignore[arg-type]
-        message = String(codec.encode(feedback))
+        message = typed.to_msg(feedback, self.clock)
         if command_id in self._answered:
             self._answered[command_id] = message
         self._feedback[group].publish(message)

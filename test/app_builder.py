@@ -1,7 +1,6 @@
 """Build Application objects directly (no XML) for engine tests, and run them on a scripted cell."""
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,9 +13,10 @@ from execution_engine.app_model.model import Application, Call, ErrorPolicy, Ope
 from execution_engine.clock import Clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.engine.report import RunReport
-from execution_engine.transport.msgs import String, Trigger
+from execution_engine.transport import codec, typed
+from execution_engine.transport.msgs import Trigger
 from execution_engine.transport.qos import EVENTS
-from execution_engine.transport.wire import ENGINE_STATUS, engine_service, sm_topic
+from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus, SmStatus, engine_service, sm_topic
 
 OpSpec = Mapping[str, Sequence[str]]  # group -> (function, *params)
 
@@ -49,8 +49,12 @@ class Cell:
         self.events: list[dict[str, Any]] = []
         self.engine_states: list[dict[str, Any]] = []
         for group in self.robot.group_names:
-            node.create_subscription(String, sm_topic(group, "status"), lambda m: self.events.append(json.loads(m.data)), EVENTS)
-        node.create_subscription(String, ENGINE_STATUS, lambda m: self.engine_states.append(json.loads(m.data)), EVENTS)
+            node.create_subscription(
+                typed.MachineStatusMsg, sm_topic(group, "status"), lambda m: self.events.append(codec.to_primitive(typed.from_msg(SmStatus, m, self.clock))), EVENTS
+            )
+        node.create_subscription(
+            typed.EngineStatusMsg, ENGINE_STATUS, lambda m: self.engine_states.append(codec.to_primitive(typed.from_msg(EngineStatus, m, self.clock))), EVENTS
+        )
         self.node = node
         self._clients = {c: node.create_client(Trigger, engine_service(c)) for c in ("start", "pause", "resume", "stop", "step", "reset")}
         return self

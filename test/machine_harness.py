@@ -5,7 +5,6 @@ drive a machine into any state of Table 2 and watch the status topic for the tra
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -16,11 +15,11 @@ from core_functions.geometry import Pose
 from core_functions.robots import NEXTAGE_OPEN, RobotModel
 from execution_engine.clock import Clock
 from execution_engine.machine.group_machine import GroupMachine
-from execution_engine.transport import codec
+from execution_engine.transport import codec, typed
 from execution_engine.transport.local import LocalTransport
 from execution_engine.transport.msgs import String, Trigger, TriggerResponse
 from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
-from execution_engine.transport.wire import ENGINE_CELL, CellSnapshot, SmRequest, SmResult, sm_service, sm_topic
+from execution_engine.transport.wire import ENGINE_CELL, CellSnapshot, SmRequest, SmResult, SmStatus, sm_service, sm_topic
 from robot_bridges.bridge_node import BridgeNode
 
 CELL = CellSnapshot(
@@ -60,7 +59,10 @@ class Harness:
             machine = GroupMachine(self.transport.create_node(f"{group}_machine", parameters=params))
             self.machines[group] = machine
             self.status[group] = []
-            self.engine.create_subscription(String, sm_topic(group, "status"), lambda m, g=group: self.status[g].append(json.loads(m.data)), EVENTS)
+            self.engine.create_subscription(
+                typed.MachineStatusMsg, sm_topic(group, "status"),
+                lambda m, g=group: self.status[g].append(codec.to_primitive(typed.from_msg(SmStatus, m, self.clock))), EVENTS,
+            )
             self.engine.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
             self._request_pubs[group] = self.engine.create_publisher(String, sm_topic(group, "request"), COMMANDS)
             self.tasks.append(loop.create_task(machine.run()))

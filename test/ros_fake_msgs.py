@@ -218,6 +218,48 @@ ParameterValue = message_class(
 )
 SetParametersResult = message_class("SetParametersResult", {"successful": "boolean", "reason": "string"})
 
+# ============================================================ the project's own interface package
+_ROSIDL_NAMES = {"bool": "boolean", "float64": "double", "float32": "float", "byte": "octet", "char": "uint8"}
+
+
+def _rosidl_package(package: str, known: dict[str, type]) -> dict[str, dict[str, Any]]:
+    """Classes of ``package`` as rosidl generates them from its .msg/.srv files: field types named as
+    ``get_fields_and_field_types`` names them (``string``, ``uint32``, ``sequence<pkg/Name>``),
+    nested messages by their classes; ``known`` holds the fake classes of the packages it uses."""
+    from execution_engine.transport.idl import interface_roots
+    from execution_engine.transport.mirrors import registry
+
+    folder = next(root / package for root in interface_roots() if (root / package).is_dir())
+    classes: dict[str, type] = {}
+
+    def build(ros_type: str, name: str) -> type:
+        fields: dict[str, str] = {}
+        nested: dict[str, type] = {}
+        for spec in registry().spec(ros_type).fields:
+            if "/" in spec.base:
+                pkg, _, short = spec.base.split("/")
+                kind = f"{pkg}/{short}"
+                nested[spec.name] = known.get(spec.base) or classes.get(short) or build(spec.base, short)
+            else:
+                kind = _ROSIDL_NAMES.get(spec.base, spec.base)
+            fields[spec.name] = kind if spec.array is None else f"sequence<{kind}>"
+        cls = message_class(name, fields, nested)
+        if ros_type.split("/")[1] == "msg":
+            classes[name] = cls
+        return cls
+
+    for path in sorted((folder / "msg").glob("*.msg")):
+        if path.stem not in classes:
+            build(f"{package}/msg/{path.stem}", path.stem)
+    services: dict[str, type] = {}
+    for path in sorted((folder / "srv").glob("*.srv")):
+        base = f"{package}/srv/{path.stem}"
+        services[path.stem] = type(path.stem, (), {
+            "Request": build(f"{base}_Request", f"{path.stem}_Request"), "Response": build(f"{base}_Response", f"{path.stem}_Response"),
+        })
+    return {f"{package}.msg": classes, f"{package}.srv": services}
+
+
 INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "builtin_interfaces.msg": {"Time": Time},
     "rosgraph_msgs.msg": {"Clock": ClockMessage},
@@ -232,6 +274,7 @@ INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "std_srvs.srv": {"Trigger": Trigger},
     "rcl_interfaces.msg": {"ParameterDescriptor": ParameterDescriptor, "ParameterValue": ParameterValue, "SetParametersResult": SetParametersResult},
 }
+INTERFACE_MODULES.update(_rosidl_package("dual_arm_executive_interfaces", {"std_msgs/msg/Header": Header, "builtin_interfaces/msg/Time": Time}))
 
 
 def resolve(ros_type: str) -> type:

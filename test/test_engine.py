@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import asyncio
-import json
 from typing import Any
 
 import pytest
@@ -10,7 +9,8 @@ from app_builder import Cell, make_app
 
 from execution_engine.app_model.model import ErrorPolicy
 from execution_engine.clock import Clock
-from execution_engine.transport.msgs import Bool, String
+from execution_engine.transport import typed
+from execution_engine.transport.msgs import Bool
 from execution_engine.transport.qos import LATCHED
 from execution_engine.transport.wire import ENGINE_STATUS, SAFETY_STOP
 from robot_bridges.backend import FaultKind
@@ -258,15 +258,16 @@ def test_a_long_lived_engine_runs_one_application_after_another(run_sim: Any) ->
 
 
 def test_a_tool_that_connects_after_the_run_still_sees_how_it_ended(run_sim: Any) -> None:
-    async def main(clock: Clock) -> list[dict[str, Any]]:
+    async def main(clock: Clock) -> list[Any]:
         cell = await Cell(clock).start()
         await cell.deployment.engine.run(make_app(THREE_OPS[:1]))
-        late: list[dict[str, Any]] = []
+        late: list[Any] = []
         viewer = cell.deployment.transport.create_node("late_viewer")
-        viewer.create_subscription(String, ENGINE_STATUS, lambda m: late.append(json.loads(m.data)), LATCHED)
+        viewer.create_subscription(typed.EngineStatusMsg, ENGINE_STATUS, late.append, LATCHED)
         await clock.sleep(0.1)
         await cell.deployment.close()
         return late
 
     late = run_sim(main)
-    assert [s["state"] for s in late] == ["finished"] and late[0]["operation_index"] == 1
+    assert [s.state for s in late] == ["finished"] and late[0].operation_index == 1 == late[0].operation_count
+    assert [(g.group, g.state) for g in late[0].groups] == [("left_arm", "Finish"), ("right_arm", "Finish"), ("torso_head", "Finish")]

@@ -12,32 +12,32 @@ from scripted_backend import VISION_OFFSET
 from core_functions.primitives import ExecuteTrajectory, MasterSlaveMove, MoveCartesian
 from execution_engine.clock import Clock
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, TABLE_2
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import String
+from execution_engine.transport import typed
 from execution_engine.transport.qos import COMMANDS, LATCHED
-from execution_engine.transport.wire import SmStructure, sm_topic
+from execution_engine.transport.wire import sm_topic
 
 
 def test_structure_and_state_are_latched_for_late_viewers(run_sim: Any) -> None:
-    async def main(clock: Clock) -> tuple[SmStructure, list[str]]:
+    async def main(clock: Clock) -> tuple[Any, list[Any]]:
         h = await Harness(clock).start()
         try:
             await clock.sleep(1.0)
             viewer = h.transport.create_node("late_viewer")
-            got: dict[str, list[str]] = {"structure": [], "state": []}
-            viewer.create_subscription(String, sm_topic("right_arm", "structure"), lambda m: got["structure"].append(m.data), LATCHED)
-            viewer.create_subscription(String, sm_topic("right_arm", "state"), lambda m: got["state"].append(m.data), LATCHED)
+            got: dict[str, list[Any]] = {"structure": [], "state": []}
+            viewer.create_subscription(typed.MachineStructureMsg, sm_topic("right_arm", "structure"), got["structure"].append, LATCHED)
+            viewer.create_subscription(typed.MachineStateMsg, sm_topic("right_arm", "state"), got["state"].append, LATCHED)
             await clock.sleep(0.1)
-            return codec.decode(SmStructure, got["structure"][0]), got["state"]
+            return got["structure"][0], got["state"]
         finally:
             await h.close()
 
-    structure, states = run_sim(main)
+    structure, states = run_sim(main)  # the typed messages a viewer (ros2 topic echo, Foxglove) reads
     assert structure.group == "right_arm" and structure.initial == READY
     assert set(structure.states) == set(TABLE_2) | {FINISH}
     rows = {(t.source, t.signal, t.target) for t in structure.transitions}
     assert rows == {(s, g, t) for s, row in TABLE_2.items() for g, t in row.items()}
-    assert states == [READY]
+    assert [(s.group, s.state) for s in states] == [("right_arm", READY)]
+    assert states[0].header.stamp.sec > 1_600_000_000  # ROS time (since 1970), not run seconds
 
 
 def test_request_while_busy_is_refused_and_the_running_function_is_untouched(run_sim: Any) -> None:
@@ -353,8 +353,8 @@ def test_a_lost_command_is_sent_again_with_its_id_and_run_once(run_sim: Any) -> 
             sent: list[str] = []
             real_publish = publisher.publish
 
-            def lossy(msg: String) -> None:  # the first command never arrives, every copy is recorded
-                sent.append(json.loads(msg.data)["id"])
+            def lossy(msg: Any) -> None:  # the first command never arrives, every copy is recorded
+                sent.append(msg.id)
                 if len(sent) > 1:
                     real_publish(msg)
 
@@ -374,10 +374,10 @@ def test_the_bridge_runs_a_repeated_command_id_once_and_repeats_its_answer(run_s
     async def main(clock: Clock) -> tuple[list[dict[str, Any]], int]:
         h = await Harness(clock).start()
         try:
-            feedback: list[dict[str, Any]] = []
-            h.engine.create_subscription(String, "left_arm/bridge/feedback", lambda m: feedback.append(json.loads(m.data)), COMMANDS)
-            commands = h.engine.create_publisher(String, "left_arm/bridge/command")
-            command = String('{"id":"dup-1","group":"left_arm","op":"execute","primitive":{"kind":"end_effector","action":"gripper_open"},"v":1}')
+            feedback: list[Any] = []
+            h.engine.create_subscription(typed.BridgeFeedbackMsg, "left_arm/bridge/feedback", feedback.append, COMMANDS)
+            commands = h.engine.create_publisher(typed.BridgeCommandMsg, "left_arm/bridge/command")
+            command = typed.BridgeCommandMsg(id="dup-1", group="left_arm", op="execute", primitive_kind="end_effector", primitive_json='{"action":"gripper_open"}')
             commands.publish(command)
             await clock.sleep(2.0)
             commands.publish(command)  # the machine heard nothing and sends it again
@@ -388,5 +388,5 @@ def test_the_bridge_runs_a_repeated_command_id_once_and_repeats_its_answer(run_s
 
     feedback, executed = run_sim(main)
     assert executed == 1
-    finals = [f for f in feedback if f["status"] == "done"]
+    finals = [f for f in feedback if f.status == "done"]
     assert len(finals) == 2 and finals[0] == finals[1]  # the latest answer, repeated as it was

@@ -21,8 +21,10 @@ from execution_engine.recorder.definitions import SEPARATOR, schema_text
 from execution_engine.recorder.reading import Recording, iter_messages, trace_records
 from execution_engine.recorder.recorder import reader_qos
 from execution_engine.recorder.writer import McapSink
-from execution_engine.transport import msgs
+from execution_engine.clock import Clock
+from execution_engine.transport import msgs, typed
 from execution_engine.transport.qos import EVENTS, LATCHED, SENSOR, Durability, Reliability
+from execution_engine.transport.wire import EngineEvent, EngineStatus, GroupProgress, SmStatus, SmStructure, TransitionSpec
 
 RIVET = "apps_xml/rivet_installation.xml"
 
@@ -59,7 +61,12 @@ def test_every_message_decodes_to_its_ros_type_with_ros2_schemas(rivet_run: tupl
         assert count == summary.statistics.message_count > 1000
     assert types["/joint_states"] == "sensor_msgs/msg/JointState"
     assert types["/left_arm/tcp_pose"] == "geometry_msgs/msg/PoseStamped"
-    assert types["/left_arm/sm/status"] == "std_msgs/msg/String"
+    ours = "dual_arm_executive_interfaces/msg/"
+    assert types["/left_arm/sm/status"] == ours + "MachineStatus"
+    assert types["/left_arm/sm/state"] == ours + "MachineState" and types["/left_arm/sm/structure"] == ours + "MachineStructure"
+    assert types["/execution_engine/status"] == ours + "EngineStatus" and types["/execution_engine/events"] == ours + "EngineEvent"
+    assert types["/right_arm/bridge/command"] == ours + "BridgeCommand" and types["/right_arm/bridge/feedback"] == ours + "BridgeFeedback"
+    assert types["/execution_engine/cell"] == "std_msgs/msg/String"  # the cell model stays JSON (no .msg of its own yet)
     assert types["/tf"] == "tf2_msgs/msg/TFMessage"
     assert types["/diagnostics"] == "diagnostic_msgs/msg/DiagnosticArray"
     for topic in ("/execution_engine/status", "/execution_engine/events", "/right_arm/bridge/command",
@@ -121,6 +128,15 @@ SAMPLES: list[Any] = [
     msgs.CameraInfo(msgs.Header(msgs.Time(13, 14), "head_camera"), 480, 640, "plumb_bob", (0.1, 0.0, 0.0, 0.0, 0.0),
                     (500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0), (1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0),
                     (500.0, 0, 320.0, 0, 0, 500.0, 240.0, 0, 0, 0, 1.0, 0), 1, 1, msgs.RegionOfInterest(1, 2, 3, 4, True)),
+    # the project's own types: their schemas come from the interface package's .msg files
+    typed.to_msg(SmStatus("left_arm", "primitive_end", "Motion", 2.5, primitive="move_joints", index=3, count=12,
+                          result={"kind": "motion", "joints": [0.1]}), Clock(epoch=1_700_000_000.0)),
+    typed.to_msg(EngineStatus("rivet", "running", 2, 10, 1.0, "op2", {"left_arm": GroupProgress("Motion", "op2", "move_to")}),
+                 Clock(epoch=1_700_000_000.0)),
+    typed.to_msg(EngineEvent("operator", 3.0, "running", command="pause", source="/execution_engine/pause", accepted=True, answer="ok"),
+                 Clock(epoch=1_700_000_000.0)),
+    typed.to_msg(SmStructure("left_arm", "Ready", ("Ready", "Motion"), (TransitionSpec("Ready", "motion_request", "Motion"),)),
+                 Clock(epoch=1_700_000_000.0)),
 ]
 
 

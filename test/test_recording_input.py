@@ -13,7 +13,8 @@ from execution_engine.recorder.reading import MAGIC
 from execution_engine.recorder.writer import McapSink
 from execution_engine.recorder.safe_read import NotARecording
 from execution_engine.run_report import summarize
-from execution_engine.transport import codec, msgs
+from execution_engine.clock import Clock
+from execution_engine.transport import msgs, typed
 from execution_engine.transport.qos import EVENTS, SENSOR
 from execution_engine.transport.wire import SmStatus
 
@@ -22,9 +23,10 @@ def small_recording() -> bytes:
     stream = io.BytesIO()
     stream.close = lambda: None  # type: ignore[method-assign]
     sink = McapSink(stream, "memory", chunk_size=512)
+    clock = Clock(epoch=1_000.0)
     for i in range(40):
         status = SmStatus(group="left_arm", event="transition", state="Motion", t=0.1 * i, from_state="Ready", to_state="Motion", signal="motion_request", operation="1")
-        sink.put("/left_arm/sm/status", msgs.String(codec.encode(status)), (EVENTS,), 1_000_000 + i)
+        sink.put("/left_arm/sm/status", typed.to_msg(status, clock), (EVENTS,), 1_000_000 + i)
         sink.put("/joint_states", msgs.JointState(msgs.Header(msgs.Time(1, i)), ("a",), (0.1 * i,)), (SENSOR,), 1_000_000 + i)
     sink.close()
     return stream.getvalue()

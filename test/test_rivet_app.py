@@ -21,15 +21,15 @@ from execution_engine.app_model import load_application
 from execution_engine.cli import main
 from execution_engine.clock import Clock
 from execution_engine.deployment import deploy_local
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import String, Trigger
+from execution_engine.transport import typed
+from execution_engine.transport.msgs import Trigger
 from execution_engine.transport.wire import BridgeCommand, BridgeFeedback, bridge_topic
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"
-TRACE_EVENTS = {"transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator"}
+TRACE_EVENTS = {"transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag"}
 
 
 def run_cli(tmp_path: Path, *extra: str) -> tuple[int, str, list[dict[str, Any]]]:
@@ -158,12 +158,12 @@ def test_vision_brings_the_rivet_to_the_true_hole_within_the_process_tolerance(r
         deployment = await deploy_local(clock, app.robot, backend, machine_parameters={"trajectory_db": ":memory:"})
         moves: list[MoveCartesian] = []
 
-        def record(msg: String) -> None:
-            command = codec.decode(BridgeCommand, msg.data)
+        def record(msg: Any) -> None:
+            command = typed.from_msg(BridgeCommand, msg, clock)
             if isinstance(command.primitive, MoveCartesian):
                 moves.append(command.primitive)
 
-        deployment.transport.create_node("spy").create_subscription(String, bridge_topic("right_arm", "command"), record)
+        deployment.transport.create_node("spy").create_subscription(typed.BridgeCommandMsg, bridge_topic("right_arm", "command"), record)
         try:
             report = await deployment.engine.run(app)
         finally:
@@ -191,17 +191,17 @@ def test_pause_then_resume_mid_motion_reaches_the_same_target(run_sim: Any) -> N
         commands: dict[str, BridgeCommand] = {}
         done: dict[str, BridgeFeedback] = {}
 
-        def on_command(msg: String) -> None:
-            command = codec.decode(BridgeCommand, msg.data)
+        def on_command(msg: Any) -> None:
+            command = typed.from_msg(BridgeCommand, msg, clock)
             commands[command.id] = command
 
-        def on_feedback(msg: String) -> None:
-            feedback = codec.decode(BridgeFeedback, msg.data)
+        def on_feedback(msg: Any) -> None:
+            feedback = typed.from_msg(BridgeFeedback, msg, clock)
             if feedback.status == "done":
                 done[feedback.id] = feedback
 
-        spy.create_subscription(String, bridge_topic("left_arm", "command"), on_command)
-        spy.create_subscription(String, bridge_topic("left_arm", "feedback"), on_feedback)
+        spy.create_subscription(typed.BridgeCommandMsg, bridge_topic("left_arm", "command"), on_command)
+        spy.create_subscription(typed.BridgeFeedbackMsg, bridge_topic("left_arm", "feedback"), on_feedback)
         pause = spy.create_client(Trigger, "/execution_engine/pause")
         resume = spy.create_client(Trigger, "/execution_engine/resume")
         task = asyncio.ensure_future(deployment.engine.run(app))

@@ -8,7 +8,6 @@ destroyed node that stayed advertised, and logs that never reached ``/rosout``.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import os
 import signal
@@ -30,12 +29,13 @@ from execution_engine.app_model import load_application
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.clock import Clock, FollowingClock
 from execution_engine.ros_main import ExitCode, Outcome, machine_node_name, run_node
+from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import ClockMessage, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
 from execution_engine.transport.local import LocalTransport
 from execution_engine.transport.port import Node, wait_until_matched
 from execution_engine.transport.qos import CLOCK, COMMANDS, EVENTS, SENSOR
 from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.wire import bridge_topic, sm_topic
+from execution_engine.transport.wire import SmStatus, bridge_topic, sm_topic
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.nextage_sim.node import declare_nextage_parameters
 from robot_bridges.nextage_sim.node import main as nextage_main
@@ -88,7 +88,9 @@ async def run_cell(clock: Clock, app: Path) -> tuple[Any, list[dict[str, Any]]]:
         for group in NEXTAGE_OPEN.group_names:
             machine = transport.create_node(machine_node_name(group), parameters={"group": group})
             tasks.append(asyncio.ensure_future(nodes.run_group_machine(machine, Outcome())))
-            viewer.create_subscription(String, sm_topic(group, "status"), lambda m: statuses.append(json.loads(m.data)), EVENTS)
+            viewer.create_subscription(
+                typed.MachineStatusMsg, sm_topic(group, "status"), lambda m: statuses.append(codec.to_primitive(typed.from_msg(SmStatus, m, clock))), EVENTS
+            )
         engine = ExecutionEngine(transport.create_node("execution_engine"))
         report = await clock.wait_for(engine.run(load_application(app, full_catalog())), BOUND)
         return report, statuses
@@ -118,7 +120,7 @@ def test_a_bridge_is_matched_for_commands_only_once_its_robot_has_started(run_si
         transport = LocalTransport(clock)
         backend = _SlowStart(clock, NEXTAGE_OPEN)
         bridge = BridgeNode(transport.create_node("bridge"), backend)
-        command = transport.create_node("left_arm_machine").create_publisher(String, bridge_topic("left_arm", "command"), COMMANDS)
+        command = transport.create_node("left_arm_machine").create_publisher(typed.BridgeCommandMsg, bridge_topic("left_arm", "command"), COMMANDS)
         starting = asyncio.ensure_future(bridge.start())
         matched = await wait_until_matched(clock, [command], 5.0)
         matched_at = clock.now()

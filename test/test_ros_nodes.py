@@ -202,7 +202,10 @@ def test_the_engine_records_the_ros_graph_with_its_record_parameter(fake_rclpy: 
     recording = Recording(str(record))
     types = {m.topic: m.ros_type for m in iter_messages(record, recording)}
     assert not recording.cut
-    assert types["/joint_states"] == "sensor_msgs/msg/JointState" and types["/left_arm/sm/status"] == "std_msgs/msg/String"
+    assert types["/joint_states"] == "sensor_msgs/msg/JointState"
+    ours = "dual_arm_executive_interfaces/msg/"
+    assert types["/left_arm/sm/status"] == ours + "MachineStatus" and types["/left_arm/sm/state"] == ours + "MachineState"
+    assert types["/execution_engine/status"] == ours + "EngineStatus" and types["/left_arm/bridge/command"] == ours + "BridgeCommand"
     events = list(trace_records(record, Recording(str(record))))
     assert [r for r in events if r["event"] == "function_end" and r["outcome"] == "succeeded"]
     assert stopped_cleanly()

@@ -40,6 +40,7 @@ from execution_engine.engine.wall_clock import RealWallClock, WallClock, wake_lo
 from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from execution_engine.transport import codec
+from execution_engine.transport import typed
 from execution_engine.transport.msgs import Bool, String, Trigger, TriggerRequest, TriggerResponse
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS, LATCHED
@@ -109,8 +110,8 @@ class ExecutionEngine:
         self.startup_timeout = float(node.declare_parameter("startup_timeout", 15.0, "how long to wait for the group machines (s)"))
         self.function_timeout = float(node.declare_parameter("function_timeout", 3600.0, "longest a function may take (s)"))
         self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
-        self._status_pub = node.create_publisher(String, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
-        self._events_pub = node.create_publisher(String, ENGINE_EVENTS, EVENTS)  # every state change and command, once
+        self._status_pub = node.create_publisher(typed.EngineStatusMsg, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
+        self._events_pub = node.create_publisher(typed.EngineEventMsg, ENGINE_EVENTS, EVENTS)  # every state change and command, once
         self._cell_pub = node.create_publisher(String, ENGINE_CELL, LATCHED)
         self._cell_frames = CellFramesBroadcaster(node)  # the cell's frames on tf_static, for RViz
         node.create_subscription(Bool, SAFETY_STOP, self._on_safety, LATCHED)
@@ -192,6 +193,8 @@ class ExecutionEngine:
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
         self.zones.close()
+        for group, seconds in self.zones.waited().items():  # a zone wait falls inside a function: idle, not busy
+            report.group_busy[group] = max(0.0, report.group_busy.get(group, 0.0) - seconds)
         report.flag_waits = list(self.flags.waits)
         self._set_state({"finished": "finished", "failed": "failed", "stopped": "stopped"}[report.outcome], report.message)
         return report
@@ -678,7 +681,7 @@ class ExecutionEngine:
 
     def _publish_event(self, event: EngineEvent) -> None:
         if self._events_pub.get_subscription_count() > 0:
-            self._events_pub.publish(String(codec.encode(event)))
+            self._events_pub.publish(typed.to_msg(event, self.clock))
 
     def _publish_status(self) -> None:
         if self._status_pub.get_subscription_count() == 0:
@@ -701,4 +704,4 @@ class ExecutionEngine:
             groups=groups,
             message=self._message,
         )
-        self._status_pub.publish(String(codec.encode(status)))
+        self._status_pub.publish(typed.to_msg(status, self.clock))

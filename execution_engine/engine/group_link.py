@@ -14,10 +14,11 @@ from __future__ import annotations
 import asyncio
 import itertools
 import uuid
+from typing import Any
 
 from execution_engine.clock import Clock
 from execution_engine.ros_main import machine_node_name
-from execution_engine.transport import codec
+from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import String, Trigger
 from execution_engine.transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
 from execution_engine.transport.qos import COMMANDS, LATCHED
@@ -39,7 +40,7 @@ class GroupLink:
         self._session = uuid.uuid4().hex[:6]
         self._requests = node.create_publisher(String, sm_topic(group, "request"), COMMANDS)
         self._results = node.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
-        node.create_subscription(String, sm_topic(group, "state"), self._on_state, LATCHED)
+        node.create_subscription(typed.MachineStateMsg, sm_topic(group, "state"), self._on_state, LATCHED)
         self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
         self.rejected: list[str] = []
         self._watch: asyncio.Task[None] | None = None
@@ -100,8 +101,13 @@ class GroupLink:
             future.set_result(result)
 
     # ------------------------------------------------------------------------------ state
-    def _on_state(self, msg: String) -> None:
-        self.state = msg.data
+    def _on_state(self, msg: Any) -> None:
+        try:
+            self.state = typed.read_state(msg, source=self.node.resolve(sm_topic(self.group, "state")))
+        except codec.WireError as error:
+            self.rejected.append(str(error))
+            self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
+            return
         self._state_changed.set()
 
     async def wait_state(self, states: tuple[str, ...], timeout: float) -> bool:

@@ -24,10 +24,8 @@ from typing import Any
 from app_functions.registry import full_catalog
 from execution_engine.app_model import Application, read_application
 from execution_engine.engine.engine import ExecutionEngine
-from execution_engine.transport import codec
-from execution_engine.transport import mirrors
+from execution_engine.transport import codec, mirrors, typed
 from execution_engine.transport.action import ActionServer, GoalHandle
-from execution_engine.transport.msgs import String
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS
 from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus
@@ -40,7 +38,7 @@ _BUSY = ("running", "paused", "stepping", "error", "alarm", "stopping")
 RunApplication = mirrors.action(f"{_PACKAGE}/action/RunApplication")
 RunApplicationGoal, RunApplicationResult, RunApplicationFeedback = RunApplication.Goal, RunApplication.Result, RunApplication.Feedback
 SendGoal, GetResult = RunApplication.SendGoal, RunApplication.GetResult
-GroupProgressMsg = mirrors.mirror(f"{_PACKAGE}/msg/GroupProgress")
+GroupProgressMsg = typed.GroupProgressMsg
 
 
 def feedback_of(status: EngineStatus) -> Any:
@@ -62,7 +60,7 @@ class RunApplicationServer:
         self.current: GoalHandle | None = None
         self.server = ActionServer(node, RunApplication, ACTION_NAME, execute=self._execute, accept=self._accept, cancel=self._cancel)
         self._stops: set[asyncio.Task[object]] = set()
-        node.create_subscription(String, ENGINE_STATUS, self._on_status, EVENTS)
+        node.create_subscription(typed.EngineStatusMsg, ENGINE_STATUS, self._on_status, EVENTS)
 
     def _accept(self, goal: Any) -> str | None:
         if self.current is not None or self.engine.state in _BUSY:
@@ -76,11 +74,11 @@ class RunApplicationServer:
         self._stops.add(task)
         task.add_done_callback(self._stops.discard)
 
-    def _on_status(self, msg: String) -> None:
+    def _on_status(self, msg: Any) -> None:
         if self.current is None:
             return
         try:
-            status = codec.decode(EngineStatus, msg.data, source=self.node.resolve(ENGINE_STATUS))
+            status = typed.from_msg(EngineStatus, msg, self.node.clock, source=self.node.resolve(ENGINE_STATUS))
         except codec.WireError as error:
             self.node.logger.warning("%s: %s", self.node.fully_qualified_name, error)
             return

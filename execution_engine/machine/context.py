@@ -23,7 +23,7 @@ from execution_engine.machine.bridge_watch import BridgeWatch
 from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
 from execution_engine.machine.zone_gate import ZoneGate
-from execution_engine.transport import codec
+from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import String
 from execution_engine.transport.port import Node, Publisher, Subscription, wait_until_matched
 from execution_engine.transport.wire import BridgeCommand, FaultKind, SmRequest, SmResult, SmStatus, SyncMessage
@@ -47,9 +47,9 @@ class MachineConfig:
 @dataclass
 class Publishers:
     result: Publisher[String]
-    status: Publisher[String]
-    state: Publisher[String]
-    bridge: Publisher[String]
+    status: Publisher[Any]  # typed.MachineStatusMsg
+    state: Publisher[Any]  # typed.MachineStateMsg
+    bridge: Publisher[Any]  # typed.BridgeCommandMsg
     sync: Publisher[String]
 
 
@@ -67,7 +67,7 @@ class MachineContext:
         events: EventQueue,
         publishers: Publishers,
         config: MachineConfig,
-        feedback: Subscription[String] | None = None,
+        feedback: Subscription[Any] | None = None,
     ) -> None:
         self.group = group
         self.node = node
@@ -90,7 +90,7 @@ class MachineContext:
         self._feedback = feedback
         self.bridge_watch = BridgeWatch(node, feedback)  # a working state's check that the bridge is alive
         self._bridge_linked = False  # both directions to the bridge have matched
-        self._sent: dict[str, String] = {}  # unacknowledged bridge commands, for resending
+        self._sent: dict[str, Any] = {}  # unacknowledged bridge commands, for resending
         self.cell_arrived = asyncio.Event()
         self.zones = ZoneGate(self)  # interference zones: ask before a motion enters one
 
@@ -135,7 +135,7 @@ class MachineContext:
             fields["result"] = codec.to_primitive(fields["result"])
         values = {"state": self.state_name, **defaults, **fields}
         message = SmStatus(group=self.group, event=event, t=self.clock.now(), **values)  # type: ignore[arg-type]
-        self.pub.status.publish(String(codec.encode(message)))
+        self.pub.status.publish(typed.to_msg(message, self.clock))
 
     async def link_bridge(self) -> str | None:
         """Wait (bounded) until the command topic and the feedback topic have matched the bridge:
@@ -153,7 +153,7 @@ class MachineContext:
         """Publish a bridge command; returns its id (feedback carries the same id)."""
         cid = command_id or self.new_id()
         command = BridgeCommand(id=cid, group=self.group, op=op, primitive=primitive)  # type: ignore[arg-type]
-        message = String(codec.encode(command))
+        message = typed.to_msg(command, self.clock)
         self._sent[cid] = message
         if len(self._sent) > 16:  # only the newest few can still be waiting for their answer
             del self._sent[next(iter(self._sent))]

@@ -16,6 +16,7 @@ import asyncio
 import hashlib
 import os
 from pathlib import Path
+from typing import Any
 
 from app_functions.registry import full_catalog, functions_class
 from core_functions.functions import SkillContext
@@ -51,7 +52,7 @@ from execution_engine.machine.table import (
     WORKING_STATES,
 )
 from execution_engine.smach import StateMachine, StructureInfo, TransitionRecord, UserData
-from execution_engine.transport import codec
+from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import String, Trigger, TriggerRequest, TriggerResponse
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
@@ -120,12 +121,12 @@ class GroupMachine:
         g = self.group
         publishers = Publishers(
             result=node.create_publisher(String, sm_topic(g, "result"), COMMANDS),
-            status=node.create_publisher(String, sm_topic(g, "status"), EVENTS),
-            state=node.create_publisher(String, sm_topic(g, "state"), LATCHED),
-            bridge=node.create_publisher(String, bridge_topic(g, "command"), COMMANDS),
+            status=node.create_publisher(typed.MachineStatusMsg, sm_topic(g, "status"), EVENTS),
+            state=node.create_publisher(typed.MachineStateMsg, sm_topic(g, "state"), LATCHED),
+            bridge=node.create_publisher(typed.BridgeCommandMsg, bridge_topic(g, "command"), COMMANDS),
             sync=node.create_publisher(String, SYNC_TOPIC, COMMANDS),
         )
-        self._structure_pub = node.create_publisher(String, sm_topic(g, "structure"), LATCHED)
+        self._structure_pub = node.create_publisher(typed.MachineStructureMsg, sm_topic(g, "structure"), LATCHED)
         self.ctx = MachineContext(
             group=g,
             node=node,
@@ -135,7 +136,7 @@ class GroupMachine:
             events=self.events,
             publishers=publishers,
             config=config,
-            feedback=node.create_subscription(String, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS),
+            feedback=node.create_subscription(typed.BridgeFeedbackMsg, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS),
         )
         node.create_subscription(String, sm_topic(g, "request"), self._on_request, COMMANDS)
         node.create_subscription(String, SYNC_TOPIC, self._on_sync, COMMANDS)
@@ -174,7 +175,7 @@ class GroupMachine:
             states=(*structure.states, FINISH),
             transitions=tuple(TransitionSpec(s, o, t) for s, o, t in structure.transitions),
         )
-        self._structure_pub.publish(String(codec.encode(message)))
+        self._structure_pub.publish(typed.to_msg(message, self.clock))
 
     def on_structure(self, structure: StructureInfo) -> None:
         """Structure is published once, when built (latched); nothing to do per run."""
@@ -190,7 +191,7 @@ class GroupMachine:
     def _set_state(self, state: str) -> None:
         self._pause_pending_in = None
         self.ctx.state_name = state
-        self.ctx.pub.state.publish(String(state))
+        self.ctx.pub.state.publish(typed.machine_state(self.group, state, self.clock))
         self._diagnostics.update()
 
     @property
@@ -207,9 +208,9 @@ class GroupMachine:
             return
         self.events.put(RequestEvent(request))
 
-    def _on_feedback(self, msg: String) -> None:
+    def _on_feedback(self, msg: Any) -> None:
         try:
-            feedback = codec.decode(BridgeFeedback, msg.data, source=self.node.resolve(bridge_topic(self.group, "feedback")))
+            feedback = typed.from_msg(BridgeFeedback, msg, self.clock, source=self.node.resolve(bridge_topic(self.group, "feedback")))
         except codec.WireError as error:
             self.events.put(FaultEvent("bridge feedback", str(error), FaultKind.PROTOCOL))
             return

@@ -10,6 +10,9 @@ ROS 2 Jazzy's common_interfaces, rcl_interfaces and geometry2; comments left out
 from __future__ import annotations
 
 import re
+from functools import lru_cache
+
+from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
 
 SEPARATOR = "=" * 80
 
@@ -54,6 +57,31 @@ _PRIMITIVES = frozenset({
 _FIELD = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_/]*)(?:<=\d+)?(?:\[[^\]]*\])?\s+[A-Za-z_]")
 
 
+#: packages whose definitions are the interface files installed with this project (their .msg text)
+OWN_PACKAGES = frozenset({"dual_arm_executive_interfaces"})
+
+
+@lru_cache(maxsize=None)
+def _own(name: str) -> str | None:
+    """The field and constant lines of one of the project's own messages, read from its .msg file."""
+    package, _, message = name.partition("/")
+    if package not in OWN_PACKAGES:
+        return None
+    try:
+        text = InterfaceRegistry().file_text(package, "msg", message)
+    except InterfaceError:
+        return None
+    return "".join(line + "\n" for line in (raw.split("#", 1)[0].rstrip() for raw in text.splitlines()) if line)
+
+
+def definition(name: str) -> str:
+    """The .msg text of ``pkg/Name``; KeyError when neither the table nor the project's files have it."""
+    text = DEFINITIONS.get(name) or _own(name)
+    if text is None:
+        raise KeyError(name)
+    return text
+
+
 def short_name(ros_type: str) -> str:
     """``pkg/msg/Name`` -> ``pkg/Name`` (how ``MSG:`` lines and field types spell it)."""
     parts = ros_type.split("/")
@@ -66,7 +94,7 @@ def dependencies(name: str) -> list[str]:
 
     def visit(current: str) -> None:
         package = current.split("/")[0]
-        for line in DEFINITIONS[current].splitlines():
+        for line in definition(current).splitlines():
             match = _FIELD.match(line)
             if match is None:  # a blank line (constants are always of primitive types)
                 continue
@@ -84,14 +112,15 @@ def dependencies(name: str) -> list[str]:
 
 def known(ros_type: str) -> bool:
     """Whether this table can describe ``ros_type`` (a recorder skips, and says so, what it cannot)."""
-    return short_name(ros_type) in DEFINITIONS
+    name = short_name(ros_type)
+    return name in DEFINITIONS or _own(name) is not None
 
 
 def schema_text(ros_type: str) -> str:
     """The ``ros2msg`` schema of ``ros_type`` (``sensor_msgs/msg/JointState``) as rosbag2 stores it;
     KeyError for a type this table does not know."""
     name = short_name(ros_type)
-    parts = [DEFINITIONS[name]]
+    parts = [definition(name)]
     for dependency in dependencies(name):
-        parts.append(f"{SEPARATOR}\nMSG: {dependency}\n{DEFINITIONS[dependency]}")
+        parts.append(f"{SEPARATOR}\nMSG: {dependency}\n{definition(dependency)}")
     return "".join(parts)

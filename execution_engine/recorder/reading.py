@@ -26,7 +26,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from execution_engine.observers import engine_record, trace_record
 from execution_engine.recorder.safe_read import DamagedRecord, NotARecording, records
-from execution_engine.transport import codec
+from execution_engine.transport import codec, typed
 from execution_engine.transport.wire import EngineEvent, SmStatus
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -127,17 +127,29 @@ class _Reading:
         return None
 
 
+@dataclass(frozen=True)
+class _Epoch:
+    epoch: float
+
+
 def trace_records(path: str | Path, recording: Recording) -> Iterator[dict[str, Any]]:
-    """The run's machine status and engine events as trace records (:mod:`execution_engine.observers`)."""
+    """The run's machine status and engine events as trace records (:mod:`execution_engine.observers`).
+
+    Their ``t`` is run time: the header stamps less the run clock's epoch, which the metadata at
+    the file's end holds (a cut file: the first message's time), so the events are kept until then."""
+    kept: list[tuple[type, DecodedMessage]] = []
     for message in iter_messages(path, recording):
-        data = getattr(message.msg, "data", None)
-        if message.ros_type != "std_msgs/msg/String" or not isinstance(data, str):  # (a damaged schema may lack the field)
-            continue
-        match = _STATUS.match(message.topic)
-        try:
-            if match is not None:
-                yield trace_record(codec.decode(SmStatus, data, source=message.topic))
-            elif _EVENTS.match(message.topic):
-                yield engine_record(codec.decode(EngineEvent, data, source=message.topic))
+        if _STATUS.match(message.topic) and message.ros_type == str(typed.MachineStatusMsg.ROS_TYPE):  # type: ignore[attr-defined]
+            kept.append((SmStatus, message))
+        elif _EVENTS.match(message.topic) and message.ros_type == str(typed.EngineEventMsg.ROS_TYPE):  # type: ignore[attr-defined]
+            kept.append((EngineEvent, message))
+    try:
+        epoch = _Epoch(float(recording.metadata["dual_arm_executive"]["clock_epoch"]))
+    except (KeyError, ValueError):
+        epoch = _Epoch((recording.start_ns or 0) * 1e-9)
+    for cls, message in kept:
+        try:  # (a damaged schema may lack a field)
+            decoded = typed.from_fields(cls, message.msg, epoch, source=message.topic)
         except codec.WireError:
             continue
+        yield trace_record(decoded) if isinstance(decoded, SmStatus) else engine_record(decoded)

@@ -24,7 +24,7 @@ from typing import Any
 from execution_engine.recorder.definitions import known
 from execution_engine.recorder.writer import McapSink, RecordingStats
 from execution_engine.transport import codec
-from execution_engine.transport.msgs import String
+from execution_engine.transport import typed
 from execution_engine.transport.port import Node, TopicInfo, TransportError
 from execution_engine.transport.qos import Durability, History, QoS, Reliability
 from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus
@@ -105,15 +105,15 @@ class Recorder:
         def record(msg: Any) -> None:
             stamp = node.now_stamp()
             sink.put(topic, msg, offered, stamp.sec * 1_000_000_000 + stamp.nanosec)
-            if topic == self._engine_status and isinstance(msg, String):
+            if topic == self._engine_status and isinstance(msg, typed.EngineStatusMsg):
                 self._on_engine_status(msg)
 
         return record
 
-    def _on_engine_status(self, msg: String) -> None:
+    def _on_engine_status(self, msg: Any) -> None:
         """An operation boundary: the chunk so far goes to disk, as the trace does."""
         try:
-            status = codec.decode(EngineStatus, msg.data, source=self._engine_status)
+            status = typed.from_msg(EngineStatus, msg, self.node.clock, source=self._engine_status)
         except codec.WireError:
             return
         if status.operation_id != self._operation:
@@ -134,6 +134,7 @@ class Recorder:
                 self.sink.add_attachment(f"{kind}/{Path(path).name}", "application/xml", Path(path).read_bytes(), now_ns)
         self.sink.add_metadata("dual_arm_executive", {
             "application_path": str(application),
+            "clock_epoch": repr(self.node.clock.epoch),  # ROS time of run time 0: stamps -> the trace's t
             "application_sha256": file_digest(application),
             "cell_path": str(cell or ""),
             "cell_sha256": file_digest(cell),

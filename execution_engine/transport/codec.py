@@ -184,6 +184,24 @@ def decode(cls: type[T], text: str | bytes, *, source: str = "", max_bytes: int 
     return from_primitive(cls, raw, source=source)
 
 
+def parse_json(text: str | bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Any:
+    """Parse JSON from another process (a typed message's ``*_json`` field): ValueError when it is
+    larger than ``max_bytes``, not JSON, or holds NaN or infinity."""
+    if len(text) > max_bytes:
+        raise ValueError(f"{len(text)} bytes exceed the limit of {max_bytes}")
+    try:
+        value = _loads(text)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+    except ValueError as error:
+        raise ValueError(f"not valid JSON: {error}") from None
+    try:
+        _check_json_value(value, 0)
+    except _Mismatch as error:
+        raise ValueError(error.reason) from None
+    return value
+
+
 def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not allowed")
 

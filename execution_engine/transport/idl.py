@@ -169,6 +169,10 @@ class InterfaceRegistry:
             f"no interface file for {package}/{kind}/{name} in {', '.join(map(str, self.roots)) or '(no interface folder found)'}"
         )
 
+    def file_text(self, package: str, kind: str, name: str) -> str:
+        """The text of ``<package>/<kind>/<name>.<kind>`` (a recorder stores it as the schema)."""
+        return self._read(package, kind, name)[0]
+
     def spec(self, ros_type: str) -> MessageSpec:
         """The parsed spec of ``pkg/msg/Name``, ``pkg/srv/Name_Request|_Response`` or
         ``pkg/action/Name_Goal|_Result|_Feedback``."""

@@ -24,7 +24,10 @@ class Time:
     @staticmethod
     def from_seconds(seconds: float) -> Time:
         whole = math.floor(seconds)
-        return Time(int(whole), int(round((seconds - whole) * 1e9)) % 1_000_000_000)
+        nanosec = int(round((seconds - whole) * 1e9))
+        if nanosec == 1_000_000_000:  # 2.9999999999 s is 3 s, not 2 s
+            whole, nanosec = whole + 1, 0
+        return Time(int(whole), nanosec)
 
     def to_seconds(self) -> float:
         return self.sec + self.nanosec * 1e-9

@@ -52,7 +52,7 @@ from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from execution_engine.clock import Clock, FollowingClock
-from execution_engine.transport import ros_logging
+from execution_engine.transport import ros_logging, typed
 from execution_engine.transport.msgs import CAMERA_TYPES, MESSAGE_TYPES, ClockMessage, Time
 from execution_engine.transport.port import (
     EndpointNode,
@@ -513,7 +513,7 @@ class RosNode(EndpointNode):
 
     def topic_names_and_types(self) -> list[TopicInfo]:
         """The graph's topics of our types, with each publisher's offered QoS (``ros2 bag record -a``'s discovery)."""
-        known = {t.ROS_TYPE: t for t in (*MESSAGE_TYPES, *CAMERA_TYPES, ClockMessage)}
+        known = {t.ROS_TYPE: t for t in (*MESSAGE_TYPES, *typed.MESSAGE_TYPES, *CAMERA_TYPES, ClockMessage)}
         found = []
         for name, types in self.ros_node.get_topic_names_and_types():
             mirror = next((known[t] for t in types if t in known), None)

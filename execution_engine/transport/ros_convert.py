@@ -54,9 +54,11 @@ def import_ros_type(ros_type: str) -> type:
     try:
         module = importlib.import_module(module_name)
     except ImportError as error:
-        raise TransportError(
-            f"cannot import {module_name} for {ros_type}: {error} (is the ROS 2 environment sourced?)"
-        ) from None
+        hint = (
+            "build it with colcon: --base-paths <repo> <repo>/interfaces" if package == "dual_arm_executive_interfaces"
+            else "is the ROS 2 environment sourced?"
+        )
+        raise TransportError(f"cannot import {module_name} for {ros_type}: {error} ({hint})") from None
     try:
         cls = getattr(module, name)
         return getattr(cls, part) if part else cls  # type: ignore[no-any-return]

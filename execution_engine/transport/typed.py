@@ -1,0 +1,370 @@
+"""Wire dataclasses <-> the typed messages of ``dual_arm_executive_interfaces``.
+
+The nodes think in the dataclasses of :mod:`execution_engine.transport.wire` (optional fields,
+enums, primitives as tagged unions); on the wire they travel as the ``.msg`` types of the
+interface package, so ``ros2 topic echo``, PlotJuggler and Foxglove show and plot every field.
+This module is the one place that maps between the two:
+
+* an absent optional string is ``""`` in the message, an absent primitive index or count ``-1``;
+* a run time ``t`` becomes the ROS time ``header.stamp`` (the clock's epoch plus ``t``, added in
+  integer nanoseconds so that it comes back to within a nanosecond) and back, into the
+  receiver's own run time;
+* only a primitive's fields (``primitive_json``) and what a primitive returned (``result_json``)
+  stay JSON: their shape depends on the primitive's kind.
+
+What arrives is checked exactly as the JSON codec checks it -- the received message is put back
+into the dataclass's shape and validated by :func:`codec.from_primitive` -- so a message that is
+out of contract (an unknown event, a fault kind nobody knows, a primitive that does not parse)
+raises :class:`codec.WireError` naming the topic, the ROS type and the ``.msg`` field, and the
+receiver reports and ignores it as before.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol, TypeVar
+
+from execution_engine.clock import Clock
+from execution_engine.transport import codec, mirrors
+from execution_engine.transport.msgs import Header, Time
+from execution_engine.transport.wire import (
+    BridgeCommand,
+    BridgeFeedback,
+    EngineEvent,
+    EngineStatus,
+    GroupProgress,
+    SmStatus,
+    SmStructure,
+    TransitionSpec,
+)
+
+W = TypeVar("W")
+
+PACKAGE = "dual_arm_executive_interfaces"
+
+
+def _mirror(name: str) -> type:
+    return mirrors.mirror(f"{PACKAGE}/msg/{name}")
+
+
+MachineStateMsg = _mirror("MachineState")
+MachineStatusMsg = _mirror("MachineStatus")
+MachineStructureMsg = _mirror("MachineStructure")
+MachineTransitionMsg = _mirror("MachineTransition")
+EngineStatusMsg = _mirror("EngineStatus")
+EngineEventMsg = _mirror("EngineEvent")
+OperatorActionMsg = _mirror("OperatorAction")
+GroupProgressMsg = _mirror("GroupProgress")
+BridgeCommandMsg = _mirror("BridgeCommand")
+BridgeFeedbackMsg = _mirror("BridgeFeedback")
+
+#: every type of the interface package a node publishes (a recorder's discovery knows them)
+MESSAGE_TYPES: tuple[type, ...] = (
+    MachineStateMsg, MachineStatusMsg, MachineStructureMsg, EngineStatusMsg, EngineEventMsg, BridgeCommandMsg, BridgeFeedbackMsg,
+)
+_NANO = 1_000_000_000
+
+
+class Epoch(Protocol):
+    """What converting times needs of a clock: the ROS time of its run time 0."""
+
+    @property
+    def epoch(self) -> float: ...
+
+
+# ---------------------------------------------------------------------------------- time
+def stamp_of(clock: Epoch, t: float) -> Time:
+    """The ROS time of run time ``t`` on ``clock`` (what :meth:`Node.now_stamp` gives at ``t``)."""
+    epoch, offset = Time.from_seconds(clock.epoch), Time.from_seconds(t)
+    total = (epoch.sec + offset.sec) * _NANO + epoch.nanosec + offset.nanosec
+    return Time(total // _NANO, total % _NANO)
+
+
+def run_time(clock: Epoch, stamp: Any) -> float:
+    """Run time on ``clock`` of a ROS time stamp (the inverse of :func:`stamp_of`)."""
+    epoch = Time.from_seconds(clock.epoch)
+    return (stamp.sec - epoch.sec) + (stamp.nanosec - epoch.nanosec) * 1e-9
+
+
+def _header(clock: Clock, t: float) -> Header:
+    return Header(stamp=stamp_of(clock, t))
+
+
+def _text(value: str | None) -> str:
+    return "" if value is None else value
+
+
+def _opt(value: str) -> str | None:
+    return value if value else None
+
+
+def _json(value: Any) -> str:
+    return "" if value is None else codec.encode(value)
+
+
+# ------------------------------------------------------------------------------ outbound
+def machine_state(group: str, state: str, clock: Clock) -> Any:
+    """``<group>/sm/state``: the state a machine is in, stamped now."""
+    return MachineStateMsg(header=_header(clock, clock.now()), group=group, state=state)
+
+
+def _status_msg(s: SmStatus, clock: Clock) -> Any:
+    return MachineStatusMsg(
+        header=_header(clock, s.t), group=s.group, event=s.event, state=s.state,
+        from_state=_text(s.from_state), to_state=_text(s.to_state), signal=_text(s.signal),
+        operation=_text(s.operation), function=_text(s.function), request_id=_text(s.request_id),
+        primitive=_text(s.primitive), index=-1 if s.index is None else s.index,
+        count=-1 if s.count is None else s.count, outcome=_text(s.outcome), error=_text(s.error),
+        result_json=_json(s.result),
+    )
+
+
+def _structure_msg(s: SmStructure, clock: Clock) -> Any:
+    return MachineStructureMsg(
+        group=s.group, initial=s.initial, states=tuple(s.states),
+        transitions=tuple(MachineTransitionMsg(source=t.source, signal=t.signal, target=t.target) for t in s.transitions),
+    )
+
+
+def _engine_status_msg(s: EngineStatus, clock: Clock) -> Any:
+    return EngineStatusMsg(
+        header=_header(clock, s.t), app=s.app, state=s.state, operation_index=s.operation_index,
+        operation_count=s.operation_count, operation_id=_text(s.operation_id),
+        groups=tuple(
+            GroupProgressMsg(group=g, state=p.state, operation=_text(p.operation), function=_text(p.function))
+            for g, p in s.groups.items()
+        ),
+        message=s.message,
+    )
+
+
+def _engine_event_msg(e: EngineEvent, clock: Clock) -> Any:
+    return EngineEventMsg(
+        header=_header(clock, e.t), event=e.event, state=e.state, operation=_text(e.operation),
+        from_state=_text(e.from_state), message=e.message,
+        action=OperatorActionMsg(command=_text(e.command), source=_text(e.source), accepted=bool(e.accepted), answer=_text(e.answer)),
+    )
+
+
+def _command_msg(c: BridgeCommand, clock: Clock) -> Any:
+    kind, fields = "", ""
+    if c.primitive is not None:
+        raw = codec.to_primitive(c.primitive)
+        kind = raw.pop("kind")
+        fields = codec.encode(raw)
+    return BridgeCommandMsg(id=c.id, group=c.group, op=c.op, primitive_kind=kind, primitive_json=fields)
+
+
+def _feedback_msg(f: BridgeFeedback, clock: Clock) -> Any:
+    return BridgeFeedbackMsg(
+        header=_header(clock, f.t), id=f.id, group=f.group, status=f.status, error=_text(f.error),
+        fault="" if f.fault is None else f.fault.value, result_json=_json(f.result),
+    )
+
+
+_OUT: dict[type, tuple[type, Callable[[Any, Clock], Any]]] = {
+    SmStatus: (MachineStatusMsg, _status_msg),
+    SmStructure: (MachineStructureMsg, _structure_msg),
+    EngineStatus: (EngineStatusMsg, _engine_status_msg),
+    EngineEvent: (EngineEventMsg, _engine_event_msg),
+    BridgeCommand: (BridgeCommandMsg, _command_msg),
+    BridgeFeedback: (BridgeFeedbackMsg, _feedback_msg),
+}
+
+
+def msg_type(wire_cls: type) -> type:
+    """The message type that carries ``wire_cls`` on the wire (``SmStatus`` -> ``MachineStatus``)."""
+    return _OUT[wire_cls][0]
+
+
+def to_msg(obj: Any, clock: Clock) -> Any:
+    """The typed message of a wire dataclass; run times become stamps on ``clock``."""
+    return _OUT[type(obj)][1](obj, clock)
+
+
+# ------------------------------------------------------------------------------- inbound
+class _Bad(Exception):
+    def __init__(self, reason: str, path: str) -> None:
+        super().__init__(reason)
+        self.reason, self.path = reason, path
+
+
+def _str(msg: Any, name: str) -> str:
+    value = getattr(msg, name, None)
+    if not isinstance(value, str):
+        raise _Bad(f"expected a string, got {type(value).__name__}", name)
+    return value
+
+
+def _int(msg: Any, name: str) -> int:
+    value = getattr(msg, name, None)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _Bad(f"expected an integer, got {type(value).__name__}", name)
+    return value
+
+
+def _stamp(msg: Any, clock: Epoch) -> float:
+    header = getattr(msg, "header", None)
+    stamp = getattr(header, "stamp", None)
+    if not (isinstance(getattr(stamp, "sec", None), int) and isinstance(getattr(stamp, "nanosec", None), int)):
+        raise _Bad("expected a builtin_interfaces/Time", "header.stamp")
+    return run_time(clock, stamp)
+
+
+def _parsed(msg: Any, name: str, *, kind: str = "") -> Any:
+    """A ``*_json`` field parsed (None when empty); a value that is no JSON object is refused."""
+    text = _str(msg, name)
+    if not text:
+        return None
+    try:
+        value = codec.parse_json(text)
+    except ValueError as error:
+        raise _Bad(str(error), name) from None
+    if not isinstance(value, dict):
+        raise _Bad(f"expected a JSON object, got {type(value).__name__}", name)
+    if kind:
+        if value.get("kind", kind) != kind:
+            raise _Bad(f"says kind {value.get('kind')!r}, primitive_kind says {kind!r}", name)
+        value = {**value, "kind": kind}
+    return value
+
+
+def _opt_index(msg: Any, name: str) -> int | None:
+    value = _int(msg, name)
+    return None if value == -1 else value
+
+
+def _status_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    raw: dict[str, Any] = {"group": _str(m, "group"), "event": _str(m, "event"), "state": _str(m, "state"), "t": _stamp(m, clock)}
+    for name, key in (("from_state", "from"), ("to_state", "to"), ("signal", "signal"), ("operation", "operation"),
+                      ("function", "function"), ("request_id", "request_id"), ("primitive", "primitive"),
+                      ("outcome", "outcome"), ("error", "error")):
+        raw[key] = _opt(_str(m, name))
+    raw["index"], raw["count"] = _opt_index(m, "index"), _opt_index(m, "count")
+    raw["result"] = _parsed(m, "result_json")
+    return raw
+
+
+def _items(m: Any, name: str) -> list[Any]:
+    value = getattr(m, name, None)
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)):
+        raise _Bad(f"expected a sequence, got {type(value).__name__}", name)
+    return list(value)
+
+
+def _nested(items: list[Any], name: str, read: Callable[[Any], dict[str, Any]]) -> list[dict[str, Any]]:
+    out = []
+    for i, item in enumerate(items):
+        try:
+            out.append(read(item))
+        except _Bad as error:
+            raise _Bad(error.reason, f"{name}[{i}].{error.path}") from None
+    return out
+
+
+def _structure_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    states = _items(m, "states")
+    transitions = _nested(_items(m, "transitions"), "transitions",
+                          lambda t: {"from": _str(t, "source"), "signal": _str(t, "signal"), "to": _str(t, "target")})
+    return {"group": _str(m, "group"), "initial": _str(m, "initial"), "states": states, "transitions": transitions}
+
+
+def _engine_status_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    groups = _nested(_items(m, "groups"), "groups", lambda g: {
+        "group": _str(g, "group"), "state": _str(g, "state"),
+        "operation": _opt(_str(g, "operation")), "function": _opt(_str(g, "function")),
+    })
+    by_group: dict[str, Any] = {}
+    for i, g in enumerate(groups):
+        if g["group"] in by_group:
+            raise _Bad(f"group {g['group']!r} listed twice", f"groups[{i}].group")
+        by_group[g.pop("group")] = g
+    return {
+        "app": _str(m, "app"), "state": _str(m, "state"), "operation_index": _int(m, "operation_index"),
+        "operation_count": _int(m, "operation_count"), "t": _stamp(m, clock),
+        "operation_id": _opt(_str(m, "operation_id")), "groups": by_group, "message": _str(m, "message"),
+    }
+
+
+def _engine_event_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    event = _str(m, "event")
+    action = getattr(m, "action", None)
+    raw: dict[str, Any] = {
+        "event": event, "t": _stamp(m, clock), "state": _str(m, "state"), "operation": _opt(_str(m, "operation")),
+        "from": _opt(_str(m, "from_state")), "message": _str(m, "message"),
+    }
+    try:
+        for name in ("command", "source", "answer"):
+            raw[name] = _opt(_str(action, name))
+        accepted = getattr(action, "accepted", None)
+        if not isinstance(accepted, bool):
+            raise _Bad(f"expected true or false, got {type(accepted).__name__}", "accepted")
+    except _Bad as error:
+        raise _Bad(error.reason, f"action.{error.path}") from None
+    raw["accepted"] = accepted if event == "operator" else None
+    return raw
+
+
+def _command_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    kind = _str(m, "primitive_kind")
+    primitive = _parsed(m, "primitive_json", kind=kind or "?")
+    if primitive is None and kind:
+        raise _Bad(f"primitive_kind {kind!r} without its fields", "primitive_json")
+    return {"id": _str(m, "id"), "group": _str(m, "group"), "op": _str(m, "op"), "primitive": primitive}
+
+
+def _feedback_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    return {
+        "id": _str(m, "id"), "group": _str(m, "group"), "status": _str(m, "status"), "error": _opt(_str(m, "error")),
+        "fault": _opt(_str(m, "fault")), "result": _parsed(m, "result_json"), "t": _stamp(m, clock),
+    }
+
+
+#: reading a message back: its fields in the dataclass's JSON shape, and the dataclass keys whose
+#: field has another name in the .msg (so an error names the .msg field)
+_IN: dict[type, tuple[Callable[[Any, Epoch], dict[str, Any]], dict[str, str]]] = {
+    SmStatus: (_status_raw, {"from": "from_state", "to": "to_state", "result": "result_json"}),
+    SmStructure: (_structure_raw, {}),
+    EngineStatus: (_engine_status_raw, {}),
+    EngineEvent: (_engine_event_raw, {"from": "from_state", "command": "action.command", "source": "action.source",
+                                      "accepted": "action.accepted", "answer": "action.answer"}),
+    BridgeCommand: (_command_raw, {"primitive": "primitive_json"}),
+    BridgeFeedback: (_feedback_raw, {"result": "result_json"}),
+}
+
+
+def from_msg(wire_cls: type[W], msg: Any, clock: Epoch, *, source: str = "") -> W:
+    """The wire dataclass of a received typed message; :class:`codec.WireError` (naming ``source``,
+    the ROS type and the .msg field) when it is of another type or out of contract."""
+    expected = msg_type(wire_cls)
+    if type(msg) is not expected:
+        type_name = str(expected.ROS_TYPE)  # type: ignore[attr-defined]
+        raise codec.WireError(f"expected {type_name}, got {type(msg).__name__}", source=source, type_name=type_name)
+    return from_fields(wire_cls, msg, clock, source=source)
+
+
+def from_fields(wire_cls: type[W], msg: Any, clock: Epoch, *, source: str = "") -> W:
+    """As :func:`from_msg` for any object with the message's fields as attributes (a message
+    decoded from a recording by ``mcap-ros2-support``)."""
+    type_name = str(msg_type(wire_cls).ROS_TYPE)  # type: ignore[attr-defined]
+    read, renames = _IN[wire_cls]
+    try:
+        raw = read(msg, clock)
+    except _Bad as error:
+        raise codec.WireError(error.reason, source=source, type_name=type_name, path=error.path) from None
+    try:
+        return codec.from_primitive(wire_cls, raw, source=source)
+    except codec.WireError as error:
+        head, dot, rest = error.path.partition(".")
+        head, bracket, index = head.partition("[")
+        path = renames.get(head, head) + (bracket + index) + (dot + rest)
+        raise codec.WireError(error.reason, source=source, type_name=type_name, path=path) from None
+
+
+def read_state(msg: Any, *, source: str = "") -> str:
+    """The state named by a received ``MachineState``; WireError when it names none."""
+    type_name = str(MachineStateMsg.ROS_TYPE)  # type: ignore[attr-defined]
+    if type(msg) is not MachineStateMsg:
+        raise codec.WireError(f"expected {type_name}, got {type(msg).__name__}", source=source, type_name=type_name)
+    if not isinstance(msg.state, str) or not msg.state:
+        raise codec.WireError("names no state", source=source, type_name=type_name, path="state")
+    return msg.state
