@@ -193,8 +193,6 @@ class ExecutionEngine:
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
         self.zones.close()
-        for group, seconds in self.zones.waited().items():  # a zone wait falls inside a function: idle, not busy
-            report.group_busy[group] = max(0.0, report.group_busy.get(group, 0.0) - seconds)
         report.flag_waits = list(self.flags.waits)
         self._set_state({"finished": "finished", "failed": "failed", "stopped": "stopped"}[report.outcome], report.message)
         return report
