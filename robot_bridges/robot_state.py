@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from execution_engine.transport.msgs import String, TFMessage, Time
+from execution_engine.transport.msgs import Header, Quaternion, String, TFMessage, Time, Transform, TransformStamped, Vector3
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import ROBOT_DESCRIPTION, TF, TF_STATIC
 from execution_engine.transport.transforms import transform_stamped
@@ -41,6 +41,7 @@ class RobotStatePublisher:
         self._tf_static = node.create_publisher(TFMessage, TF_STATIC_TOPIC, TF_STATIC)
         self._description.publish(String(urdf))
         self._static_sent = False
+        self._placed: dict[str, tuple[float, Transform]] = {}  # movable joint -> (position, its transform): a joint at rest is not worked out again
 
     @classmethod
     def for_backend(cls, node: Node, backend: RobotBackend) -> RobotStatePublisher | None:
@@ -57,5 +58,17 @@ class RobotStatePublisher:
                 self._tf_static.publish(TFMessage(tuple(transform_stamped(j.parent, j.child, p, stamp) for j, p in fixed)))
         if self._tf.get_subscription_count() == 0:
             return  # nobody draws the robot: skip the kinematics
-        moved = self.tree.movable_transforms(names, positions)
-        self._tf.publish(TFMessage(tuple(transform_stamped(j.parent, j.child, p, stamp) for j, p in moved)))
+        given = self.tree.positions(names, positions)
+        if any(self._placed.get(name, (None,))[0] != value for name, value in given.items()):
+            self.tree.place(given)  # (a joint's transform depends on its own position only)
+        transforms = []
+        for joint in self.tree.joints:
+            value = given.get(joint.name)
+            if value is None:
+                continue
+            placed = self._placed.get(joint.name)
+            if placed is None or placed[0] != value:
+                translation, rotation = self.tree.relative(joint)
+                placed = self._placed[joint.name] = (value, Transform(Vector3(*translation), Quaternion(*rotation)))
+            transforms.append(TransformStamped(Header(stamp, joint.parent), joint.child, placed[1]))
+        self._tf.publish(TFMessage(tuple(transforms)))

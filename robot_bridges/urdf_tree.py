@@ -88,6 +88,11 @@ class UrdfTree:
         the missing transform instead of showing the arm somewhere it is not.
         """
         given = self.positions(names, positions)
+        self.place(given)
+        return [(j, self._relative(j)) for j in self.joints if j.name in given]
+
+    def place(self, given: Mapping[str, float]) -> None:
+        """Forward kinematics for these joint positions (:meth:`positions`), the others at 0."""
         q = pin.neutral(self.model)
         for name, value in given.items():
             first, nq = self._slots[name]
@@ -96,7 +101,18 @@ class UrdfTree:
             else:
                 q[first], q[first + 1] = math.cos(value), math.sin(value)
         self._update(q)
-        return [(j, self._relative(j)) for j in self.joints if j.name in given]
+
+    def relative(self, joint: TreeJoint) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """The child link in the parent link after :meth:`place`: translation (m) and unit quaternion
+        (x, y, z, w with w >= 0, as :meth:`Pose.from_matrix` gives it), straight from pinocchio --
+        ``tf`` asks for every movable joint 20 times a second, without needing a checked Pose."""
+        placements = self._data.oMf
+        placement = placements[self._link_frame[joint.parent]].actInv(placements[self._link_frame[joint.child]])
+        t, r = placement.translation, pin.Quaternion(placement.rotation)
+        x, y, z, w = float(r.x), float(r.y), float(r.z), float(r.w)
+        if w < 0:
+            x, y, z, w = -x, -y, -z, -w
+        return (float(t[0]), float(t[1]), float(t[2])), (x, y, z, w)
 
     def positions(self, names: Sequence[str], positions: Sequence[float]) -> Mapping[str, float]:
         """The positions of this tree's movable joints among ``names``; ValueError on a length mismatch."""

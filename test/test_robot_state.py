@@ -151,6 +151,40 @@ def test_fixed_joints_go_once_on_tf_static_and_tf_carries_the_named_movable_join
     assert set(tree_of(tf[-1].transforms)) == {"l1"}  # a joint the state does not name is left out
 
 
+def test_tf_follows_every_joint_state_whichever_joints_moved(run_sim: Any) -> None:
+    """A joint at rest keeps its transform from before (it is not worked out again); every published
+    set equals the tree's own kinematics for that state, whichever joints moved since the last."""
+    rng = np.random.default_rng(5)
+    tree = UrdfTree(NEXTAGE_URDF.read_text())
+    names = tree.movable_joints
+    states = [rng.uniform(-1.0, 1.0, len(names))]
+    for _ in range(12):  # now one joint moves, now several, now none
+        state = states[-1].copy()
+        moving = rng.choice(len(names), size=int(rng.integers(0, 4)), replace=False)
+        state[moving] = rng.uniform(-1.0, 1.0, len(moving))
+        states.append(state)
+
+    async def main(clock: Clock) -> list[TFMessage]:
+        transport = LocalTransport(clock)
+        publisher = RobotStatePublisher(transport.create_node("bridge"), NEXTAGE_URDF.read_text())
+        tf = Inbox(transport.create_node("viewer"), TFMessage, TF_TOPIC, TF)
+        for k, state in enumerate(states):
+            publisher.publish(names, tuple(state), Time(k, 0))
+            await clock.sleep(0.05)
+        return tf.messages
+
+    published = run_sim(main)
+    assert len(published) == len(states)
+    for message, state in zip(published, states):
+        expected = {j.child: (j.parent, pose) for j, pose in tree.movable_transforms(names, tuple(state))}
+        got = tree_of(message.transforms)
+        assert set(got) == set(expected)
+        for child, (parent, pose) in expected.items():
+            q, want = got[child][1], pose
+            assert got[child][0] == parent and q.distance_to(want) < 1e-12, child
+            assert max(abs(a - b) for a, b in zip((q.qx, q.qy, q.qz, q.qw), (want.qx, want.qy, want.qz, want.qw))) < 1e-12, child
+
+
 def test_a_backend_without_urdf_publishes_neither(run_sim: Any) -> None:
     async def main(clock: Clock) -> int:
         transport = LocalTransport(clock)
