@@ -1,23 +1,28 @@
-"""What the flight recorder costs: time per primitive with ``--record`` against the same run without it.
+"""What the flight recorder costs: time per primitive with recording against the same run without it.
 
-    python bench/recording_overhead.py [N]          # per-primitive overhead, N primitives (default 2000)
-    python bench/recording_overhead.py --rsi 20     # + the KUKA RSI 4 ms loop, 20 s without and 20 s with recording
+    python bench/recording_overhead.py [N]                       # per primitive (N primitives, default 2000) + the demonstrator
+    python bench/recording_overhead.py 0 --rounds 0 --demo-rounds 0 --rsi 20 --rsi-rounds 2   # the KUKA RSI 4 ms loop only
 
 1. Per primitive, in one process on real (wall) time, on the Nextage simulator back end: the
    applications of ``bench/primitive_overhead.py`` (one ``set_speed`` primitive per function -- the
    engine, machine, transport and bridge paid per primitive, the worst case -- and N primitives in
-   one skill), each run without and with a :class:`~execution_engine.recorder.recorder.Recorder`
-   node on the same transport writing every topic to an MCAP file; the runs alternate (without,
-   with, without, ...) and the medians are compared: the ratio is time with / time without.
-   ``set_speed`` does not move the arm, so there is no motion time to hide the recorder's cost in. Both sides
-   have the run observer ``run`` always has (console and trace): without any subscriber the machines would not
-   even encode their status events, and the difference would not be the recorder's.
-2. ``--rsi S``: ``bench/rsi_latency.py``'s real-time phase (the engine runs ``kuka_rsi_demo.xml``
+   one skill), three sides alternating: without a recorder; a recorder subscribed to every topic
+   that keeps nothing (what listening costs: delivery, callbacks, and the nodes that publish only
+   when someone listens); a :class:`~execution_engine.recorder.recorder.Recorder` writing every
+   topic to an MCAP file.  Wall and CPU time of this process (the encoder process's is not in it:
+   it is what the control loop pays).  ``set_speed`` does not move the arm, so there is no motion
+   time to hide the recorder's cost in.  Every side has the run observer ``run`` always has
+   (console and trace): without any subscriber the machines would not even encode their status
+   events, and the difference would not be the recorder's.
+2. The rivet demonstrator through the CLI at ``--speed 10`` and ``--speed max``, without and with
+   ``--record``: wall time, CPU of the run's process, CPU of all processes (the encoder's too).
+3. ``--rsi S``: ``bench/rsi_latency.py``'s real-time phase (the engine runs ``kuka_rsi_demo.xml``
    over and over against a simulated KR C4 at a real 4 ms cycle, the RSI loop in its own process)
-   for S seconds without and S seconds with every topic recorded; the controller's count of late
-   replies for each.
+   for S seconds without and S seconds with every topic recorded, ``--rsi-rounds`` times; the
+   controller's count of late replies for each (``--rsi-echo``: the UDP echo baseline beside it).
 
-The last line is one JSON object with every figure.
+Ratios are time with / time without, medians of the rounds.  The last line is one JSON object
+with every figure.
 """
 from __future__ import annotations
 
@@ -177,56 +182,66 @@ def demo(speed: str, rounds: int) -> dict[str, Any]:
     return out
 
 
-def rsi(seconds: float) -> dict[str, Any]:
-    """The 4 ms loop's late replies without and with the recorder in the engine's process."""
+def rsi(seconds: float, rounds: int, echo: bool) -> dict[str, Any]:
+    """The 4 ms loop's late replies without and with the recorder in the engine's process,
+    ``rounds`` of each, alternating."""
     import execution_engine.deployment as deployment_module
     import rsi_latency
 
     original: Callable[..., Awaitable[Deployment]] = deployment_module.deploy_local
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = {"seconds": seconds, "rounds": rounds, "echo_baseline": echo, "without": [], "recorded": []}
     with tempfile.TemporaryDirectory() as folder:
-        for label in ("without", "recorded"):
-            recorders: list[Recorder] = []
+        for i in range(rounds):
+            for label in ("without", "recorded"):
+                recorders: list[Recorder] = []
 
-            async def deploy(*args: Any, **kwargs: Any) -> Deployment:
-                deployment = await original(*args, **kwargs)
-                if label == "recorded":
-                    recorders.append(attach_recorder(deployment, Path(folder) / "rsi.mcap"))
-                    close = deployment.close
+                async def deploy(*args: Any, **kwargs: Any) -> Deployment:
+                    deployment = await original(*args, **kwargs)
+                    if label == "recorded":
+                        recorders.append(attach_recorder(deployment, Path(folder) / f"rsi{i}.mcap"))
+                        close = deployment.close
 
-                    async def close_all() -> None:
-                        for recorder in recorders:
-                            await recorder.close()
-                        await close()
+                        async def close_all() -> None:
+                            for recorder in recorders:
+                                await recorder.close()
+                            await close()
 
-                    deployment.close = close_all  # type: ignore[method-assign]
-                return deployment
+                        deployment.close = close_all  # type: ignore[method-assign]
+                    return deployment
 
-            deployment_module.deploy_local = deploy  # type: ignore[assignment]
-            try:
-                result = rsi_latency.real_time(seconds, Path(folder) / f"feedback_{label}.csv")
-            finally:
-                deployment_module.deploy_local = original
-            out[label] = {k: result.get(k) for k in ("packets", "late", "app_runs", "app_runs_ok", "rsi_round_trip_us", "echo_late")}
-            if recorders:
-                out[label]["messages"] = recorders[0].sink.stats.written
-                out[label]["dropped"] = sum(recorders[0].sink.stats.dropped.values())
+                deployment_module.deploy_local = deploy  # type: ignore[assignment]
+                try:
+                    result = rsi_latency.real_time(seconds, Path(folder) / f"feedback_{label}{i}.csv", echo=echo)
+                finally:
+                    deployment_module.deploy_local = original
+                figures = {k: result.get(k) for k in ("packets", "late", "late_ipocs_from_end", "app_runs", "app_runs_ok", "rsi_round_trip_us", "echo_late")}
+                if recorders:
+                    figures["messages"] = recorders[0].sink.stats.written
+                    figures["dropped"] = sum(recorders[0].sink.stats.dropped.values())
+                out[label].append(figures)
+                print(f"RSI 4 ms, round {i + 1}, {label:<8}: {figures['late']} late of {figures['packets']} packets "
+                      f"(at {figures['late_ipocs_from_end']} cycles from the end), demo runs {figures['app_runs_ok']}/{figures['app_runs']}"
+                      + (f", {figures['messages']} messages recorded, {figures['dropped']} dropped" if recorders else ""), flush=True)
     return out
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("primitives", nargs="?", type=int, default=2000)
-    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--rounds", type=int, default=5, help="rounds of the per-primitive comparison (0: skip)")
     parser.add_argument("--demo-rounds", type=int, default=3, help="rounds of the rivet demonstrator at each speed (0: skip)")
     parser.add_argument("--rsi", type=float, default=0.0, metavar="SECONDS", help="also the RSI loop's late packets, SECONDS each way")
+    parser.add_argument("--rsi-rounds", type=int, default=1, help="rounds of the RSI comparison (each: without, then recorded)")
+    parser.add_argument("--rsi-echo", action="store_true", help="run the bare UDP echo baseline beside the RSI loop (two more processes)")
     args = parser.parse_args()
-    result: dict[str, Any] = {"bench": "recording_overhead", **per_primitive(args.primitives, args.rounds)}
-    for kind, label in (("function", "one primitive per function"), ("skill", "primitives within a skill")):
-        for measure_, unit in ((kind, "wall"), (f"{kind}_cpu", "CPU ")):
-            print(f"{label:<27} {unit}: {result[f'{measure_}_us_without']:9.2f} us without, {result[f'{measure_}_us_subscribed']:9.2f} subscribed "
-                  f"(ratio {result[f'{measure_}_ratio_subscribed']:.3f}), {result[f'{measure_}_us_recorded']:9.2f} recorded (ratio {result[f'{measure_}_ratio']:.3f})")
-    print(f"recorded {result['messages_per_run']} messages per run, {result['dropped']} dropped")
+    result: dict[str, Any] = {"bench": "recording_overhead"}
+    if args.rounds > 0:
+        result.update(per_primitive(args.primitives, args.rounds))
+        for kind, label in (("function", "one primitive per function"), ("skill", "primitives within a skill")):
+            for measure_, unit in ((kind, "wall"), (f"{kind}_cpu", "CPU ")):
+                print(f"{label:<27} {unit}: {result[f'{measure_}_us_without']:9.2f} us without, {result[f'{measure_}_us_subscribed']:9.2f} subscribed "
+                      f"(ratio {result[f'{measure_}_ratio_subscribed']:.3f}), {result[f'{measure_}_us_recorded']:9.2f} recorded (ratio {result[f'{measure_}_ratio']:.3f})")
+        print(f"recorded {result['messages_per_run']} messages per run, {result['dropped']} dropped")
     if args.demo_rounds > 0:
         result["demo"] = [demo(speed, args.demo_rounds) for speed in ("10", "max")]
         for d in result["demo"]:
@@ -235,9 +250,10 @@ def main() -> None:
                   f"CPU of the run's process {d['cpu_ms_per_primitive_without']:.2f} / {d['cpu_ms_per_primitive_recorded']:.2f} (ratio {d['cpu_ratio']:.3f}), "
                   f"CPU of all processes {d['all_cpu_ms_per_primitive_without']:.2f} / {d['all_cpu_ms_per_primitive_recorded']:.2f} (ratio {d['all_cpu_ratio']:.3f})")
     if args.rsi > 0:
-        result["rsi"] = rsi(args.rsi)
-        for label, figures in result["rsi"].items():
-            print(f"RSI 4 ms, {label:<8}: {figures['late']} late of {figures['packets']} packets, demo runs {figures['app_runs_ok']}/{figures['app_runs']}")
+        result["rsi"] = rsi(args.rsi, args.rsi_rounds, args.rsi_echo)
+        for label in ("without", "recorded"):
+            runs = result["rsi"][label]
+            print(f"RSI 4 ms, {label:<8}: {sum(r['late'] or 0 for r in runs)} late of {sum(r['packets'] or 0 for r in runs)} packets in {len(runs)} round(s)")
     print(json.dumps(result))
 
 

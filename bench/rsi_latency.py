@@ -200,20 +200,24 @@ async def engine_phase(port: int, seconds: float, feedback: Path) -> dict[str, o
     return {"app_runs": runs, "app_runs_ok": ok, "seconds": time.monotonic() - started}
 
 
-def real_time(seconds: float, feedback: Path) -> dict[str, object]:
+def real_time(seconds: float, feedback: Path, echo: bool = True) -> dict[str, object]:
+    """The engine phase against a simulated KR C4; ``echo``: a second simulator drives the bare UDP
+    echo baseline at the same time (two more processes on the machine, one of them real time)."""
     port = free_port()
     # The engine phase may run past ``seconds`` by one application run (~20 s): the simulator outlasts it.
     sim = start_simulator(port, seconds + 40.0)
-    echo_proc, echo_port = start_echo(idle=seconds + 60)
-    echo_sim = start_simulator(echo_port, seconds + 40.0, echo=True)
+    echo_proc, echo_port = start_echo(idle=seconds + 60) if echo else (None, 0)
+    echo_sim = start_simulator(echo_port, seconds + 40.0, echo=True) if echo_proc is not None else None
     try:
         result = asyncio.run(engine_phase(port, seconds, feedback))
     finally:
         for proc in (sim, echo_sim):
-            proc.terminate()  # ends the run cleanly (SIGTERM): the summary is still printed
-    rsi, echo = summary_of(sim, 30), summary_of(echo_sim, 30)
-    echo_proc.terminate()
-    echo_proc.wait(10)
+            if proc is not None:
+                proc.terminate()  # ends the run cleanly (SIGTERM): the summary is still printed
+    rsi, echo_summary = summary_of(sim, 30), summary_of(echo_sim, 30) if echo_sim is not None else {}
+    if echo_proc is not None:
+        echo_proc.terminate()
+        echo_proc.wait(10)
     result.update(
         {
             "packets": rsi.get("packets"),
@@ -222,9 +226,9 @@ def real_time(seconds: float, feedback: Path) -> dict[str, object]:
             "late_before_first_reply": int(rsi.get("late", 0)) - int(rsi.get("late_since_first_reply", 0)),  # type: ignore[call-overload]
             "simulator_overruns": rsi.get("overruns"),
             "rsi_round_trip_us": rsi.get("round_trip_us"),
-            "echo_packets": echo.get("packets"),
-            "echo_late": echo.get("late_since_first_reply"),
-            "echo_round_trip_us": echo.get("round_trip_us"),
+            "echo_packets": echo_summary.get("packets"),
+            "echo_late": echo_summary.get("late_since_first_reply"),
+            "echo_round_trip_us": echo_summary.get("round_trip_us"),
             "feedback_lines": sum(1 for _ in feedback.open()) - 1 if feedback.exists() else 0,
         }
     )
