@@ -87,3 +87,54 @@ def test_a_client_without_clientid_gets_its_header_echoed_even_when_its_reply_re
     assert reply[:2] == XCDR1_LE
     # header echoed; success (bool) then three bytes of padding to the string's 4-byte length
     assert reply[4:].startswith(header + b"\x01\x00\x00\x00" + cdr_string("paused"))
+
+
+CHURN = """
+import asyncio, sys
+from execution_engine.clock import real_clock, run_with_clock
+from execution_engine.transport.dds import DdsTransport
+from execution_engine.transport.msgs import String
+from execution_engine.transport.qos import COMMANDS
+
+async def main(clock):
+    transport = DdsTransport(clock)
+    watcher = transport.create_node("watcher").create_subscription(String, "chatter", lambda _m: None, COMMANDS)
+    print("ready", flush=True)
+    for index in range(int(sys.argv[1])):
+        node = transport.create_node(f"n{index}")  # each change is a ros_discovery_info update
+        node.create_publisher(String, "chatter", COMMANDS)
+        await asyncio.sleep(0)
+        watcher.publisher_nodes()  # and reads the peers' updates
+        node.destroy()
+        await asyncio.sleep(0)
+    await transport.shutdown()
+    print("done", flush=True)
+
+run_with_clock(main, real_clock())
+"""
+
+
+def test_processes_updating_the_graph_at_once_never_hang(env: dict[str, str]) -> None:
+    """Every process writes ros_discovery_info and reads its peers' updates.  cyclonedds writes
+    holding the GIL: had the reader a listener, a local write waiting for that listener while a
+    peer's update holds it (waiting for the GIL) would hang the process for good.  And the list of
+    matched writers grows while it is read (cyclonedds-python's own getter raised IndexError then).
+    Two processes churning their graphs at once both finish."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    children = [
+        subprocess.Popen([sys.executable, "-c", CHURN, "150"], cwd=root, env={**os.environ, **env, "PYTHONPATH": str(root)},
+                         stdout=subprocess.PIPE, text=True)
+        for _ in range(2)
+    ]
+    try:
+        outputs = [child.communicate(timeout=60)[0] for child in children]
+    finally:
+        for child in children:
+            child.kill()
+            child.wait(timeout=BOUND)
+    assert all(out.split() == ["ready", "done"] for out in outputs), outputs

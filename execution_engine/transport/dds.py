@@ -120,7 +120,7 @@ class _DdsPublisher(Publisher[M], Generic[M]):
         self.writer.write(self.node.transport.converter.to_wire(msg))
 
     def get_subscription_count(self) -> int:
-        return len(self.writer.get_matched_subscriptions()) if self.alive else 0
+        return len(_matched_handles(self.writer, subscriptions=True)) if self.alive else 0
 
     def destroy(self) -> None:
         if self.alive:
@@ -196,7 +196,7 @@ class _DdsSubscription(Subscription[M], Generic[M]):
         """The nodes of the matched publishers, from what their processes put on ros_discovery_info."""
         if not self.alive:
             return []
-        owners = self.node.transport.owners
+        owners = self.node.transport.refresh_owners()
         return sorted({owners[d.key.bytes] for d in _matched(self.reader, subscriptions=False) if d.key.bytes in owners})
 
     def destroy(self) -> None:
@@ -400,8 +400,33 @@ class _DdsClient(ServiceClient[Any, Any]):
             self.ends.destroy()
 
 
+def _matched_handles(entity: Any, *, subscriptions: bool) -> list[int]:
+    """Instance handles of what a writer's readers (``subscriptions``) or a reader's writers are.
+
+    cyclonedds-python's ``get_matched_subscriptions``/``get_matched_publications`` size their buffer
+    with a first call and index it with the count of a second one: a peer matched in between is an
+    IndexError in the caller.  Here the count Cyclone answers is checked against the room given,
+    and asked again with more room.
+    """
+    import ctypes
+
+    from cyclonedds.internal import dds_c_t
+
+    call = entity._get_matched_subscriptions if subscriptions else entity._get_matched_publications
+    room = 16
+    for _ in range(8):
+        buffer = (dds_c_t.instance_handle * room)()
+        count = int(call(entity._ref, ctypes.cast(buffer, ctypes.POINTER(dds_c_t.instance_handle)), room))
+        if count < 0:
+            raise TransportError(f"cannot list the matched endpoints of a DDS entity (DDS return code {count})")
+        if count <= room:
+            return [int(h) for h in buffer[:count]]
+        room = count + 16
+    return [int(h) for h in buffer[:room]]  # still growing: what fitted
+
+
 def _matched(entity: Any, *, subscriptions: bool) -> list[Any]:
-    handles = entity.get_matched_subscriptions() if subscriptions else entity.get_matched_publications()
+    handles = _matched_handles(entity, subscriptions=subscriptions)
     getter = entity.get_matched_subscription_data if subscriptions else entity.get_matched_publication_data
     found = []
     for handle in handles:
@@ -510,11 +535,12 @@ class DdsTransport(Transport):
         #: writer GUID (16 bytes) -> fully qualified name of its node, from every process's ros_discovery_info
         self.owners = graph.WriterOwners()
         self._discovery_taker = _Taker(self, graph.DISCOVERY_TOPIC)
+        # Read on the loop, never from a listener: this process writes the topic too, and cyclonedds
+        # writes holding the GIL, so a local delivery waiting for a listener that waits for the GIL
+        # (a peer's sample arriving at the same moment) would hang the process.
         self._discovery_reader = self.dds.sub.DataReader(
-            self.participant, discovery_topic, qos=discovery_qos,
-            listener=self.dds.core.Listener(on_data_available=self._on_discovery),
+            self.participant, discovery_topic, qos=graph.dds_qos(graph.DISCOVERY_READER, user_data=self.type_hash(graph.DISCOVERY_TYPE)),
         )
-        self._on_discovery()  # what came while the reader was being made
         self.stopping = False
 
     # ------------------------------------------------------------------------- plumbing
@@ -552,16 +578,16 @@ class DdsTransport(Transport):
         if self.rejected[topic] == 1 or self.rejected[topic] % 1000 == 0:
             log.warning("dds: %d sample(s) on %s rejected; last: %s", self.rejected[topic], topic, why)
 
-    def _on_discovery(self, _reader: Any = None) -> None:
-        """Cyclone's thread: remember which node each writer of the graph belongs to. Never raises."""
-        reader = getattr(self, "_discovery_reader", None)
-        if reader is None or self._deleted:
-            return
-        for sample in self._discovery_taker.take(reader):
-            try:
-                self.owners.update(sample)
-            except Exception as error:  # noqa: BLE001 - a peer's garbage costs only its sample
-                self.reject(graph.DISCOVERY_TOPIC, f"{type(error).__name__}: {error}")
+    def refresh_owners(self) -> graph.WriterOwners:
+        """Which node each writer of the graph belongs to, with what has come on ros_discovery_info
+        since the last call (the loop's thread; a peer's garbage costs only its sample)."""
+        if not self._deleted:
+            for sample in self._discovery_taker.take(self._discovery_reader):
+                try:
+                    self.owners.update(sample)
+                except Exception as error:  # noqa: BLE001
+                    self.reject(graph.DISCOVERY_TOPIC, f"{type(error).__name__}: {error}")
+        return self.owners
 
     def graph_changed(self) -> None:
         """Publish ros_discovery_info once this loop pass has made its changes."""

@@ -16,7 +16,6 @@ Pure data and small helpers for :mod:`execution_engine.transport.dds`, each matc
 from __future__ import annotations
 
 import os
-import threading
 from collections import OrderedDict
 from collections.abc import Mapping
 from typing import Any
@@ -33,6 +32,8 @@ DISCOVERY_RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
 SERVICES = QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 10)
 #: what rmw publishes ros_discovery_info with
 DISCOVERY = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
+#: how this process reads it, between polls: one topic without keys, so every process's updates share the depth
+DISCOVERY_READER = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1000)
 
 
 def topic_name(resolved: str) -> str:
@@ -166,14 +167,12 @@ class WriterOwners:
 
     Entries outlive their writers (a killed process sends no last update), so a watcher can still
     name the node of a publisher it has lost; the oldest are forgotten past :attr:`LIMIT`.
-    Updated on Cyclone's listener thread, read on the loop: one lock.
     """
 
     LIMIT = 10_000
 
     def __init__(self) -> None:
         self._names: OrderedDict[bytes, str] = OrderedDict()
-        self._lock = threading.Lock()
 
     def update(self, info: Any) -> None:
         """Take one ParticipantEntitiesInfo sample."""
@@ -182,17 +181,14 @@ class WriterOwners:
             namespace = str(node.node_namespace)
             fqn = f"{namespace.rstrip('/')}/{node.node_name}"
             found.extend((bytes(g.data)[:16], fqn) for g in node.writer_gid_seq)
-        with self._lock:
-            for guid, fqn in found:
-                self._names.pop(guid, None)
-                self._names[guid] = fqn
-            while len(self._names) > self.LIMIT:
-                self._names.popitem(last=False)
+        for guid, fqn in found:
+            self._names.pop(guid, None)
+            self._names[guid] = fqn
+        while len(self._names) > self.LIMIT:
+            self._names.popitem(last=False)
 
     def __contains__(self, guid: object) -> bool:
-        with self._lock:
-            return guid in self._names
+        return guid in self._names
 
     def __getitem__(self, guid: bytes) -> str:
-        with self._lock:
-            return self._names[guid]
+        return self._names[guid]
