@@ -98,11 +98,15 @@ from execution_engine.transport.qos import COMMANDS
 
 async def main(clock):
     transport = DdsTransport(clock)
-    watcher = transport.create_node("watcher").create_subscription(String, "chatter", lambda _m: None, COMMANDS)
+    talker = transport.create_node("talker")
+    watcher = talker.create_subscription(String, "chatter", lambda _m: None, COMMANDS)
+    chatter = talker.create_publisher(String, "chatter", COMMANDS)  # heard by its own node and the peer's
     print("ready", flush=True)
     for index in range(int(sys.argv[1])):
         node = transport.create_node(f"n{index}")  # each change is a ros_discovery_info update
         node.create_publisher(String, "chatter", COMMANDS)
+        for _ in range(20):
+            chatter.publish(String(str(index)))
         await asyncio.sleep(0)
         watcher.publisher_nodes()  # and reads the peers' updates
         node.destroy()
@@ -115,9 +119,10 @@ run_with_clock(main, real_clock())
 
 
 def test_processes_updating_the_graph_at_once_never_hang(env: dict[str, str]) -> None:
-    """Every process writes ros_discovery_info and reads its peers' updates.  cyclonedds writes
-    holding the GIL: had the reader a listener, a local write waiting for that listener while a
-    peer's update holds it (waiting for the GIL) would hang the process for good.  And the list of
+    """Every process writes ros_discovery_info and reads its peers' updates, and a node hears its
+    own topic and its peer's.  cyclonedds writes holding the GIL: had a reader a listener, a local
+    write waiting for that listener while a peer's sample holds it (waiting for the GIL) would hang
+    the process for good.  And the list of
     matched writers grows while it is read (cyclonedds-python's own getter raised IndexError then).
     Two processes churning their graphs at once both finish."""
     import os

@@ -16,8 +16,10 @@ the wire is what ``rmw_cyclonedds_cpp`` of ROS 2 Jazzy puts there, so ``ros2 nod
   cut off drops out of it within the lease -- that is how the engine notices a lost machine
   (:mod:`execution_engine.engine.group_link`).
 
-Threads: Cyclone calls the listeners on its own threads; they take and decode samples there and
-hand them to the asyncio loop with ``call_soon_threadsafe``, in arrival order.  A sample that
+Threads: no Cyclone listeners (a write of this process waiting for a listener that waits for the
+GIL hangs the process, see :mod:`~execution_engine.transport.dds_waiter`); one waiter thread per
+transport takes and decodes the samples of every reader and hands them to the asyncio loop with
+``call_soon_threadsafe``, in arrival order.  A sample that
 does not decode (truncated CDR, garbage) or does not convert is counted per topic
 (:attr:`DdsTransport.rejected`) and logged once per topic, never delivered, never fatal.
 Like the rclpy transport it runs in wall time; durations given to it are run seconds.
@@ -30,13 +32,14 @@ import logging
 import os
 from collections import Counter
 from collections.abc import Awaitable, Callable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from execution_engine.clock import Clock
 from execution_engine.transport import dds_graph as graph
 from execution_engine.transport.dds_args import RosArguments, parse_ros_arguments, user_arguments
 from execution_engine.transport.dds_convert import DdsConverter
+from execution_engine.transport.dds_entities import Caller, Taker, delete, matched, matched_handles
+from execution_engine.transport.dds_waiter import DdsWaiter
 from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
 from execution_engine.transport.idl_hash import type_hash_user_data
 from execution_engine.transport.port import (
@@ -58,9 +61,7 @@ from execution_engine.transport.ros_args import raw_parameter_texts
 M = TypeVar("M")
 log = logging.getLogger(__name__)
 
-_TAKE_LIMIT = 10_000  # samples taken in one listener call; the rest wait for the next
 _POLL = 0.02  # run seconds between discovery checks
-_FAILURE_LIMIT = 1000  # undecodable samples in a row before a listener call gives up until the next
 _REPLY_MATCH_WAIT = 1.0  # wall seconds a reply waits at most for the caller's reply reader to match
 
 
@@ -91,14 +92,6 @@ def _domain(dds: Any, domain_id: int, config: str | None) -> Any:
     return domain
 
 
-def _delete(entity: Any) -> None:
-    """Delete a Cyclone entity now (its listener callbacks are finished when this returns)."""
-    try:
-        entity.__del__()
-    except Exception:  # noqa: BLE001 - an entity already gone with its parent
-        pass
-
-
 # =================================================================================== endpoints
 class _DdsPublisher(Publisher[M], Generic[M]):
     def __init__(self, node: DdsNode, msg_type: type[M], topic: str, qos: QoS) -> None:
@@ -120,40 +113,12 @@ class _DdsPublisher(Publisher[M], Generic[M]):
         self.writer.write(self.node.transport.converter.to_wire(msg))
 
     def get_subscription_count(self) -> int:
-        return len(_matched_handles(self.writer, subscriptions=True)) if self.alive else 0
+        return len(matched_handles(self.writer, subscriptions=True)) if self.alive else 0
 
     def destroy(self) -> None:
         if self.alive:
             self.alive = False
-            _delete(self.writer)
-
-
-class _Taker:
-    """Takes samples one by one in a Cyclone listener thread, so a bad one costs only itself."""
-
-    def __init__(self, transport: DdsTransport, topic: str) -> None:
-        self.transport = transport
-        self.topic = topic
-
-    def take(self, reader: Any) -> list[Any]:
-        samples: list[Any] = []
-        failures = 0
-        for _ in range(_TAKE_LIMIT):
-            try:
-                got = reader.take(N=1)
-            except self.transport.dds.core.DDSException:
-                break  # the reader is being deleted
-            except Exception as error:  # noqa: BLE001 - undecodable CDR (taken, so gone): count it, keep going
-                self.transport.reject(self.topic, f"undecodable sample: {type(error).__name__}: {error}")
-                failures += 1
-                if failures >= _FAILURE_LIMIT:
-                    break
-                continue
-            if not got:
-                break
-            if getattr(got[0], "sample_info", None) is not None and got[0].sample_info.valid_data:
-                samples.append(got[0])
-        return samples
+            delete(self.writer)
 
 
 class _DdsSubscription(Subscription[M], Generic[M]):
@@ -161,24 +126,21 @@ class _DdsSubscription(Subscription[M], Generic[M]):
         self.node, self.msg_type, self.topic, self.qos = node, msg_type, topic, qos
         transport = node.transport
         self._callback = callback
-        self._taker = _Taker(transport, topic)
+        self._taker = Taker(transport, topic)
         self.alive = True
-        dds = transport.dds
-        listener = dds.core.Listener(on_data_available=self._on_data)
-        self.reader = dds.sub.DataReader(
+        self.reader = transport.dds.sub.DataReader(
             transport.participant, transport.topic(graph.topic_name(topic), transport.converter.wire_class(msg_type)),
-            qos=graph.dds_qos(qos, user_data=transport.type_hash(msg_type.ROS_TYPE)), listener=listener,  # type: ignore[attr-defined]
+            qos=graph.dds_qos(qos, user_data=transport.type_hash(msg_type.ROS_TYPE)),  # type: ignore[attr-defined]
         )
         node.add_entity(self.reader, reader=True)
-        self._on_data()  # transient-local samples may have arrived while the reader was being made
+        self._watch = transport.waiter.watch(self.reader, self._on_data)
 
-    def _on_data(self, _reader: Any = None) -> None:
-        """Cyclone's thread: decode, convert, queue on the loop. Never raises."""
-        reader = getattr(self, "reader", None)
-        if not self.alive or reader is None:
-            return  # still being created: the call after creation takes what came early
+    def _on_data(self) -> None:
+        """The waiter's thread: decode, convert, queue on the loop. Never raises."""
+        if not self.alive:
+            return
         transport = self.node.transport
-        for sample in self._taker.take(reader):
+        for sample in self._taker.take(self.reader):
             try:
                 msg = transport.converter.from_wire(self.msg_type, sample)
             except Exception as error:  # noqa: BLE001 - garbage that decoded: still garbage
@@ -197,19 +159,20 @@ class _DdsSubscription(Subscription[M], Generic[M]):
         if not self.alive:
             return []
         owners = self.node.transport.refresh_owners()
-        return sorted({owners[d.key.bytes] for d in _matched(self.reader, subscriptions=False) if d.key.bytes in owners})
+        return sorted({owners[d.key.bytes] for d in matched(self.reader, subscriptions=False) if d.key.bytes in owners})
 
     def destroy(self) -> None:
         if self.alive:
             self.alive = False
-            _delete(self.reader)
+            self.node.transport.waiter.forget(self._watch)
+            delete(self.reader)
 
 
 class _ServiceEndpoints:
     """A request/reply pair of a service or client, with the user data that pairs them."""
 
-    def __init__(self, node: DdsNode, srv_type: type, name: str, role: str, on_data: Callable[[Any], None]) -> None:
-        transport = node.transport
+    def __init__(self, node: DdsNode, srv_type: type, name: str, role: str, on_data: Callable[[], None]) -> None:
+        transport = self.transport = node.transport
         ros_type = getattr(srv_type, "ROS_TYPE", None)
         if not isinstance(ros_type, str):
             raise TransportError(f"{srv_type!r} is not a service mirror")
@@ -231,37 +194,16 @@ class _ServiceEndpoints:
         self.writer = dds.pub.DataWriter(transport.participant, transport.topic(write_topic, ours), qos=qos)
         self.reader = dds.sub.DataReader(
             transport.participant, transport.topic(read_topic, theirs),
-            qos=graph.dds_qos(graph.SERVICES, user_data=user_data + read_hash), listener=dds.core.Listener(on_data_available=on_data),
+            qos=graph.dds_qos(graph.SERVICES, user_data=user_data + read_hash),
         )
         node.add_entity(self.writer, reader=False)
         node.add_entity(self.reader, reader=True)
+        self.watch = transport.waiter.watch(self.reader, on_data)
 
     def destroy(self) -> None:
-        _delete(self.reader)
-        _delete(self.writer)
-
-
-@dataclass(frozen=True)
-class _Caller:
-    """Who sent a request, as its request writer's discovery data tells: the reply goes to this
-    caller's reply reader.  An rmw client names that reader in ``clientid=`` user data; a client
-    without it (ros2-client on RustDDS, or any plain DDS peer using rmw_cyclonedds_cpp's header)
-    is known only by its participant, so any reply reader of that participant will do."""
-
-    client_id: str | None
-    participant: Any  # the request writer's participant key (a UUID), None when unknown
-
-    @classmethod
-    def of(cls, publication: Any) -> _Caller:
-        if publication is None:
-            return cls(None, None)
-        return cls(graph.user_data_value(publication.qos, "clientid"), getattr(publication, "participant_key", None))
-
-    def reads(self, subscription: Any) -> bool:
-        """Whether a matched reply reader is this caller's."""
-        if self.client_id is not None:
-            return graph.user_data_value(subscription.qos, "clientid") == self.client_id
-        return self.participant is not None and getattr(subscription, "participant_key", None) == self.participant
+        self.transport.waiter.forget(self.watch)
+        delete(self.reader)
+        delete(self.writer)
 
 
 class _DdsService(ServiceServer):
@@ -269,12 +211,11 @@ class _DdsService(ServiceServer):
         self.node, self.srv_type, self.name = node, srv_type, name
         self._handler = handler
         self.alive = True
-        self._taker = _Taker(node.transport, f"{name} (request)")
+        self._taker = Taker(node.transport, f"{name} (request)")
         self.ends = _ServiceEndpoints(node, srv_type, name, "serviceid", self._on_request)
-        self._on_request()  # requests that came while the endpoints were being made
 
-    def _on_request(self, _reader: Any = None) -> None:
-        """Cyclone's thread. Never raises."""
+    def _on_request(self) -> None:
+        """The waiter's thread. Never raises."""
         ends = getattr(self, "ends", None)
         if ends is None or not self.alive:
             return
@@ -283,19 +224,19 @@ class _DdsService(ServiceServer):
         for sample in self._taker.take(reader):
             try:
                 request = transport.converter.from_wire(self.srv_type.Request, sample)
-                client = _Caller.of(reader.get_matched_publication_data(sample.sample_info.publication_handle))
+                client = Caller.of(reader.get_matched_publication_data(sample.sample_info.publication_handle))
             except Exception as error:  # noqa: BLE001
                 transport.reject(f"{self.name} (request)", f"{type(error).__name__}: {error}")
                 continue
             transport.call_soon(self._start, request, int(sample.guid), int(sample.seq), client)
 
-    def _start(self, request: Any, guid: int, seq: int, client: _Caller) -> None:
+    def _start(self, request: Any, guid: int, seq: int, client: Caller) -> None:
         if self.alive:
             task = self.node.transport.loop.create_task(self._serve(request, guid, seq, client), name=f"service {self.name}")
             self.node.transport.handlers.add(task)
             task.add_done_callback(self.node.transport.handlers.discard)
 
-    async def _serve(self, request: Any, guid: int, seq: int, client: _Caller) -> None:
+    async def _serve(self, request: Any, guid: int, seq: int, client: Caller) -> None:
         transport = self.node.transport
         try:
             # a handler that waits for a long job on purpose (an action's get_result) says so
@@ -314,14 +255,14 @@ class _DdsService(ServiceServer):
         if self.alive:
             self.ends.writer.write(transport.converter.to_wire_service(self.ends.reply_type, response, guid, seq))
 
-    async def _wait_for_client(self, client: _Caller) -> None:
+    async def _wait_for_client(self, client: Caller) -> None:
         """Until the reply writer has matched the caller's reply reader (bounded, 1 s): a reply
         written before that is lost (volatile), and the caller waits in vain."""
         clock = self.node.transport.clock
         deadline = clock.now() + clock.speed * _REPLY_MATCH_WAIT
         writer = self.ends.writer
         while clock.now() < deadline:
-            if any(client.reads(data) for data in _matched(writer, subscriptions=True)):
+            if any(client.reads(data) for data in matched(writer, subscriptions=True)):
                 return
             await clock.sleep(_POLL)
 
@@ -337,11 +278,11 @@ class _DdsClient(ServiceClient[Any, Any]):
         self.alive = True
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._seq = itertools.count(1)
-        self._taker = _Taker(node.transport, f"{name} (reply)")
+        self._taker = Taker(node.transport, f"{name} (reply)")
         self.ends = _ServiceEndpoints(node, srv_type, name, "clientid", self._on_reply)
         self.guid = int(self.ends.writer.instance_handle) & 0xFFFF_FFFF_FFFF_FFFF  # rmw: the writer's handle, unsigned
 
-    def _on_reply(self, _reader: Any = None) -> None:
+    def _on_reply(self) -> None:
         ends = getattr(self, "ends", None)
         if ends is None or not self.alive or not hasattr(self, "guid"):
             return
@@ -365,8 +306,8 @@ class _DdsClient(ServiceClient[Any, Any]):
     def available(self) -> bool:
         """A server's request reader and reply writer are both matched (rmw's serviceid rule)."""
         writer, reader = self.ends.writer, self.ends.reader
-        servers = {graph.user_data_value(d.qos, "serviceid") for d in _matched(writer, subscriptions=True)}
-        repliers = {graph.user_data_value(d.qos, "serviceid") for d in _matched(reader, subscriptions=False)}
+        servers = {graph.user_data_value(d.qos, "serviceid") for d in matched(writer, subscriptions=True)}
+        repliers = {graph.user_data_value(d.qos, "serviceid") for d in matched(reader, subscriptions=False)}
         servers.discard(None)
         return bool(servers & repliers)
 
@@ -398,42 +339,6 @@ class _DdsClient(ServiceClient[Any, Any]):
             for future in self._pending.values():
                 future.cancel()
             self.ends.destroy()
-
-
-def _matched_handles(entity: Any, *, subscriptions: bool) -> list[int]:
-    """Instance handles of what a writer's readers (``subscriptions``) or a reader's writers are.
-
-    cyclonedds-python's ``get_matched_subscriptions``/``get_matched_publications`` size their buffer
-    with a first call and index it with the count of a second one: a peer matched in between is an
-    IndexError in the caller.  Here the count Cyclone answers is checked against the room given,
-    and asked again with more room.
-    """
-    import ctypes
-
-    from cyclonedds.internal import dds_c_t
-
-    call = entity._get_matched_subscriptions if subscriptions else entity._get_matched_publications
-    room = 16
-    for _ in range(8):
-        buffer = (dds_c_t.instance_handle * room)()
-        count = int(call(entity._ref, ctypes.cast(buffer, ctypes.POINTER(dds_c_t.instance_handle)), room))
-        if count < 0:
-            raise TransportError(f"cannot list the matched endpoints of a DDS entity (DDS return code {count})")
-        if count <= room:
-            return [int(h) for h in buffer[:count]]
-        room = count + 16
-    return [int(h) for h in buffer[:room]]  # still growing: what fitted
-
-
-def _matched(entity: Any, *, subscriptions: bool) -> list[Any]:
-    handles = _matched_handles(entity, subscriptions=subscriptions)
-    getter = entity.get_matched_subscription_data if subscriptions else entity.get_matched_publication_data
-    found = []
-    for handle in handles:
-        data = getter(handle)
-        if data is not None:
-            found.append(data)
-    return found
 
 
 # ======================================================================================= node
@@ -517,6 +422,7 @@ class DdsTransport(Transport):
             )
         except Exception as error:  # noqa: BLE001 - DDSException from a bad CYCLONEDDS_URI and the like
             raise TransportError(f"cannot join DDS domain {self.domain_id}: {error} (check CYCLONEDDS_URI)") from None
+        self.waiter = DdsWaiter(self.dds, self.participant, f"domain {self.domain_id}")
         self._topics: dict[tuple[str, type], Any] = {}
         self._hashes: dict[str, bytes] = {}
         self._ids = itertools.count(1)
@@ -534,7 +440,7 @@ class DdsTransport(Transport):
         self._discovery = self.dds.pub.DataWriter(self.participant, discovery_topic, qos=discovery_qos)
         #: writer GUID (16 bytes) -> fully qualified name of its node, from every process's ros_discovery_info
         self.owners = graph.WriterOwners()
-        self._discovery_taker = _Taker(self, graph.DISCOVERY_TOPIC)
+        self._discovery_taker = Taker(self, graph.DISCOVERY_TOPIC)
         # Read on the loop, never from a listener: this process writes the topic too, and cyclonedds
         # writes holding the GIL, so a local delivery waiting for a listener that waits for the GIL
         # (a peer's sample arriving at the same moment) would hang the process.
@@ -642,7 +548,8 @@ class DdsTransport(Transport):
         await asyncio.gather(*self.handlers, return_exceptions=True)
         self._publish_graph()
         self._deleted = True
-        _delete(self._discovery_reader)
-        _delete(self._discovery)
-        _delete(self.participant)
+        self.waiter.close()
+        delete(self._discovery_reader)
+        delete(self._discovery)
+        delete(self.participant)
         self._closed.set()
