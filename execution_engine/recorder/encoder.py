@@ -38,6 +38,7 @@ from execution_engine.recorder.frames import frame, read_frame
 from execution_engine.transport.qos import Durability, QoS, Reliability
 
 LIBRARY = "dual_arm_executive recorder (mcap, mcap-ros2-support)"
+NICE = 10  # the encoder's niceness above the run's: it takes spare CPU time, not the machines'
 
 def qos_yaml(offered: tuple[QoS, ...]) -> str:
     """A channel's ``offered_qos_profiles`` as rosbag2 (Jazzy) writes it: one YAML entry per publisher."""
@@ -163,6 +164,10 @@ def serve(inp: IO[bytes], out: IO[bytes], chunk_size: int, compression: Compress
 def main() -> None:
     # An operator's Ctrl-C reaches the whole process group: the run ends the recording itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:  # on a busy computer the control loop comes first; the queue and the pipes hold what waits
+        os.nice(NICE)
+    except OSError:
+        pass
     out = os.fdopen(os.dup(1), "wb", buffering=1 << 16)
     os.dup2(2, 1)  # a stray print can never break the frames
     chunk_size, compression = int(sys.argv[1]), CompressionType[sys.argv[2]]
