@@ -117,6 +117,34 @@ def test_a_lost_bridge_ends_the_working_groups_in_error_handling_naming_its_node
         assert ends and ends[0]["state"] == "ErrorHandling" and ends[0]["t"] - lost_at <= BRIDGE_WATCH_PERIOD + 1e-6
 
 
+def test_a_motion_waiting_for_a_zone_ends_when_the_bridge_is_lost(run_sim: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A function whose next motion waits for an interference zone (here never granted) while the
+    bridge's node leaves: nothing could ever move it, so it ends at once with the bridge named
+    instead of waiting for the zone for ever."""
+    from execution_engine.machine.zone_gate import ZoneGate
+
+    monkeypatch.setattr(ZoneGate, "admits", lambda gate, _primitive: gate.ctx.group != "left_arm")
+
+    async def main(clock: Clock) -> tuple[Any, float]:
+        cell = await Cell(clock).start()
+        lost_at: list[float] = []
+
+        async def kill() -> None:
+            await clock.sleep(2.0)
+            cell.deployment.bridge.node.destroy()
+            lost_at.append(clock.now())
+
+        killer = asyncio.get_running_loop().create_task(kill())
+        report = await cell.run(make_app([{"left_arm": ("move_to_joint_pose", "initial")}]))
+        await killer
+        return report, lost_at[0]
+
+    report, lost_at = run_sim(main)
+    error = report.errors[0]
+    assert report.outcome == "failed" and error.group == "left_arm" and error.fault == "connection"
+    assert "bridge /scripted_bridge lost" in error.error and error.t - lost_at <= BRIDGE_WATCH_PERIOD + 1e-6
+
+
 def test_launch_is_a_subcommand_with_one_line_errors(tmp_path: Path) -> None:
     from execution_engine.cli import main
 

@@ -166,7 +166,12 @@ class ReadyState(MachineState):
                     userdata["primitive"] = primitive
                     return primitive.STATE.request_signal
                 gated = True
-            event = await ctx.events.get(ctx.zones.wake_in() if gated else None)
+                lost = ctx.bridge_watch.lost()  # waiting for a zone with no bridge to move: nothing ever will
+                if lost is not None:
+                    ctx.status("error", error=lost)
+                    ctx.finish_function("aborted", lost, FaultKind.CONNECTION)
+                    continue
+            event = await ctx.events.get(min(ctx.zones.wake_in(), WATCH_PERIOD) if gated else None)
             if event is None:
                 continue
             if isinstance(event, RequestEvent):
