@@ -80,8 +80,8 @@ def serve_goals(node: Node, engine: ExecutionEngine) -> RunApplicationServer | N
         return RunApplicationServer(node, engine)
     except TransportError as error:
         node.logger.info(
-            "%s: the RunApplication action is not served on this transport (it is on --transport dds; "
-            "here the operator services start/pause/resume/stop run the application): %s",
+            "%s: the RunApplication action is not served (under rclpy it needs the built interface package: "
+            "colcon build --base-paths <repo> <repo>/interfaces; the operator services start/pause/resume/stop run the application): %s",
             node.fully_qualified_name, error,
         )
         return None

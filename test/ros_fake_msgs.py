@@ -23,6 +23,8 @@ _DEFAULTS: dict[str, Callable[[], Any]] = {
     "int32": int,
     "uint32": int,
     "uint8": int,
+    "int8": int,
+    "uint8[16]": lambda: np.zeros(16, dtype=np.uint8),
     "sequence<double>": lambda: array.array("d"),
     "sequence<string>": list,
     "int64": int,
@@ -32,7 +34,7 @@ _DEFAULTS: dict[str, Callable[[], Any]] = {
     "double[9]": lambda: np.zeros(9),  # fixed-size arrays are numpy arrays in rosidl Python
     "double[12]": lambda: np.zeros(12),
 }
-_INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint8": (0, 255)}
+_INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint8": (0, 255), "int8": (-128, 127)}
 
 
 class FakeMessage:
@@ -114,6 +116,14 @@ def _check(kind: str, nested: type | None, name: str, value: Any) -> Any:
             f"The '{name}' field must be a set or sequence and each value of type 'int' and each unsigned integer in [0, 255]"
         )
         return array.array("B", value)
+    elif kind == "uint8[16]":  # a goal id (unique_identifier_msgs/UUID): rosidl holds a numpy array
+        if isinstance(value, np.ndarray):
+            assert value.dtype == np.uint8 and value.size == 16, f"The '{name}' numpy.ndarray() must have the dtype of 'numpy.uint8' and a size of 16"
+            return value
+        assert len(value) == 16 and all(isinstance(v, int) and 0 <= v < 256 for v in value), (
+            f"The '{name}' field must be a set or sequence with length 16 and each value of type 'int' and each unsigned integer in [0, 255]"
+        )
+        return np.array(value, dtype=np.uint8)
     elif kind in ("double[9]", "double[12]"):
         size = int(kind[7:-1])
         if isinstance(value, np.ndarray):
@@ -231,19 +241,22 @@ def _rosidl_package(package: str, known: dict[str, type]) -> dict[str, dict[str,
 
     folder = next(root / package for root in interface_roots() if (root / package).is_dir())
     classes: dict[str, type] = {}
+    built: dict[str, type] = {}  # every class made, by ROS type: one class per type, as rosidl has
 
     def build(ros_type: str, name: str) -> type:
+        if ros_type in built:
+            return built[ros_type]
         fields: dict[str, str] = {}
         nested: dict[str, type] = {}
         for spec in registry().spec(ros_type).fields:
             if "/" in spec.base:
                 pkg, _, short = spec.base.split("/")
                 kind = f"{pkg}/{short}"
-                nested[spec.name] = known.get(spec.base) or classes.get(short) or build(spec.base, short)
+                nested[spec.name] = known.get(spec.base) or built.get(spec.base) or build(spec.base, short)
             else:
                 kind = _ROSIDL_NAMES.get(spec.base, spec.base)
-            fields[spec.name] = kind if spec.array is None else f"sequence<{kind}>"
-        cls = message_class(name, fields, nested)
+            fields[spec.name] = kind if spec.array is None else f"{kind}[{spec.array}]" if spec.array.isdigit() else f"sequence<{kind}>"
+        cls = built[ros_type] = message_class(name, fields, nested)
         if ros_type.split("/")[1] == "msg":
             classes[name] = cls
         return cls
@@ -257,7 +270,20 @@ def _rosidl_package(package: str, known: dict[str, type]) -> dict[str, dict[str,
         services[path.stem] = type(path.stem, (), {
             "Request": build(f"{base}_Request", f"{path.stem}_Request"), "Response": build(f"{base}_Response", f"{path.stem}_Response"),
         })
-    return {f"{package}.msg": classes, f"{package}.srv": services}
+    actions: dict[str, type] = {}
+    for path in sorted((folder / "action").glob("*.action")):
+        base, stem = f"{package}/action/{path.stem}", path.stem
+
+        def part(name: str, base: str = base, stem: str = stem) -> type:
+            return build(f"{base}_{name}", f"{stem}_{name}")
+
+        def service(name: str, stem: str = stem, part: Any = part) -> type:
+            return type(f"{stem}_{name}", (), {"Request": part(f"{name}_Request"), "Response": part(f"{name}_Response")})
+
+        # rosidl: Goal, Result, Feedback on the class, what rcl_action sends in its Impl
+        impl = type("Impl", (), {"SendGoalService": service("SendGoal"), "GetResultService": service("GetResult"), "FeedbackMessage": part("FeedbackMessage")})
+        actions[stem] = type(stem, (), {"Goal": part("Goal"), "Result": part("Result"), "Feedback": part("Feedback"), "Impl": impl})
+    return {f"{package}.msg": classes, f"{package}.srv": services, **({f"{package}.action": actions} if actions else {})}
 
 
 INTERFACE_MODULES: dict[str, dict[str, Any]] = {
@@ -274,12 +300,23 @@ INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "std_srvs.srv": {"Trigger": Trigger},
     "rcl_interfaces.msg": {"ParameterDescriptor": ParameterDescriptor, "ParameterValue": ParameterValue, "SetParametersResult": SetParametersResult},
 }
-INTERFACE_MODULES.update(_rosidl_package("dual_arm_executive_interfaces", {"std_msgs/msg/Header": Header, "builtin_interfaces/msg/Time": Time}))
+INTERFACE_MODULES.update(_rosidl_package("unique_identifier_msgs", {}))
+INTERFACE_MODULES.update(_rosidl_package("action_msgs", {
+    "builtin_interfaces/msg/Time": Time, "unique_identifier_msgs/msg/UUID": INTERFACE_MODULES["unique_identifier_msgs.msg"]["UUID"],
+}))
+INTERFACE_MODULES.update(_rosidl_package("dual_arm_executive_interfaces", {
+    "std_msgs/msg/Header": Header, "builtin_interfaces/msg/Time": Time,
+    "unique_identifier_msgs/msg/UUID": INTERFACE_MODULES["unique_identifier_msgs.msg"]["UUID"],
+}))
 
 
 def resolve(ros_type: str) -> type:
     """A resolver over the fake interface packages (what import_ros_type does with real ones)."""
+    from execution_engine.transport.ros_convert import _ACTION_PARTS
+
     package, kind, name = ros_type.split("/")
     service, _, part = name.partition("_")
     cls = INTERFACE_MODULES[f"{package}.{kind}"][service if part else name]
-    return getattr(cls, part) if part else cls  # type: ignore[no-any-return]
+    for attribute in (_ACTION_PARTS[part] if kind == "action" else (part,) if part else ()):
+        cls = getattr(cls, attribute)
+    return cls  # type: ignore[no-any-return]

@@ -32,7 +32,14 @@ from execution_engine.transport.qos import Durability, History, QoS, Reliability
 M = TypeVar("M")
 Resolver = Callable[[str], type]
 
-_ROS_TYPE = re.compile(r"^([a-z][a-z0-9_]*)/(msg|srv)/([A-Z][A-Za-z0-9]*)(?:_(Request|Response))?$")
+_ROS_TYPE = re.compile(r"^([a-z][a-z0-9_]*)/(msg|srv|action)/([A-Z][A-Za-z0-9]*)(?:_([A-Za-z_]+))?$")
+#: Where rosidl's Python class of an action keeps each part rcl_action puts on the wire.
+_ACTION_PARTS: dict[str, tuple[str, ...]] = {
+    "Goal": ("Goal",), "Result": ("Result",), "Feedback": ("Feedback",),
+    "FeedbackMessage": ("Impl", "FeedbackMessage"),
+    **{f"{service}{suffix}": ("Impl", f"{service}Service", *([suffix[1:]] if suffix else []))
+       for service in ("SendGoal", "GetResult") for suffix in ("", "_Request", "_Response")},
+}
 
 #: Parameters rclpy declares on every node by itself; they are not overrides meant for our code.
 RCLPY_OWN_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"})
@@ -41,15 +48,25 @@ _RCLPY_OWN_PREFIXES = ("qos_overrides.",)
 
 # ------------------------------------------------------------------------------- resolving
 def import_ros_type(ros_type: str) -> type:
-    """The rosidl class of ``pkg/msg/Name`` or ``pkg/srv/Name[_Request|_Response]``.
+    """The rosidl class of ``pkg/msg/Name``, ``pkg/srv/Name[_Request|_Response]`` or a part of an
+    action, ``pkg/action/Name_<part>`` (``Goal``, ``SendGoal``, ``SendGoal_Request``, ``FeedbackMessage``...).
 
     Requests and responses are reached through their service class (``Trigger.Request``),
-    because rosidl packages export the service, not always its parts.
+    because rosidl packages export the service, not always its parts; an action's services and
+    feedback message through the action's ``Impl`` (``RunApplication.Impl.SendGoalService``).
     """
     match = _ROS_TYPE.match(ros_type)
     if match is None:
         raise TransportError(f"{ros_type!r} is not a ROS interface name like 'std_msgs/msg/String'")
     package, kind, name, part = match.groups()
+    if kind == "action":
+        if part not in _ACTION_PARTS:
+            raise TransportError(f"{ros_type!r}: an action's part is one of {', '.join(_ACTION_PARTS)}")
+        path: tuple[str, ...] = (name, *_ACTION_PARTS[part])
+    elif part in (None, "Request", "Response"):
+        path = (name, part) if part else (name,)
+    else:
+        raise TransportError(f"{ros_type!r} is not a ROS interface name like 'std_msgs/msg/String'")
     module_name = f"{package}.{kind}"
     try:
         module = importlib.import_module(module_name)
@@ -59,11 +76,13 @@ def import_ros_type(ros_type: str) -> type:
             else "is the ROS 2 environment sourced?"
         )
         raise TransportError(f"cannot import {module_name} for {ros_type}: {error} ({hint})") from None
+    found: Any = module
     try:
-        cls = getattr(module, name)
-        return getattr(cls, part) if part else cls  # type: ignore[no-any-return]
+        for attribute in path:
+            found = getattr(found, attribute)
     except AttributeError:
-        raise TransportError(f"{module_name} has no {name}{'.' + part if part else ''} (for {ros_type})") from None
+        raise TransportError(f"{module_name} has no {'.'.join(path)} (for {ros_type})") from None
+    return found  # type: ignore[no-any-return]
 
 
 @lru_cache(maxsize=None)
@@ -108,6 +127,8 @@ def _scalar(hint: Any, value: Any, path: str) -> Any:
     convert = _SCALARS.get(hint)
     if convert is None:
         raise TransportError(f"field {path!r}: unsupported mirror field type {hint!r}")
+    if isinstance(value, (np.integer, np.floating)):  # an item of rosidl's numpy array (a goal id's uint8[16])
+        value = value.item()
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise TransportError(f"field {path!r}: expected a number, got {type(value).__name__}")
     if hint is int and isinstance(value, float) and not value.is_integer():
