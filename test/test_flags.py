@@ -148,21 +148,21 @@ def test_a_master_slave_pair_meets_its_partner_in_flags_mode(tmp_path: Path) -> 
 
 # ------------------------------------------------------------------ interference zones
 def write_zoned(folder: Path, operations: list[dict[str, str]]) -> tuple[Path, dict[tuple[int, str], int]]:
-    """The rivet cell has the zone ``at_part`` over the part's holes."""
-    assert '<zone name="at_part"' in RIVET_CELL.read_text(encoding="utf-8")
+    """The rivet cell has the zones ``hands_left`` (holes 1-3) and ``hands_right`` (holes 2-4) over the part."""
+    assert '<zone name="hands_left"' in RIVET_CELL.read_text(encoding="utf-8")
     return write(folder, operations)
 
 
 def test_a_zone_order_that_deadlocks_with_a_flag_is_refused(tmp_path: Path) -> None:
     path, where = write_zoned(tmp_path, [
         {"left_arm": call("wait_flag", param("go"))},
-        {"left_arm": call("approach", param("drill_1")), "right_arm": call("approach", param("drill_4"))},
+        {"left_arm": call("approach", param("drill_2")), "right_arm": call("approach", param("drill_3"))},
         {"right_arm": call("set_flag", param("go"))},
     ])
     code, _, err = cli("validate", str(path))
     assert code == 1
     message = next(x for x in err.splitlines() if x.startswith(f"{path}:{where[(2, 'right_arm')]}:"))
-    assert f"waits for zone 'at_part', where left_arm works first, at line {where[(2, 'left_arm')]}" in message
+    assert f"waits for zone 'hands_left', where left_arm works first, at line {where[(2, 'left_arm')]}" in message
     assert f"waits for flag 'go', which right_arm sets only at line {where[(3, 'right_arm')]}" in message
 
 

@@ -1,6 +1,6 @@
 """Interference zones of a cell: boxes where only one group may work at a time.
 
-``<zone name="at_part" parent="part" xyz="0 0 0.05" size="0.16 0.24 0.14"/>`` is a box with the
+``<zone name="hands_left" parent="part" xyz="0 0.02 0.05" size="0.16 0.12 0.14"/>`` is a box with the
 axes of its parent frame (default ``world``), centred at ``xyz`` in it (the cell's length unit).
 A call works in a zone when a frame it names (a hole, a slot, a target) lies inside the box.  In
 both modes the engine lets one group at a time into a zone, in application order

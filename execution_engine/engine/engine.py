@@ -193,6 +193,8 @@ class ExecutionEngine:
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
         self.zones.close()
+        for group, seconds in self.zones.waited().items():  # a zone wait falls inside a function: idle, not busy
+            report.group_busy[group] = max(0.0, report.group_busy.get(group, 0.0) - seconds)
         report.flag_waits = list(self.flags.waits)
         self._set_state({"finished": "finished", "failed": "failed", "stopped": "stopped"}[report.outcome], report.message)
         return report
@@ -314,6 +316,8 @@ class ExecutionEngine:
 
     async def _run_operation(self, operation: Operation) -> None:
         calls = {g: c for g, c in operation.calls.items() if not self._sits_out(c)}
+        for group in operation.calls.keys() - calls.keys():  # done before a resume, skipped: holds no zone
+            self.zones.ended(operation.id, group)
         pending = self._dispatch(operation, calls, attempt=1)
         report = self.report
         assert report is not None

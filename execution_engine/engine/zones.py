@@ -106,6 +106,14 @@ class ZoneBoard:
             self._leave(zone, call)
         self._grant_waiting()
 
+    def waited(self) -> dict[str, float]:
+        """Seconds each group waited for zones in this run: inside its functions, so idle, not busy."""
+        out: dict[str, float] = {}
+        for wait in self.waits:
+            if wait.kind == "zone":
+                out[wait.group] = out.get(wait.group, 0.0) + wait.duration
+        return out
+
     def close(self) -> None:
         """The run ended: waits still open end as stopped."""
         for asking in list(self._asking.values()):

@@ -97,6 +97,7 @@ class ZoneGate:
             answer = ctx.sync_board.get(key, {}).get(ENGINE)
             if answer is not None and answer.event == "done":
                 self.held.add(zone)
+                self._asked_at.pop(zone, None)  # granted: no more announcements due (else Ready would wake at once, for ever)
                 continue
             if now >= self._asked_at.get(zone, -1e18) + ctx.config.resend_interval:
                 ctx.send_sync(key, "arrived")
