@@ -63,8 +63,8 @@ class Harness:
                 typed.MachineStatusMsg, sm_topic(group, "status"),
                 lambda m, g=group: self.status[g].append(codec.to_primitive(typed.from_msg(SmStatus, m, self.clock))), EVENTS,
             )
-            self.engine.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
-            self._request_pubs[group] = self.engine.create_publisher(String, sm_topic(group, "request"), COMMANDS)
+            self.engine.create_subscription(typed.MachineResultMsg, sm_topic(group, "result"), self._on_result, COMMANDS)
+            self._request_pubs[group] = self.engine.create_publisher(typed.MachineRequestMsg, sm_topic(group, "request"), COMMANDS)
             self.tasks.append(loop.create_task(machine.run()))
         self._clients = {
             (g, c): self.engine.create_client(Trigger, sm_service(g, c)) for g in self.robot.group_names for c in ("pause", "resume", "stop", "reset")
@@ -81,8 +81,8 @@ class Harness:
         await asyncio.gather(*self.tasks, return_exceptions=True)
         await self.bridge.close()
 
-    def _on_result(self, msg: String) -> None:
-        result = codec.decode(SmResult, msg.data)
+    def _on_result(self, msg: Any) -> None:
+        result = typed.from_msg(SmResult, msg, self.clock)
         self.results[result.id] = result
 
     # ---------------------------------------------------------------------------- driving
@@ -90,15 +90,15 @@ class Harness:
         self._next += 1
         request_id = f"req-{self._next}"
         request = SmRequest(id=request_id, operation=operation, function=function, params=params, sync=sync, partners=partners)
-        self._request_pubs[group].publish(String(codec.encode(request)))
+        self._request_pubs[group].publish(typed.to_msg(request, self.clock))
         return request_id
 
-    def send_raw(self, group: str, text: str) -> None:
-        self._request_pubs[group].publish(String(text))
+    def send_raw(self, group: str, msg: Any) -> None:
+        self._request_pubs[group].publish(msg)
 
     def end(self, group: str) -> None:
         self._next += 1
-        self._request_pubs[group].publish(String(codec.encode(SmRequest(id=f"end-{self._next}", kind="end"))))
+        self._request_pubs[group].publish(typed.to_msg(SmRequest(id=f"end-{self._next}", kind="end"), self.clock))
 
     async def service(self, group: str, command: str) -> TriggerResponse:
         response: TriggerResponse = await self._clients[(group, command)].call(Trigger.Request(), timeout=5.0)

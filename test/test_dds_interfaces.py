@@ -132,6 +132,8 @@ WIRE_TO_MSG = {
     wire.EngineStatus: ("EngineStatus", {"t": "header", "v": None, "operation_id": "operation_id"}),
     wire.SmStatus: ("MachineStatus", {"t": "header", "v": None, "result": "result_json"}),
     wire.SmStructure: ("MachineStructure", {"v": None}),
+    wire.SmRequest: ("MachineRequest", {"v": None}),
+    wire.SmResult: ("MachineResult", {"v": None, "t_start": "start", "t_end": "header"}),
     wire.BridgeCommand: ("BridgeCommand", {"v": None, "primitive": "primitive_json"}),
     wire.BridgeFeedback: ("BridgeFeedback", {"t": "header", "v": None, "result": "result_json"}),
     wire.GroupProgress: ("GroupProgress", {}),

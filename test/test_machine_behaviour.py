@@ -62,13 +62,13 @@ def test_request_while_busy_is_refused_and_the_running_function_is_untouched(run
 @pytest.mark.parametrize(
     ("raw", "expected"),
     [
-        ("{not json", "not valid JSON"),
-        ('{"id": 7, "function": "gripper_open"}', "field 'id': expected a string"),
-        ('{"id": "x", "kind": "execute"}', "an execute request needs a function"),
-        ('{"id": "x", "function": "gripper_open", "v": 2}', "protocol version 2"),
+        (typed.MachineRequestMsg(id="x", kind="teleport", function="gripper_open"), "field 'kind': 'teleport' is not one of"),
+        (typed.MachineRequestMsg(id=7, kind="execute", function="gripper_open"), "field 'id': expected a string"),
+        (typed.MachineRequestMsg(id="x", kind="execute"), "an execute request needs a function"),
+        (typed.MachineRequestMsg(id="x", kind="execute", function="gripper_open", params=(1,)), "field 'params[0]': expected a string"),
     ],
 )
-def test_garbage_requests_are_reported_and_change_nothing(run_sim: Any, raw: str, expected: str) -> None:
+def test_garbage_requests_are_reported_and_change_nothing(run_sim: Any, raw: Any, expected: str) -> None:
     async def main(clock: Clock) -> tuple[list[dict[str, Any]], str, int]:
         h = await Harness(clock).start()
         try:

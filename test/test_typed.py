@@ -31,6 +31,8 @@ from execution_engine.transport.wire import (
     EngineStatus,
     FaultKind,
     GroupProgress,
+    SmRequest,
+    SmResult,
     SmStatus,
     SmStructure,
     TransitionSpec,
@@ -52,6 +54,11 @@ SAMPLES: list[Any] = [
     EngineEvent("flag", 2.0, "waiting", "op1", message="left_arm waits", command="parts_ready", source="left_arm", answer="flag"),
     BridgeCommand("c-1", "left_arm", "execute", MoveJoints((0.1, 0.2, 0.3, 0.4, 0.5, 0.6))),
     BridgeCommand("c-2", "left_arm", "stop"),
+    SmRequest("engine-1", operation="op2", function="insert_rivet", params=("drill_1", "0.5"), attempt=2, sync="op2:fbm",
+              partners=("left_arm", "right_arm"), cell="rivet_cell"),
+    SmRequest("engine-2", kind="end"),
+    SmResult("engine-1", "left_arm", "aborted", "op2", "insert_rivet", error="collision: elbow", fault=FaultKind.COLLISION,
+             t_start=1.25, t_end=7.999999999, primitives=4),
     BridgeFeedback("c-1", "left_arm", "done", result=MotionResult(("left_1", "left_2"), (0.1, 0.2)), t=4.25),
     BridgeFeedback("c-1", "left_arm", "error", error="collision: elbow", fault=FaultKind.COLLISION, t=4.5),
 ]
@@ -62,9 +69,11 @@ def test_every_wire_message_travels_typed_and_comes_back_the_same(sample: Any) -
     msg = typed.to_msg(sample, CLOCK)
     assert type(msg) is typed.msg_type(type(sample)) and msg.ROS_TYPE.startswith("dual_arm_executive_interfaces/msg/")
     back = typed.from_msg(type(sample), msg, CLOCK, source="/topic")
-    if hasattr(sample, "t"):  # run time -> ROS time (header.stamp) -> run time: within a nanosecond
-        assert back.t == pytest.approx(sample.t, abs=1e-9)
-    without_t = [{k: v for k, v in codec.to_primitive(m).items() if k != "t"} for m in (back, sample)]
+    times = ("t", "t_start", "t_end")
+    for name in times:  # run time -> ROS time (header.stamp) -> run time: within a nanosecond
+        if hasattr(sample, name):
+            assert getattr(back, name) == pytest.approx(getattr(sample, name), abs=1e-9)
+    without_t = [{k: v for k, v in codec.to_primitive(m).items() if k not in times} for m in (back, sample)]
     assert without_t[0] == without_t[1]
 
 

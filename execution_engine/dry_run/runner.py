@@ -21,6 +21,7 @@ import tempfile
 from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import Catalog
@@ -34,8 +35,7 @@ from execution_engine.dry_run.collisions import scene_of, sweep
 from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
 from execution_engine.dry_run.report import CollisionCheck, DryRunReport, Finding, group_times
 from execution_engine.dry_run.simulators import DryRunSetup, setup_for
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import String
+from execution_engine.transport import typed
 from execution_engine.transport.qos import COMMANDS
 from execution_engine.transport.wire import SmResult, sm_topic
 from robot_bridges.backend import BackendOptions
@@ -240,10 +240,11 @@ class _Results:
         self._outcomes: dict[tuple[str, str], str] = {}
         node = deployment.transport.create_node("dry_run_results")
         for group in deployment.machines:
-            node.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
+            node.create_subscription(typed.MachineResultMsg, sm_topic(group, "result"), self._on_result, COMMANDS)
+        self._clock = node.clock
 
-    def _on_result(self, message: String) -> None:
-        result = codec.decode(SmResult, message.data, source="dry run")
+    def _on_result(self, message: Any) -> None:
+        result = typed.from_msg(SmResult, message, self._clock, source="dry run")
         self._outcomes[(result.operation, result.group)] = result.outcome
 
     def succeeded(self, operation: str) -> set[str]:

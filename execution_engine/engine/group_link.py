@@ -19,7 +19,7 @@ from typing import Any
 from execution_engine.clock import Clock
 from execution_engine.ros_main import machine_node_name
 from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import String, Trigger
+from execution_engine.transport.msgs import Trigger
 from execution_engine.transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
 from execution_engine.transport.qos import COMMANDS, LATCHED
 from execution_engine.transport.wire import FaultKind, SmRequest, SmResult, sm_service, sm_topic
@@ -38,8 +38,8 @@ class GroupLink:
         self._pending: dict[str, asyncio.Future[SmResult]] = {}
         self._ids = itertools.count(1)
         self._session = uuid.uuid4().hex[:6]
-        self._requests = node.create_publisher(String, sm_topic(group, "request"), COMMANDS)
-        self._results = node.create_subscription(String, sm_topic(group, "result"), self._on_result, COMMANDS)
+        self._requests = node.create_publisher(typed.MachineRequestMsg, sm_topic(group, "request"), COMMANDS)
+        self._results = node.create_subscription(typed.MachineResultMsg, sm_topic(group, "result"), self._on_result, COMMANDS)
         node.create_subscription(typed.MachineStateMsg, sm_topic(group, "state"), self._on_state, LATCHED)
         self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
         self.rejected: list[str] = []
@@ -58,7 +58,7 @@ class GroupLink:
     def send(self, request: SmRequest) -> asyncio.Future[SmResult]:
         future: asyncio.Future[SmResult] = asyncio.get_running_loop().create_future()
         self._pending[request.id] = future
-        self._requests.publish(String(codec.encode(request)))
+        self._requests.publish(typed.to_msg(request, self.clock))
         if self._watch is None or self._watch.done():
             self._watch = asyncio.get_running_loop().create_task(self._watch_machine(), name=f"{self.group} machine watch")
         return future
@@ -82,16 +82,16 @@ class GroupLink:
             await self.clock.sleep(WATCH_PERIOD)
 
     def send_end(self) -> None:
-        self._requests.publish(String(codec.encode(SmRequest(id=self.new_id(), kind="end"))))
+        self._requests.publish(typed.to_msg(SmRequest(id=self.new_id(), kind="end"), self.clock))
 
     def forget(self, request_id: str) -> None:
         future = self._pending.pop(request_id, None)
         if future is not None and not future.done():
             future.cancel()
 
-    def _on_result(self, msg: String) -> None:
+    def _on_result(self, msg: Any) -> None:
         try:
-            result = codec.decode(SmResult, msg.data, source=self.node.resolve(sm_topic(self.group, "result")))
+            result = typed.from_msg(SmResult, msg, self.clock, source=self.node.resolve(sm_topic(self.group, "result")))
         except codec.WireError as error:
             self.rejected.append(str(error))
             self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)

@@ -46,7 +46,7 @@ class MachineConfig:
 
 @dataclass
 class Publishers:
-    result: Publisher[String]
+    result: Publisher[Any]  # typed.MachineResultMsg
     status: Publisher[Any]  # typed.MachineStatusMsg
     state: Publisher[Any]  # typed.MachineStateMsg
     bridge: Publisher[Any]  # typed.BridgeCommandMsg
@@ -239,4 +239,4 @@ class MachineContext:
             t_end=now,
             primitives=primitives,
         )
-        self.pub.result.publish(String(codec.encode(result)))
+        self.pub.result.publish(typed.to_msg(result, self.clock))

@@ -120,7 +120,7 @@ class GroupMachine:
         self.events = EventQueue(self.clock)
         g = self.group
         publishers = Publishers(
-            result=node.create_publisher(String, sm_topic(g, "result"), COMMANDS),
+            result=node.create_publisher(typed.MachineResultMsg, sm_topic(g, "result"), COMMANDS),
             status=node.create_publisher(typed.MachineStatusMsg, sm_topic(g, "status"), EVENTS),
             state=node.create_publisher(typed.MachineStateMsg, sm_topic(g, "state"), LATCHED),
             bridge=node.create_publisher(typed.BridgeCommandMsg, bridge_topic(g, "command"), COMMANDS),
@@ -138,7 +138,7 @@ class GroupMachine:
             config=config,
             feedback=node.create_subscription(typed.BridgeFeedbackMsg, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS),
         )
-        node.create_subscription(String, sm_topic(g, "request"), self._on_request, COMMANDS)
+        node.create_subscription(typed.MachineRequestMsg, sm_topic(g, "request"), self._on_request, COMMANDS)
         node.create_subscription(String, SYNC_TOPIC, self._on_sync, COMMANDS)
         node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
         for command in MACHINE_SERVICES:
@@ -199,9 +199,9 @@ class GroupMachine:
         return self.ctx.state_name
 
     # ---------------------------------------------------------------------------- inputs
-    def _on_request(self, msg: String) -> None:
+    def _on_request(self, msg: Any) -> None:
         try:
-            request = codec.decode(SmRequest, msg.data, source=self.node.resolve(sm_topic(self.group, "request")))
+            request = typed.from_msg(SmRequest, msg, self.clock, source=self.node.resolve(sm_topic(self.group, "request")))
         except codec.WireError as error:
             self.ctx.status("error", error=f"rejected request: {error}")
             self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)

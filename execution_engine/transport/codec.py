@@ -1,6 +1,7 @@
 """Dataclass <-> JSON coding with validation: the contract of every JSON message on the wire.
 
-Structured messages travel as JSON inside ``std_msgs/String``.  Whatever arrives is input from
+Structured messages are JSON inside ``std_msgs/String`` or, for the typed topics, put back into
+their JSON shape by :mod:`execution_engine.transport.typed`.  Whatever arrives is input from
 another process, so decoding checks everything against the dataclass's type hints -- required
 fields, types, literals, enum values, nested messages, tagged unions, a size limit -- and a
 failure raises :class:`WireError` naming the message type, the field path and the source (a

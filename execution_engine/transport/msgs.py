@@ -3,8 +3,8 @@
 The core never imports rclpy, yet its nodes must speak exactly what ROS 2 nodes speak.  Each
 mirror names its ROS type (``ROS_TYPE``) and holds the same fields with the same meaning, so the
 rclpy adapter converts field by field and the in-process transport passes the frozen objects
-themselves.  No custom .msg types exist: structured payloads travel as JSON in
-:class:`String` (see :mod:`execution_engine.transport.wire`).
+themselves.  The mirrors of the project's own types are generated from their .msg files
+(:mod:`execution_engine.transport.mirrors`, :mod:`execution_engine.transport.typed`).
 """
 from __future__ import annotations
 

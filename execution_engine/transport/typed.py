@@ -32,6 +32,8 @@ from execution_engine.transport.wire import (
     EngineEvent,
     EngineStatus,
     GroupProgress,
+    SmRequest,
+    SmResult,
     SmStatus,
     SmStructure,
     TransitionSpec,
@@ -47,6 +49,8 @@ def _mirror(name: str) -> type:
 
 
 MachineStateMsg = _mirror("MachineState")
+MachineRequestMsg = _mirror("MachineRequest")
+MachineResultMsg = _mirror("MachineResult")
 MachineStatusMsg = _mirror("MachineStatus")
 MachineStructureMsg = _mirror("MachineStructure")
 MachineTransitionMsg = _mirror("MachineTransition")
@@ -59,7 +63,8 @@ BridgeFeedbackMsg = _mirror("BridgeFeedback")
 
 #: every type of the interface package a node publishes (a recorder's discovery knows them)
 MESSAGE_TYPES: tuple[type, ...] = (
-    MachineStateMsg, MachineStatusMsg, MachineStructureMsg, EngineStatusMsg, EngineEventMsg, BridgeCommandMsg, BridgeFeedbackMsg,
+    MachineStateMsg, MachineStatusMsg, MachineStructureMsg, MachineRequestMsg, MachineResultMsg, EngineStatusMsg, EngineEventMsg,
+    BridgeCommandMsg, BridgeFeedbackMsg,
 )
 _NANO = 1_000_000_000
 
@@ -105,6 +110,21 @@ def _json(value: Any) -> str:
 def machine_state(group: str, state: str, clock: Clock) -> Any:
     """``<group>/sm/state``: the state a machine is in, stamped now."""
     return MachineStateMsg(header=_header(clock, clock.now()), group=group, state=state)
+
+
+def _request_msg(r: SmRequest, clock: Clock) -> Any:
+    return MachineRequestMsg(
+        id=r.id, kind=r.kind, operation=r.operation, function=r.function, params=tuple(r.params), attempt=r.attempt,
+        sync=r.sync, partners=tuple(r.partners), cell=r.cell,
+    )
+
+
+def _result_msg(r: SmResult, clock: Clock) -> Any:
+    return MachineResultMsg(
+        header=_header(clock, r.t_end), id=r.id, group=r.group, outcome=r.outcome, operation=r.operation,
+        function=r.function, error=_text(r.error), fault="" if r.fault is None else r.fault.value,
+        start=stamp_of(clock, r.t_start), primitives=r.primitives,
+    )
 
 
 def _status_msg(s: SmStatus, clock: Clock) -> Any:
@@ -162,6 +182,8 @@ def _feedback_msg(f: BridgeFeedback, clock: Clock) -> Any:
 
 
 _OUT: dict[type, tuple[type, Callable[[Any, Clock], Any]]] = {
+    SmRequest: (MachineRequestMsg, _request_msg),
+    SmResult: (MachineResultMsg, _result_msg),
     SmStatus: (MachineStatusMsg, _status_msg),
     SmStructure: (MachineStructureMsg, _structure_msg),
     EngineStatus: (EngineStatusMsg, _engine_status_msg),
@@ -231,6 +253,25 @@ def _parsed(msg: Any, name: str, *, kind: str = "") -> Any:
 def _opt_index(msg: Any, name: str) -> int | None:
     value = _int(msg, name)
     return None if value == -1 else value
+
+
+def _request_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    return {
+        "id": _str(m, "id"), "kind": _str(m, "kind"), "operation": _str(m, "operation"), "function": _str(m, "function"),
+        "params": _items(m, "params"), "attempt": _int(m, "attempt"), "sync": _str(m, "sync"),
+        "partners": _items(m, "partners"), "cell": _str(m, "cell"),
+    }
+
+
+def _result_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    start = getattr(m, "start", None)
+    if not (isinstance(getattr(start, "sec", None), int) and isinstance(getattr(start, "nanosec", None), int)):
+        raise _Bad("expected a builtin_interfaces/Time", "start")
+    return {
+        "id": _str(m, "id"), "group": _str(m, "group"), "outcome": _str(m, "outcome"), "operation": _str(m, "operation"),
+        "function": _str(m, "function"), "error": _opt(_str(m, "error")), "fault": _opt(_str(m, "fault")),
+        "t_start": run_time(clock, start), "t_end": _stamp(m, clock), "primitives": _int(m, "primitives"),
+    }
 
 
 def _status_raw(m: Any, clock: Epoch) -> dict[str, Any]:
@@ -322,6 +363,8 @@ def _feedback_raw(m: Any, clock: Epoch) -> dict[str, Any]:
 #: reading a message back: its fields in the dataclass's JSON shape, and the dataclass keys whose
 #: field has another name in the .msg (so an error names the .msg field)
 _IN: dict[type, tuple[Callable[[Any, Epoch], dict[str, Any]], dict[str, str]]] = {
+    SmRequest: (_request_raw, {}),
+    SmResult: (_result_raw, {"t_start": "start", "t_end": "header.stamp"}),
     SmStatus: (_status_raw, {"from": "from_state", "to": "to_state", "result": "result_json"}),
     SmStructure: (_structure_raw, {}),
     EngineStatus: (_engine_status_raw, {}),

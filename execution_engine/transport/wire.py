@@ -1,10 +1,12 @@
-"""The JSON messages between engine, group machines, bridges and viewers, and their topic names.
+"""The messages between engine, group machines, bridges and viewers, and their topic names.
 
-Every structured message is a frozen dataclass carried as JSON in ``std_msgs/String``, with a
-protocol version ``v`` (always 1) and, for commands and their answers, a correlation ``id``.
-Receivers decode with :func:`execution_engine.transport.codec.decode`, which validates the whole
-message; a message that fails is reported and ignored.  Names follow the table in
-docs/architecture.md.
+Every structured message is a frozen dataclass with a protocol version ``v`` (always 1) and, for
+commands and their answers, a correlation ``id``.  On the wire most are the typed messages of
+``dual_arm_executive_interfaces`` (:mod:`execution_engine.transport.typed` converts and
+validates them); the located frames, the cell model and the barrier messages are JSON in
+``std_msgs/String``, decoded with :func:`execution_engine.transport.codec.decode`.  Either way
+the whole message is validated, and one that fails is reported and ignored.  Names follow the
+table in docs/architecture.md.
 """
 from __future__ import annotations
 
