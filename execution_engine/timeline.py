@@ -253,10 +253,25 @@ class TimelineBuilder:
             if t_end > cursor:
                 copy.idle.append(IdleGap(group, cursor, t_end))
             copy.waits = [list(w) for w in lane.waits]
-            copy.idle = [piece for gap in copy.idle for piece in _split(gap, copy.waits, t_end)]
+            inside = _within_functions(group, copy.bars, copy.waits, t_end)  # a zone wait holds a function before its motion
+            copy.busy -= sum(g.duration for g in inside)
+            copy.idle = sorted([piece for gap in copy.idle for piece in _split(gap, copy.waits, t_end)] + inside, key=lambda g: g.t_start)
             lanes[group] = copy
         operations = sorted(self._operations.values(), key=lambda s: s.t_start)
         return Timeline(lanes, operations, list(self.marks), t_start, t_end, self.retries)
+
+
+def _within_functions(group: str, bars: list[FunctionBar], waits: list[list[Any]], now: float) -> list[IdleGap]:
+    """The parts of waits that fall inside a function (a zone: its motion waits, the function has
+    started): idle time named after the wait, not busy time."""
+    pieces = []
+    for what, start, end in waits:
+        stop = now if end is None else end
+        for bar in bars:
+            a, b = max(start, bar.t_start), min(stop, bar.end(now))
+            if b > a:
+                pieces.append(IdleGap(group, a, b, what))
+    return pieces
 
 
 def _split(gap: IdleGap, waits: list[list[Any]], now: float) -> list[IdleGap]:

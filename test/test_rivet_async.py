@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from execution_engine.timeline import build_timeline
 from test_dry_run import cli
 
 ASYNC, LOCK = "apps_xml/rivet_async.xml", "apps_xml/rivet_installation.xml"
@@ -73,6 +74,9 @@ def test_one_arm_at_a_time_where_the_hands_would_meet(runs: dict[str, tuple[int,
     right = [(a, b) for a, b, g in held["hands_right"] if g == "right_arm"]
     assert any(a < d and c < b for a, b in left for c, d in right)  # both arms at the part at once
     assert any(r["event"] == "flag" and r.get("kind") == "zone" and r["state"] == "waiting" for r in records)
+    lane = build_timeline(records).lanes["left_arm"]  # the Fig. 12 timeline and `report`: the wait is idle, named
+    waited = sum(g.duration for g in lane.idle if g.waiting == "zone hands_left")
+    assert waited > 1.0 and lane.busy + sum(g.duration for g in lane.idle) == pytest.approx(records[-1]["t"] - records[0]["t"], abs=0.01)
 
 
 def test_no_collision_and_a_clearly_shorter_cycle_than_lock_step(runs: dict[str, tuple[int, str, list[dict]]]) -> None:
