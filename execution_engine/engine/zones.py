@@ -9,7 +9,8 @@ group order -- has left it or ended, so the order is the same in every run and `
 prove it free of deadlocks together with the flags and the operations (app_model/flag_check.py).
 The machine says ``left`` when a motion of it ends outside the box again; its call's successful
 result ends its turn too (a lost ``left`` costs time, never safety).  A failed call keeps the
-zone: its arm may still be inside, and a retry of the call is let in again at once.
+zone: its arm may still be inside, and a retry of the call is let in again at once.  Motions
+that are not the application's (the stages of a safe pose) are let in at once.
 
 A call that names no frame in the zone but moves into it anyway has no place in the order: it
 is let in whenever nobody is inside.  Calls of synchronised functions are not gated: both arms
@@ -79,6 +80,7 @@ class ZoneBoard:
         self._calls: dict[str, CallKey] = {}  # request id -> its call
         self._asking: dict[str, _Asking] = {}  # key -> a request not granted yet
         self._granted: set[str] = set()
+        self._operations: set[str] = set()
 
     def start(self, app: Application, waits: list[FlagWait], done_before: int = 0) -> None:
         """A new run: its order; calls before operation ``done_before`` ran in an earlier run."""
@@ -89,12 +91,15 @@ class ZoneBoard:
         self._calls.clear()
         self._asking.clear()
         self._granted.clear()
+        self._operations = {op.id for op in app.operations}
         earlier = {op.id for op in app.operations[:done_before]}
         self._done = {zone: {c for c in calls if c[0] in earlier} for zone, calls in self.order.items()}
 
     def register(self, request_id: str, operation: str, group: str) -> None:
-        """The engine sent request ``request_id`` for call (``operation``, ``group``)."""
-        self._calls[request_id] = (operation, group)
+        """The engine sent request ``request_id`` for call (``operation``, ``group``) of the application
+        (the safe pose's stages are not: their motions are let in at once)."""
+        if operation in self._operations:
+            self._calls[request_id] = (operation, group)
 
     def ended(self, operation: str, group: str) -> None:
         """Call (``operation``, ``group``) succeeded: whatever it held, it left."""
@@ -132,8 +137,12 @@ class ZoneBoard:
             return
         zone, request_id = parsed
         call = self._calls.get(request_id)
-        if call is None or call[1] != message.group:
-            return  # a request of an earlier run, or of nobody we sent
+        if call is None:  # not a call of the application (a safe-pose retreat, an earlier run's): not gated
+            if message.event == "arrived":
+                self._send(message.key)
+            return
+        if call[1] != message.group:
+            return
         if message.event == "arrived":
             self._ask(zone, call, message.key)
         elif message.event == "left" and self.inside.get(zone) == call:
