@@ -57,3 +57,26 @@ def test_the_engine_under_rclpy_serves_run_application(fake_rclpy: Any) -> None:
     assert accepted.accepted and accepted.stamp.sec > 1_600_000_000  # ROS time: epoch seconds
     assert answer.status == GoalStatus.STATUS_ABORTED and answer.result.outcome == "invalid" and "set_sped" in answer.result.report
     assert empty_accepted is False
+
+
+def test_get_result_waits_for_the_run_however_long_not_the_handler_timeout(fake_rclpy: Any) -> None:
+    """rclpy answers a request from its callback, so the transport bounds how long a handler may
+    take (``handler_timeout``); get_result waits for the whole run on purpose and is exempt.  Here
+    the run outlasts the bound: no machine answers within the engine's startup_timeout."""
+    from test_run_action import TINY
+
+    async def body(transport: RosTransport) -> tuple[Any, float]:
+        engine_node = transport.create_node("execution_engine", parameters={"startup_timeout": 1.5})
+        serve_goals(engine_node, ExecutionEngine(engine_node))
+        caller = transport.create_node("action_client")
+        base = f"/{ACTION_NAME}/_action"
+        send, result = caller.create_client(SendGoal, f"{base}/send_goal"), caller.create_client(GetResult, f"{base}/get_result")
+        goal_id = UUID(tuple([3] * 16))
+        assert (await send.call(SendGoal.Request(goal_id, RunApplicationGoal(application_xml=TINY)), timeout=BOUND)).accepted
+        asked = transport.clock.now()
+        answer = await result.call(GetResult.Request(goal_id), timeout=6 * BOUND)  # the engine waits for each group in turn
+        return answer, transport.clock.now() - asked
+
+    answer, waited = run_real(lambda clock: with_transport(clock, body, handler_timeout=0.5))
+    assert waited > 0.5
+    assert answer.status == GoalStatus.STATUS_ABORTED and "no group machine answered" in answer.result.report

@@ -283,7 +283,10 @@ class _RosService(ServiceServer):
             return failure_response(self.srv_type.Response, f"{self.name}: service was destroyed")
         transport = self.node.transport
         future = asyncio.run_coroutine_threadsafe(self._call(request), transport.loop)
-        wall = transport.clock.to_wall(transport.handler_timeout)
+        # a handler that waits for a long job on purpose (an action's get_result) holds this
+        # executor thread until the job ends (or shutdown cancels it), unbounded
+        long_running = getattr(self._handler, "long_running", False)
+        wall = None if long_running else transport.clock.to_wall(transport.handler_timeout)
         try:
             return future.result(timeout=wall)
         except concurrent.futures.TimeoutError:
