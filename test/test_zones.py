@@ -17,6 +17,7 @@ from core_functions.primitives import Dwell, MoveCartesian
 from test_flags import call, param, run, write
 
 AWAY = "0.34,0.16,0.05,180deg,0,90deg"  # beside the part, on the left arm's side: outside the zones
+AWAY_RIGHT = "0.34,-0.16,0.05,180deg,0,90deg"  # ... and on the right arm's side
 #: The rivet cell's zones: hands_left over holes 1-3, hands_right over holes 2-4 (hole 2 is in both).
 ZONE = "hands_left"
 DWELL = 5.0
@@ -35,6 +36,19 @@ class ZoneVisits(CoreFunctions):
         yield MoveCartesian(self.cell.pose(hole).offset_local(dz=-0.05), "ptp", frame=f"{hole} clearance")
         yield MoveCartesian(self.resolve(away), "ptp", frame="away")  # type: ignore[arg-type]
         yield Dwell(DWELL)
+
+
+    @skill(
+        ParamSpec("hole", ParamType.FRAME, "the hole to visit"),
+        ParamSpec("away", ParamType.TARGET, "where to go in between", unit="m, rad"),
+        states=("Motion",),
+    )
+    def visit_twice(self, hole: str, away: object) -> Skill:
+        """Above the hole, away, a moment there, above the hole again, away."""
+        for _ in range(2):
+            yield MoveCartesian(self.cell.pose(hole).offset_local(dz=-0.05), "ptp", frame=f"{hole} clearance")
+            yield MoveCartesian(self.resolve(away), "ptp", frame="away")  # type: ignore[arg-type]
+            yield Dwell(0.5)
 
 
 @pytest.fixture
@@ -100,3 +114,20 @@ def test_two_arms_in_different_zones_work_at_once(tmp_path: Path) -> None:
     assert code == 0, text
     assert not any(r["event"] == "flag" and r["state"] == "waiting" for r in records)
     assert events(records, "right_arm", "primitive_start", "1")[0]["t"] == events(records, "left_arm", "primitive_start", "1")[0]["t"]
+
+
+def test_coming_back_into_a_zone_waits_behind_the_arm_inside(tmp_path: Path, visits: None) -> None:
+    """The left arm leaves hole 1, the right arm goes in (hole 2), the left arm's way back in waits
+    until the right arm is out again: a zone left is asked for again, not kept."""
+    path, _ = write(tmp_path, [
+        {"left_arm": call("visit_twice", param("drill_1"), param(AWAY)), "right_arm": call("visit_then_work_away", param("drill_2"), param(AWAY_RIGHT))},
+    ], "operation")
+    code, text, records = run(path, tmp_path)
+    assert code == 0, text
+    left_moves = [r for r in events(records, "left_arm", "primitive_start", "1") if "move" in str(r.get("primitive"))]
+    right_ends = [r for r in events(records, "right_arm", "primitive_end", "1") if "move" in str(r.get("primitive"))]
+    right_out = right_ends[1]["t"]
+    assert left_moves[2]["t"] == pytest.approx(right_out, abs=0.05)  # back in only once the right arm was out
+    zone = [(r["group"], r["state"]) for r in records if r["event"] == "flag" and r["flag"] == ZONE]
+    assert zone == [("left_arm", "passed"), ("right_arm", "waiting"), ("left_arm", "left"), ("right_arm", "passed"),
+                    ("left_arm", "waiting"), ("right_arm", "left"), ("left_arm", "passed"), ("left_arm", "left")]

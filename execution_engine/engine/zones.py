@@ -146,6 +146,7 @@ class ZoneBoard:
         if message.event == "arrived":
             self._ask(zone, call, message.key)
         elif message.event == "left" and self.inside.get(zone) == call:
+            self._granted.discard(message.key)  # coming back in is asked for again, behind whoever is inside then
             self._leave(zone, call)
             self._done.setdefault(zone, set()).add(call)
             self._grant_waiting()

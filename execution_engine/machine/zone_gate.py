@@ -128,4 +128,6 @@ class ZoneGate:
             pose, size = zones.get(zone, (None, None))
             if pose is None or not inside_box(pose, size, tcp.position):  # type: ignore[arg-type]
                 self.held.discard(zone)
-                self.ctx.send_sync(zone_key(zone, self._request), "left")
+                key = zone_key(zone, self._request)
+                self.ctx.send_sync(key, "left")
+                self.ctx.sync_board.get(key, {}).pop(ENGINE, None)  # back into the zone later: ask again
