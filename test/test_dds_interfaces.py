@@ -136,6 +136,7 @@ WIRE_TO_MSG = {
     wire.SmResult: ("MachineResult", {"v": None, "t_start": "start", "t_end": "header"}),
     wire.BridgeCommand: ("BridgeCommand", {"v": None, "primitive": "primitive_json"}),
     wire.BridgeFeedback: ("BridgeFeedback", {"t": "header", "v": None, "result": "result_json"}),
+    wire.SyncMessage: ("SyncMessage", {"t": "header", "v": None}),
     wire.GroupProgress: ("GroupProgress", {}),
     wire.TransitionSpec: ("MachineTransition", {}),
 }

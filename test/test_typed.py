@@ -35,6 +35,7 @@ from execution_engine.transport.wire import (
     SmResult,
     SmStatus,
     SmStructure,
+    SyncMessage,
     TransitionSpec,
     bridge_topic,
     sm_topic,
@@ -61,6 +62,9 @@ SAMPLES: list[Any] = [
              t_start=1.25, t_end=7.999999999, primitives=4),
     BridgeFeedback("c-1", "left_arm", "done", result=MotionResult(("left_1", "left_2"), (0.1, 0.2)), t=4.25),
     BridgeFeedback("c-1", "left_arm", "error", error="collision: elbow", fault=FaultKind.COLLISION, t=4.5),
+    SyncMessage("left_arm", "op2:fbm", "arrived", "FullBodyMotion", 3.000000001),
+    SyncMessage("right_arm", "op2:fbm", "failed", "ErrorHandling", 3.5, error="partner timeout", fault=FaultKind.TIMEOUT),
+    SyncMessage("execution_engine", "zone:fixture:engine-4", "done", "granted", 4.0),
 ]
 
 
@@ -118,6 +122,11 @@ def _status(**changes: Any) -> Any:
         (typed.EngineStatusMsg(state="dancing"), EngineStatus, "state", "'dancing' is not one of"),
         (typed.EngineEventMsg(event="state", header=Header(stamp="noon")), EngineEvent, "header.stamp", "builtin_interfaces/Time"),
         (typed.MachineStateMsg(), SmStatus, "", "expected dual_arm_executive_interfaces/msg/MachineStatus, got MachineState"),
+        (typed.SyncMsg(group="left_arm", key="k", event="teleported", state="Motion"), SyncMessage, "event", "'teleported' is not one of"),
+        (typed.SyncMsg(group="left_arm", key="k", event="failed", state="Motion", fault="gremlins"), SyncMessage, "fault", "'gremlins' is not one of"),
+        (typed.SyncMsg(group="left_arm", key=3, event="arrived", state="Motion"), SyncMessage, "key", "expected a string"),
+        (typed.SyncMsg(group="left_arm", key="k", event="arrived", state="Motion", header=Header(stamp=None)), SyncMessage,
+         "header.stamp", "builtin_interfaces/Time"),
     ],
 )
 def test_out_of_contract_messages_are_refused_naming_topic_type_and_field(msg: Any, cls: type, field: str, reason: str) -> None:

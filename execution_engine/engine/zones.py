@@ -21,14 +21,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application
 from execution_engine.app_model.zones import ENGINE, call_zones, parse_key
 from execution_engine.clock import Clock
 from execution_engine.engine.flags import FlagWait
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import String
+from execution_engine.transport import codec, typed
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import COMMANDS
 from execution_engine.transport.wire import SYNC_TOPIC, SyncMessage
@@ -70,8 +70,8 @@ class ZoneBoard:
         self.clock: Clock = node.clock
         self.catalog = catalog
         self.publish = publish
-        self._pub = node.create_publisher(String, SYNC_TOPIC, COMMANDS)
-        node.create_subscription(String, SYNC_TOPIC, self._on_sync, COMMANDS)
+        self._pub = node.create_publisher(typed.SyncMsg, SYNC_TOPIC, COMMANDS)
+        node.create_subscription(typed.SyncMsg, SYNC_TOPIC, self._on_sync, COMMANDS)
         self.order: dict[str, list[CallKey]] = {}
         self.waits: list[FlagWait] = []
         self.waiting: dict[str, str] = {}  # group -> "zone Z" it waits for now
@@ -127,9 +127,9 @@ class ZoneBoard:
         self.waiting.clear()
 
     # ------------------------------------------------------------------------ messages
-    def _on_sync(self, msg: String) -> None:
+    def _on_sync(self, msg: Any) -> None:
         try:
-            message = codec.decode(SyncMessage, msg.data, source="coordination")
+            message = typed.from_msg(SyncMessage, msg, self.clock, source="coordination")
         except codec.WireError:
             return  # the machines log what they cannot read; the engine only answers zone requests
         parsed = parse_key(message.key)
@@ -205,4 +205,4 @@ class ZoneBoard:
 
     def _send(self, key: str) -> None:
         message = SyncMessage(group=ENGINE, key=key, event="done", state="granted", t=self.clock.now())
-        self._pub.publish(String(codec.encode(message)))
+        self._pub.publish(typed.to_msg(message, self.clock))

@@ -24,7 +24,6 @@ from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
 from execution_engine.machine.zone_gate import ZoneGate
 from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import String
 from execution_engine.transport.port import Node, Publisher, Subscription, wait_until_matched
 from execution_engine.transport.wire import BridgeCommand, FaultKind, SmRequest, SmResult, SmStatus, SyncMessage
 
@@ -50,7 +49,7 @@ class Publishers:
     status: Publisher[Any]  # typed.MachineStatusMsg
     state: Publisher[Any]  # typed.MachineStateMsg
     bridge: Publisher[Any]  # typed.BridgeCommandMsg
-    sync: Publisher[String]
+    sync: Publisher[Any]  # typed.SyncMsg
 
 
 class MachineContext:
@@ -174,7 +173,7 @@ class MachineContext:
         """Announce at a barrier; a failure carries its kind, so the partners report the same one."""
         message = SyncMessage(group=self.group, key=key, event=event, state=self.state_name, t=self.clock.now(), error=error, fault=fault)  # type: ignore[arg-type]
         self.record_sync(message)
-        self.pub.sync.publish(String(codec.encode(message)))
+        self.pub.sync.publish(typed.to_msg(message, self.clock))
 
     def record_sync(self, message: SyncMessage) -> None:
         self.sync_board.setdefault(message.key, {})[message.group] = message

@@ -124,7 +124,7 @@ class GroupMachine:
             status=node.create_publisher(typed.MachineStatusMsg, sm_topic(g, "status"), EVENTS),
             state=node.create_publisher(typed.MachineStateMsg, sm_topic(g, "state"), LATCHED),
             bridge=node.create_publisher(typed.BridgeCommandMsg, bridge_topic(g, "command"), COMMANDS),
-            sync=node.create_publisher(String, SYNC_TOPIC, COMMANDS),
+            sync=node.create_publisher(typed.SyncMsg, SYNC_TOPIC, COMMANDS),
         )
         self._structure_pub = node.create_publisher(typed.MachineStructureMsg, sm_topic(g, "structure"), LATCHED)
         self.ctx = MachineContext(
@@ -139,7 +139,7 @@ class GroupMachine:
             feedback=node.create_subscription(typed.BridgeFeedbackMsg, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS),
         )
         node.create_subscription(typed.MachineRequestMsg, sm_topic(g, "request"), self._on_request, COMMANDS)
-        node.create_subscription(String, SYNC_TOPIC, self._on_sync, COMMANDS)
+        node.create_subscription(typed.SyncMsg, SYNC_TOPIC, self._on_sync, COMMANDS)
         node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
         for command in MACHINE_SERVICES:
             node.create_service(Trigger, sm_service(g, command), lambda req, c=command: self._on_service(c, req))
@@ -216,9 +216,9 @@ class GroupMachine:
             return
         self.events.put(FeedbackEvent(feedback))
 
-    def _on_sync(self, msg: String) -> None:
+    def _on_sync(self, msg: Any) -> None:
         try:
-            message = codec.decode(SyncMessage, msg.data, source=self.node.resolve(SYNC_TOPIC))
+            message = typed.from_msg(SyncMessage, msg, self.clock, source=self.node.resolve(SYNC_TOPIC))
         except codec.WireError as error:
             self.node.logger.error("%s: ignored sync message: %s", self.node.fully_qualified_name, error)
             return

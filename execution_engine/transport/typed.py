@@ -36,7 +36,7 @@ from execution_engine.transport.wire import (
     SmResult,
     SmStatus,
     SmStructure,
-    TransitionSpec,
+    SyncMessage,
 )
 
 W = TypeVar("W")
@@ -60,11 +60,12 @@ OperatorActionMsg = _mirror("OperatorAction")
 GroupProgressMsg = _mirror("GroupProgress")
 BridgeCommandMsg = _mirror("BridgeCommand")
 BridgeFeedbackMsg = _mirror("BridgeFeedback")
+SyncMsg = _mirror("SyncMessage")
 
 #: every type of the interface package a node publishes (a recorder's discovery knows them)
 MESSAGE_TYPES: tuple[type, ...] = (
     MachineStateMsg, MachineStatusMsg, MachineStructureMsg, MachineRequestMsg, MachineResultMsg, EngineStatusMsg, EngineEventMsg,
-    BridgeCommandMsg, BridgeFeedbackMsg,
+    BridgeCommandMsg, BridgeFeedbackMsg, SyncMsg,
 )
 _NANO = 1_000_000_000
 
@@ -181,6 +182,13 @@ def _feedback_msg(f: BridgeFeedback, clock: Clock) -> Any:
     )
 
 
+def _sync_msg(s: SyncMessage, clock: Clock) -> Any:
+    return SyncMsg(
+        header=_header(clock, s.t), group=s.group, key=s.key, event=s.event, state=s.state, error=_text(s.error),
+        fault="" if s.fault is None else s.fault.value,
+    )
+
+
 _OUT: dict[type, tuple[type, Callable[[Any, Clock], Any]]] = {
     SmRequest: (MachineRequestMsg, _request_msg),
     SmResult: (MachineResultMsg, _result_msg),
@@ -190,6 +198,7 @@ _OUT: dict[type, tuple[type, Callable[[Any, Clock], Any]]] = {
     EngineEvent: (EngineEventMsg, _engine_event_msg),
     BridgeCommand: (BridgeCommandMsg, _command_msg),
     BridgeFeedback: (BridgeFeedbackMsg, _feedback_msg),
+    SyncMessage: (SyncMsg, _sync_msg),
 }
 
 
@@ -360,6 +369,13 @@ def _feedback_raw(m: Any, clock: Epoch) -> dict[str, Any]:
     }
 
 
+def _sync_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    return {
+        "group": _str(m, "group"), "key": _str(m, "key"), "event": _str(m, "event"), "state": _str(m, "state"),
+        "t": _stamp(m, clock), "error": _opt(_str(m, "error")), "fault": _opt(_str(m, "fault")),
+    }
+
+
 #: reading a message back: its fields in the dataclass's JSON shape, and the dataclass keys whose
 #: field has another name in the .msg (so an error names the .msg field)
 _IN: dict[type, tuple[Callable[[Any, Epoch], dict[str, Any]], dict[str, str]]] = {
@@ -372,6 +388,7 @@ _IN: dict[type, tuple[Callable[[Any, Epoch], dict[str, Any]], dict[str, str]]] =
                                       "accepted": "action.accepted", "answer": "action.answer"}),
     BridgeCommand: (_command_raw, {"primitive": "primitive_json"}),
     BridgeFeedback: (_feedback_raw, {"result": "result_json"}),
+    SyncMessage: (_sync_raw, {"t": "header.stamp"}),
 }
 
 
