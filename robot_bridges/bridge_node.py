@@ -21,7 +21,7 @@ from typing import Any
 
 from core_functions.primitives import PrimitiveResult, describe
 from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, String
+from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion
 from execution_engine.transport.port import Node, Publisher
 from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
 from execution_engine.transport.qos import JOINT_STATES as JOINT_STATES_QOS
@@ -62,7 +62,7 @@ class BridgeNode:
         self._robot_state = RobotStatePublisher.for_backend(node, backend)  # robot_description, tf: for RViz
         for group in backend.groups:
             self._feedback[group] = node.create_publisher(typed.BridgeFeedbackMsg, bridge_topic(group, "feedback"), COMMANDS)
-        node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
+        node.create_subscription(typed.CellSnapshotMsg, ENGINE_CELL, self._on_cell, LATCHED)
         self._camera = attach_cameras(node, backend)  # camera parameters: publish_images, camera_source (ROS image topics)
         self._state_task: asyncio.Task[None] | None = None
         self.errors: list[str] = []
@@ -95,9 +95,9 @@ class BridgeNode:
         self.node.destroy()
 
     # ------------------------------------------------------------------------------ inbound
-    def _on_cell(self, msg: String) -> None:
+    def _on_cell(self, msg: Any) -> None:
         try:
-            cell = codec.decode(CellSnapshot, msg.data, source=self.node.resolve(ENGINE_CELL))
+            cell = typed.from_msg(CellSnapshot, msg, self.clock, source=self.node.resolve(ENGINE_CELL))
         except codec.WireError as error:
             self._report(f"ignored cell model: {error}")
             return

@@ -17,7 +17,7 @@ from execution_engine.clock import Clock
 from execution_engine.machine.group_machine import GroupMachine
 from execution_engine.transport import codec, typed
 from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import String, Trigger, TriggerResponse
+from execution_engine.transport.msgs import Trigger, TriggerResponse
 from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
 from execution_engine.transport.wire import ENGINE_CELL, CellSnapshot, SmRequest, SmResult, SmStatus, sm_service, sm_topic
 from robot_bridges.bridge_node import BridgeNode
@@ -46,8 +46,8 @@ class Harness:
         self.bridge = BridgeNode(self.transport.create_node("bridge"), self.backend)
         await self.bridge.start()
         self.engine = self.transport.create_node("fake_engine")
-        self.cell_pub = self.engine.create_publisher(String, ENGINE_CELL, LATCHED)
-        self.cell_pub.publish(String(codec.encode(CELL)))
+        self.cell_pub = self.engine.create_publisher(typed.CellSnapshotMsg, ENGINE_CELL, LATCHED)
+        self.cell_pub.publish(typed.to_msg(CELL, self.clock))
         self.machines: dict[str, GroupMachine] = {}
         self.status: dict[str, list[dict[str, Any]]] = {}
         self.results: dict[str, SmResult] = {}

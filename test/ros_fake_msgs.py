@@ -305,7 +305,7 @@ INTERFACE_MODULES.update(_rosidl_package("action_msgs", {
     "builtin_interfaces/msg/Time": Time, "unique_identifier_msgs/msg/UUID": INTERFACE_MODULES["unique_identifier_msgs.msg"]["UUID"],
 }))
 INTERFACE_MODULES.update(_rosidl_package("dual_arm_executive_interfaces", {
-    "std_msgs/msg/Header": Header, "builtin_interfaces/msg/Time": Time,
+    "std_msgs/msg/Header": Header, "builtin_interfaces/msg/Time": Time, "geometry_msgs/msg/Pose": Pose, "diagnostic_msgs/msg/KeyValue": KeyValue,
     "unique_identifier_msgs/msg/UUID": INTERFACE_MODULES["unique_identifier_msgs.msg"]["UUID"],
 }))
 

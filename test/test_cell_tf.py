@@ -21,9 +21,9 @@ from execution_engine.app_model import load_application
 from execution_engine.clock import Clock, run_with_clock, simulated_clock
 from execution_engine.deployment import deploy_local
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
-from execution_engine.transport import codec
+from execution_engine.transport import typed
 from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import String, TFMessage, Time
+from execution_engine.transport.msgs import TFMessage, Time
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import LATCHED, TF, TF_STATIC
 from execution_engine.transport.transforms import compose_to_root, tree_of
@@ -73,12 +73,12 @@ def test_a_located_parent_moves_its_children_and_a_late_joiner_sees_only_the_cor
         broadcaster.publish_cell(snapshot, NEXTAGE_OPEN)
         await clock.sleep(0.5)
         machine = transport.create_node("left_arm_machine")
-        located = {g: machine.create_publisher(String, sm_topic(g, "located"), LATCHED) for g in ("left_arm", "right_arm")}
-        located["left_arm"].publish(String(codec.encode(LocatedFrames("left_arm", snapshot.name, {"part": moved_part}))))
+        located = {g: machine.create_publisher(typed.LocatedFramesMsg, sm_topic(g, "located"), LATCHED) for g in ("left_arm", "right_arm")}
+        located["left_arm"].publish(typed.to_msg(LocatedFrames("left_arm", snapshot.name, {"part": moved_part}), clock))
         await clock.sleep(0.5)
-        located["right_arm"].publish(String(codec.encode(LocatedFrames("right_arm", snapshot.name, {"rivet_2": found_rivet, "nowhere": Pose()}))))
+        located["right_arm"].publish(typed.to_msg(LocatedFrames("right_arm", snapshot.name, {"rivet_2": found_rivet, "nowhere": Pose()}), clock))
         await clock.sleep(0.5)
-        located["right_arm"].publish(String(codec.encode(LocatedFrames("right_arm", "another_cell", {"rivet_3": Pose()}))))
+        located["right_arm"].publish(typed.to_msg(LocatedFrames("right_arm", "another_cell", {"rivet_3": Pose()}), clock))
         await clock.sleep(0.5)
         late: list[TFMessage] = []
         collect(transport.create_node("late_rviz"), TF_STATIC_TOPIC, TF_STATIC, late)
@@ -113,12 +113,12 @@ def test_a_machine_reports_every_frame_it_located_in_its_cell(run_sim: Any) -> N
         h = await Harness(clock).start()
         reports: list[LocatedFrames] = []
         viewer = h.transport.create_node("viewer")
-        viewer.create_subscription(String, sm_topic("left_arm", "located"), lambda m: reports.append(codec.decode(LocatedFrames, m.data)), LATCHED)
+        viewer.create_subscription(typed.LocatedFramesMsg, sm_topic("left_arm", "located"), lambda m: reports.append(typed.from_msg(LocatedFrames, m, clock)), LATCHED)
         try:
             await clock.sleep(0.1)
             result = await h.result(h.send("left_arm", "locate", "hole_1"))
             assert result.outcome == "succeeded", result.error
-            h.cell_pub.publish(String(codec.encode(CELL)))  # a new run: the cell model again
+            h.cell_pub.publish(typed.to_msg(CELL, clock))  # a new run: the cell model again
             await clock.sleep(0.1)
             return reports
         finally:
@@ -146,9 +146,9 @@ def rivet_run() -> dict[str, Any]:
         collect(viewer, TF_STATIC_TOPIC, TF_STATIC, static)
         located: list[LocatedFrames] = []
         for group in app.robot.arm_groups:
-            viewer.create_subscription(String, sm_topic(group, "located"), lambda m: located.append(codec.decode(LocatedFrames, m.data)), LATCHED)
-        cells: list[str] = []
-        collect(viewer, ENGINE_CELL, LATCHED, cells, String)
+            viewer.create_subscription(typed.LocatedFramesMsg, sm_topic(group, "located"), lambda m: located.append(typed.from_msg(LocatedFrames, m, clock)), LATCHED)
+        cells: list[Any] = []
+        collect(viewer, ENGINE_CELL, LATCHED, cells, typed.CellSnapshotMsg)
         try:
             report = await deployment.engine.run(app)
             late = deployment.transport.create_node("late_rviz")
@@ -160,7 +160,7 @@ def rivet_run() -> dict[str, Any]:
         finally:
             await deployment.close()
         assert report.ok, report
-        snapshot = codec.decode(CellSnapshot, cells[-1].data)
+        snapshot = typed.from_msg(CellSnapshot, cells[-1], clock)
         return {"static": static, "located": located, "late_static": late_static, "late_tf": late_tf, "cell": snapshot}
 
     return run_with_clock(main, simulated_clock())

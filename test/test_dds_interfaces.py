@@ -137,6 +137,8 @@ WIRE_TO_MSG = {
     wire.BridgeCommand: ("BridgeCommand", {"v": None, "primitive": "primitive_json"}),
     wire.BridgeFeedback: ("BridgeFeedback", {"t": "header", "v": None, "result": "result_json"}),
     wire.SyncMessage: ("SyncMessage", {"t": "header", "v": None}),
+    wire.CellSnapshot: ("CellSnapshot", {"v": None, "joint_pose_groups": "joint_poses"}),
+    wire.LocatedFrames: ("LocatedFrames", {"t": "header", "v": None}),
     wire.GroupProgress: ("GroupProgress", {}),
     wire.TransitionSpec: ("MachineTransition", {}),
 }

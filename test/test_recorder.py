@@ -66,7 +66,8 @@ def test_every_message_decodes_to_its_ros_type_with_ros2_schemas(rivet_run: tupl
     assert types["/left_arm/sm/state"] == ours + "MachineState" and types["/left_arm/sm/structure"] == ours + "MachineStructure"
     assert types["/execution_engine/status"] == ours + "EngineStatus" and types["/execution_engine/events"] == ours + "EngineEvent"
     assert types["/right_arm/bridge/command"] == ours + "BridgeCommand" and types["/right_arm/bridge/feedback"] == ours + "BridgeFeedback"
-    assert types["/execution_engine/cell"] == "std_msgs/msg/String"  # the cell model stays JSON (no .msg of its own yet)
+    assert types["/execution_engine/cell"] == ours + "CellSnapshot" and types["/coordination/sync"] == ours + "SyncMessage"
+    assert types["/left_arm/sm/located"] == ours + "LocatedFrames"
     assert types["/tf"] == "tf2_msgs/msg/TFMessage"
     assert types["/diagnostics"] == "diagnostic_msgs/msg/DiagnosticArray"
     for topic in ("/execution_engine/status", "/execution_engine/events", "/right_arm/bridge/command",

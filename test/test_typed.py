@@ -17,20 +17,24 @@ from machine_harness import Harness
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from test_ros_transport import Inbox, matched, run_real, with_transport
 
+from core_functions.cell_index import CellFrame
+from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, MoveJoints
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.observers import RunObserver
-from execution_engine.transport import codec, typed
+from execution_engine.transport import codec, msgs, typed
 from execution_engine.transport.msgs import Header, Time
 from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
 from execution_engine.transport.ros import RosTransport
 from execution_engine.transport.wire import (
     BridgeCommand,
     BridgeFeedback,
+    CellSnapshot,
     EngineEvent,
     EngineStatus,
     FaultKind,
     GroupProgress,
+    LocatedFrames,
     SmRequest,
     SmResult,
     SmStatus,
@@ -65,6 +69,17 @@ SAMPLES: list[Any] = [
     SyncMessage("left_arm", "op2:fbm", "arrived", "FullBodyMotion", 3.000000001),
     SyncMessage("right_arm", "op2:fbm", "failed", "ErrorHandling", 3.5, error="partner timeout", fault=FaultKind.TIMEOUT),
     SyncMessage("execution_engine", "zone:fixture:engine-4", "done", "granted", 4.0),
+    CellSnapshot(
+        "rivet_cell",
+        (CellFrame("part", Pose(0.35, 0.0, 0.1, 0.0, 0.0, 0.6, 0.8), "part"),
+         CellFrame("drill_1", Pose(0.01, 0.02, 0.0), "hole", "part", {"diameter": "0.0048", "depth": "0.01"})),
+        elements={"tray": {"kind": "fixture", "slots": "4"}},
+        joint_poses={"home": {"CHEST_JOINT0": 0.0, "LARM_JOINT0": 0.5}, "look": {"HEAD_JOINT1": -0.25}},
+        truth={"part": Pose(0.351, 0.0, 0.1, 0.0, 0.0, 0.6, 0.8)},
+        joint_pose_groups={"look": "torso_head"},
+    ),
+    LocatedFrames("left_arm", "rivet_cell", {"drill_1": Pose(0.3607, 0.02, 0.1), "part": Pose(0.35, 0.0, 0.1)}, 6.5),
+    LocatedFrames("right_arm", "rivet_cell", t=7.0),
 ]
 
 
@@ -93,6 +108,33 @@ def test_fields_are_plain_values_a_plotting_tool_reads() -> None:
     assert command.primitive_kind == "move_joints" and codec.parse_json(command.primitive_json)["positions"] == [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
     event = typed.to_msg(SAMPLES[5], CLOCK)
     assert (event.action.command, event.action.accepted, event.action.answer) == ("pause", False, "no")
+    cell = typed.to_msg(CELL_SAMPLE, CLOCK)
+    assert (cell.frames[0].pose.position.x, cell.frames[0].pose.orientation.z, cell.frames[0].pose.orientation.w) == (0.35, 0.6, 0.8)
+    assert [(a.key, a.value) for a in cell.frames[1].attributes] == [("diameter", "0.0048"), ("depth", "0.01")]
+    assert [(j.name, j.group, j.joint_names, j.positions) for j in cell.joint_poses] == [
+        ("home", "", ("CHEST_JOINT0", "LARM_JOINT0"), (0.0, 0.5)), ("look", "torso_head", ("HEAD_JOINT1",), (-0.25,))]
+    located = typed.to_msg(SAMPLES[-2], CLOCK)
+    assert [(f.name, f.pose.position.x) for f in located.frames] == [("drill_1", 0.3607), ("part", 0.35)]
+    assert located.header.stamp == Time(1_763_900_006, 750_000_000)
+
+
+CELL_SAMPLE = next(s for s in SAMPLES if isinstance(s, CellSnapshot))
+
+
+def _changed(msg: Any, **changes: Any) -> Any:
+    return type(msg)(**{**{f: getattr(msg, f) for f in msg.__dataclass_fields__}, **changes})
+
+
+def _cell(**changes: Any) -> Any:
+    return _changed(typed.to_msg(CELL_SAMPLE, CLOCK), **changes)
+
+
+def _frame(**changes: Any) -> Any:
+    return _changed(typed.to_msg(CELL_SAMPLE, CLOCK).frames[1], **changes)
+
+
+def _pose(x: Any = 0.0, w: Any = 1.0) -> Any:
+    return msgs.Pose(msgs.Point(x, 0.0, 0.0), msgs.Quaternion(0.0, 0.0, 0.0, w))
 
 
 def _status(**changes: Any) -> Any:
@@ -127,6 +169,23 @@ def _status(**changes: Any) -> Any:
         (typed.SyncMsg(group="left_arm", key=3, event="arrived", state="Motion"), SyncMessage, "key", "expected a string"),
         (typed.SyncMsg(group="left_arm", key="k", event="arrived", state="Motion", header=Header(stamp=None)), SyncMessage,
          "header.stamp", "builtin_interfaces/Time"),
+        (_cell(frames=(_frame(pose=_pose(w=2.0)),)), CellSnapshot, "frames[0].pose.orientation", "unit length"),
+        (_cell(frames=(_frame(pose=_pose(x=float("nan"))),)), CellSnapshot, "frames[0].pose", "non-finite"),
+        (_cell(frames=(_frame(pose=_pose(x="far")),)), CellSnapshot, "frames[0].pose.position.x", "expected a number"),
+        (_cell(frames=(_frame(attributes=(msgs.KeyValue("a", "1"), msgs.KeyValue("a", "2"))),)), CellSnapshot,
+         "frames[0].attributes[1].key", "'a' listed twice"),
+        (_cell(truth=(typed.NamedPoseMsg(name="part", pose=_pose(w=0.0)),)), CellSnapshot, "truth[0].pose.orientation", "unit length"),
+        (_cell(joint_poses=(typed.NamedJointPoseMsg(name="home", joint_names=("a", "b"), positions=(0.1,)),)), CellSnapshot,
+         "joint_poses[0].positions", "1 positions for 2 joint names"),
+        (_cell(joint_poses=(typed.NamedJointPoseMsg(name="home", joint_names=("a",), positions=(True,)),)), CellSnapshot,
+         "joint_poses[0].positions[0]", "expected a number"),
+        (_cell(elements=(typed.CellElementMsg(name="tray"),) * 2), CellSnapshot, "elements[1].name", "'tray' listed twice"),
+        (_cell(name=None), CellSnapshot, "name", "expected a string"),
+        (typed.LocatedFramesMsg(group="left_arm", cell="c", frames=(typed.NamedPoseMsg(name="drill_1", pose=_pose(w=0.5)),)),
+         LocatedFrames, "frames[0].pose.orientation", "unit length"),
+        (typed.LocatedFramesMsg(group="left_arm", cell="c", frames=(typed.NamedPoseMsg(name="d", pose=_pose()),) * 2),
+         LocatedFrames, "frames[1].name", "'d' listed twice"),
+        (typed.CellSnapshotMsg(name="c"), LocatedFrames, "", "expected dual_arm_executive_interfaces/msg/LocatedFrames, got CellSnapshot"),
     ],
 )
 def test_out_of_contract_messages_are_refused_naming_topic_type_and_field(msg: Any, cls: type, field: str, reason: str) -> None:
@@ -246,3 +305,22 @@ def test_over_dds_the_topics_carry_the_package_types_by_their_ros_names() -> Non
             await tool.shutdown()
 
     run_with_clock(main, real_clock())
+
+
+@pytest.mark.parametrize("sample", [s for s in SAMPLES if isinstance(s, (SyncMessage, CellSnapshot, LocatedFrames))],
+                         ids=lambda s: type(s).__name__)
+def test_sync_cell_and_located_cross_both_ros_wires_intact(sample: Any) -> None:
+    """The rclpy transport (the built package's classes) and the DDS transport (CDR as rmw_cyclonedds
+    writes it) carry the typed sync, cell and located messages field for field, poses included."""
+    from execution_engine.transport.dds_convert import DdsConverter
+    from execution_engine.transport.idl import InterfaceRegistry
+    from execution_engine.transport.ros_convert import MessageConverter
+
+    msg = typed.to_msg(sample, CLOCK)
+    ros = MessageConverter(ros_fakes.resolve)
+    over_ros = ros.from_ros(type(msg), ros.to_ros(msg))
+    dds = DdsConverter(InterfaceRegistry())
+    over_dds = dds.from_wire(type(msg), dds.wire_class(type(msg)).deserialize(dds.to_wire(msg).serialize()))
+    for received in (over_ros, over_dds):
+        assert received == msg
+        assert codec.to_primitive(typed.from_msg(type(sample), received, CLOCK)) == codec.to_primitive(typed.from_msg(type(sample), msg, CLOCK))

@@ -19,10 +19,12 @@ an empty one), so for that moment a restarted engine may show the previous run's
 """
 from __future__ import annotations
 
+from typing import Any
+
 from core_functions.cell_index import CellIndex
 from core_functions.robots import RobotModel
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import String, TFMessage, Time, TransformStamped
+from execution_engine.transport import codec, typed
+from execution_engine.transport.msgs import TFMessage, Time, TransformStamped
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import LATCHED, TF_STATIC
 from execution_engine.transport.transforms import transform_stamped
@@ -57,15 +59,15 @@ class CellFramesBroadcaster:
         for group in robot.group_names:
             if group not in self._groups:
                 self._groups.add(group)
-                self.node.create_subscription(String, sm_topic(group, "located"), lambda m, g=group: self._on_located(g, m), LATCHED)
+                self.node.create_subscription(typed.LocatedFramesMsg, sm_topic(group, "located"), lambda m, g=group: self._on_located(g, m), LATCHED)
         self._cell, self._root = snapshot, robot.world_frame
         self._located.clear()
         self._publish()
 
-    def _on_located(self, group: str, msg: String) -> None:
+    def _on_located(self, group: str, msg: Any) -> None:
         topic = self.node.resolve(sm_topic(group, "located"))
         try:
-            located = codec.decode(LocatedFrames, msg.data, source=topic)
+            located = typed.from_msg(LocatedFrames, msg, self.node.clock, source=topic)
         except codec.WireError as error:
             self.node.logger.error("%s: ignored located frames: %s", self.node.fully_qualified_name, error)
             return

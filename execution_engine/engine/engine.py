@@ -39,9 +39,8 @@ from execution_engine.engine.safe_pose import SafePosePlan, go_safe
 from execution_engine.engine.wall_clock import RealWallClock, WallClock, wake_loop
 from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
-from execution_engine.transport import codec
 from execution_engine.transport import typed
-from execution_engine.transport.msgs import Bool, String, Trigger, TriggerRequest, TriggerResponse
+from execution_engine.transport.msgs import Bool, Trigger, TriggerRequest, TriggerResponse
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS, LATCHED
 from execution_engine.transport.wire import (
@@ -112,7 +111,7 @@ class ExecutionEngine:
         self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
         self._status_pub = node.create_publisher(typed.EngineStatusMsg, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
         self._events_pub = node.create_publisher(typed.EngineEventMsg, ENGINE_EVENTS, EVENTS)  # every state change and command, once
-        self._cell_pub = node.create_publisher(String, ENGINE_CELL, LATCHED)
+        self._cell_pub = node.create_publisher(typed.CellSnapshotMsg, ENGINE_CELL, LATCHED)
         self._cell_frames = CellFramesBroadcaster(node)  # the cell's frames on tf_static, for RViz
         node.create_subscription(Bool, SAFETY_STOP, self._on_safety, LATCHED)
         for command in ENGINE_SERVICES:
@@ -161,7 +160,7 @@ class ExecutionEngine:
         if app.cell is not None:
             snapshot: CellSnapshot = app.cell.to_snapshot()
             self._cell_name = snapshot.name
-            self._cell_pub.publish(String(codec.encode(snapshot)))
+            self._cell_pub.publish(typed.to_msg(snapshot, self.clock))
             self._cell_frames.publish_cell(snapshot, app.robot)
         try:
             await self._await_machines()

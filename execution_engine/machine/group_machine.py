@@ -53,7 +53,7 @@ from execution_engine.machine.table import (
 )
 from execution_engine.smach import StateMachine, StructureInfo, TransitionRecord, UserData
 from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import String, Trigger, TriggerRequest, TriggerResponse
+from execution_engine.transport.msgs import Trigger, TriggerRequest, TriggerResponse
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
 from execution_engine.transport.wire import (
@@ -140,7 +140,7 @@ class GroupMachine:
         )
         node.create_subscription(typed.MachineRequestMsg, sm_topic(g, "request"), self._on_request, COMMANDS)
         node.create_subscription(typed.SyncMsg, SYNC_TOPIC, self._on_sync, COMMANDS)
-        node.create_subscription(String, ENGINE_CELL, self._on_cell, LATCHED)
+        node.create_subscription(typed.CellSnapshotMsg, ENGINE_CELL, self._on_cell, LATCHED)
         for command in MACHINE_SERVICES:
             node.create_service(Trigger, sm_service(g, command), lambda req, c=command: self._on_service(c, req))
         node.fault_handler = self._on_fault
@@ -227,14 +227,14 @@ class GroupMachine:
         self.ctx.record_sync(message)
         self.events.put(SyncEvent(message))
 
-    def _on_cell(self, msg: String) -> None:
+    def _on_cell(self, msg: Any) -> None:
         try:
-            snapshot = codec.decode(CellSnapshot, msg.data, source=self.node.resolve(ENGINE_CELL))
+            snapshot = typed.from_msg(CellSnapshot, msg, self.clock, source=self.node.resolve(ENGINE_CELL))
         except codec.WireError as error:
             self.ctx.status("error", error=f"ignored cell model: {error}")
             return
         self.ctx.set_cell(snapshot.index())
-        self.store.cell_sha256 = hashlib.sha256(msg.data.encode()).hexdigest()  # stamped on what is recorded for it
+        self.store.cell_sha256 = hashlib.sha256(codec.encode(snapshot).encode()).hexdigest()  # stamped on what is recorded for it
         self._located.attach(self.ctx.cell)
 
     async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:

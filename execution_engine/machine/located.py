@@ -12,8 +12,7 @@ from __future__ import annotations
 
 from core_functions.cell_index import CellIndex
 from core_functions.geometry import Pose
-from execution_engine.transport import codec
-from execution_engine.transport.msgs import String
+from execution_engine.transport import typed
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import LATCHED
 from execution_engine.transport.wire import LocatedFrames, sm_topic
@@ -25,7 +24,7 @@ class LocatedFramesPublisher:
     def __init__(self, node: Node, group: str) -> None:
         self.node = node
         self.group = group
-        self._pub = node.create_publisher(String, sm_topic(group, "located"), LATCHED)
+        self._pub = node.create_publisher(typed.LocatedFramesMsg, sm_topic(group, "located"), LATCHED)
 
     def attach(self, cell: CellIndex | None) -> None:
         """Follow the corrections of ``cell``, the machine's new cell model (none located yet)."""
@@ -37,4 +36,4 @@ class LocatedFramesPublisher:
     def _publish(self, cell: CellIndex) -> None:
         frames: dict[str, Pose] = cell.corrections()
         message = LocatedFrames(group=self.group, cell=cell.name, frames=frames, t=self.node.clock.now())
-        self._pub.publish(String(codec.encode(message)))
+        self._pub.publish(typed.to_msg(message, self.node.clock))

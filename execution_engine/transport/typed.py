@@ -10,7 +10,10 @@ This module is the one place that maps between the two:
   integer nanoseconds so that it comes back to within a nanosecond) and back, into the
   receiver's own run time;
 * only a primitive's fields (``primitive_json``) and what a primitive returned (``result_json``)
-  stay JSON: their shape depends on the primitive's kind.
+  stay JSON: their shape depends on the primitive's kind;
+* the cell model's maps (frame attributes, elements, joint poses, true and located poses) become
+  lists of named entries (``diagnostic_msgs/KeyValue``, ``NamedPose``, ``NamedJointPose``), poses
+  ``geometry_msgs/Pose``; a name listed twice is refused.
 
 What arrives is checked exactly as the JSON codec checks it -- the received message is put back
 into the dataclass's shape and validated by :func:`codec.from_primitive` -- so a message that is
@@ -23,15 +26,18 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol, TypeVar
 
+from core_functions.geometry import Pose
 from execution_engine.clock import Clock
-from execution_engine.transport import codec, mirrors
-from execution_engine.transport.msgs import Header, Time
+from execution_engine.transport import codec, mirrors, msgs
+from execution_engine.transport.msgs import Header, KeyValue, Time
 from execution_engine.transport.wire import (
     BridgeCommand,
     BridgeFeedback,
+    CellSnapshot,
     EngineEvent,
     EngineStatus,
     GroupProgress,
+    LocatedFrames,
     SmRequest,
     SmResult,
     SmStatus,
@@ -61,11 +67,17 @@ GroupProgressMsg = _mirror("GroupProgress")
 BridgeCommandMsg = _mirror("BridgeCommand")
 BridgeFeedbackMsg = _mirror("BridgeFeedback")
 SyncMsg = _mirror("SyncMessage")
+NamedPoseMsg = _mirror("NamedPose")
+CellFrameMsg = _mirror("CellFrame")
+CellElementMsg = _mirror("CellElement")
+NamedJointPoseMsg = _mirror("NamedJointPose")
+CellSnapshotMsg = _mirror("CellSnapshot")
+LocatedFramesMsg = _mirror("LocatedFrames")
 
 #: every type of the interface package a node publishes (a recorder's discovery knows them)
 MESSAGE_TYPES: tuple[type, ...] = (
     MachineStateMsg, MachineStatusMsg, MachineStructureMsg, MachineRequestMsg, MachineResultMsg, EngineStatusMsg, EngineEventMsg,
-    BridgeCommandMsg, BridgeFeedbackMsg, SyncMsg,
+    BridgeCommandMsg, BridgeFeedbackMsg, SyncMsg, CellSnapshotMsg, LocatedFramesMsg,
 )
 _NANO = 1_000_000_000
 
@@ -189,6 +201,38 @@ def _sync_msg(s: SyncMessage, clock: Clock) -> Any:
     )
 
 
+def _pose_msg(p: Pose) -> msgs.Pose:
+    x, y, z, qx, qy, qz, qw = (float(v) for v in (p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw))
+    return msgs.Pose(msgs.Point(x, y, z), msgs.Quaternion(qx, qy, qz, qw))
+
+
+def _pairs(values: dict[str, str]) -> tuple[KeyValue, ...]:
+    return tuple(KeyValue(key=k, value=v) for k, v in values.items())
+
+
+def _named_poses(poses: dict[str, Pose]) -> tuple[Any, ...]:
+    return tuple(NamedPoseMsg(name=name, pose=_pose_msg(pose)) for name, pose in poses.items())
+
+
+def _cell_msg(c: CellSnapshot, clock: Clock) -> Any:
+    return CellSnapshotMsg(
+        name=c.name,
+        frames=tuple(CellFrameMsg(name=f.name, pose=_pose_msg(f.pose), kind=f.kind, parent=f.parent, attributes=_pairs(f.attributes))
+                     for f in c.frames),
+        elements=tuple(CellElementMsg(name=name, attributes=_pairs(attributes)) for name, attributes in c.elements.items()),
+        joint_poses=tuple(
+            NamedJointPoseMsg(name=name, group=c.joint_pose_groups.get(name, ""), joint_names=tuple(joints),
+                              positions=tuple(float(v) for v in joints.values()))
+            for name, joints in c.joint_poses.items()
+        ),
+        truth=_named_poses(c.truth),
+    )
+
+
+def _located_msg(m: LocatedFrames, clock: Clock) -> Any:
+    return LocatedFramesMsg(header=_header(clock, m.t), group=m.group, cell=m.cell, frames=_named_poses(m.frames))
+
+
 _OUT: dict[type, tuple[type, Callable[[Any, Clock], Any]]] = {
     SmRequest: (MachineRequestMsg, _request_msg),
     SmResult: (MachineResultMsg, _result_msg),
@@ -199,6 +243,8 @@ _OUT: dict[type, tuple[type, Callable[[Any, Clock], Any]]] = {
     BridgeCommand: (BridgeCommandMsg, _command_msg),
     BridgeFeedback: (BridgeFeedbackMsg, _feedback_msg),
     SyncMessage: (SyncMsg, _sync_msg),
+    CellSnapshot: (CellSnapshotMsg, _cell_msg),
+    LocatedFrames: (LocatedFramesMsg, _located_msg),
 }
 
 
@@ -376,6 +422,80 @@ def _sync_raw(m: Any, clock: Epoch) -> dict[str, Any]:
     }
 
 
+_POSE_FIELDS = (("x", "position", "x"), ("y", "position", "y"), ("z", "position", "z"),
+                ("qx", "orientation", "x"), ("qy", "orientation", "y"), ("qz", "orientation", "z"), ("qw", "orientation", "w"))
+
+
+def _pose_raw(m: Any, name: str) -> dict[str, float]:
+    """A ``geometry_msgs/Pose`` field in the codec's pose shape; a non-finite value or a quaternion
+    that is not of unit length is refused naming the field."""
+    pose, values = getattr(m, name, None), {}
+    for key, part, axis in _POSE_FIELDS:
+        value = getattr(getattr(pose, part, None), axis, None)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise _Bad(f"expected a number, got {type(value).__name__}", f"{name}.{part}.{axis}")
+        values[key] = float(value)
+    try:
+        Pose(**values)
+    except ValueError as error:
+        raise _Bad(str(error), f"{name}.orientation" if "quaternion" in str(error) else name) from None
+    return values
+
+
+def _by_name(m: Any, name: str, key: str, read: Callable[[Any], Any]) -> dict[str, Any]:
+    """A sequence of named entries as the map the dataclass holds; a name listed twice is refused."""
+    out: dict[str, Any] = {}
+    for i, item in enumerate(_items(m, name)):
+        try:
+            entry, value = _str(item, key), read(item)
+        except _Bad as error:
+            raise _Bad(error.reason, f"{name}[{i}].{error.path}") from None
+        if entry in out:
+            raise _Bad(f"{entry!r} listed twice", f"{name}[{i}].{key}")
+        out[entry] = value
+    return out
+
+
+def _attributes(m: Any) -> dict[str, str]:
+    return _by_name(m, "attributes", "key", lambda kv: _str(kv, "value"))
+
+
+def _joints(m: Any) -> dict[str, float]:
+    names, positions = _items(m, "joint_names"), _items(m, "positions")
+    if len(names) != len(positions):
+        raise _Bad(f"{len(positions)} positions for {len(names)} joint names", "positions")
+    for i, (joint, value) in enumerate(zip(names, positions)):
+        if not isinstance(joint, str):
+            raise _Bad(f"expected a string, got {type(joint).__name__}", f"joint_names[{i}]")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise _Bad(f"expected a number, got {type(value).__name__}", f"positions[{i}]")
+    if len(set(names)) != len(names):
+        raise _Bad("a joint listed twice", "joint_names")
+    return {joint: float(value) for joint, value in zip(names, positions)}
+
+
+def _cell_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    frames = _nested(_items(m, "frames"), "frames", lambda f: {
+        "name": _str(f, "name"), "pose": _pose_raw(f, "pose"), "kind": _str(f, "kind"), "parent": _str(f, "parent"),
+        "attributes": _attributes(f),
+    })
+    joint_poses = _by_name(m, "joint_poses", "name", lambda j: (_joints(j), _str(j, "group")))
+    return {
+        "name": _str(m, "name"), "frames": frames,
+        "elements": _by_name(m, "elements", "name", _attributes),
+        "joint_poses": {name: joints for name, (joints, _) in joint_poses.items()},
+        "joint_pose_groups": {name: group for name, (_, group) in joint_poses.items() if group},
+        "truth": _by_name(m, "truth", "name", lambda p: _pose_raw(p, "pose")),
+    }
+
+
+def _located_raw(m: Any, clock: Epoch) -> dict[str, Any]:
+    return {
+        "group": _str(m, "group"), "cell": _str(m, "cell"), "t": _stamp(m, clock),
+        "frames": _by_name(m, "frames", "name", lambda p: _pose_raw(p, "pose")),
+    }
+
+
 #: reading a message back: its fields in the dataclass's JSON shape, and the dataclass keys whose
 #: field has another name in the .msg (so an error names the .msg field)
 _IN: dict[type, tuple[Callable[[Any, Epoch], dict[str, Any]], dict[str, str]]] = {
@@ -389,6 +509,8 @@ _IN: dict[type, tuple[Callable[[Any, Epoch], dict[str, Any]], dict[str, str]]] =
     BridgeCommand: (_command_raw, {"primitive": "primitive_json"}),
     BridgeFeedback: (_feedback_raw, {"result": "result_json"}),
     SyncMessage: (_sync_raw, {"t": "header.stamp"}),
+    CellSnapshot: (_cell_raw, {"joint_pose_groups": "joint_poses"}),
+    LocatedFrames: (_located_raw, {"t": "header.stamp"}),
 }
 
 
