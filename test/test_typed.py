@@ -181,6 +181,8 @@ def _status(**changes: Any) -> Any:
          "joint_poses[0].positions[0]", "expected a number"),
         (_cell(elements=(typed.CellElementMsg(name="tray"),) * 2), CellSnapshot, "elements[1].name", "'tray' listed twice"),
         (_cell(name=None), CellSnapshot, "name", "expected a string"),
+        (_cell(elements=(typed.CellElementMsg(name="tray"),) * (typed.MAX_SEQUENCE_ITEMS + 1)), CellSnapshot, "elements",
+         "100,001 items, over the limit of 100,000"),
         (typed.LocatedFramesMsg(group="left_arm", cell="c", frames=(typed.NamedPoseMsg(name="drill_1", pose=_pose(w=0.5)),)),
          LocatedFrames, "frames[0].pose.orientation", "unit length"),
         (typed.LocatedFramesMsg(group="left_arm", cell="c", frames=(typed.NamedPoseMsg(name="d", pose=_pose()),) * 2),

@@ -48,6 +48,10 @@ from execution_engine.transport.wire import (
 W = TypeVar("W")
 
 PACKAGE = "dual_arm_executive_interfaces"
+# Items a received sequence may hold.  A typed message has no JSON text for codec.MAX_MESSAGE_BYTES
+# to bound, so this is the receiver's own limit: well above what validate lets through (a cell
+# within 4 MB of JSON has about 31,000 frames), well below what would tie a node up for seconds.
+MAX_SEQUENCE_ITEMS = 100_000
 
 
 def _mirror(name: str) -> type:
@@ -344,6 +348,8 @@ def _items(m: Any, name: str) -> list[Any]:
     value = getattr(m, name, None)
     if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)):
         raise _Bad(f"expected a sequence, got {type(value).__name__}", name)
+    if len(value) > MAX_SEQUENCE_ITEMS:
+        raise _Bad(f"{len(value):,} items, over the limit of {MAX_SEQUENCE_ITEMS:,}", name)
     return list(value)
 
 
