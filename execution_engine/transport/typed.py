@@ -36,6 +36,7 @@ from execution_engine.transport.wire import (
     CellSnapshot,
     EngineEvent,
     EngineStatus,
+    FaultKind,
     GroupProgress,
     LocatedFrames,
     SmRequest,
@@ -46,6 +47,7 @@ from execution_engine.transport.wire import (
 )
 
 W = TypeVar("W")
+T = TypeVar("T")
 
 PACKAGE = "dual_arm_executive_interfaces"
 # Items a received sequence may hold.  A typed message has no JSON text for codec.MAX_MESSAGE_BYTES
@@ -119,6 +121,10 @@ def _opt(value: str) -> str | None:
     return value if value else None
 
 
+def _fault(fault: FaultKind | None) -> str:
+    return "" if fault is None else fault.value
+
+
 def _json(value: Any) -> str:
     return "" if value is None else codec.encode(value)
 
@@ -139,7 +145,7 @@ def _request_msg(r: SmRequest, clock: Clock) -> Any:
 def _result_msg(r: SmResult, clock: Clock) -> Any:
     return MachineResultMsg(
         header=_header(clock, r.t_end), id=r.id, group=r.group, outcome=r.outcome, operation=r.operation,
-        function=r.function, error=_text(r.error), fault="" if r.fault is None else r.fault.value,
+        function=r.function, error=_text(r.error), fault=_fault(r.fault),
         start=stamp_of(clock, r.t_start), primitives=r.primitives,
     )
 
@@ -194,14 +200,14 @@ def _command_msg(c: BridgeCommand, clock: Clock) -> Any:
 def _feedback_msg(f: BridgeFeedback, clock: Clock) -> Any:
     return BridgeFeedbackMsg(
         header=_header(clock, f.t), id=f.id, group=f.group, status=f.status, error=_text(f.error),
-        fault="" if f.fault is None else f.fault.value, result_json=_json(f.result),
+        fault=_fault(f.fault), result_json=_json(f.result),
     )
 
 
 def _sync_msg(s: SyncMessage, clock: Clock) -> Any:
     return SyncMsg(
         header=_header(clock, s.t), group=s.group, key=s.key, event=s.event, state=s.state, error=_text(s.error),
-        fault="" if s.fault is None else s.fault.value,
+        fault=_fault(s.fault),
     )
 
 
@@ -283,12 +289,21 @@ def _int(msg: Any, name: str) -> int:
     return value
 
 
+def _time(value: Any, path: str, clock: Epoch) -> float:
+    """Run time of a ``builtin_interfaces/Time`` field, refused naming ``path`` when it is none."""
+    if not (isinstance(getattr(value, "sec", None), int) and isinstance(getattr(value, "nanosec", None), int)):
+        raise _Bad("expected a builtin_interfaces/Time", path)
+    return run_time(clock, value)
+
+
 def _stamp(msg: Any, clock: Epoch) -> float:
-    header = getattr(msg, "header", None)
-    stamp = getattr(header, "stamp", None)
-    if not (isinstance(getattr(stamp, "sec", None), int) and isinstance(getattr(stamp, "nanosec", None), int)):
-        raise _Bad("expected a builtin_interfaces/Time", "header.stamp")
-    return run_time(clock, stamp)
+    return _time(getattr(getattr(msg, "header", None), "stamp", None), "header.stamp", clock)
+
+
+def _number(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _Bad(f"expected a number, got {type(value).__name__}", path)
+    return float(value)
 
 
 def _parsed(msg: Any, name: str, *, kind: str = "") -> Any:
@@ -323,13 +338,10 @@ def _request_raw(m: Any, clock: Epoch) -> dict[str, Any]:
 
 
 def _result_raw(m: Any, clock: Epoch) -> dict[str, Any]:
-    start = getattr(m, "start", None)
-    if not (isinstance(getattr(start, "sec", None), int) and isinstance(getattr(start, "nanosec", None), int)):
-        raise _Bad("expected a builtin_interfaces/Time", "start")
     return {
         "id": _str(m, "id"), "group": _str(m, "group"), "outcome": _str(m, "outcome"), "operation": _str(m, "operation"),
         "function": _str(m, "function"), "error": _opt(_str(m, "error")), "fault": _opt(_str(m, "fault")),
-        "t_start": run_time(clock, start), "t_end": _stamp(m, clock), "primitives": _int(m, "primitives"),
+        "t_start": _time(getattr(m, "start", None), "start", clock), "t_end": _stamp(m, clock), "primitives": _int(m, "primitives"),
     }
 
 
@@ -353,7 +365,8 @@ def _items(m: Any, name: str) -> list[Any]:
     return list(value)
 
 
-def _nested(items: list[Any], name: str, read: Callable[[Any], dict[str, Any]]) -> list[dict[str, Any]]:
+def _nested(items: list[Any], name: str, read: Callable[[Any], T]) -> list[T]:
+    """Each item read, an error naming the item (``frames[3].pose``)."""
     out = []
     for i, item in enumerate(items):
         try:
@@ -437,10 +450,7 @@ def _pose_raw(m: Any, name: str) -> dict[str, float]:
     that is not of unit length is refused naming the field."""
     pose, values = getattr(m, name, None), {}
     for key, part, axis in _POSE_FIELDS:
-        value = getattr(getattr(pose, part, None), axis, None)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise _Bad(f"expected a number, got {type(value).__name__}", f"{name}.{part}.{axis}")
-        values[key] = float(value)
+        values[key] = _number(getattr(getattr(pose, part, None), axis, None), f"{name}.{part}.{axis}")
     try:
         Pose(**values)
     except ValueError as error:
@@ -451,11 +461,7 @@ def _pose_raw(m: Any, name: str) -> dict[str, float]:
 def _by_name(m: Any, name: str, key: str, read: Callable[[Any], Any]) -> dict[str, Any]:
     """A sequence of named entries as the map the dataclass holds; a name listed twice is refused."""
     out: dict[str, Any] = {}
-    for i, item in enumerate(_items(m, name)):
-        try:
-            entry, value = _str(item, key), read(item)
-        except _Bad as error:
-            raise _Bad(error.reason, f"{name}[{i}].{error.path}") from None
+    for i, (entry, value) in enumerate(_nested(_items(m, name), name, lambda item: (_str(item, key), read(item)))):
         if entry in out:
             raise _Bad(f"{entry!r} listed twice", f"{name}[{i}].{key}")
         out[entry] = value
@@ -470,14 +476,14 @@ def _joints(m: Any) -> dict[str, float]:
     names, positions = _items(m, "joint_names"), _items(m, "positions")
     if len(names) != len(positions):
         raise _Bad(f"{len(positions)} positions for {len(names)} joint names", "positions")
+    values = []
     for i, (joint, value) in enumerate(zip(names, positions)):
         if not isinstance(joint, str):
             raise _Bad(f"expected a string, got {type(joint).__name__}", f"joint_names[{i}]")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise _Bad(f"expected a number, got {type(value).__name__}", f"positions[{i}]")
+        values.append(_number(value, f"positions[{i}]"))
     if len(set(names)) != len(names):
         raise _Bad("a joint listed twice", "joint_names")
-    return {joint: float(value) for joint, value in zip(names, positions)}
+    return dict(zip(names, values))
 
 
 def _cell_raw(m: Any, clock: Epoch) -> dict[str, Any]:
@@ -520,13 +526,18 @@ _IN: dict[type, tuple[Callable[[Any, Epoch], dict[str, Any]], dict[str, str]]] =
 }
 
 
+def _of_type(msg: Any, expected: type, source: str) -> str:
+    """The ROS name of ``expected``; WireError when ``msg`` is of another type."""
+    type_name = str(expected.ROS_TYPE)  # type: ignore[attr-defined]
+    if type(msg) is not expected:
+        raise codec.WireError(f"expected {type_name}, got {type(msg).__name__}", source=source, type_name=type_name)
+    return type_name
+
+
 def from_msg(wire_cls: type[W], msg: Any, clock: Epoch, *, source: str = "") -> W:
     """The wire dataclass of a received typed message; :class:`codec.WireError` (naming ``source``,
     the ROS type and the .msg field) when it is of another type or out of contract."""
-    expected = msg_type(wire_cls)
-    if type(msg) is not expected:
-        type_name = str(expected.ROS_TYPE)  # type: ignore[attr-defined]
-        raise codec.WireError(f"expected {type_name}, got {type(msg).__name__}", source=source, type_name=type_name)
+    _of_type(msg, msg_type(wire_cls), source)
     return from_fields(wire_cls, msg, clock, source=source)
 
 
@@ -550,9 +561,7 @@ def from_fields(wire_cls: type[W], msg: Any, clock: Epoch, *, source: str = "") 
 
 def read_state(msg: Any, *, source: str = "") -> str:
     """The state named by a received ``MachineState``; WireError when it names none."""
-    type_name = str(MachineStateMsg.ROS_TYPE)  # type: ignore[attr-defined]
-    if type(msg) is not MachineStateMsg:
-        raise codec.WireError(f"expected {type_name}, got {type(msg).__name__}", source=source, type_name=type_name)
+    type_name = _of_type(msg, MachineStateMsg, source)
     if not isinstance(msg.state, str) or not msg.state:
         raise codec.WireError("names no state", source=source, type_name=type_name, path="state")
     return msg.state
