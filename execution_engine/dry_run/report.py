@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from execution_engine.app_model.diagnostics import Diagnostic, capped
-from execution_engine.engine.flags import FlagWait
+from execution_engine.engine.flags import FlagWait, costliest, wait_totals
 
 #: How the timeline's seconds were measured: the application's simulated clock (a simulator that
 #: runs on it: every wait of the engine and the machines is in it too), or the robot's own cycles
@@ -152,20 +152,12 @@ class DryRunReport:
             return []
         out = []
         for group, time in self.groups.items():
-            waited: dict[str, float] = {}
-            for wait in self.waits:
-                if wait.group == group:
-                    key = f"{wait.kind} {wait.flag!r}"
-                    waited[key] = waited.get(key, 0.0) + wait.duration
+            waited = wait_totals(self.waits, group)
             if waited:
-                parts = ", ".join(f"waiting for {what} {d:.2f} s" for what, d in sorted(waited.items(), key=lambda kv: -kv[1]))
+                parts = ", ".join(f"waiting for {kind} {name!r} {d:.2f} s" for (kind, name), d in costliest(waited))
                 out.append(f"  {group:<12} idle: {parts}, the rest {max(0.0, time.idle - sum(waited.values())):.2f} s")
-        totals: dict[str, float] = {}
-        for wait in self.waits:
-            key = f"{wait.kind} {wait.flag!r}"
-            totals[key] = totals.get(key, 0.0) + wait.duration
-        costly = sorted(totals.items(), key=lambda kv: -kv[1])[:3]
-        out.append("  waits that cost most: " + ", ".join(f"{what} {d:.2f} s" for what, d in costly))
+        costly = costliest(wait_totals(self.waits), 3)
+        out.append("  waits that cost most: " + ", ".join(f"{kind} {name!r} {d:.2f} s" for (kind, name), d in costly))
         return out
 
 

@@ -17,7 +17,7 @@ passed / timeout / set) so the trace and the Fig. 12 timeline show it.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -49,6 +49,21 @@ class FlagWait:
     @property
     def duration(self) -> float:
         return self.t_end - self.t_start
+
+
+def wait_totals(waits: Iterable[FlagWait], group: str | None = None) -> dict[tuple[str, str], float]:
+    """Seconds waited per (kind, flag or zone) -- of ``group``, or of every group -- in the order
+    first waited: what a run report and the dry run split a group's idle time into."""
+    totals: dict[tuple[str, str], float] = {}
+    for wait in waits:
+        if group is None or wait.group == group:
+            totals[(wait.kind, wait.flag)] = totals.get((wait.kind, wait.flag), 0.0) + wait.duration
+    return totals
+
+
+def costliest(totals: dict[tuple[str, str], float], count: int | None = None) -> list[tuple[tuple[str, str], float]]:
+    """The totals longest first (ties in the order first waited), the first ``count`` of them."""
+    return sorted(totals.items(), key=lambda kv: -kv[1])[:count]
 
 
 class FlagBoard:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from execution_engine.engine.flags import FlagWait
+from execution_engine.engine.flags import FlagWait, costliest, wait_totals
 
 RunOutcome = Literal["finished", "failed", "stopped"]
 StepOutcome = Literal["done", "skipped", "failed"]
@@ -117,19 +117,12 @@ class RunReport:
         lines = []
         for group in sorted(self.group_busy):
             idle = max(0.0, self.total - self.group_busy[group])
-            waited: dict[str, float] = {}
-            for wait in self.flag_waits:
-                if wait.group == group:
-                    key = f"waiting for {wait.kind} {wait.flag!r}"
-                    waited[key] = waited.get(key, 0.0) + wait.duration
+            waited = wait_totals(self.flag_waits, group)
             if not waited:
                 continue
-            parts = ", ".join(f"{t:.2f} s {what}" for what, t in sorted(waited.items(), key=lambda kv: -kv[1]))
+            parts = ", ".join(f"{t:.2f} s waiting for {kind} {name!r}" for (kind, name), t in costliest(waited))
             lines.append(f"  {group:<12} idle {idle:8.2f} s: {parts}, {max(0.0, idle - sum(waited.values())):.2f} s the rest")
-        totals: dict[tuple[str, str], float] = {}
-        for wait in self.flag_waits:
-            totals[(wait.kind, wait.flag)] = totals.get((wait.kind, wait.flag), 0.0) + wait.duration
-        costly = sorted(totals.items(), key=lambda kv: -kv[1])[:3]
+        costly = costliest(wait_totals(self.flag_waits), 3)
         lines.append("  waits that cost most: " + ", ".join(f"{kind} {name!r} {t:.2f} s" for (kind, name), t in costly))
         return lines
 
