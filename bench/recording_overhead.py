@@ -64,6 +64,9 @@ class NullSink:
     def put(self, topic: str, msg: Any, offered: Any, log_time_ns: int) -> None:
         pass
 
+    def derive_tf(self, *args: Any) -> None:
+        pass
+
     def add_metadata(self, name: str, data: Any) -> None:
         pass
 
@@ -80,7 +83,7 @@ class NullSink:
 def attach_recorder(deployment: Deployment, path: Path | None) -> Recorder:
     """A recorder node on the deployment's transport writing ``path`` (None: subscribed, nothing written)."""
     sink: Any = McapSink(open(path, "wb"), str(path)) if path is not None else NullSink()
-    recorder = Recorder(deployment.transport.create_node("recorder"), sink)
+    recorder = Recorder(deployment.transport.create_node("recorder"), sink, derive_tf=True)  # as ``run --record``
     recorder.start()
     return recorder
 

@@ -147,7 +147,9 @@ class Clock:
         would otherwise make time race ahead, burning a core and hours of robot time while an
         alarm waits for an operator.  Inside ``held()`` the loop waits for real events only
         (a key, a service call, a wall-clock timer) and run time does not advance; real and
-        scaled clocks are not affected.  Use it only where nothing but a person can move the run on.
+        scaled clocks are not affected.  Use it only where nothing but the outside world can move the
+        run on: a person, or work done outside the loop that the run waits for (a recording being
+        finished in its writer threads).
         """
         loop = self._loop
         if not isinstance(loop, VirtualTimeLoop):

@@ -9,7 +9,7 @@ and ``joint_states`` disagree.
 
 As robot_state_publisher: one transform per movable URDF joint (parent link -> child link) with
 every joint-state publication; the fixed joints once on ``tf_static``; the URDF text once,
-latched.  The kinematics are pinocchio's (:mod:`robot_bridges.urdf_tree`), loaded only for a
+latched.  The kinematics are pinocchio's (:mod:`core_functions.urdf_tree`), loaded only for a
 back end that has a URDF.
 """
 from __future__ import annotations
@@ -17,31 +17,30 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from execution_engine.transport.msgs import Header, Quaternion, String, TFMessage, Time, Transform, TransformStamped, Vector3
+from execution_engine.transport.msgs import String, TFMessage, Time
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import ROBOT_DESCRIPTION, TF, TF_STATIC
-from execution_engine.transport.transforms import transform_stamped
 from execution_engine.transport.wire import ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 
 if TYPE_CHECKING:
+    from core_functions.urdf_tree import UrdfTree
     from robot_bridges.backend import RobotBackend
-    from robot_bridges.urdf_tree import UrdfTree
 
 
 class RobotStatePublisher:
     """Publishes one robot's URDF and link transforms through ``node``."""
 
     def __init__(self, node: Node, urdf: str) -> None:
-        from robot_bridges.urdf_tree import UrdfTree  # pinocchio: only for a robot with a URDF
+        from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio: only for a robot with a URDF
 
         self.node = node
-        self.tree: UrdfTree = UrdfTree(urdf)
+        self.links = LinkTransforms(urdf)
+        self.tree: UrdfTree = self.links.tree
         self._description = node.create_publisher(String, ROBOT_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION)
         self._tf = node.create_publisher(TFMessage, TF_TOPIC, TF)
         self._tf_static = node.create_publisher(TFMessage, TF_STATIC_TOPIC, TF_STATIC)
         self._description.publish(String(urdf))
         self._static_sent = False
-        self._placed: dict[str, tuple[float, Transform]] = {}  # movable joint -> (position, its transform): a joint at rest is not worked out again
 
     @classmethod
     def for_backend(cls, node: Node, backend: RobotBackend) -> RobotStatePublisher | None:
@@ -53,22 +52,9 @@ class RobotStatePublisher:
         """The transforms for one joint state, stamped like it; the fixed joints the first time."""
         if not self._static_sent:
             self._static_sent = True
-            fixed = self.tree.fixed_transforms()
-            if fixed:  # tf_static is latched: one message with every fixed joint, sent once
-                self._tf_static.publish(TFMessage(tuple(transform_stamped(j.parent, j.child, p, stamp) for j, p in fixed)))
+            fixed = self.links.fixed(stamp)
+            if fixed is not None:
+                self._tf_static.publish(fixed)
         if self._tf.get_subscription_count() == 0:
-            return  # nobody draws the robot: skip the kinematics
-        given = self.tree.positions(names, positions)
-        if any(self._placed.get(name, (None,))[0] != value for name, value in given.items()):
-            self.tree.place(given)  # (a joint's transform depends on its own position only)
-        transforms = []
-        for joint in self.tree.joints:
-            value = given.get(joint.name)
-            if value is None:
-                continue
-            placed = self._placed.get(joint.name)
-            if placed is None or placed[0] != value:
-                translation, rotation = self.tree.relative(joint)
-                placed = self._placed[joint.name] = (value, Transform(Vector3(*translation), Quaternion(*rotation)))
-            transforms.append(TransformStamped(Header(stamp, joint.parent), joint.child, placed[1]))
-        self._tf.publish(TFMessage(tuple(transforms)))
+            return  # nobody draws the robot (a recording works tf out of joint_states itself): skip the kinematics
+        self._tf.publish(self.links.moving(names, positions, stamp))

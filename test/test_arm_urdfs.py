@@ -22,7 +22,7 @@ from execution_engine.clock import Clock
 from execution_engine.transport.transforms import compose_to_root
 from robot_bridges.kuka_rsi import kinematics as kuka
 from robot_bridges.vplus import kinematics as viper
-from robot_bridges.urdf_tree import UrdfTree
+from core_functions.urdf_tree import UrdfTree
 
 VIPER = viper.ViperKinematics()
 KUKA = kuka.KukaArm()

@@ -30,7 +30,7 @@ from execution_engine.transport.transforms import compose_to_root, tree_of
 from execution_engine.transport.wire import ENGINE_CELL, TF_STATIC_TOPIC, TF_TOPIC, CellSnapshot, LocatedFrames, sm_topic
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
-from robot_bridges.urdf_tree import UrdfTree
+from core_functions.urdf_tree import UrdfTree
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"

@@ -20,6 +20,7 @@ from scripted_backend import ScriptedBackend
 from core_functions.geometry import Pose
 from core_functions.primitives import MoveJoints
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN
+from core_functions.urdf_tree import UrdfTree
 from execution_engine.clock import Clock
 from execution_engine.transport.local import LocalTransport
 from execution_engine.transport.msgs import JointState, String, TFMessage, Time
@@ -32,7 +33,6 @@ from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.nextage_sim.backend import NextageSimBackend
 from robot_bridges.registry import create_backend
 from robot_bridges.robot_state import RobotStatePublisher
-from robot_bridges.urdf_tree import UrdfTree
 
 ROOT = Path(__file__).resolve().parents[1]
 NEXTAGE_URDF = ROOT / "robot_bridges" / "nextage_sim" / "urdf" / "nextage_open.urdf"

@@ -120,7 +120,7 @@ async def start_recording(
             observer.sinks.append(flight.writer.on_status)
             observer.event_sinks.append(flight.writer.on_event)
     if getattr(args, "record", None):
-        flight.recorder = record_node(transport.create_node("recorder"), args.record, app, backend, continues)
+        flight.recorder = record_node(transport.create_node("recorder"), args.record, app, backend, continues, derive_tf=True)
     return flight
 
 
@@ -129,13 +129,17 @@ def _skipped(store: CheckpointStore, index: int, operation: Operation, group: st
     store.function_event(index, operation.id, group, operation.calls[group].function, 0, SKIPPED, 0.0)
 
 
-def record_node(node: Node, path: str, app: Application, backend: str = "ROS 2 bridge node", continues: str = "") -> Recorder | None:
+def record_node(
+    node: Node, path: str, app: Application, backend: str = "ROS 2 bridge node", continues: str = "", *, derive_tf: bool = False
+) -> Recorder | None:
     """Record the graph ``node`` sees to ``path`` (None when empty); on ROS, the engine's ``record``
-    parameter records through the engine's own node."""
+    parameter records through the engine's own node.  ``derive_tf``: the bridge runs in this
+    process (``run``), so ``tf`` is worked out of its joint states (:mod:`.derived_tf`); on a
+    graph, ``tf`` may have other publishers and is recorded as received."""
     if not path:
         return None
     stream = open(path, "wb")  # noqa: SIM115 - the sink's thread owns and closes it
-    recorder = Recorder(node, McapSink(stream, path))
+    recorder = Recorder(node, McapSink(stream, path), derive_tf=derive_tf)
     recorder.describe_run(app.path, app.cell.path if app.cell is not None else None, {
         "application": app.name, "robot": app.robot.name, "backend": backend, "continues": continues,
     })

@@ -11,7 +11,9 @@ Protocol, both ways frames of a one-byte kind, a 4-byte little-endian length and
 
 * in (stdin), kind ``B``: a pickled list of items -- ``("m", topic, ros_type, msg, offered,
   log_time_ns)`` (a message's fields as a dict: :func:`.frames.ros_fields`),
-  ``("meta", name, data)``, ``("att", name, media_type, data, log_time_ns)``, ``("sync", n)``
+  ``("meta", name, data)``, ``("att", name, media_type, data, log_time_ns)``, ``("tf", topic,
+  offered, joint_states_topic, description_topic)`` (work ``tf`` out of the joint states:
+  :mod:`.derived_tf`), ``("sync", n)``
   (close the chunk in progress and hand over every byte so far), ``("stop", dropped_by_topic)``
   (store the ``recording_stats`` metadata, write the summary and the index, end);
 * out (stdout), kind ``D``: bytes of the file, in order; ``S``: sync ``n`` is done (every byte
@@ -34,6 +36,7 @@ from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import EncoderFunction, serialize_dynamic
 
 from execution_engine.recorder.definitions import schema_text
+from execution_engine.recorder.derived_tf import TF_TYPE, DerivedTf
 from execution_engine.recorder.frames import frame, read_frame
 from execution_engine.transport.qos import Durability, QoS, Reliability
 
@@ -89,6 +92,7 @@ class Encoder:
         self.channels: dict[str, int] = {}
         self.sequence: Counter[str] = Counter()
         self.by_topic: Counter[str] = Counter()
+        self.derived: DerivedTf | None = None  # tf worked out of joint_states (:mod:`.derived_tf`)
 
     def message(self, topic: str, ros_type: str, msg: dict[str, Any], offered: tuple[QoS, ...], log_time: int) -> None:
         schema = self.schemas.get(ros_type)
@@ -104,6 +108,8 @@ class Encoder:
         self.writer.add_message(channel, log_time, schema[1](msg), log_time, self.sequence[topic])
         self.sequence[topic] += 1
         self.by_topic[topic] += 1
+        if self.derived is not None and (tf := self.derived.follow(topic, msg)) is not None:
+            self.message(self.derived.topic, TF_TYPE, tf, self.derived.offered, log_time)
 
     def item(self, item: tuple[Any, ...]) -> bool:
         """Handle one item; True at the stop."""
@@ -117,6 +123,8 @@ class Encoder:
             self.writer.add_attachment(log_time, log_time, name, media_type, data)
         elif kind == "sync":
             self.writer.flush()
+        elif kind == "tf":
+            self.derived = DerivedTf(*item[1:])
         elif kind == "stop":
             dropped: Counter[str] = item[1]
             self.writer.add_metadata("recording_stats", {

@@ -7,6 +7,7 @@ is, transient-local only when all are, so the latched state, structure and cell 
 same code records the in-process deployment of ``run --record`` and a ROS 2 graph (the engine
 node's ``record`` parameter).  Every message is handed to an :class:`McapSink`, whose encoder process
 does the converting, encoding and writing; the callbacks only enqueue the message and its stamp.
+In an in-process run the encoder also works ``tf`` out of ``joint_states`` (:mod:`.derived_tf`).
 
 What ran goes in with it: the application XML and its cell model as attachments, and a
 ``dual_arm_executive`` metadata record (application, digests, robot, back end, software version,
@@ -27,7 +28,7 @@ from execution_engine.transport import codec
 from execution_engine.transport import typed
 from execution_engine.transport.port import Node, TopicInfo, TransportError
 from execution_engine.transport.qos import Durability, History, QoS, Reliability
-from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus
+from execution_engine.transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC, EngineStatus
 
 POLL = 0.5  # run seconds between looks for new topics (rosbag2 polls every 0.1 s of wall time)
 DEPTH = 1000  # a recorder keeps up with bursts: every state change matters
@@ -62,10 +63,13 @@ def reader_qos(offered: tuple[QoS, ...]) -> QoS:
 class Recorder:
     """Records every topic ``node`` can see into ``sink`` until :meth:`close`."""
 
-    def __init__(self, node: Node, sink: McapSink, poll: float = POLL) -> None:
+    def __init__(self, node: Node, sink: McapSink, poll: float = POLL, *, derive_tf: bool = False) -> None:
         self.node = node
         self.sink = sink
         self.poll = poll
+        # In a run whose bridge is in this process, tf is its joint_states through its URDF: the
+        # encoder works it out (:mod:`.derived_tf`) and the bridge need not compute it for us.
+        self._derived_tf = node.resolve(TF_TOPIC) if derive_tf else None
         self._topics: dict[str, TopicInfo] = {}
         self._operation: str | None = None
         self._task: asyncio.Task[None] | None = None
@@ -86,6 +90,10 @@ class Recorder:
             ros_type = str(getattr(info.msg_type, "ROS_TYPE", ""))
             if not known(ros_type):
                 self.node.logger.warning("recorder: %s is not recorded: no message definition of %s", info.name, ros_type or info.msg_type.__name__)
+                continue
+            if info.name == self._derived_tf:
+                self.sink.derive_tf(info.name, info.offered, self.node.resolve(JOINT_STATES), self.node.resolve(ROBOT_DESCRIPTION_TOPIC))
+                new.append(info.name)
                 continue
             self.node.create_subscription(info.msg_type, info.name, self._callback(info), reader_qos(info.offered))
             new.append(info.name)
@@ -149,4 +157,5 @@ class Recorder:
             self._task.cancel()
             await asyncio.gather(self._task, return_exceptions=True)
         await asyncio.sleep(0)  # deliveries already scheduled on the loop
-        return await asyncio.get_running_loop().run_in_executor(None, self.sink.close)
+        with self.node.clock.held():  # simulated time waits for the file: the cell's periodic tasks would race ahead
+            return await asyncio.get_running_loop().run_in_executor(None, self.sink.close)

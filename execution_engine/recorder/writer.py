@@ -146,6 +146,11 @@ class McapSink:
             return
         self._queue.append(("m", topic, msg, offered, log_time_ns))
 
+    def derive_tf(self, topic: str, offered: tuple[QoS, ...], joint_states: str, description: str) -> None:
+        """Have the encoder write ``topic`` (``tf``) from the recorded joint states and URDF
+        (:mod:`.derived_tf`) instead of receiving it."""
+        self._control(("tf", topic, offered, joint_states, description))
+
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         self._control(("meta", name, dict(data)))
 

@@ -1,0 +1,63 @@
+"""``tf`` worked out in the encoder process from the recorded ``joint_states`` and ``robot_description``.
+
+The bridge publishes ``tf`` only when someone listens, and a recorder listening to it would make
+the bridge compute about 15 transforms 20 times a second and hand each over, object by object,
+on the control path: at ``--speed max`` that alone cost the run some 14 % of its CPU time.  In
+an in-process run (``run --record``) the bridge's ``tf`` is a pure function of its own
+``joint_states`` and URDF, stamped like the state and published in the same step; so the
+recorder asks the encoder to do what the bridge would have done, with the same code
+(:class:`~execution_engine.transport.link_transforms.LinkTransforms`), and writes each ``tf``
+message right after its joint state, with the same log time.  A recording made this way holds
+the ``tf`` a listener would have received, message for message.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from execution_engine.transport.msgs import TFMessage, Time
+from execution_engine.transport.qos import QoS
+
+TF_TYPE = TFMessage.ROS_TYPE
+
+
+def message_fields(value: Any) -> Any:
+    """A message object as the CDR encoder takes it: dicts of fields, lists for sequences."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: message_fields(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, (tuple, list)):
+        return [message_fields(v) for v in value]
+    return value
+
+
+@dataclasses.dataclass
+class DerivedTf:
+    """Which topics ``tf`` comes from, and the URDF's link transforms once its text arrived."""
+
+    topic: str
+    offered: tuple[QoS, ...]
+    joint_states: str
+    description: str
+    links: Any = None  # LinkTransforms, made from the first robot_description
+
+    def follow(self, topic: str, msg: dict[str, Any]) -> dict[str, Any] | None:
+        """After a recorded message: the ``tf`` message it implies, or None.
+
+        A URDF pinocchio cannot read, or a joint state whose names and positions differ in
+        length, gives no ``tf`` -- the bridge could not have published one either."""
+        if topic == self.description:
+            from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio: only when asked
+
+            try:
+                self.links = LinkTransforms(str(msg.get("data", "")))
+            except (ValueError, RuntimeError):
+                self.links = None
+            return None
+        if topic != self.joint_states or self.links is None:
+            return None
+        stamp = msg["header"]["stamp"]
+        try:
+            tf = self.links.moving(msg["name"], msg["position"], Time(int(stamp["sec"]), int(stamp["nanosec"])))
+        except ValueError:
+            return None
+        return message_fields(tf)
