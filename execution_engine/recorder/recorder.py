@@ -24,11 +24,10 @@ from typing import Any
 
 from execution_engine.recorder.definitions import known
 from execution_engine.recorder.writer import McapSink, RecordingStats
-from execution_engine.transport import codec
 from execution_engine.transport import typed
 from execution_engine.transport.port import Node, TopicInfo, TransportError
 from execution_engine.transport.qos import Durability, History, QoS, Reliability
-from execution_engine.transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC, EngineStatus
+from execution_engine.transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC
 
 POLL = 0.5  # run seconds between looks for new topics (rosbag2 polls every 0.1 s of wall time)
 DEPTH = 1000  # a recorder keeps up with bursts: every state change matters
@@ -119,13 +118,11 @@ class Recorder:
         return record
 
     def _on_engine_status(self, msg: Any) -> None:
-        """An operation boundary: the chunk so far goes to disk, as the trace does."""
-        try:
-            status = typed.from_msg(EngineStatus, msg, self.node.clock, source=self._engine_status)
-        except codec.WireError:
-            return
-        if status.operation_id != self._operation:
-            self._operation = status.operation_id
+        """An operation boundary: the chunk so far goes to disk, as the trace does.  Only the
+        operation's id is read (the file keeps the whole message): no decoding on the control path."""
+        operation = msg.operation_id
+        if isinstance(operation, str) and operation != self._operation:
+            self._operation = operation
             self.sink.sync()
 
     def describe_run(
