@@ -173,3 +173,34 @@ def test_qos_mapping_for_rclpy_is_by_enum_member_name() -> None:
     assert rclpy_qos_kwargs(SENSOR)["reliability"] == "BEST_EFFORT"
     with pytest.raises(ValueError, match="depth"):
         QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_LAST, 0)
+
+
+def test_a_publisher_reaches_exactly_the_subscriptions_alive_when_it_publishes(run_sim: Any) -> None:
+    """Who a publisher reaches is worked out once per graph change, so it must follow every change:
+    a subscription made between two messages gets the second, a destroyed one nothing more, and an
+    incompatible QoS never matches."""
+
+    async def main(clock: Clock) -> tuple[list[str], list[str], list[str], list[int]]:
+        bus = LocalTransport(clock)
+        node = bus.create_node("n")
+        pub = node.create_publisher(String, "/t", SENSOR)
+        first: list[str] = []
+        later: list[str] = []
+        strict: list[str] = []
+        counts = []
+        sub = node.create_subscription(String, "/t", lambda m: first.append(m.data), SENSOR)
+        node.create_subscription(String, "/t", lambda m: strict.append(m.data), QoS(reliability=Reliability.RELIABLE))
+        counts.append(pub.get_subscription_count())
+        pub.publish(String("a"))
+        node.create_subscription(String, "/t", lambda m: later.append(m.data), SENSOR)
+        counts.append(pub.get_subscription_count())
+        pub.publish(String("b"))
+        await clock.sleep(0)
+        sub.destroy()
+        counts.append(pub.get_subscription_count())
+        pub.publish(String("c"))
+        await clock.sleep(0)
+        return first, later, strict, counts
+
+    first, later, strict, counts = run_sim(main)
+    assert first == ["a", "b"] and later == ["b", "c"] and strict == [] and counts == [1, 2, 1]

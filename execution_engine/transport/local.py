@@ -193,6 +193,9 @@ class LocalTransport(Transport):
         super().__init__(clock)
         self._publishers: dict[str, list[_LocalPublisher[Any]]] = {}
         self._subscriptions: dict[str, list[_LocalSubscription[Any]]] = {}
+        # publisher -> the subscriptions it reaches: worked out once, not on every publish (a
+        # running cell publishes thousands of messages a second and rarely changes its graph)
+        self._matches: dict[_LocalPublisher[Any], tuple[_LocalSubscription[Any], ...]] = {}
         self._services: dict[str, _LocalService] = {}
         self._types: dict[str, type] = {}
         self._nodes: dict[str, LocalNode] = {}
@@ -234,10 +237,12 @@ class LocalTransport(Transport):
         pubs = self._publishers.get(pub.topic, [])
         if pub in pubs:
             pubs.remove(pub)
+        self._matches.pop(pub, None)
 
     def add_subscription(self, sub: _LocalSubscription[Any]) -> None:
         self._claim_type(sub.topic, sub.msg_type)
         self._subscriptions.setdefault(sub.topic, []).append(sub)
+        self._matches.clear()
         for pub in self._publishers.get(sub.topic, []):
             if sub.qos.compatible_with(pub.qos) and sub.qos.durability is Durability.TRANSIENT_LOCAL:
                 for msg in pub.history:
@@ -247,12 +252,16 @@ class LocalTransport(Transport):
         subs = self._subscriptions.get(sub.topic, [])
         if sub in subs:
             subs.remove(sub)
+        self._matches.clear()
 
     def matching_publishers(self, sub: _LocalSubscription[Any]) -> list[_LocalPublisher[Any]]:
         return [p for p in self._publishers.get(sub.topic, []) if sub.qos.compatible_with(p.qos)]
 
-    def matching_subscriptions(self, pub: _LocalPublisher[Any]) -> list[_LocalSubscription[Any]]:
-        return [s for s in self._subscriptions.get(pub.topic, []) if s.qos.compatible_with(pub.qos)]
+    def matching_subscriptions(self, pub: _LocalPublisher[Any]) -> tuple[_LocalSubscription[Any], ...]:
+        found = self._matches.get(pub)
+        if found is None:
+            found = self._matches[pub] = tuple(s for s in self._subscriptions.get(pub.topic, []) if s.qos.compatible_with(pub.qos))
+        return found
 
     def add_service(self, server: _LocalService) -> None:
         if server.name in self._services:
