@@ -422,7 +422,9 @@ class DdsTransport(Transport):
             )
         except Exception as error:  # noqa: BLE001 - DDSException from a bad CYCLONEDDS_URI and the like
             raise TransportError(f"cannot join DDS domain {self.domain_id}: {error} (check CYCLONEDDS_URI)") from None
-        self.waiter = DdsWaiter(self.dds, self.participant, f"domain {self.domain_id}")
+        self.spin_error: BaseException | None = None
+        self._closed = asyncio.Event()
+        self.waiter = DdsWaiter(self.dds, self.participant, f"domain {self.domain_id}", on_stop=self._waiter_stopped)
         self._topics: dict[tuple[str, type], Any] = {}
         self._hashes: dict[str, bytes] = {}
         self._ids = itertools.count(1)
@@ -432,8 +434,6 @@ class DdsTransport(Transport):
         self._nodes: dict[str, DdsNode] = {}
         self.rejected: Counter[str] = Counter()
         self.handlers: set[asyncio.Task[Any]] = set()
-        self.spin_error: BaseException | None = None
-        self._closed = asyncio.Event()
         self._graph_pending = False
         discovery_topic = self.topic(graph.DISCOVERY_TOPIC, self.registry.message(graph.DISCOVERY_TYPE))
         discovery_qos = graph.dds_qos(graph.DISCOVERY, user_data=self.type_hash(graph.DISCOVERY_TYPE))
@@ -532,6 +532,13 @@ class DdsTransport(Transport):
     def user_args(self, argv: Sequence[str]) -> list[str]:
         """``argv`` without the program name and its ROS arguments."""
         return user_arguments(argv)
+
+    def _waiter_stopped(self, error: BaseException) -> None:
+        """The waiter's thread stopped by itself: this process hears nothing any more, so it ends
+        as an rclpy process does when its executor dies (``spin_error``, non-zero exit; the
+        launch names the node and the other groups stop)."""
+        self.spin_error = error
+        self.call_soon(self._closed.set)
 
     async def wait_closed(self) -> None:
         await self._closed.wait()

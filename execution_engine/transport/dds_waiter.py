@@ -24,8 +24,9 @@ JOIN_TIMEOUT = 5.0  # wall seconds close() waits for the thread (a handler takes
 class DdsWaiter:
     """Calls ``handler()`` on its own thread whenever a watched reader holds samples."""
 
-    def __init__(self, dds: Any, participant: Any, name: str) -> None:
+    def __init__(self, dds: Any, participant: Any, name: str, on_stop: Callable[[BaseException], None] | None = None) -> None:
         self._dds = dds
+        self._on_stop = on_stop  # told when the thread stops by itself: nothing would arrive any more
         self._waitset = dds.core.WaitSet(participant)
         self._guard = dds.core.GuardCondition(participant)  # wakes the thread for close()
         self._waitset.attach(self._guard)
@@ -64,6 +65,8 @@ class DdsWaiter:
             except Exception as error:  # noqa: BLE001 - the waitset is being deleted, or a defect: said, then stop
                 if not self._stopping:
                     log.error("dds: the waiter thread stops: %s: %s", type(error).__name__, error)
+                    if self._on_stop is not None:
+                        self._on_stop(error)
                 return
             with self._lock:
                 watched = list(self._watched.values())

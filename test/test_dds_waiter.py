@@ -1,0 +1,50 @@
+"""The DDS transport's one receiving thread: if it stops by itself, the process must learn it.
+
+Everything a DDS node hears comes through the waiter's thread; a waiter that died with only a
+log line would leave a node that looks alive and hears nothing (a machine waiting for feedback
+forever).  The transport ends as an rclpy one does when its executor dies: ``spin_error`` set,
+``wait_closed`` returns, and the node process exits non-zero (``ros_main``).
+"""
+from __future__ import annotations
+
+import asyncio
+import random
+from typing import Any
+
+from execution_engine.clock import Clock, real_clock, run_with_clock
+from execution_engine.transport.dds import DdsTransport
+
+LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
+BOUND = 10.0
+
+
+class BrokenWaitSet:
+    """A waitset whose wait fails, as a defect in the binding or a deleted entity would make it."""
+
+    def wait(self, timeout: Any) -> None:
+        raise RuntimeError("waitset broken")
+
+    def attach(self, condition: Any) -> None:
+        pass
+
+    def detach(self, condition: Any) -> None:
+        pass
+
+
+def test_a_waiter_that_stops_by_itself_closes_the_transport_with_its_error() -> None:
+    env = {"ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK}
+
+    async def main(clock: Clock) -> tuple[BaseException | None, BaseException | None, bool]:
+        transport = DdsTransport(clock, env=env)
+        try:
+            healthy = transport.spin_error
+            transport.waiter._waitset = BrokenWaitSet()  # noqa: SLF001 - the thread takes it at its next wait
+            await asyncio.wait_for(transport.wait_closed(), BOUND)
+            return healthy, transport.spin_error, transport.waiter._thread.is_alive()  # noqa: SLF001
+        finally:
+            await transport.shutdown()
+
+    healthy, error, alive = run_with_clock(main, real_clock())
+    assert healthy is None
+    assert isinstance(error, RuntimeError) and str(error) == "waitset broken"
+    assert not alive
