@@ -130,9 +130,9 @@ def raw_round_trip(n: int) -> float:
             once()
         return (time.perf_counter() - t0) / n
     finally:  # no listener may fire into a finalizing interpreter
-        from execution_engine.transport.dds import _delete
+        from execution_engine.transport.dds_entities import delete
 
-        _delete(participant)
+        delete(participant)
 
 
 THROUGHPUT_PUBLISHER = """

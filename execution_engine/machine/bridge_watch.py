@@ -25,15 +25,20 @@ class BridgeWatch:
         self.node = node
         self.feedback = feedback
         self.names: list[str] = []  # the bridge's node(s), as last seen alive
+        self._count = 0  # live publishers at the last check: the names are asked again only when it changes
 
     def lost(self) -> str | None:
         """Why the bridge is gone, or None while its feedback publisher is alive (or unwatched)."""
         feedback = self.feedback
         if feedback is None:
             return None
-        if feedback.get_publisher_count() > 0:
-            self.names = feedback.publisher_nodes() or self.names
+        count = feedback.get_publisher_count()
+        if count > 0:
+            if count != self._count or not self.names:  # asking who they are costs a graph look-up (DDS, rclpy)
+                self.names = feedback.publisher_nodes() or self.names
+            self._count = count
             return None
+        self._count = 0
         who = f"bridge {', '.join(self.names)}" if self.names else "the bridge"
         topic = self.node.resolve(feedback.topic)
         return f"{who} lost: no live publisher on {topic} (its process died or was cut off from this one)"
