@@ -15,7 +15,7 @@ Operators start, pause, resume, step, stop and reset the whole application throu
 services (or, in its own process, :meth:`ExecutionEngine.operator_command`); a ``true`` on
 ``/cell/safety_stop`` pauses every group until an operator resumes.  Every command and every
 change of the engine's state is published on ``execution_engine/events`` (traces) and every
-command is listed in the run report with its run time and source.
+command is listed in the run report with its run time and source (:mod:`.commands`).
 """
 from __future__ import annotations
 
@@ -27,20 +27,19 @@ from typing import Protocol
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import BindContext, Catalog
-from core_functions.limits import DURATION
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
+from execution_engine.engine.commands import OperatorCommands
 from execution_engine.engine.faults import verdict
 from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard, run_groups
 from execution_engine.engine.group_link import GroupLink
-from execution_engine.engine.operator import CONSOLE_KEYS, ENDED, Flags, decide
-from execution_engine.engine.report import GroupError, OperatorAction, RunReport
+from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
-from execution_engine.engine.wall_clock import RealWallClock, WallClock, wake_loop
+from execution_engine.engine.wall_clock import RealWallClock, WallClock
 from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from execution_engine.transport import typed
-from execution_engine.transport.msgs import Bool, Trigger, TriggerRequest, TriggerResponse
+from execution_engine.transport.msgs import Bool, Trigger
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS, LATCHED
 from execution_engine.transport.wire import (
@@ -81,7 +80,7 @@ class ResumePoint(Protocol):
     async def first_operation(self, engine: ExecutionEngine, operation: Operation) -> Operation: ...
 
 
-class ExecutionEngine:
+class ExecutionEngine(OperatorCommands):
     """One engine node; runs one application at a time."""
 
     def __init__(
@@ -443,66 +442,6 @@ class ExecutionEngine:
         resent = self._dispatch(operation, {g: d.call for g, d in failed.items()}, attempt)
         pending.update(resent)
 
-    # ----------------------------------------------------------------------------- alarm
-    def alarm_message(self, group: str, error: str, plan: str, timeout: float) -> str:
-        """The alarm as the operator reads it: what failed, and exactly how to answer it."""
-        reset, stop = (self.node.resolve(engine_service(c)) for c in ("reset", "stop"))
-        limit = f"; gives up after {timeout:g} s (wall clock)" if timeout > 0 else ""
-        return (
-            f"ALARM {group}: {error} ({plan}) - to retry: key {CONSOLE_KEYS['reset']!r} (run --interactive) or call {reset}; "
-            f"to abort: key {CONSOLE_KEYS['stop']!r} or call {stop}{limit}"
-        )
-
-    async def _alarm(self, group: str, error: str, plan: str, timeout: float) -> tuple[bool, str]:
-        """Hold for an operator reset: (True, "") to retry; (False, why) to give up -- a stop, or
-        ``timeout`` seconds of the operator's wall clock without an answer (0: the longest
-        duration there is, a day -- no wait is without a bound)."""
-        self._alarm_reset = False
-        timeout = timeout if timeout > 0 else DURATION.upper
-        self._set_state("alarm", self.alarm_message(group, error, plan, timeout))
-        if not self.operators:  # nobody can answer: say so now rather than wait for no one
-            self._note_recovery(f"{plan}; alarm cannot be answered: no operator console and no service client can reach this engine")
-            return False, (
-                "; the alarm asks an operator: retry (reset) or abort (stop)? - and no operator can answer it here: "
-                "run with --interactive at a terminal, or on ROS, where the engine's services answer"
-            )
-        expired = False
-
-        def expire() -> None:
-            nonlocal expired
-            expired = True
-            self._poke()
-
-        timer = self.wall_clock.call_later(timeout, wake_loop(asyncio.get_running_loop(), expire))
-        try:
-            with self._operator_wait():  # the robot waits for a person: simulated time must not race on
-                while not self._alarm_reset and self._stop_reason is None and not expired:
-                    await self._wait_control()
-        finally:
-            timer.cancel()
-        if self._alarm_reset and self._stop_reason is None:
-            self._note_recovery(f"{plan}; alarm reset by an operator: retried")
-            return True, ""
-        unanswered = "" if self._stop_reason is not None else f"; alarm not answered within {timeout:g} s (wall clock)"
-        self._note_recovery(f"{plan}{unanswered or '; alarm answered with stop'}")
-        return False, unanswered
-
-    async def hold_for_answer(self, message: str) -> str:
-        """An alarm that only an operator ends: "reset", "skip" or "stop"; "unanswerable" at once
-        when nobody can answer (a resumed run's interrupted functions)."""
-        self._alarm_reset = self._alarm_skip = False
-        self._skippable = True
-        self._set_state("alarm", message)
-        try:
-            if not self.operators:
-                return "unanswerable"
-            with self._operator_wait():
-                while not self._alarm_reset and not self._alarm_skip and self._stop_reason is None:
-                    await self._wait_control()
-        finally:
-            self._skippable = False
-        return "stop" if self._stop_reason is not None else "skip" if self._alarm_skip else "reset"
-
     def announce(self, message: str) -> None:
         """Say something about the run in the engine's status and events (and so in the trace)."""
         self._set_state("running", message)
@@ -571,96 +510,6 @@ class ExecutionEngine:
             link.send_end()
         reached = await asyncio.gather(*(link.wait_state((FINISH,), self.service_timeout) for link in self.links.values()))
         return all(reached)
-
-    # -------------------------------------------------------------------------- operator
-    async def _on_service(self, command: str, request: TriggerRequest) -> TriggerResponse:
-        ok, message = await self.operator_command(command, f"service {self.node.resolve(engine_service(command))}")
-        return Trigger.Response(ok, message)
-
-    async def operator_command(self, command: str, source: str) -> tuple[bool, str]:
-        """Take (or refuse) an operator command; it is recorded before it takes effect.
-
-        ``source`` says where it came from: the services pass their resolved name, the terminal
-        console of ``run --interactive`` (in this process) the key that was pressed.
-        """
-        ok, answer = decide(command, self.state, Flags(self._start_requested, self._safety_active, self._skippable))
-        self._record(OperatorAction(self.clock.now(), command, source, self.state, ok, answer))
-        if not ok:
-            return False, answer
-        notes = await getattr(self, f"_cmd_{command}")(source)
-        self._poke()
-        return True, answer + "".join(f"; {note}" for note in notes)
-
-    def _record(self, action: OperatorAction) -> None:
-        if self.report is not None and self.state not in ENDED:
-            self.report.operator_actions.append(action)
-        self._publish_event(EngineEvent(
-            "operator", action.t, action.state, self._operation.id if self._operation else None,
-            command=action.command, source=action.source, accepted=action.accepted, answer=action.answer,
-        ))
-
-    async def _cmd_start(self, source: str) -> list[str]:
-        self._start_requested = True
-        return []
-
-    async def _cmd_pause(self, source: str) -> list[str]:
-        self._paused = True
-        self._stepping = False
-        answers = [await link.command("pause") for link in self.links.values() if link.state in (READY, *WORKING_STATES)]
-        self._set_state("paused", f"paused by {source}")
-        return [m for ok, m in answers if not ok]
-
-    async def _resume_groups(self) -> None:
-        self._paused = False
-        for link in self.links.values():
-            if link.state in (PAUSE, READY):
-                await link.command("resume")
-
-    async def _cmd_resume(self, source: str) -> list[str]:
-        self._stepping = False
-        await self._resume_groups()
-        self._set_state("running", f"resumed by {source}")
-        return []
-
-    async def _cmd_step(self, source: str) -> list[str]:
-        self._stepping = True
-        self._start_requested = True
-        if self._paused:
-            await self._resume_groups()
-        return []
-
-    async def _cmd_stop(self, source: str) -> list[str]:
-        self._stop_reason = f"stopped by {source}"
-        for link in self.links.values():
-            if link.state in (READY, PAUSE, *WORKING_STATES):
-                await link.command("stop")
-        return []
-
-    async def _cmd_reset(self, source: str) -> list[str]:
-        self._alarm_reset = True
-        return []
-
-    async def _cmd_skip(self, source: str) -> list[str]:
-        self._alarm_skip = True
-        return []
-
-    def _on_safety(self, msg: Bool) -> None:
-        if msg.data and not self._safety_active:
-            self._safety_active = True
-            task = asyncio.get_running_loop().create_task(self.operator_command("pause", f"safety stop on {self.node.resolve(SAFETY_STOP)}"))
-            self._tasks.add(task)
-            task.add_done_callback(self._task_done)
-        elif not msg.data and self._safety_active:
-            self._safety_active = False
-            self._message = "safety stop cleared: resume to continue"
-            self._publish_status()
-
-    def _task_done(self, task: asyncio.Task[tuple[bool, str]]) -> None:
-        """A background command must not fail unseen."""
-        self._tasks.discard(task)
-        error = None if task.cancelled() else task.exception()
-        if error is not None:
-            self.node.report_fault("safety stop pause", error)
 
     # ---------------------------------------------------------------------------- status
     def _set_state(self, state: str, message: str | None = None) -> None:
