@@ -118,6 +118,7 @@ class McapSink:
         self._poll = poll
         self._syncs: dict[int, list[threading.Event]] = {}  # sync number -> who waits for it
         self._numbers = itertools.count()
+        self._last_sync = time.monotonic()  # when the feeder last sent a sync (written by the feeder only)
         self._sent: Counter[str] = Counter()
         self._warned = False
         self._closed = False
@@ -187,10 +188,13 @@ class McapSink:
         return self.stats
 
     def _control(self, item: Any) -> None:
-        """Control items are few and never dropped (they may go past the bound)."""
+        """Control items are few and never dropped (they may go past the bound).  A sync wakes the
+        feeder only once ``SYNC_GAP`` has passed since the last one: before that the feeder would
+        only hold it back, and a run of short operations (one sync each) would wake it, and make it
+        pickle a small batch, at every operation."""
         if not self._closed:
             self._queue.append(item)
-            if isinstance(item, threading.Event):
+            if isinstance(item, threading.Event) and time.monotonic() - self._last_sync >= SYNC_GAP:
                 self._wake.set()
 
     def _fail(self, reason: str) -> None:
@@ -204,7 +208,6 @@ class McapSink:
 
     # ---------------------------------------------------------------- the feeder thread
     def _feed(self) -> None:
-        last_flush = time.monotonic()
         pending = False  # messages sent since the last sync
         waiting: list[threading.Event] = []  # syncs asked for and not yet sent
         try:
@@ -228,10 +231,10 @@ class McapSink:
                     if len(items) >= BATCH:
                         self._send(items)
                         items = []
-                since = time.monotonic() - last_flush
+                since = time.monotonic() - self._last_sync
                 if stop or (waiting and since >= SYNC_GAP) or (pending and since >= self._flush_period):
                     items.append(self._sync_item(waiting))
-                    waiting, pending, last_flush = [], False, time.monotonic()
+                    waiting, pending, self._last_sync = [], False, time.monotonic()
                 if stop:
                     items.append(("stop", Counter(self.stats.dropped)))
                 if items:
