@@ -29,6 +29,7 @@ import pickle
 import signal
 import sys
 from collections import Counter
+from dataclasses import dataclass
 from typing import IO, Any
 
 from mcap.well_known import MessageEncoding, SchemaEncoding
@@ -38,24 +39,68 @@ from mcap_ros2._dynamic import EncoderFunction, serialize_dynamic
 from execution_engine.recorder.definitions import schema_text
 from execution_engine.recorder.derived_tf import TF_TYPE, DerivedTf
 from execution_engine.recorder.frames import frame, read_frame
+from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
+from execution_engine.transport.idl_hash import type_hash
 from execution_engine.transport.qos import Durability, QoS, Reliability
 
 LIBRARY = "dual_arm_executive recorder (mcap, mcap-ros2-support)"
 NICE = 10  # the encoder's niceness above the run's: it takes spare CPU time, not the machines'
 
+#: RMW_DURATION_INFINITE (seconds, nanoseconds): how rosbag2 (Jazzy) writes an infinite deadline, lifespan or lease
+INFINITE = (9223372036, 854775807)
+EMPTY = '""'  # an empty YAML string
+NOT_STARTED = 2**63 - 1  # the starting time rosbag2 writes before the first message (its time_point's maximum)
+
+
+def _qos_entry(qos: QoS, pad: str) -> str:
+    """One publisher's QoS, rosbag2's (metadata version 9) YAML keys and values, each line after ``pad``."""
+    infinite = f"{pad}    sec: {INFINITE[0]}\n{pad}    nsec: {INFINITE[1]}\n"
+    return (
+        f"{pad}- history: keep_last\n{pad}  depth: {qos.depth}\n"
+        f"{pad}  reliability: {'best_effort' if qos.reliability is Reliability.BEST_EFFORT else 'reliable'}\n"
+        f"{pad}  durability: {'transient_local' if qos.durability is Durability.TRANSIENT_LOCAL else 'volatile'}\n"
+        f"{pad}  deadline:\n{infinite}{pad}  lifespan:\n{infinite}{pad}  liveliness: automatic\n"
+        f"{pad}  liveliness_lease_duration:\n{infinite}{pad}  avoid_ros_namespace_conventions: false\n"
+    )
+
+
 def qos_yaml(offered: tuple[QoS, ...]) -> str:
-    """A channel's ``offered_qos_profiles`` as rosbag2 (Jazzy) writes it: one YAML entry per publisher."""
-    infinite = "    sec: 2147483647\n    nsec: 4294967295\n"
-    entries = []
-    for qos in offered:
-        entries.append(
-            f"- history: keep_last\n  depth: {qos.depth}\n"
-            f"  reliability: {'best_effort' if qos.reliability is Reliability.BEST_EFFORT else 'reliable'}\n"
-            f"  durability: {'transient_local' if qos.durability is Durability.TRANSIENT_LOCAL else 'volatile'}\n"
-            f"  deadline:\n{infinite}  lifespan:\n{infinite}  liveliness: automatic\n"
-            f"  liveliness_lease_duration:\n{infinite}  avoid_ros_namespace_conventions: false"
+    """A channel's ``offered_qos_profiles`` as rosbag2 (Jazzy) writes it: one YAML entry per publisher;
+    ``[]`` (an empty YAML sequence, as rosbag2 writes it) when no publisher was seen."""
+    return "".join(_qos_entry(qos, "") for qos in offered).rstrip("\n") or "[]"
+
+
+@dataclass
+class _Topic:
+    """What the ``rosbag2`` metadata record says of one channel."""
+
+    ros_type: str
+    offered: tuple[QoS, ...]
+    type_hash: str
+    count: int = 0
+
+
+def bag_metadata(topics: dict[str, _Topic], start: int, end: int) -> str:
+    """The ``serialized_metadata`` of the ``rosbag2`` metadata record ``ros2 bag record`` ends its
+    file with (rosbag2's ``BagMetadata``, version 9): rosbag2 reads the metadata version, the ROS
+    distribution and each topic's type hash from it; counts and times it takes from the summary."""
+    lines = [
+        "version: 9\nstorage_identifier: mcap\n",
+        f"duration:\n  nanoseconds: {max(0, end - start)}\nstarting_time:\n  nanoseconds_since_epoch: {start}\n",
+        f"message_count: {sum(t.count for t in topics.values())}\n",
+        "topics_with_message_count:\n" if topics else "topics_with_message_count: []\n",
+    ]
+    for name, topic in topics.items():
+        profiles = "".join(_qos_entry(qos, "        ") for qos in topic.offered)
+        lines.append(
+            f"  - topic_metadata:\n      name: {name}\n      type: {topic.ros_type}\n"
+            f"      serialization_format: cdr\n"
+            f"      offered_qos_profiles:{chr(10) + profiles if profiles else ' []' + chr(10)}"
+            f"      type_description_hash: {topic.type_hash or EMPTY}\n    message_count: {topic.count}\n"
         )
-    return "\n".join(entries)
+    lines.append(f"compression_format: {EMPTY}\ncompression_mode: {EMPTY}\nrelative_file_paths: []\nfiles: []\n"
+                 "custom_data: {}\nros_distro: jazzy")
+    return "".join(lines)
 
 
 class _Output:
@@ -88,11 +133,25 @@ class Encoder:
         self.output = _Output()
         self.writer = Writer(self.output, chunk_size=chunk_size, compression=compression)
         self.writer.start(profile="ros2", library=LIBRARY)
+        # rosbag2 writes this record on opening a bag as well: a file cut before its end still names
+        # its metadata version and ROS distribution (the summary's figures replace these on reading)
+        self.writer.add_metadata("rosbag2", {"serialized_metadata": bag_metadata({}, NOT_STARTED, NOT_STARTED)})
         self.schemas: dict[str, tuple[int, EncoderFunction]] = {}
         self.channels: dict[str, int] = {}
+        self.topics: dict[str, _Topic] = {}
+        self.registry = InterfaceRegistry()
         self.sequence: Counter[str] = Counter()
         self.by_topic: Counter[str] = Counter()
         self.derived: DerivedTf | None = None  # tf worked out of joint_states (:mod:`.derived_tf`)
+        self.start, self.end = NOT_STARTED, 0  # the first and the last log time
+
+    def _type_hash(self, ros_type: str) -> str:
+        """``RIHS01_...`` as rmw announces it (rosbag2 stores it as ``topic_type_hash``); empty when
+        the interface files cannot tell (rosbag2 stores an empty hash too)."""
+        try:
+            return type_hash(self.registry, ros_type)
+        except (InterfaceError, KeyError):
+            return ""
 
     def message(self, topic: str, ros_type: str, msg: dict[str, Any], offered: tuple[QoS, ...], log_time: int) -> None:
         schema = self.schemas.get(ros_type)
@@ -102,14 +161,18 @@ class Encoder:
             schema = self.schemas[ros_type] = (schema_id, serialize_dynamic(ros_type, text)[ros_type])
         channel = self.channels.get(topic)
         if channel is None:
+            info = self.topics[topic] = _Topic(ros_type, offered, self._type_hash(ros_type))
             channel = self.channels[topic] = self.writer.register_channel(
-                topic, MessageEncoding.CDR, schema[0], {"offered_qos_profiles": qos_yaml(offered)}
+                topic, MessageEncoding.CDR, schema[0],
+                {"offered_qos_profiles": qos_yaml(offered), "topic_type_hash": info.type_hash},
             )
         self.writer.add_message(channel, log_time, schema[1](msg), log_time, self.sequence[topic])
         self.sequence[topic] += 1
         self.by_topic[topic] += 1
         if self.derived is not None and (tf := self.derived.follow(topic, msg)) is not None:
             self.message(self.derived.topic, TF_TYPE, tf, self.derived.offered, log_time)
+        self.topics[topic].count += 1
+        self.start, self.end = min(self.start, log_time), max(self.end, log_time)
 
     def item(self, item: tuple[Any, ...]) -> bool:
         """Handle one item; True at the stop."""
@@ -132,6 +195,7 @@ class Encoder:
                 "dropped": str(sum(dropped.values())),
                 "dropped_by_topic": ", ".join(f"{t}={n}" for t, n in sorted(dropped.items())),
             })
+            self.writer.add_metadata("rosbag2", {"serialized_metadata": bag_metadata(self.topics, self.start, self.end)})
             self.writer.finish()
             return True
         return False
