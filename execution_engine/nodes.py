@@ -104,9 +104,15 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     node.logger.info("%s: running %s (%d operations)", node.fully_qualified_name, app.name, len(app.operations))
     outcome.code = ExitCode.FAILED  # until the report says otherwise
     recorder = record_node(node, settings.record, app)
+    groups = app.robot.group_names
+    if recorder is not None and not await recorder.ready(groups, engine.startup_timeout):
+        node.logger.warning("%s: the recording may miss the run's first messages: not every machine's topics were matched within %g s",
+                            node.fully_qualified_name, engine.startup_timeout)
     try:
         report = await engine.run(app)
     finally:
+        if recorder is not None:
+            await recorder.settle(groups, engine.service_timeout)
         await stop_recording(recorder, sys.stdout)
     print("\n".join(report.summary_lines()), flush=True)
     outcome.code = ExitCode.OK if report.ok else ExitCode.FAILED

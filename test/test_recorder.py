@@ -89,6 +89,23 @@ def test_state_transitions_match_the_trace_and_joint_states_cover_the_run(rivet_
     assert max(b - a for a, b in zip(stamps, stamps[1:])) < 0.5  # no hole in the arm's record
 
 
+def test_every_request_is_recorded_from_the_first_one(rivet_run: tuple[Path, Path]) -> None:
+    """The engine makes a group's request publisher when the run starts and sends the first
+    request at once: the recorder subscribes the moment the publisher is made, not at its next
+    look at the graph, so each group's requests are its functions and the end, all of them."""
+    record, trace = rivet_run
+    functions: dict[str, int] = {}
+    for r in _trace(trace):
+        if r["event"] == "function_start":
+            functions[r["group"]] = functions.get(r["group"], 0) + 1
+    requests: dict[str, list[str]] = {}
+    for m in iter_messages(record, Recording(str(record))):
+        if m.topic.endswith("/sm/request"):
+            requests.setdefault(m.topic.split("/")[1], []).append(m.msg.kind)
+    assert {g: len(kinds) for g, kinds in requests.items()} == {g: n + 1 for g, n in functions.items()}
+    assert all(kinds[-1] == "end" and "end" not in kinds[:-1] for kinds in requests.values())
+
+
 def test_what_ran_is_in_the_recording(rivet_run: tuple[Path, Path]) -> None:
     record, _ = rivet_run
     recording = Recording(str(record))

@@ -200,8 +200,14 @@ def test_the_engine_records_the_ros_graph_with_its_record_parameter(fake_rclpy: 
     assert _run_ros_cell(app, record=str(record)) == ExitCode.OK
     assert f"recording {record}:" in capsys.readouterr().out
     recording = Recording(str(record))
-    types = {m.topic: m.ros_type for m in iter_messages(record, recording)}
+    messages = list(iter_messages(record, recording))
+    types = {m.topic: m.ros_type for m in messages}
     assert not recording.cut
+    # from the first request to the last Finish: nothing of the run's start or end is still on its way
+    requests = {g: [m.msg.kind for m in messages if m.topic == f"/{g}/sm/request"] for g in ("left_arm", "right_arm", "torso_head")}
+    assert requests == {"left_arm": ["execute", "execute", "end"], "right_arm": ["execute", "execute", "end"], "torso_head": ["end"]}
+    for group in ("left_arm", "right_arm", "torso_head"):
+        assert [m.msg.state for m in messages if m.topic == f"/{group}/sm/state"][-1] == "Finish"
     assert types["/joint_states"] == "sensor_msgs/msg/JointState"
     ours = "dual_arm_executive_interfaces/msg/"
     assert types["/left_arm/sm/status"] == ours + "MachineStatus" and types["/left_arm/sm/state"] == ours + "MachineState"

@@ -17,20 +17,22 @@ from __future__ import annotations
 
 import asyncio
 import hashlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 from execution_engine.recorder.definitions import known
+from execution_engine.machine.table import FINISH
 from execution_engine.recorder.writer import McapSink, RecordingStats
 from execution_engine.transport import typed
-from execution_engine.transport.port import Node, TopicInfo, TransportError
+from execution_engine.transport.port import Node, Subscription, TopicInfo, TransportError
 from execution_engine.transport.qos import Durability, History, QoS, Reliability
-from execution_engine.transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC
+from execution_engine.transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC, sm_topic
 
 POLL = 0.5  # run seconds between looks for new topics (rosbag2 polls every 0.1 s of wall time)
 DEPTH = 1000  # a recorder keeps up with bursts: every state change matters
+WAIT_STEP = 0.05  # run seconds between looks while waiting for the graph (ready, settle)
 
 
 def software_version() -> str:
@@ -70,33 +72,49 @@ class Recorder:
         # encoder works it out (:mod:`.derived_tf`) and the bridge need not compute it for us.
         self._derived_tf = node.resolve(TF_TOPIC) if derive_tf else None
         self._topics: dict[str, TopicInfo] = {}
+        self._subscriptions: dict[str, Subscription[Any]] = {}
+        self._states: dict[str, str] = {}  # <group>/sm/state topic -> the last state recorded on it
         self._operation: str | None = None
         self._task: asyncio.Task[None] | None = None
         self._engine_status = node.resolve(ENGINE_STATUS)
 
     def start(self) -> None:
-        """Subscribe to what exists now, then keep looking for new topics."""
+        """Subscribe to what exists now, to every topic a node of this process starts publishing
+        the moment it does, and keep looking for the topics of other processes."""
+        self.node.transport.publisher_listeners.append(self._on_publisher)
         self.discover()
         self._task = asyncio.get_running_loop().create_task(self._watch(), name="recorder discovery")
 
     def discover(self) -> list[str]:
         """Subscribe to topics not seen before; the new topic names."""
-        new = []
-        for info in self.node.topic_names_and_types():
-            if info.name in self._topics:
-                continue
-            self._topics[info.name] = info
-            ros_type = str(getattr(info.msg_type, "ROS_TYPE", ""))
-            if not known(ros_type):
-                self.node.logger.warning("recorder: %s is not recorded: no message definition of %s", info.name, ros_type or info.msg_type.__name__)
-                continue
-            if info.name == self._derived_tf:
-                self.sink.derive_tf(info.name, info.offered, self.node.resolve(JOINT_STATES), self.node.resolve(ROBOT_DESCRIPTION_TOPIC))
-                new.append(info.name)
-                continue
-            self.node.create_subscription(info.msg_type, info.name, self._callback(info), reader_qos(info.offered))
-            new.append(info.name)
-        return new
+        return [info.name for info in self.node.topic_names_and_types() if info.name not in self._topics and self._subscribe(info)]
+
+    def _on_publisher(self, created: TopicInfo) -> None:
+        """A node of this process made a publisher and has not published yet: a topic new to the
+        recording is subscribed now, or its first messages (an operation's first request) would
+        be gone before the next look at the graph.  Never raises into the publisher's maker."""
+        if created.name in self._topics:
+            return
+        try:
+            known_info = next((i for i in self.node.topic_names_and_types() if i.name == created.name), None)
+            offered = known_info.offered if known_info is not None else ()
+            offered += tuple(q for q in created.offered if q not in offered)
+            self._subscribe(TopicInfo(created.name, created.msg_type, offered))
+        except TransportError as error:
+            self.node.logger.warning("recorder: cannot subscribe to %s: %s", created.name, error)
+
+    def _subscribe(self, info: TopicInfo) -> bool:
+        """Record ``info``'s topic from now on; False when it cannot be (no message definition)."""
+        self._topics[info.name] = info
+        ros_type = str(getattr(info.msg_type, "ROS_TYPE", ""))
+        if not known(ros_type):
+            self.node.logger.warning("recorder: %s is not recorded: no message definition of %s", info.name, ros_type or info.msg_type.__name__)
+            return False
+        if info.name == self._derived_tf:
+            self.sink.derive_tf(info.name, info.offered, self.node.resolve(JOINT_STATES), self.node.resolve(ROBOT_DESCRIPTION_TOPIC))
+            return True
+        self._subscriptions[info.name] = self.node.create_subscription(info.msg_type, info.name, self._callback(info), reader_qos(info.offered))
+        return True
 
     async def _watch(self) -> None:
         while True:
@@ -115,7 +133,43 @@ class Recorder:
             if topic == self._engine_status and isinstance(msg, typed.EngineStatusMsg):
                 self._on_engine_status(msg)
 
-        return record
+        if not topic.endswith("/sm/state"):
+            return record
+
+        def record_state(msg: Any) -> None:
+            record(msg)
+            self._states[topic] = str(getattr(msg, "state", ""))
+
+        return record_state
+
+    # ------------------------------------------------------------ a graph of processes (ROS 2, DDS)
+    async def ready(self, groups: Iterable[str], timeout: float) -> bool:
+        """Before a run on a graph: wait (bounded) until each group's machine state is subscribed
+        and every subscription has matched the publishers the graph showed, so the run's first
+        transitions are not still on their way to a reader that does not exist yet."""
+        wanted = [self.node.resolve(sm_topic(g, "state")) for g in groups]
+        clock = self.node.clock
+        deadline = clock.now() + timeout
+        while True:
+            self.discover()
+            subscribed = all(t in self._subscriptions for t in wanted)
+            if subscribed and all(sub.get_publisher_count() >= len(self._topics[t].offered) for t, sub in self._subscriptions.items()):
+                return True
+            if clock.now() >= deadline:
+                return False
+            await clock.sleep(WAIT_STEP)
+
+    async def settle(self, groups: Iterable[str], timeout: float) -> bool:
+        """After a run on a graph: wait (bounded) until each group's Finish is in the recording
+        (the engine returns when it has seen them; the recorder's own readers may not have yet)."""
+        wanted = [self.node.resolve(sm_topic(g, "state")) for g in groups]
+        clock = self.node.clock
+        deadline = clock.now() + timeout
+        while any(self._states.get(t) != FINISH for t in wanted):
+            if clock.now() >= deadline:
+                return False
+            await clock.sleep(WAIT_STEP)
+        return True
 
     def _on_engine_status(self, msg: Any) -> None:
         """An operation boundary: the chunk so far goes to disk, as the trace does.  Only the
@@ -150,6 +204,8 @@ class Recorder:
     async def close(self) -> RecordingStats:
         """Stop looking for topics, let the last messages arrive, finish the file (the sink adds
         the ``recording_stats`` metadata: what was written and dropped)."""
+        if self._on_publisher in self.node.transport.publisher_listeners:
+            self.node.transport.publisher_listeners.remove(self._on_publisher)
         if self._task is not None:
             self._task.cancel()
             await asyncio.gather(self._task, return_exceptions=True)

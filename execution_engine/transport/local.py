@@ -146,13 +146,14 @@ class LocalNode(Node):
         parameters: Mapping[str, ParameterValue] | None,
     ) -> None:
         super().__init__(name, namespace, bus.clock, parameters)
-        self.bus = bus
+        self.bus = self.transport = bus
         self._endpoints: list[Any] = []
 
     def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]:
         pub = _LocalPublisher(self, msg_type, self.resolve(topic), qos)
         self.bus.add_publisher(pub)
         self._endpoints.append(pub)
+        self.bus.publisher_created(TopicInfo(pub.topic, msg_type, (qos,)))
         return pub
 
     def create_subscription(

@@ -198,6 +198,8 @@ class ServiceClient(ABC, Generic[Req, Resp]):
 class Node(ABC):
     """One participant on the transport, with its own name, parameters and fault handler."""
 
+    transport: Transport  # the transport the node belongs to (set by each adapter)
+
     def __init__(
         self,
         name: str,
@@ -315,7 +317,9 @@ class EndpointNode(Node):
         return endpoint
 
     def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]:
-        return self._add(self.publisher_class(self, msg_type, self.resolve(topic), qos))  # type: ignore[no-any-return]
+        publisher = self._add(self.publisher_class(self, msg_type, self.resolve(topic), qos))
+        self.transport.publisher_created(TopicInfo(publisher.topic, msg_type, (qos,)))
+        return publisher  # type: ignore[no-any-return]
 
     def create_subscription(
         self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS
@@ -334,6 +338,13 @@ class Transport(ABC):
 
     def __init__(self, clock: Clock) -> None:
         self.clock = clock
+        #: told of each publisher a node of this process creates, before it can publish anything: a
+        #: recorder subscribes to a new topic then, so not even its first message is missed
+        self.publisher_listeners: list[Callable[[TopicInfo], None]] = []
+
+    def publisher_created(self, info: TopicInfo) -> None:
+        for listener in list(self.publisher_listeners):
+            listener(info)
 
     @abstractmethod
     def create_node(
