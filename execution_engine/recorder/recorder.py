@@ -22,11 +22,11 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from execution_engine.recorder.definitions import known
 from execution_engine.machine.table import FINISH
+from execution_engine.recorder.definitions import known
 from execution_engine.recorder.writer import McapSink, RecordingStats
 from execution_engine.transport import typed
-from execution_engine.transport.port import Node, Subscription, TopicInfo, TransportError
+from execution_engine.transport.port import Node, Subscription, TopicInfo, TransportError, poll_until
 from execution_engine.transport.qos import Durability, History, QoS, Reliability
 from execution_engine.transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC, sm_topic
 
@@ -147,29 +147,24 @@ class Recorder:
         """Before a run on a graph: wait (bounded) until each group's machine state is subscribed
         and every subscription has matched the publishers the graph showed, so the run's first
         transitions are not still on their way to a reader that does not exist yet."""
-        wanted = [self.node.resolve(sm_topic(g, "state")) for g in groups]
-        clock = self.node.clock
-        deadline = clock.now() + timeout
-        while True:
+        wanted = self._state_topics(groups)
+
+        def matched() -> bool:
             self.discover()
-            subscribed = all(t in self._subscriptions for t in wanted)
-            if subscribed and all(sub.get_publisher_count() >= len(self._topics[t].offered) for t, sub in self._subscriptions.items()):
-                return True
-            if clock.now() >= deadline:
-                return False
-            await clock.sleep(WAIT_STEP)
+            return all(t in self._subscriptions for t in wanted) and all(
+                sub.get_publisher_count() >= len(self._topics[t].offered) for t, sub in self._subscriptions.items()
+            )
+
+        return await poll_until(self.node.clock, matched, timeout, WAIT_STEP)
 
     async def settle(self, groups: Iterable[str], timeout: float) -> bool:
         """After a run on a graph: wait (bounded) until each group's Finish is in the recording
         (the engine returns when it has seen them; the recorder's own readers may not have yet)."""
-        wanted = [self.node.resolve(sm_topic(g, "state")) for g in groups]
-        clock = self.node.clock
-        deadline = clock.now() + timeout
-        while any(self._states.get(t) != FINISH for t in wanted):
-            if clock.now() >= deadline:
-                return False
-            await clock.sleep(WAIT_STEP)
-        return True
+        wanted = self._state_topics(groups)
+        return await poll_until(self.node.clock, lambda: all(self._states.get(t) == FINISH for t in wanted), timeout, WAIT_STEP)
+
+    def _state_topics(self, groups: Iterable[str]) -> list[str]:
+        return [self.node.resolve(sm_topic(g, "state")) for g in groups]
 
     def _on_engine_status(self, msg: Any) -> None:
         """An operation boundary: the chunk so far goes to disk, as the trace does.  Only the
