@@ -49,7 +49,7 @@ setup(
         *tree("schema"),
         *tree("interfaces"),
     ],
-    install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9", "mcap>=1.2", "mcap-ros2-support>=0.5", "matplotlib>=3.6", "opencv-python-headless>=4.8"],
+    install_requires=["lxml>=4.9", "numpy>=1.24", "pin>=2.7", "orjson>=3.9", "mcap>=1.2", "mcap-ros2-support>=0.5", "matplotlib>=3.6", "opencv-python-headless>=4.8", "pyyaml>=6"],
     extras_require={
         "studio": STUDIO,
         "dds": ["cyclonedds>=11,<12", "pyyaml>=6"],

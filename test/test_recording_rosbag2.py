@@ -13,7 +13,7 @@ from pathlib import Path
 import yaml
 from mcap.reader import make_reader
 
-from execution_engine.recorder.encoder import qos_yaml
+from execution_engine.recorder.bag_metadata import qos_yaml
 from execution_engine.recorder.reading import Recording, iter_messages
 from execution_engine.recorder.writer import McapSink
 from execution_engine.transport import msgs

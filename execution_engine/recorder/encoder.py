@@ -29,79 +29,22 @@ import pickle
 import signal
 import sys
 from collections import Counter
-from dataclasses import dataclass
 from typing import IO, Any
 
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import EncoderFunction, serialize_dynamic
 
+from execution_engine.recorder.bag_metadata import NOT_STARTED, BagTopic, bag_metadata, qos_yaml
 from execution_engine.recorder.definitions import schema_text
 from execution_engine.recorder.derived_tf import TF_TYPE, DerivedTf
 from execution_engine.recorder.frames import frame, read_frame
 from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
 from execution_engine.transport.idl_hash import type_hash
-from execution_engine.transport.qos import Durability, QoS, Reliability
+from execution_engine.transport.qos import QoS
 
 LIBRARY = "dual_arm_executive recorder (mcap, mcap-ros2-support)"
 NICE = 10  # the encoder's niceness above the run's: it takes spare CPU time, not the machines'
-
-#: RMW_DURATION_INFINITE (seconds, nanoseconds): how rosbag2 (Jazzy) writes an infinite deadline, lifespan or lease
-INFINITE = (9223372036, 854775807)
-EMPTY = '""'  # an empty YAML string
-NOT_STARTED = 2**63 - 1  # the starting time rosbag2 writes before the first message (its time_point's maximum)
-
-
-def _qos_entry(qos: QoS, pad: str) -> str:
-    """One publisher's QoS, rosbag2's (metadata version 9) YAML keys and values, each line after ``pad``."""
-    infinite = f"{pad}    sec: {INFINITE[0]}\n{pad}    nsec: {INFINITE[1]}\n"
-    return (
-        f"{pad}- history: keep_last\n{pad}  depth: {qos.depth}\n"
-        f"{pad}  reliability: {'best_effort' if qos.reliability is Reliability.BEST_EFFORT else 'reliable'}\n"
-        f"{pad}  durability: {'transient_local' if qos.durability is Durability.TRANSIENT_LOCAL else 'volatile'}\n"
-        f"{pad}  deadline:\n{infinite}{pad}  lifespan:\n{infinite}{pad}  liveliness: automatic\n"
-        f"{pad}  liveliness_lease_duration:\n{infinite}{pad}  avoid_ros_namespace_conventions: false\n"
-    )
-
-
-def qos_yaml(offered: tuple[QoS, ...]) -> str:
-    """A channel's ``offered_qos_profiles`` as rosbag2 (Jazzy) writes it: one YAML entry per publisher;
-    ``[]`` (an empty YAML sequence, as rosbag2 writes it) when no publisher was seen."""
-    return "".join(_qos_entry(qos, "") for qos in offered).rstrip("\n") or "[]"
-
-
-@dataclass
-class _Topic:
-    """What the ``rosbag2`` metadata record says of one channel."""
-
-    ros_type: str
-    offered: tuple[QoS, ...]
-    type_hash: str
-    count: int = 0
-
-
-def bag_metadata(topics: dict[str, _Topic], start: int, end: int) -> str:
-    """The ``serialized_metadata`` of the ``rosbag2`` metadata record ``ros2 bag record`` ends its
-    file with (rosbag2's ``BagMetadata``, version 9): rosbag2 reads the metadata version, the ROS
-    distribution and each topic's type hash from it; counts and times it takes from the summary."""
-    lines = [
-        "version: 9\nstorage_identifier: mcap\n",
-        f"duration:\n  nanoseconds: {max(0, end - start)}\nstarting_time:\n  nanoseconds_since_epoch: {start}\n",
-        f"message_count: {sum(t.count for t in topics.values())}\n",
-        "topics_with_message_count:\n" if topics else "topics_with_message_count: []\n",
-    ]
-    for name, topic in topics.items():
-        profiles = "".join(_qos_entry(qos, "        ") for qos in topic.offered)
-        lines.append(
-            f"  - topic_metadata:\n      name: {name}\n      type: {topic.ros_type}\n"
-            f"      serialization_format: cdr\n"
-            f"      offered_qos_profiles:{chr(10) + profiles if profiles else ' []' + chr(10)}"
-            f"      type_description_hash: {topic.type_hash or EMPTY}\n    message_count: {topic.count}\n"
-        )
-    lines.append(f"compression_format: {EMPTY}\ncompression_mode: {EMPTY}\nrelative_file_paths: []\nfiles: []\n"
-                 "custom_data: {}\nros_distro: jazzy")
-    return "".join(lines)
-
 
 class _Output:
     """What ``mcap``'s writer writes to: bytes gathered here go out as ``D`` frames."""
@@ -138,7 +81,7 @@ class Encoder:
         self.writer.add_metadata("rosbag2", {"serialized_metadata": bag_metadata({}, NOT_STARTED, NOT_STARTED)})
         self.schemas: dict[str, tuple[int, EncoderFunction]] = {}
         self.channels: dict[str, int] = {}
-        self.topics: dict[str, _Topic] = {}
+        self.topics: dict[str, BagTopic] = {}
         self.registry = InterfaceRegistry()
         self.sequence: Counter[str] = Counter()
         self.by_topic: Counter[str] = Counter()
@@ -161,7 +104,7 @@ class Encoder:
             schema = self.schemas[ros_type] = (schema_id, serialize_dynamic(ros_type, text)[ros_type])
         channel = self.channels.get(topic)
         if channel is None:
-            info = self.topics[topic] = _Topic(ros_type, offered, self._type_hash(ros_type))
+            info = self.topics[topic] = BagTopic(ros_type, offered, self._type_hash(ros_type))
             channel = self.channels[topic] = self.writer.register_channel(
                 topic, MessageEncoding.CDR, schema[0],
                 {"offered_qos_profiles": qos_yaml(offered), "topic_type_hash": info.type_hash},
