@@ -21,8 +21,8 @@
    for S seconds without and S seconds with every topic recorded, ``--rsi-rounds`` times; the
    controller's count of late replies for each (``--rsi-echo``: the UDP echo baseline beside it).
 
-Ratios are time with / time without, medians of the rounds.  The last line is one JSON object
-with every figure.
+Ratios are time with / time without, medians of the rounds.  Before the last line, each ratio
+beside the aim (at most 10 % per primitive); the last line is one JSON object with every figure.
 """
 from __future__ import annotations
 
@@ -257,7 +257,27 @@ def main() -> None:
         for label in ("without", "recorded"):
             runs = result["rsi"][label]
             print(f"RSI 4 ms, {label:<8}: {sum(r['late'] or 0 for r in runs)} late of {sum(r['packets'] or 0 for r in runs)} packets in {len(runs)} round(s)")
+    for line in verdict(result):
+        print(line)
     print(json.dumps(result))
+
+
+AIM = 1.10  # recording may cost at most 10 % per primitive (issue 11)
+
+
+def verdict(result: dict[str, Any]) -> list[str]:
+    """The aim, side by side with what was measured: the application run first, then the stress runs."""
+    lines = []
+    for d in result.get("demo", []):
+        worst = max(d["wall_ratio"], d["cpu_ratio"])
+        lines.append(f"aim <= {AIM:.2f} per primitive, rivet demonstrator --speed {d['speed']}: wall {d['wall_ratio']:.3f}, "
+                     f"CPU of the run's process {d['cpu_ratio']:.3f}: {'within' if worst <= AIM else 'ABOVE'}")
+    if "function_cpu_ratio" in result:
+        worst = max(result["function_cpu_ratio"], result["skill_cpu_ratio"])
+        lines.append(f"stress, set_speed primitives that move nothing (no motion time to hide in): CPU {result['function_cpu_ratio']:.3f} "
+                     f"per function, {result['skill_cpu_ratio']:.3f} within a skill: {'within' if worst <= AIM else 'ABOVE'} "
+                     "(docs/benchmarks.md says why)")
+    return lines
 
 
 if __name__ == "__main__":
