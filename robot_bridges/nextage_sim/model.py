@@ -64,7 +64,7 @@ class IKOptions:
     position_tolerance: float = 1e-5  # m
     orientation_tolerance: float = 1e-4  # rad
     max_iterations: int = 60
-    restarts: int = 12
+    restarts: int = 24  # 12 missed an in-limits branch hypothesis found (test_ik_round_trip_from_the_initial_pose's example)
     max_step: float = 0.5  # rad per iteration, keeps DLS steps inside the linear region
     damping: float = 1e-6  # bias of the squared DLS damping (which also grows with the error)
     restart_seed: int = 20170419
