@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from execution_engine.recorder.frames import ros_fields
 from execution_engine.transport.msgs import TFMessage, Time
 from execution_engine.transport.qos import QoS
 
@@ -31,8 +32,8 @@ def message_fields(value: Any) -> Any:
     names = _FIELD_NAMES.get(cls, ())
     if names == ():
         names = _FIELD_NAMES[cls] = tuple(f.name for f in dataclasses.fields(cls)) if dataclasses.is_dataclass(cls) else None
-    if names is not None:
-        return {name: message_fields(getattr(value, name)) for name in names}
+    if names is not None:  # the same form the run's process pickles messages into (frames.ros_fields)
+        return ros_fields({name: message_fields(getattr(value, name)) for name in names})
     if cls is tuple or cls is list:
         return [message_fields(v) for v in value]
     return value

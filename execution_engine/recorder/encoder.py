@@ -83,8 +83,6 @@ class Encoder:
         self.channels: dict[str, int] = {}
         self.topics: dict[str, BagTopic] = {}
         self.registry = InterfaceRegistry()
-        self.sequence: Counter[str] = Counter()
-        self.by_topic: Counter[str] = Counter()
         self.derived: DerivedTf | None = None  # tf worked out of joint_states (:mod:`.derived_tf`)
         self.start, self.end = NOT_STARTED, 0  # the first and the last log time
 
@@ -104,18 +102,21 @@ class Encoder:
             schema = self.schemas[ros_type] = (schema_id, serialize_dynamic(ros_type, text)[ros_type])
         channel = self.channels.get(topic)
         if channel is None:
-            info = self.topics[topic] = BagTopic(ros_type, offered, self._type_hash(ros_type))
+            self.topics[topic] = BagTopic(ros_type, offered, self._type_hash(ros_type))
             channel = self.channels[topic] = self.writer.register_channel(
                 topic, MessageEncoding.CDR, schema[0],
-                {"offered_qos_profiles": qos_yaml(offered), "topic_type_hash": info.type_hash},
+                {"offered_qos_profiles": qos_yaml(offered), "topic_type_hash": self.topics[topic].type_hash},
             )
-        self.writer.add_message(channel, log_time, schema[1](msg), log_time, self.sequence[topic])
-        self.sequence[topic] += 1
-        self.by_topic[topic] += 1
+        info = self.topics[topic]
+        self.writer.add_message(channel, log_time, schema[1](msg), log_time, info.count)  # sequence: per channel, from 0
+        info.count += 1
+        self.start, self.end = min(self.start, log_time), max(self.end, log_time)
         if self.derived is not None and (tf := self.derived.follow(topic, msg)) is not None:
             self.message(self.derived.topic, TF_TYPE, tf, self.derived.offered, log_time)
-        self.topics[topic].count += 1
-        self.start, self.end = min(self.start, log_time), max(self.end, log_time)
+
+    def written(self) -> dict[str, int]:
+        """Messages written, per topic."""
+        return {topic: info.count for topic, info in self.topics.items()}
 
     def item(self, item: tuple[Any, ...]) -> bool:
         """Handle one item; True at the stop."""
@@ -134,7 +135,7 @@ class Encoder:
         elif kind == "stop":
             dropped: Counter[str] = item[1]
             self.writer.add_metadata("recording_stats", {
-                "written": str(sum(self.by_topic.values())),
+                "written": str(sum(self.written().values())),
                 "dropped": str(sum(dropped.values())),
                 "dropped_by_topic": ", ".join(f"{t}={n}" for t, n in sorted(dropped.items())),
             })
@@ -161,7 +162,7 @@ def serve(inp: IO[bytes], out: IO[bytes], chunk_size: int, compression: Compress
             for number in syncs:
                 out.write(frame(b"S", str(number).encode()))
             if stop:
-                out.write(frame(b"T", pickle.dumps(dict(encoder.by_topic))))
+                out.write(frame(b"T", pickle.dumps(encoder.written())))
                 out.flush()
                 return
             out.flush()
