@@ -1,9 +1,11 @@
 """``python -m execution_engine studio [APP.xml] [--port 8080] [--host 127.0.0.1] [--robot ...] [--speed ...] [--replay TRACE.jsonl]``.
 
 Serves the operator station (builder, monitor, timeline) with uvicorn.  It binds to loopback
-unless ``--host`` names another address, and then says so: the station starts and stops robots,
-and it has no login.  The run's settings (``--robot``, ``--speed``, ``--trace``, back-end
-options) are those of ``run`` and apply to every run started from the page.
+unless ``--host`` names another address; then every page must present a token, made when the
+station starts and printed in the address to open, or kept by the integrator in
+``--token-file`` (which also asks for it on loopback).  The run's settings (``--robot``,
+``--speed``, ``--trace``, back-end options) are those of ``run`` and apply to every run started
+from the page.
 """
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import argparse
 import asyncio
 import logging
 import math
+import socket
 import sys
 from pathlib import Path
 from typing import IO, Any
@@ -19,7 +22,6 @@ from core_functions.catalog import Catalog
 
 log = logging.getLogger(__name__)
 
-LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 #: Options ``studio`` takes over from ``run`` (same meaning, same parsing: the two cannot drift apart).
@@ -31,7 +33,11 @@ def add_parser(sub: Any) -> None:
     studio = sub.add_parser("studio", help="the operator station in the browser: build, validate, run, watch and replay applications")
     studio.add_argument("file", nargs="?", metavar="APP.xml", help="the application to open in the builder")
     studio.add_argument("--port", type=int, default=8080, help="HTTP port of the station (default 8080)")
-    studio.add_argument("--host", default="127.0.0.1", help="address to serve on (default loopback; anything else is reachable from the network)")
+    studio.add_argument("--host", default="127.0.0.1", help="address to serve on (default loopback; anything else is reachable from the network and needs the token)")
+    studio.add_argument("--token-file", dest="token_file", metavar="FILE",
+                        help="the token pages must present, kept in FILE (one line, mode 600); default: made at start and printed when not on loopback")
+    studio.add_argument("--allowed-host", dest="allowed_host", action="append", default=[], metavar="NAME",
+                        help="a host name pages reach the station by, besides its address, this computer's name and localhost (repeatable)")
     studio.add_argument("--replay", metavar="TRACE.jsonl", help="show a finished run's trace instead of running anything")
     studio.add_argument("--transport", choices=("local", "ros"), default="local",
                         help="local: run the application in this process (default); ros: watch and command a cell running on the ROS graph (needs APP.xml for its groups, and rclpy)")
@@ -42,8 +48,10 @@ def add_parser(sub: Any) -> None:
             studio._add_action(action)  # noqa: SLF001
 
 
-def build_station(args: argparse.Namespace, catalog: Catalog, root: Path) -> Any:
-    """The station of these arguments (no server yet): what the tests serve with Starlette's TestClient."""
+def build_station(args: argparse.Namespace, catalog: Catalog, root: Path, access: Any = None) -> Any:
+    """The station of these arguments (no server yet): what the tests serve with Starlette's TestClient.
+
+    ``access`` (:class:`operator_station.access.Access`): who may use it; default loopback pages."""
     from operator_station.feed import Feed
     from operator_station.replay import load_replay
     from operator_station.server import Station
@@ -53,20 +61,20 @@ def build_station(args: argparse.Namespace, catalog: Catalog, root: Path) -> Any
     app_path = (root / args.file).resolve() if args.file else None
     if args.replay:
         load_replay(feed, Path(args.replay))
-        return Station(catalog, feed, None, root, app_path, replay=True)
+        return Station(catalog, feed, None, root, app_path, replay=True, access=access)
     if getattr(args, "transport", "local") == "ros":
-        return _attached(args, catalog, feed, root, app_path)
+        return _attached(args, catalog, feed, root, app_path, access)
     options = {"host": args.controller_host, "port": args.controller_port, "rsi_listen": args.rsi_listen,
                "faults": tuple(args.fault or ()), "seed": args.seed, "extra": dict(args.backend_option or ())}
     settings = RunSettings(args.robot, options, args.speed, Path(args.trace) if args.trace else None, args.trajectory_db, not args.no_check)
-    return Station(catalog, feed, RunSession(feed, settings), root, app_path)
+    return Station(catalog, feed, RunSession(feed, settings), root, app_path, access=access)
 
 
 class StudioError(Exception):
     """A setting the station cannot work with: one line for the operator."""
 
 
-def _attached(args: argparse.Namespace, catalog: Catalog, feed: Any, root: Path, app_path: Path | None) -> Any:
+def _attached(args: argparse.Namespace, catalog: Catalog, feed: Any, root: Path, app_path: Path | None, access: Any) -> Any:
     """A station watching a cell on the ROS graph: the application names the robot (its groups)."""
     import importlib.util
 
@@ -88,7 +96,7 @@ def _attached(args: argparse.Namespace, catalog: Catalog, feed: Any, root: Path,
         raise StudioError(f"{app_path}: {error.args[0]}") from None
     session = AttachedSession(feed, robot, document.name, ros_connect(["operator_station"]))
     session.attach()
-    return Station(catalog, feed, session, root, app_path)
+    return Station(catalog, feed, session, root, app_path, access=access)
 
 
 def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr) -> int:
@@ -105,13 +113,22 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     if args.replay and not Path(args.replay).is_file():
         err.write(f"error: {args.replay}: no such trace file\n")
         return 1
-    if args.host not in LOOPBACK:
-        err.write(f"warning: serving on {args.host}: anyone who reaches this address can start and stop the robot (no login); use the default 127.0.0.1 unless the network is the cell's own\n")
+    from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
+
+    if not is_loopback(args.host):
+        err.write(f"warning: serving on {args.host}: reachable from the network; every page and script must present the token\n")
     if not 0 <= args.port <= 65535:
         err.write(f"error: --port must be 0..65535, got {args.port}\n")
         return 2
+
     try:
-        station = build_station(args, catalog, Path.cwd())
+        token = read_token_file(Path(args.token_file)) if getattr(args, "token_file", None) else None
+        access = Access.for_address(args.host, token, tuple(getattr(args, "allowed_host", None) or ()))
+    except AccessError as error:
+        err.write(f"error: {error}\n")
+        return 2
+    try:
+        station = build_station(args, catalog, Path.cwd(), access)
     except StudioError as error:
         err.write(f"error: {error}\n")
         return 2
@@ -119,12 +136,19 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
         err.write(f"error: {error}\n")
         return 1
     from operator_station.server import create_app
+    from operator_station.serving import StationServer, server_config
 
-    config = uvicorn.Config(create_app(station), host=args.host, port=args.port, log_level="warning", lifespan="off", ws="websockets")
-    server = uvicorn.Server(config)
+    server = StationServer(server_config(create_app(station), args.host, args.port), station)
     speed = "max" if math.isinf(args.speed) else f"x{args.speed:g}"
     what = f"replaying {args.replay}" if args.replay else f"runs at {speed}"
-    out.write(f"operator station on http://{args.host if ':' not in args.host else f'[{args.host}]'}:{args.port}/ ({what}); Ctrl-C ends it\n")
+    out.write(f"operator station on {_url(args.host, args.port)} ({what}); Ctrl-C ends it\n")
+    if access.token_needed:
+        page = _url(socket.gethostname() if is_wildcard(args.host) else args.host, args.port)
+        if token is None:
+            out.write(f"open {page}?token={access.token} (a token made for this start; keep one with --token-file)\n")
+        else:
+            out.write(f"open {page}?token=TOKEN with the token of {args.token_file}\n")
+        out.write(f"pages may reach it as: {', '.join(sorted(access.hosts))} (others with --allowed-host NAME)\n")
     out.flush()
     try:
         asyncio.run(_serve(server, station))
@@ -137,13 +161,16 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     return 0
 
 
+def _url(host: str, port: int) -> str:
+    return f"http://{host if ':' not in host else f'[{host}]'}:{port}/"
+
+
 async def _serve(server: Any, station: Any) -> None:
+    """Serve until a signal or an error; the server's shutdown stops the run first (operator_station.serving)."""
+    from operator_station.serving import STOP_BOUND, stop_station
+
     try:
         await server.serve()
     finally:
-        station.stopping.set()
-        if station.session is not None and station.session.running:  # a run of its own: stopped with the station
-            await station.session.command("stop")
-            await asyncio.to_thread(station.session.join, 30.0)
-        elif station.session is not None:  # an attached cell goes on; the station leaves its graph
-            await asyncio.to_thread(station.session.join, 10.0)
+        if not station.stopped:  # ended without the server's shutdown (it could not bind): nothing may be left running
+            await stop_station(station, server.clock, STOP_BOUND)

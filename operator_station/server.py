@@ -10,27 +10,35 @@ Routes (JSON unless said otherwise):
   ``POST /api/validate`` ``{path, document}``; ``POST /api/save`` ``{path, document}`` (only valid
   documents are written); ``POST /api/run`` ``{path, document}`` validates, then starts the run;
 * ``POST /api/operator/{command}`` start, pause, resume, step, stop, reset; ``POST /api/safety``
-  ``{active}``;
+  ``{"active": true}`` raises the safety stop; ``POST /api/safety/clear`` ``{"confirm": true}``
+  clears it (its own confirmed action, logged with who and when);
 * ``GET /api/timeline`` the timeline model of the records so far (``?until=T`` for a replay's slider);
 * ``WS /ws`` the live feed: a snapshot, then every record and joint sample, in order, batched.
 
-Paths the page names are resolved against the directory the station was started in; only
-``.xml`` files are opened or written.
+Everything passes the guard first (:mod:`operator_station.guard`: Host, Origin, a session or the
+token, JSON bodies bounded while they stream).  Paths the page names are resolved, links
+followed, and must lie in the station's folders (:mod:`operator_station.folders`); only ``.xml``
+files are opened or written.
 """
 from __future__ import annotations
 
 import asyncio
 import logging
 import os
+import time
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 import orjson
 from starlette.applications import Starlette
+from starlette.exceptions import HTTPException
+from starlette.middleware import Middleware
 from starlette.requests import Request
-from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.responses import JSONResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -39,12 +47,17 @@ from core_functions.catalog import Catalog
 from execution_engine.app_model.document import AppDocument, DocumentError, read_document
 from execution_engine.transport.wire import ENGINE_SERVICES
 from operator_station import builder
+from operator_station.access import Access
 from operator_station.feed import Feed
+from operator_station.folders import Folders
+from operator_station.guard import WHO, BodyTooLarge, Guard, page
 from operator_station.attach import AttachedSession
 from operator_station.session import RunSession
 from operator_station.timeline_view import TimelineView
 
 log = logging.getLogger(__name__)
+#: Who did what to the cell's safety stop, and when: its own logger, so it can be kept apart.
+audit_log = logging.getLogger("operator_station.audit")
 
 STATIC = Path(__file__).resolve().parent / "static"
 #: Largest request body taken (a 10,000-operation application as JSON is ~3 MB).
@@ -53,6 +66,10 @@ MAX_BODY = 32 << 20
 PUSH_PERIOD = 0.05
 #: Records sent in one WebSocket message at most.
 MAX_BATCH = 5000
+#: Pages watching the live feed at once; one more is refused (close code 1013, try again later).
+MAX_PAGES = 16
+#: Safety-stop actions kept in :attr:`Station.audit`.
+MAX_AUDIT = 1000
 
 
 class Station:
@@ -60,17 +77,36 @@ class Station:
 
     def __init__(
         self, catalog: Catalog, feed: Feed, session: RunSession | AttachedSession | None, root: Path, app_path: Path | None, replay: bool = False,
+        access: Access | None = None, wall: Callable[[], float] = time.time,
     ) -> None:
         self.catalog = catalog
         self.catalog_json = builder.catalog_view(catalog)
         self.feed = feed
         self.session = session
         self.root = root
+        self.folders = Folders([root, *([app_path.parent] if app_path is not None else [])])
         self.app_path = app_path
         self.replay = replay
+        self.access = access or Access.for_address("127.0.0.1")
+        self.wall = wall  # seconds since 1970, for the audit's "when"
         self.timeline = TimelineView(feed)
-        self.stopping = asyncio.Event()  # set when the server ends: every page's feed loop stops
+        self.stopped = False  # set when the server ends: every page's feed loop stops
+        self.pages = 0  # live feeds open now
+        self.audit: deque[dict[str, str]] = deque(maxlen=MAX_AUDIT)
         self._opened: tuple[tuple[float, int], bytes] | None = None  # the start file's answer, by (mtime, size)
+
+    def stop(self) -> None:
+        """End every page's feed (from any thread): the station is going away."""
+        self.stopped = True
+        self.feed.wake()
+
+    def note(self, action: str, who: Any, answer: str) -> dict[str, str]:
+        """Log a safety-stop action with who took it and when (UTC)."""
+        when = datetime.fromtimestamp(self.wall(), timezone.utc).isoformat(timespec="milliseconds")
+        entry = {"when": when, "who": str(who or "unknown"), "action": action, "answer": answer}
+        self.audit.append(entry)
+        audit_log.warning("studio: %s by %s at %s: %s", action, entry["who"], when, answer)
+        return entry
 
     def opened(self) -> bytes:
         """The ``/api/document`` answer for the start file, read once per change of the file (a 10,000-operation
@@ -92,12 +128,8 @@ class Station:
         return self._opened[1]
 
     def resolve(self, text: Any) -> Path:
-        if not isinstance(text, str) or not text.strip():
-            raise ValueError("a file path is needed")
-        path = (self.root / text.strip()).resolve()
-        if path.suffix.lower() != ".xml":
-            raise ValueError(f"{text}: an application file ends in .xml")
-        return path
+        """The application file the page names, inside the station's folders (ValueError, one line, if not)."""
+        return self.folders.resolve(text)
 
 
 class FastJSON(JSONResponse):
@@ -112,9 +144,12 @@ def _error(message: str, status: int = 400) -> JSONResponse:
 
 
 async def _body(request: Request) -> dict[str, Any]:
-    data = await request.body()
-    if len(data) > MAX_BODY:
-        raise ValueError(f"the request is {len(data)} bytes, over the limit of {MAX_BODY}")
+    """The request's JSON object; the guard has checked its type and counts its bytes as they stream in."""
+    data = bytearray()
+    async for chunk in request.stream():
+        data += chunk
+        if len(data) > MAX_BODY:  # the guard's own bound is the same: this one only if the guard was left out
+            raise BodyTooLarge(MAX_BODY)
     try:
         body = orjson.loads(data or b"{}")
     except orjson.JSONDecodeError as error:
@@ -122,6 +157,16 @@ async def _body(request: Request) -> dict[str, Any]:
     if not isinstance(body, dict):
         raise ValueError("the request must be a JSON object")
     return body
+
+
+async def _run_field(station: Station, request: Request, name: str) -> tuple[Any, Response | None]:
+    """One field of a command's JSON body, or the refusal: a replay has no run, a bad body is a 400."""
+    if station.session is None:
+        return None, _error("this station replays a trace; there is no run to command", 409)
+    try:
+        return (await _body(request)).get(name), None
+    except ValueError as error:
+        return None, _error(str(error))
 
 
 def _with_document(station: Station, handler: Callable[[Path, AppDocument], Awaitable[Response]]) -> Callable[[Request], Awaitable[Response]]:
@@ -141,7 +186,7 @@ def _with_document(station: Station, handler: Callable[[Path, AppDocument], Awai
 
 def create_app(station: Station) -> Starlette:
     async def index(request: Request) -> Response:
-        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+        return page(request, station.access, STATIC / "index.html")
 
     async def catalog(request: Request) -> Response:
         return FastJSON(station.catalog_json)
@@ -170,7 +215,7 @@ def create_app(station: Station) -> Starlette:
         try:
             saved, messages = await asyncio.to_thread(builder.save_document, doc, path, station.catalog)
         except OSError as error:
-            return _error(f"{_shown(station, path)}: cannot write: {error.strerror or error}")
+            return _error(f"{station.folders.shown(path)}: cannot write: {error.strerror or error}")
         return FastJSON({"ok": saved, "path": _shown(station, path), "messages": [m.to_json() for m in messages]})
 
     async def run(path: Path, doc: AppDocument) -> Response:
@@ -196,16 +241,27 @@ def create_app(station: Station) -> Starlette:
         return FastJSON({"ok": ok, "answer": answer})
 
     async def safety(request: Request) -> Response:
-        if station.session is None:
-            return _error("this station replays a trace; there is no run to command", 409)
-        try:
-            active = (await _body(request)).get("active")
-        except ValueError as error:
-            return _error(str(error))
-        if not isinstance(active, bool):
-            return _error("safety: give {\"active\": true} to raise the safety stop, false to clear it")
-        ok, answer = station.session.safety_stop(active)
+        active, refusal = await _run_field(station, request, "active")
+        if refusal is not None:
+            return refusal
+        if active is False:
+            return _error("safety: clearing the safety stop is its own confirmed action: POST /api/safety/clear {\"confirm\": true}")
+        if active is not True:
+            return _error("safety: give {\"active\": true} to raise the safety stop (clear it with /api/safety/clear)")
+        ok, answer = station.session.safety_stop(True)  # type: ignore[union-attr] - _run_field checked it
+        station.note("safety stop raised" if ok else "safety stop raise refused", request.scope.get(WHO), answer)
         return FastJSON({"ok": ok, "answer": answer})
+
+    async def safety_clear(request: Request) -> Response:
+        """Clearing lets the robot move again once resumed: never a side effect of a toggle, always confirmed."""
+        confirm, refusal = await _run_field(station, request, "confirm")
+        if refusal is not None:
+            return refusal
+        if confirm is not True:
+            return _error("safety clear: confirm it with {\"confirm\": true} once the cell is safe; the robot moves again on Resume")
+        ok, answer = station.session.safety_stop(False)  # type: ignore[union-attr]
+        entry = station.note("safety stop cleared" if ok else "safety stop clear refused", request.scope.get(WHO), answer)
+        return FastJSON({"ok": ok, "answer": answer, "who": entry["who"], "when": entry["when"]})
 
     async def timeline(request: Request) -> Response:
         until = request.query_params.get("until")
@@ -216,11 +272,16 @@ def create_app(station: Station) -> Starlette:
         return FastJSON(await asyncio.to_thread(station.timeline.model, limit))
 
     async def feed(socket: WebSocket) -> None:
+        if station.pages >= MAX_PAGES or station.stopped:
+            await socket.close(code=1013)  # try again later
+            return
         await socket.accept()
+        station.pages += 1
         waiter = station.feed.waiter()
+        listener = asyncio.ensure_future(_until_gone(socket, waiter))
         run, sent, joints, last_state = -1, 0, 0, ""
         try:
-            while not station.stopping.is_set():
+            while not station.stopped and not listener.done():
                 waiter.clear()
                 if station.feed.snapshot.run != run:  # a new run or replay: the page starts over
                     run, sent, joints, last_state = station.feed.snapshot.run, 0, 0, ""
@@ -240,13 +301,21 @@ def create_app(station: Station) -> Starlette:
                     await socket.send_text(orjson.dumps({"type": "joints", "names": snapshot.joint_names, "samples": samples}).decode())
                 joints = joint_total
                 await asyncio.sleep(PUSH_PERIOD)
-                await _wait_either(waiter, station.stopping)
-        except (WebSocketDisconnect, RuntimeError):
+                await waiter.wait()  # a change, the page gone (the listener) or the station ending (Station.stop)
+            if station.stopped and not listener.done():
+                await socket.close(code=1001)  # going away
+        except (WebSocketDisconnect, RuntimeError, OSError):
             pass  # the page went away (RuntimeError: sending on a socket already closed)
         finally:
+            listener.cancel()
             station.feed.forget(waiter)
+            station.pages -= 1
 
-    return Starlette(routes=[
+    async def refused(request: Request, error: Exception) -> Response:
+        assert isinstance(error, HTTPException)
+        return _error(str(error.detail), error.status_code)
+
+    return Starlette(middleware=[Middleware(Guard, access=station.access, max_body=MAX_BODY)], exception_handlers={HTTPException: refused}, routes=[
         Route("/", index),
         Route("/favicon.ico", lambda request: Response(status_code=204)),  # no icon: say so, not 404 in the console
         Route("/api/catalog", catalog),
@@ -258,19 +327,22 @@ def create_app(station: Station) -> Starlette:
         Route("/api/run", _with_document(station, run), methods=["POST"]),
         Route("/api/operator/{command}", operator, methods=["POST"]),
         Route("/api/safety", safety, methods=["POST"]),
+        Route("/api/safety/clear", safety_clear, methods=["POST"]),
         Route("/api/timeline", timeline),
         WebSocketRoute("/ws", feed),
         Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
     ])
 
 
-async def _wait_either(first: asyncio.Event, second: asyncio.Event) -> None:
-    waits = [asyncio.ensure_future(first.wait()), asyncio.ensure_future(second.wait())]
+async def _until_gone(socket: WebSocket, waiter: asyncio.Event) -> None:
+    """Read the page's side until it closes (the page sends nothing else), then wake the feed loop to end it."""
     try:
-        await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+        while (await socket.receive())["type"] != "websocket.disconnect":
+            pass
+    except (WebSocketDisconnect, RuntimeError, OSError):
+        pass
     finally:
-        for wait in waits:
-            wait.cancel()
+        waiter.set()
 
 
 def _live_state(snapshot: Any) -> dict[str, Any]:
@@ -281,7 +353,4 @@ def _live_state(snapshot: Any) -> dict[str, Any]:
 
 def _shown(station: Station, path: Path) -> str:
     """A path as the page shows it: relative to the station's directory when it is below it."""
-    try:
-        return str(path.relative_to(station.root))
-    except ValueError:
-        return str(path)
+    return station.folders.shown(path)

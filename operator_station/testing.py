@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from operator_station.server import Station, create_app
+from operator_station.serving import StationServer, server_config
 
 
 def free_port() -> int:
@@ -36,10 +37,8 @@ class ServedStation:
 
 def serve(station: Station, start_timeout: float = 15.0) -> ServedStation:
     """Serve ``station`` on 127.0.0.1 at a free port; returns once it accepts connections."""
-    import uvicorn
-
     port = free_port()
-    server = uvicorn.Server(uvicorn.Config(create_app(station), host="127.0.0.1", port=port, log_level="warning", lifespan="off", ws="websockets"))
+    server = StationServer(server_config(create_app(station), "127.0.0.1", port), station)
     thread = threading.Thread(target=server.run, name="studio server", daemon=True)
     thread.start()
     deadline = time.monotonic() + start_timeout  # wall time: a real server on a real socket

@@ -58,8 +58,16 @@ def cell_dir(tmp_path: Path) -> Path:
     return tmp_path
 
 
+#: Where the tests' client believes the station is (its Host header and origin): the default address and port.
+BASE = "http://127.0.0.1:8080"
+FEED = "ws://127.0.0.1:8080/ws"
+
+
 def client_for(station: Station) -> TestClient:
-    return TestClient(create_app(station))
+    """A client that loads the page first, as a browser on loopback does: it holds the station's session cookie."""
+    client = TestClient(create_app(station), base_url=BASE, client=("127.0.0.1", 50000))
+    assert client.get("/").status_code == 200 and client.cookies
+    return client
 
 
 def rivet(cell_dir: Path, **changes: Any) -> tuple[Station, TestClient, dict[str, Any]]:
@@ -139,13 +147,13 @@ def test_save_writes_what_validate_accepts_and_opening_it_gives_it_back(cell_dir
 
 def test_bad_requests_are_one_line_and_change_nothing(cell_dir: Path) -> None:
     station, client, _ = rivet(cell_dir)
-    assert client.post("/api/validate", content=b"{not json").status_code == 400
+    assert client.post("/api/validate", content=b"{not json", headers={"Content-Type": "application/json"}).status_code == 400
     answer = client.post("/api/save", json={"path": "x.txt", "document": {}})
     assert answer.status_code == 400 and "xml" in answer.json()["error"]
     answer = client.post("/api/save", json={"path": "x.xml", "document": {"name": "a", "robot": "nextage", "operations": "no"}})
     assert answer.status_code == 400 and answer.json()["error"] == "operations: a list is needed"
-    assert client.post("/api/operator/launch").status_code == 404
-    assert client.post("/api/operator/pause").json() == {"ok": False, "answer": "no run is going"}
+    assert client.post("/api/operator/launch", json={}).status_code == 404
+    assert client.post("/api/operator/pause", json={}).json() == {"ok": False, "answer": "no run is going"}
     assert client.post("/api/safety", json={"active": "yes"}).status_code == 400
     assert not (cell_dir / "x.xml").exists() and station.feed.snapshot.run == 0
 
@@ -157,7 +165,7 @@ def test_a_run_at_max_speed_reaches_finish_and_the_page_gets_the_trace_record_fo
     lines = [json.loads(line) for line in trace.read_text(encoding="utf-8").splitlines()]
     assert lines[-1]["event"] == "run_end" and lines[-1]["outcome"] == "finished"
     received: list[dict[str, Any]] = []
-    with client.websocket_connect("/ws") as socket:
+    with client.websocket_connect(FEED) as socket:
         while len(received) < len(lines):
             message = json.loads(socket.receive_text())
             if message["type"] == "records":
@@ -198,7 +206,7 @@ def test_operator_commands_go_through_the_engine_and_are_traced_with_their_sourc
     assert session.wait_started(60.0)
     assert client.post("/api/safety", json={"active": True}).json()["ok"]
     assert wait_until(lambda: any(r.get("source", "").startswith("safety stop on") for r in station.feed.records))
-    stop = client.post("/api/operator/stop").json()
+    stop = client.post("/api/operator/stop", json={}).json()
     assert stop["ok"], stop
     session.join(120.0)
     records = [json.loads(line) for line in trace.read_text(encoding="utf-8").splitlines()]
@@ -274,9 +282,9 @@ def test_attached_through_the_transport_port_the_page_sees_and_commands_a_cell_i
         assert session.wait_started(60.0)
         assert client.post("/api/run", json={"path": "rivet_installation.xml", "document": client.get("/api/document").json()["document"]}).json()["ok"]
         assert wait_until(lambda: any(r["event"] == "function_start" for r in feed.records))
-        assert client.post("/api/operator/pause").json()["ok"]
+        assert client.post("/api/operator/pause", json={}).json()["ok"]
         assert wait_until(lambda: (feed.snapshot.status or {}).get("state") == "paused")
-        assert client.post("/api/operator/resume").json()["ok"]
+        assert client.post("/api/operator/resume", json={}).json()["ok"]
         assert wait_until(lambda: (feed.snapshot.status or {}).get("state") == "finished", 120.0)
         operator = [(r["command"], r["source"], r["accepted"]) for r in feed.records if r["event"] == "operator"]
         assert operator == [(c, f"service /execution_engine/{c}", True) for c in ("start", "pause", "resume")]

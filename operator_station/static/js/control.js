@@ -1,6 +1,8 @@
 // Operator control: start (validate the builder's application, then run it), pause, resume, step,
 // stop and reset go to the engine's own operator commands (recorded in the trace with source
 // "studio"); the safety stop raises the cell's safety input, which the engine obeys and records.
+// Clearing the safety stop is never a toggle: a dialog asks first, then /api/safety/clear with
+// {confirm: true}; the station logs who cleared it and when, and the robot moves again on Resume.
 "use strict";
 
 const Control = (() => {
@@ -26,12 +28,36 @@ const Control = (() => {
     if (reply.ok) document.getElementById("tab-monitor").click();
     return reply;
   }
-  async function safety(active) {
-    const reply = await Store.post("/api/safety", {active});
-    if (reply.ok) safetyActive = active;
+  function showSafety(active) {
+    safetyActive = active;
     $("safety-stop").classList.toggle("active", safetyActive);
     $("safety-stop").textContent = safetyActive ? "SAFETY STOP ACTIVE (click to clear)" : "SAFETY STOP";
+  }
+  async function safety(active) {
+    if (!active) return clearSafety();
+    const reply = await Store.post("/api/safety", {active: true});
+    if (reply.ok) showSafety(true);
     answer(reply.answer || reply.error, reply.ok);
+    return reply;
+  }
+  // The confirmation dialog; the clear is sent only on its confirm button.
+  function clearSafety() {
+    const dialog = $("safety-dialog");
+    return new Promise((resolve) => {
+      dialog.addEventListener("close", async () => {
+        if (dialog.returnValue !== "confirm") {
+          answer("safety stop: not cleared", false);
+          resolve(null);
+          return;
+        }
+        const reply = await Store.post("/api/safety/clear", {confirm: true});
+        if (reply.ok) showSafety(false);
+        answer(reply.ok ? `${reply.answer} (logged: ${reply.who}, ${reply.when})` : (reply.error || reply.answer), reply.ok);
+        resolve(reply);
+      }, {once: true});
+      dialog.returnValue = "";
+      dialog.showModal();
+    });
   }
   function safetyButton(active) {
     const button = document.createElement("button");
@@ -62,6 +88,6 @@ const Control = (() => {
     updateButtons();
   });
   Store.on("state", updateButtons);
-  Store.on("snapshot", () => { safetyActive = false; $("safety-stop").classList.remove("active"); $("safety-stop").textContent = "SAFETY STOP"; });
-  return {command, start, safety, safetyButton};
+  Store.on("snapshot", () => showSafety(false));
+  return {command, start, safety, clearSafety, safetyButton};
 })();

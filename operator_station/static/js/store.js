@@ -17,13 +17,16 @@ const Store = (() => {
   store.on = (name, fn) => { (listeners[name] = listeners[name] || []).push(fn); };
   store.emit = (name, arg) => { for (const fn of listeners[name] || []) { try { fn(arg); } catch (e) { console.error(name, e); } } };
 
+  // Every call is JSON and carries the page's session cookie (HttpOnly, SameSite=Strict: set by the station
+  // when it served this page); the station refuses anything else, so a refusal says why in its "error".
+  const refused = (url, status) => ({ok: false, error: status === 401 ? `${url}: no session: load the station's page again (with its token when it serves the network)` : `${url}: HTTP ${status}`});
   store.post = async (url, body) => {
-    const response = await fetch(url, {method: "POST", headers: {"Content-Type": "application/json"}, body: JSON.stringify(body || {})});
+    const response = await fetch(url, {method: "POST", credentials: "same-origin", headers: {"Content-Type": "application/json"}, body: JSON.stringify(body || {})});
     let data;
-    try { data = await response.json(); } catch (e) { data = {ok: false, error: `${url}: HTTP ${response.status}`}; }
+    try { data = await response.json(); } catch (e) { data = refused(url, response.status); }
     return data;
   };
-  store.get = async (url) => (await fetch(url)).json();
+  store.get = async (url) => (await fetch(url, {credentials: "same-origin"})).json();
 
   store.now = () => {
     if (store.cursor !== null) return store.cursor;
@@ -75,7 +78,7 @@ const Store = (() => {
   function connect() {
     const socket = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
     socket.onopen = () => { store.connected = true; };
-    socket.onclose = () => { store.connected = false; setTimeout(connect, 1000); };
+    socket.onclose = () => { store.connected = false; setTimeout(connect, 1000); };  // the station busy (1013) or gone: try again
     socket.onmessage = (event) => {
       const message = JSON.parse(event.data);
       if (message.type === "snapshot") {
