@@ -21,7 +21,6 @@ import argparse
 import asyncio
 import contextlib
 import json
-import logging
 import math
 import signal
 import sys
@@ -35,6 +34,7 @@ from core_functions.catalog import Catalog, ParamType
 from core_functions.robots import ROBOTS, RobotModel
 from execution_engine.app_model import Application, ApplicationError, load_application, read_application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
+from execution_engine.console_log import ConsoleLog
 from execution_engine.deployment import deploy_local
 from execution_engine import launcher
 from execution_engine.dry_run.check import check as dry_run_check
@@ -422,16 +422,16 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
             args = parser.parse_args(argv)
     except SystemExit as exit_:
         return EXIT_USAGE if exit_.code else EXIT_OK
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s", stream=err)
-    try:
-        return dispatch(args, out, err)
-    except KeyboardInterrupt:
-        err.write("interrupted\n")
-        return EXIT_STOPPED
-    except Exception as error:  # noqa: BLE001 - a defect: one line for the operator, the traceback with -v
-        err.write(f"error: {args.command} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
-        _explain(error, args, err)
-        return EXIT_INTERNAL
+    with ConsoleLog(err, args.verbose):  # every command's log: a warning that repeats is one counted line a second
+        try:
+            return dispatch(args, out, err)
+        except KeyboardInterrupt:
+            err.write("interrupted\n")
+            return EXIT_STOPPED
+        except Exception as error:  # noqa: BLE001 - a defect: one line for the operator, the traceback with -v
+            err.write(f"error: {args.command} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
+            _explain(error, args, err)
+            return EXIT_INTERNAL
 
 
 def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
