@@ -114,6 +114,8 @@ class OperatorCommands:
         self._start_requested = True
         if self._paused:
             await self._resume_groups()
+            if self.state == "paused":  # paused within an operation: it goes on, to its end
+                self._set_state("stepping", f"one step by {source}")
         return []
 
     async def _cmd_stop(self, source: str) -> list[str]:

@@ -40,6 +40,7 @@ from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from execution_engine.transport import typed
 from execution_engine.transport.msgs import Bool, Trigger
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS, LATCHED
 from execution_engine.transport.wire import (
@@ -105,9 +106,9 @@ class ExecutionEngine(OperatorCommands):
         self.wall_clock: WallClock = wall_clock or RealWallClock()
         self.catalog = catalog or full_catalog()
         self.autostart = bool(node.declare_parameter("autostart", True, "start running as soon as the machines are ready"))
-        self.startup_timeout = float(node.declare_parameter("startup_timeout", 15.0, "how long to wait for the group machines (s)"))
-        self.function_timeout = float(node.declare_parameter("function_timeout", 3600.0, "longest a function may take (s)"))
-        self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
+        self.startup_timeout = float(declare_bounded(node, "startup_timeout", 15.0, "how long to wait for the group machines (s)"))
+        self.function_timeout = float(declare_bounded(node, "function_timeout", 3600.0, "longest a function may take (s)"))
+        self.service_timeout = float(declare_bounded(node, "service_timeout", 5.0, "machine service call timeout (s)"))
         self._status_pub = node.create_publisher(typed.EngineStatusMsg, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
         self._events_pub = node.create_publisher(typed.EngineEventMsg, ENGINE_EVENTS, EVENTS)  # every state change and command, once
         self._cell_pub = node.create_publisher(typed.CellSnapshotMsg, ENGINE_CELL, LATCHED)
@@ -187,7 +188,7 @@ class ExecutionEngine(OperatorCommands):
         except ApplicationAborted as abort:
             report.outcome = "stopped" if self._stop_reason is not None else "failed"
             report.message = str(abort)
-        self._set_state("stopping")
+        self._set_state("stopping", report.message)  # why it stops: the operator's stop, the failure, or nothing to say
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
         self.zones.close()
@@ -239,7 +240,8 @@ class ExecutionEngine(OperatorCommands):
     async def _gate(self) -> bool:
         """Hold between operations while paused; False when the application must stop."""
         while self._paused and self._stop_reason is None:
-            self._set_state("paused")
+            stepped = f"one step done (operation {self._operation.id}): step or resume to go on" if self._stepping and self._operation else "paused"
+            self._set_state("paused", None if self.state == "paused" else stepped)
             with self._operator_wait():  # between operations, only an operator moves the run on
                 await self._wait_control()
         return self._stop_reason is None
@@ -513,10 +515,18 @@ class ExecutionEngine(OperatorCommands):
 
     # ---------------------------------------------------------------------------- status
     def _set_state(self, state: str, message: str | None = None) -> None:
+        """Change (or restate) the engine's state and publish it.
+
+        A message is the reason of *this* change: a change without one has none, so a line such
+        as STOPPING never carries the reason of an earlier change ("resumed by ...").  Restating
+        the state without a message keeps the reason it was entered with.
+        """
         previous = self.state
         self.state = state
         if message is not None:
             self._message = message
+        elif state != previous:
+            self._message = ""
         if state != previous:
             operation = self._operation.id if self._operation else None
             self._publish_event(EngineEvent("state", self.clock.now(), state, operation, from_state=previous, message=self._message))
