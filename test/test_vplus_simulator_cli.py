@@ -20,6 +20,10 @@ from robot_bridges.vplus.simulator import main
         (["--port", "70000"], "--port must be 0..65535"),
         (["--speed", "0"], "--speed must be > 0"),
         (["--max-clients", "0"], "--max-clients must be >= 1"),
+        (["--idle-timeout", "0"], "--idle-timeout must be within (0, 86400] s, got 0"),
+        (["--idle-timeout", "inf"], "--idle-timeout must be within (0, 86400] s, got inf"),
+        (["--reclaim-after", "-1"], "--reclaim-after must be within (0, 86400] s, got -1"),
+        (["--reclaim-after", "1e9"], "--reclaim-after must be within (0, 86400] s, got 1e+09"),
     ],
 )
 def test_bad_arguments_are_refused_with_a_clear_message(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:

@@ -12,8 +12,18 @@ splits each read on ``\\r\\n`` and so breaks on a message cut across two reads, 
 lines across any segmentation, as the seed says both ends should.
 
 For tests, :class:`Faults` injects what real networks and controllers do: drop the connection
-(after a number of messages, or when a given skill starts), delay acks, garble them, and write
-them in small pieces.  Everything runs on the injectable clock.
+(after a number of messages, or when a given skill starts), delay acks, garble them, write them in
+small pieces, or report a pose the arm is not at (a controller that lies).  Everything runs on the
+injectable clock.
+
+Client slots are bounded (``max_clients``, AdeptServer's ``/CLIENTS 10``) and so is what a client
+may hold one for without working: only a complete message of a skill this server has counts as
+work -- an empty line, a few bytes now and then, a malformed line or an unknown skill do not -- so
+a client that has sent no such message for ``idle_timeout`` is closed however much it trickles,
+one that sends ``max_junk`` bytes without one is closed at once, and when every slot is taken a
+new client takes the slot of the client that has worked least recently, if that one has been idle
+for ``reclaim_after``.  No set of clients can therefore lock a working client out for longer than
+``reclaim_after``.
 
 ``python -m robot_bridges.vplus.simulator --port 1234`` runs it standalone until SIGINT/SIGTERM.
 """
@@ -27,6 +37,7 @@ import signal
 import sys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from execution_engine.clock import Clock, run_with_clock, scaled_clock
 from robot_bridges.vplus.codec import (
@@ -40,7 +51,7 @@ from robot_bridges.vplus.codec import (
     UnknownSkill,
     decode_message,
 )
-from robot_bridges.vplus.kinematics import HOME_DEG
+from robot_bridges.vplus.kinematics import HOME_DEG, Location
 from robot_bridges.vplus.sim_arm import SimulatedArm, SkillError
 
 log = logging.getLogger(__name__)
@@ -48,8 +59,18 @@ log = logging.getLogger(__name__)
 DEFAULT_PORT = 1234
 #: AdeptServer opens its socket with ``/CLIENTS 10``.
 MAX_CLIENTS = 10
-IDLE_TIMEOUT = 60.0  # run seconds a client may stay silent before its slot is freed (the back end reconnects)
+#: Run seconds a client may go without a complete message before its slot is freed (the back end
+#: reconnects at its next primitive); trickled bytes, empty lines and garbage do not reset it.
+IDLE_TIMEOUT = 60.0
+#: Run seconds without work after which a client's slot goes to a new client when every slot is taken.
+RECLAIM_AFTER = 30.0
+#: Bytes a client may send without a complete message among them before it is closed: the longest
+#: legal message is ~100 bytes, so this is junk, an endless trickle, not a slow command.
+MAX_JUNK = 4096
+MAX_SECONDS = 86400.0  # longest idle_timeout / reclaim_after accepted: a day
 _READ_SIZE = 2048  # AdeptServer's /BUFFER_SIZE
+_KEPT = 100_000  # entries of errors / received / acked kept for inspection (the oldest go first)
+_T = TypeVar("_T")
 
 
 @dataclass
@@ -70,6 +91,9 @@ class Faults:
     split_acks: int = 0
     #: Skills that run but are never acked, as if the ack were lost.
     mute: set[str] = field(default_factory=set)
+    #: Every ack reports this location (mm, deg) instead of where the arm is: a controller that
+    #: acknowledges every skill but does not move where it was told (or reports it wrongly).
+    report_location: Location | None = None
 
 
 @dataclass
@@ -77,6 +101,12 @@ class _Client:
     peer: str
     writer: asyncio.StreamWriter
     task: asyncio.Task[None]
+    last_work: float  # run time its last complete message of a known skill ended (or it connected)
+    busy: bool = False  # running (or queued behind another client's) message: not idle
+    junk: int = 0  # bytes received since its last complete message
+
+    def idle(self, now: float) -> float:
+        return 0.0 if self.busy else now - self.last_work
 
 
 class VPlusSimulator:
@@ -94,6 +124,8 @@ class VPlusSimulator:
         max_line: int = MAX_LINE,
         skills: Iterable[Skill] = tuple(Skill),
         idle_timeout: float = IDLE_TIMEOUT,
+        reclaim_after: float = RECLAIM_AFTER,
+        max_junk: int = MAX_JUNK,
     ) -> None:
         self.clock = clock
         self.host = host
@@ -102,9 +134,14 @@ class VPlusSimulator:
         self.faults = faults or Faults()
         self.max_clients = max_clients
         self.max_line = max_line
-        if not idle_timeout > 0:
-            raise ValueError(f"idle_timeout must be > 0, got {idle_timeout}")
+        for name, value in (("idle_timeout", idle_timeout), ("reclaim_after", reclaim_after)):
+            if not 0 < value <= MAX_SECONDS:
+                raise ValueError(f"{name} must be within (0, {MAX_SECONDS:g}] s, got {value}")
+        if max_junk < MAX_LINE:
+            raise ValueError(f"max_junk must be >= {MAX_LINE} bytes (one line), got {max_junk}")
         self.idle_timeout = idle_timeout
+        self.reclaim_after = reclaim_after
+        self.max_junk = max_junk
         #: The skills this server has; AdeptServer variants differ (gripper, movehome on some only).
         self.skills = frozenset(Skill(s) for s in skills)
         self.errors: list[str] = []
@@ -170,9 +207,12 @@ class VPlusSimulator:
     # ---------------------------------------------------------------------------- serving
     async def _on_connect(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = _peer(writer)
-        if len(self._clients) >= self.max_clients:
+        if len(self._clients) >= self.max_clients and not self._reclaim(peer):
             # Say why before closing: a client that is simply reset cannot tell a full server from a dead one.
-            reason = f"refused: {self.max_clients} clients already connected; idle ones are closed after {self.idle_timeout:g} s"
+            reason = (
+                f"refused: {self.max_clients} clients already connected; idle ones are closed after {self.idle_timeout:g} s, "
+                f"and one idle for {self.reclaim_after:g} s gives its slot to a new client"
+            )
             self._error(f"{peer}: {reason}")
             writer.write(reason.encode() + b"\r\n")
             with contextlib.suppress(ConnectionError):
@@ -183,10 +223,10 @@ class VPlusSimulator:
         self._next_client += 1
         task = asyncio.current_task()
         assert task is not None
-        self._clients[key] = _Client(peer, writer, task)
+        client = self._clients[key] = _Client(peer, writer, task, self.clock.now())
         log.info("connection established: %s", peer)
         try:
-            await self._serve(peer, reader, writer)
+            await self._serve(client, reader, writer)
         except (ConnectionError, asyncio.IncompleteReadError) as error:
             log.info("%s: connection lost: %s", peer, error)
         except asyncio.CancelledError:  # the server is closing: end quietly (a cancelled connection task
@@ -199,18 +239,37 @@ class VPlusSimulator:
             writer.close()
             log.info("connection closed: %s", peer)
 
-    async def _serve(self, peer: str, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    def _reclaim(self, newcomer: str) -> bool:
+        """Every slot is taken: close the client idle longest, if idle for ``reclaim_after``; whether one was."""
+        now = self.clock.now()
+        key, idlest = max(self._clients.items(), key=lambda item: item[1].idle(now))
+        idle = idlest.idle(now)
+        if idle < self.reclaim_after:
+            return False
+        log.info("%s: idle for %.1f s, its slot goes to %s", idlest.peer, idle, newcomer)
+        self._say_and_close(idlest, f"closed: idle for {idle:.1f} s and another client needs the slot")
+        del self._clients[key]  # its task ends on its own; the slot is the newcomer's now
+        return True
+
+    def _say_and_close(self, client: _Client, text: str) -> None:
+        client.writer.write(text.encode() + b"\r\n")
+        client.writer.close()
+
+    async def _serve(self, client: _Client, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         splitter = LineSplitter(self.max_line)
+        peer = client.peer
         while not writer.is_closing():
-            try:
-                data = await self.clock.wait_for(reader.read(_READ_SIZE), self.idle_timeout)
-            except asyncio.TimeoutError:  # a silent client must not hold a slot forever
+            left = client.last_work + self.idle_timeout - self.clock.now()
+            try:  # bounded from its last message, not its last byte: trickling does not keep a slot
+                data = await self.clock.wait_for(reader.read(_READ_SIZE), max(0.0, left))
+            except asyncio.TimeoutError:
                 log.info("%s: idle for %g s, closing", peer, self.idle_timeout)
-                writer.write(f"closed: idle for {self.idle_timeout:g} s".encode() + b"\r\n")
+                self._say_and_close(client, f"closed: idle for {self.idle_timeout:g} s")
                 return
             if not data:
                 return
             t_recv = self.controller_time()
+            client.junk += len(data)
             try:
                 lines = splitter.feed(data)
             except FrameError as error:
@@ -219,28 +278,39 @@ class VPlusSimulator:
             for line in lines:
                 if writer.is_closing():
                     return
-                await self._handle(peer, line, t_recv, writer)
+                client.busy = True
+                try:
+                    worked = await self._handle(peer, line, t_recv, writer)
+                finally:
+                    client.busy = False
+                if worked:
+                    client.last_work, client.junk = self.clock.now(), 0
+            if client.junk > self.max_junk:
+                self._error(f"{peer}: {client.junk} bytes without a complete message; closing the connection")
+                self._say_and_close(client, f"closed: {client.junk} bytes without a message")
+                return
 
-    async def _handle(self, peer: str, line: bytes, t_recv: float, writer: asyncio.StreamWriter) -> None:
+    async def _handle(self, peer: str, line: bytes, t_recv: float, writer: asyncio.StreamWriter) -> bool:
+        """Run one line; whether it was work (a message of a skill this server has, run or failed)."""
         faults = self.faults
         if faults.drop_after is not None:
             if faults.drop_after <= 0:
                 faults.drop_after = None
                 writer.close()
-                return
+                return False
             faults.drop_after -= 1
         try:
             message = decode_message(line)
         except UnknownSkill as error:
             self._error(f"{peer}: unknown skill {error.skill!r} in message {error.msg_id}: not acked")
-            return
+            return False
         except DecodeError as error:
             self._error(f"{peer}: malformed message: {error}: not acked")
-            return
+            return False
         if message.command.skill not in self.skills:
             self._error(f"{peer}: unknown skill {message.command.skill.value!r} in message {message.id}: not acked")
-            return
-        self.received.append(message)
+            return False
+        _keep(self.received, message)
         skill = message.command.skill.value
         async with self._robot:
             if skill in faults.drop_on:
@@ -250,11 +320,13 @@ class VPlusSimulator:
                 await self.arm.run(message.command)
             except SkillError as error:
                 self._error(f"{peer}: {message}: {error}: not acked")
-                return
-            ack = Ack(message.id, t_recv, self.controller_time(), self.arm.location())
+                return True
+            location = self.arm.location() if faults.report_location is None else faults.report_location
+            ack = Ack(message.id, t_recv, self.controller_time(), location)
         if writer.is_closing() or skill in faults.mute:
-            return
+            return True
         await self._write_ack(ack, writer)
+        return True
 
     async def _write_ack(self, ack: Ack, writer: asyncio.StreamWriter) -> None:
         faults = self.faults
@@ -272,11 +344,18 @@ class VPlusSimulator:
         else:
             writer.write(data)
             await writer.drain()
-        self.acked.append(ack.id)
+        _keep(self.acked, ack.id)
 
     def _error(self, text: str) -> None:
-        self.errors.append(text)
+        _keep(self.errors, text)
         log.warning("%s", text)
+
+
+def _keep(entries: list[_T], entry: _T) -> None:
+    """Append, dropping the oldest beyond a bound: a simulator serving for days must not grow for ever."""
+    entries.append(entry)
+    if len(entries) > _KEPT + _KEPT // 4:
+        del entries[: len(entries) - _KEPT]
 
 
 def _peer(writer: asyncio.StreamWriter) -> str:
@@ -293,14 +372,26 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--run-for", type=float, default=None, metavar="SECONDS", help="stop after this much run time")
     parser.add_argument("--max-clients", type=int, default=MAX_CLIENTS, help=f"simultaneous clients (default {MAX_CLIENTS})")
     parser.add_argument(
-        "--idle-timeout", type=float, default=IDLE_TIMEOUT, help=f"close a client silent this long, run seconds (default {IDLE_TIMEOUT:g})"
+        "--idle-timeout", type=float, default=IDLE_TIMEOUT,
+        help=f"close a client that has sent no complete message this long, run seconds (default {IDLE_TIMEOUT:g}; trickled bytes do not count)",
+    )
+    parser.add_argument(
+        "--reclaim-after", type=float, default=RECLAIM_AFTER,
+        help=f"with every slot taken, a new client takes the slot of one idle this long, run seconds (default {RECLAIM_AFTER:g})",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log every connection and error")
     return parser
 
 
 async def serve(
-    clock: Clock, host: str, port: int, *, run_for: float | None = None, max_clients: int = MAX_CLIENTS, idle_timeout: float = IDLE_TIMEOUT
+    clock: Clock,
+    host: str,
+    port: int,
+    *,
+    run_for: float | None = None,
+    max_clients: int = MAX_CLIENTS,
+    idle_timeout: float = IDLE_TIMEOUT,
+    reclaim_after: float = RECLAIM_AFTER,
 ) -> int:
     """Run the simulator until SIGINT/SIGTERM or ``run_for`` seconds of run time; returns an exit code."""
     stop = asyncio.Event()
@@ -308,7 +399,7 @@ async def serve(
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     try:
-        async with VPlusSimulator(clock, host, port, max_clients=max_clients, idle_timeout=idle_timeout) as sim:
+        async with VPlusSimulator(clock, host, port, max_clients=max_clients, idle_timeout=idle_timeout, reclaim_after=reclaim_after) as sim:
             print(f"V+ simulator on {host}:{sim.port} (x{clock.speed:g}); Ctrl-C stops it", flush=True)
             with contextlib.suppress(asyncio.TimeoutError):
                 await clock.wait_for(stop.wait(), run_for)
@@ -330,12 +421,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.max_clients < 1:
         print(f"error: --max-clients must be >= 1, got {args.max_clients}", file=sys.stderr)
         return 2
-    if not (args.idle_timeout > 0):
-        print(f"error: --idle-timeout must be > 0, got {args.idle_timeout}", file=sys.stderr)
-        return 2
+    for option, value in (("--idle-timeout", args.idle_timeout), ("--reclaim-after", args.reclaim_after)):
+        if not 0 < value <= MAX_SECONDS:
+            print(f"error: {option} must be within (0, {MAX_SECONDS:g}] s, got {value:g}", file=sys.stderr)
+            return 2
     try:
         return run_with_clock(
-            lambda clock: serve(clock, args.host, args.port, run_for=args.run_for, max_clients=args.max_clients, idle_timeout=args.idle_timeout),
+            lambda clock: serve(
+                clock, args.host, args.port, run_for=args.run_for, max_clients=args.max_clients,
+                idle_timeout=args.idle_timeout, reclaim_after=args.reclaim_after,
+            ),
             scaled_clock(args.speed),
         )
     except OSError as error:
