@@ -39,7 +39,7 @@ from execution_engine.deployment import deploy_local
 from execution_engine import launcher
 from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
-from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
+from execution_engine.observers import LivePrinter, QuestionPrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
 from execution_engine.run_checks import Refused, check_trajectory_db, preflight
 from execution_engine.vision_cli import add_vision_parser, cmd_vision
@@ -221,6 +221,8 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
     # (--interactive); nobody else reaches the in-process engine.  While that person is waited
     # for, simulated time stands still instead of racing on.
     operators = bool(args.interactive) and sys.stdin.isatty()
+    if args.interactive and not operators:
+        out.write("warning: --interactive: standard input is not a terminal, so there are no operator keys; an alarm ends the run at once\n")
     deployment = await deploy_local(
         clock, app.robot, backend, machine_parameters=machine_parameters, operators=operators, hold_for_operators=operators and clock.simulated,
     )
@@ -234,6 +236,8 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
         observer.sinks.append(printer.on_status)
         observer.engine_sinks.append(printer.on_engine)
         observer.event_sinks.append(printer.on_event)
+    elif operators:  # quiet hides progress, never a question the run waits on
+        observer.engine_sinks.append(QuestionPrinter(out).on_engine)
     recorder = await start_recording(args, app, deployment.transport, backend_name(app, args), observer)  # checkpoints after the trace
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
     loop = asyncio.get_running_loop()
@@ -264,7 +268,7 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
             except (NotImplementedError, RuntimeError):
                 pass
         if interactive:
-            OperatorConsole.detach_stdin(loop)
+            console.detach_stdin(loop)  # the terminal as it was, also after Ctrl-C or an exception
         await stop_recording(recorder, out)
         await deployment.close()
 

@@ -186,6 +186,13 @@ class TraceWriter:
         self.lines += 1
 
 
+def engine_line(status: EngineStatus) -> str:
+    """The console's words for the engine's state: ``PAUSED operation 2/8 - paused by ...``."""
+    progress = f"operation {status.operation_index}/{status.operation_count}" if status.operation_count else ""
+    message = f" - {status.message}" if status.message else ""
+    return f"{status.state.upper()} {progress}{message}"
+
+
 class LivePrinter:
     """One console line per state change of a group, and per change of the engine's state.
 
@@ -223,9 +230,7 @@ class LivePrinter:
     def on_engine(self, status: EngineStatus) -> None:
         if status.state != self._engine_state:
             self._engine_state = status.state
-            progress = f"operation {status.operation_index}/{status.operation_count}" if status.operation_count else ""
-            message = f" - {status.message}" if status.message else ""
-            self._print(status.t, "engine", f"{status.state.upper()} {progress}{message}")
+            self._print(status.t, "engine", engine_line(status))
 
     def on_event(self, event: EngineEvent) -> None:
         """Operator commands (state changes are printed from the status, with their progress)."""
@@ -238,3 +243,25 @@ class LivePrinter:
     def _print(self, t: float, who: str, text: str) -> None:
         self.stream.write(f"[{t:9.3f} s] {who:<{self.width}}  {text}\n")
         self.stream.flush()
+
+
+class QuestionPrinter:
+    """With ``run -q``: the questions the run waits on, and nothing else.
+
+    Quiet hides progress, never a question: an alarm that holds the robot until an operator
+    answers is printed -- what failed, and which key or service answers it -- as the live view
+    prints it, once per question.
+    """
+
+    def __init__(self, stream: IO[str]) -> None:
+        self.stream = stream
+        self._asked = ""
+
+    def on_engine(self, status: EngineStatus) -> None:
+        if status.state != "alarm":
+            self._asked = ""
+            return
+        if status.message and status.message != self._asked:
+            self._asked = status.message
+            self.stream.write(f"[{status.t:9.3f} s] engine  {engine_line(status)}\n")
+            self.stream.flush()

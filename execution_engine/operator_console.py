@@ -8,10 +8,20 @@ name.  (A Trigger request carries no caller, so the services cannot tell callers
 Without an engine at hand the console calls those same services.  Ctrl-C asks the engine to
 stop (Table 2's stop: every moving group halts, then ErrorHandling, then Finish); a second
 Ctrl-C abandons the run.
+
+At a terminal a key acts the moment it is pressed: an operator who presses ``s`` to stop a robot
+must not also have to find Enter.  The terminal is put in cbreak mode (keys one by one, not
+echoed; Ctrl-C still interrupts) for as long as the console reads it, and put back as it was when
+the console lets go -- at the end of the run, on Ctrl-C, on an exception, and at exit.  Anything
+else (a pipe, a file) is read line by line.  The prompt says which of the two it is.
 """
 from __future__ import annotations
 
 import asyncio
+import atexit
+import codecs
+import contextlib
+import os
 import sys
 from collections.abc import Awaitable, Callable, Coroutine
 from typing import IO, Any
@@ -21,11 +31,78 @@ from execution_engine.transport.msgs import Trigger
 from execution_engine.transport.port import Node, TransportError
 from execution_engine.transport.wire import ENGINE_SERVICES, engine_service
 
+try:  # POSIX terminals; elsewhere the console reads lines
+    import termios
+    import tty
+except ImportError:  # pragma: no cover - not on the platforms this runs on
+    termios = None  # type: ignore[assignment]
+    tty = None  # type: ignore[assignment]
+
 #: ``(command, source) -> (accepted, answer)``: the engine's own entry for operator commands.
 Commander = Callable[[str, str], Awaitable[tuple[bool, str]]]
 
-HELP = "operator commands: " + " ".join(f"{key} ({command})" for command, key in CONSOLE_KEYS.items()) + " h (help)"
+KEY_LIST = " ".join(f"{key} ({command})" for command, key in CONSOLE_KEYS.items()) + " h (help)"
+HELP = "operator commands: " + KEY_LIST
+PROMPT_KEYS = f"operator keys, no Enter needed: {KEY_LIST}"
+PROMPT_LINES = f"operator commands, type a key (or the command's name) and Enter: {KEY_LIST}"
 _KEYS = {**{key: command for command, key in CONSOLE_KEYS.items()}, **{c: c for c in ENGINE_SERVICES}}
+
+READ_BYTES = 256  # read at most this much per wake of the loop
+MAX_LINE = 256  # characters of a typed line; a longer one is dropped whole
+MAX_PENDING = 8  # commands in flight at once; keys beyond that are ignored (a held-down key)
+
+
+class KeyDecoder:
+    """Bytes from the keyboard to operator words: one per key (a terminal in cbreak mode) or per line.
+
+    Escape sequences (arrow and function keys) and control characters are dropped, a line longer
+    than :data:`MAX_LINE` is dropped whole, and bytes that are not UTF-8 become U+FFFD (an
+    unknown command), so nothing typed can grow memory or be taken for another key.
+    """
+
+    def __init__(self, keys: bool) -> None:
+        self.keys = keys
+        self._decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
+        self._line: list[str] = []
+        self._overlong = False
+        self._escape = ""  # "" | "esc" (after ESC) | "csi" (after ESC [ or ESC O)
+
+    def feed(self, data: bytes) -> list[str]:
+        words: list[str] = []
+        for char in self._decoder.decode(data):
+            if self._skip_escape(char):
+                continue
+            if self.keys:
+                if char.isprintable() and not char.isspace():
+                    words.append(char)
+                continue
+            self._take_line_char(char, words)
+        return words
+
+    def _skip_escape(self, char: str) -> bool:
+        if char == "\x1b":
+            self._escape = "esc"
+            return True
+        if self._escape == "esc":
+            self._escape = "csi" if char in "[O" else ""
+            return True
+        if self._escape == "csi":
+            if "\x40" <= char <= "\x7e":
+                self._escape = ""
+            return True
+        return False
+
+    def _take_line_char(self, char: str, words: list[str]) -> None:
+        if char in "\r\n":
+            if self._line and not self._overlong:
+                words.append("".join(self._line))
+            self._line, self._overlong = [], False
+        elif self._overlong or not char.isprintable():
+            return
+        elif len(self._line) >= MAX_LINE:
+            self._line, self._overlong = [], True
+        else:
+            self._line.append(char)
 
 
 class OperatorConsole:
@@ -35,6 +112,8 @@ class OperatorConsole:
         self.commander = commander
         self._clients = {c: node.create_client(Trigger, engine_service(c)) for c in ENGINE_SERVICES}
         self._tasks: set[asyncio.Task[Any]] = set()
+        self._fd: int | None = None
+        self._saved: tuple[int, list[Any]] | None = None  # the terminal's settings to put back
 
     async def command(self, name: str, key: str | None = None) -> str:
         """Give one command; the answer (or why it failed) for the console.
@@ -78,23 +157,69 @@ class OperatorConsole:
             self.node.report_fault("operator console", error)
             self.out.write(f"console: the command failed: {type(error).__name__}: {error}\n")
 
-    def attach_stdin(self, loop: asyncio.AbstractEventLoop) -> bool:
-        """Read commands from stdin when it is a terminal; False when it is not."""
-        if not sys.stdin.isatty():
+    def attach_stdin(self, loop: asyncio.AbstractEventLoop, stream: IO[Any] | None = None) -> bool:
+        """Read commands from ``stream`` (stdin): key by key at a terminal, line by line otherwise.
+
+        Prints the prompt, which says which.  False when there is nothing to read from.
+        """
+        stream = sys.stdin if stream is None else stream
+        try:
+            fd = stream.fileno()
+        except (AttributeError, ValueError, OSError):
             return False
+        keys = self._cbreak(fd)
+        decoder = KeyDecoder(keys)
 
         def readable() -> None:
-            line = sys.stdin.readline()
-            if line:
-                self.spawn(self.handle_line(line), loop)
+            try:
+                data = os.read(fd, READ_BYTES)
+            except BlockingIOError:
+                return
+            except OSError as error:
+                data = b""
+                self.out.write(f"console: cannot read the terminal ({error.strerror or error}); operator keys are off\n")
+            if not data:  # end of input: nobody types here any more
+                self.detach_stdin(loop)
+                return
+            for word in decoder.feed(data):
+                if len(self._tasks) >= MAX_PENDING:
+                    self.out.write(f"console: {len(self._tasks)} commands still being carried out; {word!r} ignored\n")
+                    continue
+                self.spawn(self.handle_line(word), loop)
 
-        loop.add_reader(sys.stdin.fileno(), readable)
-        self.out.write(HELP + "\n")
+        loop.add_reader(fd, readable)
+        self._fd = fd
+        self.out.write((PROMPT_KEYS if keys else PROMPT_LINES) + "\n")
+        self.out.flush()
         return True
 
-    @staticmethod
-    def detach_stdin(loop: asyncio.AbstractEventLoop) -> None:
+    def detach_stdin(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Stop reading, and give the terminal back as it was."""
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            with contextlib.suppress(ValueError, OSError):
+                loop.remove_reader(fd)
+        self.restore_terminal()
+
+    def restore_terminal(self) -> None:
+        """The terminal's settings from before :meth:`attach_stdin` (at once; also run at exit)."""
+        saved, self._saved = self._saved, None
+        if saved is None:
+            return
+        atexit.unregister(self.restore_terminal)
+        fd, attributes = saved
+        with contextlib.suppress(OSError, termios.error if termios is not None else OSError):
+            termios.tcsetattr(fd, termios.TCSADRAIN, attributes)
+
+    def _cbreak(self, fd: int) -> bool:
+        """Put the terminal ``fd`` in cbreak mode; False (line mode) when it is no terminal or refuses."""
+        if termios is None or not os.isatty(fd):
+            return False
         try:
-            loop.remove_reader(sys.stdin.fileno())
-        except (ValueError, OSError):
-            pass
+            attributes = termios.tcgetattr(fd)
+            tty.setcbreak(fd, termios.TCSANOW)
+        except (termios.error, OSError):
+            return False
+        self._saved = (fd, attributes)
+        atexit.register(self.restore_terminal)  # a run that dies past every finally still gives the terminal back
+        return True
