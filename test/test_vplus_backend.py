@@ -420,6 +420,12 @@ def test_the_factory_starts_a_simulator_when_no_host_is_given(run_sim: Run) -> N
         (BackendOptions(robot=ADEPT_VIPER_S850, extra={"linear": "curvy"}), "linear must be"),
         (BackendOptions(robot=ADEPT_VIPER_S850, host="10.0.0.2", port=99999), "port must be"),
         (BackendOptions(robot=ADEPT_VIPER_S850, extra={"camera": "webcam"}), "camera must be"),
+        (BackendOptions(robot=ADEPT_VIPER_S850, extra={"tolerance_mm": "0"}), r"vplus: tolerance_mm must be a number in \[0.01, 50\] mm, got 0$"),
+        (BackendOptions(robot=ADEPT_VIPER_S850, extra={"tolerance_mm": "inf"}), r"tolerance_mm must be a number in \[0.01, 50\] mm, got inf$"),
+        (BackendOptions(robot=ADEPT_VIPER_S850, extra={"tolerance_deg": "11"}), r"tolerance_deg must be a number in \[0.01, 10\] deg, got 11$"),
+        (BackendOptions(robot=ADEPT_VIPER_S850, extra={"tolerance_deg": "wide"}), r"tolerance_deg must be a number in \[0.01, 10\] deg, got 'wide'$"),
+        (BackendOptions(robot=ADEPT_VIPER_S850, extra={"sim_frozen_pose": "yes"}), "sim_frozen_pose is 0 or 1, got 'yes'"),
+        (BackendOptions(robot=ADEPT_VIPER_S850, host="10.0.0.2", extra={"sim_frozen_pose": "1"}), r"a real one \(--host\) takes none"),
     ],
 )
 def test_the_factory_refuses_options_it_cannot_honour(options: BackendOptions, message: str) -> None:

@@ -17,9 +17,11 @@ def test_defaults_start_the_simulator_and_overrides_reach_the_backend(run_sim: A
         bus = LocalTransport(clock)
         setup = declare_vplus_parameters(bus.create_node("vplus_bridge"))
         assert setup.options.host is None and setup.options.port == 1234 and setup.speed == 1.0
-        custom = declare_vplus_parameters(bus.create_node("real", parameters={"host": "192.168.0.10", "port": 2000, "timeout": 9.5, "linear": "reject"}))
+        custom = declare_vplus_parameters(
+            bus.create_node("real", parameters={"host": "192.168.0.10", "port": 2000, "timeout": 9.5, "linear": "reject", "tolerance_mm": 2.5})
+        )
         assert (custom.options.host, custom.options.port) == ("192.168.0.10", 2000)
-        assert custom.options.extra == {"timeout": "9.5", "retries": "3", "linear": "reject"}
+        assert custom.options.extra == {"timeout": "9.5", "retries": "3", "linear": "reject", "tolerance_mm": "2.5", "tolerance_deg": "0.5"}
         backend = await create_backend(BACKEND, clock, setup.options.__class__(robot=setup.options.robot, extra=setup.options.extra))
         await backend.close()
         with pytest.raises(ValueError, match="port must be 1..65535"):

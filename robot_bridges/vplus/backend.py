@@ -37,6 +37,10 @@ Where the robot is comes from the acks: ``tcp_pose`` is the pose of the last ack
 state is derived from it (inverse kinematics seeded by the commanded joints; exact after a
 joint move).  After any failure the next primitive first sends a lone ``break``, which waits for
 a motion still under way and reports the pose, so the estimate is right again before we move.
+Every other ack is checked against what was commanded (:mod:`robot_bridges.vplus.trust`): a
+motion must end at its goal and start, like a hand action, where the last one ended, within
+``tolerance_mm`` / ``tolerance_deg``; a controller that reports otherwise is a ``controller``
+fault and is not trusted again.
 
 Pause, resume and stop: AdeptServer cannot hold or abort a motion in progress (its only motion
 control is ``break``).  ``pause`` therefore takes effect at the end of the current motion: the
@@ -98,39 +102,23 @@ from robot_bridges.vplus.kinematics import (
     pose_to_location,
 )
 from robot_bridges.vplus.camera_port import rendered_focus_camera
+from robot_bridges.vplus.job import Job
 from robot_bridges.vplus.measurement import MeasurementError, MeasurementPort, SimulatedFocusCamera
 from robot_bridges.vplus.simulator import DEFAULT_PORT, VPlusSimulator
 from robot_bridges.vplus.trajectory import TrajectoryPlanner, plan_replay
+from robot_bridges.vplus.trust import PoseTolerance, agree, disagreement
 
 log = logging.getLogger(__name__)
 
 GROUP = "arm"
 LinearPolicy = Literal["joint", "reject"]
 _RAMP = 0.2  # s, generous acceleration allowance per motion for the timeout estimate
-_AGREE_MM, _AGREE_DEG = 0.5, 0.05  # an ack pose this close to the predicted one confirms the joints
 _END_EFFECTOR: dict[str, Command] = {
     "air_on": codec.ENABLE_AIR,
     "air_off": codec.DISABLE_AIR,
     "gripper_open": codec.GRIPPER_OPEN,
     "gripper_close": codec.GRIPPER_CLOSE,
 }
-
-
-class _Job:
-    """The primitive under way, and what the operator asked of it."""
-
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
-        self.paused = False
-        self.stopped = False
-        self.changed = asyncio.Event()
-        self.finished: asyncio.Future[None] = loop.create_future()
-
-    def signal(self) -> None:
-        self.changed.set()
-
-    async def next_change(self) -> None:
-        await self.changed.wait()
-        self.changed.clear()
 
 
 class VPlusBackend(RobotBackend):
@@ -151,6 +139,7 @@ class VPlusBackend(RobotBackend):
         retries: int = 3,
         linear: LinearPolicy = "joint",
         simulator: VPlusSimulator | None = None,
+        tolerance: PoseTolerance | None = None,
     ) -> None:
         group = robot.group(GROUP)
         if len(group.joints) != 6:
@@ -165,6 +154,7 @@ class VPlusBackend(RobotBackend):
         self.measurement = measurement
         self.ack_timeout = ack_timeout
         self.linear = linear
+        self.tolerance = tolerance or PoseTolerance()
         self.client = VPlusClient(host, port, clock, timeout=ack_timeout, retries=retries)
         # ``name`` also names the bridge node, so it stays a plain token; messages say ``label``.
         self.name = "vplus"
@@ -174,10 +164,11 @@ class VPlusBackend(RobotBackend):
         self._tcp: Pose | None = None
         self._speed = 100.0  # percent
         self._io = {"air": False, "gripper_closed": False}
-        self._job: _Job | None = None
+        self._job: Job | None = None
         self._stale = True  # the pose estimate needs a resync before the next motion
         self._busy_until = 0.0  # run time at which the controller should be idle again
         self._warned_linear = False
+        self._distrust: str | None = None  # why this controller's reports are no longer believed
 
     @property
     def groups(self) -> tuple[str, ...]:
@@ -218,7 +209,7 @@ class VPlusBackend(RobotBackend):
         self._check_group(group)
         if self._job is not None:
             raise BridgeError(FaultKind.BUSY, f"{self.label}: {GROUP} is already executing a primitive")
-        job = _Job(asyncio.get_running_loop())
+        job = Job(asyncio.get_running_loop())
         self._job = job
         work = asyncio.ensure_future(self._dispatch(primitive, job))
         try:
@@ -262,7 +253,7 @@ class VPlusBackend(RobotBackend):
         job.signal()
         await asyncio.shield(job.finished)
 
-    async def _dispatch(self, primitive: Primitive, job: _Job) -> PrimitiveResult:
+    async def _dispatch(self, primitive: Primitive, job: Job) -> PrimitiveResult:
         if isinstance(primitive, MoveJoints):
             return await self._move_joints(primitive)
         if isinstance(primitive, MoveCartesian):
@@ -340,9 +331,12 @@ class VPlusBackend(RobotBackend):
     async def _send_motion(self, messages: Sequence[Command], goal: np.ndarray, estimate: float, what: str) -> MotionResult:
         """Write ``messages`` (ending in a break) at once and wait for the arm to reach ``goal``."""
         timeout = self.ack_timeout + 2.0 * estimate + self._busy_for()
+        start = self._trusted_pose()
         self._busy_until = self.clock.now() + estimate + self._busy_for()
         acks = await self._talk(messages, timeout, what, joined=True)
         self._busy_until = 0.0
+        self._check(acks[0], start, f"{what}, start")
+        self._check(acks[-1], self.kin.forward(goal), what)
         self._update(acks[-1], goal)
         return self._motion_result()
 
@@ -376,7 +370,7 @@ class VPlusBackend(RobotBackend):
         return self.planner.record(self.label, self._joints, primitive)
 
     # ---------------------------------------------------------------------- other skills
-    async def _dwell(self, seconds: float, job: _Job) -> None:
+    async def _dwell(self, seconds: float, job: Job) -> None:
         remaining = seconds
         while remaining > 0 and not job.stopped:
             if job.paused:
@@ -394,7 +388,9 @@ class VPlusBackend(RobotBackend):
         if command is None:
             raise BridgeError(FaultKind.UNSUPPORTED, f"{self.label}: AdeptServer has no skill for {describe(primitive)}")
         await self._ensure_link()
+        still = self._trusted_pose()
         acks = await self._talk([command], self.ack_timeout + self._busy_for(), describe(primitive))
+        self._check(acks[-1], still, describe(primitive))
         self._note_pose(acks[-1])
         if primitive.action.startswith("gripper"):
             self._io.update(air=True, gripper_closed=primitive.action == "gripper_close")
@@ -414,6 +410,8 @@ class VPlusBackend(RobotBackend):
     # ------------------------------------------------------------------------- the link
     async def _ensure_link(self) -> None:
         """Connected and with a fresh pose: reconnect after a loss, resync after any failure."""
+        if self._distrust is not None:
+            raise BridgeError(FaultKind.CONTROLLER, f"{self._distrust}; nothing more is sent to it")
         if not self.client.connected:
             try:
                 await self.client.connect()
@@ -440,12 +438,27 @@ class VPlusBackend(RobotBackend):
         self._stale = False
         return acks
 
+    def _trusted_pose(self) -> np.ndarray | None:
+        """Where the arm must be when the next ack comes, if it is not moving: the last pose taken."""
+        if self._stale or self._tcp is None or self._busy_for() > 0:
+            return None
+        return self._tcp.matrix()
+
+    def _check(self, ack: Ack, commanded: np.ndarray | None, what: str) -> None:
+        """A reported pose that is not where the arm was sent is a fault, and the controller is believed no more."""
+        if commanded is None:
+            return
+        problem = disagreement(self.label, what, commanded, ack.pose, self.tolerance)
+        if problem is not None:
+            self._distrust, self._stale = problem, True
+            raise BridgeError(FaultKind.CONTROLLER, problem)
+
     def _update(self, ack: Ack, predicted: np.ndarray) -> None:
         """Take the pose from ``ack`` and the joints that explain it, nearest ``predicted``."""
         self._note_pose(ack)
         reported = location_to_matrix(ack.pose)
         expected = self.kin.forward(predicted)
-        if _agree(expected, reported):
+        if agree(expected, reported):
             self._joints = np.asarray(predicted, dtype=float)
             return
         try:
@@ -490,15 +503,8 @@ def _fault_kind(error: VPlusError) -> FaultKind:
     return FaultKind.INTERNAL
 
 
-def _agree(a: np.ndarray, b: np.ndarray) -> bool:
-    if np.linalg.norm(a[:3, 3] - b[:3, 3]) * 1000.0 > _AGREE_MM:
-        return False
-    cos = (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0
-    return math.degrees(math.acos(max(-1.0, min(1.0, cos)))) <= _AGREE_DEG
-
-
 # ------------------------------------------------------------------------------ registry
-_EXTRAS = ("timeout", "retries", "linear", "camera", "controller_speed")
+_EXTRAS = ("timeout", "retries", "linear", "camera", "controller_speed", "tolerance_mm", "tolerance_deg", "sim_frozen_pose")
 
 
 async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
@@ -511,7 +517,10 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     what answers vision requests -- the sharpness model of the focus camera, the sharpness of its
     rendered images (:mod:`robot_bridges.vplus.camera_port`), nothing; default ``simulated`` without
     a host, ``none`` with one -- a real cell plugs its vision pipeline in as a :class:`MeasurementPort`,
-    e.g. a :class:`~robot_bridges.vplus.camera_port.CameraMeasurement` on a ROS camera).
+    e.g. a :class:`~robot_bridges.vplus.camera_port.CameraMeasurement` on a ROS camera), ``tolerance_mm``
+    and ``tolerance_deg`` (how far a reported pose may lie from the commanded one: [0.01, 50] mm,
+    default 1; [0.01, 10] deg, default 0.5), and for the simulator only ``sim_frozen_pose`` (1: every
+    ack reports the pose it started at, home, wherever the arm is -- a controller that lies).
     """
     options.check("vplus", ADEPT_VIPER_S850, _EXTRAS)
     if options.host is not None:
@@ -539,6 +548,12 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
         raise ValueError(f"vplus: timeout must be a number and retries an integer: {error}") from None
     if not (timeout > 0 and math.isfinite(timeout) and retries >= 0):
         raise ValueError(f"vplus: timeout must be > 0 and retries >= 0, got {timeout}, {retries}")
+    tolerance = PoseTolerance.from_options(options.extra, "vplus")
+    frozen = options.extra.get("sim_frozen_pose", "0")
+    if frozen not in ("0", "1"):
+        raise ValueError(f"vplus: sim_frozen_pose is 0 or 1, got {frozen!r}")
+    if frozen == "1" and options.host is not None:
+        raise ValueError("vplus: sim_frozen_pose shapes the simulated controller; a real one (--host) takes none")
     linear = options.extra.get("linear", "joint")
     if linear not in ("joint", "reject"):
         raise ValueError(f"vplus: linear must be 'joint' or 'reject', got {linear!r}")
@@ -555,9 +570,12 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     if options.host is not None:
         port = DEFAULT_PORT if options.port is None else options.port
         return VPlusBackend(
-            clock, options.host, port, robot=options.robot, measurement=measurement, ack_timeout=timeout, retries=retries, linear=linear  # type: ignore[arg-type]
+            clock, options.host, port, robot=options.robot, measurement=measurement, ack_timeout=timeout, retries=retries, linear=linear,  # type: ignore[arg-type]
+            tolerance=tolerance,
         )
     simulator = await VPlusSimulator(clock, "127.0.0.1", options.port or 0).start()
+    if frozen == "1":
+        simulator.faults.report_location = simulator.arm.location()
     return VPlusBackend(
         clock,
         "127.0.0.1",
@@ -568,4 +586,5 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
         retries=retries,
         linear=linear,  # type: ignore[arg-type]
         simulator=simulator,
+        tolerance=tolerance,
     )

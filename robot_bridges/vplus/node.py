@@ -28,9 +28,11 @@ def declare_vplus_parameters(node: Node) -> BridgeSetup:
     retries = int(node.declare_parameter("retries", 3, "connection attempts after the first"))
     linear = str(node.declare_parameter("linear", "joint", "linear moves: 'joint' (run joint-interpolated) or 'reject'"))
     camera = str(node.declare_parameter("camera", "", "what answers vision requests: simulated, rendered (images of the focus camera), none ('' = simulated without host)"))
+    tolerance_mm = float(node.declare_parameter("tolerance_mm", 1.0, "how far a reported position may lie from the commanded one (mm, [0.01, 50])"))
+    tolerance_deg = float(node.declare_parameter("tolerance_deg", 0.5, "how far a reported orientation may lie from the commanded one (deg, [0.01, 10])"))
     if not 0 < port < 65536:
         raise ValueError(f"port must be 1..65535, got {port}")
-    extra = {"timeout": repr(timeout), "retries": str(retries), "linear": linear}
+    extra = {"timeout": repr(timeout), "retries": str(retries), "linear": linear, "tolerance_mm": repr(tolerance_mm), "tolerance_deg": repr(tolerance_deg)}
     if camera:
         extra["camera"] = camera
     options = BackendOptions(robot=ADEPT_VIPER_S850, host=host or None, port=port, extra=extra)
