@@ -7,7 +7,9 @@ Exit codes (docs/faults.md lists every refusal with its message and code):
   it starts unless ``--no-check``) or a failed run (an alarm nobody can answer included);
 * 2 bad command line or an option refused before anything runs (files, names, back-end setup);
 * 3 run stopped by the operator (or abandoned with a second Ctrl-C);
-* 4 the run finished but its trace could not be written (the summary is still printed);
+* 4 the run (or report) finished but an output could not be written whole: the trace, the recording,
+  the checkpoint, the timeline (a full disk, a file system gone read-only; the summary is still
+  printed, and one line per output says what was lost);
 * 5 the controller could not be reached or refused the run (connection refused, no answer, all
   client slots taken, an RSI peer that never spoke);
 * 70 a defect of this program (one line; ``-v`` shows the traceback).
@@ -41,6 +43,7 @@ from execution_engine.dry_run.check import check as dry_run_check
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, QuestionPrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
+from execution_engine.output_files import WriteFailure
 from execution_engine.run_checks import Refused, check_trajectory_db, preflight
 from execution_engine.vision_cli import add_vision_parser, cmd_vision
 from operator_station import cli as studio
@@ -49,7 +52,7 @@ from execution_engine.checkpoint.store import CheckpointError
 from execution_engine.recorder.cli_hook import add_run_options, prepare_flight, start_recording, stop_recording
 from robot_bridges.backend import BackendOptions, BridgeError
 
-EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_TRACE, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
+EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_OUTPUT, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
 
 XML_USAGE = """\
 An application is an XML file: <application name=".." robot="nextage" cell="cells/your_cell.xml">, holding
@@ -212,7 +215,10 @@ def backend_options(app: Application, args: argparse.Namespace) -> BackendOption
     )
 
 
-async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], writer: TraceWriter | None) -> RunReport:
+async def _run(
+    app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], writer: TraceWriter | None, lost: list[WriteFailure] | None = None,
+) -> RunReport:
+    """The run; ``lost`` gets the outputs (recording, checkpoint) that could not be written whole."""
     from robot_bridges.registry import create_backend
 
     backend = await create_backend(backend_name(app, args), clock, backend_options(app, args))
@@ -269,7 +275,9 @@ async def _run(app: Application, args: argparse.Namespace, clock: Clock, out: IO
                 pass
         if interactive:
             console.detach_stdin(loop)  # the terminal as it was, also after Ctrl-C or an exception
-        await stop_recording(recorder, out)
+        failures = await stop_recording(recorder, out)
+        if lost is not None:
+            lost.extend(failures)
         await deployment.close()
 
 
@@ -287,8 +295,8 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
         err.write(f"error: {refusal}\n")
         return EXIT_USAGE
     try:
-        prepare_flight(app, args)  # --resume: refuse a changed application or cell before any file is written
-    except CheckpointError as refusal:
+        prepare_flight(app, args)  # --resume, then every file read or written (output_files), before any is written
+    except (CheckpointError, Refused) as refusal:
         err.write(f"error: {refusal}\n")
         return EXIT_USAGE
     if not args.no_check:
@@ -318,8 +326,9 @@ def _run_recorded(app: Application, args: argparse.Namespace, out: IO[str], err:
     clock = simulated_clock() if math.isinf(args.speed) else scaled_clock(args.speed)
     report: RunReport | None = None
     outcome = "error"
+    lost: list[WriteFailure] = []  # outputs that could not be written whole: exit 4 after a good run
     try:
-        report = run_with_clock(lambda c: _run(app, args, c, out, writer), clock)
+        report = run_with_clock(lambda c: _run(app, args, c, out, writer, lost), clock)
     except BridgeError as error:  # the controller refused or never answered, before the first primitive
         code = EXIT_PEER
         err.write(f"error: cannot run {args.file}: {error}; {PEER_ADVICE}\n")
@@ -339,19 +348,17 @@ def _run_recorded(app: Application, args: argparse.Namespace, out: IO[str], err:
         out.write("\n" + "\n".join(report.summary_lines()) + "\n")
         outcome = report.outcome
         code = EXIT_OK if report.ok else EXIT_STOPPED if report.outcome == "stopped" else EXIT_INVALID
-    if writer is None:
-        return code
-    t = report.t_end if report is not None else writer.last_t
-    done, total = (report.operations_done, report.operations_total) if report is not None else (0, len(app.operations))
-    writer.finish(t, outcome, code, done, total)
-    if writer.error is None:
-        return code
-    reason = writer.error.strerror or str(writer.error)
-    err.write(
-        f"error: --trace {args.trace}: could not be written ({reason}): {writer.lost} record(s) lost, the trace is incomplete; "
-        f"the run itself: {outcome.upper()} (summary above); free space or give another --trace\n"
-    )
-    return EXIT_TRACE if code == EXIT_OK else code
+    code = EXIT_OUTPUT if lost and code == EXIT_OK else code
+    if writer is not None:
+        t = report.t_end if report is not None else writer.last_t
+        done, total = (report.operations_done, report.operations_total) if report is not None else (0, len(app.operations))
+        writer.finish(t, outcome, code, done, total)
+        if writer.error is not None:
+            lost.insert(0, WriteFailure("--trace", str(args.trace), writer.error.strerror or str(writer.error),
+                                        f"{writer.lost} record(s) lost, the trace is incomplete"))
+    for failure in lost:
+        err.write(failure.line(outcome) + "\n")
+    return EXIT_OUTPUT if lost and code == EXIT_OK else code
 
 
 #: What an operator can do about a controller that would not take the run (exit 5).

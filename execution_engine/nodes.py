@@ -21,6 +21,7 @@ from execution_engine.app_model import Application, ApplicationError, load_appli
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.engine.run_action import RunApplicationServer
 from execution_engine.machine.group_machine import GroupMachine
+from execution_engine.output_files import Refused
 from execution_engine.recorder.cli_hook import record_node, stop_recording
 from execution_engine.ros_main import (
     ENGINE_NODE,
@@ -103,7 +104,10 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     app = load_or_explain(settings.application)
     node.logger.info("%s: running %s (%d operations)", node.fully_qualified_name, app.name, len(app.operations))
     outcome.code = ExitCode.FAILED  # until the report says otherwise
-    recorder = record_node(node, settings.record, app)
+    try:  # the recording is never the application or its cell (output_files)
+        recorder = record_node(node, settings.record, app, option="parameter record")
+    except Refused as refusal:
+        raise StartupError(str(refusal)) from None
     groups = app.robot.group_names
     if recorder is not None and not await recorder.ready(groups, engine.startup_timeout):
         node.logger.warning("%s: the recording may miss the run's first messages: not every machine's topics were matched within %g s",
@@ -113,9 +117,9 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     finally:
         if recorder is not None:
             await recorder.settle(groups, engine.service_timeout)
-        await stop_recording(recorder, sys.stdout)
+        lost = await stop_recording(recorder, sys.stdout)
     print("\n".join(report.summary_lines()), flush=True)
-    outcome.code = ExitCode.OK if report.ok else ExitCode.FAILED
+    outcome.code = ExitCode.OK if report.ok and not lost else ExitCode.FAILED  # a recording that failed is no success
     if not settings.exit_when_done:
         await serve_forever()
 

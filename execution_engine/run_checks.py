@@ -2,8 +2,8 @@
 
 An option that cannot work must fail in one line at the start, naming the option and what to do,
 and change nothing -- not after a dry run, not half-way through a shift, never as a traceback.
-So the trace and trajectory-database paths are checked here without writing a byte (a trace
-never overwrites the application, its cell or the trajectory database), controller names are
+So every file the run reads or writes is listed here (:func:`run_files`) and checked by the one
+rule of :mod:`execution_engine.output_files` without writing a byte, controller names are
 resolved once (the run then talks to addresses, and a name that resolves to nothing is an
 option error, not a "no answer within 2 s" much later), and ``--fault`` is checked against the
 robot's groups.  :class:`Refused` carries the line; the CLI prints it and exits with
@@ -13,23 +13,19 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
-import os
 import socket
-import sqlite3
-import stat
 from collections.abc import Iterable
-from contextlib import closing
 from pathlib import Path
 
 from execution_engine.app_model.model import Application
+from execution_engine.output_files import FilePlan, Output, Refused
 
-
-class Refused(Exception):
-    """An option ``run`` cannot work with; the message is the whole line the operator reads."""
+__all__ = ["Refused", "check_faults", "check_trajectory_db", "preflight", "resolve", "resolve_endpoint", "run_files", "app_inputs"]
 
 
 def preflight(app: Application, args: argparse.Namespace) -> None:
-    """Check every option that names a file or a peer; resolve names once (``args`` is updated).
+    """Check the options that name a peer or a group; resolve names once (``args`` is updated).
+    The files come once the run has named them all (:func:`run_files`, from ``prepare_flight``).
 
     Raises :class:`Refused` with one line; writes nothing.
     """
@@ -38,16 +34,6 @@ def preflight(app: Application, args: argparse.Namespace) -> None:
         args.host = resolve("--host", args.host)
     if args.rsi_listen is not None:
         args.rsi_listen = resolve_endpoint("--rsi-listen", args.rsi_listen)
-    if args.trajectory_db:
-        check_trajectory_db(args.trajectory_db, _inputs(app))
-    if args.trace:
-        protected = _inputs(app) + ([Path(args.trajectory_db)] if args.trajectory_db else [])
-        check_trace(args.trace, protected)
-
-
-def _inputs(app: Application) -> list[Path]:
-    """The files the run reads: an output option naming one of them would destroy it."""
-    return [app.path] + ([app.cell.path] if app.cell is not None and app.cell.path is not None else [])
 
 
 def check_faults(faults: Iterable[str], groups: Iterable[str]) -> None:
@@ -82,83 +68,53 @@ def resolve_endpoint(option: str, text: str) -> str:
     return f"{resolve(option, host)}:{port}"
 
 
-def check_trace(path: str, protected: Iterable[Path]) -> None:
-    """The trace can be created or appended to, and is none of the files the run reads."""
-    target = Path(path)
-    if target.is_dir():
-        raise Refused(f"--trace {path}: is a directory; give a file name, e.g. {target / 'run.jsonl'}")
-    _check_parent("--trace", target)
-    if target.exists():
-        for other in protected:
-            if _same(target, other):
-                raise Refused(f"--trace {path}: is {other}, which this run reads; the trace would overwrite it: give another file")
-    _check_writable("--trace", target)
+def run_files(
+    inputs: Iterable[tuple[str, str | Path]], *, trace: str | None = None, record: str | None = None, checkpoint: str | None = None,
+    resume: str | None = None, trajectory_db: str | None = None, extra: dict[str, str] | None = None,
+    derived: dict[str, str] | None = None, command: str = "run",
+) -> FilePlan:
+    """Every file a run reads (``inputs``: the application and its cell, :func:`app_inputs`) and
+    writes, as ``run`` (after ``prepare_flight``) or the studio names them.
 
+    ``derived``: option -> where its path came from, for the paths the run chose itself (the
+    checkpoint next to the trace, the application's own trajectory database, a resumed run's
+    trace); the refusal then says so instead of naming an option nobody gave.  ``extra``: the
+    back-end options (``config`` is read, ``feedback`` written)."""
+    derived = derived or {}
+    extra = extra or {}
+    plan = FilePlan(command)
+    for named, path in inputs:
+        plan.read(named, path)
+    if extra.get("config"):
+        plan.read(f"--backend-option config={extra['config']}", extra["config"])
 
-def check_trajectory_db(path: str, protected: Iterable[Path]) -> None:
-    """The trajectory database is an SQLite file (or can be created), not a directory or another file."""
-    target = Path(path)
-    if target.is_dir():
-        raise Refused(f"--trajectory-db {path}: is a directory; give an SQLite file, e.g. {target / 'trajectories.db'}")
-    if not target.exists():
-        _check_creatable("--trajectory-db", target, parents=True)  # the store makes missing directories
-        return
-    for other in protected:
-        if _same(target, other):
-            raise Refused(f"--trajectory-db {path}: is {other}, which this run reads as an application or cell; give another file")
-    if not stat.S_ISREG(target.stat().st_mode):
-        raise Refused(f"--trajectory-db {path}: is not a regular file; give an SQLite file")
-    try:  # read-only: a refused file is left exactly as it was
-        with closing(sqlite3.connect(f"{target.resolve().as_uri()}?mode=ro", uri=True)) as db:
-            db.execute("SELECT count(*) FROM sqlite_master").fetchone()
-    except sqlite3.Error as error:  # sqlite3.DatabaseError is no OSError
-        raise Refused(f"--trajectory-db {path}: is not an SQLite database ({error}); give the file RecordTrajectory wrote, or a new name") from None
-    _check_writable("--trajectory-db", target)
+    def output(option: str, path: str | None, what: str, example: str, **kind: bool) -> Output | None:
+        return Output(option, str(path), what, example, default=derived.get(option, ""), **kind) if path else None
 
-
-def _same(a: Path, b: Path) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
-def _check_parent(option: str, target: Path) -> None:
-    parent = target.parent
-    if not parent.exists():
-        raise Refused(f"{option} {target}: the directory {parent} does not exist; create it first or give another path")
-    if not parent.is_dir():
-        raise Refused(f"{option} {target}: {parent} is not a directory")
-
-
-def _check_writable(option: str, target: Path) -> None:
-    if target.exists():
-        try:  # append mode: opening changes nothing, and finds read-only files and file systems
-            with open(target, "ab"):
-                pass
-        except OSError as error:
-            raise Refused(f"{option} {target}: cannot be written ({error.strerror or error}); give a writable file") from None
-        return
-    _check_creatable(option, target, parents=False)
-
-
-def _check_creatable(option: str, target: Path, *, parents: bool) -> None:
-    """Create and remove the file: the only sure test of a path (permissions, read-only mounts, /proc)."""
-    if parents:
-        existing = target.parent
-        while not existing.exists() and existing != existing.parent:
-            existing = existing.parent
-        if not existing.is_dir():
-            raise Refused(f"{option} {target}: {existing} is not a directory")
-        if existing != target.parent:
-            if not os.access(existing, os.W_OK | os.X_OK):
-                raise Refused(f"{option} {target}: the directory {target.parent} cannot be created in {existing}")
-            return
+    plan.write(output("--trace", trace, "the trace", "run.jsonl"))
+    plan.write(output("--record", record, "the recording", "run.mcap"))
+    if resume:  # read and written again: the run's own checkpoint
+        plan.write(Output("--resume", str(resume), "the checkpoint", "run.checkpoint.sqlite", sqlite=True))
     else:
-        _check_parent(option, target)
-    try:
-        fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-    except OSError as error:
-        raise Refused(f"{option} {target}: cannot be created ({error.strerror or error}); give a writable path") from None
-    os.close(fd)
-    os.unlink(target)
+        plan.write(output("--checkpoint", checkpoint, "the checkpoint", "run.checkpoint.sqlite", sqlite=True))
+    plan.write(output("--trajectory-db", trajectory_db, "the trajectory database", "trajectories.db", sqlite=True, reads=True, makes_folders=True))
+    if extra.get("feedback"):
+        plan.write(Output("--backend-option feedback", extra["feedback"], "the feedback log", "feedback.csv", joiner="="))
+    return plan
+
+
+def app_inputs(app: Application) -> list[tuple[str, str | Path]]:
+    """The application and its cell, as a refusal names them."""
+    found = [(f"the application {app.path}", app.path)]
+    if app.cell is not None and app.cell.path is not None:
+        found.append((f"the cell {app.cell.path}", app.cell.path))
+    return found
+
+
+def check_trajectory_db(path: str, applications: Iterable[Path]) -> None:
+    """The database a dry run reads (``validate --simulate``): refused as ``run`` would refuse it."""
+    plan = FilePlan("validate")
+    for application in applications:
+        plan.read(f"the application {application}", application)
+    plan.write(Output("--trajectory-db", path, "the trajectory database", "trajectories.db", sqlite=True, reads=True, makes_folders=True))
+    plan.check()

@@ -13,12 +13,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from execution_engine.output_files import FilePlan, Output, Refused
 from execution_engine.recorder.reading import Recording, is_mcap, trace_records
 from execution_engine.recorder.safe_read import NotARecording
 from execution_engine.timeline import Timeline, TimelineBuilder
 from execution_engine.trace_report import read_trace
 
-EXIT_OK, EXIT_UNREADABLE = 0, 1
+EXIT_OK, EXIT_UNREADABLE, EXIT_USAGE, EXIT_OUTPUT = 0, 1, 2, 4  # as run's: a refused option 2, an output not written 4
 
 
 @dataclass
@@ -115,6 +116,13 @@ def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
     if not path.is_file():
         err.write(f"error: {path}: no such file\n")
         return EXIT_UNREADABLE
+    target = None if args.no_timeline else Path(args.timeline) if args.timeline else path.with_name(path.stem + ".timeline.svg")
+    if target is not None:
+        try:  # before reading: the timeline is never the record it is drawn from
+            timeline_files(path, target, given=bool(args.timeline)).check()
+        except Refused as refusal:
+            err.write(f"error: {refusal}\n")
+            return EXIT_USAGE
     try:
         summary = summarize(path)
     except OSError as error:
@@ -124,14 +132,23 @@ def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
         err.write(f"error: {error}\n")
         return EXIT_UNREADABLE
     out.write("\n".join(summary.lines()) + "\n")
-    if not args.no_timeline:
+    if target is not None:
         from execution_engine.timeline_plot import plot_timeline  # matplotlib only when drawing
 
-        target = Path(args.timeline) if args.timeline else path.with_name(path.stem + ".timeline.svg")
         try:
             plot_timeline(summary.timeline, target, title=f"{path.name}{' (CUT)' if summary.cut else ''}")
-        except (OSError, ValueError) as error:
-            err.write(f"error: timeline {target}: {error}\n")
-            return EXIT_UNREADABLE
+        except OSError as error:
+            err.write(f"error: --timeline {target}: could not be written ({error.strerror or error}); the summary above is whole; free space or give another --timeline\n")
+            return EXIT_OUTPUT
         out.write(f"timeline: {target}\n")
     return EXIT_OK
+
+
+def timeline_files(record: Path, timeline: Path, *, given: bool) -> FilePlan:
+    """The record ``report`` reads and the timeline it writes (.svg or .png), by run's rule."""
+    from execution_engine.timeline_plot import FORMATS  # matplotlib: loaded to draw anyway
+
+    if timeline.suffix.lower() not in FORMATS:
+        raise Refused(f"--timeline {timeline}: the timeline is written as .svg or .png")
+    default = "" if given else "next to the record"
+    return FilePlan("report").read(f"the record {record}", record).write(Output("--timeline", str(timeline), "the timeline", "run.timeline.svg", default=default))

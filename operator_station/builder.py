@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
 from execution_engine.app_model.document import AppDocument, Placement, read_document, serialize
 from execution_engine.cli import catalog_document
+from execution_engine.output_files import FilePlan, Output, Refused
 
 
 @dataclass(frozen=True)
@@ -98,15 +100,26 @@ def open_document(path: Path) -> tuple[AppDocument | None, list[Diagnostic]]:
     return read_document(path)
 
 
-def save_document(document: AppDocument, path: Path, catalog: Catalog) -> tuple[bool, list[PlacedMessage]]:
+def save_document(document: AppDocument, path: Path, catalog: Catalog, outputs: Sequence[Output] = ()) -> tuple[bool, list[PlacedMessage]]:
     """Write the document to ``path`` only if it validates there; the messages either way.
 
+    ``path`` may be the application itself (that is saving), never its cell nor one of
+    ``outputs`` (the station's runs' files): run's rule, :mod:`execution_engine.output_files`.
     The file is replaced atomically (a temporary file beside it, then a rename), so a crash
     never leaves half an application behind.
     """
     app, messages, text = validate(document, path, catalog)
     if app is None:
         return False, messages
+    plan = FilePlan("application")
+    if app.cell is not None and app.cell.path is not None:
+        plan.read(f"the cell {app.cell.path}", app.cell.path)
+    for output in (*outputs, Output("save as", str(path), "the application", "app.xml")):
+        plan.write(output)
+    try:
+        plan.check_clashes()
+    except Refused as refusal:
+        return False, [*messages, PlacedMessage(str(refusal), "error", str(path), 1, 1, None, None, None, "application")]
     temporary = path.with_name(f".{path.name}.studio-{os.getpid()}")
     temporary.write_text(text, encoding="utf-8")
     os.replace(temporary, path)

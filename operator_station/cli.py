@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import IO, Any
 
 from core_functions.catalog import Catalog
+from execution_engine.output_files import FilePlan, Refused
+from execution_engine.run_checks import run_files
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +72,13 @@ def build_station(args: argparse.Namespace, catalog: Catalog, root: Path, access
     return Station(catalog, feed, RunSession(feed, settings), root, app_path, access=access)
 
 
+def studio_files(args: argparse.Namespace) -> FilePlan:
+    """The files the station's runs write whatever the application (``--trace``, ``--trajectory-db``,
+    a back end's feedback log) and read (the application given, a back end's config)."""
+    inputs = [(f"the application {args.file}", args.file)] if args.file else []
+    return run_files(inputs, trace=args.trace, trajectory_db=args.trajectory_db, extra=dict(args.backend_option or ()), command="studio")
+
+
 class StudioError(Exception):
     """A setting the station cannot work with: one line for the operator."""
 
@@ -113,6 +122,12 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     if args.replay and not Path(args.replay).is_file():
         err.write(f"error: {args.replay}: no such trace file\n")
         return 1
+    if not args.replay:
+        try:  # every run's files, by run's rule: the page's application is checked again at each start
+            studio_files(args).check()
+        except Refused as refusal:
+            err.write(f"error: {refusal}\n")
+            return 2
     from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
 
     if not is_loopback(args.host):

@@ -213,7 +213,8 @@ def create_app(station: Station) -> Starlette:
 
     async def save(path: Path, doc: AppDocument) -> Response:
         try:
-            saved, messages = await asyncio.to_thread(builder.save_document, doc, path, station.catalog)
+            outputs = station.session.outputs() if isinstance(station.session, RunSession) else []  # never over a run's files
+            saved, messages = await asyncio.to_thread(builder.save_document, doc, path, station.catalog, outputs)
         except OSError as error:
             return _error(f"{station.folders.shown(path)}: cannot write: {error.strerror or error}")
         return FastJSON({"ok": saved, "path": _shown(station, path), "messages": [m.to_json() for m in messages]})

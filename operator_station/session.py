@@ -22,12 +22,15 @@ from pathlib import Path
 from typing import IO, Any
 
 from core_functions.robots import RobotModel
+from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.dry_run.runner import DryRunError, dry_run
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import RunObserver, TraceWriter
+from execution_engine.output_files import FilePlan, Output, Refused, WriteFailure
+from execution_engine.run_checks import app_inputs, run_files
 from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import Bool, JointState
 from execution_engine.transport.port import Node
@@ -78,9 +81,14 @@ class RunSession:
         return str(self.settings.backend or app.robot.default_backend)
 
     def start(self, app: Application, operations: list[dict[str, Any]]) -> tuple[bool, str]:
-        """Start ``app`` (validated) on a fresh deployment; False and why when a run is still going."""
+        """Start ``app`` (validated) on a fresh deployment; False and why when a run is still going,
+        or when a file it would write is one it reads or another it writes (nothing written then)."""
         if self.running:
             return False, "a run is still going: stop it first"
+        try:
+            self.files(app).check()
+        except Refused as refusal:
+            return False, f"not run: {refusal}"
         self._ready.clear()
         self.report = None
         self.feed.begin("live", app.name, list(app.robot.group_names), operations=operations)
@@ -95,6 +103,21 @@ class RunSession:
     def join(self, timeout: float | None = None) -> None:
         if self._thread is not None:
             self._thread.join(timeout)
+
+    def trajectory_db(self, app: Application) -> str:
+        """``--trajectory-db``, else the application's own database (as ``run`` uses), never a home directory's."""
+        return self.settings.trajectory_db or str(application_store(app.path))
+
+    def files(self, app: Application) -> FilePlan:
+        """Every file a run of ``app`` reads and writes, under ``run``'s rule (:mod:`execution_engine.output_files`)."""
+        derived = {} if self.settings.trajectory_db else {"--trajectory-db": "the application's own"}
+        return run_files(app_inputs(app), trace=str(self.settings.trace) if self.settings.trace else None, trajectory_db=self.trajectory_db(app),
+                         extra=self.settings.options.get("extra") or {}, derived=derived, command="studio run")
+
+    def outputs(self) -> list[Output]:
+        """The files every run of this station writes, whatever the application: a saved application is none of them."""
+        return run_files((), trace=str(self.settings.trace) if self.settings.trace else None, trajectory_db=self.settings.trajectory_db,
+                         extra=self.settings.options.get("extra") or {}).outputs
 
     # ------------------------------------------------------------------------ the run thread
     def _options(self, app: Application) -> BackendOptions:
@@ -123,7 +146,7 @@ class RunSession:
     def _checked(self, app: Application) -> bool:
         """The dry run ``run`` does first: its planned durations give the ETA; findings refuse the run."""
         try:
-            report = dry_run(app, self.backend_name(app), self._options(app), self.settings.trajectory_db)
+            report = dry_run(app, self.backend_name(app), self._options(app), self.trajectory_db(app))
         except (KeyError, ValueError, OSError, ConnectionError, DryRunError) as error:
             self.feed.update(messages=[{"severity": "error", "message": f"not run: the dry run could not be done: {error}"}])
             return False
@@ -139,7 +162,7 @@ class RunSession:
         from robot_bridges.registry import create_backend
 
         backend = await create_backend(self.backend_name(app), clock, self._options(app))
-        parameters = {"trajectory_db": self.settings.trajectory_db} if self.settings.trajectory_db else {}
+        parameters = {"trajectory_db": self.trajectory_db(app)}
         deployment = await deploy_local(clock, app.robot, backend, machine_parameters=parameters, engine_parameters={"autostart": False})
         deployment.engine.hold_for_operators = True  # the operator is a person at a page: simulated time waits
         node = deployment.transport.create_node("operator_station")
@@ -159,6 +182,10 @@ class RunSession:
             for each in (writer, page):
                 if each is not None:
                     each.finish(t_end, report.outcome, code, report.operations_done, report.operations_total)
+            if writer is not None and writer.error is not None:  # said on the page, as run says it on its console
+                lost = WriteFailure("--trace", str(self.settings.trace), writer.error.strerror or str(writer.error),
+                                    f"{writer.lost} record(s) lost, the trace is incomplete")
+                self.feed.update(messages=[{"severity": "error", "message": lost.line(report.outcome, "the run's report").removeprefix("error: ")}])
             return report
         finally:
             self._loop = None

@@ -61,6 +61,11 @@ FILES: dict[str, str | bytes] = {
     ),
     "rivet.xml": RIVET.replace('cell="cells/rivet_cell.xml"', f'cell="{CELL}"'),
     "not_a_db.sqlite": "SQLite format? no: plain text\n",
+    "rivet.trajectories.sqlite": "",
+    "cp.sqlite": "",
+    "run.jsonl": '{"event": "run_start", "t": 0}\n',
+    "run.svg": '{"event": "run_start", "t": 0}\n',
+    "rsi.xml": (ROOT / "config" / "kuka_rsi_ethernet.xml").read_text(),
     "huge.xml": b"<application>" + b" " * (33 * 1024 * 1024) + b"</application>",
 }
 

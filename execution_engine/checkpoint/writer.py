@@ -41,6 +41,7 @@ class CheckpointWriter:
         self._index = {op.id: i for i, op in enumerate(app.operations)}
         self._attempts: dict[tuple[int, str], int] = {}
         self.error: str = ""
+        self.reason: str = ""  # the database's words for the first failure (database or disk is full)
 
     def on_status(self, status: SmStatus) -> None:
         if status.event not in ("function_start", "function_end") or status.operation not in self._index:
@@ -74,5 +75,6 @@ class CheckpointWriter:
         try:
             change()  # type: ignore[operator]
         except sqlite3.Error as error:
+            self.reason = str(error)
             self.error = f"checkpoint {self.store.path}: {error}"
             log.error("%s; the run goes on without checkpoints", self.error)

@@ -21,8 +21,10 @@ from execution_engine.checkpoint.resume import ANSWERS, ResumePlan, app_meta, ch
 from execution_engine.checkpoint.store import SKIPPED, CheckpointError, CheckpointStore
 from execution_engine.checkpoint.writer import CheckpointWriter
 from execution_engine.observers import RunObserver
+from execution_engine.output_files import FilePlan, Output, WriteFailure, same_file, stores_data
 from execution_engine.recorder.recorder import Recorder
 from execution_engine.recorder.writer import McapSink
+from execution_engine.run_checks import app_inputs, run_files
 from execution_engine.transport.port import Node, Transport
 
 
@@ -45,29 +47,48 @@ def add_run_options(run: argparse.ArgumentParser) -> None:
 
 
 def checkpoint_path(args: argparse.Namespace) -> str | None:
-    """``--checkpoint``, else the resumed checkpoint, else next to the trace or the recording."""
+    """``--checkpoint``, else the resumed checkpoint, else next to the trace or the recording (a file, not a device)."""
     if getattr(args, "checkpoint", None):
         return str(args.checkpoint)
     if getattr(args, "resume", None):
         return str(args.resume)
-    base = getattr(args, "trace", None) or getattr(args, "record", None)
-    if not base:
+    bases = [p for p in (getattr(args, "trace", None), getattr(args, "record", None)) if p and stores_data(p)]
+    if not bases:  # none, or devices (/dev/null): no folder to keep a checkpoint in
         return None
-    path = Path(base)
-    return str(path.with_name(path.name.split(".")[0] + ".checkpoint.sqlite"))
+    base = bases[0]
+    path = Path(base)  # (a directory given as --trace is refused by name, before this path is checked)
+    return str(path.parent / (path.name.split(".")[0] + ".checkpoint.sqlite"))
 
 
 def prepare_flight(app: Application, args: argparse.Namespace) -> None:
-    """Before anything is written: check ``--resume`` (CheckpointError naming what is wrong) and
-    name the resumed run's trace and recording, never the files of the run it continues."""
+    """Before anything is written: check ``--resume`` (CheckpointError naming what is wrong), name
+    the resumed run's trace and recording (never the files of the run it continues), the
+    checkpoint and the trajectory database, then check every file the run reads and writes
+    against each other (:func:`run_files`: Refused, one line, nothing written)."""
+    derived: dict[str, str] = {}
+    resume = getattr(args, "resume", None)
+    if resume:
+        _prepare_resume(app, args, str(resume), derived)
+    given = getattr(args, "checkpoint", None)
     args.checkpoint = checkpoint_path(args)
+    if args.checkpoint and not given and not resume:
+        trace = getattr(args, "trace", None)
+        derived["--checkpoint"] = "next to --trace" if trace and stores_data(trace) else "next to --record"
     if not getattr(args, "trajectory_db", None):  # the application's own, never a home directory's
         args.trajectory_db = str(application_store(app.path))
-    resume = getattr(args, "resume", None)
-    if not resume:
-        return
+        derived["--trajectory-db"] = "the application's own"
+    run_files(
+        app_inputs(app), trace=getattr(args, "trace", None), record=getattr(args, "record", None), checkpoint=args.checkpoint,
+        resume=resume, trajectory_db=args.trajectory_db, extra=dict(getattr(args, "backend_option", None) or ()), derived=derived,
+    ).check()
+
+
+def _prepare_resume(app: Application, args: argparse.Namespace, resume: str, derived: dict[str, str]) -> None:
     if not Path(resume).is_file():
         raise CheckpointError(f"--resume {resume}: no such checkpoint file")
+    given = getattr(args, "checkpoint", None)
+    if given and not same_file(given, resume):
+        raise CheckpointError(f"--checkpoint {given}: a resumed run goes on writing the checkpoint it resumes (--resume {resume}); leave --checkpoint out")
     store = CheckpointStore(resume, read_only=True)
     try:
         check_same(store, app)
@@ -76,14 +97,15 @@ def prepare_flight(app: Application, args: argparse.Namespace) -> None:
         raise CheckpointError(f"--resume {resume}: not a checkpoint of this program ({error})") from None
     finally:
         store.close()
-    earlier = {p for _, trace, record in runs for p in (trace, record) if p}
-    for option in ("trace", "record"):
+    earlier = [p for _, trace, record in runs for p in (trace, record) if p and stores_data(p)]  # (/dev/null holds no run)
+    for option, column in (("trace", 1), ("record", 2)):
         given = getattr(args, option, None)
-        last = next((r[1] if option == "trace" else r[2] for r in reversed(runs) if (r[1] if option == "trace" else r[2])), "")
-        if given and str(Path(given)) in {str(Path(p)) for p in earlier}:
+        last = next((str(r[column]) for r in reversed(runs) if r[column] and stores_data(r[column])), "")
+        if given and any(same_file(given, p) for p in earlier):
             raise CheckpointError(f"--{option} {given}: that file holds the run being resumed; give a new file (or leave it out: {next_name(given, len(runs) + 1)})")
         if not given and last:
             setattr(args, option, next_name(last, len(runs) + 1))
+            derived[f"--{option}"] = "named after the resumed run's"
 
 
 @dataclass
@@ -130,14 +152,20 @@ def _skipped(store: CheckpointStore, index: int, operation: Operation, group: st
 
 
 def record_node(
-    node: Node, path: str, app: Application, backend: str = "ROS 2 bridge node", continues: str = "", *, derive_tf: bool = False
+    node: Node, path: str, app: Application, backend: str = "ROS 2 bridge node", continues: str = "", *, derive_tf: bool = False,
+    option: str = "--record",
 ) -> Recorder | None:
     """Record the graph ``node`` sees to ``path`` (None when empty); on ROS, the engine's ``record``
     parameter records through the engine's own node.  ``derive_tf``: the bridge runs in this
     process (``run``), so ``tf`` is worked out of its joint states (:mod:`.derived_tf`); on a
-    graph, ``tf`` may have other publishers and is recorded as received."""
+    graph, ``tf`` may have other publishers and is recorded as received.  Refused (one line naming
+    ``option``) when ``path`` is the application, its cell, a directory or cannot be written."""
     if not path:
         return None
+    plan = FilePlan("engine")
+    for named, source in app_inputs(app):
+        plan.read(named, source)
+    plan.write(Output(option, path, "the recording", "run.mcap", joiner="=" if option.startswith("parameter") else " ")).check()
     stream = open(path, "wb")  # noqa: SIM115 - the sink's thread owns and closes it
     recorder = Recorder(node, McapSink(stream, path), derive_tf=derive_tf)
     recorder.describe_run(app.path, app.cell.path if app.cell is not None else None, {
@@ -147,18 +175,22 @@ def record_node(
     return recorder
 
 
-async def stop_recording(flight: Flight | Recorder | None, out: IO[str]) -> bool:
-    """Finish the recording and close the checkpoint; say what they hold. False when something was lost."""
+async def stop_recording(flight: Flight | Recorder | None, out: IO[str]) -> list[WriteFailure]:
+    """Finish the recording and close the checkpoint; say what they hold. What could not be written
+    whole (the command then ends with EXIT_OUTPUT, :class:`WriteFailure`'s line naming the option)."""
     if isinstance(flight, Recorder) or flight is None:
         flight = Flight(recorder=flight)
-    ok = True
+    failures: list[WriteFailure] = []
     if flight.recorder is not None:
         stats = await flight.recorder.close()
         out.write("\n".join(stats.lines()) + "\n")
-        ok = not stats.dropped and not stats.error
+        if stats.error or stats.dropped:
+            dropped = f" ({sum(stats.dropped.values())} message(s) dropped)" if stats.dropped else ""
+            failures.append(WriteFailure("--record", stats.path, stats.error or "the writer could not keep up", f"the recording is incomplete{dropped}"))
     if flight.store is not None:
         if flight.writer is not None and flight.writer.error:
             out.write(f"CHECKPOINT FAILED: {flight.writer.error}\n")
-            ok = False
+            failures.append(WriteFailure("--checkpoint", str(flight.store.path), flight.writer.reason,
+                                         "later results are not in it: a resume from it may redo functions that completed"))
         flight.store.close()
-    return ok
+    return failures

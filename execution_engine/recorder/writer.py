@@ -75,6 +75,11 @@ class RecordingStats:
         return out
 
 
+def _reason(error: Exception) -> str:
+    """Why a write failed, in the system's words (No space left on device) when it has them."""
+    return error.strerror if isinstance(error, OSError) and error.strerror else f"{type(error).__name__}: {error}"
+
+
 def _encoder_command(chunk_size: int, compression: str) -> list[str]:
     """``compression``: an ``mcap`` ``CompressionType`` name (``ZSTD``, ``LZ4``, ``NONE``)."""
     return [sys.executable, "-m", "execution_engine.recorder.encoder", str(chunk_size), compression]
@@ -296,7 +301,7 @@ class McapSink:
                         self._stream.flush()
                         self._fsync()
         except Exception as error:  # noqa: BLE001 - said, never silent
-            self._fail(f"{type(error).__name__}: {error}")
+            self._fail(_reason(error))
         if not self._finished:
             self.stats.by_topic = self.stats.by_topic or Counter(self._sent)
             self.stats.written = self.stats.written or sum(self.stats.by_topic.values())
@@ -306,7 +311,7 @@ class McapSink:
         try:
             self._stream.write(data)
         except Exception as error:  # noqa: BLE001 - a full or failing disk stops the recording, not the run
-            self._fail(f"{type(error).__name__}: {error}")
+            self._fail(_reason(error))
 
     def _fsync(self) -> None:
         try:
