@@ -6,15 +6,21 @@ project calls ``time.sleep``, ``time.monotonic`` or ``asyncio.sleep`` directly: 
 :class:`Clock`.  Three kinds exist:
 
 * :func:`real_clock` -- wall time, for real controllers;
-* :func:`scaled_clock` -- wall time multiplied by a speed factor (the simulator at 10x or 100x);
+* :func:`scaled_clock` -- a simulated robot's time at a speed factor (10x, 100x) of the wall
+  clock, on a :class:`~execution_engine.time_loops.PacedLoop`: only the loop's idle waits count,
+  so rendering, detecting, recording or a busy computer never pass as robot time;
 * :func:`simulated_clock` -- virtual time on a :class:`VirtualTimeLoop`: whenever every task is
   waiting for a timer, time jumps straight to the next timer.  Runs are deterministic and take
   no wall time for waiting.
 
 All three are the same :class:`Clock` class; what differs is the event loop they run on and the
-speed factor.  A fourth, :class:`FollowingClock`, takes its time from outside the process (a
-simulator's ``/clock`` on a ROS node with ``use_sim_time``).  "Run time" is seconds since the clock was started, so traces of real, scaled and
-simulated runs read the same.
+speed factor (:mod:`execution_engine.time_loops` says why time is counted as it is).  A fourth,
+:class:`FollowingClock`, takes its time from outside the process (a simulator's ``/clock`` on a
+ROS node with ``use_sim_time``).  "Run time" is seconds since the clock was started, so traces of
+real, scaled and simulated runs read the same.
+
+Speed factors lie in [:data:`MIN_SPEED`, :data:`MAX_SPEED`]; faster than that is ``max``
+(simulated time), slower is not a simulation anyone can wait for.
 """
 from __future__ import annotations
 
@@ -23,17 +29,22 @@ import contextlib
 import heapq
 import itertools
 import math
-import selectors
 import threading
 import time
-from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
+from collections.abc import Awaitable, Callable, Coroutine, Iterator
 from typing import Any, TypeVar
+
+from core_functions.option_ranges import bounds
+from execution_engine.time_loops import PacedLoop, VirtualTimeLoop, Wall
 
 T = TypeVar("T")
 
 __all__ = [
     "Clock",
     "FollowingClock",
+    "MAX_SPEED",
+    "MIN_SPEED",
+    "PacedLoop",
     "VirtualTimeLoop",
     "real_clock",
     "run_with_clock",
@@ -42,20 +53,30 @@ __all__ = [
 ]
 
 
+#: The slowest and fastest speed factor of a scaled clock: a hundredth of real time (an 88 s cycle
+#: in two and a half hours) to a thousand times (a 10 ms control period is 10 us of waiting).
+MIN_SPEED, MAX_SPEED = bounds("speed").lower, bounds("speed").upper
+
+
 class Clock:
     """Run time in seconds, sleeps and timeouts, all scaled by ``speed``.
 
     The clock binds to the event loop it is first used on; ``now()`` may be read from any thread
-    (a logging thread, the rclpy executor) because it only reads the loop's monotonic time.
+    (a logging thread, the rclpy executor) because it only reads the loop's time.  A ``paced``
+    clock (a simulated robot at a speed factor) needs a :class:`PacedLoop` and paces it: from
+    then on the loop's time, and so every clock on it, counts only its idle waits.
     """
 
-    def __init__(self, speed: float = 1.0, *, simulated: bool = False, epoch: float | None = None) -> None:
+    def __init__(self, speed: float = 1.0, *, simulated: bool = False, paced: bool = False, epoch: float | None = None) -> None:
         if not (speed > 0 and math.isfinite(speed)):
             raise ValueError(f"clock speed must be a positive finite factor, got {speed!r}")
+        if simulated and paced:
+            raise ValueError("a clock is either simulated (virtual time) or paced by the wall clock, not both")
         if epoch is not None and not (math.isfinite(epoch) and epoch >= 0):
             raise ValueError(f"clock epoch must be a finite time since 1970 in seconds, got {epoch!r}")
         self._speed = float(speed)
         self._simulated = simulated
+        self._paced = paced
         self._loop: asyncio.AbstractEventLoop | None = None
         self._origin = 0.0
         self._epoch = epoch
@@ -72,6 +93,11 @@ class Clock:
         """True when time is virtual: waiting costs no wall time."""
         return self._simulated
 
+    @property
+    def paced(self) -> bool:
+        """True for a simulated robot's time paced by the wall clock: only idle waits count."""
+        return self._paced
+
     def bind(self, loop: asyncio.AbstractEventLoop | None = None) -> Clock:
         """Tie the clock to ``loop`` (default: the running loop) and start run time at 0."""
         loop = loop or asyncio.get_running_loop()
@@ -81,6 +107,10 @@ class Clock:
             if self._loop is None:
                 if self._simulated and not isinstance(loop, VirtualTimeLoop):
                     raise RuntimeError("a simulated clock needs a VirtualTimeLoop; use run_with_clock()")
+                if self._paced:
+                    if not isinstance(loop, PacedLoop):
+                        raise RuntimeError("a scaled clock needs a PacedLoop (its time counts idle waits only); use run_with_clock()")
+                    loop.pace()
                 self._loop = loop
                 self._origin = loop.time()
                 if self._epoch is None:
@@ -146,13 +176,14 @@ class Clock:
         Under a simulated clock the periodic tasks of a cell (state publishing, diagnostics)
         would otherwise make time race ahead, burning a core and hours of robot time while an
         alarm waits for an operator.  Inside ``held()`` the loop waits for real events only
-        (a key, a service call, a wall-clock timer) and run time does not advance; real and
-        scaled clocks are not affected.  Use it only where nothing but the outside world can move the
-        run on: a person, or work done outside the loop that the run waits for (a recording being
-        finished in its writer threads).
+        (a key, a service call, a wall-clock timer) and run time does not advance, on a simulated
+        or a paced (scaled) loop; a real clock is not affected.  Use it only where nothing but the
+        outside world can move the run on: a person, or work done outside the loop that the run
+        waits for (a recording being finished in its writer threads).  Work in a worker thread
+        (``run_in_executor``) holds time by itself.
         """
         loop = self._loop
-        if not isinstance(loop, VirtualTimeLoop):
+        if not (isinstance(loop, VirtualTimeLoop) or (isinstance(loop, PacedLoop) and loop.paced)):
             yield
             return
         loop.holds += 1
@@ -162,7 +193,7 @@ class Clock:
             loop.holds -= 1
 
     def __repr__(self) -> str:
-        kind = "simulated" if self._simulated else f"x{self._speed:g}"
+        kind = "simulated" if self._simulated else f"x{self._speed:g}{' paced' if self._paced else ''}"
         return f"Clock({kind}, now={self.now():.3f})"
 
 
@@ -337,8 +368,15 @@ def real_clock() -> Clock:
 
 
 def scaled_clock(speed: float) -> Clock:
-    """Wall time sped up (or slowed down) by ``speed``."""
-    return Clock(speed)
+    """A simulated robot's time at ``speed`` times the wall clock, counting only idle waits.
+
+    ``speed`` 1 is real time, wall seconds as they pass: a real controller can be driven on it.
+    Any other factor is a simulation, paced by the wall clock (:class:`PacedLoop`): work the
+    computer does (rendering, detection, recording, another program) is not robot time.
+    """
+    if not (MIN_SPEED <= speed <= MAX_SPEED):
+        raise ValueError(f"speed must be in [{MIN_SPEED:g}, {MAX_SPEED:g}] (or simulated time: max), got {speed!r}")
+    return Clock(speed) if speed == 1.0 else Clock(speed, paced=True)
 
 
 def simulated_clock() -> Clock:
@@ -346,80 +384,13 @@ def simulated_clock() -> Clock:
     return Clock(1.0, simulated=True)
 
 
-class _VirtualSelector(selectors.BaseSelector):
-    """Selector that turns an idle wait into a jump of the loop's virtual time.
+def run_with_clock(main: Callable[[Clock], Coroutine[Any, Any, T]], clock: Clock, *, wall: Wall = time.monotonic) -> T:
+    """Run ``main(clock)`` to completion on a fresh loop suited to ``clock``.
 
-    asyncio computes how long it may block until the next timer and passes that to
-    ``select``.  We poll the real file descriptors without blocking; if nothing is ready and a
-    timer is pending, we advance virtual time to it instead of sleeping.  With no timer pending
-    (``timeout is None``) only another thread or a socket can wake the loop, so we block for
-    real.  Loopback sockets served by tasks of the same loop deliver data synchronously, so a
-    TCP or UDP peer simulated in-process works under virtual time too.
-
-    Loopback delivery is almost always synchronous, but the kernel may defer it under load; so
-    when sockets other than the loop's own wake-up pipe are registered, an idle loop first waits
-    ``io_grace`` wall seconds for late data before jumping.  Pure in-process runs pay nothing.
+    Every loop but a simulated clock's is a :class:`PacedLoop` on ``wall``: plain wall time until a
+    scaled clock binds to it (a bridge node's simulator, say), paced from then on.
     """
-
-    io_grace = 0.001
-
-    def __init__(self, loop: VirtualTimeLoop) -> None:
-        self._real = selectors.DefaultSelector()
-        self._loop = loop
-
-    def register(self, fileobj: Any, events: int, data: Any = None) -> selectors.SelectorKey:
-        return self._real.register(fileobj, events, data)
-
-    def unregister(self, fileobj: Any) -> selectors.SelectorKey:
-        return self._real.unregister(fileobj)
-
-    def modify(self, fileobj: Any, events: int, data: Any = None) -> selectors.SelectorKey:
-        return self._real.modify(fileobj, events, data)
-
-    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
-        ready = self._real.select(0)
-        if ready:
-            return ready
-        if timeout is None or (self._loop.holds and timeout > 0):  # held: only the outside world moves on
-            return self._real.select(None)
-        if timeout > 0:
-            if len(self._real.get_map()) > 1:
-                ready = self._real.select(min(timeout, self.io_grace))
-                if ready:
-                    return ready
-            self._loop.advance(timeout)
-        return []
-
-    def close(self) -> None:
-        self._real.close()
-
-    def get_key(self, fileobj: Any) -> selectors.SelectorKey:
-        return self._real.get_key(fileobj)
-
-    def get_map(self) -> Mapping[Any, selectors.SelectorKey]:
-        return self._real.get_map()
-
-
-class VirtualTimeLoop(asyncio.SelectorEventLoop):
-    """An asyncio loop whose ``time()`` is virtual and jumps over idle waits."""
-
-    def __init__(self) -> None:
-        self._virtual_now = 0.0
-        self.holds = 0  # Clock.held() depth: time stands still while positive
-        super().__init__(_VirtualSelector(self))
-
-    def time(self) -> float:
-        return self._virtual_now
-
-    def advance(self, seconds: float) -> None:
-        """Move virtual time forward (never backward)."""
-        if seconds > 0:
-            self._virtual_now += seconds
-
-
-def run_with_clock(main: Callable[[Clock], Coroutine[Any, Any, T]], clock: Clock) -> T:
-    """Run ``main(clock)`` to completion on a fresh loop suited to ``clock``."""
-    loop: asyncio.AbstractEventLoop = VirtualTimeLoop() if clock.simulated else asyncio.new_event_loop()
+    loop: asyncio.AbstractEventLoop = VirtualTimeLoop() if clock.simulated else PacedLoop(wall)
     try:
         asyncio.set_event_loop(loop)
         clock.bind(loop)
