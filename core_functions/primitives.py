@@ -175,6 +175,15 @@ class MoveRelative:
     reference: Literal["world", "tool"] = "world"
     interpolation: Interpolation = "linear"
 
+    def goal(self, start: Pose) -> Pose:
+        """Where the TCP ends when the move starts at ``start``: the one definition every back end and
+        the machine's re-basing of a retried move use.  Tool axes: ``start * delta``.  World axes: the
+        translation added, the orientation turned about the world axes through the TCP."""
+        if self.reference == "tool":
+            return start.compose(self.delta)
+        turn = Pose(0.0, 0.0, 0.0, *self.delta.quaternion).compose(Pose(0.0, 0.0, 0.0, *start.quaternion))
+        return Pose(start.x + self.delta.x, start.y + self.delta.y, start.z + self.delta.z, *turn.quaternion)
+
 
 @dataclass(frozen=True)
 class SetSpeed:

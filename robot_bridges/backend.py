@@ -11,6 +11,9 @@ Contract, which the bridge node and the tests rely on:
   :class:`BridgeError` with a :class:`FaultKind`; it never returns half-done.
 * ``pause`` holds the group where it is; ``resume`` completes the *same* primitive to the same
   target; ``stop`` abandons it, and the pending ``execute`` raises ``BridgeError(STOPPED)``.
+* ``measure`` says where an idle group is now, by the robot's word: the pose a relative move
+  starts from, which the group machine fixes before sending one, so that a retry is re-based on
+  it and never repeats the move (docs/architecture.md, "Motions are never repeated blindly").
 * Any other exception out of a back end is a bug; the bridge node still reports it as an error.
 """
 from __future__ import annotations
@@ -21,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from core_functions.geometry import Pose
-from core_functions.primitives import Primitive, PrimitiveResult
+from core_functions.primitives import MotionResult, Primitive, PrimitiveResult
 from core_functions.robots import RobotModel
 
 # FaultKind is defined with the wire messages: it travels in the bridge's error feedback and on
@@ -77,6 +80,15 @@ class RobotBackend(ABC):
     @abstractmethod
     async def stop(self, group: str) -> None:
         """Abandon the group's current primitive and hold position."""
+
+    async def measure(self, group: str) -> MotionResult:
+        """Where ``group`` is now: every joint of :meth:`joint_state` and the group's TCP.
+
+        A back end whose estimate can be stale (a lost link) refreshes it from the robot first;
+        raise :class:`BridgeError` when it cannot (BUSY while the group executes a primitive).
+        """
+        names, positions = self.joint_state()
+        return MotionResult(tuple(names), tuple(positions), self.tcp_pose(group))
 
     @abstractmethod
     def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:

@@ -9,6 +9,10 @@ is carried out once: a machine re-sends a command it got no answer for (it may h
 before DDS discovery matched the topics), so a repeated id is not run again -- its latest
 feedback is repeated instead, or nothing while it is still being taken up.
 
+A ``measure`` command asks where an idle group is (answered ``measured`` with a MotionResult):
+the machine fixes a relative move's absolute goal from it before sending the move, so a retry can
+be re-based instead of repeating it.
+
 Every failure becomes an ``error`` feedback naming the command: garbage on the command topic is
 reported (it has no id to answer), a back-end exception is reported even when it is a bug.
 """
@@ -123,6 +127,8 @@ class BridgeNode:
             self._answered.popitem(last=False)
         if command.op == "execute":
             self._start_execute(command)
+        elif command.op == "measure":
+            self._spawn(self._measure(command))
         else:
             self._spawn(self._control(command))
 
@@ -173,6 +179,21 @@ class BridgeNode:
             self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}", fault=FaultKind.INTERNAL)
         else:
             self._send(group, command.id, status)
+
+    async def _measure(self, command: BridgeCommand) -> None:
+        group = command.group
+        busy = self._running.get(group)
+        try:
+            if busy is not None and not busy.done():  # the machine measures only between primitives
+                raise BridgeError(FaultKind.BUSY, f"{group} is executing a primitive: no measurement now")
+            result = await self.backend.measure(group)
+        except BridgeError as error:
+            self._send(group, command.id, "error", error=str(error), fault=error.kind)
+        except Exception as error:  # noqa: BLE001 - a back-end defect must still reach the machine
+            log.exception("%s: measuring %s failed", self.backend.name, group)
+            self._send(group, command.id, "error", error=f"{FaultKind.INTERNAL.value}: {type(error).__name__}: {error}", fault=FaultKind.INTERNAL)
+        else:
+            self._send(group, command.id, "measured", result=result)
 
     async def _await_stopped(self, group: str) -> None:
         """'stopped' promises the primitive is over, so the group can take the next one at once."""

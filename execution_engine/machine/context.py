@@ -22,6 +22,7 @@ from execution_engine.clock import Clock
 from execution_engine.machine.bridge_watch import BridgeWatch
 from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
+from execution_engine.machine.rebase import RelativeGoals
 from execution_engine.machine.zone_gate import ZoneGate
 from execution_engine.transport import codec, typed
 from execution_engine.transport.port import Node, Publisher, Subscription, wait_until_matched
@@ -92,6 +93,7 @@ class MachineContext:
         self._sent: dict[str, Any] = {}  # unacknowledged bridge commands, for resending
         self.cell_arrived = asyncio.Event()
         self.zones = ZoneGate(self)  # interference zones: ask before a motion enters one
+        self.goals = RelativeGoals()  # the goals relative moves resolved to: a retry re-bases them (machine/rebase.py)
 
     # --------------------------------------------------------------------------- identity
     def new_id(self) -> str:
@@ -194,6 +196,7 @@ class MachineContext:
         except KeyError as error:  # a group unknown to the robot
             return f"{request.function}: {error}"
         method: Callable[..., Any] = getattr(self.functions, spec.method)
+        self.goals.begin(request)
         run = FunctionRun(request, spec, method(*args), self.clock.now())
         self.run = run
         self.status("function_start")

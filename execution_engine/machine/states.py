@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import MutableMapping
 from typing import Any
 
-from core_functions.primitives import MasterSlaveMove, describe
+from core_functions.primitives import MasterSlaveMove, MotionResult, describe
 from execution_engine.machine.bridge_watch import WATCH_PERIOD
 from execution_engine.machine.context import MachineContext
 from execution_engine.machine.events import (
@@ -26,6 +26,7 @@ from execution_engine.machine.events import (
     RequestEvent,
 )
 from execution_engine.machine.function_run import SkillError
+from execution_engine.machine.rebase import Step, absolute
 from execution_engine.machine.table import (
     END,
     ERROR,
@@ -99,12 +100,20 @@ class MachineState(State):
         handed back in order, except the final feedback of ``keep_done_of`` (the primitive
         finished while we paused it), which is kept in userdata for the resume.
         """
+        problem, _ = await self._ask(op, keep_done_of=keep_done_of, userdata=userdata)
+        return problem
+
+    async def _ask(
+        self, op: str, *, keep_done_of: str | None = None, userdata: MutableMapping[str, Any] | None = None
+    ) -> tuple[Problem | None, BridgeFeedback | None]:
+        """:meth:`_control` for any command without a primitive (``measure`` too): the problem, or the answer."""
         ctx = self.ctx
         link_problem = await ctx.link_bridge()
         if link_problem is not None:
-            return FaultKind.CONNECTION, link_problem
+            return (FaultKind.CONNECTION, link_problem), None
         control_id = ctx.send_bridge(op)
-        expected = {"pause": "paused", "resume": "resumed", "stop": "stopped"}[op]
+        expected = {"pause": "paused", "resume": "resumed", "stop": "stopped", "measure": "measured"}[op]
+        answer: BridgeFeedback | None = None
         deadline = ctx.clock.now() + ctx.config.bridge_timeout
         resend_at = ctx.clock.now() + ctx.config.resend_interval
         held: list[Event] = []
@@ -126,6 +135,7 @@ class MachineState(State):
                 continue
             if isinstance(event, FeedbackEvent) and event.feedback.id == control_id:
                 if event.feedback.status == expected:
+                    answer = event.feedback
                     break
                 if event.feedback.status == "error":
                     problem = feedback_fault(event.feedback), f"{op} failed: {event.feedback.error}"
@@ -142,7 +152,7 @@ class MachineState(State):
         ctx.acknowledged(control_id)
         for event in reversed(held):
             ctx.events.put_back(event)
-        return problem
+        return problem, answer
 
 
 # -------------------------------------------------------------------------------- Ready
@@ -161,10 +171,12 @@ class ReadyState(MachineState):
                 continue
             gated = False  # the next motion waits for a zone (machine/zone_gate.py)
             if run is not None and run.next_primitive is not None and not ctx.hold:
-                if ctx.zones.admits(run.next_primitive):
-                    primitive = run.take()
-                    userdata["primitive"] = primitive
-                    return primitive.STATE.request_signal
+                step = ctx.goals.step(run.started, run.next_primitive)  # a retried relative move: its recorded goal
+                if ctx.zones.admits(step.send):
+                    run.take()
+                    ctx.goals.take(step)
+                    userdata["primitive"] = step.send
+                    return step.send.STATE.request_signal
                 gated = True
                 lost = ctx.bridge_watch.lost()  # waiting for a zone with no bridge to move: nothing ever will
                 if lost is not None:
@@ -221,7 +233,27 @@ class WorkingState(MachineState):
         primitive = userdata["primitive"]
         assert ctx.run is not None
         ctx.status("primitive_start", primitive=describe(primitive), index=ctx.run.started)
+        step = ctx.goals.current
+        if step is not None and step.refusal is not None:
+            return fail(userdata, FaultKind.UNSUPPORTED, step.refusal)
+        if step is not None and step.needs_goal:
+            problem = await self._fix_goal(step)
+            if problem is not None:
+                return fail(userdata, problem[0], f"{describe(primitive)}: {problem[1]}")
         return await self._execute(userdata, primitive)
+
+    async def _fix_goal(self, step: Step) -> Problem | None:
+        """Before a relative move may be sent: measure where the arm is and record the goal it resolves to."""
+        ctx = self.ctx
+        problem, answer = await self._ask("measure")
+        if problem is not None:
+            return problem
+        measured = answer.result if answer is not None else None
+        if not isinstance(measured, MotionResult):
+            return FaultKind.PROTOCOL, f"the bridge's measurement is a {type(measured).__name__}, not a MotionResult"
+        joints = ctx.robot.group(ctx.group).joint_names
+        ctx.goals.record(step.index, absolute(step.asked, measured, joints, ctx.goals.label(step.index, step.asked)))
+        return None
 
     async def _execute(self, userdata: MutableMapping[str, Any], primitive: Any) -> str:
         """Send ``primitive`` once the bridge is linked, then wait for its end."""

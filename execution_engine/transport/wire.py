@@ -139,11 +139,12 @@ class SmStructure:
 # ---------------------------------------------------------------------- machine <-> bridge
 @dataclass(frozen=True)
 class BridgeCommand:
-    """Machine -> bridge: execute a primitive, or pause / resume / stop the group's motion."""
+    """Machine -> bridge: execute a primitive, pause / resume / stop the group's motion, or measure
+    where the idle group is (before a relative move, whose goal the machine fixes from it)."""
 
     id: str
     group: str
-    op: Literal["execute", "pause", "resume", "stop"]
+    op: Literal["execute", "pause", "resume", "stop", "measure"]
     primitive: Primitive | None = None
     v: int = PROTOCOL_VERSION
 
@@ -159,10 +160,10 @@ class BridgeFeedback:
 
     id: str
     group: str
-    status: Literal["accepted", "done", "error", "paused", "resumed", "stopped"]
+    status: Literal["accepted", "done", "error", "paused", "resumed", "stopped", "measured"]
     error: str | None = None
     fault: FaultKind | None = None  # with "error": the back end's FaultKind
-    result: PrimitiveResult | None = None  # with "done": what the primitive's type says it returns
+    result: PrimitiveResult | None = None  # with "done": what the primitive's type says it returns; "measured": a MotionResult
     t: float = 0.0
     v: int = PROTOCOL_VERSION
 

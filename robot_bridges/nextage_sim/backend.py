@@ -311,18 +311,7 @@ class NextageSimBackend(RobotBackend):
         return await self._cartesian(group, primitive, lambda current: primitive.target, primitive.interpolation)
 
     async def _move_relative(self, group: str, primitive: MoveRelative) -> MotionResult:
-        delta = primitive.delta
-
-        def target(current: Pose) -> Pose:
-            if primitive.reference == "tool":
-                return current.compose(delta)
-            m = delta.matrix()
-            m[:3, 3] = 0.0
-            m = m @ current.matrix()
-            m[:3, 3] = np.array(current.position) + np.array(delta.position)
-            return Pose.from_matrix(m)
-
-        return await self._cartesian(group, primitive, target, primitive.interpolation)
+        return await self._cartesian(group, primitive, primitive.goal, primitive.interpolation)
 
     async def _cartesian(
         self, group: str, primitive: MoveCartesian | MoveRelative, target_of: Callable[[Pose], Pose], interpolation: str

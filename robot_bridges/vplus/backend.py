@@ -232,6 +232,14 @@ class VPlusBackend(RobotBackend):
             self._job = None
             job.finished.set_result(None)
 
+    async def measure(self, group: str) -> MotionResult:
+        """Where the arm is by the controller's word: after a loss or a failure a lone ``break`` asks it first."""
+        self._check_group(group)
+        if self._job is not None:
+            raise BridgeError(FaultKind.BUSY, f"{self.label}: {GROUP} is executing a primitive: no measurement now")
+        await self._ensure_link()
+        return self._motion_result()
+
     async def pause(self, group: str) -> None:
         self._check_group(group)
         if self._job is not None:
@@ -301,10 +309,9 @@ class VPlusBackend(RobotBackend):
         now = self._current_pose()
         delta = primitive.delta
         what = describe(primitive) + f" ({primitive.reference})"
+        target = primitive.goal(now)
         if primitive.reference == "tool":
-            target = now.compose(delta)
             return await self._move_to_pose(target, codec.move_rel_tool(pose_to_location(delta)), what)
-        target = Pose(now.x + delta.x, now.y + delta.y, now.z + delta.z, *Pose.from_matrix(delta.matrix() @ now.matrix()).quaternion)
         if delta.angle_to(Pose()) < 1e-12:  # a pure translation: the skill made for it
             mm = (delta.x * 1000.0, delta.y * 1000.0, delta.z * 1000.0, 0.0, 0.0, 0.0)
             return await self._move_to_pose(target, codec.move_rel_world(mm), what)
