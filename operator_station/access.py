@@ -57,6 +57,14 @@ def is_loopback(address: str) -> bool:
         return False
 
 
+def is_address(name: str) -> bool:
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
 def is_wildcard(address: str) -> bool:
     """``0.0.0.0`` or ``::``: every address of the computer."""
     try:
@@ -94,17 +102,19 @@ def read_token_file(path: Path) -> str:
 
 
 def normal_host(name: str) -> str:
-    """A host name as compared: lower case, IPv6 without brackets, no trailing dot."""
-    return name.strip("[]").lower().rstrip(".")
+    """A host name as compared: lower case, no trailing dot; an address in its one canonical form (IPv6 without brackets)."""
+    plain = name.strip("[]").lower().rstrip(".")
+    try:
+        return str(ipaddress.ip_address(plain))
+    except ValueError:
+        return plain
 
 
 def check_host_name(name: str) -> str:
     """An ``--allowed-host`` value, normalised; AccessError if it is neither a DNS name nor an address."""
     plain = normal_host(name)
-    try:
-        return str(ipaddress.ip_address(plain))
-    except ValueError:
-        pass
+    if is_address(plain):
+        return plain
     if not plain or len(plain) > 253 or not HOST_NAME.fullmatch(plain):
         raise AccessError(f"--allowed-host {name!r}: not a host name or an address (give the name pages use, without port or scheme)")
     return plain
@@ -153,6 +163,11 @@ class Access:
         """Loopback without a token file: sessions for loopback page loads.  Anything else: the token."""
         needed = token is not None or not is_loopback(bound)
         return cls(token or new_token(), needed, host_names(bound, extra_hosts))
+
+    def shown_hosts(self, port: int | None = None) -> str:
+        """The names as a page writes them in an address (IPv6 in brackets), with ``port`` if given."""
+        names = (f"[{n}]" if ":" in n else n for n in sorted(self.hosts))
+        return ", ".join(f"{n}:{port}" if port is not None else n for n in names)
 
     def token_matches(self, given: str | None) -> bool:
         return given is not None and secrets.compare_digest(given.encode("utf-8", "replace"), self.token.encode())

@@ -30,8 +30,8 @@ def missing() -> str | None:
     return None
 
 
-def chromium(width: int = 1600, height: int = 1000) -> Any:
-    """A headless Chromium WebDriver with the browser's console log kept."""
+def chromium(width: int = 1600, height: int = 1000, arguments: tuple[str, ...] = ()) -> Any:
+    """A headless Chromium WebDriver with the browser's console log kept; ``arguments`` are added to Chromium's."""
     from selenium import webdriver
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
@@ -41,7 +41,7 @@ def chromium(width: int = 1600, height: int = 1000) -> Any:
         raise RuntimeError(missing() or "no Chromium")
     options = Options()
     options.binary_location = binary
-    for argument in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", f"--window-size={width},{height}"):
+    for argument in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", f"--window-size={width},{height}", *arguments):
         options.add_argument(argument)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     return webdriver.Chrome(service=Service(driver), options=options)

@@ -163,7 +163,7 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
             out.write(f"open {page}?token={access.token} (a token made for this start; keep one with --token-file)\n")
         else:
             out.write(f"open {page}?token=TOKEN with the token of {args.token_file}\n")
-        out.write(f"pages may reach it as: {', '.join(sorted(access.hosts))} (others with --allowed-host NAME)\n")
+        out.write(f"pages may reach it as: {access.shown_hosts()} (others with --allowed-host NAME)\n")
     out.flush()
     try:
         asyncio.run(_serve(server, station))

@@ -24,11 +24,11 @@ headers that keep the page out of other sites' frames and never any ``Access-Con
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Awaitable, Callable, MutableMapping
 from email.message import Message
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlsplit
 
 from starlette.datastructures import Headers
 from starlette.exceptions import HTTPException
@@ -41,15 +41,17 @@ from operator_station.access import Access, Who, is_loopback, normal_host
 log = logging.getLogger(__name__)
 
 Scope = MutableMapping[str, Any]
-Message_ = MutableMapping[str, Any]
-Receive = Callable[[], Awaitable[Message_]]
-Send = Callable[[Message_], Awaitable[None]]
+AsgiMessage = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[AsgiMessage]]
+Send = Callable[[AsgiMessage], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 #: Methods that change nothing (everything else needs a JSON body).
 SAFE_METHODS = ("GET", "HEAD")
 #: Paths that need a session or the token (the page itself hands out the session; its assets are public).
 PROTECTED = ("/api/", "/ws")
+#: A Host header: a name or an IPv4 address, or an IPv6 address in brackets, and maybe a port (RFC 9110 7.2).
+HOST_HEADER = re.compile(r"(?P<name>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(?P<port>[0-9]{1,5}))?")
 #: The scope key the guard leaves the requester in, for the routes' log lines.
 WHO = "studio.who"
 #: Headers on every HTTP answer: no framing by other sites, no sniffing, no referrer (the token is in a URL once).
@@ -64,7 +66,8 @@ SECURITY_HEADERS = (
 
 
 class BodyTooLarge(HTTPException):
-    """A body that went past the limit while it streamed in; the route never sees the rest."""
+    """A body that went past the limit while it streamed in; the route never sees the rest, the connection is closed
+    (uvicorn would otherwise read the rest of the body to keep the connection)."""
 
     def __init__(self, limit: int) -> None:
         super().__init__(413, f"the request body is over the limit of {limit} bytes")
@@ -87,20 +90,14 @@ def host_problem(host: str | None, scope: Scope, access: Access) -> str | None:
     """Why ``Host`` does not name this station (None when it does)."""
     if not host:
         return "a request without a Host header"
-    try:
-        parts = urlsplit("//" + host)
-        name, port = parts.hostname, parts.port
-    except ValueError:
-        name, port = None, None
-        parts = None
-    if parts is None or not name or parts.netloc != host or parts.path or parts.query or parts.fragment or parts.username is not None:
+    match = HOST_HEADER.fullmatch(host)
+    if match is None:
         return f"Host {host!r} is not a host and port"
     server = scope.get("server") or ("", 0)
-    port = port if port is not None else (443 if scope.get("scheme") in ("https", "wss") else 80)
-    name = normal_host(name)
+    port = int(match["port"]) if match["port"] else (443 if scope.get("scheme") in ("https", "wss") else 80)
+    name = normal_host(match["name"])
     if port != server[1] or not (name in access.hosts or name == normal_host(str(server[0]))):
-        served = ", ".join(f"[{n}]:{server[1]}" if ":" in n else f"{n}:{server[1]}" for n in sorted(access.hosts))
-        return f"Host {host!r} is not this station's (it answers to {served}; add a name with --allowed-host)"
+        return f"Host {host!r} is not this station's (it answers to {access.shown_hosts(server[1])}; add a name with --allowed-host)"
     return None
 
 
@@ -160,7 +157,8 @@ class Guard:
         if scope["type"] == "websocket":
             await self.app(scope, receive, send)
             return
-        await self.app(scope, self._bounded(receive), _with_headers(send))
+        body = CountedBody(receive, self.max_body)
+        await self.app(scope, body.receive, _with_headers(send, lambda: body.over))
 
     def _body_problem(self, headers: Headers) -> tuple[int, str | None]:
         kind = media_type(headers.get("content-type"))
@@ -175,35 +173,42 @@ class Guard:
                 return 413, f"the request body is {int(length)} bytes, over the limit of {self.max_body}"
         return 0, None
 
-    def _bounded(self, receive: Receive) -> Receive:
-        """``receive`` counting the body's bytes; past the limit, the route gets a 413 and nothing more is read."""
-        seen = 0
-        limit = self.max_body
-
-        async def counted() -> Message_:
-            nonlocal seen
-            message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > limit:
-                    raise BodyTooLarge(limit)
-            return message
-
-        return counted
-
     async def _refuse(self, scope: Scope, receive: Receive, send: Send, status: int, problem: str) -> None:
         client = scope.get("client") or ("unknown", 0)
         log.info("studio refused %s %s from %s: %s", scope.get("method", "WEBSOCKET"), scope["path"], client[0], problem)
         if scope["type"] == "websocket":
             await WebSocketClose(code=1008)(scope, receive, send)
             return
-        await JSONResponse({"ok": False, "error": problem}, status_code=status)(scope, receive, _with_headers(send))
+        unread = scope.get("method") not in SAFE_METHODS  # its body was not read: hang up rather than drain it
+        await JSONResponse({"ok": False, "error": problem}, status_code=status)(scope, receive, _with_headers(send, lambda: unread))
 
 
-def _with_headers(send: Send) -> Send:
-    async def sending(message: Message_) -> None:
+class CountedBody:
+    """A request's ``receive`` counting the body's bytes: past the limit the route gets a 413 and nothing more is read."""
+
+    def __init__(self, receive: Receive, limit: int) -> None:
+        self._receive = receive
+        self.limit = limit
+        self.seen = 0
+        self.over = False
+
+    async def receive(self) -> AsgiMessage:
+        message = await self._receive()
+        if message["type"] == "http.request":
+            self.seen += len(message.get("body", b""))
+            if self.seen > self.limit:
+                self.over = True
+                raise BodyTooLarge(self.limit)
+        return message
+
+
+def _with_headers(send: Send, hang_up: Callable[[], bool]) -> Send:
+    """``send`` adding the security headers (and dropping any CORS header); ``Connection: close`` when ``hang_up()``."""
+
+    async def sending(message: AsgiMessage) -> None:
         if message["type"] == "http.response.start":
-            message["headers"] = [*(h for h in message.get("headers", []) if not h[0].lower().startswith(b"access-control-")), *SECURITY_HEADERS]
+            kept = [h for h in message.get("headers", []) if not h[0].lower().startswith(b"access-control-") and not (hang_up() and h[0].lower() == b"connection")]
+            message["headers"] = [*kept, *SECURITY_HEADERS, *([(b"connection", b"close")] if hang_up() else [])]
         await send(message)
 
     return sending

@@ -46,6 +46,8 @@ def op(group: str, function: str, *params: str) -> str:
 #: The files rows name under {tmp}, as docs/faults.md describes them.
 FILES: dict[str, str | bytes] = {
     "not_xml.xml": "this is not XML at all\n",
+    "short_token": "secret\n",
+    "shared_token": "C" * 43 + "\n",
     "truncated.xml": RIVET[: len(RIVET) // 2],
     "entity.xml": '<?xml version="1.0"?>\n<!DOCTYPE a [<!ENTITY big "xxxxxxxx">]>\n<application name="t" robot="nextage">&big;</application>\n',
     "unknown_function.xml": app(op("left_arm", "fly_away")),
