@@ -33,6 +33,7 @@ from typing import IO, NoReturn
 
 from app_functions.registry import full_catalog
 from core_functions.catalog import Catalog, ParamType
+from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.robots import ROBOTS, RobotModel
 from execution_engine.app_model import Application, ApplicationError, load_application, read_application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
@@ -185,16 +186,14 @@ def cmd_functions(catalog: Catalog, as_json: bool, out: IO[str]) -> int:
 
 # ----------------------------------------------------------------------------------- run
 def parse_speed(text: str) -> float:
-    """A positive speed factor, or ``max`` for simulated time (as fast as the computer goes)."""
+    """A speed factor in its range (core_functions.option_ranges), or ``max`` for simulated time (as fast as the computer goes)."""
     if text.lower() in ("max", "inf", "fastest"):
         return math.inf
+    speed = bounds("speed")
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"speed must be a positive number or 'max', got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"speed must be a positive number or 'max', got {text!r}")
-    return value
+        return speed.check("speed", text)
+    except RangeError:
+        raise argparse.ArgumentTypeError(f"speed must be a number in {speed.describe()} or 'max', got {text!r}") from None
 
 
 def backend_name(app: Application, args: argparse.Namespace) -> str:
@@ -398,7 +397,7 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--simulate", action="store_true", help="also dry-run each valid file on the robot's simulator: every unreachable target, joint limit, missing trajectory and unsupported action at its line, and the predicted cycle time")
     validate.add_argument("--robot", choices=("nextage-sim", "vplus", "kuka-rsi"), help="with --simulate: the back end whose simulator to use (default: the application robot's)")
     validate.add_argument("--backend-option", action="append", type=parse_option, metavar="KEY=VALUE", help="with --simulate: back-end option as for run, e.g. config=my_rsi.xml (repeatable)")
-    validate.add_argument("--seed", type=int, default=0, help="with --simulate: simulator random seed (vision noise), as for run")
+    validate.add_argument("--seed", type=argument_type("seed"), default=0, help="with --simulate: simulator random seed (vision noise) in [0, 4294967295], as for run")
     validate.add_argument("--trajectory-db", metavar="PATH", help="with --simulate: the trajectory database the run will use (read, never written)")
     validate.set_defaults(host=None, port=None, rsi_listen=None, fault=None)
     functions = sub.add_parser("functions", help="list the function catalog")
@@ -407,14 +406,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_vision_parser(sub)
     run = sub.add_parser("run", help="run an application (default: on the Nextage kinematic simulator)")
     run.add_argument("file", metavar="FILE")
-    run.add_argument("--speed", type=parse_speed, default=1.0, help="run-time speed factor (default 1 = real time), or 'max'")
+    run.add_argument("--speed", type=parse_speed, default=1.0, help="robot seconds per wall second, in [0.01, 1000]: 1 (the default) is real time, any other factor simulated time that counts only the computer's idle waits; or 'max': simulated time as fast as the computer goes")
     run.add_argument("--trace", metavar="PATH", help="write every event as a JSON line to PATH")
     run.add_argument("--robot", choices=("nextage-sim", "vplus", "kuka-rsi"), help="back end (default: the application robot's)")
     run.add_argument("--host", help="controller address (V+); none starts the simulator")
     run.add_argument("--port", type=int, help="controller port (V+ default 1234)")
     run.add_argument("--rsi-listen", metavar="HOST:PORT", help="KUKA RSI: serve a real controller on this address")
     run.add_argument("--fault", action="append", metavar="GROUP:KIND@FRACTION", help="simulator fault injection, e.g. right_arm:joint_limit@0.5 (repeatable)")
-    run.add_argument("--seed", type=int, default=0, help="simulator random seed (vision noise)")
+    run.add_argument("--seed", type=argument_type("seed"), default=0, help="simulator random seed (vision noise) in [0, 4294967295]")
     run.add_argument("--backend-option", action="append", type=parse_option, metavar="KEY=VALUE", help="back-end specific option, e.g. timeout=20 (repeatable; each back end lists and checks its own)")
     run.add_argument("--trajectory-db", metavar="PATH", help="SQLite file for recorded trajectories")
     run.add_argument("--interactive", action="store_true", help="read operator commands from the terminal")

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import IO
 
 from app_functions.registry import full_catalog
+from core_functions.option_ranges import argument_type
 from execution_engine.app_model import ApplicationError, load_application
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.resources import share_path
@@ -65,10 +66,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     launch = sub.add_parser("launch", help="start the cell as one process per node (over DDS without ROS, or rclpy), supervised")
     launch.add_argument("file", metavar="FILE", help="application XML file the engine runs")
     launch.add_argument("--transport", choices=("dds", "ros"), default="dds", help="dds: Cyclone DDS without a ROS install (default); ros: rclpy")
-    launch.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second of a simulator back end (default 1)")
+    launch.add_argument("--speed", type=argument_type("speed"), default=1.0, help="simulated seconds per wall second of a simulator back end, in [0.01, 1000] (default 1)")
     launch.add_argument("--nodes", help="comma-separated node names to start (default: every node of the cell)")
-    launch.add_argument("--grace", type=float, default=5.0, help="seconds the engine gets to end its run by itself after another node died (default 5)")
-    launch.add_argument("--stop-timeout", type=float, default=10.0, help="seconds a node gets to stop on SIGTERM before SIGKILL (default 10)")
+    launch.add_argument("--grace", type=argument_type("grace"), default=5.0, help="seconds the engine gets to end its run by itself after another node died, in [0, 600] (default 5)")
+    launch.add_argument("--stop-timeout", type=argument_type("stop_timeout"), default=10.0, help="seconds a node gets to stop on SIGTERM before SIGKILL, in [0.1, 600] (default 10)")
 
 
 def cell_nodes(app_file: Path, transport: str, speed: float) -> list[NodeSpec]:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from core_functions.geometry import Pose
+from core_functions.option_ranges import bounds
 from core_functions.primitives import MotionResult, Primitive, PrimitiveResult
 from core_functions.robots import RobotModel
 
@@ -124,9 +125,12 @@ class BackendOptions:
     extra: dict[str, str] = field(default_factory=dict)
 
     def check(self, backend: str, robot: RobotModel, known_extras: Iterable[str]) -> None:
-        """Refuse, rather than ignore, options meant for another robot or back end."""
+        """Refuse, rather than ignore, options meant for another robot or back end, and a seed out of its range.
+
+        Each back end checks its numeric extras against core_functions.option_ranges as it parses them."""
         if self.robot.name != robot.name:
             raise ValueError(f"the {backend} back end drives {robot.name}, not {self.robot.name}")
+        bounds("seed").check_int(f"{backend}: seed", self.seed)
         known = sorted(known_extras)
         unknown = sorted(set(self.extra) - set(known))
         if unknown:

@@ -26,6 +26,7 @@ from typing import Any
 from core_functions.primitives import PrimitiveResult, describe
 from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node, Publisher
 from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
 from execution_engine.transport.qos import JOINT_STATES as JOINT_STATES_QOS
@@ -53,10 +54,8 @@ class BridgeNode:
         self.node = node
         self.backend = backend
         self.clock = node.clock
-        self.state_period = float(node.declare_parameter("state_period", 0.05, "joint_states / tcp_pose period (s)"))
-        self.stop_timeout = float(node.declare_parameter("stop_timeout", 5.0, "longest a stopped primitive may take to end (s)"))
-        if self.state_period <= 0:
-            raise ValueError(f"{node.fully_qualified_name}: state_period must be > 0, got {self.state_period}")
+        self.state_period = float(declare_bounded(node, "state_period", 0.05, "joint_states / tcp_pose period (s)"))
+        self.stop_timeout = float(declare_bounded(node, "stop_timeout", 5.0, "longest a stopped primitive may take to end (s)"))
         self._feedback: dict[str, Publisher[Any]] = {}  # typed.BridgeFeedbackMsg
         self._answered: OrderedDict[str, Any | None] = OrderedDict()  # command id -> latest feedback
         self._running: dict[str, asyncio.Task[None]] = {}

@@ -37,12 +37,13 @@ class Harness:
     robot: RobotModel = NEXTAGE_OPEN
     durations: dict[str, float] = field(default_factory=dict)
     parameters: dict[str, Any] = field(default_factory=dict)
+    backend_class: type[ScriptedBackend] = ScriptedBackend  # a subclass scripts more (a slow measurement, say)
 
     async def start(self) -> Harness:
         import asyncio
 
         self.transport = LocalTransport(self.clock)
-        self.backend = ScriptedBackend(self.clock, self.robot, self.durations)
+        self.backend = self.backend_class(self.clock, self.robot, self.durations)
         self.bridge = BridgeNode(self.transport.create_node("bridge"), self.backend)
         await self.bridge.start()
         self.engine = self.transport.create_node("fake_engine")

@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 from app_builder import make_app
+from machine_harness import Harness
 from scripted_backend import ScriptedBackend
 
 from core_functions.geometry import Pose
@@ -166,3 +167,28 @@ def test_the_bridge_measures_an_idle_group_and_refuses_while_it_moves(run_sim: R
     busy = answers[("m2", "error")]
     assert busy.fault is FaultKind.BUSY and "no measurement now" in (busy.error or "")
     assert ("x1", "done") in answers
+
+
+class SlowToMeasure(ScriptedBackend):
+    """A controller that takes half a second to say where the arm is (a resync over a slow link)."""
+
+    async def measure(self, group: str) -> MotionResult:
+        await self.clock.sleep(0.5)
+        return await super().measure(group)
+
+
+def test_a_stop_while_the_arm_is_measured_wins_over_the_relative_move(run_sim: Run) -> None:
+    async def main(clock: Clock) -> tuple[Any, list[str]]:
+        bench = await Harness(clock, backend_class=SlowToMeasure).start()
+        backend = bench.backend
+        request_id = bench.send("left_arm", "move_relative", "0", "0", "0.02")
+        await bench.until_state("left_arm", "Motion")
+        await clock.sleep(0.1)  # the measurement is under way
+        assert (await bench.service("left_arm", "stop")).success
+        result = await bench.result(request_id)
+        await bench.close()
+        return result, [e.kind for e in backend.log]
+
+    result, executed = run_sim(main)
+    assert result.outcome == "preempted" and result.fault is FaultKind.STOPPED
+    assert executed == []  # the move never went out

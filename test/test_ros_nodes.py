@@ -85,7 +85,7 @@ def test_wrong_parameters_and_arguments_are_usage_errors(fake_rclpy: Any, capsys
     assert nextage_main(["nextage_sim_bridge", "--ros-args", "-p", "initial_pose:=upside_down"]) == ExitCode.USAGE
     assert "unknown Nextage pose 'upside_down'" in capsys.readouterr().err
     assert nextage_main(["nextage_sim_bridge", "--ros-args", "-p", "speed:=0.0"]) == ExitCode.USAGE
-    assert "speed must be > 0" in capsys.readouterr().err
+    assert "/nextage_sim_bridge: parameter 'speed' must be a number in [0.01, 1000] x real time, got 0\n" in capsys.readouterr().err
 
 
 def test_a_machine_not_named_after_its_group_is_flagged(

@@ -311,8 +311,11 @@ def _create(clock: Clock, options: Any) -> KukaRsiBackend:
     [
         ({"extra": {"bogus": "1"}}, "unknown option(s) bogus"),
         ({"extra": {"runner": "fiber"}}, "runner must be process or thread"),
-        ({"extra": {"cycle": "four"}}, "cycle and timeout are integers"),
-        ({"extra": {"silence": "0"}}, "must be > 0"),
+        ({"extra": {"cycle": "four"}}, "kuka-rsi: cycle must be 4 or 12 (ms), got 'four'"),
+        ({"extra": {"silence": "0"}}, "kuka-rsi: silence must be a number in [0.01, 10] s, got '0'"),
+        ({"extra": {"connect_timeout": "inf"}}, "kuka-rsi: connect_timeout must be a number in [0.1, 600] s, got 'inf'"),
+        ({"extra": {"timeout": "2.5"}}, "kuka-rsi: timeout must be a whole number in [1, 100000], got '2.5'"),
+        ({"extra": {"sim_drop": "1.5"}}, "kuka-rsi: sim_drop must be a number in [0, 1], got '1.5'"),
         ({"extra": {"config": "/nonexistent.xml"}}, "cannot read RSI configuration"),
         ({"rsi_listen": "0.0.0.0:49152"}, "give the controller's address as host"),
         ({"host": "192.168.1.10"}, "needs rsi_listen"),

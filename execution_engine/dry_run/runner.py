@@ -45,7 +45,7 @@ log = logging.getLogger(__name__)
 
 FUNCTION = "function"
 _ABORT = ErrorPolicy(retries=0, action="abort")  # a retry would fail the same way; a safe pose would move
-_QUIET_BRIDGE = {"state_period": 3600.0}  # nobody watches joint_states in a dry run
+_QUIET_BRIDGE = {"state_period": 1.0}  # nobody watches joint_states in a dry run: the longest period a bridge takes
 #: sync="flags": runs again without the calls that failed, at most this many times.
 MAX_RERUNS = 25
 

@@ -40,6 +40,7 @@ from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from execution_engine.transport import typed
 from execution_engine.transport.msgs import Bool, Trigger
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS, LATCHED
 from execution_engine.transport.wire import (
@@ -105,9 +106,9 @@ class ExecutionEngine(OperatorCommands):
         self.wall_clock: WallClock = wall_clock or RealWallClock()
         self.catalog = catalog or full_catalog()
         self.autostart = bool(node.declare_parameter("autostart", True, "start running as soon as the machines are ready"))
-        self.startup_timeout = float(node.declare_parameter("startup_timeout", 15.0, "how long to wait for the group machines (s)"))
-        self.function_timeout = float(node.declare_parameter("function_timeout", 3600.0, "longest a function may take (s)"))
-        self.service_timeout = float(node.declare_parameter("service_timeout", 5.0, "machine service call timeout (s)"))
+        self.startup_timeout = float(declare_bounded(node, "startup_timeout", 15.0, "how long to wait for the group machines (s)"))
+        self.function_timeout = float(declare_bounded(node, "function_timeout", 3600.0, "longest a function may take (s)"))
+        self.service_timeout = float(declare_bounded(node, "service_timeout", 5.0, "machine service call timeout (s)"))
         self._status_pub = node.create_publisher(typed.EngineStatusMsg, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
         self._events_pub = node.create_publisher(typed.EngineEventMsg, ENGINE_EVENTS, EVENTS)  # every state change and command, once
         self._cell_pub = node.create_publisher(typed.CellSnapshotMsg, ENGINE_CELL, LATCHED)

@@ -79,6 +79,15 @@ class EventQueue:
         """Return an event to the front so the next state sees it first."""
         self._events.appendleft(event)
 
+    def take_signal(self, command: OperatorCommand) -> OperatorSignal | None:
+        """Remove and return the first queued operator ``command``, if any: a stop that came while a
+        state waited for something else must still win over a primitive not sent yet."""
+        for event in self._events:
+            if isinstance(event, OperatorSignal) and event.command == command:
+                self._events.remove(event)
+                return event
+        return None
+
     async def get(self, timeout: float | None = None) -> Event | None:
         """The next event, or None after ``timeout`` run seconds (None: wait without bound)."""
         if self._events:

@@ -54,6 +54,7 @@ from execution_engine.machine.table import (
 from execution_engine.smach import StateMachine, StructureInfo, TransitionRecord, UserData
 from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import Trigger, TriggerRequest, TriggerResponse
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
 from execution_engine.transport.wire import (
@@ -100,9 +101,9 @@ class GroupMachine:
             "'' = the per-user default, with a warning"
         ))
         config = MachineConfig(
-            bridge_timeout=float(node.declare_parameter("bridge_timeout", MachineConfig.bridge_timeout)),
-            primitive_timeout=float(node.declare_parameter("primitive_timeout", MachineConfig.primitive_timeout)),
-            sync_timeout=float(node.declare_parameter("sync_timeout", MachineConfig.sync_timeout)),
+            bridge_timeout=declare_bounded(node, "bridge_timeout", MachineConfig.bridge_timeout, "how fast the bridge must acknowledge a command (s)"),
+            primitive_timeout=declare_bounded(node, "primitive_timeout", MachineConfig.primitive_timeout, "longest a primitive may run (s)"),
+            sync_timeout=declare_bounded(node, "sync_timeout", MachineConfig.sync_timeout, "how long partners may take to meet at a barrier (s)"),
         )
         self.robot = find_robot(robot_name)
         if self.group not in self.robot.group_names:

@@ -240,6 +240,9 @@ class WorkingState(MachineState):
             problem = await self._fix_goal(step)
             if problem is not None:
                 return fail(userdata, problem[0], f"{describe(primitive)}: {problem[1]}")
+            stop = ctx.events.take_signal("stop")  # asked while the arm was measured: the move is not sent
+            if stop is not None:
+                return self.stopping(userdata, stop)
         return await self._execute(userdata, primitive)
 
     async def _fix_goal(self, step: Step) -> Problem | None:

@@ -25,6 +25,7 @@ from core_functions.geometry import Pose
 from core_functions.vision.camera import Intrinsics
 from execution_engine.clock import Clock
 from execution_engine.transport.msgs import ByteBuffer, CameraInfo, Header, Image, RegionOfInterest, Time
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node, Publisher
 from execution_engine.transport.qos import SENSOR
 from robot_bridges.camera.sources import CameraSource, CaptureError, Frame
@@ -172,7 +173,7 @@ def attach_cameras(node: Node, backend: object) -> RosCamera | None:
     and a camera setting given to a back end without cameras is refused rather than ignored."""
     publish = bool(node.declare_parameter("publish_images", False, "publish every image the cameras take on <camera>/image_raw and <camera>/camera_info"))
     source = str(node.declare_parameter("camera_source", "", "'' = the back end's own cameras (the simulator renders the cell); 'ros' = <camera>/image_raw + camera_info topics"))
-    timeout = float(node.declare_parameter("camera_timeout", 2.0, "longest wait for an image from a ROS camera (s)"))
+    timeout = float(declare_bounded(node, "camera_timeout", 2.0, "longest wait for an image from a ROS camera (s)"))
     if source not in ("", "ros"):
         raise ValueError(f"{node.fully_qualified_name}: camera_source must be '' or 'ros', got {source!r}")
     cameras = getattr(backend, "cameras", None)

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from core_functions import option_ranges
 from core_functions.geometry import Pose
 from core_functions.motion_profile import TcpLimits
 from core_functions.primitives import (
@@ -717,22 +718,21 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     for name, value, allowed in choices:
         if value not in allowed:
             raise ValueError(f"kuka-rsi: {name} must be {' or '.join(allowed)}, got {value!r}")
-    try:
-        cycle = int(extra.get("cycle", "4"))
-        timeout = int(extra.get("timeout", "100"))
-        monitor = float(extra.get("axis_monitor", "360"))
-        silence = float(extra.get("silence", "0.1"))
-        connect = float(extra.get("connect_timeout", "10"))
-        limits = MotionLimits(linear_speed=float(extra.get("linear_speed", "1.0")), linear_accel=float(extra.get("linear_accel", "2.0")))
-        tolerance = float(extra.get("tolerance", "0.1"))
-        tolerance_mm = float(extra.get("tolerance_mm", "1.0"))
-    except ValueError as error:
-        raise ValueError(
-            f"kuka-rsi: cycle and timeout are integers; axis_monitor, silence, connect_timeout, linear_speed, linear_accel, "
-            f"tolerance and tolerance_mm numbers: {error}"
-        ) from None
-    if not all(v > 0 for v in (silence, connect, monitor, limits.linear_speed, limits.linear_accel, tolerance, tolerance_mm)):
-        raise ValueError("kuka-rsi: axis_monitor, silence, connect_timeout, linear_speed, linear_accel, tolerance and tolerance_mm must be > 0")
+    cycle_text = extra.get("cycle", "4").strip()
+    if cycle_text not in ("4", "12"):
+        raise ValueError(f"kuka-rsi: cycle must be 4 or 12 (ms), got {cycle_text!r}")
+    cycle = int(cycle_text)
+
+    def number(name: str, default: str, setting: str | None = None) -> float:  # in its range (core_functions.option_ranges)
+        return option_ranges.check(setting or name, extra.get(name, default), label=f"kuka-rsi: {name}")
+
+    timeout = int(number("timeout", "100", "rsi_timeout"))
+    monitor = number("axis_monitor", "360")
+    silence = number("silence", "0.1")
+    connect = number("connect_timeout", "10")
+    limits = MotionLimits(linear_speed=number("linear_speed", "1.0"), linear_accel=number("linear_accel", "2.0"))
+    tolerance = number("tolerance", "0.1")
+    tolerance_mm = number("tolerance_mm", "1.0")
     try:
         config = load_config(extra["config"]) if "config" in extra else None
     except ConfigError as error:
@@ -778,7 +778,7 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
 def _misbehaviour(extra: dict[str, str], seed: int) -> tuple[Faults, Quirks, Flood]:
     """The simulated controller's deliberate faults and quirks, and a flooder beside it, from the ``sim_`` options."""
     try:
-        drop = float(extra.get("sim_drop", "0"))
+        drop = option_ranges.check("sim_drop", extra.get("sim_drop", "0"))
         axis, deg = Quirks.parse_drift(extra["sim_drift"]) if "sim_drift" in extra else (0, 0.0)
         frozen = extra.get("sim_frozen_setpoint", "0")
         if frozen not in ("0", "1"):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from core_functions.option_ranges import Range, bounds
 from core_functions.robots import KUKA_KR
 from execution_engine.transport.port import Node
 from robot_bridges.backend import BackendOptions
@@ -41,6 +42,10 @@ _NUMBER_OPTIONS = {
 }
 
 
+#: Parameters whose range goes by another name in core_functions.option_ranges (the back end checks each).
+_RANGES: dict[str, Range | None] = {"timeout": bounds("rsi_timeout"), "cycle": None}  # cycle: 4 or 12
+
+
 def declare_kuka_parameters(node: Node) -> BridgeSetup:
     """The RSI bridge's parameters; an empty rsi_listen starts the simulator."""
     rsi_listen = str(node.declare_parameter("rsi_listen", "", "HOST:PORT of the controller's RSI configuration ('' = start a simulator)"))
@@ -55,7 +60,8 @@ def declare_kuka_parameters(node: Node) -> BridgeSetup:
         if value:
             extra[name] = value
     for name, (number, description) in _NUMBER_OPTIONS.items():
-        value = node.declare_parameter(name, number, description)
+        allowed = _RANGES[name] if name in _RANGES else bounds(name)
+        value = node.declare_parameter(name, number, description if allowed is None else f"{description}; range {allowed.describe()}")
         if not (name == "silence" and value == 0.0):
             extra[name] = str(value)
     if not 0 <= port < 65536:

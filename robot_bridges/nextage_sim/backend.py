@@ -25,6 +25,7 @@ import numpy as np
 
 from core_functions.geometry import Pose
 from core_functions.linear_path import LineTolerance
+from core_functions import option_ranges
 from core_functions.primitives import (
     Dwell,
     EndEffector,
@@ -129,8 +130,7 @@ class NextageSimBackend(RobotBackend):
         camera_mounts: Mapping[str, Pose] | None = None,
         check_collisions: bool = False,
     ) -> None:
-        if not (control_period > 0 and math.isfinite(control_period)):
-            raise ValueError(f"control period must be a positive number of seconds, got {control_period!r}")
+        control_period = option_ranges.check("control_period", control_period)
         self.clock = clock
         self.control_period = float(control_period)
         self.model = model or NextageModel()
@@ -754,16 +754,15 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`), ``collision_check`` (``on``, the
     default: two bodies touching stop the motion with a ``collision`` fault; ``off``) and ``<camera>_mount`` (a
     camera's hand-eye calibration, six numbers x y z roll pitch yaw in its link); a controller address makes
-    no sense for a simulator and is refused rather than ignored.
+    no sense for a simulator and is refused rather than ignored.  ``control_period`` lies in its range
+    (core_functions.option_ranges: [0.001, 0.5] s): a longer step would let a motion pass a joint limit or a
+    collision between two checks.
     """
     options.check("nextage-sim", NEXTAGE_OPEN, _EXTRAS)
     given = [n for n, v in (("host", options.host), ("port", options.port), ("rsi_listen", options.rsi_listen)) if v is not None]
     if given:
         raise ValueError(f"the nextage-sim back end is a simulator and takes no {', '.join(given)}")
-    try:
-        period = float(options.extra.get("control_period", "0.01"))
-    except ValueError:
-        raise ValueError(f"nextage-sim: control_period {options.extra['control_period']!r} is not a number") from None
+    period = option_ranges.check("control_period", options.extra.get("control_period", "0.01"), label="nextage-sim: control_period")
     tool = parse_tool(options.extra["tool"]) if "tool" in options.extra else HAND_TOOL
     check = options.extra.get("collision_check", "on")
     if check not in ("on", "off"):

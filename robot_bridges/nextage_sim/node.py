@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from core_functions.robots import NEXTAGE_OPEN
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node
 from robot_bridges.backend import BackendOptions
 from robot_bridges.node import BridgeSetup, bridge_main, csv_list
@@ -18,12 +19,10 @@ BACKEND = "nextage-sim"
 
 def declare_nextage_parameters(node: Node) -> BridgeSetup:
     """The simulator's parameters, with the defaults of the embedded deployment."""
-    speed = float(node.declare_parameter("speed", 1.0, "simulated time per wall second (10.0: ten times faster than real)"))
-    if not speed > 0:
-        raise ValueError(f"speed must be > 0, got {speed}")
+    speed = float(declare_bounded(node, "speed", 1.0, "simulated time per wall second (10.0: ten times faster than real)"))
     initial_pose = str(node.declare_parameter("initial_pose", "initial", "joint pose the simulated robot starts in (initial or off)"))
-    control_period = float(node.declare_parameter("control_period", 0.01, "simulation step (s of simulated time)"))
-    seed = int(node.declare_parameter("seed", 0, "random seed of simulated vision noise"))
+    control_period = float(declare_bounded(node, "control_period", 0.01, "simulation step (s of simulated time)"))
+    seed = int(declare_bounded(node, "seed", 0, "random seed of simulated vision noise"))
     faults = str(node.declare_parameter("faults", "", "comma-separated injected faults, e.g. right_arm:joint_limit@0.5"))
     options = BackendOptions(
         robot=NEXTAGE_OPEN,

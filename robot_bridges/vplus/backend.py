@@ -60,6 +60,7 @@ from typing import Literal
 
 import numpy as np
 
+from core_functions import option_ranges
 from core_functions.geometry import Pose
 from core_functions.primitives import (
     Dwell,
@@ -535,10 +536,7 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
         # speed factor (real motions "time out"), a simulated one would jump every network wait.
         # Only a controller that is itself a simulator at that speed may be driven faster, and the
         # user must say so (controller_speed), never the run's --speed alone.
-        try:
-            controller_speed = float(options.extra.get("controller_speed", "1"))
-        except ValueError:
-            raise ValueError(f"vplus: controller_speed must be a number, got {options.extra['controller_speed']!r}") from None
+        controller_speed = option_ranges.check("speed", options.extra.get("controller_speed", "1"), label="vplus: controller_speed")
         if clock.simulated or not math.isclose(clock.speed, controller_speed):
             raise ValueError(
                 f"vplus: the controller at {options.host} runs at x{controller_speed:g} (a real one in real time): run with "
@@ -548,13 +546,8 @@ async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
         raise ValueError("the vplus back end takes no rsi_listen (that is for KUKA RSI)")
     if options.faults:
         raise ValueError("the vplus back end takes no --fault: inject V+ faults through robot_bridges.vplus.simulator.Faults")
-    try:
-        timeout = float(options.extra.get("timeout", "5"))
-        retries = int(options.extra.get("retries", "3"))
-    except ValueError as error:
-        raise ValueError(f"vplus: timeout must be a number and retries an integer: {error}") from None
-    if not (timeout > 0 and math.isfinite(timeout) and retries >= 0):
-        raise ValueError(f"vplus: timeout must be > 0 and retries >= 0, got {timeout}, {retries}")
+    timeout = option_ranges.check("timeout", options.extra.get("timeout", "5"), label="vplus: timeout")
+    retries = option_ranges.check_int("retries", options.extra.get("retries", "3"), label="vplus: retries")
     tolerance = PoseTolerance.from_options(options.extra, "vplus")
     frozen = options.extra.get("sim_frozen_pose", "0")
     if frozen not in ("0", "1"):

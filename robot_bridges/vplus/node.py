@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from core_functions.robots import ADEPT_VIPER_S850
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node
 from robot_bridges.backend import BackendOptions
 from robot_bridges.node import BridgeSetup, bridge_main
@@ -24,8 +25,8 @@ def declare_vplus_parameters(node: Node) -> BridgeSetup:
     """The V+ bridge's parameters; an empty host starts the simulator."""
     host = str(node.declare_parameter("host", "", "AdeptServer address ('' = start the simulator on 127.0.0.1)"))
     port = int(node.declare_parameter("port", 1234, "AdeptServer TCP port"))
-    timeout = float(node.declare_parameter("timeout", 5.0, "ack allowance per command on top of its motion time (s)"))
-    retries = int(node.declare_parameter("retries", 3, "connection attempts after the first"))
+    timeout = float(declare_bounded(node, "timeout", 5.0, "ack allowance per command on top of its motion time (s)"))
+    retries = int(declare_bounded(node, "retries", 3, "connection attempts after the first"))
     linear = str(node.declare_parameter("linear", "joint", "linear moves: 'joint' (run joint-interpolated) or 'reject'"))
     camera = str(node.declare_parameter("camera", "", "what answers vision requests: simulated, rendered (images of the focus camera), none ('' = simulated without host)"))
     tolerance_mm = float(node.declare_parameter("tolerance_mm", 1.0, "how far a reported position may lie from the commanded one (mm, [0.01, 50])"))

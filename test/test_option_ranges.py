@@ -1,0 +1,118 @@
+"""Every numeric setting has a finite range, is refused outside it in one line, and is documented with it.
+
+The command-line and back-end option refusals are rows 140-159 of docs/faults.md
+(test_cli_faults.py runs them); here: the table itself, the node parameters, and the docs.
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from core_functions.option_ranges import OPTIONS, Range, RangeError, bounds, table
+from execution_engine.clock import Clock, MAX_SPEED, MIN_SPEED, run_with_clock, simulated_clock
+from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.machine.group_machine import GroupMachine
+from execution_engine.transport.local import LocalTransport
+from execution_engine.transport.port import TransportError
+from robot_bridges.bridge_node import BridgeNode
+from robot_bridges.camera.ros_camera import attach_cameras
+from robot_bridges.nextage_sim.backend import NextageSimBackend
+from robot_bridges.nextage_sim.node import declare_nextage_parameters
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_range_is_finite_and_the_speed_is_the_clocks() -> None:
+    for name, (allowed, where, what) in OPTIONS.items():
+        assert math.isfinite(allowed.lower) and math.isfinite(allowed.upper) and allowed.lower < allowed.upper, name
+        assert where and what, name
+    assert (bounds("speed").lower, bounds("speed").upper) == (MIN_SPEED, MAX_SPEED)
+
+
+@given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(max_size=20)))
+def test_a_value_is_either_in_its_range_or_refused_naming_it(value: Any) -> None:
+    for name, (allowed, _, _) in OPTIONS.items():
+        try:
+            checked = allowed.check(name, value)
+        except RangeError as error:
+            message = str(error)
+            assert message.startswith(f"{name} must be a ") and allowed.describe() in message and "\n" not in message
+        else:
+            assert math.isfinite(checked) and allowed.lower <= checked <= allowed.upper
+            assert not allowed.integer or checked.is_integer()
+
+
+def test_integer_settings_refuse_fractions_and_floats_refuse_text() -> None:
+    assert Range(0, 10, integer=True).check("n", "3") == 3.0
+    with pytest.raises(RangeError, match=r"^n must be a whole number in \[0, 10\], got '2.5'$"):
+        Range(0, 10, integer=True).check("n", "2.5")
+    with pytest.raises(RangeError, match=r"^t must be a number in \[0.1, 600\] s, got True$"):
+        Range(0.1, 600, "s").check("t", True)
+
+
+# ------------------------------------------------------------------------------ node parameters
+def _refusal(build: Any, parameters: dict[str, Any]) -> str:
+    async def main(clock: Clock) -> str:
+        transport = LocalTransport(clock)
+        with pytest.raises(TransportError) as caught:
+            build(transport, parameters)
+        return str(caught.value)
+
+    return run_with_clock(main, simulated_clock())
+
+
+def _machine(transport: LocalTransport, parameters: dict[str, Any]) -> None:
+    GroupMachine(transport.create_node("left_arm_machine", parameters={"group": "left_arm", "trajectory_db": ":memory:", **parameters}))
+
+
+def _engine(transport: LocalTransport, parameters: dict[str, Any]) -> None:
+    ExecutionEngine(transport.create_node("execution_engine", parameters=parameters))
+
+
+def _bridge(transport: LocalTransport, parameters: dict[str, Any]) -> None:
+    backend = NextageSimBackend(transport.clock)
+    node = transport.create_node("nextage_sim_bridge", parameters=parameters)
+    if "camera_timeout" in parameters:
+        attach_cameras(node, backend)
+    else:
+        BridgeNode(node, backend)
+
+
+def _simulator(transport: LocalTransport, parameters: dict[str, Any]) -> None:
+    declare_nextage_parameters(transport.create_node("nextage_sim_bridge", parameters=parameters))
+
+
+@pytest.mark.parametrize(
+    ("build", "parameters", "message"),
+    [
+        (_machine, {"bridge_timeout": math.inf}, "/left_arm_machine: parameter 'bridge_timeout' must be a number in [0.1, 600] s, got inf"),
+        (_machine, {"primitive_timeout": 1e308}, "/left_arm_machine: parameter 'primitive_timeout' must be a number in [1, 86400] s, got 1e+308"),
+        (_machine, {"sync_timeout": 0.0}, "/left_arm_machine: parameter 'sync_timeout' must be a number in [0.1, 3600] s, got 0"),
+        (_engine, {"startup_timeout": -1.0}, "/execution_engine: parameter 'startup_timeout' must be a number in [0.1, 3600] s, got -1"),
+        (_engine, {"function_timeout": math.inf}, "/execution_engine: parameter 'function_timeout' must be a number in [1, 86400] s, got inf"),
+        (_engine, {"service_timeout": math.nan}, "/execution_engine: parameter 'service_timeout' must be a number in [0.1, 600] s, got nan"),
+        (_bridge, {"state_period": 1e308}, "/nextage_sim_bridge: parameter 'state_period' must be a number in [0.001, 1] s, got 1e+308"),
+        (_bridge, {"stop_timeout": math.inf}, "/nextage_sim_bridge: parameter 'stop_timeout' must be a number in [0.1, 600] s, got inf"),
+        (_bridge, {"camera_timeout": 0.0}, "/nextage_sim_bridge: parameter 'camera_timeout' must be a number in [0.01, 600] s, got 0"),
+        (_simulator, {"speed": 1e-300}, "/nextage_sim_bridge: parameter 'speed' must be a number in [0.01, 1000] x real time, got 1e-300"),
+        (_simulator, {"control_period": 1e308}, "/nextage_sim_bridge: parameter 'control_period' must be a number in [0.001, 0.5] s, got 1e+308"),
+        (_simulator, {"seed": -1}, "/nextage_sim_bridge: parameter 'seed' must be a whole number in [0, 4294967295], got -1"),
+    ],
+)
+def test_a_node_parameter_outside_its_range_is_refused_in_one_line(build: Any, parameters: dict[str, Any], message: str) -> None:
+    assert _refusal(build, parameters) == message
+
+
+# --------------------------------------------------------------------------------------- docs
+def test_the_docs_show_every_range() -> None:
+    """docs/faults.md's table of ranges is table(), row for row, so it cannot drift from the code."""
+    text = (ROOT / "docs" / "faults.md").read_text(encoding="utf-8")
+    section = text[text.index("## Ranges of numeric settings"):text.index("## The table")]
+    documented = re.findall(r"^\| `(\w+)` \| ([^|]+) \| ([^|]+) \| ([^|]+) \|$", section, re.MULTILINE)
+    assert [(n, r.strip(), w.strip(), x.strip()) for n, r, w, x in documented] == table()
