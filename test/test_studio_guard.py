@@ -49,6 +49,15 @@ def feed_refused(client: TestClient, url: str = FEED, **kwargs: Any) -> bool:
     return False
 
 
+def feed_accepted(client: TestClient) -> bool:
+    """True if the live feed opens and sends its snapshot."""
+    try:
+        with client.websocket_connect(FEED) as socket:
+            return '"snapshot"' in socket.receive_text()
+    except WebSocketDisconnect:
+        return False
+
+
 # ------------------------------------------------------------------------------------------------ Host
 @pytest.mark.parametrize("host", ["attacker.example:8080", "attacker.example", "127.0.0.1:9999", "localhost", "127.0.0.1:8080.evil.example",
                                   "user@127.0.0.1:8080", "127.0.0.1:8080/x", "[::1", "127.0.0.1:80a"])
@@ -243,6 +252,19 @@ def test_a_token_file_is_read_and_checked(tmp_path: Path) -> None:
         read_token_file(tmp_path / "none")
     with pytest.raises(AccessError, match="not a file"):
         read_token_file(tmp_path)
+
+
+def test_live_feeds_are_bounded_in_number(cell_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One page more than MAX_PAGES is told to come back later (1013); a feed that ends frees its place."""
+    monkeypatch.setattr(server, "MAX_PAGES", 2)
+    _, client, _ = rivet(cell_dir)
+    with client.websocket_connect(FEED) as first, client.websocket_connect(FEED) as second:
+        assert '"snapshot"' in first.receive_text() and '"snapshot"' in second.receive_text()
+        with pytest.raises(WebSocketDisconnect) as busy:
+            with client.websocket_connect(FEED) as third:
+                third.receive_text()
+        assert busy.value.code == 1013
+    assert wait_until(lambda: feed_accepted(client), 30.0)  # both gone: a page gets in again
 
 
 # ---------------------------------------------------------------------------------------------- bodies
