@@ -19,7 +19,7 @@ from starlette.testclient import TestClient  # noqa: E402
 from starlette.websockets import WebSocketDisconnect  # noqa: E402
 
 from operator_station import server  # noqa: E402
-from operator_station.access import Access, AccessError, read_token_file  # noqa: E402
+from operator_station.access import TOKEN_PATTERN, Access, AccessError, read_token_file  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.guard import host_problem, media_type, origin_problem  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
@@ -265,6 +265,19 @@ def test_live_feeds_are_bounded_in_number(cell_dir: Path, monkeypatch: pytest.Mo
                 third.receive_text()
         assert busy.value.code == 1013
     assert wait_until(lambda: feed_accepted(client), 30.0)  # both gone: a page gets in again
+
+
+@given(st.binary(max_size=300) | st.from_regex(r"[A-Za-z0-9_-]{30,40}\n?", fullmatch=True).map(str.encode))
+def test_any_token_file_gives_a_token_of_the_documented_form_or_one_line(tmp_path_factory: pytest.TempPathFactory, data: bytes) -> None:
+    path = tmp_path_factory.mktemp("token") / "token"
+    path.write_bytes(data)
+    path.chmod(0o600)
+    try:
+        token = read_token_file(path)
+    except AccessError as refusal:
+        assert str(refusal).startswith(f"--token-file {path}: ") and "\n" not in str(refusal)
+    else:
+        assert TOKEN_PATTERN.fullmatch(token) and token == data.decode("ascii").strip()
 
 
 # ---------------------------------------------------------------------------------------------- bodies
