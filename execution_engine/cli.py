@@ -41,6 +41,8 @@ from execution_engine.console_log import ConsoleLog
 from execution_engine.deployment import deploy_local
 from execution_engine import launcher
 from execution_engine.dry_run.check import check as dry_run_check
+from execution_engine.dry_run.simulators import setup_for
+from execution_engine.dry_run.start import StartRefused, start_checked
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, QuestionPrinter, RunObserver, TraceWriter
 from execution_engine.operator_console import OperatorConsole
@@ -247,7 +249,9 @@ async def _run(
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
     loop = asyncio.get_running_loop()
     interactive = console.attach_stdin(loop) if operators else False
-    run_task = loop.create_task(deployment.engine.run(app, recorder.resume))
+    setup = None if args.no_check else setup_for(backend_name(app, args), backend_options(app, args))  # checked where the robot is
+    checked = getattr(args, "checked", None)
+    run_task = loop.create_task(start_checked(deployment.engine, app, backend, clock, setup, args.trajectory_db, checked, recorder.resume, out))
     interrupts = 0
 
     def on_interrupt() -> None:
@@ -300,6 +304,7 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
         return EXIT_USAGE
     if not args.no_check:
         code, checked = dry_run_check(app, args.file, backend_name(app, args), backend_options(app, args), args.trajectory_db, out, err, summary=not args.quiet)
+        args.checked = checked  # the verdict from the simulator's start; _run checks again if the robot is elsewhere
         if code != EXIT_OK:
             found = f"{len(checked.findings)} problem(s) found by the dry run" if checked is not None else "the dry run did not pass"
             err.write(f"{args.file}: not run: {found}; use --no-check to run anyway\n")
@@ -332,6 +337,9 @@ def _run_recorded(app: Application, args: argparse.Namespace, out: IO[str], err:
         code = EXIT_PEER
         err.write(f"error: cannot run {args.file}: {error}; {PEER_ADVICE}\n")
         _explain(error, args, err)
+    except StartRefused as refusal:  # the dry run from where the robot is found problems: nothing moved
+        code, outcome = EXIT_INVALID, "refused"
+        err.write("".join(f"{line}\n" for line in refusal.lines) + f"{args.file}: not run: {refusal.reason}; use --no-check to run anyway\n")
     except (KeyError, ValueError, OSError, ConnectionError) as error:
         code = EXIT_USAGE
         err.write(f"error: cannot run {args.file}: {error}\n")

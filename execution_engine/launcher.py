@@ -8,7 +8,9 @@
 
 The nodes are those of ``launch/<back end>.launch.py`` with the same names and the same
 parameters (``config/<back end>.yaml`` as params file): the bridge of the application robot's back
-end, one ``group_machine`` per group, and the engine running APP with ``exit_when_done``.  Each is
+end, one ``group_machine`` per group, and the engine running APP with ``exit_when_done`` -- checked
+first, as ``run`` is, by the dry run, here from the joints the bridge publishes (``--no-check``: the
+engine's ``check:=false``; docs/application_xml.md, "Checking before anything moves").  Each is
 the installed executable's code in its own Python process with ``--transport dds`` (no ROS
 install) or ``--transport ros`` (rclpy).  ``--nodes`` starts only some of them, so a cell can be
 split across machines that share a DDS domain.
@@ -70,10 +72,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     launch.add_argument("--nodes", help="comma-separated node names to start (default: every node of the cell)")
     launch.add_argument("--grace", type=argument_type("grace"), default=5.0, help="seconds the engine gets to end its run by itself after another node died, in [0, 600] (default 5)")
     launch.add_argument("--stop-timeout", type=argument_type("stop_timeout"), default=10.0, help="seconds a node gets to stop on SIGTERM before SIGKILL, in [0.1, 600] (default 10)")
+    launch.add_argument(
+        "--no-check", action="store_true",
+        help="start without the dry run from the robot's measured joints that the engine otherwise does first (its parameter check:=false)",
+    )
 
 
-def cell_nodes(app_file: Path, transport: str, speed: float) -> list[NodeSpec]:
-    """The cell of ``app_file``'s robot, bridge first and engine last (the order they start in)."""
+def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True) -> list[NodeSpec]:
+    """The cell of ``app_file``'s robot, bridge first and engine last (the order they start in);
+    ``check``: the engine dry-runs the application from the robot's measured joints before it starts."""
     app = load_application(app_file, full_catalog())
     backend = app.robot.default_backend
     module = backend.replace("-", "_")
@@ -93,6 +100,7 @@ def cell_nodes(app_file: Path, transport: str, speed: float) -> list[NodeSpec]:
         )))
     specs.append(NodeSpec(ENGINE_NODE, (
         *_python(*_ENTRY["engine"]), *common, "-p", f"application:={app_file.resolve()}", "-p", "exit_when_done:=true",
+        *(() if check else ("-p", "check:=false")),
     )))
     return specs
 
@@ -239,7 +247,7 @@ def cmd_launch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
         err.write("error: --speed and --stop-timeout must be > 0, --grace >= 0\n")
         return EXIT_USAGE
     try:
-        specs = select(cell_nodes(path, args.transport, args.speed), args.nodes)
+        specs = select(cell_nodes(path, args.transport, args.speed, not args.no_check), args.nodes)
     except ApplicationError as error:
         err.write(f"error: cannot launch {args.file}:\n" + "\n".join(str(d) for d in error.diagnostics) + "\n")
         return EXIT_INVALID

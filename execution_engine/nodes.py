@@ -18,9 +18,12 @@ from pathlib import Path
 
 from app_functions.registry import full_catalog
 from execution_engine.app_model import Application, ApplicationError, load_application
+from execution_engine.dry_run.cell_start import CellStarts
+from execution_engine.dry_run.start import StartRefused
 from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.engine.report import RunReport
 from execution_engine.engine.run_action import RunApplicationServer
-from execution_engine.machine.group_machine import GroupMachine
+from execution_engine.machine.group_machine import GroupMachine, default_trajectory_db
 from execution_engine.output_files import Refused
 from execution_engine.recorder.cli_hook import record_node, stop_recording
 from execution_engine.ros_main import (
@@ -45,6 +48,8 @@ class EngineSettings:
     exit_when_done: bool
     record: str = ""
     wait_for_goals: bool = False
+    check: bool = True
+    trajectory_db: str = ""
 
 
 def declare_engine_parameters(node: Node) -> EngineSettings:
@@ -59,7 +64,15 @@ def declare_engine_parameters(node: Node) -> EngineSettings:
     wait_for_goals = bool(
         node.declare_parameter("wait_for_goals", False, "with no application: serve RunApplication goals on execution_engine/run_application")
     )
-    return EngineSettings(application, exit_when_done, record, wait_for_goals)
+    check = bool(node.declare_parameter(
+        "check", True,
+        "dry-run every run (the application, each RunApplication goal) from the robot's joints on joint_states first, and refuse "
+        "it with the findings when it would collide or fail; a robot away from the start is brought back first (false: run unchecked)",
+    ))
+    trajectory_db = str(node.declare_parameter(
+        "trajectory_db", "", "the machines' trajectory database, which the dry run reads (never writes); empty: the machines' default"
+    ))
+    return EngineSettings(application, exit_when_done, record, wait_for_goals, check, trajectory_db)
 
 
 def load_or_explain(path: str) -> Application:
@@ -74,11 +87,12 @@ def load_or_explain(path: str) -> Application:
         raise StartupError("\n".join(lines), ExitCode.FAILED) from None
 
 
-def serve_goals(node: Node, engine: ExecutionEngine) -> RunApplicationServer | None:
+def serve_goals(node: Node, engine: ExecutionEngine, starts: CellStarts | None = None) -> RunApplicationServer | None:
     """The RunApplication action server, or None where the transport cannot carry its types (rclpy
-    without the built dual_arm_executive_interfaces package): the engine runs on without it."""
+    without the built dual_arm_executive_interfaces package): the engine runs on without it.
+    ``starts``: each goal is checked from the robot's measured joints first (None: unchecked)."""
     try:
-        return RunApplicationServer(node, engine)
+        return RunApplicationServer(node, engine, starts.run_goal if starts is not None else None)
     except TransportError as error:
         node.logger.info(
             "%s: the RunApplication action is not served (under rclpy it needs the built interface package: "
@@ -94,7 +108,8 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     with startup_errors():
         settings = declare_engine_parameters(node)
         engine = ExecutionEngine(node)
-    goals = serve_goals(node, engine)
+    starts = CellStarts(node, engine, settings.trajectory_db or default_trajectory_db(), engine.startup_timeout) if settings.check else None
+    goals = serve_goals(node, engine, starts)
     warn_undeclared(node)
     if not settings.application and settings.wait_for_goals:
         if goals is None:
@@ -113,15 +128,27 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
         node.logger.warning("%s: the recording may miss the run's first messages: not every machine's topics were matched within %g s",
                             node.fully_qualified_name, engine.startup_timeout)
     try:
-        report = await engine.run(app)
+        report = await _run_checked(engine, app, starts)
+    except StartRefused as refusal:
+        print("\n".join([*refusal.lines, f"{app.path}: not run: {refusal.reason}; to run it anyway: -p check:=false (launch --no-check)"]),
+              file=sys.stderr, flush=True)
+        report = None
     finally:
         if recorder is not None:
             await recorder.settle(groups, engine.service_timeout)
         lost = await stop_recording(recorder, sys.stdout)
-    print("\n".join(report.summary_lines()), flush=True)
-    outcome.code = ExitCode.OK if report.ok and not lost else ExitCode.FAILED  # a recording that failed is no success
+    if report is not None:
+        print("\n".join(report.summary_lines()), flush=True)
+        outcome.code = ExitCode.OK if report.ok and not lost else ExitCode.FAILED  # a recording that failed is no success
     if not settings.exit_when_done:
         await serve_forever()
+
+
+async def _run_checked(engine: ExecutionEngine, app: Application, starts: CellStarts | None) -> RunReport:
+    """The application's run, checked from where the robot is unless ``check`` is off."""
+    if starts is None:
+        return await engine.run(app)
+    return await starts.run(app, lambda line: print(line, flush=True))
 
 
 async def run_group_machine(node: Node, outcome: Outcome) -> None:

@@ -15,7 +15,7 @@ import json
 import logging
 import math
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +26,10 @@ from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.deployment import Deployment, deploy_local
+from execution_engine.dry_run.report import DryRunReport
 from execution_engine.dry_run.runner import DryRunError, dry_run
+from execution_engine.dry_run.simulators import setup_for
+from execution_engine.dry_run.start import StartRefused, backend_measure, backend_source, check_run
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import RunObserver, TraceWriter
 from execution_engine.output_files import FilePlan, Output, Refused, WriteFailure
@@ -72,6 +75,7 @@ class RunSession:
         self._safety: Any = None  # the studio node's publisher on cell/safety_stop
         self._ready = threading.Event()
         self.report: RunReport | None = None
+        self._verdict: DryRunReport | None = None  # the dry run before connecting, from the simulator's start
 
     @property
     def running(self) -> bool:
@@ -134,6 +138,9 @@ class RunSession:
             finally:
                 if trace is not None:
                     trace.close()
+        except StartRefused as refusal:  # the dry run from where the robot is: nothing moved
+            found = [{"severity": "error", "message": line} for line in refusal.lines]
+            self.feed.update(messages=[{"severity": "error", "message": f"not run: {refusal.reason}"}, *found])
         except Exception as error:  # noqa: BLE001 - the page must hear of it; the thread must not die silently
             log.exception("the studio run failed")
             self.feed.update(messages=[{"severity": "error", "message": f"the run could not go on: {type(error).__name__}: {error}"}])
@@ -156,6 +163,7 @@ class RunSession:
             self.feed.update(messages=[{"severity": "error", "message": f"not run: {len(report.findings)} problem(s) found by the dry run"}, *found])
             return False
         self.feed.update(plan=planned_durations(report, app))
+        self._verdict = report
         return True
 
     async def _run(self, app: Application, clock: Clock, trace: IO[str] | None) -> RunReport:
@@ -172,8 +180,8 @@ class RunSession:
         self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
         self._loop, self._deployment = asyncio.get_running_loop(), deployment
         self._ready.set()
-        run = asyncio.get_running_loop().create_task(deployment.engine.run(app))
         try:
+            run = asyncio.get_running_loop().create_task(await self._started(app, deployment, backend, clock))
             await asyncio.sleep(0)  # the engine takes its first steps: a start now is this run's
             await deployment.engine.operator_command("start", SOURCE)
             report = await run
@@ -190,6 +198,22 @@ class RunSession:
         finally:
             self._loop = None
             await deployment.close()
+
+    async def _started(self, app: Application, deployment: Deployment, backend: Any, clock: Clock) -> Coroutine[Any, Any, RunReport]:
+        """The run to start: checked from where the robot is now, as ``run`` does (StartRefused with
+        the findings when it must not start; a way back first when the robot is elsewhere)."""
+        if not self.settings.check:
+            return deployment.engine.run(app)
+        notes: list[dict[str, Any]] = []
+
+        def say(line: str) -> None:
+            notes.append({"severity": "info", "message": line})
+            self.feed.update(messages=list(notes))
+
+        measure = backend_measure(app.robot, backend, backend_source(backend))
+        setup = setup_for(self.backend_name(app), self._options(app))
+        checked = await check_run(deployment.engine, app, setup, self.trajectory_db(app), measure, clock, checked=self._verdict, say=say)
+        return checked.run()
 
     # ------------------------------------------------------------------------ the page's side
     async def command(self, command: str) -> tuple[bool, str]:

@@ -309,6 +309,10 @@ INTERFACE_MODULES.update(_rosidl_package("dual_arm_executive_interfaces", {
     "unique_identifier_msgs/msg/UUID": INTERFACE_MODULES["unique_identifier_msgs.msg"]["UUID"],
 }))
 
+for _action in INTERFACE_MODULES["dual_arm_executive_interfaces.action"].values():  # rosidl: rcl_action's own parts
+    _action.Impl.CancelGoalService = INTERFACE_MODULES["action_msgs.srv"]["CancelGoal"]
+    _action.Impl.GoalStatusMessage = INTERFACE_MODULES["action_msgs.msg"]["GoalStatusArray"]
+
 
 def resolve(ros_type: str) -> type:
     """A resolver over the fake interface packages (what import_ros_type does with real ones)."""

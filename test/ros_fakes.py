@@ -22,7 +22,9 @@ the parts that bit us on a real Jazzy -- not rclpy's internals:
   take + callback + response; an exception out of a callback ends ``spin``; and, like rclpy
   up to 7.1.11, ``shutdown(timeout_sec)`` returns at once without waiting for callbacks;
 * messages are delivered as copies (as DDS would); ``call_async`` futures' done-callbacks run
-  on an executor thread.
+  on an executor thread;
+* ``rclpy.action.ActionClient`` (``test/ros_fake_action.py``): a goal is known from its goal
+  response on, status entries of unknown goals are dropped, as rclpy's client does.
 
 ``install(monkeypatch)`` puts the fake modules in ``sys.modules`` and returns the fake ``rclpy``.
 """
@@ -930,6 +932,9 @@ def install(monkeypatch: Any) -> types.ModuleType:
             "rclpy.event_handler", PublisherEventCallbacks=PublisherEventCallbacks, SubscriptionEventCallbacks=SubscriptionEventCallbacks
         ),
     }
+    import ros_fake_action  # it builds on this module: imported once the module is complete
+
+    submodules["rclpy.action"] = _module("rclpy.action", ActionClient=ros_fake_action.ActionClient)
     for name, module in submodules.items():
         setattr(rclpy, name.split(".", 1)[1], module)
         monkeypatch.setitem(sys.modules, name, module)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import io
 import logging
+import os
+import random
 import re
 import shlex
 import socket
@@ -46,6 +48,13 @@ def op(group: str, function: str, *params: str) -> str:
 #: The files rows name under {tmp}, as docs/faults.md describes them.
 FILES: dict[str, str | bytes] = {
     "not_xml.xml": "this is not XML at all\n",
+    "collide.xml": (  # both hands to the middle of the table at once
+        '<?xml version="1.0"?>\n<application name="colliding" robot="nextage">\n  <operation id="1">\n'
+        '    <left_arm><function name="move_to"><params><param value="0.34,0.0,0.10,180deg,0,90deg"/></params></function></left_arm>\n'
+        '    <right_arm><function name="move_to"><params><param value="0.34,0.0,0.10,180deg,0,90deg"/></params></function></right_arm>\n'
+        '  </operation>\n</application>\n'
+    ),
+
     "short_token": "secret\n",
     "shared_token": "C" * 43 + "\n",
     "truncated.xml": RIVET[: len(RIVET) // 2],
@@ -171,9 +180,17 @@ def run_in_process(argv: list[str], bound: float) -> tuple[int, str]:
     return result[0], out.getvalue() + err.getvalue()
 
 
-def run_process(argv: list[str], bound: float) -> tuple[int, str]:
+#: A ``launch`` row's cell talks DDS on loopback only, in a domain of its own, and keeps its
+#: machines' default trajectory database in the row's folder, not the home directory.
+LOOPBACK_DDS = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
+
+
+def run_process(argv: list[str], bound: float, home: Path | None = None) -> tuple[int, str]:
+    env = {**os.environ, "ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK_DDS}
+    if home is not None:
+        env["XDG_DATA_HOME"] = str(home)
     done = subprocess.run(  # stdin is no terminal: nobody at this run can answer an operator question
-        [sys.executable, "-m", "execution_engine", *argv], cwd=ROOT, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=bound,
+        [sys.executable, "-m", "execution_engine", *argv], cwd=ROOT, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=bound, env=env,
     )
     return done.returncode, done.stdout + done.stderr
 
@@ -203,8 +220,10 @@ def test_row(row: Row, tmp_path: Path, request: pytest.FixtureRequest, monkeypat
         values.update(request.getfixturevalue("peers"))
     argv = shlex.split(fill(row.command, values))
     assert argv[:3] == PREFIX, row.command
-    runner = run_in_process if row.how == "in-process" else run_process
-    code, output = runner(argv[3:], row.bound)
+    if row.how == "in-process":
+        code, output = run_in_process(argv[3:], row.bound)
+    else:
+        code, output = run_process(argv[3:], row.bound, tmp_path)
     assert "Traceback" not in output, output
     assert pattern(row.message, values).search(output), f"expected a line {row.message!r}, got:\n{output}"
     assert code == row.exit_code, output

@@ -11,7 +11,7 @@ PACKAGES = ("execution_engine", "core_functions", "app_functions", "robot_bridge
 # Wiring may import back ends; nothing else may.
 WIRING = {"execution_engine/cli.py", "execution_engine/deployment.py", "execution_engine/nodes.py", "execution_engine/ros_main.py"}
 # The dry run builds a robot's simulator and wraps its back end (docs/application_xml.md, "Checking before anything moves").
-WIRING |= {f"execution_engine/dry_run/{m}.py" for m in ("backend", "check", "runner", "simulators", "collisions")}
+WIRING |= {f"execution_engine/dry_run/{m}.py" for m in ("backend", "check", "runner", "simulators", "collisions", "placement", "cell_start")}
 # The operator station runs the engine and a back end in-process (docs/studio.md): wiring too.
 WIRING |= {"operator_station/session.py"}
 ROS_ADAPTERS = {"execution_engine/transport/ros.py"}

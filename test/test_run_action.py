@@ -3,6 +3,7 @@ status, a cancel is the operator's stop, and a bad goal says why."""
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 from typing import Any
 
 from app_builder import Cell
@@ -91,8 +92,8 @@ def test_an_invalid_application_ends_the_goal_aborted_with_its_diagnostics(run_s
         cell, client = await start(clock)
         try:
             _, goal_id = await client.goal(RunApplicationGoal(application_xml=TINY.replace("set_speed", "set_sped")), 4)
+            first = await client.result.call(GetResult.Request(goal_id), timeout=10.0)  # one goal at a time: the next once it ended
             wrong_backend, other_id = await client.goal(RunApplicationGoal(application_xml=TINY, backend="kuka-rsi"), 5)
-            first = await client.result.call(GetResult.Request(goal_id), timeout=10.0)
             second = await client.result.call(GetResult.Request(other_id), timeout=10.0)
             empty = await client.goal(RunApplicationGoal(), 6)
             return first, second, empty
@@ -103,3 +104,117 @@ def test_an_invalid_application_ends_the_goal_aborted_with_its_diagnostics(run_s
     assert first.status == GoalStatus.STATUS_ABORTED and first.result.outcome == "invalid" and "set_sped" in first.result.report
     assert second.status == GoalStatus.STATUS_ABORTED and "runs the nextage-sim back end, not kuka-rsi" in second.result.report
     assert empty[0] is False
+
+
+# ===================================================================== ROS 2 action protocol order
+def test_a_client_that_learns_of_its_goal_from_the_answer_sees_it_run_and_can_cancel_it(run_sim: Any) -> None:
+    """rclpy's ActionClient (and so ``ros2 action send_goal``) knows a goal from its goal response
+    on and drops status entries of goals it does not know: the server answers first, then says
+    ACCEPTED/EXECUTING, so the client sees the goal run, its Ctrl-C cancels it, the next goal runs."""
+    from rclpy_like import RclpyLikeActionClient
+
+    async def main(clock: Clock) -> tuple[Any, ...]:
+        cell = await Cell(clock, durations={"move_joints": 30.0}).start()
+        RunApplicationServer(cell.deployment.engine.node, cell.deployment.engine)
+        client = RclpyLikeActionClient(cell.deployment.transport.create_node("ros2_action_send_goal"))
+        try:
+            first = await client.send_goal(RunApplicationGoal(application_xml=TINY), 1)
+            assert first is not None
+            await clock.sleep(5.0)  # the run is in its 30 s move
+            seen_running = first.status
+            cancelled = await client.cancel_if_active(first)  # Ctrl-C
+            ended = await client.result(first)
+            second = await client.send_goal(RunApplicationGoal(application_xml=TINY.replace("30", "3")), 2)
+            assert second is not None
+            finished = await client.result(second)
+            await clock.sleep(0.5)
+            return seen_running, cancelled, ended, first, second, finished, client.dropped
+        finally:
+            await cell.deployment.close()
+
+    seen_running, cancelled, ended, first, second, finished, dropped = run_sim(main)
+    assert seen_running == GoalStatus.STATUS_EXECUTING
+    assert cancelled is not None and cancelled.return_code == 0 and len(cancelled.goals_canceling) == 1
+    assert ended.status == GoalStatus.STATUS_CANCELED
+    assert dropped == []  # no status went out before the goal's answer
+    order = [GoalStatus.STATUS_ACCEPTED, GoalStatus.STATUS_EXECUTING, GoalStatus.STATUS_CANCELING, GoalStatus.STATUS_CANCELED]
+    assert first.statuses == sorted(first.statuses, key=order.index) and first.statuses[-1] == GoalStatus.STATUS_CANCELED
+    assert GoalStatus.STATUS_EXECUTING in first.statuses
+    assert finished.status == GoalStatus.STATUS_SUCCEEDED and finished.result.ok
+    assert GoalStatus.STATUS_EXECUTING in second.statuses and second.statuses[-1] == GoalStatus.STATUS_SUCCEEDED
+
+
+# ============================================== every goal checked from where the robot is (finding 4)
+async def _nextage_goal_cell(clock: Clock) -> tuple[Any, Any, Any, Any]:
+    """The Nextage simulator (collision check on), machines, and the engine serving goals as its
+    process does: each goal's run checked from joint_states first (execution_engine/nodes.py)."""
+    from crossing_cell import CollisionWatch
+    from execution_engine.deployment import deploy_local
+    from execution_engine.dry_run.cell_start import CellStarts
+    from execution_engine.transport.msgs import JointState
+    from execution_engine.transport.qos import SENSOR
+    from execution_engine.transport.wire import JOINT_STATES
+    from robot_bridges.backend import BackendOptions
+    from robot_bridges.registry import create_backend
+    from core_functions.robots import NEXTAGE_OPEN
+    from rclpy_like import RclpyLikeActionClient
+
+    backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN))
+    deployment = await deploy_local(clock, NEXTAGE_OPEN, backend, machine_parameters={"trajectory_db": ":memory:"})
+    engine = deployment.engine
+    RunApplicationServer(engine.node, engine, CellStarts(engine.node, engine, ":memory:", engine.startup_timeout).run_goal)
+    watch = CollisionWatch()
+    node = deployment.transport.create_node("ros2_action_send_goal")
+    node.create_subscription(JointState, JOINT_STATES, watch, SENSOR)
+    return deployment, backend, RclpyLikeActionClient(node), watch
+
+
+def test_after_a_cancelled_goal_the_next_one_goes_back_safely_first_and_never_crosses_the_hands(run_sim: Any) -> None:
+    from crossing_cell import CROSSING, WAIT_OPERATION
+
+    async def main(clock: Clock) -> tuple[Any, ...]:
+        deployment, _, client, watch = await _nextage_goal_cell(clock)
+        try:
+            first = await client.send_goal(RunApplicationGoal(application_xml=CROSSING), 1)
+            assert first is not None
+            for _ in range(1200):  # until the feedback says the run is in its wait
+                if any(f.operation_index == WAIT_OPERATION for f in first.feedback):
+                    break
+                await clock.sleep(0.05)
+            await clock.sleep(1.0)
+            await client.cancel_if_active(first)
+            ended = await client.result(first)
+            second = await client.send_goal(RunApplicationGoal(application_xml=CROSSING), 2)
+            assert second is not None
+            return ended, await client.result(second), watch
+        finally:
+            await deployment.close()
+
+    ended, answer, watch = run_sim(main)
+    assert ended.status == GoalStatus.STATUS_CANCELED and "operations: 3/5" in ended.result.report
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED and answer.result.outcome == "finished", answer.result.report
+    report = answer.result.report
+    assert "the robot is not where crossing starts" in report and "the run starts with the way back" in report
+    assert "application crossing (way back): FINISHED" in report and "application crossing: FINISHED" in report
+    assert watch.samples > 100 and watch.touching == []
+
+
+def test_a_goal_whose_run_would_collide_is_aborted_with_the_findings_and_nothing_moves(run_sim: Any) -> None:
+    from crossing_cell import COLLIDING
+
+    async def main(clock: Clock) -> tuple[Any, Any, Any]:
+        deployment, backend, client, _ = await _nextage_goal_cell(clock)
+        try:
+            before = backend.joint_state()
+            handle = await client.send_goal(RunApplicationGoal(application_xml=COLLIDING), 1)
+            assert handle is not None
+            return await client.result(handle), before, backend.joint_state()
+        finally:
+            await deployment.close()
+
+    answer, before, after = run_sim(main)
+    assert answer.status == GoalStatus.STATUS_ABORTED and answer.result.outcome == "refused" and not answer.result.ok
+    lines = answer.result.report.splitlines()
+    assert any(line.startswith(f"{Path.cwd() / 'goal.xml'}:4:") and "operation 1 left_arm move_to: collision:" in line for line in lines), lines
+    assert lines[-1].endswith("not run: 2 problem(s) found by the dry run from where the robot is (/joint_states)")
+    assert after == before

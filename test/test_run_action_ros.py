@@ -80,3 +80,78 @@ def test_get_result_waits_for_the_run_however_long_not_the_handler_timeout(fake_
     answer, waited = run_real(lambda clock: with_transport(clock, body, handler_timeout=0.5))
     assert waited > 0.5
     assert answer.status == GoalStatus.STATUS_ABORTED and "no group machine answered" in answer.result.report
+
+
+# ====================================== rclpy's ActionClient against the engine, a whole cell over rclpy
+def test_rclpy_sees_its_goal_run_cancels_it_and_the_next_goal_goes_back_safely_first(fake_rclpy: Any, tmp_path: Any, monkeypatch: Any) -> None:
+    """Issue 20, 4 and 5(a), under (the fake) rclpy: ``ros2 action send_goal``'s client knows a goal
+    from its goal response on and drops status entries of goals it does not know; it sees this
+    goal EXECUTING (the status follows the answer), so its Ctrl-C cancels it.  The next goal starts
+    from where the cancel left the robot -- the left hand in the middle -- and is brought back by
+    the way the dry run proved, then runs: no two bodies ever touch on joint_states."""
+    import asyncio
+    import threading
+
+    from crossing_cell import CROSSING, WAIT_OPERATION, CollisionWatch, start_nextage_cell
+    from ros_fakes import FakeExecutor, FakeNode, QoSProfile
+
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))  # the machines' default trajectory database
+    action_type = ros_fakes.INTERFACE_MODULES["dual_arm_executive_interfaces.action"]["RunApplication"]
+    ActionClient = __import__("rclpy.action", fromlist=["ActionClient"]).ActionClient
+
+    async def wait_done(clock: Any, future: Any, bound: float) -> Any:
+        deadline = clock.now() + bound
+        while not future.done():
+            assert clock.now() < deadline, "no answer in time"
+            await clock.sleep(0.01)
+        return future.result()
+
+    async def body(transport: RosTransport) -> tuple[Any, ...]:
+        clock = transport.clock
+        tasks = start_nextage_cell(transport, wait_for_goals=True)
+        tool = FakeNode("ros2_action_send_goal")  # the ROS 2 tool: its own node and executor
+        watch = CollisionWatch()
+        tool.create_subscription(ros_fakes.JointState, "/joint_states", watch, QoSProfile(depth=10))
+        client = ActionClient(tool, action_type, f"/{ACTION_NAME}")
+        executor = FakeExecutor()
+        executor.add_node(tool)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+        try:
+            deadline = clock.now() + BOUND
+            while not client.server_is_ready():
+                assert clock.now() < deadline
+                await clock.sleep(0.02)
+            feedback: list[Any] = []
+            first = await wait_done(clock, client.send_goal_async(action_type.Goal(application_xml=CROSSING), feedback.append), BOUND)
+            result = first.get_result_async()
+            deadline = clock.now() + 4 * BOUND
+            while not any(f.feedback.operation_index == WAIT_OPERATION for f in feedback):
+                assert clock.now() < deadline, "the run never reached its wait"
+                await clock.sleep(0.02)
+            seen = first.status
+            cancelled = None
+            if seen in (1, 2):  # ros2 action send_goal on Ctrl-C: cancel a goal it sees running
+                cancelled = await wait_done(clock, first.cancel_goal_async(), BOUND)
+            ended = await wait_done(clock, result, 4 * BOUND)
+            second = await wait_done(clock, client.send_goal_async(action_type.Goal(application_xml=CROSSING)), BOUND)
+            answer = await wait_done(clock, second.get_result_async(), 8 * BOUND)
+            ours = {bytes(first.goal_id.uuid), bytes(second.goal_id.uuid)}
+            # a goal that ended is forgotten, and later arrays still name it until its result expires: not a loss
+            dropped = [entry for entry in client.ignored_status if entry[0] in ours and entry[1] in (1, 2, 3)]
+            return seen, cancelled, ended, second.accepted, answer, first.statuses, dropped, watch
+        finally:
+            executor.shutdown()
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+
+    seen, cancelled, ended, accepted, answer, statuses, dropped, watch = run_real(lambda clock: with_transport(clock, body))
+    assert dropped == []  # no status of these goals went out before their goal response
+    assert seen == GoalStatus.STATUS_EXECUTING and statuses[:1] in ([GoalStatus.STATUS_ACCEPTED], [GoalStatus.STATUS_EXECUTING])
+    assert cancelled is not None and cancelled.return_code == 0
+    assert ended.status == GoalStatus.STATUS_CANCELED and statuses[-1] == GoalStatus.STATUS_CANCELED
+    assert accepted
+    assert answer.status == GoalStatus.STATUS_SUCCEEDED, answer.result.report
+    assert "the run starts with the way back" in answer.result.report and "application crossing: FINISHED" in answer.result.report
+    assert watch.samples > 50 and watch.touching == []

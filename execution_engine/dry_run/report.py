@@ -17,6 +17,8 @@ from execution_engine.engine.flags import FlagWait, costliest, wait_totals
 #: runs on it: every wait of the engine and the machines is in it too), or the robot's own cycles
 #: (a controller simulator that keeps its own time, such as RSI's IPOC; primitives back to back).
 TimeBase = Literal["simulated clock", "robot cycles"]
+#: Joint names and positions (rad), as a back end's ``joint_state()`` gives them.
+JointPositions = tuple[tuple[str, ...], tuple[float, ...]]
 
 
 @dataclass(frozen=True)
@@ -117,6 +119,10 @@ class DryRunReport:
     notes: tuple[str, ...] = ()
     collisions: CollisionCheck | None = None  # None: the robot has no collision model
     waits: tuple[FlagWait, ...] = ()  # every wait for a flag or a zone, on the application's clock
+    #: The joints (names, rad) the dry run started from -- the simulator's own start, or the robot's
+    #: measured state it was put in -- and where the application left them.
+    start: JointPositions | None = None
+    end: JointPositions | None = None
 
     @property
     def ok(self) -> bool:

@@ -32,8 +32,9 @@ from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.engine.report import GroupError
 from execution_engine.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
 from execution_engine.dry_run.collisions import scene_of, sweep
+from execution_engine.dry_run.placement import place
 from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
-from execution_engine.dry_run.report import CollisionCheck, DryRunReport, Finding, group_times
+from execution_engine.dry_run.report import CollisionCheck, DryRunReport, Finding, JointPositions, group_times
 from execution_engine.dry_run.simulators import DryRunSetup, setup_for
 from execution_engine.transport import typed
 from execution_engine.transport.qos import COMMANDS
@@ -54,24 +55,35 @@ class DryRunError(Exception):
     """The dry run itself could not be carried out (a defect, not a problem of the application)."""
 
 
-def dry_run(app: Application, backend: str, options: BackendOptions, trajectory_db: str | None = None) -> DryRunReport:
+def dry_run(
+    app: Application, backend: str, options: BackendOptions, trajectory_db: str | None = None, start: JointPositions | None = None
+) -> DryRunReport:
     """Dry-run ``app`` on the simulator of ``backend`` (a registry name) set up like ``options``.
 
     ``trajectory_db`` is the database the real run would use (default: the per-user one); it is
-    copied, never written.  Raises ``ValueError``/``KeyError`` for options the back end refuses,
-    :class:`DryRunError` when the run breaks down.
+    copied, never written.  ``start``: the joints (names, rad) to put the simulated robot in
+    first -- where the real robot is (:mod:`.start`); None: the simulator's own start.  Raises
+    ``ValueError``/``KeyError`` for options the back end refuses, :class:`DryRunError` when the
+    run breaks down.
     """
     setup = setup_for(backend, options)
+    return dry_run_setup(app, setup, trajectory_db, start)
+
+
+def dry_run_setup(app: Application, setup: DryRunSetup, trajectory_db: str | None = None, start: JointPositions | None = None) -> DryRunReport:
+    """:func:`dry_run` with the simulator already chosen; on its own loop and clock (blocks)."""
     clock = simulated_clock() if setup.simulated_clock else real_clock()
-    return run_with_clock(lambda c: run_dry(app, setup, c, trajectory_db), clock)
+    return run_with_clock(lambda c: run_dry(app, setup, c, trajectory_db, start), clock)
 
 
-async def run_dry(app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None) -> DryRunReport:
+async def run_dry(
+    app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None, start: JointPositions | None = None
+) -> DryRunReport:
     """The dry run on ``clock`` (the caller's loop); see :func:`dry_run` (and the module, for sync="flags")."""
     left_out: dict[str, set[str]] = {}  # operation id -> groups whose failed call is left out
     earlier: list[Finding] = []  # the failures of the runs before
     for _ in range(MAX_RERUNS):
-        report, failed = await _run_once(_leave_out(app, left_out), setup, clock, trajectory_db)
+        report, failed = await _run_once(_leave_out(app, left_out), setup, clock, trajectory_db, start)
         fresh = {(f.operation, f.group) for f in failed} - {(op, g) for op, groups in left_out.items() for g in groups}
         if not fresh:
             break
@@ -103,7 +115,9 @@ def _leave_out(app: Application, left_out: dict[str, set[str]]) -> Application:
     return replace(app, operations=tuple(operations))
 
 
-async def _run_once(app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None) -> tuple[DryRunReport, list[Finding]]:
+async def _run_once(
+    app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None, start: JointPositions | None
+) -> tuple[DryRunReport, list[Finding]]:
     """One dry run; with sync="flags" also the findings of the calls that failed (then not swept: it runs again)."""
     inner = await create_backend(setup.backend, clock, setup.options)
     timing: Timing = ClockTiming(clock) if setup.robot_seconds is None else CycleTiming(setup.robot_seconds(inner))
@@ -117,10 +131,13 @@ async def _run_once(app: Application, setup: DryRunSetup, clock: Clock, trajecto
             await inner.close()
             raise
         store = DryRunTrajectoryStore(db, backend)
-        initial = backend.joint_state()
         try:
+            if start is not None:
+                await place(inner, app.robot, start)
+            initial = backend.joint_state()
             _attach(deployment, recorder, store)
             total, failed = await _run_operations(app, deployment, recorder)
+            final = backend.joint_state()
         finally:
             await deployment.close()
             store.close()
@@ -149,6 +166,8 @@ async def _run_once(app: Application, setup: DryRunSetup, clock: Clock, trajecto
         notes=tuple(notes),
         waits=tuple(recorder.waits),
         collisions=None if stats is None else CollisionCheck(stats.motions, stats.samples, scene.margin if scene else 0.0),
+        start=initial,
+        end=final,
     ), [f for f in found if (f.operation, f.group) in failed]
 
 

@@ -31,6 +31,10 @@ if TYPE_CHECKING:
 class OperatorCommands:
     """The operator's side of the engine (commands, safety stop, alarms)."""
 
+    #: Every stop asked for, taken or not: a run that is still being checked before it starts
+    #: (execution_engine/dry_run/start.py) is not started when this changed meanwhile.
+    stops_asked: int = 0
+
     if TYPE_CHECKING:  # the engine's own state, which these methods read and change
         node: Node
         clock: Clock
@@ -70,6 +74,8 @@ class OperatorCommands:
         ``source`` says where it came from: the services pass their resolved name, the terminal
         console of ``run --interactive`` (in this process) the key that was pressed.
         """
+        if command == "stop":
+            self.stops_asked += 1
         ok, answer = decide(command, self.state, Flags(self._start_requested, self._safety_active, self._skippable))
         self._record(OperatorAction(self.clock.now(), command, source, self.state, ok, answer))
         if not ok:

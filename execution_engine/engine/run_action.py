@@ -9,15 +9,22 @@ The goal names an application file, or carries the XML text (its cell file is th
 working directory of the engine).  A goal is refused while a run is in progress.  The application is
 validated first: one with errors ends the goal aborted, its diagnostics in ``report``.  Feedback is
 the engine's status as it changes (operation, index, count, each group's state and function);
-the result is the outcome (``finished``, ``failed``, ``stopped``, ``invalid``), ``ok`` and the
-run's report.  A cancel is the operator's stop: every group's motion stopped, then Finish, and the
-goal ends cancelled with the report of what was done.  ``backend`` must be empty or the back end
+the result is the outcome (``finished``, ``failed``, ``stopped``, ``invalid``, ``refused``), ``ok``
+and the run's report.  How the application is run is the owner's (``runner``): the engine
+process's checks it from where the robot is first (execution_engine/dry_run/cell_start.py), so a
+goal whose run would collide, or after a cancelled one would start from mid-application, is
+refused with the dry run's findings as its report, or starts with a way back the dry run proved
+safe.  A cancel is the operator's stop: every group's motion stopped, then Finish, and the goal
+ends cancelled with the report of what was done; a cancel while the run is being checked ends it
+before anything moves.  ``backend`` must be empty or the back end
 the cell runs (the application robot's); ``speed`` is the bridge's own parameter (``--speed`` of the
 launch, ``-p speed:=F``), so a goal may only leave it 0.
 """
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -50,23 +57,42 @@ def feedback_of(status: EngineStatus) -> Any:
     )
 
 
-class RunApplicationServer:
-    """Runs goals on ``engine`` (one at a time) and reports them back."""
+@dataclass(frozen=True)
+class GoalOutcome:
+    """How a goal's run ended: the result's outcome, ok and report."""
 
-    def __init__(self, node: Node, engine: ExecutionEngine) -> None:
+    outcome: str
+    ok: bool
+    report: str
+
+
+#: Runs a goal's (valid) application on the engine and says how it ended.
+GoalRunner = Callable[[Application], Awaitable[GoalOutcome]]
+
+
+class RunApplicationServer:
+    """Runs goals on ``engine`` (one at a time) and reports them back.
+
+    ``runner`` runs a goal's application; without one the application is run as it is, unchecked
+    (the engine parameter ``check:=false``)."""
+
+    def __init__(self, node: Node, engine: ExecutionEngine, runner: GoalRunner | None = None) -> None:
         self.node = node
         self.engine = engine
+        self.runner = runner or self._run_unchecked
         self.catalog = full_catalog()
         self.current: GoalHandle | None = None
+        self.busy = False  # a goal was accepted and has not ended
         self.server = ActionServer(node, RunApplication, ACTION_NAME, execute=self._execute, accept=self._accept, cancel=self._cancel)
         self._stops: set[asyncio.Task[object]] = set()
         node.create_subscription(typed.EngineStatusMsg, ENGINE_STATUS, self._on_status, EVENTS)
 
     def _accept(self, goal: Any) -> str | None:
-        if self.current is not None or self.engine.state in _BUSY:
+        if self.busy or self.engine.state in _BUSY:
             return f"a run is in progress (engine {self.engine.state})"
         if not goal.application_file and not goal.application_xml:
             return "the goal names no application (application_file or application_xml)"
+        self.busy = True  # from the answer on: a second goal is refused even before this one executes
         return None
 
     def _cancel(self, handle: GoalHandle) -> None:
@@ -97,15 +123,21 @@ class RunApplicationServer:
         return app, text
 
     async def _execute(self, handle: GoalHandle) -> Any:
-        goal = handle.goal
-        app, problems = self._load(goal)
-        if app is None:
-            handle.aborted = True
-            return RunApplicationResult("invalid", False, problems)
-        self.current = handle
         try:
-            report = await self.engine.run(app)
+            app, problems = self._load(handle.goal)
+            if app is None:
+                handle.aborted = True
+                return RunApplicationResult("invalid", False, problems)
+            if handle.cancel_requested:
+                return RunApplicationResult("stopped", False, f"{app.name}: cancelled before it started")
+            self.current = handle
+            done = await self.runner(app)
         finally:
             self.current = None
-        handle.aborted = not report.ok
-        return RunApplicationResult(report.outcome, report.ok, "\n".join(report.summary_lines()))
+            self.busy = False
+        handle.aborted = not done.ok
+        return RunApplicationResult(done.outcome, done.ok, done.report)
+
+    async def _run_unchecked(self, app: Application) -> GoalOutcome:
+        report = await self.engine.run(app)
+        return GoalOutcome(report.outcome, report.ok, "\n".join(report.summary_lines()))

@@ -13,6 +13,11 @@ succeeded, or aborted when ``handle.aborted`` is set; cancelled when a cancel wa
 ``accept(goal) -> reason or None`` and ``cancel(handle)`` (start stopping; ``execute`` returns when
 stopped).  ``get_result`` waits for the goal's end, however long the job: its handler is marked
 ``long_running`` so a transport does not time it out.
+
+The order on the wire is rcl_action's (rclpy's ActionClient depends on it): the goal response
+first, then the status array with the goal ACCEPTED, then EXECUTING (:class:`~.port.Reply`); a
+cancel's CANCELING before the cancel response; the terminal status before the result response.
+An ended goal is forgotten after :data:`RESULT_TIMEOUT`, as rcl_action's ``result_timeout``.
 """
 from __future__ import annotations
 
@@ -24,11 +29,13 @@ from typing import Any
 
 from execution_engine.transport import mirrors
 from execution_engine.transport.msgs import Time
-from execution_engine.transport.port import Node
+from execution_engine.transport.port import Node, Reply
 from execution_engine.transport.qos import COMMANDS, Durability, History, QoS, Reliability
 
 log = logging.getLogger(__name__)
 
+#: Seconds an ended goal (its status and result) is kept, rcl_action's default ``result_timeout``.
+RESULT_TIMEOUT = 900.0
 #: rcl_action_qos_profile_status_default
 STATUS_QOS = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
 
@@ -81,6 +88,7 @@ class ActionServer:
         self._execute, self._accept, self._cancel = execute, accept, cancel
         self.goals: dict[tuple[int, ...], GoalHandle] = {}
         self._tasks: set[asyncio.Task[None]] = set()
+        self._expiries: list[asyncio.TimerHandle] = []
         base = f"{self.name}/_action"
         node.create_service(action.SendGoal, f"{base}/send_goal", self._on_send_goal)
         get_result = self._on_get_result
@@ -91,22 +99,33 @@ class ActionServer:
 
     # ------------------------------------------------------------------------- services
     async def _on_send_goal(self, request: Any) -> Any:
+        """Accept or refuse; an accepted goal's status goes out only after this response.
+
+        rclpy's ActionClient makes a goal known when the goal response arrives and drops status
+        entries of unknown goals; a status published first is lost to it (and latched at depth 1,
+        never sent again), so ``ros2 action send_goal`` would never see the goal run and its
+        Ctrl-C would not cancel.  rcl_action's order, kept here: response, then ACCEPTED and
+        EXECUTING, then the terminal status, then the result."""
         stamp = self.node.now_stamp()
-        reason = self._accept(request.goal)
-        if reason is not None or request.goal_id.uuid in self.goals:
-            self.node.logger.warning("%s: goal refused: %s", self.name, reason or "its id is in use")
+        reason = "its id is in use" if request.goal_id.uuid in self.goals else self._accept(request.goal)
+        if reason is not None:
+            self.node.logger.warning("%s: goal refused: %s", self.name, reason)
             return self.action.SendGoal.Response(False, stamp)
         handle = GoalHandle(request.goal_id, request.goal, stamp)
         self.goals[request.goal_id.uuid] = handle
-        self._publish_status()
+        return Reply(self.action.SendGoal.Response(True, stamp), lambda: self._start(handle))
+
+    def _start(self, handle: GoalHandle) -> None:
+        """The goal response is on its way: announce the goal, then execute it."""
+        self._publish_status()  # ACCEPTED
         task = asyncio.get_running_loop().create_task(self._run(handle), name=f"{self.name} goal")
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
-        return self.action.SendGoal.Response(True, stamp)
 
     async def _run(self, handle: GoalHandle) -> None:
-        handle.status = GoalStatus.STATUS_EXECUTING
-        self._publish_status()
+        if handle.status == GoalStatus.STATUS_ACCEPTED:  # a cancel may have come first: it stays CANCELING
+            handle.status = GoalStatus.STATUS_EXECUTING
+            self._publish_status()
         try:
             handle.result = await self._execute(handle)
             if handle.cancel_requested:
@@ -119,6 +138,12 @@ class ActionServer:
             handle.status = GoalStatus.STATUS_ABORTED
         handle.done.set()
         self._publish_status()
+        self._expiries.append(self.node.clock.call_later(RESULT_TIMEOUT, self._expire, handle.goal_id.uuid))
+
+    def _expire(self, uuid: tuple[int, ...]) -> None:
+        """rcl_action forgets an ended goal after its result timeout: the status array stays bounded."""
+        if self.goals.pop(uuid, None) is not None:
+            self._publish_status()
 
     async def _on_get_result(self, request: Any) -> Any:
         handle = self.goals.get(request.goal_id.uuid)
@@ -153,6 +178,8 @@ class ActionServer:
         self._status.publish(GoalStatusArray(tuple(GoalStatus(h.info, h.status) for h in self.goals.values())))
 
     async def close(self) -> None:
+        for timer in self._expiries:
+            timer.cancel()
         for task in list(self._tasks):
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)

@@ -54,6 +54,7 @@ from execution_engine.transport.port import (
     TransportError,
     poll_until,
     resolve_name,
+    unwrap_reply,
 )
 from execution_engine.transport.qos import QoS
 from execution_engine.transport.ros_args import raw_parameter_texts
@@ -241,7 +242,7 @@ class _DdsService(ServiceServer):
         try:
             # a handler that waits for a long job on purpose (an action's get_result) says so
             timeout = None if getattr(self._handler, "long_running", False) else transport.handler_timeout
-            response = await transport.clock.wait_for(self._handler(request), timeout)
+            response, then = unwrap_reply(await transport.clock.wait_for(self._handler(request), timeout))
             if type(response) is not self.srv_type.Response:
                 raise TransportError(f"handler answered {type(response).__name__}, not {self.srv_type.Response.__name__}")
         except asyncio.CancelledError:
@@ -250,10 +251,15 @@ class _DdsService(ServiceServer):
             self.node.report_fault(f"service {self.name}", error)
             from execution_engine.transport.ros_convert import failure_response
 
-            response = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}")
+            response, then = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}"), None
         await self._wait_for_client(client)
         if self.alive:
             self.ends.writer.write(transport.converter.to_wire_service(self.ends.reply_type, response, guid, seq))
+        if then is not None:  # written first: what follows the answer reaches the caller after it
+            try:
+                then()
+            except Exception as error:  # noqa: BLE001
+                self.node.report_fault(f"service {self.name} (after its answer)", error)
 
     async def _wait_for_client(self, client: Caller) -> None:
         """Until the reply writer has matched the caller's reply reader (bounded, 1 s): a reply

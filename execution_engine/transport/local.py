@@ -26,6 +26,7 @@ from execution_engine.transport.port import (
     TopicInfo,
     Transport,
     TransportError,
+    unwrap_reply,
 )
 from execution_engine.transport.qos import COMMANDS, Durability, History, QoS
 
@@ -131,10 +132,32 @@ class _LocalClient(ServiceClient[Any, Any]):
         # The handler runs as its own task, like a server in another process: cancelling the
         # caller's wait (timeout) must not cancel the server's work half-way.
         task = self.node.bus.loop.create_task(server.handler(request), name=f"service {self.name}")
-        response = await self.node.clock.wait_for(asyncio.shield(task), timeout)
+        try:
+            answer = await self.node.clock.wait_for(asyncio.shield(task), timeout)
+        except BaseException:  # the caller gave up; whatever the handler does after its answer still happens
+            task.add_done_callback(lambda done: _follow_up_later(server, done))
+            raise
+        response, then = unwrap_reply(answer)
+        if then is not None:  # after the caller has the response in hand, as the other transports do it
+            self.node.bus.loop.call_soon(_follow_up, server, then)
         if type(response) is not self.srv_type.Response:
             raise TransportError(f"service {self.name} answered {type(response).__name__}")
         return response
+
+
+def _follow_up(server: _LocalService, then: Callable[[], None]) -> None:
+    try:
+        then()
+    except Exception as error:  # noqa: BLE001 - the serving node hears of it, like a handler's fault
+        server.node.report_fault(f"service {server.name} (after its answer)", error)
+
+
+def _follow_up_later(server: _LocalService, done: asyncio.Task[Any]) -> None:
+    if done.cancelled() or done.exception() is not None:
+        return
+    _, then = unwrap_reply(done.result())
+    if then is not None:
+        _follow_up(server, then)
 
 
 class LocalNode(Node):

@@ -175,6 +175,28 @@ class TopicInfo:
     offered: tuple[QoS, ...]
 
 
+@dataclass(frozen=True)
+class Reply:
+    """A service handler's answer with work that must wait until the answer is on its way.
+
+    A handler returns it instead of a bare response when something it does next must reach the
+    caller *after* the response: an action server publishes a goal's status only once the goal
+    response is sent, as rcl_action does, because rclpy's ActionClient learns of a goal from that
+    response and drops status entries of goals it does not know.  Every transport writes the
+    response, then runs ``then`` on the node's loop (also when the caller stopped waiting).
+    """
+
+    response: Any
+    then: Callable[[], None]
+
+
+def unwrap_reply(answer: Any) -> tuple[Any, Callable[[], None] | None]:
+    """A handler's answer as (response, follow-up or None)."""
+    if isinstance(answer, Reply):
+        return answer.response, answer.then
+    return answer, None
+
+
 class ServiceServer(ABC):
     name: str
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import logging
+import threading
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
@@ -21,6 +22,7 @@ from execution_engine.transport.port import (
     ServiceUnavailable,
     Subscription,
     TransportError,
+    unwrap_reply,
 )
 from execution_engine.transport.qos import Durability, QoS
 from execution_engine.transport.ros_convert import failure_response
@@ -109,6 +111,9 @@ class RosService(ServiceServer):
         self.gone = False  # the rclpy service is destroyed
         self._handler = handler
         self._guard: Any = None
+        self._follow_guard: Any = None  # fires once the responses before it are sent (Reply.then)
+        self._follow_ups: list[Callable[[], None]] = []
+        self._lock = threading.Lock()
         self.group = node.transport.api.exclusive_group()  # see the module docstring
         service_class, _, _ = node.converter.service_classes(srv_type)
         self.handle = node.ros_node.create_service(service_class, name, self._on_request, callback_group=self.group)
@@ -118,7 +123,9 @@ class RosService(ServiceServer):
         with self.node.transport.in_flight:
             try:
                 request = self.node.converter.from_ros(self.srv_type.Request, ros_request)
-                response = self._run_handler(request)
+                response, then = unwrap_reply(self._run_handler(request))
+                if then is not None:
+                    self._after_answer(then)
             except Exception as error:  # noqa: BLE001 - the caller gets a failure answer, the node a fault
                 self.node.report_fault_threadsafe(f"service {self.name}", error)
                 response = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}")
@@ -155,12 +162,38 @@ class RosService(ServiceServer):
         assert task is not None
         transport.handlers.add(task)
         try:
-            response = await self._handler(request)
+            answer = await self._handler(request)
         finally:
             transport.handlers.discard(task)
+        response, _ = unwrap_reply(answer)
         if type(response) is not self.srv_type.Response:
             raise TransportError(f"service {self.name} handler answered {type(response).__name__}, not {self.srv_type.Response.__name__}")
-        return response
+        return answer
+
+    def _after_answer(self, then: Callable[[], None]) -> None:
+        """Executor thread, inside the request's callback: run ``then`` on the loop once rclpy has
+        sent the response.  rclpy sends it when the callback returns, still holding the service's
+        mutually exclusive group; a guard condition of that group fires only after that."""
+        with self._lock:
+            self._follow_ups.append(then)
+            if self._follow_guard is None:
+                self._follow_guard = self.node.ros_node.create_guard_condition(self._answered, callback_group=self.group)
+            guard = self._follow_guard
+        guard.trigger()
+
+    def _answered(self) -> None:
+        """Executor thread, holding the service's group: the responses before this are sent."""
+        with self.node.transport.in_flight:
+            with self._lock:
+                pending, self._follow_ups = self._follow_ups, []
+            for then in pending:
+                self.node.transport.call_soon(self._follow_up, then)
+
+    def _follow_up(self, then: Callable[[], None]) -> None:
+        try:
+            then()
+        except Exception as error:  # noqa: BLE001 - the serving node hears of it, like a handler's fault
+            self.node.report_fault(f"service {self.name} (after its answer)", error)
 
     def destroy(self) -> None:
         """Stop answering now; leave the graph as soon as no request is being answered.
@@ -191,8 +224,9 @@ class RosService(ServiceServer):
         self.gone = True
         try:
             self.node.ros_node.destroy_service(self.handle)
-            if self._guard is not None:
-                self.node.ros_node.destroy_guard_condition(self._guard)
+            for guard in (self._guard, self._follow_guard):
+                if guard is not None:
+                    self.node.ros_node.destroy_guard_condition(guard)
         except Exception:  # noqa: BLE001 - the node goes anyway; say what stayed behind
             log.exception("destroying service %s failed", self.name)
 

@@ -1,0 +1,94 @@
+"""The start check on a graph: an engine node measures the robot on ``joint_states`` and runs checked.
+
+``launch``, ``ros2 launch`` and every RunApplication goal start a run in an engine node that
+does not hold the back end: the robot is measured from the bridge's ``joint_states`` -- a sample
+taken after the run was asked for, every joint of the robot in it -- and the run is planned and
+carried out as :mod:`.start` says (the dry run uses the simulator of the application robot's
+back end with its default options, and the machines' trajectory database).  A refusal leaves the
+robot where it is: a goal ends aborted with outcome ``refused`` and the findings as its report;
+the engine process started with an application prints them and ends with exit code 1.
+"""
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Any
+
+from execution_engine.app_model.model import Application
+from execution_engine.dry_run.simulators import setup_for
+from execution_engine.dry_run.start import MeasuredState, StartRefused, UntrustedState, check_run, measured
+from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.engine.report import RunReport
+from execution_engine.engine.run_action import GoalOutcome
+from execution_engine.transport.msgs import JointState
+from execution_engine.transport.port import Node
+from execution_engine.transport.qos import SENSOR
+from execution_engine.transport.wire import JOINT_STATES
+from robot_bridges.backend import BackendOptions
+
+
+class CellStarts:
+    """Checked starts for the engine on ``node``: the measured joints, the plan, the run."""
+
+    def __init__(self, node: Node, engine: ExecutionEngine, trajectory_db: str, timeout: float) -> None:
+        self.node = node
+        self.engine = engine
+        self.trajectory_db = trajectory_db or None
+        self.timeout = timeout
+        self.topic = node.resolve(JOINT_STATES)
+        self._latest: dict[str, tuple[float, int]] = {}  # joint -> (position, sample number)
+        self._samples = 0
+        self._arrived = asyncio.Event()
+        # best effort: takes a reliable publisher (the bridges) as well as a best-effort one
+        node.create_subscription(JointState, JOINT_STATES, self._on_joints, SENSOR)
+
+    def _on_joints(self, msg: JointState) -> None:
+        self._samples += 1
+        for name, position in zip(msg.name, msg.position):
+            self._latest[name] = (float(position), self._samples)
+        self._arrived.set()
+
+    def measure_for(self, app: Application) -> Callable[[], Any]:
+        async def measure() -> MeasuredState:
+            return await self.measure(app)
+
+        return measure
+
+    async def measure(self, app: Application) -> MeasuredState:
+        """Every joint of the robot from samples that arrived after this call (bounded by ``timeout``)."""
+        after = self._samples
+        names = app.robot.joint_names
+        clock = self.node.clock
+        deadline = clock.now() + self.timeout
+        while not all(self._latest.get(n, (0.0, 0))[1] > after for n in names):
+            remaining = deadline - clock.now()
+            if remaining <= 0:
+                stale = [n for n in names if self._latest.get(n, (0.0, 0))[1] <= after]
+                raise StartRefused(
+                    f"no joint positions on {self.topic} for {', '.join(stale[:3])}{' ...' if len(stale) > 3 else ''} within {self.timeout:g} s: "
+                    "the run is checked from where the robot is, and the bridge does not say (is it running?)"
+                )
+            self._arrived.clear()
+            try:
+                await clock.wait_for(self._arrived.wait(), remaining)
+            except asyncio.TimeoutError:
+                continue
+        try:
+            return measured(app.robot, names, tuple(self._latest[n][0] for n in names), f"{self.topic}")
+        except UntrustedState as error:
+            raise StartRefused(str(error)) from None
+
+    async def run(self, app: Application, say: Callable[[str], None]) -> RunReport:
+        """Run ``app`` checked from the measured joints; StartRefused when it must not start."""
+        setup = setup_for(app.robot.default_backend, BackendOptions(robot=app.robot))
+        run = await check_run(self.engine, app, setup, self.trajectory_db, self.measure_for(app), self.node.clock, say=say)
+        return await run.run()
+
+    async def run_goal(self, app: Application) -> GoalOutcome:
+        """A RunApplication goal's run: its outcome, ok and report (the findings when refused)."""
+        lines: list[str] = []
+        try:
+            report = await self.run(app, lines.append)
+        except StartRefused as refusal:
+            return GoalOutcome("refused", False, "\n".join([*refusal.lines, f"{app.path}: not run: {refusal.reason}"]))
+        return GoalOutcome(report.outcome, report.ok, "\n".join([*lines, *report.summary_lines()]))
