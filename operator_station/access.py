@@ -140,7 +140,7 @@ def host_names(bound: str, extra: tuple[str, ...] = ()) -> frozenset[str]:
 class Who:
     """Who made a request, for the log: a session's short id or the token, and the client's address."""
 
-    kind: str  # "session", "token" or "loopback page" (the page load that gets a session)
+    kind: str  # "session" or "token"
     ident: str
     address: str
 

@@ -207,3 +207,39 @@ def test_a_bad_edit_shows_the_validators_message_at_its_cell_and_nothing_runs(dr
         assert served.station.feed.snapshot.run == 0 and not served.station.session.running  # type: ignore[union-attr]
     finally:
         served.close()
+
+
+def test_the_safety_stop_is_cleared_only_through_the_confirm_dialog_and_resume_needs_the_clear(driver: Any, folder: Path) -> None:
+    """Raise from the page; a click on the raised stop asks first: Cancel leaves it raised (the engine still refuses
+    Resume), Confirm clears it through /api/safety/clear and says who and when; then Resume runs the robot again."""
+    served = open_station(driver, folder, file="rivet_installation.xml", speed=1.0, no_check=True)
+    station = served.station
+    try:
+        until(driver, lambda d: validated(d) == "valid")
+        press(driver, "ctl-start")
+        until(driver, lambda d: text(d, "engine-state") == "running")
+        press(driver, "safety-stop")
+        until(driver, lambda d: text(d, "engine-state") == "paused" and "ACTIVE" in text(d, "safety-stop"))
+        dialog = driver.find_element(By.ID, "safety-dialog")
+        press(driver, "safety-stop")  # asks first
+        until(driver, lambda d: dialog.get_attribute("open") is not None)
+        press(driver, "safety-dialog-cancel")
+        until(driver, lambda d: dialog.get_attribute("open") is None and text(d, "control-answer") == "safety stop: not cleared")
+        assert [e["action"] for e in station.audit] == ["safety stop raised"]
+        press(driver, "ctl-resume")  # the engine refuses while the stop is raised
+        until(driver, lambda d: text(d, "control-answer") == "resume: the safety stop is still active")
+        assert text(driver, "engine-state") == "paused"
+
+        press(driver, "safety-stop")
+        until(driver, lambda d: dialog.get_attribute("open") is not None)
+        press(driver, "safety-dialog-confirm")
+        until(driver, lambda d: "safety stop cleared: resume to continue (logged: session " in text(d, "control-answer"))
+        assert " from 127.0.0.1:" in text(driver, "control-answer") and text(driver, "safety-stop") == "SAFETY STOP"
+        assert [e["action"] for e in station.audit] == ["safety stop raised", "safety stop cleared"]
+        assert station.audit[1]["who"] == station.audit[0]["who"] and station.audit[1]["who"].startswith("session ")
+        until(driver, lambda d: "safety stop cleared" in ((station.feed.snapshot.status or {}).get("message") or ""))
+        press(driver, "ctl-resume")
+        until(driver, lambda d: text(d, "engine-state") == "running")
+        assert not [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        served.close()  # stops the run through the engine

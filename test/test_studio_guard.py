@@ -19,7 +19,7 @@ from starlette.testclient import TestClient  # noqa: E402
 from starlette.websockets import WebSocketDisconnect  # noqa: E402
 
 from operator_station import server  # noqa: E402
-from operator_station.access import Access, AccessError, read_token_file  # noqa: E402
+from operator_station.access import TOKEN_PATTERN, Access, AccessError, read_token_file  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.guard import host_problem, media_type, origin_problem  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
@@ -47,6 +47,15 @@ def feed_refused(client: TestClient, url: str = FEED, **kwargs: Any) -> bool:
     except WebSocketDisconnect as closed:
         return closed.code == 1008
     return False
+
+
+def feed_accepted(client: TestClient) -> bool:
+    """True if the live feed opens and sends its snapshot."""
+    try:
+        with client.websocket_connect(FEED) as socket:
+            return '"snapshot"' in socket.receive_text()
+    except WebSocketDisconnect:
+        return False
 
 
 # ------------------------------------------------------------------------------------------------ Host
@@ -243,6 +252,32 @@ def test_a_token_file_is_read_and_checked(tmp_path: Path) -> None:
         read_token_file(tmp_path / "none")
     with pytest.raises(AccessError, match="not a file"):
         read_token_file(tmp_path)
+
+
+def test_live_feeds_are_bounded_in_number(cell_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One page more than MAX_PAGES is told to come back later (1013); a feed that ends frees its place."""
+    monkeypatch.setattr(server, "MAX_PAGES", 2)
+    _, client, _ = rivet(cell_dir)
+    with client.websocket_connect(FEED) as first, client.websocket_connect(FEED) as second:
+        assert '"snapshot"' in first.receive_text() and '"snapshot"' in second.receive_text()
+        with pytest.raises(WebSocketDisconnect) as busy:
+            with client.websocket_connect(FEED) as third:
+                third.receive_text()
+        assert busy.value.code == 1013
+    assert wait_until(lambda: feed_accepted(client), 30.0)  # both gone: a page gets in again
+
+
+@given(st.binary(max_size=300) | st.from_regex(r"[A-Za-z0-9_-]{30,40}\n?", fullmatch=True).map(str.encode))
+def test_any_token_file_gives_a_token_of_the_documented_form_or_one_line(tmp_path_factory: pytest.TempPathFactory, data: bytes) -> None:
+    path = tmp_path_factory.mktemp("token") / "token"
+    path.write_bytes(data)
+    path.chmod(0o600)
+    try:
+        token = read_token_file(path)
+    except AccessError as refusal:
+        assert str(refusal).startswith(f"--token-file {path}: ") and "\n" not in str(refusal)
+    else:
+        assert TOKEN_PATTERN.fullmatch(token) and token == data.decode("ascii").strip()
 
 
 # ---------------------------------------------------------------------------------------------- bodies

@@ -99,6 +99,27 @@ class SimulatorSpec:
     faults: Faults = Faults()
     quirks: Quirks = Quirks()  # a misbehaving peer, for tests and demonstrations
     flood: Flood = Flood()  # a second sender on the controller's host (another port), for tests and demonstrations
+    rt_priority: int = 20  # SCHED_FIFO of a simulator process, above the loop's 10 (a controller is hard real time); 0: none
+
+
+#: Seconds without packets from a simulated real-time controller that mean it is lost.  A real
+#: controller is hard real time and 0.1 s of silence means a cable or a stopped RSI; the simulator is
+#: a process of this computer, which a busy computer can hold back that long when the system grants
+#: no real-time priority (measured: 101 ms beside two CPU-bound processes on two cores).  Its real
+#: stops (RSI timeout, limits) it reports itself, and its exit is seen at once.
+SIMULATED_SILENCE = 1.0
+
+
+def realtime_advice(tuning: str) -> str | None:
+    """What to do when the RSI loop runs without real-time priority (from its tuning note); None when it has it."""
+    if "no real-time priority" not in tuning:
+        return None
+    return (
+        f"the RSI loop runs without real-time priority ({tuning.split('no real-time priority', 1)[1].strip(' ()') or 'refused'}): "
+        "on a busy computer its replies will be late (each one counted by the controller, which stops RSI after its "
+        "timeout of late replies in a row); allow this user real-time scheduling (e.g. 'USER - rtprio 20' in "
+        "/etc/security/limits.conf, or CAP_SYS_NICE) -- docs/kuka_rsi.md, 'On a busy computer'"
+    )
 
 
 class RsiStartError(BridgeError, ConnectionError):
@@ -192,6 +213,9 @@ class KukaRsiBackend(RobotBackend):
         address = self.iface.events.address
         assert address is not None
         log.info("%s: RSI loop on %s:%d (%s)", self.name, address[0], address[1], self.iface.events.tuning)
+        advice = realtime_advice(self.iface.events.tuning)
+        if advice is not None:
+            log.warning("%s: %s", self.name, advice)
         if self.feedback_file:
             self.iface.set_feedback_output(0, self.feedback_file)
         if self.simulator_spec is not None:
@@ -216,18 +240,25 @@ class KukaRsiBackend(RobotBackend):
                 bind=(self.link.host, self.link.port or 0), quirks=spec.quirks, flood=spec.flood,
             ).start()
             return
+        self._sim_process = subprocess.Popen(self.simulator_command(address), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+        assert self._sim_process.stdout is not None
+        self._watch(self._sim_process.stdout.fileno(), self._on_sim_output)
+
+    def simulator_command(self, address: tuple[str, int]) -> list[str]:
+        """The command line of the simulated controller's own process, sending to the loop at ``address``."""
+        spec = self.simulator_spec
+        assert spec is not None
         ctx = spec.context
         args = [
             sys.executable, "-m", "robot_bridges.kuka_rsi.simulator", "--to", f"{address[0]}:{address[1]}",
             "--bind", f"{self.link.host}:{self.link.port or 0}", "--cycle", str(ctx.cycle_ms), "--timeout", str(ctx.timeout),
             "--mode", ctx.correction_mode, "--seed", str(spec.faults.seed), "--axis-monitor", str(ctx.axis_monitor_deg[0]),
+            "--rt-priority", str(spec.rt_priority),
         ]
         args += _quirk_arguments(spec.faults, spec.quirks, spec.flood)
         if self.link.config is not None:
             args += ["--config", self.link.config.source]
-        self._sim_process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
-        assert self._sim_process.stdout is not None
-        self._watch(self._sim_process.stdout.fileno(), self._on_sim_output)
+        return args
 
     async def close(self) -> None:
         iface = self.iface
@@ -309,6 +340,8 @@ class KukaRsiBackend(RobotBackend):
                 self._sim_summary = json.loads(line)
             except json.JSONDecodeError:
                 pass
+        elif line.strip():
+            log.info("%s: %s", self.name, line.strip()[:500])  # the banner: address, cycle, real-time priority
         self._changed.set()
 
     def _simulator_stop_reason(self) -> str | None:
@@ -762,10 +795,12 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
         context = RsiContext(cycle_ms=cycle, timeout=timeout, correction_mode=mode, axis_monitor_deg=(monitor,) * 6)
         link = RobotLink("kuka", "127.0.0.1", None, config=config, correction_mode=mode, cycle_ms=cycle, **trust)  # type: ignore[arg-type]
         accelerated = sim_runner == "accelerated"
-        if accelerated and "silence" not in extra:
-            # In-process, the lockstep controller shares the application's GIL: a long computation
-            # there can hold it back for a while.  That is silence the loop must not take for a stop.
-            settings = LoopSettings(silence_timeout=2.0, connect_timeout=connect)
+        if "silence" not in extra:
+            # The simulated controller is a process (or thread) of this computer, not hard real time:
+            # held back by a busy computer it goes quiet without being lost (SIMULATED_SILENCE).  In-process,
+            # the lockstep controller shares the application's GIL: a long computation there can hold it
+            # back for a while longer.  Neither is silence the loop may take for a stop.
+            settings = LoopSettings(silence_timeout=2.0 if accelerated else SIMULATED_SILENCE, connect_timeout=connect)
         faults, quirks, flood = _misbehaviour(extra, options.seed)
         spec = SimulatorSpec(
             runner="thread" if accelerated else sim_runner, accelerated=accelerated, context=context, faults=faults, quirks=quirks, flood=flood,

@@ -33,7 +33,7 @@ _NUMBER_OPTIONS = {
     "cycle": (4, "RSI cycle of the controller in ms: 4 or 12"),
     "timeout": (100, "late packets in a row after which the simulated RSI stops"),
     "axis_monitor": (360.0, "simulated AXISCORRMON limit (deg)"),
-    "silence": (0.0, "seconds without packets that mean the robot is lost (0 = the back end's default: 0.1 s, 2 s for an accelerated simulator)"),
+    "silence": (0.0, "seconds without packets that mean the robot is lost (0 = the back end's default: 0.1 s for a real controller, 1 s for a simulated one, 2 s for an accelerated simulator)"),
     "connect_timeout": (10.0, "seconds to the controller's first valid packet before the bridge gives up, saying what arrived instead"),
     "linear_speed": (1.0, "Cartesian speed at 100 % (m/s)"),
     "linear_accel": (2.0, "Cartesian acceleration at 100 % (m/s^2)"),

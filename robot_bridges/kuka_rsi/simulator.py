@@ -817,6 +817,22 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def ask_realtime(priority: int) -> str:
+    """``SCHED_FIFO`` at ``priority`` for this process (0: none asked); what took effect, for the banner.
+
+    A KR C4's RSI is hard real time.  A simulator scheduled like any other process stalls when the
+    computer is busy -- more than 100 ms beside two CPU-bound processes on two cores -- and the
+    external system then rightly reports a controller that went silent.
+    """
+    if priority <= 0:
+        return "no real-time priority asked"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError) as error:
+        return f"no real-time priority ({error.strerror or error})"
+    return f"SCHED_FIFO {priority}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the simulator; the last line on stdout is a JSON summary. Exit 0 normal end, 2 RSI error, 1 bad usage."""
     args = _parser().parse_args(argv)
@@ -850,13 +866,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         sock.close()
         print(f"kuka_rsi simulator: cannot bind the flooder to {host}:{flood.port}: {error.strerror}", file=sys.stderr)
         return 1
-    if args.rt_priority > 0:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
-        except (PermissionError, OSError) as error:
-            print(f"kuka_rsi simulator: no real-time priority ({error.strerror or error})", file=sys.stderr)
+    priority = ask_realtime(args.rt_priority)
     flooding = "" if flooder is None else f", flooding from {flooder.address[0]}:{flooder.address[1]} ({flood.rate:g} {flood.content} per cycle)"
-    print(f"KRC simulator {host}:{port} -> {to}, {args.cycle} ms, {'accelerated' if args.accelerated else f'x{args.speed:g}'}{flooding}", flush=True)
+    print(f"KRC simulator {host}:{port} -> {to}, {args.cycle} ms, {'accelerated' if args.accelerated else f'x{args.speed:g}'}, {priority}{flooding}", flush=True)
     stop = threading.Event()
     # SIGTERM / SIGINT end the run between two cycles, so the summary below is still printed.
     for sig in (signal.SIGTERM, signal.SIGINT):
