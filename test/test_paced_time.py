@@ -163,15 +163,12 @@ class StallingBackend(ScriptedBackend):
         return await super().execute(group, primitive)
 
 
-def test_the_bridge_accept_timeout_does_not_fire_when_the_computer_stalls(monkeypatch: pytest.MonkeyPatch) -> None:
-    import machine_harness
-
+def test_the_bridge_accept_timeout_does_not_fire_when_the_computer_stalls() -> None:
     wall = FakeWall()
     StallingBackend.wall = wall
-    monkeypatch.setattr(machine_harness, "ScriptedBackend", StallingBackend)
 
     async def main(clock: Clock) -> tuple[list[Any], list[Any]]:
-        h = await Harness(clock, parameters={"bridge_timeout": 5.0}).start()
+        h = await Harness(clock, parameters={"bridge_timeout": 5.0}, backend_class=StallingBackend).start()
         try:
             first = h.send("left_arm", "move_to_joint_pose", "initial")
             second = h.send("right_arm", "move_to_joint_pose", "initial")
