@@ -27,6 +27,7 @@ import os
 from collections.abc import Callable, Iterable
 from typing import IO, Any, TypeVar
 
+from core_functions.printable import printable
 from execution_engine.transport import codec, typed
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import EVENTS
@@ -241,7 +242,8 @@ class LivePrinter:
             self._print(event.t, event.source, event.message)
 
     def _print(self, t: float, who: str, text: str) -> None:
-        self.stream.write(f"[{t:9.3f} s] {who:<{self.width}}  {text}\n")
+        """One line; names and texts from the application and the peers with control and bidi characters escaped."""
+        self.stream.write(f"[{t:9.3f} s] {printable(who):<{self.width}}  {printable(text)}\n")
         self.stream.flush()
 
 
@@ -263,5 +265,5 @@ class QuestionPrinter:
             return
         if status.message and status.message != self._asked:
             self._asked = status.message
-            self.stream.write(f"[{status.t:9.3f} s] engine  {engine_line(status)}\n")
+            self.stream.write(f"[{status.t:9.3f} s] engine  {printable(engine_line(status))}\n")
             self.stream.flush()

@@ -9,11 +9,14 @@ corrections; and the Fig. 12 timeline of every group as SVG or PNG (:mod:`.timel
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from core_functions.printable import printable
 from execution_engine.output_files import FilePlan, Output, Refused
+from execution_engine.record_limits import TIME_BOUND, OverLimit
 from execution_engine.recorder.reading import Recording, is_mcap, trace_records
 from execution_engine.recorder.safe_read import NotARecording
 from execution_engine.timeline import Timeline, TimelineBuilder
@@ -53,7 +56,7 @@ class RunSummary:
         out.append(f"  retries: {t.retries}")
         out.extend(self.extra)
         out.extend(vision_lines(t))
-        return out
+        return [printable(line) for line in out]  # every name and text in them came from the file
 
 
 def vision_lines(timeline: Timeline) -> list[str]:
@@ -65,11 +68,16 @@ def vision_lines(timeline: Timeline) -> list[str]:
                 result: Any = p.result or {}
                 pose = result.get("pose") if isinstance(result, dict) and result.get("kind") == "vision" else None
                 if isinstance(pose, dict):
-                    xyz = ", ".join(f"{1000 * float(pose.get(k, 0.0)):.2f}" for k in ("x", "y", "z"))
+                    xyz = ", ".join(f"{1000 * _number(pose.get(k)):.2f}" for k in ("x", "y", "z"))
                     score = result.get("score")
                     score_text = f"{score:.3f}" if isinstance(score, (int, float)) else "?"
                     found.append((p.t_start, f"  vision: {p.t_start:9.3f} s {lane.group} {p.name}: at ({xyz}) mm, score {score_text}"))
-    return [line for _, line in sorted(found)]
+    return [line for _, line in sorted(found, key=lambda item: item[0])]
+
+
+def _number(value: object) -> float:
+    """A coordinate the file gives; NaN (printed as such) when it is none."""
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
 
 
 def summarize(path: str | Path) -> RunSummary:
@@ -88,6 +96,8 @@ def summarize(path: str | Path) -> RunSummary:
             )
             if meta.get("continues"):
                 header.append(f"  continues: {meta['continues']}")
+        if recording.skipped:
+            header.append(f"  {recording.skipped} event(s) at a time no run has (not finite, or past ±{TIME_BOUND:.0f} s) skipped")
         if recording.cut:
             last = f" at {builder.t_last:.3f} s" if builder.t_first is not None else ""
             header.append(f"  CUT: the recording has no end (the run was killed or crashed); readable up to its last chunk{last}")
@@ -128,8 +138,8 @@ def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
     except OSError as error:
         err.write(f"error: {path}: cannot read: {error.strerror or error}\n")
         return EXIT_UNREADABLE
-    except NotARecording as error:
-        err.write(f"error: {error}\n")
+    except (NotARecording, OverLimit) as error:
+        err.write(f"error: {printable(error)}\n")
         return EXIT_UNREADABLE
     out.write("\n".join(summary.lines()) + "\n")
     if target is not None:

@@ -15,6 +15,7 @@ operation) and operator actions.  A bar still open has ``t_end`` None: it ran up
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -151,6 +152,7 @@ class TimelineBuilder:
         self.retries = 0
         self.t_first: float | None = None
         self.t_last = 0.0
+        self._waiting: dict[tuple[str, str], list[list[Any]]] = {}  # (group, what) -> its waits still open, oldest first
 
     def add_all(self, records: Iterable[Mapping[str, Any]]) -> TimelineBuilder:
         for record in records:
@@ -175,7 +177,7 @@ class TimelineBuilder:
         elif event == "primitive_start":
             bar = self._open.get(group)
             if bar is not None:
-                bar.primitives.append(PrimitiveBar(str(record.get("primitive", "")), int(record.get("index") or 0), str(record.get("state", "")), t))
+                bar.primitives.append(PrimitiveBar(str(record.get("primitive", "")), _whole(record.get("index")), str(record.get("state", "")), t))
         elif event == "primitive_end":
             bar = self._open.get(group)
             if bar is not None and bar.primitives and bar.primitives[-1].t_end is None:
@@ -218,14 +220,15 @@ class TimelineBuilder:
         """A wait for a flag (or zone) opens at ``waiting`` and closes at passed/timeout/stopped; a set is a mark."""
         state, what = record.get("state"), f"{record.get('kind', 'flag')} {record.get('flag')}"
         if state == "waiting":
-            lane.waits.append([what, t, None])
+            wait: list[Any] = [what, t, None]
+            lane.waits.append(wait)
+            self._waiting.setdefault((lane.group, what), []).append(wait)
         elif state == "set":
             self.marks.append(Mark(t, "flag", lane.group, str(record.get("message") or f"set {what}")))
         else:
-            for wait in reversed(lane.waits):
-                if wait[0] == what and wait[2] is None:
-                    wait[2] = t
-                    break
+            still = self._waiting.get((lane.group, what))
+            if still:  # the latest wait for it closes (one lookup: a file of many waits costs no more than their number)
+                still.pop()[2] = t
 
     def _engine(self, record: Mapping[str, Any], t: float) -> None:
         event = record.get("event")
@@ -253,41 +256,77 @@ class TimelineBuilder:
             if t_end > cursor:
                 copy.idle.append(IdleGap(group, cursor, t_end))
             copy.waits = [list(w) for w in lane.waits]
-            inside = _within_functions(group, copy.bars, copy.waits, t_end)  # a zone wait holds a function before its motion
+            waits = _disjoint(copy.waits, t_end)
+            inside = _within_functions(group, copy.bars, waits, t_end)  # a zone wait holds a function before its motion
             copy.busy -= sum(g.duration for g in inside)
-            copy.idle = sorted([piece for gap in copy.idle for piece in _split(gap, copy.waits, t_end)] + inside, key=lambda g: g.t_start)
+            copy.idle = sorted(_split(copy.idle, waits) + inside, key=lambda g: g.t_start)
             lanes[group] = copy
         operations = sorted(self._operations.values(), key=lambda s: s.t_start)
         return Timeline(lanes, operations, list(self.marks), t_start, t_end, self.retries)
 
 
-def _within_functions(group: str, bars: list[FunctionBar], waits: list[list[Any]], now: float) -> list[IdleGap]:
+def _disjoint(waits: list[list[Any]], now: float) -> list[tuple[str, float, float]]:
+    """The waits as (what, start, end) in time order, none overlapping the one before (a group waits for
+    one thing at a time; a file that says otherwise is clipped), so the sweeps below stay linear."""
+    out: list[tuple[str, float, float]] = []
+    cursor = -math.inf
+    for what, start, end in sorted(waits, key=lambda w: w[1]):
+        a, b = max(start, cursor), now if end is None else end
+        if b > a:
+            out.append((what, a, b))
+            cursor = b
+    return out
+
+
+def _within_functions(group: str, bars: list[FunctionBar], waits: list[tuple[str, float, float]], now: float) -> list[IdleGap]:
     """The parts of waits that fall inside a function (a zone: its motion waits, the function has
-    started): idle time named after the wait, not busy time."""
-    pieces = []
-    for what, start, end in waits:
-        stop = now if end is None else end
-        for bar in bars:
-            a, b = max(start, bar.t_start), min(stop, bar.end(now))
+    started): idle time named after the wait, not busy time.  One sweep over both, in time order."""
+    spans: list[tuple[float, float]] = []
+    for bar in sorted(bars, key=lambda b: b.t_start):
+        start = max(bar.t_start, spans[-1][1]) if spans else bar.t_start
+        if bar.end(now) > start:
+            spans.append((start, bar.end(now)))
+    pieces, first = [], 0
+    for what, start, stop in waits:
+        while first < len(spans) and spans[first][1] <= start:
+            first += 1
+        index = first
+        while index < len(spans) and spans[index][0] < stop:
+            a, b = max(start, spans[index][0]), min(stop, spans[index][1])
             if b > a:
                 pieces.append(IdleGap(group, a, b, what))
+            index += 1
     return pieces
 
 
-def _split(gap: IdleGap, waits: list[list[Any]], now: float) -> list[IdleGap]:
-    """An idle gap cut where the group waited for a flag or zone: each wait's share named, the rest plain idle."""
-    pieces, cursor = [], gap.t_start
-    for what, start, end in sorted(waits, key=lambda w: w[1]):
-        a, b = max(cursor, start), min(gap.t_end, now if end is None else end)
-        if b <= a:
-            continue
-        if a > cursor:
-            pieces.append(IdleGap(gap.group, cursor, a))
-        pieces.append(IdleGap(gap.group, a, b, what))
-        cursor = b
-    if gap.t_end > cursor:
-        pieces.append(IdleGap(gap.group, cursor, gap.t_end))
+def _split(gaps: list[IdleGap], waits: list[tuple[str, float, float]]) -> list[IdleGap]:
+    """Idle gaps (in time order) cut where the group waited for a flag or zone: each wait's share named,
+    the rest plain idle.  One sweep over both."""
+    pieces, first = [], 0
+    for gap in gaps:
+        cursor = gap.t_start
+        while first < len(waits) and waits[first][2] <= gap.t_start:
+            first += 1
+        index = first
+        while index < len(waits) and waits[index][1] < gap.t_end:
+            what, start, end = waits[index]
+            a, b = max(cursor, start), min(gap.t_end, end)
+            if b > a:
+                if a > cursor:
+                    pieces.append(IdleGap(gap.group, cursor, a))
+                pieces.append(IdleGap(gap.group, a, b, what))
+                cursor = b
+            index += 1
+        if gap.t_end > cursor:
+            pieces.append(IdleGap(gap.group, cursor, gap.t_end))
     return pieces
+
+
+def _whole(value: object) -> int:
+    """A primitive's index as the record gives it; 0 when it gives none (or nonsense)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return 0
+    return int(value)
 
 
 def build_timeline(records: Iterable[Mapping[str, Any]], groups: Iterable[str] = ()) -> Timeline:

@@ -5,8 +5,11 @@ went wrong.  The first question is whether the trace can be trusted: a complete 
 a ``run_end`` record (:class:`execution_engine.observers.TraceWriter`); one without it was cut
 (the run was killed, the machine lost power) and the report says so, with the last event the
 trace still holds.  Lines that are not trace records (a file edited by hand, another file given
-by mistake) are named by line number and skipped, never fatal; the file is read in bounded
-memory, line by line, with a size limit per line.
+by mistake) are named by line number and skipped, never fatal -- a record at a time no run has
+(``1e308``, ``NaN``) among them; the file is read in bounded memory, line by line, with a size
+limit per line, and a file naming more groups than a robot has is refused (OverLimit, one line:
+:mod:`execution_engine.record_limits`).  Every name and text it shows comes from the file, so it
+is shown with its control and bidirectional characters escaped (:func:`printable`).
 """
 from __future__ import annotations
 
@@ -16,6 +19,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from core_functions.printable import printable
+from execution_engine.record_limits import GroupCount, time_problem
 
 MAX_LINE = 1 << 20  # bytes: a trace line is a few hundred bytes; a megabyte is not a trace line
 MAX_PROBLEMS = 20  # problem lines listed; the rest are counted
@@ -37,6 +43,7 @@ class TraceSummary:
     problem_count: int = 0
     incomplete_tail: bool = False  # the file does not end with a newline: its last write was cut
     on_record: Callable[[dict[str, Any]], None] | None = field(default=None, repr=False, compare=False)
+    groups: GroupCount | None = field(default=None, repr=False, compare=False)
 
     @property
     def cut(self) -> bool:
@@ -44,24 +51,25 @@ class TraceSummary:
 
     def lines(self) -> list[str]:
         """The report, one line each."""
-        out = [f"trace {self.path}: {self.records} record(s)"]
+        out = [f"trace {printable(self.path)}: {self.records} record(s)"]
         if self.end is not None:
+            end = {k: printable(self.end.get(k, "?")) for k in ("outcome", "exit_code", "operations_done", "operations_total")}
             out.append(
-                f"  ended: {self.end.get('outcome', '?')} (exit code {self.end.get('exit_code', '?')}), operations "
-                f"{self.end.get('operations_done', '?')}/{self.end.get('operations_total', '?')}, at {self.end.get('t', 0):.3f} s"
+                f"  ended: {end['outcome']} (exit code {end['exit_code']}), operations "
+                f"{end['operations_done']}/{end['operations_total']}, at {self.end['t']:.3f} s"
             )
         else:
-            where = f"at {self.last.get('t', 0):.3f} s ({_describe(self.last)})" if self.last else "before any record"
+            where = f"at {self.last.get('t', 0):.3f} s ({printable(_describe(self.last))})" if self.last else "before any record"
             out.append(f"  CUT: no run_end record; the run was killed or crashed; the last event {where}")
         if self.incomplete_tail:
             out.append("  the last line is incomplete (cut in the middle of a write) and was skipped")
         for group, count in sorted(self.by_group.items()):
-            out.append(f"  {group:<12} {count} record(s)")
-        out.extend(f"  operator: {line}" for line in self.operator)
-        out.extend(f"  error: {text}" for text in self.errors)
+            out.append(f"  {printable(group):<12} {count} record(s)")
+        out.extend(f"  operator: {printable(line)}" for line in self.operator)
+        out.extend(f"  error: {printable(text)}" for text in self.errors)
         if self.problem_count:
             out.append(f"  {self.problem_count} line(s) are not trace records:")
-            out.extend(f"    {p}" for p in self.problems)
+            out.extend(f"    {printable(p)}" for p in self.problems)
             if self.problem_count > len(self.problems):
                 out.append(f"    and {self.problem_count - len(self.problems)} more")
         return out
@@ -80,6 +88,7 @@ def read_trace(path: str | Path, on_record: Callable[[dict[str, Any]], None] | N
     ``on_record`` sees every valid record in order (the timeline is built from them)."""
     summary = TraceSummary(str(path))
     summary.on_record = on_record
+    summary.groups = GroupCount(str(path))
     with open(path, "rb") as stream:
         number = 0
         while True:
@@ -105,9 +114,15 @@ def _take(summary: TraceSummary, number: int, raw: bytes) -> None:
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         _problem(summary, f"line {number}: not JSON ({error})")
         return
-    if not (isinstance(record, dict) and isinstance(record.get("event"), str) and isinstance(record.get("t"), (int, float))):
+    if not (isinstance(record, dict) and isinstance(record.get("event"), str) and "t" in record):
         _problem(summary, f"line {number}: not a trace record (needs 'event' and 't')")
         return
+    problem = time_problem(record["t"])
+    if problem is not None:
+        _problem(summary, f"line {number}: {problem}")
+        return
+    if summary.groups is not None:
+        summary.groups.see(str(record.get("group", "?")), f"line {number}")
     summary.records += 1
     if summary.on_record is not None:
         summary.on_record(record)

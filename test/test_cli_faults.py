@@ -11,12 +11,14 @@ where the back end needs the robot's real clock (a controller named by ``--host`
 from __future__ import annotations
 
 import io
+import json
 import logging
 import os
 import random
 import re
 import shlex
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -25,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import zstandard
 
 from execution_engine.cli import main
 
@@ -43,6 +46,23 @@ def app(body: str, head: str = "", robot: str = "nextage", cell: str | None = No
 def op(group: str, function: str, *params: str) -> str:
     inner = "".join(f'<param value="{p}"/>' for p in params)
     return f'  <operation id="1">\n    <{group}><function name="{function}"><params>{inner}</params></function></{group}>\n  </operation>\n'
+
+
+def mcap_chunks(inner: bytes, count: int) -> bytes:
+    """An MCAP file of a header and ``count`` zstd chunks each holding ``inner`` (a few KB for megabytes of zeros)."""
+    def record(opcode: int, body: bytes) -> bytes:
+        return struct.pack("<BQ", opcode, len(body)) + body
+
+    def text(value: str) -> bytes:
+        return struct.pack("<I", len(value)) + value.encode()
+
+    packed = zstandard.ZstdCompressor().compress(inner)
+    chunk = record(0x06, struct.pack("<QQQI", 0, 0, len(inner), 0) + text("zstd") + struct.pack("<Q", len(packed)) + packed)
+    return b"\x89MCAP0\r\n" + record(0x01, text("ros2") + text("crafted")) + chunk * count
+
+
+def trace(*records: dict[str, object]) -> str:
+    return "".join(json.dumps({"group": "left_arm", "operation": "1", "function": "wait", **r}) + "\n" for r in records)
 
 
 #: The files rows name under {tmp}, as docs/faults.md describes them.
@@ -77,6 +97,12 @@ FILES: dict[str, str | bytes] = {
     "run.jsonl": '{"event": "run_start", "t": 0}\n',
     "run.svg": '{"event": "run_start", "t": 0}\n',
     "rsi.xml": (ROOT / "config" / "kuka_rsi_ethernet.xml").read_text(),
+    "zeros.mcap": mcap_chunks(bytes(64_000_000), 20),
+    "unpacked.mcap": mcap_chunks(struct.pack("<BQ", 0x80, 64_000_000 - 9) + bytes(64_000_000 - 9), 20),
+    "groups.jsonl": trace(*({"event": "function_start", "t": 0.01 * i, "group": f"g{i}"} for i in range(20_000))),
+    "far_time.jsonl": trace({"event": "function_start", "t": 1.0}, {"event": "function_end", "t": 1e308, "outcome": "succeeded"}),
+    "spoof.jsonl": trace({"event": "function_start", "t": 0.0}, {"event": "error", "t": 1.0, "error": "1\u202egnp.exe failed"}),
+    "bidi_id.xml": app(op("left_arm", "gripper_open")).replace('<operation id="1">', '<operation id="1\u202egnp.exe">'),
     "huge.xml": b"<application>" + b" " * (33 * 1024 * 1024) + b"</application>",
 }
 

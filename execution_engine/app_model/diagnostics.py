@@ -13,6 +13,8 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+from core_functions.printable import printable
+
 Severity = Literal["error", "warning"]
 
 #: At most this many diagnostics are shown for one validation; the rest are counted.
@@ -50,8 +52,9 @@ class Diagnostic:
         return (self.file, self.line, self.col)
 
     def __str__(self) -> str:
+        """The line a console shows: what came from the file with its control and bidi characters escaped."""
         prefix = "warning: " if self.severity == "warning" else ""
-        return f"{self.file}:{self.line}:{self.col}: {prefix}{self.message}"
+        return f"{printable(self.file)}:{self.line}:{self.col}: {prefix}{printable(self.message)}"
 
 
 @dataclass(frozen=True)

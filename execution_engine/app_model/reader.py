@@ -18,6 +18,7 @@ from pathlib import Path
 from lxml import etree
 
 from core_functions import limits
+from core_functions.printable import printable, unsafe_character
 from core_functions.robots import RobotModel, find_robot
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
 from execution_engine.app_model.positions import DocumentWalk, SourceMap
@@ -173,6 +174,10 @@ class ApplicationReader:
     def read_operation(self, element: etree._Element, at: int, robot: RobotModel | None) -> OperationSite | None:
         op_id = element.get("id")
         operation = OperationSite(id=(op_id or "").strip(), name=element.get("name"), at=at)
+        unsafe = unsafe_character(operation.id)
+        if unsafe is not None:  # consoles, traces and the page show ids: none may reorder or hide what follows it
+            self.error(self.source.attribute_offset(at, "id"), f"operation id '{printable(operation.id)}' holds {unsafe}, which makes "
+                       "an id look like another on a console or a page; use letters, digits and punctuation")
         for child in element:
             if not isinstance(child.tag, str):
                 continue

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from core_functions.printable import printable
 from execution_engine.engine.flags import FlagWait, costliest, wait_totals
 
 RunOutcome = Literal["finished", "failed", "stopped"]
@@ -108,7 +109,7 @@ class RunReport:
             lines.append(f"  operator: {action.command} at {action.t:.2f} s from {action.source} (in {action.state}): {answer} - {action.answer}")
         if not self.finished_cleanly:
             lines.append("  not every group reached Finish")
-        return lines
+        return [printable(line) for line in lines]  # ids, names and peers' texts: no control or bidi character reaches the console
 
     def wait_lines(self) -> list[str]:
         """Each group's idle time split into its waits for flags and zones and the rest; the costliest waits."""
