@@ -128,3 +128,24 @@ def test_a_step_pauses_with_its_own_reason(run_sim: Any) -> None:
     ]
     assert seen[5] == ("paused", "one step done (operation 2): step or resume to go on")
     assert seen[-2] == ("stopping", "stopped by service /execution_engine/stop")
+
+
+def test_an_announcement_while_running_is_an_event_of_its_own_and_not_the_next_lines_reason(run_sim: Any) -> None:
+    """A resumed run names the trace it continues (checkpoint/resume.py): that line is in the trace
+    when it is said, and STOPPING does not say it again."""
+    async def main(clock: Clock) -> io.StringIO:
+        cell = await Cell(clock, durations={"move_joints": 2.0, "end_effector": 1.0}).start()
+        _, trace = watch(cell)
+        run = asyncio.ensure_future(cell.run(make_app(OPS)))
+        await clock.sleep(1.0)
+        cell.deployment.engine.announce("resumed from run.checkpoint.sqlite at operation 1; continues run.jsonl")
+        await run
+        return trace
+
+    seen = states(run_sim(main))
+    assert seen == [
+        ("running", ""),
+        ("running", "resumed from run.checkpoint.sqlite at operation 1; continues run.jsonl"),
+        ("stopping", ""),
+        ("finished", ""),
+    ]

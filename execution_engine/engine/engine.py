@@ -445,8 +445,16 @@ class ExecutionEngine(OperatorCommands):
         pending.update(resent)
 
     def announce(self, message: str) -> None:
-        """Say something about the run in the engine's status and events (and so in the trace)."""
+        """Say something about the run in the engine's status and events (and so in the trace).
+
+        Already running, there is no change of state to carry it, so the announcement is an event
+        of its own (``running`` to ``running``): it belongs to this moment, not to the next change.
+        """
+        previous = self.state
         self._set_state("running", message)
+        if previous == "running":
+            operation = self._operation.id if self._operation else None
+            self._publish_event(EngineEvent("state", self.clock.now(), "running", operation, from_state="running", message=message))
 
     async def _stop_groups(self, groups: list[str], pending: dict[str, _Dispatch]) -> None:
         """Stop running groups and wait (bounded) for their preempted results."""
