@@ -18,7 +18,8 @@ from robot_bridges.vplus.simulator import main
     ("argv", "message"),
     [
         (["--port", "70000"], "--port must be 0..65535"),
-        (["--speed", "0"], "--speed must be > 0"),
+        (["--speed", "0"], "--speed must be a number in [0.01, 1000] x real time, got 0"),
+        (["--speed", "1e308"], "--speed must be a number in [0.01, 1000] x real time, got 1e+308"),
         (["--max-clients", "0"], "--max-clients must be >= 1"),
         (["--idle-timeout", "0"], "--idle-timeout must be within (0, 86400] s, got 0"),
         (["--idle-timeout", "inf"], "--idle-timeout must be within (0, 86400] s, got inf"),

@@ -52,6 +52,7 @@ from enum import Enum
 
 import numpy as np
 
+from core_functions.option_ranges import argument_type
 from core_functions.robots import KUKA_KR
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from robot_bridges.kuka_rsi.codec import PacketCodec, PacketError, Value
@@ -795,7 +796,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--bind", default="127.0.0.1:0", help="address the controller sends from (default 127.0.0.1:0)")
     p.add_argument("--cycle", type=int, default=4, choices=(4, 12), help="RSI cycle in ms")
     p.add_argument("--accelerated", action="store_true", help="lockstep: next packet as soon as the reply is in")
-    p.add_argument("--speed", type=float, default=1.0, help="real-time mode: run faster than real time by this factor")
+    p.add_argument("--speed", type=argument_type("speed"), default=1.0, help="real-time mode: run faster than real time by this factor, in [0.01, 1000]")
     p.add_argument("--cycles", type=int, default=None, help="stop after this many cycles")
     p.add_argument("--timeout", type=int, default=100, help="late packets in a row that stop RSI")
     p.add_argument("--mode", choices=("absolute", "relative"), default="absolute", help="correction mode")

@@ -39,6 +39,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
 
+from core_functions.option_ranges import bounds
 from execution_engine.clock import Clock, run_with_clock, scaled_clock
 from robot_bridges.vplus.codec import (
     MAX_LINE,
@@ -415,8 +416,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not (0 <= args.port <= 65535):
         print(f"error: --port must be 0..65535, got {args.port}", file=sys.stderr)
         return 2
-    if not (args.speed > 0):
-        print(f"error: --speed must be > 0, got {args.speed}", file=sys.stderr)
+    if not bounds("speed").contains(args.speed):  # a scaled clock takes [0.01, 1000] (core_functions.option_ranges)
+        print(f"error: --speed must be a number in {bounds('speed').describe()}, got {args.speed:g}", file=sys.stderr)
         return 2
     if args.max_clients < 1:
         print(f"error: --max-clients must be >= 1, got {args.max_clients}", file=sys.stderr)
