@@ -88,16 +88,20 @@ def run_files(
     if extra.get("config"):
         plan.read(f"--backend-option config={extra['config']}", extra["config"])
 
-    def output(option: str, path: str | None, what: str, example: str, **kind: bool) -> Output | None:
-        return Output(option, str(path), what, example, default=derived.get(option, ""), **kind) if path else None
+    def output(option: str, path: str | None, what: str, example: str, database: bool = False) -> Output | None:
+        """An option's output (None when not given); a database is SQLite, and the trajectory database is read too."""
+        if not path:
+            return None
+        read = option == "--trajectory-db"
+        return Output(option, str(path), what, example, sqlite=database, reads=read, makes_folders=read, default=derived.get(option, ""))
 
     plan.write(output("--trace", trace, "the trace", "run.jsonl"))
     plan.write(output("--record", record, "the recording", "run.mcap"))
     if resume:  # read and written again: the run's own checkpoint
         plan.write(Output("--resume", str(resume), "the checkpoint", "run.checkpoint.sqlite", sqlite=True))
     else:
-        plan.write(output("--checkpoint", checkpoint, "the checkpoint", "run.checkpoint.sqlite", sqlite=True))
-    plan.write(output("--trajectory-db", trajectory_db, "the trajectory database", "trajectories.db", sqlite=True, reads=True, makes_folders=True))
+        plan.write(output("--checkpoint", checkpoint, "the checkpoint", "run.checkpoint.sqlite", database=True))
+    plan.write(output("--trajectory-db", trajectory_db, "the trajectory database", "trajectories.db", database=True))
     if extra.get("feedback"):
         plan.write(Output("--backend-option feedback", extra["feedback"], "the feedback log", "feedback.csv", joiner="="))
     return plan
