@@ -424,7 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=argument_type("seed"), default=0, help="simulator random seed (vision noise) in [0, 4294967295]")
     run.add_argument("--backend-option", action="append", type=parse_option, metavar="KEY=VALUE", help="back-end specific option, e.g. timeout=20 (repeatable; each back end lists and checks its own)")
     run.add_argument("--trajectory-db", metavar="PATH", help="SQLite file for recorded trajectories")
-    run.add_argument("--interactive", action="store_true", help="read operator commands from the terminal")
+    run.add_argument("--interactive", action="store_true", help="operator keys at the terminal, each acting when pressed (no Enter): p pause, r resume, s stop, t step, x reset, k skip, h help")
     run.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     run.add_argument("--no-check", action="store_true", help="start without the dry run on the simulator (validate --simulate) that otherwise comes first")
     add_run_options(run)
