@@ -21,8 +21,8 @@ from execution_engine.cli import main
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.engine.wall_clock import ManualWallClock
 from robot_bridges.backend import BackendOptions
-from robot_bridges.kuka_rsi.backend import SIMULATED_SILENCE, KukaRsiBackend, create, realtime_advice
-from robot_bridges.kuka_rsi.simulator import ask_realtime
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
+from robot_bridges.kuka_rsi.realtime import SIMULATED_SILENCE, SIMULATOR_PRIORITY, ask_realtime, realtime_advice
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -51,7 +51,7 @@ def test_silence_means_a_lost_robot_after_a_time_that_fits_who_speaks(options: d
 def test_the_simulated_controller_asks_for_real_time_priority_above_the_loop() -> None:
     backend = made()
     command = backend.simulator_command(("127.0.0.1", 40000))
-    assert command[command.index("--rt-priority") + 1] == "20"  # the loop asks for 10: the controller's clock comes first
+    assert command[command.index("--rt-priority") + 1] == str(SIMULATOR_PRIORITY) == "20"  # the loop asks for 10: the controller's clock comes first
 
 
 def test_the_simulator_says_whether_it_got_real_time_priority(monkeypatch: pytest.MonkeyPatch) -> None:

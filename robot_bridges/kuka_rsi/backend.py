@@ -58,6 +58,7 @@ from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface, RunnerMod
 from robot_bridges.kuka_rsi.kinematics import KR6_R900, URDF_PATH, KukaArm
 from robot_bridges.kuka_rsi.recording import RecordingPlanner
 from robot_bridges.kuka_rsi.peer import resolve_ipv4
+from robot_bridges.kuka_rsi.realtime import SIMULATED_SILENCE, SIMULATOR_PRIORITY, realtime_advice
 from robot_bridges.kuka_rsi.simulator import Endpoint, Faults, Quirks, RsiContext, SimulatorThread
 from robot_bridges.kuka_rsi.spoofer import Flood
 from robot_bridges.kuka_rsi.replay import resample
@@ -99,27 +100,7 @@ class SimulatorSpec:
     faults: Faults = Faults()
     quirks: Quirks = Quirks()  # a misbehaving peer, for tests and demonstrations
     flood: Flood = Flood()  # a second sender on the controller's host (another port), for tests and demonstrations
-    rt_priority: int = 20  # SCHED_FIFO of a simulator process, above the loop's 10 (a controller is hard real time); 0: none
-
-
-#: Seconds without packets from a simulated real-time controller that mean it is lost.  A real
-#: controller is hard real time and 0.1 s of silence means a cable or a stopped RSI; the simulator is
-#: a process of this computer, which a busy computer can hold back that long when the system grants
-#: no real-time priority (measured: 101 ms beside two CPU-bound processes on two cores).  Its real
-#: stops (RSI timeout, limits) it reports itself, and its exit is seen at once.
-SIMULATED_SILENCE = 1.0
-
-
-def realtime_advice(tuning: str) -> str | None:
-    """What to do when the RSI loop runs without real-time priority (from its tuning note); None when it has it."""
-    if "no real-time priority" not in tuning:
-        return None
-    return (
-        f"the RSI loop runs without real-time priority ({tuning.split('no real-time priority', 1)[1].strip(' ()') or 'refused'}): "
-        "on a busy computer its replies will be late (each one counted by the controller, which stops RSI after its "
-        "timeout of late replies in a row); allow this user real-time scheduling (e.g. 'USER - rtprio 20' in "
-        "/etc/security/limits.conf, or CAP_SYS_NICE) -- docs/kuka_rsi.md, 'On a busy computer'"
-    )
+    rt_priority: int = SIMULATOR_PRIORITY  # SCHED_FIFO of a simulator process, above the loop's (a controller is hard real time); 0: none
 
 
 class RsiStartError(BridgeError, ConnectionError):

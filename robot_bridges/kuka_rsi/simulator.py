@@ -58,6 +58,7 @@ from execution_engine.clock import Clock, real_clock, run_with_clock
 from robot_bridges.kuka_rsi.codec import PacketCodec, PacketError, Value
 from robot_bridges.kuka_rsi.config import RsiConfig, RsiRoles, load_config, default_config
 from robot_bridges.kuka_rsi.kinematics import KukaArm, abc_to_matrix, matrix_to_abc, rotation_angle
+from robot_bridges.kuka_rsi.realtime import ask_realtime
 from robot_bridges.kuka_rsi.setpoint import compose_cartesian
 from robot_bridges.kuka_rsi.spoofer import Flood, Flooder, garbage_datagram
 
@@ -816,22 +817,6 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--rt-priority", type=int, default=0, help="try SCHED_FIFO at this priority (a controller is hard real time)")
     p.add_argument("--accept-echo", action="store_true", help="benchmark baseline: a datagram equal to the packet is the reply")
     return p
-
-
-def ask_realtime(priority: int) -> str:
-    """``SCHED_FIFO`` at ``priority`` for this process (0: none asked); what took effect, for the banner.
-
-    A KR C4's RSI is hard real time.  A simulator scheduled like any other process stalls when the
-    computer is busy -- more than 100 ms beside two CPU-bound processes on two cores -- and the
-    external system then rightly reports a controller that went silent.
-    """
-    if priority <= 0:
-        return "no real-time priority asked"
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (PermissionError, OSError) as error:
-        return f"no real-time priority ({error.strerror or error})"
-    return f"SCHED_FIFO {priority}"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
