@@ -182,7 +182,8 @@ def test_static_peers_are_read_as_rcl_reads_them(caplog: pytest.LogCaptureFixtur
     {"ROS_LOCALHOST_ONLY": "1"},
 ])
 def test_cyclone_accepts_every_configuration_made(extra: dict[str, str]) -> None:
-    """Cyclone refuses e.g. an interface named twice; each configuration here makes a participant."""
+    """Cyclone refuses e.g. an interface named twice; each configuration here makes a participant (the
+    remote static peer is left out of the probe: a participant announces itself to its peers at once)."""
     probe = (
         "import sys\nfrom cyclonedds.domain import Domain, DomainParticipant\n"
         "d = Domain(int(sys.argv[1]), sys.argv[2]); DomainParticipant(int(sys.argv[1])); print('ok')"
@@ -190,5 +191,6 @@ def test_cyclone_accepts_every_configuration_made(extra: dict[str, str]) -> None
     domain = str(random.randint(100, 232))
     config = dds_graph.domain_config(extra)
     assert config is not None
+    config = config.replace('<Peer address="192.0.2.77"/>', "")  # what is checked is the interfaces; nothing goes off the host
     done = subprocess.run([sys.executable, "-c", probe, domain, config], env=_environment({}), capture_output=True, text=True, timeout=BOUND)
     assert done.stdout.strip() == "ok", done.stderr
