@@ -17,8 +17,12 @@ import os
 from collections.abc import Callable
 from typing import Any
 
-import ros_fakes
-from ros_fakes import Future, FakeClient, FakeNode, FakeSubscription, QoSProfile, ReliabilityPolicy, DurabilityPolicy, _Entity
+from ros_fake_callbacks import Entity
+from ros_fake_graph import GRAPH
+from ros_fake_node import FakeNode
+from ros_fake_qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_fake_services import FakeClient, Future
+from ros_fake_topics import FakeSubscription
 
 STATUS_UNKNOWN, STATUS_ACCEPTED, STATUS_EXECUTING, STATUS_CANCELING, STATUS_SUCCEEDED, STATUS_CANCELED, STATUS_ABORTED = range(7)
 _TERMINAL = (STATUS_SUCCEEDED, STATUS_CANCELED, STATUS_ABORTED)
@@ -42,7 +46,7 @@ class ClientGoalHandle:
         return self._client._get_result_async(self)
 
 
-class ActionClient(_Entity):
+class ActionClient(Entity):
     """rclpy.action.ActionClient(node, action_type, action_name)."""
 
     def __init__(self, node: FakeNode, action_type: Any, action_name: str, *, callback_group: Any = None) -> None:
@@ -79,7 +83,7 @@ class ActionClient(_Entity):
         request = self.action_type.Impl.SendGoalService.Request(goal_id=goal_id, goal=goal)
         if feedback_callback is not None:
             self._feedback_callbacks[bytes(goal_id.uuid)] = feedback_callback
-        with ros_fakes.GRAPH.lock:  # the response is taken under this lock: it finds the id (rclpy: self._lock)
+        with GRAPH.lock:  # the response is taken under this lock: it finds the id (rclpy: self._lock)
             future = self._goal.call_async(request)
             self._goal_ids[self._goal._sequence] = goal_id
         return future
@@ -104,7 +108,7 @@ class ActionClient(_Entity):
         kind, data = item
         if kind == "goal":
             sequence, response = data
-            with ros_fakes.GRAPH.lock:
+            with GRAPH.lock:
                 future = self._goal.pending.pop(sequence, None)
             goal_id = self._goal_ids.pop(sequence, None)
             if future is None or goal_id is None:
@@ -116,7 +120,7 @@ class ActionClient(_Entity):
         elif kind in ("cancel", "result"):
             sequence, response = data
             client = self._cancel if kind == "cancel" else self._result
-            with ros_fakes.GRAPH.lock:
+            with GRAPH.lock:
                 future = client.pending.pop(sequence, None)
             if future is not None:
                 future.set_result(response)

@@ -7,6 +7,8 @@ import sys
 import types
 
 import pytest
+import ros_fake_msgs
+import ros_fake_qos
 import ros_fakes
 from hypothesis import given
 from hypothesis import strategies as st
@@ -36,7 +38,7 @@ from execution_engine.transport.ros_convert import (
     user_overrides,
 )
 
-converter = MessageConverter(ros_fakes.resolve)
+converter = MessageConverter(ros_fake_msgs.resolve)
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 names = st.text(max_size=12)
@@ -112,7 +114,7 @@ def test_sequences_and_nested_messages_take_the_shapes_rclpy_uses() -> None:
         header=msgs.Header(msgs.Time(12, 500), "WAIST"), name=("CHEST_JOINT0", "HEAD_JOINT0"), position=(0.1, -0.2)
     )
     ros = converter.to_ros(state)
-    assert isinstance(ros.header, ros_fakes.Header) and isinstance(ros.header.stamp, ros_fakes.Time)
+    assert isinstance(ros.header, ros_fake_msgs.Header) and isinstance(ros.header.stamp, ros_fake_msgs.Time)
     assert (ros.header.stamp.sec, ros.header.stamp.nanosec, ros.header.frame_id) == (12, 500, "WAIST")
     assert ros.name == ["CHEST_JOINT0", "HEAD_JOINT0"]
     assert isinstance(ros.position, array.array) and list(ros.position) == [0.1, -0.2]
@@ -137,19 +139,19 @@ def test_a_value_of_the_wrong_kind_is_refused_naming_its_field() -> None:
 
 
 def test_a_received_message_that_does_not_fit_the_mirror_is_refused_naming_its_field() -> None:
-    ros = ros_fakes.JointState(name=["a"], position=[0.5])
+    ros = ros_fake_msgs.JointState(name=["a"], position=[0.5])
     object.__setattr__(ros, "_name", ["a", 7])  # what a mis-typed peer could deliver
     with pytest.raises(TransportError, match=r"'name\[1\]'"):
         converter.from_ros(msgs.JointState, ros)
     with pytest.raises(TransportError, match="no field 'data'"):
-        converter.from_ros(msgs.String, ros_fakes.Point())
+        converter.from_ros(msgs.String, ros_fake_msgs.Point())
 
 
 def test_an_installed_type_missing_a_mirror_field_is_refused_before_any_message() -> None:
-    stale = ros_fakes.message_class("JointState", {"header": "std_msgs/Header", "name": "sequence<string>"}, {"header": ros_fakes.Header})
+    stale = ros_fake_msgs.message_class("JointState", {"header": "std_msgs/Header", "name": "sequence<string>"}, {"header": ros_fake_msgs.Header})
 
     def resolver(ros_type: str) -> type:
-        return stale if ros_type == "sensor_msgs/msg/JointState" else ros_fakes.resolve(ros_type)
+        return stale if ros_type == "sensor_msgs/msg/JointState" else ros_fake_msgs.resolve(ros_type)
 
     with pytest.raises(TransportError, match="sensor_msgs/msg/JointState.*position, velocity, effort"):
         MessageConverter(resolver).ros_class(msgs.JointState)
@@ -161,7 +163,7 @@ def test_a_ros_byte_travels_as_bytes_of_length_one() -> None:
     ros = converter.to_ros(status)
     assert ros.level == b"\x01" and type(ros.level) is bytes
     assert converter.from_ros(msgs.DiagnosticStatus, ros) == status
-    assert converter.from_ros(msgs.DiagnosticStatus, ros_fakes.DiagnosticStatus(level=bytearray(b"\x03"))).level == b"\x03"
+    assert converter.from_ros(msgs.DiagnosticStatus, ros_fake_msgs.DiagnosticStatus(level=bytearray(b"\x03"))).level == b"\x03"
     for wrong in (1, b"", b"\x00\x01", "1"):
         with pytest.raises(TransportError, match="field 'level': expected one byte"):
             converter.to_ros(msgs.DiagnosticStatus(level=wrong))  # type: ignore[arg-type]
@@ -175,7 +177,7 @@ def test_extra_rosidl_fields_keep_their_defaults() -> None:
 
 def test_service_classes_come_from_the_service_type() -> None:
     service, request, response = converter.service_classes(msgs.Trigger)
-    assert (service, request, response) == (ros_fakes.Trigger, ros_fakes.Trigger.Request, ros_fakes.Trigger.Response)
+    assert (service, request, response) == (ros_fake_msgs.Trigger, ros_fake_msgs.Trigger.Request, ros_fake_msgs.Trigger.Response)
     with pytest.raises(TransportError, match="not a service mirror"):
         converter.service_classes(msgs.String)
 
@@ -184,15 +186,15 @@ def test_every_mirror_names_a_type_of_the_interface_packages(monkeypatch: pytest
     ros_fakes.install(monkeypatch)
     real = MessageConverter()  # the default resolver imports from sys.modules
     for mirror in msgs.MESSAGE_TYPES:
-        assert real.ros_class(mirror) is ros_fakes.resolve(mirror.ROS_TYPE)
+        assert real.ros_class(mirror) is ros_fake_msgs.resolve(mirror.ROS_TYPE)
     for service in msgs.SERVICE_TYPES:
-        assert real.service_classes(service)[0] is ros_fakes.Trigger
+        assert real.service_classes(service)[0] is ros_fake_msgs.Trigger
 
 
 def test_importing_ros_types(monkeypatch: pytest.MonkeyPatch) -> None:
     ros_fakes.install(monkeypatch)
-    assert import_ros_type("std_srvs/srv/Trigger_Response") is ros_fakes.Trigger.Response
-    assert import_ros_type("geometry_msgs/msg/PoseStamped") is ros_fakes.PoseStamped
+    assert import_ros_type("std_srvs/srv/Trigger_Response") is ros_fake_msgs.Trigger.Response
+    assert import_ros_type("geometry_msgs/msg/PoseStamped") is ros_fake_msgs.PoseStamped
     with pytest.raises(TransportError, match="not a ROS interface name"):
         import_ros_type("std_msgs.String")
     with pytest.raises(TransportError, match="has no Strin "):
@@ -204,10 +206,10 @@ def test_importing_ros_types(monkeypatch: pytest.MonkeyPatch) -> None:
 
 # ------------------------------------------------------------------------------------ QoS
 policies = types.SimpleNamespace(
-    QoSProfile=ros_fakes.QoSProfile,
-    ReliabilityPolicy=ros_fakes.ReliabilityPolicy,
-    DurabilityPolicy=ros_fakes.DurabilityPolicy,
-    HistoryPolicy=ros_fakes.HistoryPolicy,
+    QoSProfile=ros_fake_qos.QoSProfile,
+    ReliabilityPolicy=ros_fake_qos.ReliabilityPolicy,
+    DurabilityPolicy=ros_fake_qos.DurabilityPolicy,
+    HistoryPolicy=ros_fake_qos.HistoryPolicy,
 )
 
 
@@ -226,15 +228,15 @@ policies = types.SimpleNamespace(
 )
 def test_named_profiles_map_to_rclpy_policies(qos: QoS, reliability: str, durability: str, depth: int) -> None:
     profile = qos_profile(qos, policies)
-    assert profile.reliability is ros_fakes.ReliabilityPolicy[reliability]
-    assert profile.durability is ros_fakes.DurabilityPolicy[durability]
-    assert profile.history is ros_fakes.HistoryPolicy.KEEP_LAST
+    assert profile.reliability is ros_fake_qos.ReliabilityPolicy[reliability]
+    assert profile.durability is ros_fake_qos.DurabilityPolicy[durability]
+    assert profile.history is ros_fake_qos.HistoryPolicy.KEEP_LAST
     assert profile.depth == depth
 
 
 def test_keep_all_and_missing_policies() -> None:
     profile = qos_profile(QoS(Reliability.RELIABLE, Durability.VOLATILE, History.KEEP_ALL, 0), policies)
-    assert profile.history is ros_fakes.HistoryPolicy.KEEP_ALL
+    assert profile.history is ros_fake_qos.HistoryPolicy.KEEP_ALL
     old = types.SimpleNamespace(**{**vars(policies), "HistoryPolicy": types.SimpleNamespace(KEEP_LAST=1)})
     with pytest.raises(TransportError, match="history policy KEEP_ALL"):
         qos_profile(QoS(history=History.KEEP_ALL, depth=0), old)

@@ -16,7 +16,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import ros_fakes
+import ros_fake_context
+import ros_fake_graph
+import ros_fake_logging
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from scripted_backend import ScriptedBackend
 from test_ros_nodes import SMOKE_APP
@@ -47,7 +49,7 @@ def test_nothing_is_delivered_before_discovery_has_matched_the_endpoints(fake_rc
     """What a real DDS does: a volatile message published before the match is lost."""
 
     async def body(transport: RosTransport) -> None:
-        ros_fakes.GRAPH.match_delay = 0.1
+        ros_fake_graph.GRAPH.match_delay = 0.1
         talker, listener = transport.create_node("talker"), transport.create_node("listener")
         inbox = Inbox()
         sub = listener.create_subscription(String, "/x", inbox, COMMANDS)
@@ -57,7 +59,7 @@ def test_nothing_is_delivered_before_discovery_has_matched_the_endpoints(fake_rc
         await matched(transport, pub, sub)
         pub.publish(String("after the match"))
         assert await inbox.wait(transport.clock) == [String("after the match")]
-        assert ros_fakes.GRAPH.lost[0][0] == "/x"
+        assert ros_fake_graph.GRAPH.lost[0][0] == "/x"
 
     run_real(lambda clock: with_transport(clock, body))
 
@@ -66,7 +68,7 @@ def test_a_cell_started_all_at_once_runs_without_a_single_retry_despite_slow_dis
     fake_rclpy: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
-    ros_fakes.GRAPH.match_delay = 0.3  # every pair of endpoints matches 0.3 s after both exist
+    ros_fake_graph.GRAPH.match_delay = 0.3  # every pair of endpoints matches 0.3 s after both exist
     app = tmp_path / "app.xml"
     app.write_text(SMOKE_APP)
     report, statuses = run_real(lambda clock: run_cell(clock, app))
@@ -352,7 +354,7 @@ def test_a_signal_during_shutdown_is_still_handled(fake_rclpy: Any, monkeypatch:
         await node.clock.sleep(BOUND)
 
     assert run_node("engine", body, ["engine"]) == ExitCode.OK  # not killed by SIGTERM's default action
-    assert not ros_fakes.CONTEXT.ok()
+    assert not ros_fake_context.CONTEXT.ok()
 
 
 # ====================================================================== 6. parameter descriptors
@@ -387,7 +389,7 @@ def test_a_destroyed_nodes_services_leave_the_graph(fake_rclpy: Any) -> None:
         client = engine.create_client(Trigger, "/left_arm/sm/pause")
         assert (await client.call(TriggerRequest(), timeout=BOUND)).success
         machine.destroy()
-        await _until(transport.clock, lambda: not ros_fakes.GRAPH.services.get("/left_arm/sm/pause"))
+        await _until(transport.clock, lambda: not ros_fake_graph.GRAPH.services.get("/left_arm/sm/pause"))
         assert not client.handle.service_is_ready()  # type: ignore[attr-defined]
         assert "/machine" not in transport.node_names() and machine.ros_node.destroyed  # type: ignore[attr-defined]
 
@@ -411,7 +413,7 @@ def test_destroying_a_node_while_its_service_answers_does_not_kill_the_executor(
         machine.destroy()  # the response is still to be sent: the service must outlive it
         release.set()
         assert (await call).success
-        await _until(transport.clock, lambda: not ros_fakes.GRAPH.services.get("/left_arm/sm/stop"))
+        await _until(transport.clock, lambda: not ros_fake_graph.GRAPH.services.get("/left_arm/sm/stop"))
         assert transport.spin_error is None and transport._thread.is_alive()
 
     run_real(lambda clock: with_transport(clock, body))
@@ -425,9 +427,9 @@ def test_logs_reach_rosout_and_honour_log_level(fake_rclpy: Any) -> None:
         logging.getLogger("robot_bridges.nextage_sim").warning("a module speaks")
 
     assert run_node("engine", body, ["engine"]) == ExitCode.OK
-    assert ("engine", 20, "hello from engine") in ros_fakes.ROSOUT  # and several severities from one handler
-    assert not [r for r in ros_fakes.ROSOUT if r[2] == "details"]
-    assert ("engine", 30, "[robot_bridges.nextage_sim] a module speaks") in ros_fakes.ROSOUT
-    ros_fakes.ROSOUT.clear()
+    assert ("engine", 20, "hello from engine") in ros_fake_logging.ROSOUT  # and several severities from one handler
+    assert not [r for r in ros_fake_logging.ROSOUT if r[2] == "details"]
+    assert ("engine", 30, "[robot_bridges.nextage_sim] a module speaks") in ros_fake_logging.ROSOUT
+    ros_fake_logging.ROSOUT.clear()
     assert run_node("engine", body, ["engine", "--ros-args", "--log-level", "debug"]) == ExitCode.OK
-    assert ("engine", 10, "details") in ros_fakes.ROSOUT
+    assert ("engine", 10, "details") in ros_fake_logging.ROSOUT

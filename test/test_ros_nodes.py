@@ -14,7 +14,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import ros_fakes
+import ros_fake_context
+import ros_fake_msgs
+import ros_fake_qos
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
 from core_functions.robots import NEXTAGE_OPEN
@@ -50,7 +52,7 @@ def private_data_home(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def stopped_cleanly() -> bool:
-    return not ros_fakes.CONTEXT.ok() and ros_fakes.CONTEXT.shutdown_count == 1
+    return not ros_fake_context.CONTEXT.ok() and ros_fake_context.CONTEXT.shutdown_count == 1
 
 
 # ================================================================================ entry points
@@ -128,12 +130,12 @@ def test_a_dead_executor_is_an_internal_error(fake_rclpy: Any) -> None:
             raise RuntimeError("callback defect")
 
         ros_node = node.ros_node  # type: ignore[attr-defined]
-        ros_node.create_subscription(ros_fakes.String, "/raw", broken, ros_fakes.QoSProfile(depth=1))
-        raw = ros_node.create_publisher(ros_fakes.String, "/raw", ros_fakes.QoSProfile(depth=1))
+        ros_node.create_subscription(ros_fake_msgs.String, "/raw", broken, ros_fake_qos.QoSProfile(depth=1))
+        raw = ros_node.create_publisher(ros_fake_msgs.String, "/raw", ros_fake_qos.QoSProfile(depth=1))
         deadline = node.clock.now() + BOUND
         while raw.get_subscription_count() == 0 and node.clock.now() < deadline:  # discovery
             await node.clock.sleep(0.005)
-        raw.publish(ros_fakes.String(data="x"))
+        raw.publish(ros_fake_msgs.String(data="x"))
         await node.clock.sleep(BOUND)  # the dead executor ends the process long before this
 
     assert run_node("engine", body, ["engine"]) == ExitCode.INTERNAL

@@ -10,7 +10,7 @@ import asyncio
 from typing import Any
 
 import pytest
-import ros_fakes
+import ros_fake_msgs
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
@@ -32,7 +32,7 @@ from execution_engine.transport.ros import RosTransport
 from execution_engine.transport.ros_convert import MessageConverter
 
 BOUND = 5.0  # s: only reached when something hangs
-converter = MessageConverter(ros_fakes.resolve)
+converter = MessageConverter(ros_fake_msgs.resolve)
 
 TF_SAMPLE = TFMessage(
     (
@@ -56,26 +56,26 @@ DIAGNOSTIC_SAMPLE = DiagnosticArray(
 
 def test_tf_and_diagnostics_take_the_shapes_rosidl_gives_them() -> None:
     tf = converter.to_ros(TF_SAMPLE)
-    assert isinstance(tf, ros_fakes.TFMessage) and isinstance(tf.transforms, list)
-    assert all(isinstance(t, ros_fakes.TransformStamped) for t in tf.transforms)
+    assert isinstance(tf, ros_fake_msgs.TFMessage) and isinstance(tf.transforms, list)
+    assert all(isinstance(t, ros_fake_msgs.TransformStamped) for t in tf.transforms)
     assert tf.transforms[1].transform.rotation.w == 0.5 and tf.transforms[1].child_frame_id == "drill_1"
     assert converter.from_ros(TFMessage, tf) == TF_SAMPLE
 
     diagnostics = converter.to_ros(DIAGNOSTIC_SAMPLE)
     status = diagnostics.status[0]
-    assert status.level == ros_fakes.DiagnosticStatus.ERROR == b"\x02" and isinstance(status.values[0], ros_fakes.KeyValue)
+    assert status.level == ros_fake_msgs.DiagnosticStatus.ERROR == b"\x02" and isinstance(status.values[0], ros_fake_msgs.KeyValue)
     assert converter.from_ros(DiagnosticArray, diagnostics) == DIAGNOSTIC_SAMPLE
-    assert ros_fakes.DiagnosticStatus().level == DiagnosticStatus.OK  # rosidl's default: bytes([0])
+    assert ros_fake_msgs.DiagnosticStatus().level == DiagnosticStatus.OK  # rosidl's default: bytes([0])
 
 
 def test_a_level_that_is_not_one_byte_is_refused_with_the_field_named() -> None:
     for wrong in (2, b"", b"\x01\x02"):
         with pytest.raises(TransportError, match=r"field 'status\[0\]\.level': expected one byte"):
             converter.to_ros(DiagnosticArray(status=(DiagnosticStatus(level=wrong),)))  # type: ignore[arg-type]
-    received = ros_fakes.DiagnosticArray(status=[ros_fakes.DiagnosticStatus(level=b"\x01")])
+    received = ros_fake_msgs.DiagnosticArray(status=[ros_fake_msgs.DiagnosticStatus(level=b"\x01")])
     assert converter.from_ros(DiagnosticArray, received).status[0].level == DiagnosticStatus.WARN
     with pytest.raises(AssertionError, match="'level' field must be of type 'bytes'"):
-        ros_fakes.DiagnosticStatus(level=1)  # what rosidl does with an int
+        ros_fake_msgs.DiagnosticStatus(level=1)  # what rosidl does with an int
 
 
 def test_tf_static_and_diagnostics_cross_the_rclpy_adapter(fake_rclpy: Any) -> None:

@@ -12,7 +12,11 @@ from collections.abc import Callable, Coroutine
 from typing import Any, TypeVar
 
 import pytest
-import ros_fakes
+import ros_fake_callbacks
+import ros_fake_context
+import ros_fake_msgs
+import ros_fake_parameters
+import ros_fake_qos
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
@@ -93,7 +97,7 @@ def test_a_topic_keeps_its_order_across_executor_threads(fake_rclpy: Any) -> Non
         inbox = Inbox()
         sub = b.create_subscription(String, "/events", lambda m: inbox(m.data), COMMANDS)
         # rclpy runs a reentrant entity's callbacks concurrently; only an exclusive group keeps order.
-        assert isinstance(sub.handle.callback_group, ros_fakes.MutuallyExclusiveCallbackGroup)  # type: ignore[attr-defined]
+        assert isinstance(sub.handle.callback_group, ros_fake_callbacks.MutuallyExclusiveCallbackGroup)  # type: ignore[attr-defined]
         pub = a.create_publisher(String, "/events", COMMANDS)
         await matched(transport, pub, sub)
         for i in range(40):
@@ -109,7 +113,7 @@ def test_qos_reaches_rclpy_and_latched_state_reaches_a_late_subscriber(fake_rclp
         pub = machine.create_publisher(String, "/left_arm/sm/state", LATCHED)
         pub.publish(String("Ready"))
         rclpy_pub = pub.handle  # type: ignore[attr-defined]
-        assert rclpy_pub.qos.durability is ros_fakes.DurabilityPolicy.TRANSIENT_LOCAL and rclpy_pub.qos.depth == 1
+        assert rclpy_pub.qos.durability is ros_fake_qos.DurabilityPolicy.TRANSIENT_LOCAL and rclpy_pub.qos.depth == 1
         inbox = Inbox()
         transport.create_node("viewer").create_subscription(String, "/left_arm/sm/state", inbox, LATCHED)
         assert await inbox.wait(transport.clock) == [String("Ready")]
@@ -149,12 +153,12 @@ def test_a_message_that_cannot_be_converted_is_reported_not_delivered(fake_rclpy
         faults, inbox = Inbox(), Inbox()
         node.fault_handler = faults
         node.create_subscription(JointState, "/joint_states", inbox, SENSOR)
-        garbled = ros_fakes.JointState(name=["a"])
+        garbled = ros_fake_msgs.JointState(name=["a"])
         object.__setattr__(garbled, "_name", [7])  # what a mis-typed peer could deliver
-        raw = node.ros_node.create_publisher(ros_fakes.JointState, "/joint_states", ros_fakes.QoSProfile(depth=5))
+        raw = node.ros_node.create_publisher(ros_fake_msgs.JointState, "/joint_states", ros_fake_qos.QoSProfile(depth=5))
         await raw_matched(transport.clock, raw.get_subscription_count)
         raw.publish(garbled)
-        raw.publish(ros_fakes.JointState(name=["b"]))
+        raw.publish(ros_fake_msgs.JointState(name=["b"]))
         assert [m.name for m in await inbox.wait(transport.clock)] == [("b",)]
         where, error = faults.items[0]
         assert where == "subscription /joint_states" and isinstance(error, TransportError) and "name[0]" in str(error)
@@ -196,9 +200,9 @@ def test_a_handler_that_calls_another_service_does_not_starve_its_own_answer(fak
         served = machine.create_service(Trigger, "/left_arm/sm/pause", machine_pause)
         to_machine = engine.create_client(Trigger, "/left_arm/sm/pause")
         # The client's responses are taken while a thread waits in a handler: a reentrant group.
-        assert isinstance(to_machine.handle.callback_group, ros_fakes.ReentrantCallbackGroup)  # type: ignore[attr-defined]
+        assert isinstance(to_machine.handle.callback_group, ros_fake_callbacks.ReentrantCallbackGroup)  # type: ignore[attr-defined]
         # Each service its own exclusive group: it can be destroyed between requests (see ros.py).
-        assert isinstance(served.handle.callback_group, ros_fakes.MutuallyExclusiveCallbackGroup)  # type: ignore[attr-defined]
+        assert isinstance(served.handle.callback_group, ros_fake_callbacks.MutuallyExclusiveCallbackGroup)  # type: ignore[attr-defined]
 
         async def engine_pause(request: TriggerRequest) -> TriggerResponse:
             answer = await to_machine.call(TriggerRequest(), timeout=BOUND)
@@ -298,7 +302,7 @@ def test_parameters_come_from_ros_arguments_and_code_and_are_read_once(fake_rclp
             assert node.undeclared_overrides() == ["sped"]
             assert node.ros_node.get_parameter("state_period").value == 0.05
             assert node.ros_node.describe_parameter("state_period").description == "publish period"  # ros2 param describe
-            refused = node.ros_node.set_parameters([ros_fakes.Parameter("speed", value=5.0)])[0]
+            refused = node.ros_node.set_parameters([ros_fake_parameters.Parameter("speed", value=5.0)])[0]
             assert not refused.successful and "read at start-up" in refused.reason
             with pytest.raises(TransportError, match="parameter 'sped' must be true or false, got double 3.0"):
                 node.declare_parameter("sped", True)
@@ -306,7 +310,7 @@ def test_parameters_come_from_ros_arguments_and_code_and_are_read_once(fake_rclp
             await transport.shutdown()
 
     run_real(main)
-    assert ros_fakes.CONTEXT.init_kwargs["signal_handler_options"] is ros_fakes.SignalHandlerOptions.NO
+    assert ros_fake_context.CONTEXT.init_kwargs["signal_handler_options"] is ros_fake_context.SignalHandlerOptions.NO
 
 
 # ===================================================================================== lifecycle
@@ -325,7 +329,7 @@ def test_shutdown_stops_the_executor_destroys_nodes_and_rclpy(fake_rclpy: Any) -
     transport, node = run_real(main)
     assert not transport._thread.is_alive()
     assert node.ros_node.destroyed
-    assert not ros_fakes.CONTEXT.ok() and ros_fakes.CONTEXT.shutdown_count == 1
+    assert not ros_fake_context.CONTEXT.ok() and ros_fake_context.CONTEXT.shutdown_count == 1
 
 
 def test_rclpy_initialised_by_someone_else_is_left_running(fake_rclpy: Any) -> None:
@@ -337,7 +341,7 @@ def test_rclpy_initialised_by_someone_else_is_left_running(fake_rclpy: Any) -> N
         await transport.shutdown()
 
     run_real(main)
-    assert ros_fakes.CONTEXT.ok() and ros_fakes.CONTEXT.init_count == 1
+    assert ros_fake_context.CONTEXT.ok() and ros_fake_context.CONTEXT.init_count == 1
     fake_rclpy.shutdown()
 
 

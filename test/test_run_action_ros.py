@@ -4,11 +4,19 @@ send_goal`` reaches an engine started with ``ros2 run`` as it does one on ``--tr
 On the fake rclpy, whose action classes are built from the same ``.action`` file as rosidl's."""
 from __future__ import annotations
 
+import asyncio
+import threading
 from typing import Any
 
-import ros_fakes
+import ros_fake_graph
+import ros_fake_msgs
+from crossing_cell import CROSSING, WAIT_OPERATION, CollisionWatch, start_nextage_cell
+from ros_fake_executor import FakeExecutor
+from ros_fake_node import FakeNode
+from ros_fake_qos import QoSProfile
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from test_ros_transport import BOUND, run_real, with_transport
+from test_run_action import TINY
 
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplicationGoal, SendGoal
@@ -27,7 +35,7 @@ BAD_APP = """<?xml version="1.0"?>
 def test_an_actions_parts_resolve_to_rosidl_classes(fake_rclpy: Any) -> None:
     """Where rosidl keeps each part rcl_action puts on the wire: Goal on the class, the services
     and the feedback message in its Impl."""
-    package = ros_fakes.INTERFACE_MODULES["dual_arm_executive_interfaces.action"]["RunApplication"]
+    package = ros_fake_msgs.INTERFACE_MODULES["dual_arm_executive_interfaces.action"]["RunApplication"]
     base = "dual_arm_executive_interfaces/action/RunApplication"
     assert import_ros_type(f"{base}_Goal") is package.Goal
     assert import_ros_type(f"{base}_SendGoal") is package.Impl.SendGoalService
@@ -48,7 +56,7 @@ def test_the_engine_under_rclpy_serves_run_application(fake_rclpy: Any) -> None:
         answer = await result.call(GetResult.Request(goal_id), timeout=BOUND)
         empty = await send.call(SendGoal.Request(UUID(tuple([7] * 16)), RunApplicationGoal()), timeout=BOUND)
         # the service rclpy was given: rosidl's class of the action's SendGoal
-        served = ros_fakes.GRAPH.services[f"{base}/send_goal"][0]
+        served = ros_fake_graph.GRAPH.services[f"{base}/send_goal"][0]
         return server, (accepted, answer), empty.accepted, served.srv_type
 
     server, (accepted, answer), empty_accepted, srv_type = run_real(lambda clock: with_transport(clock, body))
@@ -63,8 +71,6 @@ def test_get_result_waits_for_the_run_however_long_not_the_handler_timeout(fake_
     """rclpy answers a request from its callback, so the transport bounds how long a handler may
     take (``handler_timeout``); get_result waits for the whole run on purpose and is exempt.  Here
     the run outlasts the bound: no machine answers within the engine's startup_timeout."""
-    from test_run_action import TINY
-
     async def body(transport: RosTransport) -> tuple[Any, float]:
         engine_node = transport.create_node("execution_engine", parameters={"startup_timeout": 1.5})
         serve_goals(engine_node, ExecutionEngine(engine_node))
@@ -89,14 +95,8 @@ def test_rclpy_sees_its_goal_run_cancels_it_and_the_next_goal_goes_back_safely_f
     goal EXECUTING (the status follows the answer), so its Ctrl-C cancels it.  The next goal starts
     from where the cancel left the robot -- the left hand in the middle -- and is brought back by
     the way the dry run proved, then runs: no two bodies ever touch on joint_states."""
-    import asyncio
-    import threading
-
-    from crossing_cell import CROSSING, WAIT_OPERATION, CollisionWatch, start_nextage_cell
-    from ros_fakes import FakeExecutor, FakeNode, QoSProfile
-
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))  # the machines' default trajectory database
-    action_type = ros_fakes.INTERFACE_MODULES["dual_arm_executive_interfaces.action"]["RunApplication"]
+    action_type = ros_fake_msgs.INTERFACE_MODULES["dual_arm_executive_interfaces.action"]["RunApplication"]
     ActionClient = __import__("rclpy.action", fromlist=["ActionClient"]).ActionClient
 
     async def wait_done(clock: Any, future: Any, bound: float) -> Any:
@@ -111,7 +111,7 @@ def test_rclpy_sees_its_goal_run_cancels_it_and_the_next_goal_goes_back_safely_f
         tasks = start_nextage_cell(transport, wait_for_goals=True)
         tool = FakeNode("ros2_action_send_goal")  # the ROS 2 tool: its own node and executor
         watch = CollisionWatch()
-        tool.create_subscription(ros_fakes.JointState, "/joint_states", watch, QoSProfile(depth=10))
+        tool.create_subscription(ros_fake_msgs.JointState, "/joint_states", watch, QoSProfile(depth=10))
         client = ActionClient(tool, action_type, f"/{ACTION_NAME}")
         executor = FakeExecutor()
         executor.add_node(tool)

@@ -10,7 +10,7 @@ import random
 from typing import Any
 
 import pytest
-import ros_fakes
+import ros_fake_msgs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from machine_harness import Harness
@@ -256,7 +256,7 @@ def test_the_rclpy_side_receives_the_built_interface_types(fake_rclpy: Any) -> N
         status = machine.create_publisher(typed.MachineStatusMsg, "/left_arm/sm/status", EVENTS)
         state.publish(typed.machine_state("left_arm", "Ready", transport.clock))
         ros_state = state.handle.published[-1]  # type: ignore[attr-defined]
-        assert type(ros_state) is ros_fakes.INTERFACE_MODULES["dual_arm_executive_interfaces.msg"]["MachineState"]
+        assert type(ros_state) is ros_fake_msgs.INTERFACE_MODULES["dual_arm_executive_interfaces.msg"]["MachineState"]
         assert (ros_state.group, ros_state.state) == ("left_arm", "Ready") and ros_state.header.stamp.sec > 1_600_000_000
         inbox = Inbox()
         viewer = transport.create_node("viewer")
@@ -319,7 +319,7 @@ def test_sync_cell_and_located_cross_both_ros_wires_intact(sample: Any) -> None:
     from execution_engine.transport.ros_convert import MessageConverter
 
     msg = typed.to_msg(sample, CLOCK)
-    ros = MessageConverter(ros_fakes.resolve)
+    ros = MessageConverter(ros_fake_msgs.resolve)
     over_ros = ros.from_ros(type(msg), ros.to_ros(msg))
     dds = DdsConverter(InterfaceRegistry())
     over_dds = dds.from_wire(type(msg), dds.wire_class(type(msg)).deserialize(dds.to_wire(msg).serialize()))

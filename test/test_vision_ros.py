@@ -11,7 +11,7 @@ import asyncio
 
 import numpy as np
 import pytest
-import ros_fakes
+import ros_fake_msgs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -124,7 +124,7 @@ FRAME = Frame(np.arange(12 * 7, dtype=np.uint8).reshape(7, 12), Intrinsics(12, 7
 
 
 def test_image_and_camera_info_cross_the_rosidl_conversion_unchanged() -> None:
-    converter = MessageConverter(ros_fakes.resolve)
+    converter = MessageConverter(ros_fake_msgs.resolve)
     image, info = to_messages("cam", FRAME)
     ros_image, ros_info = converter.to_ros(image), converter.to_ros(info)
     assert isinstance(ros_image.data, array.array) and ros_image.data.typecode == "B"
