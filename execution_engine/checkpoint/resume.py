@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.checkpoint.store import SUCCEEDED, CheckpointError, CheckpointStore
-from execution_engine.engine.engine import ApplicationAborted
+from execution_engine.engine.dispatch import ApplicationAborted
 from execution_engine.engine.operator import CONSOLE_KEYS
 from execution_engine.recorder.recorder import file_digest
 from execution_engine.trace_report import read_trace

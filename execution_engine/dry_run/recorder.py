@@ -14,7 +14,7 @@ from core_functions.robots import RobotModel
 from execution_engine.app_model.model import Application, Call
 from execution_engine.clock import Clock
 from execution_engine.dry_run.report import Finding, Span, TimeBase
-from execution_engine.engine.flags import FlagWait
+from execution_engine.engine.waits import FlagWait
 
 #: Where a group is: (operation id, function) of the function its machine runs, or None.
 CallLocator = Callable[[str], tuple[str, str] | None]

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from execution_engine.app_model.diagnostics import Diagnostic, capped
-from execution_engine.engine.flags import FlagWait, costliest, wait_totals
+from execution_engine.engine.waits import FlagWait, costliest, wait_totals
 
 #: How the timeline's seconds were measured: the application's simulated clock (a simulator that
 #: runs on it: every wait of the engine and the machines is in it too), or the robot's own cycles

@@ -22,7 +22,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Protocol
 
 from app_functions.registry import full_catalog
@@ -30,8 +30,10 @@ from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from execution_engine.engine.commands import OperatorCommands
+from execution_engine.engine.dispatch import ApplicationAborted, Dispatch
 from execution_engine.engine.faults import verdict
-from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard, run_groups
+from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard
+from execution_engine.engine.flags_mode import FlagsMode
 from execution_engine.engine.group_link import GroupLink
 from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
@@ -59,20 +61,6 @@ from execution_engine.transport.wire import (
 )
 
 
-@dataclass
-class _Dispatch:
-    """A function sent to a group and not yet answered."""
-
-    call: Call
-    request: SmRequest
-    future: asyncio.Future[SmResult]
-    deadline: float
-
-
-class ApplicationAborted(Exception):
-    """The run cannot go on (policy exhausted, operator stop); the report says why."""
-
-
 class ResumePoint(Protocol):
     """Where a resumed run starts (:class:`execution_engine.checkpoint.resume.ResumePlan`)."""
 
@@ -81,7 +69,7 @@ class ResumePoint(Protocol):
     async def first_operation(self, engine: ExecutionEngine, operation: Operation) -> Operation: ...
 
 
-class ExecutionEngine(OperatorCommands):
+class ExecutionEngine(OperatorCommands, FlagsMode):
     """One engine node; runs one application at a time."""
 
     def __init__(
@@ -163,11 +151,14 @@ class ExecutionEngine(OperatorCommands):
             self._cell_pub.publish(typed.to_msg(snapshot, self.clock))
             self._cell_frames.publish_cell(snapshot, app.robot)
         try:
+            import sys, time as _t; print(f"EDBG start {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
             await self._await_machines()
+            print(f"EDBG machines {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
             await self._await_start()
+            print(f"EDBG started {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
             self._set_state("running")
-            if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags.py)
-                await run_groups(self, app)
+            if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags_mode.py)
+                await self._run_groups(app)
                 report.operations_done = len(app.operations)
             for index, operation in enumerate(app.operations if app.sync != "flags" else ()):
                 if resume is not None and index < resume.index:
@@ -189,8 +180,10 @@ class ExecutionEngine(OperatorCommands):
             report.outcome = "stopped" if self._stop_reason is not None else "failed"
             report.message = str(abort)
         self._set_state("stopping", report.message)  # why it stops: the operator's stop, the failure, or nothing to say
+        import sys, time as _t; print(f"EDBG stopping {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
+        print(f"EDBG end {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
         self.zones.close()
         for group, seconds in self.zones.waited().items():  # a zone wait falls inside a function: idle, not busy
             report.group_busy[group] = max(0.0, report.group_busy.get(group, 0.0) - seconds)
@@ -296,7 +289,7 @@ class ExecutionEngine(OperatorCommands):
             )
         return requests
 
-    def _dispatch(self, operation: Operation, calls: dict[str, Call], attempt: int, only: str | None = None) -> dict[str, _Dispatch]:
+    def _dispatch(self, operation: Operation, calls: dict[str, Call], attempt: int, only: str | None = None) -> dict[str, Dispatch]:
         """Send each call's request (``only``: just that group's, the others only share its barrier key)."""
         sent = {}
         deadline = self.clock.now() + self.function_timeout
@@ -308,7 +301,7 @@ class ExecutionEngine(OperatorCommands):
                 future = self.flags.result(request, group, self.catalog, self.app)
             else:
                 future = self.links[group].send(request)
-            sent[group] = _Dispatch(calls[group], request, future, deadline)
+            sent[group] = Dispatch(calls[group], request, future, deadline)
             self.zones.register(request.id, operation.id, group)
             self._progress[group] = GroupProgress(self.links[group].state, operation.id, request.function)
         self._publish_status()
@@ -352,7 +345,7 @@ class ExecutionEngine(OperatorCommands):
             if not await self.links[group].wait_state((READY,), self.service_timeout):
                 raise ApplicationAborted(f"{group} did not return to Ready after its result (it is in {self.links[group].state})")
 
-    async def _abandon(self, pending: dict[str, _Dispatch], group: str, why: str) -> None:
+    async def _abandon(self, pending: dict[str, Dispatch], group: str, why: str) -> None:
         dispatch = pending.pop(group)
         self.links[group].forget(dispatch.request.id)
         await self.links[group].command("stop")
@@ -361,7 +354,7 @@ class ExecutionEngine(OperatorCommands):
         raise ApplicationAborted(f"{group}: {dispatch.request.function}: {why}")
 
     # ------------------------------------------------------------------- error policy
-    async def _on_failure(self, operation: Operation, pending: dict[str, _Dispatch], group: str, result: SmResult) -> None:
+    async def _on_failure(self, operation: Operation, pending: dict[str, Dispatch], group: str, result: SmResult) -> None:
         """Apply the application's error policy to a failed function (and its sync partners)."""
         assert self.app is not None and self.report is not None
         dispatch = pending[group]
@@ -424,7 +417,7 @@ class ExecutionEngine(OperatorCommands):
         for group in groups:
             await self.links[group].wait_state((PAUSE, READY, ERROR_HANDLING), self.service_timeout)
 
-    async def _collect(self, failed: dict[str, _Dispatch], first: str) -> None:
+    async def _collect(self, failed: dict[str, Dispatch], first: str) -> None:
         """Wait for the failed partners' own results (they fail through the barrier)."""
         for group, dispatch in failed.items():
             if group == first or dispatch.future.done():
@@ -434,7 +427,7 @@ class ExecutionEngine(OperatorCommands):
             except asyncio.TimeoutError:
                 await self.links[group].command("stop")
 
-    async def _retry(self, operation: Operation, pending: dict[str, _Dispatch], failed: dict[str, _Dispatch], attempt: int) -> None:
+    async def _retry(self, operation: Operation, pending: dict[str, Dispatch], failed: dict[str, Dispatch], attempt: int) -> None:
         for group in failed:
             link = self.links[group]
             if link.state == ERROR_HANDLING:
@@ -456,7 +449,7 @@ class ExecutionEngine(OperatorCommands):
             operation = self._operation.id if self._operation else None
             self._publish_event(EngineEvent("state", self.clock.now(), "running", operation, from_state="running", message=message))
 
-    async def _stop_groups(self, groups: list[str], pending: dict[str, _Dispatch]) -> None:
+    async def _stop_groups(self, groups: list[str], pending: dict[str, Dispatch]) -> None:
         """Stop running groups and wait (bounded) for their preempted results."""
         for group in groups:
             await self.links[group].command("stop")

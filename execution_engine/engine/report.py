@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from core_functions.printable import printable
-from execution_engine.engine.flags import FlagWait, costliest, wait_totals
+from execution_engine.engine.waits import FlagWait, costliest, wait_totals
 
 RunOutcome = Literal["finished", "failed", "stopped"]
 StepOutcome = Literal["done", "skipped", "failed"]

@@ -27,7 +27,7 @@ from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application
 from execution_engine.app_model.zones import ENGINE, call_zones, parse_key
 from execution_engine.clock import Clock
-from execution_engine.engine.flags import FlagWait
+from execution_engine.engine.waits import FlagWait
 from execution_engine.transport import codec, typed
 from execution_engine.transport.port import Node
 from execution_engine.transport.qos import COMMANDS
