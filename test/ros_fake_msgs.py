@@ -14,6 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from execution_engine.transport.idl import interface_roots
+from execution_engine.transport.mirrors import registry
+
 # ================================================================================= messages
 _DEFAULTS: dict[str, Callable[[], Any]] = {
     "string": str,
@@ -236,9 +239,6 @@ def _rosidl_package(package: str, known: dict[str, type]) -> dict[str, dict[str,
     """Classes of ``package`` as rosidl generates them from its .msg/.srv files: field types named as
     ``get_fields_and_field_types`` names them (``string``, ``uint32``, ``sequence<pkg/Name>``),
     nested messages by their classes; ``known`` holds the fake classes of the packages it uses."""
-    from execution_engine.transport.idl import interface_roots
-    from execution_engine.transport.mirrors import registry
-
     folder = next(root / package for root in interface_roots() if (root / package).is_dir())
     classes: dict[str, type] = {}
     built: dict[str, type] = {}  # every class made, by ROS type: one class per type, as rosidl has
@@ -314,13 +314,27 @@ for _action in INTERFACE_MODULES["dual_arm_executive_interfaces.action"].values(
     _action.Impl.GoalStatusMessage = INTERFACE_MODULES["action_msgs.msg"]["GoalStatusArray"]
 
 
+#: Where rosidl's Python class of an action keeps each part rcl_action puts on the wire (written out here, not
+#: taken from execution_engine.transport.ros_convert, so that the fake checks the transport's own table).
+ACTION_LAYOUT: dict[str, tuple[str, ...]] = {
+    "Goal": ("Goal",),
+    "Result": ("Result",),
+    "Feedback": ("Feedback",),
+    "FeedbackMessage": ("Impl", "FeedbackMessage"),
+    "SendGoal": ("Impl", "SendGoalService"),
+    "SendGoal_Request": ("Impl", "SendGoalService", "Request"),
+    "SendGoal_Response": ("Impl", "SendGoalService", "Response"),
+    "GetResult": ("Impl", "GetResultService"),
+    "GetResult_Request": ("Impl", "GetResultService", "Request"),
+    "GetResult_Response": ("Impl", "GetResultService", "Response"),
+}
+
+
 def resolve(ros_type: str) -> type:
     """A resolver over the fake interface packages (what import_ros_type does with real ones)."""
-    from execution_engine.transport.ros_convert import _ACTION_PARTS
-
     package, kind, name = ros_type.split("/")
     service, _, part = name.partition("_")
     cls = INTERFACE_MODULES[f"{package}.{kind}"][service if part else name]
-    for attribute in (_ACTION_PARTS[part] if kind == "action" else (part,) if part else ()):
+    for attribute in (ACTION_LAYOUT[part] if kind == "action" else (part,) if part else ()):
         cls = getattr(cls, attribute)
     return cls  # type: ignore[no-any-return]
