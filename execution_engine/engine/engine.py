@@ -151,11 +151,8 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
             self._cell_pub.publish(typed.to_msg(snapshot, self.clock))
             self._cell_frames.publish_cell(snapshot, app.robot)
         try:
-            import sys, time as _t; print(f"EDBG start {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
             await self._await_machines()
-            print(f"EDBG machines {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
             await self._await_start()
-            print(f"EDBG started {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
             self._set_state("running")
             if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags_mode.py)
                 await self._run_groups(app)
@@ -180,10 +177,8 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
             report.outcome = "stopped" if self._stop_reason is not None else "failed"
             report.message = str(abort)
         self._set_state("stopping", report.message)  # why it stops: the operator's stop, the failure, or nothing to say
-        import sys, time as _t; print(f"EDBG stopping {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
         report.finished_cleanly = await self._end_all()
         report.t_end = self.clock.now()
-        print(f"EDBG end {self.clock.now():.3f} {_t.monotonic():.4f}", file=sys.stderr, flush=True)
         self.zones.close()
         for group, seconds in self.zones.waited().items():  # a zone wait falls inside a function: idle, not busy
             report.group_busy[group] = max(0.0, report.group_busy.get(group, 0.0) - seconds)
