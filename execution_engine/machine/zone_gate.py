@@ -15,23 +15,48 @@ arm gets in as soon as this one is out, not when its function ends.  Synchronise
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
+from core_functions.cell_index import CellIndex
 from core_functions.geometry import Pose
 from core_functions.primitives import ExecuteTrajectory, MotionResult, MoveCartesian, MoveJoints, MoveRelative, RecordTrajectory
 from execution_engine.app_model.zones import ENGINE, ZONE_KIND, inside_box, zone_key
-
-if TYPE_CHECKING:
-    from execution_engine.machine.context import MachineContext
+from execution_engine.clock import Clock
+from execution_engine.machine.function_run import FunctionRun
+from execution_engine.transport.wire import SyncMessage
 
 _MOVES = (MoveJoints, MoveCartesian, MoveRelative, RecordTrajectory, ExecuteTrajectory)
 Box = tuple[Pose, tuple[float, float, float]]
 
 
+class Resending(Protocol):
+    """How often an unanswered announcement is repeated (machine/context.py's MachineConfig)."""
+
+    @property
+    def resend_interval(self) -> float: ...
+
+
+class GateMachine(Protocol):
+    """What the gate reads of its group machine (machine/context.py's MachineContext), and how it announces."""
+
+    @property
+    def cell(self) -> CellIndex | None: ...
+    @property
+    def run(self) -> FunctionRun | None: ...
+    @property
+    def clock(self) -> Clock: ...
+    @property
+    def config(self) -> Resending: ...
+    @property
+    def sync_board(self) -> dict[str, dict[str, SyncMessage]]: ...
+
+    def send_sync(self, key: str, event: str) -> None: ...
+
+
 class ZoneGate:
     """Which zones this group holds during its current function, and the asking for more."""
 
-    def __init__(self, ctx: MachineContext) -> None:
+    def __init__(self, ctx: GateMachine) -> None:
         self.ctx = ctx
         self.tcp: Pose | None = None  # where the last motion left the TCP (world)
         self._request = ""  # the function (request id) the state below belongs to

@@ -7,13 +7,10 @@ from __future__ import annotations
 
 import ctypes
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from execution_engine.transport import dds_graph as graph
 from execution_engine.transport.port import TransportError
-
-if TYPE_CHECKING:
-    from execution_engine.transport.dds import DdsTransport
 
 TAKE_LIMIT = 10_000  # samples taken in one handler call; the rest wait for the next
 FAILURE_LIMIT = 1000  # undecodable samples in a row before a handler call gives up until the next
@@ -27,10 +24,20 @@ def delete(entity: Any) -> None:
         pass
 
 
+class Rejecting(Protocol):
+    """What a :class:`Taker` needs of its transport (dds.py's DdsTransport): the cyclonedds modules, and
+    where a sample that does not decode is counted and told."""
+
+    @property
+    def dds(self) -> Any: ...
+
+    def reject(self, topic: str, why: str) -> None: ...
+
+
 class Taker:
     """Takes samples one by one (on the waiter's thread or the loop), so a bad one costs only itself."""
 
-    def __init__(self, transport: DdsTransport, topic: str) -> None:
+    def __init__(self, transport: Rejecting, topic: str) -> None:
         self.transport = transport
         self.topic = topic
 
@@ -86,7 +93,7 @@ def matched_handles(entity: Any, *, subscriptions: bool) -> list[int]:
     IndexError in the caller.  Here the count Cyclone answers is checked against the room given,
     and asked again with more room.
     """
-    from cyclonedds.internal import dds_c_t
+    from cyclonedds.internal import dds_c_t  # optional: pip extra 'dds'; only a DDS transport has entities
 
     call = entity._get_matched_subscriptions if subscriptions else entity._get_matched_publications
     room = 16

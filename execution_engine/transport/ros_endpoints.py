@@ -13,8 +13,10 @@ import concurrent.futures
 import logging
 import threading
 from collections.abc import Awaitable, Callable
-from typing import TYPE_CHECKING, Any, Generic, TypeVar
+from contextlib import AbstractContextManager
+from typing import Any, Generic, Protocol, TypeVar
 
+from execution_engine.clock import Clock
 from execution_engine.transport.port import (
     Publisher,
     ServiceClient,
@@ -25,10 +27,7 @@ from execution_engine.transport.port import (
     unwrap_reply,
 )
 from execution_engine.transport.qos import Durability, QoS
-from execution_engine.transport.ros_convert import failure_response
-
-if TYPE_CHECKING:
-    from execution_engine.transport.ros import RosNode
+from execution_engine.transport.ros_convert import MessageConverter, failure_response
 
 M = TypeVar("M")
 log = logging.getLogger(__name__)
@@ -36,10 +35,58 @@ log = logging.getLogger(__name__)
 POLL = 0.05  # run seconds between checks while waiting for a service to be discovered
 
 
+class EndpointTransport(Protocol):
+    """What the endpoints use of the rclpy transport (ros.py's RosTransport): its loop and executor side."""
+
+    @property
+    def api(self) -> Any: ...  # the rclpy names the adapter imported
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop: ...
+    @property
+    def clock(self) -> Clock: ...
+    @property
+    def handler_timeout(self) -> float: ...
+    @property
+    def handlers(self) -> set[asyncio.Task[Any]]: ...  # service handlers running on the loop
+    @property
+    def in_flight(self) -> AbstractContextManager[None]: ...  # held while an rclpy callback of the adapter runs
+    @property
+    def stopping(self) -> bool: ...
+    @property
+    def spinning(self) -> bool: ...
+
+    def call_soon(self, callback: Callable[..., Any], *args: Any) -> bool: ...
+    def settle_threadsafe(self, answer: asyncio.Future[Any], ros_future: Any) -> None: ...
+    def profile(self, qos: QoS) -> Any: ...
+
+
+class EndpointOwner(Protocol):
+    """The node an endpoint belongs to (ros.py's RosNode): its rclpy node, converter, groups and faults."""
+
+    @property
+    def transport(self) -> EndpointTransport: ...
+    @property
+    def converter(self) -> MessageConverter: ...
+    @property
+    def ros_node(self) -> Any: ...
+    @property
+    def subscription_group(self) -> Any: ...
+    @property
+    def service_group(self) -> Any: ...
+    @property
+    def clock(self) -> Clock: ...
+    @property
+    def fully_qualified_name(self) -> str: ...
+
+    def report_fault(self, where: str, error: BaseException) -> None: ...
+    def report_fault_threadsafe(self, where: str, error: BaseException) -> None: ...
+    def service_gone(self) -> None: ...
+
+
 class TopicEndpoint(Generic[M]):
     """What a publisher and a subscription both hold; resolves the rosidl class up front."""
 
-    def __init__(self, node: RosNode, msg_type: type[M], topic: str, qos: QoS) -> None:
+    def __init__(self, node: EndpointOwner, msg_type: type[M], topic: str, qos: QoS) -> None:
         self.node = node
         self.msg_type = msg_type
         self.topic = topic
@@ -50,7 +97,7 @@ class TopicEndpoint(Generic[M]):
 
 
 class RosPublisher(TopicEndpoint[M], Publisher[M]):
-    def __init__(self, node: RosNode, msg_type: type[M], topic: str, qos: QoS) -> None:
+    def __init__(self, node: EndpointOwner, msg_type: type[M], topic: str, qos: QoS) -> None:
         super().__init__(node, msg_type, topic, qos)
         # No QoS event handlers: rclpy's executor rebuilds its wait set from every handler on each
         # callback, and with two per endpoint that tripled the latency of a message (see the module).
@@ -69,7 +116,7 @@ class RosPublisher(TopicEndpoint[M], Publisher[M]):
 
 
 class RosSubscription(TopicEndpoint[M], Subscription[M]):
-    def __init__(self, node: RosNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS) -> None:
+    def __init__(self, node: EndpointOwner, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS) -> None:
         super().__init__(node, msg_type, topic, qos)
         self._callback = callback
         # rclpy's default handler warns of a publisher offering incompatible QoS; kept only where an
@@ -103,7 +150,7 @@ class RosSubscription(TopicEndpoint[M], Subscription[M]):
 
 
 class RosService(ServiceServer):
-    def __init__(self, node: RosNode, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> None:
+    def __init__(self, node: EndpointOwner, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> None:
         self.node = node
         self.srv_type = srv_type
         self.name = name
@@ -232,7 +279,7 @@ class RosService(ServiceServer):
 
 
 class RosClient(ServiceClient[Any, Any]):
-    def __init__(self, node: RosNode, srv_type: type, name: str) -> None:
+    def __init__(self, node: EndpointOwner, srv_type: type, name: str) -> None:
         self.node = node
         self.srv_type = srv_type
         self.name = name

@@ -13,10 +13,7 @@ from __future__ import annotations
 import random
 import socket
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
-
-if TYPE_CHECKING:
-    from robot_bridges.kuka_rsi.simulator import KrcModel
+from typing import Literal, Protocol
 
 Content = Literal["packet", "garbage", "mixed"]
 #: Datagrams one burst may send at most, however late the sender is (no catch-up storms).
@@ -58,10 +55,27 @@ def garbage_datagram(rng: random.Random) -> bytes:
     return rng.choice(choices)
 
 
+class FloodCounts(Protocol):
+    """The simulated controller's counts the flood reads and adds to (simulator.py's SimStats)."""
+
+    accepted: int  # replies of the external system the controller took: none yet, no flood
+    flood_sent: int
+    flood_replies: int
+
+
+class ForgingController(Protocol):
+    """The simulated controller seen from the flood: its counts and its packet to forge (simulator.py's KrcModel)."""
+
+    @property
+    def stats(self) -> FloodCounts: ...
+
+    def forged_packet(self, delay_jump: int, cycles_ahead: int) -> bytes: ...
+
+
 class Flooder:
     """The flood's socket on the controller's host, and what it sent and got back."""
 
-    def __init__(self, flood: Flood, host: str, peer: tuple[str, int], model: KrcModel, seed: int) -> None:
+    def __init__(self, flood: Flood, host: str, peer: tuple[str, int], model: ForgingController, seed: int) -> None:
         self.flood = flood
         self.peer = peer
         self.model = model
