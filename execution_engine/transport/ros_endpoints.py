@@ -38,20 +38,15 @@ POLL = 0.05  # run seconds between checks while waiting for a service to be disc
 class EndpointTransport(Protocol):
     """What the endpoints use of the rclpy transport (ros.py's RosTransport): its loop and executor side."""
 
-    @property
-    def api(self) -> Any: ...  # the rclpy names the adapter imported
-    @property
-    def loop(self) -> asyncio.AbstractEventLoop: ...
-    @property
-    def clock(self) -> Clock: ...
-    @property
-    def handler_timeout(self) -> float: ...
-    @property
-    def handlers(self) -> set[asyncio.Task[Any]]: ...  # service handlers running on the loop
+    api: Any  # the rclpy names the adapter imported
+    loop: asyncio.AbstractEventLoop
+    clock: Clock
+    handler_timeout: float
+    handlers: set[asyncio.Task[Any]]  # service handlers running on the loop
+    stopping: bool
+
     @property
     def in_flight(self) -> AbstractContextManager[None]: ...  # held while an rclpy callback of the adapter runs
-    @property
-    def stopping(self) -> bool: ...
     @property
     def spinning(self) -> bool: ...
 
@@ -63,18 +58,14 @@ class EndpointTransport(Protocol):
 class EndpointOwner(Protocol):
     """The node an endpoint belongs to (ros.py's RosNode): its rclpy node, converter, groups and faults."""
 
+    converter: MessageConverter
+    ros_node: Any
+    subscription_group: Any
+    service_group: Any
+    clock: Clock
+
     @property
     def transport(self) -> EndpointTransport: ...
-    @property
-    def converter(self) -> MessageConverter: ...
-    @property
-    def ros_node(self) -> Any: ...
-    @property
-    def subscription_group(self) -> Any: ...
-    @property
-    def service_group(self) -> Any: ...
-    @property
-    def clock(self) -> Clock: ...
     @property
     def fully_qualified_name(self) -> str: ...
 
