@@ -32,10 +32,11 @@ from pathlib import Path
 from typing import IO, NoReturn
 
 from app_functions.registry import full_catalog
-from core_functions.catalog import Catalog, ParamType
+from core_functions.catalog import Catalog
 from core_functions.option_ranges import RangeError, argument_type, bounds
-from core_functions.robots import ROBOTS, RobotModel
+from core_functions.robots import ROBOTS
 from execution_engine.app_model import Application, ApplicationError, load_application, read_application
+from execution_engine.catalog_document import PARAM_TYPE_HELP, XML_USAGE, catalog_document
 from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.console_log import ConsoleLog
 from execution_engine.deployment import deploy_local
@@ -54,35 +55,9 @@ from execution_engine.run_report import add_report_parser, cmd_report
 from execution_engine.checkpoint.store import CheckpointError
 from execution_engine.recorder.cli_hook import add_run_options, prepare_flight, start_recording, stop_recording
 from robot_bridges.backend import BackendOptions, BridgeError
+from robot_bridges.registry import create_backend
 
 EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_OUTPUT, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
-
-XML_USAGE = """\
-An application is an XML file: <application name=".." robot="nextage" cell="cells/your_cell.xml">, holding
-<operation id="1"> elements in the order they run. In each operation, one element per robot group (Nextage:
-left_arm, right_arm, torso_head; single-arm robots: arm) holds one <function name="..."> with its params in order:
-<params><param value="..."/></params>. A group left out of an operation waits. Groups of one operation run at the
-same time; the next operation starts when all are done. Optional: <error_policy retries="1" action="abort|safe_pose|
-alarm" safe_pose="initial"/> before the operations. Numbers are SI (m, rad, s) unless a unit is written after them
-(mm, deg, ms, %). Check a file with: python -m execution_engine validate FILE"""
-
-PARAM_TYPE_HELP = {
-    ParamType.NUMBER: "a number; a unit suffix of the param's unit family may follow (mm, cm, deg, ms, %)",
-    ParamType.INTEGER: "a whole number",
-    ParamType.BOOLEAN: "true or false (also yes/no, 1/0)",
-    ParamType.TEXT: "free text",
-    ParamType.CHOICE: "one of the listed choices",
-    ParamType.NAME: "a name you choose: letters, digits, _ . -",
-    ParamType.FRAME: "the name of a frame of the cell model (of one of the listed kinds, if any)",
-    ParamType.FRAMES: "cell frame names separated by spaces or commas",
-    ParamType.ELEMENT: "the name of an element (reference) of the cell model",
-    ParamType.TARGET: "a cell frame name, or 'x,y,z,roll,pitch,yaw' in the world frame (m, rad; mm/deg suffixes allowed)",
-    ParamType.JOINTS: "one value per joint of the group in the robot's order, rad (or 'deg' after the list)",
-    ParamType.JOINT_POSE: "a named joint pose of the robot (e.g. initial, off) or a <joint_pose> of the cell",
-    ParamType.GROUP: "the name of another group of the robot",
-    ParamType.CAMERA: "a camera of the robot (see robots), or auto for the group's own camera",
-}
-
 
 # ------------------------------------------------------------------------------ validate
 def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[str], args: argparse.Namespace | None = None) -> int:
@@ -113,35 +88,6 @@ def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[s
 
 
 # ----------------------------------------------------------------------------- functions
-def robot_document(robot: RobotModel) -> dict[str, object]:
-    """What an application writer needs of a robot: groups, joints with limits, poses, cameras (degrees)."""
-    return {
-        "aliases": list(robot.aliases),
-        "description": robot.description,
-        "workspace": robot.workspace,
-        "groups": {
-            g.name: {
-                "kind": g.kind,
-                "camera": g.camera,
-                "joints": [{"name": j.name, "min_deg": round(math.degrees(j.lower), 3), "max_deg": round(math.degrees(j.upper), 3)} for j in g.joints],
-            }
-            for g in robot.groups
-        },
-        "joint_order": list(robot.joint_names),
-        "joint_poses_deg": {name: [round(math.degrees(pose[j]), 3) for j in robot.joint_names] for name, pose in robot.poses.items()},
-        "cameras": list(robot.cameras),
-    }
-
-
-def catalog_document(catalog: Catalog) -> dict[str, object]:
-    return {
-        "xml_usage": XML_USAGE,
-        "param_types": {t.value: PARAM_TYPE_HELP[t] for t in ParamType},
-        "robots": {r.name: robot_document(r) for r in ROBOTS},
-        "functions": catalog.describe(),
-    }
-
-
 def cmd_functions(catalog: Catalog, as_json: bool, out: IO[str]) -> int:
     if as_json:
         json.dump(catalog_document(catalog), out, indent=2)
@@ -220,8 +166,6 @@ async def _run(
     app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], writer: TraceWriter | None, lost: list[WriteFailure] | None = None,
 ) -> RunReport:
     """The run; ``lost`` gets the outputs (recording, checkpoint) that could not be written whole."""
-    from robot_bridges.registry import create_backend
-
     backend = await create_backend(backend_name(app, args), clock, backend_options(app, args))
     machine_parameters = {"trajectory_db": args.trajectory_db} if args.trajectory_db else {}
     # An alarm waits only when someone can answer it: in this process, an operator at a terminal

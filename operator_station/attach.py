@@ -28,6 +28,7 @@ from execution_engine.observers import TraceWriter
 from execution_engine.transport.msgs import Bool, Trigger
 from execution_engine.transport.port import Transport, TransportError
 from execution_engine.transport.qos import LATCHED
+from execution_engine.transport.ros import RosTransport
 from execution_engine.transport.wire import ENGINE_SERVICES, SAFETY_STOP, engine_service
 from operator_station.feed import Feed
 from operator_station.session import FeedStream, observe, publish_safety
@@ -43,8 +44,6 @@ def ros_connect(argv: list[str]) -> Connect:
     """Join the ROS graph (``--ros-args`` in ``argv`` as for any node); needs rclpy."""
 
     async def connect(clock: Clock) -> Transport:
-        from execution_engine.transport.ros import RosTransport
-
         return RosTransport(clock, argv)
 
     return connect

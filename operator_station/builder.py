@@ -20,7 +20,7 @@ from core_functions.robots import find_robot
 from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
 from execution_engine.app_model.document import AppDocument, Placement, read_document, serialize
-from execution_engine.cli import catalog_document
+from execution_engine.catalog_document import catalog_document
 from execution_engine.output_files import FilePlan, Output, Refused
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib.util
 import logging
 import math
 import socket
@@ -19,11 +20,17 @@ from pathlib import Path
 from typing import IO, Any
 
 from core_functions.catalog import Catalog
+from core_functions.robots import find_robot
+from execution_engine.app_model.document import read_document
 from execution_engine.output_files import FilePlan, Refused
 from execution_engine.run_checks import run_files
+from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
+from operator_station.attach import AttachedSession, ros_connect
+from operator_station.feed import Feed
+from operator_station.replay import load_replay
+from operator_station.session import RunSession, RunSettings
 
 log = logging.getLogger(__name__)
-
 
 
 #: Options ``studio`` takes over from ``run`` (same meaning, same parsing: the two cannot drift apart).
@@ -54,10 +61,7 @@ def build_station(args: argparse.Namespace, catalog: Catalog, root: Path, access
     """The station of these arguments (no server yet): what the tests serve with Starlette's TestClient.
 
     ``access`` (:class:`operator_station.access.Access`): who may use it; default loopback pages."""
-    from operator_station.feed import Feed
-    from operator_station.replay import load_replay
-    from operator_station.server import Station
-    from operator_station.session import RunSession, RunSettings
+    from operator_station.server import Station  # optional: starlette, pip extra 'studio'
 
     feed = Feed()
     app_path = (root / args.file).resolve() if args.file else None
@@ -85,12 +89,7 @@ class StudioError(Exception):
 
 def _attached(args: argparse.Namespace, catalog: Catalog, feed: Any, root: Path, app_path: Path | None, access: Any) -> Any:
     """A station watching a cell on the ROS graph: the application names the robot (its groups)."""
-    import importlib.util
-
-    from core_functions.robots import find_robot
-    from execution_engine.app_model.document import read_document
-    from operator_station.attach import AttachedSession, ros_connect
-    from operator_station.server import Station
+    from operator_station.server import Station  # optional: starlette, pip extra 'studio'
 
     if app_path is None:
         raise StudioError("--transport ros needs the application the cell runs (APP.xml): it names the robot and its groups")
@@ -109,10 +108,10 @@ def _attached(args: argparse.Namespace, catalog: Catalog, feed: Any, root: Path,
 
 
 def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr) -> int:
-    try:
-        import starlette  # noqa: F401
-        import uvicorn
-        import websockets  # noqa: F401 - uvicorn's WebSocket protocol: without it the live feed is refused
+    try:  # optional: pip extra 'studio' (the web server), refused in one line when missing
+        import starlette  # noqa: F401 - optional: the station's routes
+        import uvicorn  # noqa: F401 - optional: the server
+        import websockets  # noqa: F401 - optional: uvicorn's WebSocket protocol: without it the live feed is refused
     except ImportError as missing:
         err.write(f"error: studio needs the web server: pip install 'dual_arm_executive[studio]' (starlette, uvicorn, websockets; missing {missing.name})\n")
         return 2
@@ -128,8 +127,6 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
         except Refused as refusal:
             err.write(f"error: {refusal}\n")
             return 2
-    from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
-
     if not is_loopback(args.host):
         err.write(f"warning: serving on {args.host}: reachable from the network; every page and script must present the token\n")
     if not 0 <= args.port <= 65535:
@@ -150,8 +147,8 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     except OSError as error:
         err.write(f"error: {error}\n")
         return 1
-    from operator_station.server import create_app
-    from operator_station.serving import StationServer, server_config
+    from operator_station.server import create_app  # optional: starlette, pip extra 'studio'
+    from operator_station.serving import StationServer, server_config  # optional: uvicorn, pip extra 'studio'
 
     server = StationServer(server_config(create_app(station), args.host, args.port), station)
     speed = "max" if math.isinf(args.speed) else f"x{args.speed:g}"
@@ -182,7 +179,7 @@ def _url(host: str, port: int) -> str:
 
 async def _serve(server: Any, station: Any) -> None:
     """Serve until a signal or an error; the server's shutdown stops the run first (operator_station.serving)."""
-    from operator_station.serving import STOP_BOUND, stop_station
+    from operator_station.serving import STOP_BOUND, stop_station  # optional: uvicorn, pip extra 'studio'
 
     try:
         await server.serve()

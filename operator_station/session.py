@@ -41,6 +41,7 @@ from execution_engine.transport.qos import LATCHED, SENSOR
 from execution_engine.transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
 from operator_station.feed import Feed
+from robot_bridges import registry
 from robot_bridges.backend import BackendOptions
 
 log = logging.getLogger(__name__)
@@ -167,9 +168,7 @@ class RunSession:
         return True
 
     async def _run(self, app: Application, clock: Clock, trace: IO[str] | None) -> RunReport:
-        from robot_bridges.registry import create_backend
-
-        backend = await create_backend(self.backend_name(app), clock, self._options(app))
+        backend = await registry.create_backend(self.backend_name(app), clock, self._options(app))
         parameters = {"trajectory_db": self.trajectory_db(app)}
         deployment = await deploy_local(clock, app.robot, backend, machine_parameters=parameters, engine_parameters={"autostart": False})
         deployment.engine.hold_for_operators = True  # the operator is a person at a page: simulated time waits
