@@ -44,7 +44,8 @@ from robot_bridges.kuka_rsi.backend import KukaRsiBackend  # noqa: E402
 from robot_bridges.kuka_rsi.config import default_config  # noqa: E402
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink  # noqa: E402
 from robot_bridges.kuka_rsi.interface import RsiInterface  # noqa: E402
-from robot_bridges.kuka_rsi.simulator import KrcModel, RsiContext, latency_summary, run_lockstep  # noqa: E402
+from robot_bridges.kuka_rsi.krc_model import KrcModel, RsiContext  # noqa: E402
+from robot_bridges.kuka_rsi.sim_network import latency_summary, run_lockstep  # noqa: E402
 
 READY_DEG = (0.0, -80.0, 85.0, 0.0, 35.0, 0.0)
 CYCLE = 0.004

@@ -31,7 +31,8 @@ from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, SimulatorSpec
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.kinematics import KukaArm
-from robot_bridges.kuka_rsi.simulator import Quirks, RsiContext
+from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_faults import Quirks
 
 READY = tuple(math.radians(v) for v in (0.0, -80.0, 85.0, 0.0, 30.0, 0.0))
 ARM = KukaArm()

@@ -19,7 +19,7 @@ from robot_bridges.kuka_rsi.config import default_config
 from robot_bridges.kuka_rsi.feedback import FeedbackLogger
 from robot_bridges.kuka_rsi.kinematics import KukaArm
 from robot_bridges.kuka_rsi.link import RobotLink
-from robot_bridges.kuka_rsi.simulator import KrcModel, RsiContext
+from robot_bridges.kuka_rsi.krc_model import KrcModel, RsiContext
 from robot_bridges.kuka_rsi.slots import CommandKind, layout, robot_block_size
 
 READY = (0.0, -80.0, 85.0, 0.0, 30.0, 0.0)

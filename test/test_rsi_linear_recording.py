@@ -29,7 +29,7 @@ from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, SimulatorSpec
 from robot_bridges.kuka_rsi.external import LoopSettings
 from robot_bridges.kuka_rsi.kinematics import KukaArm
-from robot_bridges.kuka_rsi.simulator import RsiContext
+from robot_bridges.kuka_rsi.krc_model import RsiContext
 
 Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
 TOLERANCE = 1e-4  # m: the documented default

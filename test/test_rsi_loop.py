@@ -22,7 +22,9 @@ from robot_bridges.kuka_rsi.config import RsiConfig, default_config, default_con
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RsiInterface
 from robot_bridges.kuka_rsi.kinematics import KukaArm
-from robot_bridges.kuka_rsi.simulator import Faults, Quirks, RsiContext, SimulatorThread
+from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
+from robot_bridges.kuka_rsi.sim_network import SimulatorThread
 from robot_bridges.kuka_rsi.spoofer import Flood
 from robot_bridges.kuka_rsi.streaming import ToolPathError
 

@@ -30,7 +30,8 @@ from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink, RsiLoop
 from robot_bridges.kuka_rsi.interface import RsiInterface
 from robot_bridges.kuka_rsi.peer import MAX_GAP, PeerGate
 from robot_bridges.kuka_rsi.pipe import FramedPipe
-from robot_bridges.kuka_rsi.simulator import RsiContext, SimulatorThread
+from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_network import SimulatorThread
 from robot_bridges.kuka_rsi.slots import layout, robot_block_size
 from robot_bridges.kuka_rsi.spoofer import Flood
 

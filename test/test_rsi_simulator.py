@@ -10,7 +10,10 @@ import pytest
 from robot_bridges.kuka_rsi.codec import PacketCodec
 from robot_bridges.kuka_rsi.config import default_config, default_config_path, parse_config
 from robot_bridges.kuka_rsi.kinematics import abc_to_matrix
-from robot_bridges.kuka_rsi.simulator import Faults, KrcModel, Program, Quirks, RsiContext, RsiStopped, SimulatorThread, main, run_lockstep
+from robot_bridges.kuka_rsi.krc_model import KrcModel, Program, RsiContext, RsiStopped
+from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
+from robot_bridges.kuka_rsi.sim_network import SimulatorThread, run_lockstep
+from robot_bridges.kuka_rsi.simulator import main
 
 CONFIG = default_config()
 SEN = PacketCodec.sen(CONFIG)

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
-from robot_bridges.kuka_rsi.simulator import Faults, Quirks
+from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
 from test_rsi_loop import DT, READY, WAIT, Rig, rig  # noqa: F401 - rig is the fixture
 
 VMAX = np.array(RobotLink("kr", "127.0.0.1").max_joint_speed)  # rad/s, the robot model's axis speeds
@@ -141,7 +142,6 @@ def test_the_command_line_ends_a_refused_peer_in_one_line_without_a_traceback() 
 def test_relative_corrections_with_dropped_replies_still_end_on_every_target(rig: Callable[..., Rig], holdon: str) -> None:
     """Relative mode: a dropped increment is repeated (HOLDON=1) or lost (HOLDON=0) by the
     controller; the external system knows which from RSI's rules and goes on from there."""
-    from robot_bridges.kuka_rsi.simulator import RsiContext
     from test_rsi_loop import ARM, _holdon_config
 
     context = RsiContext(start_deg=READY, correction_mode="relative")

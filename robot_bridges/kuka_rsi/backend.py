@@ -59,7 +59,9 @@ from robot_bridges.kuka_rsi.kinematics import KR6_R900, URDF_PATH, KukaArm
 from robot_bridges.kuka_rsi.recording import RecordingPlanner
 from robot_bridges.kuka_rsi.peer import resolve_ipv4
 from robot_bridges.kuka_rsi.realtime import SIMULATED_SILENCE, SIMULATOR_PRIORITY, realtime_advice
-from robot_bridges.kuka_rsi.simulator import Endpoint, Faults, Quirks, RsiContext, SimulatorThread
+from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
+from robot_bridges.kuka_rsi.sim_network import Endpoint, SimulatorThread
 from robot_bridges.kuka_rsi.spoofer import Flood
 from robot_bridges.kuka_rsi.replay import resample
 from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError
@@ -723,7 +725,7 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     if clock.simulated or clock.speed != 1.0:
         raise ValueError("the kuka-rsi back end runs on the robot's real-time clock: run with --speed 1 (the default)")
     if options.faults:
-        raise ValueError("the kuka-rsi back end takes no --fault (inject RSI faults with robot_bridges.kuka_rsi.simulator.Faults)")
+        raise ValueError("the kuka-rsi back end takes no --fault (inject RSI faults with robot_bridges.kuka_rsi.sim_faults.Faults)")
     extra = options.extra
     runner = extra.get("runner", "process")
     sim_runner = extra.get("simulator", "process")
