@@ -32,13 +32,15 @@ def _chosen(libraries: Sequence[str] | None) -> dict[str, type[CoreFunctions]]:
 
 
 @lru_cache(maxsize=None)
-def _catalog(libraries: tuple[str, ...] | None) -> Catalog:
+def catalog_of(libraries: tuple[str, ...] | None) -> Catalog:
+    """The catalog of ``libraries`` (None: every library), built once; ``catalog_of.cache_clear()`` after
+    :data:`LIBRARIES` changed (a library added at run time) builds it again."""
     return Catalog.from_classes(_chosen(libraries))
 
 
 def full_catalog(libraries: Sequence[str] | None = None) -> Catalog:
     """The catalog of ``libraries`` (default: every library) plus the core functions."""
-    return _catalog(None if libraries is None else tuple(libraries))
+    return catalog_of(None if libraries is None else tuple(libraries))
 
 
 def functions_class(libraries: Sequence[str] | None = None) -> type[CoreFunctions]:

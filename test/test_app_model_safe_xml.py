@@ -9,7 +9,7 @@ import pytest
 from app_model_support import APP_XML, CELL_XML, small_catalog
 
 from execution_engine.app_model import ApplicationError, load_application, load_cell, validate_application
-from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, _hardened_parser, read_xml
+from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, hardened_parser, read_xml
 
 CATALOG = small_catalog()
 
@@ -83,7 +83,7 @@ def test_the_parser_itself_resolves_nothing(tmp_path: Path, listener: socket.soc
     secret.write_text("TOP SECRET")
     text = (f'<!DOCTYPE a [<!ENTITY xxe SYSTEM "file://{secret}"><!ENTITY net SYSTEM "http://127.0.0.1:{port}/x">]>'
             "<a>&xxe;&net;</a>")
-    root = etree.fromstring(text.encode(), _hardened_parser())
+    root = etree.fromstring(text.encode(), hardened_parser())
     assert "TOP SECRET" not in etree.tostring(root).decode()
     assert_nobody_connected(listener)
 

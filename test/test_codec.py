@@ -142,7 +142,7 @@ def test_primitives_round_trip(positions: list[float], action: str, fraction: fl
 @pytest.mark.parametrize("text", ['{"id":"1","v":1e999}', '{"id":"1","v":NaN}', '{"id":"1","v":-Infinity}', '{"id":"1",}', "{"])
 def test_both_json_back_ends_refuse_what_is_not_finite_json(text: str) -> None:
     """orjson when installed, the standard library otherwise: the same messages are refused."""
-    for loads in (codec._loads_std, codec._loads):
+    for loads in (codec.loads_std, codec.loads):
         with pytest.raises(ValueError):
             loads(text)
-    assert json.loads(codec._dumps_std({"a": [1.5, "x", None]})) == json.loads(codec._dumps({"a": [1.5, "x", None]}))
+    assert json.loads(codec.dumps_std({"a": [1.5, "x", None]})) == json.loads(codec.dumps({"a": [1.5, "x", None]}))

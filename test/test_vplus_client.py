@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from execution_engine.clock import Clock, run_with_clock, simulated_clock
 from robot_bridges.vplus import codec
-from robot_bridges.vplus.client import CommandTimeout, ConnectionLost, ProtocolError, VPlusClient, _Link
+from robot_bridges.vplus.client import CommandTimeout, ConnectionLost, ProtocolError, VPlusClient, ControllerLink
 
 Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
 
@@ -19,7 +19,7 @@ Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
 class FakeTransport(asyncio.Transport):
     """Records writes; closing it tells the protocol, as a socket transport would."""
 
-    def __init__(self, link: _Link) -> None:
+    def __init__(self, link: ControllerLink) -> None:
         super().__init__()
         self.link = link
         self.written: list[bytes] = []
@@ -37,15 +37,15 @@ class FakeTransport(asyncio.Transport):
             asyncio.get_running_loop().call_soon(self.link.connection_lost, None)
 
 
-def attach(client: VPlusClient) -> tuple[_Link, FakeTransport]:
-    link = _Link(client)
+def attach(client: VPlusClient) -> tuple[ControllerLink, FakeTransport]:
+    link = ControllerLink(client)
     transport = FakeTransport(link)
     link.connection_made(transport)
     client._link = link
     return link, transport
 
 
-async def started(clock: Clock, command: codec.Command, timeout: float = 10.0) -> tuple[VPlusClient, _Link, FakeTransport, asyncio.Future[list[codec.Ack]]]:
+async def started(clock: Clock, command: codec.Command, timeout: float = 10.0) -> tuple[VPlusClient, ControllerLink, FakeTransport, asyncio.Future[list[codec.Ack]]]:
     """A client on a fake link with one ``execute`` under way (its message written)."""
     client = VPlusClient("sim", 1, clock, timeout=timeout)
     link, transport = attach(client)

@@ -55,10 +55,10 @@ class ZoneVisits(CoreFunctions):
 def visits(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     """Every machine and the validator offer ``visit_then_work_away`` (a library of this test)."""
     monkeypatch.setitem(registry.LIBRARIES, "zone_visits", ZoneVisits)
-    registry._catalog.cache_clear()
+    registry.catalog_of.cache_clear()
     yield
     monkeypatch.delitem(registry.LIBRARIES, "zone_visits")
-    registry._catalog.cache_clear()
+    registry.catalog_of.cache_clear()
 
 
 def events(records: list[dict], group: str, event: str, operation: str) -> list[dict]:

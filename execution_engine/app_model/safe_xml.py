@@ -69,7 +69,8 @@ class XmlDocument:
         return self.source.file
 
 
-def _hardened_parser() -> etree.XMLParser:
+def hardened_parser() -> etree.XMLParser:
+    """The parser every XML file goes through: no entities expanded, no network, no DTD, libxml2's size limits."""
     # A new parser per file: its error log then holds this file's errors only.
     return etree.XMLParser(
         resolve_entities=False,
@@ -205,7 +206,7 @@ def parse_bytes(data: bytes, *, path: Path, display: str) -> tuple[XmlDocument |
     problem = _refuse_declarations(display, text) or _too_many_nodes(display, data, text)
     if problem is not None:
         return None, [problem]
-    parser = _hardened_parser()
+    parser = hardened_parser()
     source = SourceMap(display, text)
     try:
         root = etree.fromstring(data, parser)

@@ -37,7 +37,7 @@ _PLACEMENT_HINTS = {
 }
 _GROUP_HINT = "a group runs exactly one <function> per operation; put the next one in a new <operation>"
 
-_ELEMENT_MSG = re.compile(r"^Element '([^']*)'(?:, attribute '([^']*)')?: (.*)$", re.S)
+ELEMENT_MESSAGE = re.compile(r"^Element '([^']*)'(?:, attribute '([^']*)')?: (.*)$", re.S)
 _EXPECTED = re.compile(r"Expected is(?: one of)? \( ([^)]*) \)")
 
 

@@ -35,7 +35,7 @@ from lxml import etree
 
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
 from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, XmlDocument, parse_bytes, read_xml
-from execution_engine.app_model.schema import _ELEMENT_MSG, PathIndex, Rewriter, SchemaInfo, load_schema
+from execution_engine.app_model.schema import ELEMENT_MESSAGE, PathIndex, Rewriter, SchemaInfo, load_schema
 
 #: The longest sibling list libxml2 is given; longer ones are checked in windows of this size.
 WINDOW = 64
@@ -171,7 +171,7 @@ class StructureCheck:
         entries: Iterable[etree._LogEntry] = self.info.schema.error_log  # type: ignore[assignment]  # iterable; stubs lag
         for entry in entries:
             found = index.find(getattr(entry, "path", None))
-            match = _ELEMENT_MSG.match(entry.message or "")
+            match = ELEMENT_MESSAGE.match(entry.message or "")
             element, attribute, detail = (match.group(1), match.group(2), match.group(3)) if match else ("", None, entry.message or "")
             if self.ignored(document, found, attribute, detail):
                 continue

@@ -45,7 +45,9 @@ class WireError(ValueError):
 
 
 @dataclasses.dataclass(frozen=True)
-class _FieldPlan:
+class FieldPlan:
+    """How one field of a message dataclass travels (encode, decode and json_schema.py follow the same plan)."""
+
     name: str
     key: str
     hint: Any
@@ -54,18 +56,20 @@ class _FieldPlan:
 
 
 @lru_cache(maxsize=None)
-def _plan(cls: type) -> tuple[_FieldPlan, ...]:
+def field_plan(cls: type) -> tuple[FieldPlan, ...]:
+    """The plan of each init field of ``cls``, in declaration order (made once per class)."""
     hints = typing.get_type_hints(cls)
     plans = []
     for f in dataclasses.fields(cls):
         if not f.init:
             continue
         required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-        plans.append(_FieldPlan(f.name, f.metadata.get("json", f.name), hints[f.name], required, f.default is None))
+        plans.append(FieldPlan(f.name, f.metadata.get("json", f.name), hints[f.name], required, f.default is None))
     return tuple(plans)
 
 
-def _is_tagged_union(hint: Any) -> bool:
+def is_tagged_union(hint: Any) -> bool:
+    """Whether ``hint`` is a union of dataclasses told apart by their ``KIND`` (its value is the JSON tag)."""
     args = get_args(hint)
     members = [a for a in args if a is not type(None)]
     return (
@@ -81,7 +85,7 @@ _ENCODERS: dict[type, Callable[[Any], dict[str, Any]]] = {}
 
 
 def _dataclass_encoder(cls: type) -> Callable[[Any], dict[str, Any]]:
-    fields = tuple((p.name, p.key, p.omit_none) for p in _plan(cls))
+    fields = tuple((p.name, p.key, p.omit_none) for p in field_plan(cls))
     kind = getattr(cls, "KIND", None)
     tag = {"kind": kind} if isinstance(kind, str) else {}
 
@@ -136,11 +140,13 @@ def to_primitive(obj: Any) -> Any:
     raise WireError(f"{t.__name__} cannot travel as JSON")
 
 
-def _dumps_std(value: Any) -> str:
+def dumps_std(value: Any) -> str:
+    """Compact JSON by the standard library, refusing what is not finite: the fallback without orjson."""
     return json.dumps(value, separators=(",", ":"), allow_nan=False)
 
 
-def _loads_std(text: str | bytes) -> Any:
+def loads_std(text: str | bytes) -> Any:
+    """JSON by the standard library, refusing NaN and infinities as orjson does: the fallback without orjson."""
     return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
 
 
@@ -154,22 +160,22 @@ def _finite_float(text: str) -> float:
 try:  # orjson, when installed, is several times faster both ways; the results are the same JSON
     import orjson
 
-    def _dumps(value: Any) -> str:
+    def dumps(value: Any) -> str:
         return orjson.dumps(value).decode()
 
-    def _loads(text: str | bytes) -> Any:
+    def loads(text: str | bytes) -> Any:
         try:
             return orjson.loads(text)
         except orjson.JSONDecodeError as error:
             raise ValueError(str(error)) from None
 
 except ImportError:  # pragma: no cover - exercised on machines without orjson
-    _dumps, _loads = _dumps_std, _loads_std
+    dumps, loads = dumps_std, loads_std
 
 
 def encode(obj: Any) -> str:
     """Compact JSON of a message dataclass (non-finite numbers are refused before this point)."""
-    return _dumps(to_primitive(obj))
+    return dumps(to_primitive(obj))
 
 
 # ----------------------------------------------------------------------------- decoding
@@ -179,7 +185,7 @@ def decode(cls: type[T], text: str | bytes, *, source: str = "", max_bytes: int 
     if size > max_bytes:
         raise WireError(f"message of {size} bytes exceeds the limit of {max_bytes}", source=source, type_name=cls.__name__)
     try:
-        raw = _loads(text)
+        raw = loads(text)
     except (ValueError, RecursionError) as error:
         raise WireError(f"not valid JSON: {error}", source=source, type_name=cls.__name__) from None
     return from_primitive(cls, raw, source=source)
@@ -191,7 +197,7 @@ def parse_json(text: str | bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Any:
     if len(text) > max_bytes:
         raise ValueError(f"{len(text)} bytes exceed the limit of {max_bytes}")
     try:
-        value = _loads(text)
+        value = loads(text)
     except RecursionError:
         raise ValueError("nested too deeply") from None
     except ValueError as error:
@@ -359,7 +365,7 @@ def _union_converter(hint: Any) -> Converter:
     args = get_args(hint)
     optional = type(None) in args
     members = [a for a in args if a is not type(None)]
-    if _is_tagged_union(hint):
+    if is_tagged_union(hint):
         by_kind = {a.KIND: _converter(a) for a in members}
         kinds = ", ".join(sorted(by_kind))
 
@@ -394,7 +400,7 @@ def _union_converter(hint: Any) -> Converter:
 
 
 def _dataclass_converter(cls: type) -> Converter:
-    plans = _plan(cls)
+    plans = field_plan(cls)
     fields = [(p.key, p.name, p.required) for p in plans]
     known = {p.key for p in plans} | {"kind"}
     kind = getattr(cls, "KIND", None)

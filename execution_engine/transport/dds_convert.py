@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
 from execution_engine.transport.port import TransportError
-from execution_engine.transport.ros_convert import MessageConverter, _mirror_fields, _sequence_item
+from execution_engine.transport.ros_convert import MessageConverter, mirror_fields, sequence_item
 
 M = TypeVar("M")
 
@@ -33,7 +33,7 @@ class DdsConverter(MessageConverter):
         """The DDS type of a message mirror; TransportError when its .msg lacks a mirror field."""
         cls = self.ros_class(mirror)
         declared = set(getattr(cls, "__annotations__", {}))
-        missing = [name for name, _ in _mirror_fields(mirror) if name not in declared]
+        missing = [name for name, _ in mirror_fields(mirror) if name not in declared]
         if missing:
             raise TransportError(f"{mirror.ROS_TYPE} (interface file) has no field(s) {', '.join(missing)} that {mirror.__name__} carries")  # type: ignore[attr-defined]
         return cls
@@ -47,7 +47,7 @@ class DdsConverter(MessageConverter):
     def to_wire_service(self, wire_type: type, msg: Any, guid: int, seq: int) -> Any:
         """A request or reply sample with rmw_cyclonedds_cpp's header."""
         fields: dict[str, Any] = {"guid": guid, "seq": seq}
-        for name, hint in _mirror_fields(type(msg)):
+        for name, hint in mirror_fields(type(msg)):
             fields[name] = self._value_to_ros(hint, getattr(msg, name), name)
         if "structure_needs_at_least_one_member" in getattr(wire_type, "__annotations__", {}):
             fields["structure_needs_at_least_one_member"] = 0
@@ -65,7 +65,7 @@ class DdsConverter(MessageConverter):
         return super()._value_to_ros(hint, value, path)
 
     def _value_from_ros(self, hint: Any, value: Any, path: str) -> Any:
-        if isinstance(value, (bytes, bytearray)) and _sequence_item(hint) is int:
+        if isinstance(value, (bytes, bytearray)) and sequence_item(hint) is int:
             return tuple(value)  # cyclonedds gives an octet array (uint8[16] of a goal id) as bytes
         if hint is bytes:
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 255:

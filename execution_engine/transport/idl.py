@@ -267,7 +267,7 @@ class InterfaceRegistry:
         class_name = typename.replace("::", "__")
         cls = make_idl_struct(class_name, typename, annotations)
         for spec in constants:
-            setattr(cls, spec.name, _literal(spec))
+            setattr(cls, spec.name, literal_value(spec))
         cls.ROS_TYPE = ros_type  # type: ignore[attr-defined]
         return cls
 
@@ -295,7 +295,8 @@ class InterfaceRegistry:
         return types.array[item, int(spec.array)]
 
 
-def _literal(spec: FieldSpec) -> Any:
+def literal_value(spec: FieldSpec) -> Any:
+    """The value a ``.msg`` default or constant's text stands for (its base type says how to read it)."""
     text = spec.default or ""
     if spec.base == "string":
         return text[1:-1] if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"" else text

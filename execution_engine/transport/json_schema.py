@@ -158,7 +158,7 @@ class _Builder:
         args = get_args(hint)
         members = [a for a in args if a is not type(None)]
         null = [{"type": "null"}] if len(members) < len(args) else []
-        if codec._is_tagged_union(hint):
+        if codec.is_tagged_union(hint):
             def variants() -> dict[str, Any]:
                 return {"oneOf": [self.variant(m) for m in members]}
             name = _union_name(members)
@@ -180,7 +180,7 @@ class _Builder:
         if isinstance(kind, str):  # decoded directly, a member may leave its tag out but not change it
             properties[TAG] = {"const": kind}
         required = []
-        for plan in codec._plan(cls):
+        for plan in codec.field_plan(cls):
             if plan.key in properties:
                 raise TypeError(f"{cls.__name__}.{plan.name}: JSON key {plan.key!r} is taken by the union tag")
             schema = {"const": PROTOCOL_VERSION} if plan.key == VERSION else self.hint(plan.hint)

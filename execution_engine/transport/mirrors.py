@@ -14,7 +14,7 @@ from functools import lru_cache
 from typing import Any
 
 from execution_engine.transport import msgs
-from execution_engine.transport.idl import FieldSpec, InterfaceRegistry, _literal
+from execution_engine.transport.idl import FieldSpec, InterfaceRegistry, literal_value
 
 _PYTHON = {"bool": bool, "byte": bytes, "char": int, "float32": float, "float64": float, "string": str}
 
@@ -29,7 +29,7 @@ def _scalar_default(spec: FieldSpec) -> Any:
     if spec.base == "byte":
         return bytes([int(spec.default, 0)]) if spec.default else b"\x00"
     if spec.default is not None:
-        return _literal(spec)
+        return literal_value(spec)
     return {bool: False, float: 0.0, str: ""}.get(_PYTHON.get(spec.base, int), 0)
 
 
@@ -61,7 +61,7 @@ def mirror(ros_type: str) -> type:
     cls = dataclasses.make_dataclass(ros_type.rsplit("/", 1)[1], [_field(f) for f in spec.fields], frozen=True)
     cls.ROS_TYPE = ros_type  # type: ignore[attr-defined]
     for constant in spec.constants:
-        setattr(cls, constant.name, bytes([_literal(constant)]) if constant.base == "byte" else _literal(constant))
+        setattr(cls, constant.name, bytes([literal_value(constant)]) if constant.base == "byte" else literal_value(constant))
     return cls
 
 

@@ -86,7 +86,7 @@ def import_ros_type(ros_type: str) -> type:
 
 
 @lru_cache(maxsize=None)
-def _mirror_fields(mirror: type) -> tuple[tuple[str, Any], ...]:
+def mirror_fields(mirror: type) -> tuple[tuple[str, Any], ...]:
     """(name, type hint) of each field of a mirror dataclass, in declaration order."""
     if not (dataclasses.is_dataclass(mirror) and isinstance(getattr(mirror, "ROS_TYPE", None), str)):
         raise TransportError(f"{mirror!r} is not a message mirror (a dataclass with ROS_TYPE)")
@@ -94,7 +94,7 @@ def _mirror_fields(mirror: type) -> tuple[tuple[str, Any], ...]:
     return tuple((f.name, hints[f.name]) for f in dataclasses.fields(mirror))
 
 
-def _sequence_item(hint: Any) -> Any | None:
+def sequence_item(hint: Any) -> Any | None:
     """The item type of ``tuple[T, ...]``, or None when ``hint`` is not a sequence."""
     if get_origin(hint) is tuple:
         args = get_args(hint)
@@ -153,7 +153,7 @@ class MessageConverter:
         cls = self._classes.get(mirror)
         if cls is not None:
             return cls
-        fields = _mirror_fields(mirror)
+        fields = mirror_fields(mirror)
         ros_type: str = mirror.ROS_TYPE  # type: ignore[attr-defined]
         cls = self._resolver(ros_type)
         declared = _declared_fields(cls)
@@ -164,7 +164,7 @@ class MessageConverter:
                     f"{ros_type} as installed has no field(s) {', '.join(missing)} that {mirror.__name__} carries"
                 )
         for _, hint in fields:  # nested messages are checked up front too, not on first use
-            nested = _sequence_item(hint) or hint
+            nested = sequence_item(hint) or hint
             if _is_mirror(nested):
                 self.ros_class(nested)
         self._classes[mirror] = cls
@@ -187,7 +187,7 @@ class MessageConverter:
         mirror = type(msg)
         cls = self.ros_class(mirror)
         kwargs: dict[str, Any] = {}
-        for name, hint in _mirror_fields(mirror):
+        for name, hint in mirror_fields(mirror):
             kwargs[name] = self._value_to_ros(hint, getattr(msg, name), _join(path, name))
         try:
             return cls(**kwargs)
@@ -199,7 +199,7 @@ class MessageConverter:
             if not isinstance(value, (bytes, bytearray)):
                 raise TransportError(f"field {path!r}: expected bytes, got {type(value).__name__}")
             return array.array("B", value)
-        item = _sequence_item(hint)
+        item = sequence_item(hint)
         if item is not None:
             if not isinstance(value, (tuple, list)):
                 raise TransportError(f"field {path!r}: expected a sequence, got {type(value).__name__}")
@@ -217,7 +217,7 @@ class MessageConverter:
 
     def _from_ros(self, mirror: type, ros_msg: Any, path: str) -> Any:
         kwargs: dict[str, Any] = {}
-        for name, hint in _mirror_fields(mirror):
+        for name, hint in mirror_fields(mirror):
             where = _join(path, name)
             try:
                 raw = getattr(ros_msg, name)
@@ -229,7 +229,7 @@ class MessageConverter:
     def _value_from_ros(self, hint: Any, value: Any, path: str) -> Any:
         if hint is ByteBuffer:
             return _byte_buffer(value, path)
-        item = _sequence_item(hint)
+        item = sequence_item(hint)
         if item is not None:  # fixed-size arrays (CameraInfo.k) arrive as numpy arrays
             if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, array.array, np.ndarray)):
                 raise TransportError(f"field {path!r}: expected a sequence, got {type(value).__name__}")

@@ -122,7 +122,7 @@ class _Batch:
             self.future.set_exception(error)
 
 
-class _Link(asyncio.Protocol):
+class ControllerLink(asyncio.Protocol):
     """The connection's protocol: hands each received line to the client as it arrives.
 
     A protocol, not a StreamReader plus reader task, so an ack reaches its waiter without an
@@ -189,7 +189,7 @@ class VPlusClient:
         self.max_backoff = max_backoff
         self.max_line = max_line
         self._make_id = make_id
-        self._link: _Link | None = None
+        self._link: ControllerLink | None = None
         self._pending: dict[str, _Batch] = {}
         self._expired: OrderedDict[str, Message] = OrderedDict()
         self._lock = asyncio.Lock()
@@ -231,7 +231,7 @@ class VPlusClient:
             self.server_said = ""  # a refusal arrives before create_connection returns: keep it
             try:
                 _, link = await self.clock.wait_for(
-                    loop.create_connection(lambda: _Link(self), self.host, self.port), self.connect_timeout
+                    loop.create_connection(lambda: ControllerLink(self), self.host, self.port), self.connect_timeout
                 )
             except asyncio.TimeoutError:
                 errors.append(f"attempt {attempt + 1}: no answer within {self.connect_timeout:g} s")
@@ -421,7 +421,7 @@ class VPlusClient:
         head = line.split(b":", 1)[0].decode("ascii", "replace").strip()
         return head in self._pending or head in self._expired
 
-    def _link_down(self, link: _Link, reason: str, kind: type[VPlusError] = ConnectionLost) -> None:
+    def _link_down(self, link: ControllerLink, reason: str, kind: type[VPlusError] = ConnectionLost) -> None:
         if link is not self._link:
             return  # an old connection finishing its close
         if self.server_said:

@@ -264,10 +264,10 @@ def decode_ack(line: bytes) -> Ack:
         g = match.groups()
         pose = (float(g[4]), float(g[5]), float(g[6]), float(g[7]), float(g[8]), float(g[9]))
         return Ack(g[0].decode("ascii"), float(g[2]), float(g[3]), pose, g[1].decode("ascii"))
-    return _decode_ack_slowly(line)
+    return decode_ack_by_fields(line)
 
 
-def _decode_ack_slowly(line: bytes) -> Ack:
+def decode_ack_by_fields(line: bytes) -> Ack:
     """Field by field, to say exactly what is wrong with a line the fast path refused."""
     text = _ascii(line)
     parts = text.split(":")
