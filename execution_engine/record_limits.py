@@ -9,6 +9,9 @@ run's record ever needs: a recording's compressed chunks are capped in what they
   than :data:`MAX_GROUPS` is refused, since each is a lane of the report and of the timeline.
 * Times: a run's time is finite and within :data:`TIME_BOUND` seconds (116 days) of its start;
   a record at ``1e308`` or ``NaN`` s is no event of a run, and is refused where it stands.
+* Nesting: a record is a few levels deep (a primitive's result inside it at most the wire's 64);
+  one nested deeper than :data:`MAX_NESTING` levels is refused where it stands, before anything
+  walks it (a line of a megabyte of ``[`` made the JSON parser itself give up).
 
 A refusal is :class:`OverLimit`: one line naming the file and the limit.
 """
@@ -22,6 +25,8 @@ from core_functions.printable import printable
 MAX_GROUPS = 64
 #: Seconds of run time either side of the run's start (116 days).
 TIME_BOUND = 1e7
+#: Levels of lists and objects a record may nest (the wire admits 64 inside one field).
+MAX_NESTING = 100
 
 
 class OverLimit(ValueError):
@@ -34,6 +39,20 @@ def time_problem(t: object) -> str | None:
         return f"t = {str(t)[:40]!r} is not a number of seconds"
     if not math.isfinite(t) or abs(t) > TIME_BOUND:
         return f"t = {t:g} s is not a time of a run (finite, within ±{TIME_BOUND:.0f} s of its start)"
+    return None
+
+
+def nesting_problem(value: object) -> str | None:
+    """Why ``value`` nests too deep to be a record (walked without recursion), or None."""
+    pending: list[tuple[object, int]] = [(value, 1)]
+    while pending:
+        item, level = pending.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        if level > MAX_NESTING:
+            return f"nested more than {MAX_NESTING} levels deep: no record of a run is"
+        pending.extend((child, level + 1) for child in children)
     return None
 
 

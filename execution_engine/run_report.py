@@ -1,7 +1,8 @@
 """``python -m execution_engine report RUN.mcap|TRACE.jsonl``: what a run did, read back from its record.
 
 The same summary whichever record is at hand -- a recording (:mod:`execution_engine.recorder`)
-or a JSON-lines trace (:mod:`execution_engine.trace_report`): whether the record is whole or was
+or a JSON-lines trace (:mod:`execution_engine.trace_report`), read as every reader of one reads it
+(:mod:`execution_engine.record_reader`: bounded, one-line refusals): whether the record is whole or was
 cut (and where), what ran (a recording says which application, robot, back end and version),
 the operations, each group's busy and idle time, errors, retries, operator actions and vision
 corrections; and the Fig. 12 timeline of every group as SVG or PNG (:mod:`.timeline_plot`).
@@ -16,11 +17,9 @@ from typing import IO, Any
 
 from core_functions.printable import printable
 from execution_engine.output_files import FilePlan, Output, Refused
-from execution_engine.record_limits import TIME_BOUND, OverLimit
-from execution_engine.recorder.reading import Recording, is_mcap, trace_records
-from execution_engine.recorder.safe_read import NotARecording
+from execution_engine.record_limits import TIME_BOUND
+from execution_engine.record_reader import NotARecording, OverLimit, read_record
 from execution_engine.timeline import Timeline, TimelineBuilder
-from execution_engine.trace_report import read_trace
 
 EXIT_OK, EXIT_UNREADABLE, EXIT_USAGE, EXIT_OUTPUT = 0, 1, 2, 4  # as run's: a refused option 2, an output not written 4
 
@@ -81,36 +80,34 @@ def _number(value: object) -> float:
 
 
 def summarize(path: str | Path) -> RunSummary:
-    """Read a recording or a trace; OSError when the file cannot be read, NotARecording (one line
-    naming the file) when it is neither."""
+    """Read a recording or a trace (:func:`read_record`: bounded, as every reader of one); OSError
+    when the file cannot be read, NotARecording or OverLimit (one line naming the file) when it is
+    no run's record or asks more than one can."""
     builder = TimelineBuilder()
-    if is_mcap(path):
-        recording = Recording(str(path))
-        builder.add_all(trace_records(path, recording))
-        header = [f"recording {path}: {recording.messages} message(s)"]
-        meta = recording.metadata.get("dual_arm_executive", {})
-        if meta:
-            header.append(
-                f"  ran: {meta.get('application', '?')} ({meta.get('application_path', '?')}) on {meta.get('robot', '?')} "
-                f"via {meta.get('backend', '?')}, software {meta.get('software_version', '?')}"
-            )
-            if meta.get("continues"):
-                header.append(f"  continues: {meta['continues']}")
-        if recording.skipped:
-            header.append(f"  {recording.skipped} event(s) at a time no run has (not finite, or past ±{TIME_BOUND:.0f} s) skipped")
-        if recording.cut:
-            last = f" at {builder.t_last:.3f} s" if builder.t_first is not None else ""
-            header.append(f"  CUT: the recording has no end (the run was killed or crashed); readable up to its last chunk{last}")
-            if recording.problem:
-                header.append(f"  reading stopped at damaged data: {recording.problem}")
-        timeline = builder.snapshot()
-        extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator")]
-        return RunSummary(str(path), header, timeline, recording.cut, extra)
-    trace = read_trace(path, builder.add)
-    if trace.records == 0:  # not one line of a trace: garbage, or nothing at all
-        why = trace.problems[0] if trace.problems else "it is empty" if Path(path).stat().st_size == 0 else "no whole line"
-        raise NotARecording(f"{path}: neither an MCAP recording nor a JSON-lines trace: {why}")
-    return RunSummary(str(path), trace.lines(), builder.snapshot(), trace.cut)
+    read = read_record(path, builder.add)
+    recording = read.recording
+    if recording is None:
+        assert read.trace is not None
+        return RunSummary(str(path), read.trace.lines(), builder.snapshot(), read.trace.cut)
+    header = [f"recording {path}: {recording.messages} message(s)"]
+    meta = recording.metadata.get("dual_arm_executive", {})
+    if meta:
+        header.append(
+            f"  ran: {meta.get('application', '?')} ({meta.get('application_path', '?')}) on {meta.get('robot', '?')} "
+            f"via {meta.get('backend', '?')}, software {meta.get('software_version', '?')}"
+        )
+        if meta.get("continues"):
+            header.append(f"  continues: {meta['continues']}")
+    if recording.skipped:
+        header.append(f"  {recording.skipped} event(s) at a time no run has (not finite, or past ±{TIME_BOUND:.0f} s) skipped")
+    if recording.cut:
+        last = f" at {builder.t_last:.3f} s" if builder.t_first is not None else ""
+        header.append(f"  CUT: the recording has no end (the run was killed or crashed); readable up to its last chunk{last}")
+        if recording.problem:
+            header.append(f"  reading stopped at damaged data: {recording.problem}")
+    timeline = builder.snapshot()
+    extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator")]
+    return RunSummary(str(path), header, timeline, recording.cut, extra)
 
 
 def add_report_parser(sub: Any) -> None:

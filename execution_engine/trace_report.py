@@ -6,9 +6,9 @@ a ``run_end`` record (:class:`execution_engine.observers.TraceWriter`); one with
 (the run was killed, the machine lost power) and the report says so, with the last event the
 trace still holds.  Lines that are not trace records (a file edited by hand, another file given
 by mistake) are named by line number and skipped, never fatal -- a record at a time no run has
-(``1e308``, ``NaN``) among them; the file is read in bounded memory, line by line, with a size
-limit per line, and a file naming more groups than a robot has is refused (OverLimit, one line:
-:mod:`execution_engine.record_limits`).  Every name and text it shows comes from the file, so it
+(``1e308``, ``NaN``) or nested deeper than any record among them; the file is read in bounded
+memory, line by line, with a size limit per line, and a file naming more groups than a robot has
+is refused (OverLimit, one line: :mod:`execution_engine.record_limits`).  Every name and text it shows comes from the file, so it
 is shown with its control and bidirectional characters escaped (:func:`printable`).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from core_functions.printable import printable
-from execution_engine.record_limits import GroupCount, time_problem
+from execution_engine.record_limits import MAX_NESTING, GroupCount, nesting_problem, time_problem
 
 MAX_LINE = 1 << 20  # bytes: a trace line is a few hundred bytes; a megabyte is not a trace line
 MAX_PROBLEMS = 20  # problem lines listed; the rest are counted
@@ -111,13 +111,16 @@ def read_trace(path: str | Path, on_record: Callable[[dict[str, Any]], None] | N
 def _take(summary: TraceSummary, number: int, raw: bytes) -> None:
     try:
         record = json.loads(raw)
+    except RecursionError:  # the parser's own stack: lists or objects thousands deep
+        _problem(summary, f"line {number}: nested more than {MAX_NESTING} levels deep: no record of a run is")
+        return
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         _problem(summary, f"line {number}: not JSON ({error})")
         return
     if not (isinstance(record, dict) and isinstance(record.get("event"), str) and "t" in record):
         _problem(summary, f"line {number}: not a trace record (needs 'event' and 't')")
         return
-    problem = time_problem(record["t"])
+    problem = time_problem(record["t"]) or nesting_problem(record)
     if problem is not None:
         _problem(summary, f"line {number}: {problem}")
         return

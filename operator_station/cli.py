@@ -1,4 +1,4 @@
-"""``python -m execution_engine studio [APP.xml] [--port 8080] [--host 127.0.0.1] [--robot ...] [--speed ...] [--replay TRACE.jsonl]``.
+"""``python -m execution_engine studio [APP.xml] [--port 8080] [--host 127.0.0.1] [--robot ...] [--speed ...] [--replay RUN.mcap|TRACE.jsonl]``.
 
 Serves the operator station (builder, monitor, timeline) with uvicorn.  It binds to loopback
 unless ``--host`` names another address; then every page must present a token, made when the
@@ -20,9 +20,11 @@ from pathlib import Path
 from typing import IO, Any
 
 from core_functions.catalog import Catalog
+from core_functions.printable import printable
 from core_functions.robots import find_robot
 from execution_engine.app_model.document import read_document
 from execution_engine.output_files import FilePlan, Refused
+from execution_engine.record_reader import NotARecording, OverLimit
 from execution_engine.run_checks import run_files
 from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
 from operator_station.attach import AttachedSession, ros_connect
@@ -47,7 +49,8 @@ def add_parser(sub: Any) -> None:
                         help="the token pages must present, kept in FILE (one line, mode 600); default: made at start and printed when not on loopback")
     studio.add_argument("--allowed-host", dest="allowed_host", action="append", default=[], metavar="NAME",
                         help="a host name pages reach the station by, besides its address, this computer's name and localhost (repeatable)")
-    studio.add_argument("--replay", metavar="TRACE.jsonl", help="show a finished run's trace instead of running anything")
+    studio.add_argument("--replay", metavar="RUN.mcap|TRACE.jsonl",
+                        help="show a finished run's recording or trace instead of running anything (read as report reads it)")
     studio.add_argument("--transport", choices=("local", "ros"), default="local",
                         help="local: run the application in this process (default); ros: watch and command a cell running on the ROS graph (needs APP.xml for its groups, and rclpy)")
     studio.add_argument("--controller-host", dest="controller_host", help="V+ controller address (none starts the simulator); run's --host")
@@ -144,6 +147,9 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     except StudioError as error:
         err.write(f"error: {error}\n")
         return 2
+    except (NotARecording, OverLimit) as error:  # --replay: refused as report refuses it, in one line naming the file
+        err.write(f"error: {printable(error)}\n")
+        return 1
     except OSError as error:
         err.write(f"error: {error}\n")
         return 1

@@ -1,23 +1,29 @@
-"""``studio --replay TRACE.jsonl``: a finished run's trace shown in the same views, with a time slider.
+"""``studio --replay RUN.mcap|TRACE.jsonl``: a finished run's record shown in the same views, with a time slider.
 
 A trace holds every state change, function, primitive, error and operator command of a run
-(:mod:`execution_engine.observers`), not the machines' published structure: that is Table 2,
-the same for every group (:mod:`execution_engine.machine.table`), so it is rebuilt from there.
-Joint positions come from the results the bridge reported at each primitive's end.  Lines that
-are not trace records are skipped and counted, as ``trace_report`` does; the file is read line
-by line with the same size limit per line.
+(:mod:`execution_engine.observers`), and a recording the same events as messages; neither holds
+the machines' published structure: that is Table 2, the same for every group
+(:mod:`execution_engine.machine.table`), so it is rebuilt from there.  Joint positions come from
+the results the bridge reported at each primitive's end.
+
+The file is read as ``report`` reads it (:func:`~execution_engine.record_reader.read_record`):
+in bounded time and memory, at most 64 groups, times a run can have, and a file that asks more
+than a run's record can is refused in the same one line naming it (exit 1, nothing served).
+What the page shows of the file -- ids, names, error texts -- has its control and bidirectional
+characters escaped.  The station keeps every record for its slider, so a replay holds at most
+:data:`MAX_RECORDS` of them and says how many more the file has.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
+from core_functions.printable import printable
 from execution_engine.machine.table import FINISH, READY, TABLE_2
-from execution_engine.trace_report import MAX_LINE
+from execution_engine.record_reader import printable_record, read_record
 from operator_station.feed import Feed
 
-#: Records read from one trace at most (a day of a busy cell is well below).
+#: Records a replay keeps (a day of a busy cell is well below); the rest are counted and said.
 MAX_RECORDS = 2_000_000
 
 
@@ -29,41 +35,34 @@ def table_structure(group: str) -> dict[str, Any]:
     }
 
 
-def read_records(path: Path) -> tuple[list[dict[str, Any]], int]:
-    """The trace's records in order and how many lines were not records."""
+def read_records(path: Path) -> tuple[list[dict[str, Any]], list[str]]:
+    """The record's records in order, escaped, at most :data:`MAX_RECORDS`, and the notes on the file
+    (lines skipped, cut, records beyond the bound).  OSError, NotARecording or OverLimit as
+    :func:`~execution_engine.record_reader.read_record` raises them."""
     records: list[dict[str, Any]] = []
-    skipped = 0
-    with open(path, "rb") as stream:
-        while len(records) < MAX_RECORDS:
-            raw = stream.readline(MAX_LINE + 1)
-            if not raw:
-                break
-            if not raw.endswith(b"\n") and len(raw) > MAX_LINE:
-                skipped += 1
-                while raw and not raw.endswith(b"\n"):
-                    raw = stream.readline(MAX_LINE + 1)
-                continue
-            try:
-                record = json.loads(raw)
-            except (UnicodeDecodeError, json.JSONDecodeError):
-                skipped += 1
-                continue
-            if isinstance(record, dict) and isinstance(record.get("event"), str) and isinstance(record.get("t"), (int, float)):
-                records.append(record)
-            else:
-                skipped += 1
-    return records, skipped
+    beyond = 0
+
+    def keep(record: dict[str, Any]) -> None:
+        nonlocal beyond
+        if len(records) < MAX_RECORDS:
+            records.append(printable_record(record))
+        else:
+            beyond += 1
+
+    read = read_record(path, keep)
+    notes = read.notes()
+    if beyond:
+        notes.append(f"{printable(path)}: only the first {MAX_RECORDS:,} records are replayed; {beyond:,} more follow (report summarises them all)")
+    return records, notes
 
 
 def load_replay(feed: Feed, path: Path) -> int:
-    """Put the trace at ``path`` into ``feed`` as a finished run; the number of records."""
-    records, skipped = read_records(path)
+    """Put the run's record at ``path`` into ``feed`` as a finished run; the number of records."""
+    records, notes = read_records(path)
     groups = list(dict.fromkeys(r["group"] for r in records if isinstance(r.get("group"), str) and r["group"] != "engine"))
-    total = max((r.get("operations_total", 0) for r in records if r["event"] == "run_end"), default=0)
-    messages = [{"severity": "warning", "message": f"{path}: {skipped} line(s) are not trace records and were skipped"}] if skipped else []
-    if not any(r["event"] == "run_end" for r in records):
-        messages.append({"severity": "warning", "message": f"{path}: no run_end record: the run was cut (killed or crashed)"})
-    feed.begin("replay", path.name, groups, structures={g: table_structure(g) for g in groups}, messages=messages, ended=True,
+    total = max((r["operations_total"] for r in records if r["event"] == "run_end" and _count(r.get("operations_total"))), default=0)
+    messages = [{"severity": "warning", "message": note} for note in notes]
+    feed.begin("replay", printable(path.name), groups, structures={g: table_structure(g) for g in groups}, messages=messages, ended=True,
                status={"state": "replay", "operation_count": total, "t": records[-1]["t"] if records else 0.0})
     joint_names = list(dict.fromkeys(n for r in records for n in _names(_result(r).get("joint_names")) if isinstance(n, str)))
     known = {name: float("nan") for name in joint_names}
@@ -71,10 +70,19 @@ def load_replay(feed: Feed, path: Path) -> int:
         feed.append(record)
         result = _result(record)
         if isinstance(result.get("joint_names"), list) and isinstance(result.get("positions"), list) and known:
-            known.update((n, float(p)) for n, p in zip(result["joint_names"], result["positions"]) if n in known and isinstance(p, (int, float)))
+            known.update((n, float(p)) for n, p in zip(result["joint_names"], result["positions"]) if n in known and _number(p))
             feed.joint_sample(float(record["t"]), list(known.values()), force=True)
     feed.update(joint_names=joint_names)
     return len(records)
+
+
+def _count(value: Any) -> bool:
+    """A whole number of operations (a record's ``operations_total``), not a flag, a text or a float."""
+    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value < 1 << 53
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) < 1e300
 
 
 def _names(value: Any) -> list[Any]:

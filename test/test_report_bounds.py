@@ -257,13 +257,18 @@ def bounded(path: Path) -> str:
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(cut=st.integers(0, len(WHOLE)), flips=st.lists(st.tuples(st.integers(0, len(WHOLE) - 1), st.integers(1, 255)), max_size=6))
 def test_a_recording_cut_or_flipped_anywhere_gives_a_summary_or_one_line(tmp_path: Path, cut: int, flips: list[tuple[int, int]]) -> None:
+    path = tmp_path / "flipped.mcap"
+    path.write_bytes(flipped(cut, flips))
+    bounded(path)
+
+
+def flipped(cut: int, flips: list[tuple[int, int]]) -> bytes:
+    """A whole recording cut at ``cut`` with the bytes at each position xor-ed by its value."""
     data = bytearray(WHOLE[:cut])
     for at, xor in flips:
         if at < len(data):
             data[at] ^= xor
-    path = tmp_path / "flipped.mcap"
-    path.write_bytes(bytes(data))
-    bounded(path)
+    return bytes(data)
 
 
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -271,11 +276,16 @@ def test_a_recording_cut_or_flipped_anywhere_gives_a_summary_or_one_line(tmp_pat
 @example(claims=[64_000_000] * 3, records=7_100_000, kind=0x00)  # the issue's file: chunks of zeros
 def test_crafted_chunks_never_pass_the_bounds(tmp_path: Path, claims: list[int], records: int, kind: int) -> None:
     """Chunks that claim anything up to the per-chunk bound, hold runs of tiny records, or lie about either."""
+    path = tmp_path / "crafted.mcap"
+    path.write_bytes(crafted_chunks(claims, records, kind))
+    bounded(path)
+
+
+def crafted_chunks(claims: list[int], records: int, kind: int) -> bytes:
+    """A recording of one zstd chunk per claim, each claiming that many bytes and holding ``records`` empty records of ``kind``."""
     inner = (struct.pack("<BQ", kind, 0) * records)[: max(claims)]
     payload = zstandard.ZstdCompressor().compress(inner)
-    path = tmp_path / "crafted.mcap"
-    path.write_bytes(MAGIC + HEADER + b"".join(chunk(payload, claim) for claim in claims))
-    bounded(path)
+    return MAGIC + HEADER + b"".join(chunk(payload, claim) for claim in claims)
 
 
 TRACE_VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**30, 10**30), st.text(max_size=8), st.none(), st.booleans())

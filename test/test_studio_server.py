@@ -6,6 +6,7 @@ import asyncio
 import io
 import json
 import math
+import re
 import shutil
 import time
 from collections.abc import Callable
@@ -33,6 +34,8 @@ from execution_engine.transport.port import Transport  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 from operator_station.replay import load_replay  # noqa: E402
+from execution_engine.record_reader import NotARecording, OverLimit  # noqa: E402
+from execution_engine.run_report import summarize  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
 from operator_station.timeline_view import TimelineView  # noqa: E402
 
@@ -253,7 +256,14 @@ def test_any_trace_file_even_cut_is_replayed_or_refused_line_by_line(tmp_path_fa
     path = tmp_path_factory.mktemp("replay") / "trace.jsonl"
     path.write_bytes(data[:cut])
     feed = Feed()
-    count = load_replay(feed, path)
+    try:
+        count = load_replay(feed, path)
+    except (NotARecording, OverLimit) as refusal:  # refused as report refuses it: one line naming the file
+        assert str(refusal).startswith(str(path)) and "\n" not in str(refusal)
+        with pytest.raises(type(refusal), match=re.escape(str(refusal))):
+            summarize(path)
+        assert feed.snapshot.mode == "idle" and not feed.records
+        return
     assert count == len(feed.records) and feed.snapshot.mode == "replay"
     assert all(isinstance(r["t"], (int, float)) and isinstance(r["event"], str) for r in feed.records)
     timeline = TimelineView(feed).model()
