@@ -27,6 +27,7 @@ def share_roots() -> Iterator[Path]:
     yield _SOURCE_ROOT
     yield Path(sys.prefix) / "share" / PACKAGE
     try:
+        # optional: ament_index_python is there only in a ROS 2 environment (the installed package's share folder)
         from ament_index_python.packages import get_package_share_directory  # type: ignore[import-not-found]
     except ImportError:
         return

@@ -23,14 +23,12 @@ import sys
 from collections.abc import Awaitable, Callable, Iterator, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport.port import Node, RosArgumentsError, TransportError
+from execution_engine.transport.ros import RosTransport  # rclpy itself is imported only when one starts
 from execution_engine.transport.selection import dds_transport, split_transport
-
-if TYPE_CHECKING:  # imported only when a node really runs: it needs rclpy
-    from execution_engine.transport.ros import RosTransport
 
 log = logging.getLogger(__name__)
 
@@ -131,8 +129,6 @@ def run_node(
 
 
 def _ros_transport(clock: Clock, argv: Sequence[str]) -> RosTransport:
-    from execution_engine.transport.ros import RosTransport
-
     return RosTransport(clock, argv)
 
 

@@ -20,7 +20,7 @@ def _find(names: tuple[str, ...]) -> str | None:
 def missing() -> str | None:
     """Why no headless Chromium can be driven here, or None."""
     try:
-        import selenium  # noqa: F401
+        import selenium  # noqa: F401 - optional: pip extra 'test', only to drive a browser
     except ImportError:
         return "selenium is not installed (pip install '.[test]')"
     if _find(CHROMIUM_NAMES) is None:
@@ -32,6 +32,7 @@ def missing() -> str | None:
 
 def chromium(width: int = 1600, height: int = 1000, arguments: tuple[str, ...] = ()) -> Any:
     """A headless Chromium WebDriver with the browser's console log kept; ``arguments`` are added to Chromium's."""
+    # optional: selenium (pip extra 'test'), only where a browser is driven (missing() says when it is not there)
     from selenium import webdriver
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service

@@ -31,7 +31,7 @@ class RobotStatePublisher:
     """Publishes one robot's URDF and link transforms through ``node``."""
 
     def __init__(self, node: Node, urdf: str) -> None:
-        from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio: only for a robot with a URDF
+        from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only for a robot with a URDF
 
         self.node = node
         self.links = LinkTransforms(urdf)

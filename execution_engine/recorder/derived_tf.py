@@ -55,7 +55,7 @@ class DerivedTf:
         A URDF pinocchio cannot read, or a joint state whose names and positions differ in
         length, gives no ``tf`` -- the bridge could not have published one either."""
         if topic == self.description:
-            from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio: only when asked
+            from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only when asked
 
             try:
                 self.links = LinkTransforms(str(msg.get("data", "")))

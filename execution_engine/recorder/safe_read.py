@@ -23,6 +23,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import IO
 
+import lz4.frame
+import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Header, McapRecord, Message, Schema
@@ -105,13 +107,9 @@ def decompressed(chunk: Chunk, budget: Budget | None = None) -> bytes | bytearra
     if chunk.compression == "":
         data = bytes(chunk.data)
     elif chunk.compression == "zstd":
-        import zstandard
-
         with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data)) as reader:
             data = _bounded_read(reader, claimed)
     elif chunk.compression == "lz4":
-        import lz4.frame
-
         decompressor = lz4.frame.LZ4FrameDecompressor()
         data = decompressor.decompress(bytes(chunk.data), max_length=claimed + 1)
     else:

@@ -93,7 +93,7 @@ def _encoder_env() -> dict[str, str]:
 
 def _widen(pipe: IO[bytes] | None) -> None:
     try:
-        import fcntl
+        import fcntl  # optional: POSIX only (elsewhere the pipe keeps its default size)
 
         fcntl.fcntl(pipe.fileno(), getattr(fcntl, "F_SETPIPE_SZ", 1031), PIPE_SIZE)  # type: ignore[union-attr]
     except (ImportError, OSError, AttributeError, ValueError):  # not Linux, or over the system's limit: the default

@@ -61,7 +61,7 @@ def _flatten(params: dict[str, Any], prefix: str = "") -> dict[str, ParameterVal
 
 def _yaml() -> Any:
     try:
-        import yaml
+        import yaml  # optional: PyYAML, only for a parameters file; without it such a file is refused in one line
     except ImportError:
         raise RosArgumentsError("parameters need PyYAML: pip install '.[dds]'") from None
     return yaml

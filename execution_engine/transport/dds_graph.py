@@ -179,8 +179,8 @@ def domain_config(env: Mapping[str, str] = os.environ) -> str | None:
 
 def dds_qos(qos: QoS, *, user_data: bytes = b"", lease: float | None = None) -> Any:
     """The cyclonedds ``Qos`` of a ROS endpoint with ``qos``; ``lease`` (s): automatic liveliness."""
-    from cyclonedds.qos import Policy, Qos
-    from cyclonedds.util import duration
+    from cyclonedds.qos import Policy, Qos  # optional: pip extra 'dds', only when a DDS transport runs
+    from cyclonedds.util import duration  # optional: pip extra 'dds'
 
     history = Policy.History.KeepAll if qos.history is History.KEEP_ALL else Policy.History.KeepLast(qos.depth)
     policies: list[Any] = [
@@ -206,7 +206,7 @@ def dds_qos(qos: QoS, *, user_data: bytes = b"", lease: float | None = None) -> 
 
 def user_data_value(qos: Any, key: str) -> str | None:
     """``key=value;`` from an endpoint's user data (``serviceid``, ``clientid``), or None."""
-    from cyclonedds.qos import Policy
+    from cyclonedds.qos import Policy  # optional: pip extra 'dds', only when a DDS transport runs
 
     try:
         data = qos[Policy.Userdata].data

@@ -56,7 +56,7 @@ class DdsWaiter:
                     pass  # already gone with its reader
 
     def _run(self) -> None:
-        from cyclonedds.util import duration
+        from cyclonedds.util import duration  # optional: pip extra 'dds', only when a DDS transport runs
 
         timeout = duration(seconds=PERIOD)
         while not self._stopping:

@@ -259,7 +259,7 @@ class InterfaceRegistry:
         return out
 
     def _build(self, ros_type: str, typename: str, fields: Iterable[FieldSpec], constants: Iterable[FieldSpec]) -> type:
-        from cyclonedds.idl import make_idl_struct
+        from cyclonedds.idl import make_idl_struct  # optional: pip extra 'dds', only when DDS types are built
 
         annotations: dict[str, Any] = {}
         for spec in fields:
@@ -272,7 +272,7 @@ class InterfaceRegistry:
         return cls
 
     def _annotation(self, spec: FieldSpec) -> Any:
-        from cyclonedds.idl import types
+        from cyclonedds.idl import types  # optional: pip extra 'dds', only when DDS types are built
 
         if spec.base in _PRIMITIVES:
             primitive = _PRIMITIVES[spec.base]

@@ -75,7 +75,7 @@ def _flatten(values: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str,
 def _read_params_file(path: str) -> Mapping[str, Any]:
     """The file as untyped YAML (every scalar a string), or {} when it cannot be read."""
     try:
-        import yaml  # a dependency of every ROS 2 install; the parser only matters there
+        import yaml  # optional: a dependency of every ROS 2 install; the parser only matters there
     except ImportError:
         return {}
     try:

@@ -11,13 +11,10 @@ from __future__ import annotations
 import logging
 import sys
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 from execution_engine.clock import Clock
+from execution_engine.transport.dds import DdsTransport  # cyclonedds itself is imported only when one starts
 from execution_engine.transport.port import RosArgumentsError
-
-if TYPE_CHECKING:
-    from execution_engine.transport.dds import DdsTransport
 
 TRANSPORTS = ("ros", "dds")
 DEFAULT = "ros"
@@ -55,8 +52,6 @@ def split_transport(argv: Sequence[str]) -> tuple[str, list[str]]:
 
 def dds_transport(clock: Clock, argv: Sequence[str]) -> DdsTransport:
     """The DDS transport of a node process; Python logging to stderr as rcutils prints it."""
-    from execution_engine.transport.dds import DdsTransport
-
     transport = DdsTransport(clock, argv)
     if not logging.getLogger().handlers:
         logging.basicConfig(
