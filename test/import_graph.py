@@ -52,7 +52,7 @@ class Import:
     target: str | None  # the project file ``module`` is, None outside the project
     in_function: bool  # runs when the function is called, not when the file loads
     type_checking: bool  # under ``if TYPE_CHECKING:``
-    comment: str  # the comments on the statement's lines and the line before, joined; '' if none
+    comment: str  # the comments on the statement's lines and the line before it (or before its run of imports); '' if none
 
 
 @dataclass(frozen=True)
@@ -97,6 +97,25 @@ def _comments(text: str) -> dict[int, str]:
     return found
 
 
+def _runs_of_imports(tree: ast.AST) -> dict[int, int]:
+    """Line of each import statement -> the first line of the run of imports it is in (one statement after
+    another in the same block): a comment above the run speaks for all of it."""
+    first: dict[int, int] = {}
+    for node in ast.walk(tree):
+        for field in ("body", "orelse", "finalbody", "handlers"):
+            statements = getattr(node, field, None)
+            if not isinstance(statements, list):
+                continue
+            start: int | None = None
+            for statement in statements:
+                if isinstance(statement, (ast.Import, ast.ImportFrom)):
+                    start = statement.lineno if start is None else start
+                    first[statement.lineno] = start
+                else:
+                    start = None
+    return first
+
+
 def _is_type_checking(test: ast.expr) -> bool:
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
         isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
@@ -109,8 +128,9 @@ def private(name: str) -> bool:
 
 
 class _Visitor(ast.NodeVisitor):
-    def __init__(self, rel: str, name: str, modules: dict[str, str], comments: dict[int, str]) -> None:
+    def __init__(self, rel: str, name: str, modules: dict[str, str], comments: dict[int, str], runs: dict[int, int]) -> None:
         self.rel = rel
+        self.runs = runs
         self.package = name if rel.endswith("/__init__.py") else name.rpartition(".")[0]
         self.modules = modules
         self.comments = comments
@@ -139,7 +159,7 @@ class _Visitor(ast.NodeVisitor):
             self.visit(statement)
 
     def _add(self, node: ast.Import | ast.ImportFrom, module: str, name: str | None) -> None:
-        lines = range(node.lineno - 1, (node.end_lineno or node.lineno) + 1)
+        lines = range(self.runs.get(node.lineno, node.lineno) - 1, (node.end_lineno or node.lineno) + 1)
         comment = " ".join(self.comments[n] for n in lines if n in self.comments)
         self.found.append(
             Import(self.rel, node.lineno, module, name, self.modules.get(module), self._functions > 0, self._type_checking > 0, comment)
@@ -222,8 +242,9 @@ def walk(project: Project = Project()) -> Walk:
     uses: list[PrivateUse] = []
     for name, rel in sorted(modules.items(), key=lambda kv: kv[1]):
         text = (project.root / rel).read_text(encoding="utf-8")
-        visitor = _Visitor(rel, name, modules, _comments(text))
-        visitor.visit(ast.parse(text, filename=rel))
+        tree = ast.parse(text, filename=rel)
+        visitor = _Visitor(rel, name, modules, _comments(text), _runs_of_imports(tree))
+        visitor.visit(tree)
         imports += visitor.found
         uses += visitor.private_uses
     return Walk(modules, imports, uses)
@@ -304,7 +325,8 @@ def function_level(imports: Iterable[Import]) -> list[Import]:
 
 
 def unexplained(imports: Iterable[Import]) -> list[Import]:
-    """Function-level imports without a comment (on their lines or the line before) saying optional or slow."""
+    """Function-level imports without a comment (on their lines, the line before, or above their run of
+    imports) saying optional or slow."""
     return [i for i in function_level(imports) if not REASON.search(i.comment)]
 
 
