@@ -28,10 +28,11 @@ from core_functions.primitives import (
 )
 from execution_engine.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
-from robot_bridges.kuka_rsi.backend import KukaRsiBackend, SimulatorSpec
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.kinematics import KukaArm
 from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_controller import SimulatorSpec
 from robot_bridges.kuka_rsi.sim_faults import Quirks
 
 READY = tuple(math.radians(v) for v in (0.0, -80.0, 85.0, 0.0, 30.0, 0.0))
@@ -94,7 +95,7 @@ def test_joint_and_cartesian_moves_reach_their_targets(run_sim: Run) -> None:
 
 def test_a_linear_move_follows_a_straight_line(run_sim: Run) -> None:
     async def body(b: KukaRsiBackend) -> None:
-        sim = b._sim_thread
+        sim = b.sim_thread
         assert sim is not None
         start = b.tcp_pose("arm")
         assert start is not None
@@ -166,7 +167,7 @@ def test_end_effector_actions_set_the_tool_outputs(run_sim: Run) -> None:
         assert result.io == {"gripper": True, "air": False, "tool": False}
         result = await b.execute("arm", EndEffector("air_on"))
         assert result.io == {"gripper": True, "air": True, "tool": False}
-        assert b._sim_thread is not None and b._sim_thread.model.outputs["Tool.o2"] is True
+        assert b.sim_thread is not None and b.sim_thread.model.outputs["Tool.o2"] is True
         result = await b.execute("arm", EndEffector("gripper_open"))
         assert result.io["gripper"] is False
         with pytest.raises(BridgeError) as caught:
@@ -276,11 +277,11 @@ def test_an_axis_correction_monitor_stop_is_a_controller_fault(run_sim: Run) -> 
 
 def test_silence_from_the_controller_is_a_timeout(run_sim: Run) -> None:
     async def body(b: KukaRsiBackend) -> None:
-        assert b._sim_thread is not None
+        assert b.sim_thread is not None
         await b.execute("arm", SetSpeed(0.2))
         task = asyncio.get_running_loop().create_task(b.execute("arm", MoveJoints(tuple(math.radians(v) for v in (90, -70, 80, 0, 40, 0)))))
         await b.wait_cycles(20)
-        b._sim_thread.stop()  # the controller vanishes without a word (cable pulled)
+        b.sim_thread.stop()  # the controller vanishes without a word (cable pulled)
         with pytest.raises(BridgeError) as caught:
             await task
         assert caught.value.kind is FaultKind.TIMEOUT and "no packet from kuka" in str(caught.value)
@@ -447,7 +448,7 @@ def test_primitives_plan_from_the_commanded_set_point_not_the_reported_one(run_s
         start = Pose.from_matrix(ARM.fk(here))
         sweep = await b.execute("arm", RecordTrajectory("sweep", waypoints=(start.translated(0.0, 0.05, 0.0),), interpolation="linear"))
         assert np.allclose(sweep.points[0], here, atol=1e-4)  # not READY, which the peer reports
-        sim = b._sim_thread
+        sim = b.sim_thread
         assert sim is not None
         sim.model.trace = []
         await b.execute("arm", ExecuteTrajectory("sweep", sweep.joint_names, sweep.points, sweep.times))

@@ -50,7 +50,7 @@ def test_silence_means_a_lost_robot_after_a_time_that_fits_who_speaks(options: d
 
 def test_the_simulated_controller_asks_for_real_time_priority_above_the_loop() -> None:
     backend = made()
-    command = backend.simulator_command(("127.0.0.1", 40000))
+    command = backend.simulator.command(("127.0.0.1", 40000))  # type: ignore[union-attr]
     assert command[command.index("--rt-priority") + 1] == str(SIMULATOR_PRIORITY) == "20"  # the loop asks for 10: the controller's clock comes first
 
 

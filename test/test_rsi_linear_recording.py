@@ -26,10 +26,11 @@ from core_functions.primitives import ExecuteTrajectory, MoveJoints, RecordTraje
 from core_functions.robots import KUKA_KR
 from execution_engine.clock import Clock, run_with_clock, simulated_clock
 from robot_bridges.backend import BridgeError, FaultKind
-from robot_bridges.kuka_rsi.backend import KukaRsiBackend, SimulatorSpec
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend
 from robot_bridges.kuka_rsi.external import LoopSettings
 from robot_bridges.kuka_rsi.kinematics import KukaArm
 from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_controller import SimulatorSpec
 
 Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
 TOLERANCE = 1e-4  # m: the documented default
@@ -85,7 +86,7 @@ def test_a_recorded_linear_sweep_replays_within_tolerance_of_its_lines_on_kuka_r
                 return
             assert np.all(np.abs(np.diff(plan.points, axis=0)) <= VELOCITY * np.diff(plan.times)[:, None] * (1 + 1e-9))
             assert np.max(np.diff(plan.times), initial=0.0) <= 0.1 + 1e-9  # no gap longer than the sample period
-            sim = backend._sim_thread
+            sim = backend.sim_thread
             loop = backend.iface.loop if backend.iface is not None else None
             assert sim is not None and loop is not None
             await backend.execute("arm", SetSpeed(speed))

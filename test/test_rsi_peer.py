@@ -23,7 +23,7 @@ from core_functions.primitives import MoveJoints
 from core_functions.robots import KUKA_KR
 from execution_engine.clock import Clock, real_clock
 from robot_bridges.backend import BackendOptions
-from robot_bridges.kuka_rsi.backend import KukaRsiBackend, SimulatorSpec, create
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.codec import PacketCodec
 from robot_bridges.kuka_rsi.config import default_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink, RsiLoop
@@ -31,6 +31,7 @@ from robot_bridges.kuka_rsi.interface import RsiInterface
 from robot_bridges.kuka_rsi.peer import MAX_GAP, PeerGate
 from robot_bridges.kuka_rsi.pipe import FramedPipe
 from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_controller import SimulatorSpec
 from robot_bridges.kuka_rsi.sim_network import SimulatorThread
 from robot_bridges.kuka_rsi.slots import layout, robot_block_size
 from robot_bridges.kuka_rsi.spoofer import Flood
