@@ -153,6 +153,8 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         try:
             await self._await_machines()
             await self._await_start()
+            await asyncio.sleep(0)  # what came meanwhile (a simulator's /clock) is taken in before the time is read
+            report.t_start = self.clock.now()  # the cycle starts with the first operation, as the dry run's does
             self._set_state("running")
             if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags_mode.py)
                 await self._run_groups(app)
