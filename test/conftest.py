@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Iterator
 from typing import Any, TypeVar
 
 import pytest
+from dds_domain import domain_env
 from hypothesis import HealthCheck, settings
 
 from execution_engine.clock import Clock, run_with_clock, simulated_clock
@@ -25,3 +26,11 @@ def run_sim() -> Callable[[Callable[[Clock], Coroutine[Any, Any, T]]], T]:
         return run_with_clock(main, simulated_clock())
 
     return run
+
+
+@pytest.fixture
+def dds_env() -> Iterator[dict[str, str]]:
+    """The environment of DDS participants in a domain no other test uses meanwhile, in this session or
+    another on this host (dds_domain.py), on loopback only; the domain is given back when the test ends."""
+    with domain_env() as env:
+        yield env

@@ -8,6 +8,7 @@ hand to the middle, through the left one.
 """
 from __future__ import annotations
 
+import asyncio
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,8 +17,12 @@ import numpy as np
 
 from app_functions.registry import full_catalog
 from core_functions.robots import NEXTAGE_OPEN
+from execution_engine import nodes
 from execution_engine.app_model import Application, read_application
+from execution_engine.ros_main import Outcome, machine_node_name
 from robot_bridges.collision import scene_for
+from robot_bridges.nextage_sim.node import declare_nextage_parameters
+from robot_bridges.node import run_bridge
 
 MIDDLE = '<param value="0.34,0.0,0.10,180deg,0,90deg"/>'
 CROSSING = f"""<?xml version="1.0"?>
@@ -74,13 +79,6 @@ COLLIDING = f"""<?xml version="1.0"?>
 def start_nextage_cell(transport: Any, speed: float = 20.0, **engine_parameters: Any) -> list[Any]:
     """The Nextage simulator's bridge, one machine per group and the engine as nodes of
     ``transport`` (rclpy or DDS), each running its executable's body: their tasks (cancel them)."""
-    import asyncio
-
-    from execution_engine import nodes
-    from execution_engine.ros_main import Outcome, machine_node_name
-    from robot_bridges.nextage_sim.node import declare_nextage_parameters
-    from robot_bridges.node import run_bridge
-
     bridge = transport.create_node("nextage_sim_bridge", parameters={"speed": speed})
     tasks = [asyncio.ensure_future(run_bridge("nextage-sim", declare_nextage_parameters, bridge, Outcome()))]
     for group in NEXTAGE_OPEN.group_names:

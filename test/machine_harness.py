@@ -5,6 +5,7 @@ drive a machine into any state of Table 2 and watch the status topic for the tra
 """
 from __future__ import annotations
 
+import asyncio
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,8 +41,6 @@ class Harness:
     backend_class: type[ScriptedBackend] = ScriptedBackend  # a subclass scripts more (a slow measurement, say)
 
     async def start(self) -> Harness:
-        import asyncio
-
         self.transport = LocalTransport(self.clock)
         self.backend = self.backend_class(self.clock, self.robot, self.durations)
         self.bridge = BridgeNode(self.transport.create_node("bridge"), self.backend)
@@ -75,8 +74,6 @@ class Harness:
         return self
 
     async def close(self) -> None:
-        import asyncio
-
         for task in self.tasks:
             task.cancel()
         await asyncio.gather(*self.tasks, return_exceptions=True)

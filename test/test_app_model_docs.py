@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from app_functions.registry import full_catalog
-from execution_engine.app_model import validate_application
+from core_functions.robots import NEXTAGE_OPEN
+from execution_engine.app_model import check_joint_poses, read_cell, validate_application
 from execution_engine.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -100,11 +101,6 @@ def test_the_documented_master_slave_operation_is_valid(example_tree: Path) -> N
 
 def test_every_documented_joint_pose_fits_the_nextage() -> None:
     """Each <joint_pose> line shown in the guide is valid for the robot it is written for."""
-    import re
-
-    from core_functions.robots import NEXTAGE_OPEN
-    from execution_engine.app_model import check_joint_poses, read_cell
-
     text = (Path(__file__).resolve().parents[1] / "docs" / "application_xml.md").read_text()
     poses = re.findall(r"<joint_pose [^>]*/>", text)
     assert poses

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from lxml import etree
 
 from execution_engine.app_model import ApplicationError, Diagnostic, load_application, load_cell, validate_application, validate_cell
-from execution_engine.app_model.positions import SourceMap
+from execution_engine.app_model.positions import DocumentWalk, SourceMap
+from execution_engine.app_model.safe_xml import read_xml
 
 CATALOG = small_catalog()
 SETTINGS = settings(suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow], deadline=None)
@@ -171,8 +172,6 @@ _JUNK = st.sampled_from([
 @given(cuts=st.lists(st.tuples(st.integers(0, len(APP_XML)), _JUNK), max_size=4))
 def test_the_reader_walk_gives_every_element_its_own_offset(work: Path, cuts: list[tuple[int, str]], monkeypatch: pytest.MonkeyPatch) -> None:
     """Junk anywhere (where it keeps the file well-formed) never shifts the offsets the reader hands out."""
-    from execution_engine.app_model.positions import DocumentWalk
-
     text = APP_XML
     for position, junk in sorted(cuts, reverse=True):
         tag_end = text.rfind(">", 0, position)
@@ -198,8 +197,6 @@ def test_the_reader_walk_gives_every_element_its_own_offset(work: Path, cuts: li
     validate_application(path, CATALOG)
     assert visits
     assert all(walk._aligned for walk in walks)  # the fast path held: no fallback to the element map
-    from execution_engine.app_model.safe_xml import read_xml
-
     truths: dict[str, dict[str, int]] = {}
     for (element, offset), walk in zip(visits, walks):  # the application's walk, and its cell's
         file = walk.source.file

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
-from app_model_support import CELL_XML, small_catalog
+from app_model_support import APP_XML, CELL_XML, small_catalog
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lxml import etree
@@ -329,8 +329,6 @@ _PIECES = [
 @given(data=st.data(), cell=st.booleans())
 def test_checking_in_windows_says_exactly_what_checking_whole_says(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, data: st.DataObject, cell: bool) -> None:
     """With windows of one element, every sibling list of a random mutant is split: same report."""
-    from app_model_support import APP_XML
-
     text = CELL_XML if cell else APP_XML
     for _ in range(data.draw(st.integers(1, 6))):
         ends = [i for i, c in enumerate(text) if c == ">"][:-1]

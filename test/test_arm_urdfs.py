@@ -21,8 +21,10 @@ from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, RobotModel
 from execution_engine.clock import Clock
 from execution_engine.transport.transforms import compose_to_root
 from robot_bridges.kuka_rsi import kinematics as kuka
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend
 from robot_bridges.vplus import kinematics as viper
 from core_functions.urdf_tree import UrdfTree
+from robot_bridges.vplus.backend import VPlusBackend
 
 VIPER = viper.ViperKinematics()
 KUKA = kuka.KukaArm()
@@ -72,9 +74,6 @@ def test_limits_velocities_and_joint_names_are_the_robot_models(name: str) -> No
 
 
 def test_the_backends_describe_their_robot_with_these_urdfs() -> None:
-    from robot_bridges.kuka_rsi.backend import KukaRsiBackend
-    from robot_bridges.vplus.backend import VPlusBackend
-
     # constructing connects nothing: only start() does
     assert VPlusBackend(Clock(), "127.0.0.1").robot_description() == viper.URDF_PATH.read_text(encoding="utf-8")
     other = viper.ViperKinematics(viper.ViperGeometry(a1=0.1))

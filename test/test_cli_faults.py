@@ -14,7 +14,6 @@ import io
 import json
 import logging
 import os
-import random
 import re
 import shlex
 import socket
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import pytest
 import zstandard
+from dds_domain import domain_env, stop_group
 
 from execution_engine.cli import main
 
@@ -206,19 +206,31 @@ def run_in_process(argv: list[str], bound: float) -> tuple[int, str]:
     return result[0], out.getvalue() + err.getvalue()
 
 
-#: A ``launch`` row's cell talks DDS on loopback only, in a domain of its own, and keeps its
-#: machines' default trajectory database in the row's folder, not the home directory.
-LOOPBACK_DDS = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
-
-
 def run_process(argv: list[str], bound: float, home: Path | None = None) -> tuple[int, str]:
-    env = {**os.environ, "ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK_DDS}
-    if home is not None:
-        env["XDG_DATA_HOME"] = str(home)
-    done = subprocess.run(  # stdin is no terminal: nobody at this run can answer an operator question
-        [sys.executable, "-m", "execution_engine", *argv], cwd=ROOT, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=bound, env=env,
-    )
-    return done.returncode, done.stdout + done.stderr
+    """``python -m execution_engine ARGV`` as a process of its own, ended within ``bound`` s.
+
+    A ``launch`` row's cell talks DDS on loopback only, in a domain no other test uses meanwhile (in
+    this session or another: dds_domain.py; two cells in one domain see each other's joints and
+    machines), and every process it started is gone before that domain is given back; its machines'
+    default trajectory database is in the row's folder, not the home directory."""
+    with domain_env() as dds:
+        env = {**os.environ, **dds}
+        if home is not None:
+            env["XDG_DATA_HOME"] = str(home)
+        process = subprocess.Popen(  # stdin is no terminal: nobody at this run can answer an operator question
+            [sys.executable, "-m", "execution_engine", *argv], cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            text=True, env=env, start_new_session=True,
+        )
+        try:
+            out, err = process.communicate(timeout=bound)
+        except subprocess.TimeoutExpired:
+            stop_group(process)
+            out, err = process.communicate()
+            pytest.fail(f"{argv} did not end within {bound:g} s:\n{out}{err}")
+        finally:
+            stop_group(process)  # a node its launch left behind, too
+    return process.returncode, out + err
+
 
 
 ROWS = rows()

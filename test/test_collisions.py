@@ -9,6 +9,7 @@ and work (a hand at the hole it deburs) is contact, not a collision.
 from __future__ import annotations
 
 import math
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,8 @@ from hypothesis import strategies as st
 
 from core_functions.geometry import Pose
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN
-from robot_bridges.collision import CellBox, HeldPart, scene_for
+from execution_engine.app_model import load_cell, validate_cell
+from robot_bridges.collision import CellBox, HeldPart, cell_boxes, scene_for
 from robot_bridges.collision.robots import NEXTAGE_HAND
 from robot_bridges.nextage_sim.model import NextageModel
 from test_dry_run import RIVET_CELL, call, cli, findings, param, write_app
@@ -169,16 +171,12 @@ def cell_file(folder: Path, body: str, unit: str = "mm") -> Path:
 
 
 def test_boxes_and_zones_are_read_in_the_length_unit_and_reach_the_collision_model(tmp_path: Path) -> None:
-    from execution_engine.app_model import load_cell
-
     path = cell_file(tmp_path, '<frame name="part" xyz="340 0 0" box="120 200 10" box_xyz="0 0 -5"/>\n<zone name="z" parent="part" xyz="0 0 50" size="160 220 140"/>\n')
     cell = load_cell(path)
     assert [float(v) for v in cell.frame("part").attributes["box"].split()] == pytest.approx([0.12, 0.2, 0.01])
     zone = cell.zones["z"]
     assert zone.size == pytest.approx((0.16, 0.22, 0.14)) and zone.centre == pytest.approx((0.0, 0.0, 0.05))
     assert zone.contains(cell.pose("part"), (0.34, 0.1, 0.1)) and not zone.contains(cell.pose("part"), (0.34, 0.12, 0.1))
-    from robot_bridges.collision import cell_boxes
-
     (box,) = cell_boxes(cell.to_snapshot())
     assert box.frame == "part" and box.size == pytest.approx((0.12, 0.2, 0.01)) and box.pose.position == pytest.approx((0.34, 0.0, -0.005))
 
@@ -187,10 +185,6 @@ def test_boxes_and_zones_are_read_in_the_length_unit_and_reach_the_collision_mod
 @given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**9, 10**9)), min_size=0, max_size=4), st.sampled_from(["box", "box_xyz"]))
 def test_a_bad_box_is_one_line_at_its_attribute_and_a_good_one_is_metres(values: list[float], attribute: str) -> None:
     """Random numbers: either a box within the bounds (kept in metres) or one error naming the attribute."""
-    import tempfile
-
-    from execution_engine.app_model import validate_cell
-
     text = " ".join(str(v) for v in values)
     extra = ' box="1 1 1"' if attribute == "box_xyz" else ""
     with tempfile.TemporaryDirectory() as folder:
@@ -206,10 +200,6 @@ def test_a_bad_box_is_one_line_at_its_attribute_and_a_good_one_is_metres(values:
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**9, 10**9)), min_size=0, max_size=4))
 def test_a_bad_zone_size_is_one_line_and_a_good_one_a_zone(values: list[float]) -> None:
-    import tempfile
-
-    from execution_engine.app_model import load_cell, validate_cell
-
     text = " ".join(str(v) for v in values)
     with tempfile.TemporaryDirectory() as folder:
         path = cell_file(Path(folder), f'<zone name="z" size="{text}"/>\n')

@@ -13,6 +13,7 @@ import re
 
 import pytest
 
+from execution_engine import cli
 from execution_engine.cli import main
 from execution_engine.console_log import FORMAT, AggregatingHandler, ConsoleLog, kind_of
 from execution_engine.engine.wall_clock import ManualWallClock
@@ -105,8 +106,6 @@ def test_the_kind_masks_numbers_but_not_words() -> None:
 def test_every_command_of_the_cli_logs_through_it_and_leaves_the_root_logger_as_it_was(monkeypatch: pytest.MonkeyPatch) -> None:
     """``main()`` installs the handler for its command and removes it again: a repeated warning of
     any module comes out as one counted line, on this command's own stream."""
-    from execution_engine import cli
-
     def noisy(args: object, out: object, err: object) -> int:
         for n in range(300):
             logging.getLogger("robot_bridges.kuka_rsi.backend").warning(LATE, "kuka_rsi 127.0.0.1:0 (simulated)", n + 1, n)

@@ -6,12 +6,11 @@ The transport runs Cyclone 11 from PyPI, which drops SPDP arriving on an interfa
 and by itself uses only the host's network interface: a late ``ros2 node list`` saw nothing.  The
 late joiner here is that rmw: another process, rmw's XML for LOCALHOST verbatim, and
 ``AddLocalhost="false"`` so that Cyclone 11 too announces to 127.0.0.1 alone, as 0.10.5 does.
-Every wait is bounded; the domain id is random; nothing leaves the host.
+Every wait is bounded; the domain id is the test's own (dds_domain.py); nothing leaves the host.
 """
 from __future__ import annotations
 
 import os
-import random
 import subprocess
 import sys
 from pathlib import Path
@@ -88,8 +87,8 @@ def _environment(extra: dict[str, str]) -> dict[str, str]:
     return {**env, **extra, "PYTHONPATH": str(ROOT)}
 
 
-def test_a_ros_tool_started_after_a_localhost_cell_finds_it_and_is_found() -> None:
-    domain = random.randint(100, 232)
+def test_a_ros_tool_started_after_a_localhost_cell_finds_it_and_is_found(dds_env: dict[str, str]) -> None:
+    domain = int(dds_env["ROS_DOMAIN_ID"])  # a domain of its own (dds_domain.py); the rest of dds_env is what this test varies
     cell_env = _environment({"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
     cell = subprocess.Popen([sys.executable, "-c", CELL, str(2 * BOUND)], cwd=ROOT, env=cell_env, stdout=subprocess.PIPE, text=True)
     joiner = None
@@ -181,14 +180,14 @@ def test_static_peers_are_read_as_rcl_reads_them(caplog: pytest.LogCaptureFixtur
      "CYCLONEDDS_URI": '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'},
     {"ROS_LOCALHOST_ONLY": "1"},
 ])
-def test_cyclone_accepts_every_configuration_made(extra: dict[str, str]) -> None:
+def test_cyclone_accepts_every_configuration_made(extra: dict[str, str], dds_env: dict[str, str]) -> None:
     """Cyclone refuses e.g. an interface named twice; each configuration here makes a participant (the
     remote static peer is left out of the probe: a participant announces itself to its peers at once)."""
     probe = (
         "import sys\nfrom cyclonedds.domain import Domain, DomainParticipant\n"
         "d = Domain(int(sys.argv[1]), sys.argv[2]); DomainParticipant(int(sys.argv[1])); print('ok')"
     )
-    domain = str(random.randint(100, 232))
+    domain = dds_env["ROS_DOMAIN_ID"]
     config = dds_graph.domain_config(extra)
     assert config is not None
     config = config.replace('<Peer address="192.0.2.77"/>', "")  # what is checked is the interfaces; nothing goes off the host

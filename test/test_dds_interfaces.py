@@ -12,7 +12,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from execution_engine.transport import msgs, wire
+from execution_engine.engine.run_action import RunApplicationGoal, SendGoal
+from execution_engine.transport import mirrors, msgs, wire
+from execution_engine.transport.action import UUID
 from execution_engine.transport.dds_convert import DdsConverter
 from execution_engine.transport.idl import InterfaceError, InterfaceRegistry, dds_type_name, parse_message
 from execution_engine.transport.idl_hash import type_hash
@@ -214,9 +216,6 @@ def test_action_type_hashes_are_those_of_jazzy(action_registry: InterfaceRegistr
 
 def test_action_requests_round_trip_with_the_request_header(registry: InterfaceRegistry) -> None:
     """A RunApplication goal as `ros2 action send_goal` writes it: header, 16-octet goal id, goal."""
-    from execution_engine.engine.run_action import RunApplicationGoal, SendGoal
-    from execution_engine.transport.action import UUID
-
     converter = DdsConverter(registry)
     request_type, _ = registry.wire_service(SendGoal.ROS_TYPE)
     request = SendGoal.Request(UUID(tuple(range(16))), RunApplicationGoal("/apps/rivet.xml", "", "nextage-sim", 0.0))
@@ -226,8 +225,6 @@ def test_action_requests_round_trip_with_the_request_header(registry: InterfaceR
 
 
 def test_mirrors_generated_from_the_files_use_the_written_ones_where_they_exist() -> None:
-    from execution_engine.transport import mirrors
-
     assert mirrors.mirror("builtin_interfaces/msg/Time") is msgs.Time
     status = mirrors.mirror("action_msgs/msg/GoalStatus")
     assert status.STATUS_CANCELED == 5 and status().goal_info.stamp == msgs.Time()

@@ -4,15 +4,20 @@ ros2-client's ``ServiceMapping::Cyclone`` writes a request as rmw_cyclonedds_cpp
 bytes of its request writer's GUID and the sequence number (as the RTPS high ``int32`` then low
 ``uint32``), then the request; it matches a reply by those 16 bytes, so the server must echo them
 verbatim.  It puts no ``clientid=`` in its endpoints' user data.  These tests play such a client
-with raw CDR on plain Cyclone endpoints: loopback, a random domain id, every wait bounded.
+with raw CDR on plain Cyclone endpoints: loopback, a domain of its own (dds_domain.py), every wait bounded.
 """
 from __future__ import annotations
 
-import random
+import os
 import struct
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
+from dds_domain import domain_env
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport import dds_graph
@@ -20,18 +25,19 @@ from execution_engine.transport.dds import DdsTransport
 from execution_engine.transport.msgs import Trigger, TriggerResponse
 from execution_engine.transport.port import poll_until
 
-LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
 BOUND = 10.0  # seconds any one condition may take on a loaded machine
 XCDR1_LE = b"\x00\x01"  # the encapsulation kind RustDDS and rmw write: plain CDR, little endian
 
 
 @pytest.fixture(scope="module")
-def env() -> dict[str, str]:
-    return {"ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK}
+def env() -> Iterator[dict[str, str]]:
+    with domain_env() as claimed:  # a domain no other test uses meanwhile (dds_domain.py)
+        yield claimed
 
 
 def take_raw(reader: Any) -> list[bytes]:
     """Serialized samples as they came off the wire (encapsulation header first)."""
+    # optional: cyclonedds (pip extra 'dds'); its C layer, to take the raw CDR
     from cyclonedds._clayer import ddspy_take
     from cyclonedds.core import InstanceState, SampleState, ViewState
 
@@ -51,6 +57,7 @@ def test_a_client_without_clientid_gets_its_header_echoed_even_when_its_reply_re
     slower than its request), still gets the answer: the server waits for a reply reader of the
     caller's participant instead of writing into the void."""
     async def main(clock: Clock) -> tuple[list[bytes], list[str]]:
+        # optional: cyclonedds (pip extra 'dds'), a plain DDS peer
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
 
@@ -66,7 +73,7 @@ def test_a_client_without_clientid_gets_its_header_echoed_even_when_its_reply_re
             qos = dds_graph.dds_qos(dds_graph.SERVICES)  # no user data, as RustDDS
             writer = DataWriter(peer.participant, peer.topic("rq/execution_engine/pauseRequest", request_type), qos=qos)
             assert await poll_until(clock, lambda: bool(writer.get_matched_subscriptions()), BOUND, 0.01)
-            from cyclonedds._clayer import ddspy_write
+            from cyclonedds._clayer import ddspy_write  # optional: cyclonedds (pip extra 'dds'); raw CDR out
 
             header = bytes([0x01, 0x0F, 0xA2, 0x9C, 0x11, 0x22, 0x80, 0x83]) + struct.pack("<iI", 1, 2)
             assert ddspy_write(writer._ref, XCDR1_LE + b"\x00\x00" + header + b"\x00\x00\x00\x00") >= 0
@@ -125,11 +132,6 @@ def test_processes_updating_the_graph_at_once_never_hang(env: dict[str, str]) ->
     the process for good.  And the list of
     matched writers grows while it is read (cyclonedds-python's own getter raised IndexError then).
     Two processes churning their graphs at once both finish."""
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
     root = Path(__file__).resolve().parent.parent
     children = [
         subprocess.Popen([sys.executable, "-c", CHURN, "150"], cwd=root, env={**os.environ, **env, "PYTHONPATH": str(root)},

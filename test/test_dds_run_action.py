@@ -11,13 +11,14 @@ loopback, and a client that is another DDS participant.
 from __future__ import annotations
 
 import asyncio
-import random
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from crossing_cell import CROSSING, WAIT_OPERATION, CollisionWatch, start_nextage_cell
+from dds_domain import domain_env
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.engine.run_action import ACTION_NAME, RunApplicationGoal
 from execution_engine.transport import dds_graph
@@ -29,20 +30,21 @@ from execution_engine.transport.qos import SENSOR
 from execution_engine.transport.wire import JOINT_STATES
 from rclpy_like import RclpyLikeActionClient
 
-LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
 BOUND = 20.0  # seconds any one step may take on a loaded machine
 BASE = f"{ACTION_NAME}/_action"
 
 
 @pytest.fixture
-def env() -> dict[str, str]:
-    return {"ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK}
+def env() -> Iterator[dict[str, str]]:
+    with domain_env() as claimed:  # a domain no other test uses meanwhile (dds_domain.py)
+        yield claimed
 
 
 class WireOrder:
     """Plain Cyclone readers on the action's goal replies and status: every sample with the time its writer wrote it."""
 
     def __init__(self, transport: DdsTransport) -> None:
+        # optional: cyclonedds (pip extra 'dds'), plain DDS readers
         from cyclonedds.core import Policy, Qos
         from cyclonedds.sub import DataReader
 

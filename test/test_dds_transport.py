@@ -1,4 +1,4 @@
-"""The DDS transport on the wire: loopback only, a random domain id, every wait bounded.
+"""The DDS transport on the wire: loopback only, a domain of its own (dds_domain.py), every wait bounded.
 
 Two transports in one test are two DDS participants, as two node processes would be; the
 liveliness test kills a real publisher process.  Waits are on conditions with a deadline
@@ -7,15 +7,15 @@ liveliness test kills a real publisher process.  Waits are on conditions with a 
 from __future__ import annotations
 
 import os
-import random
 import signal
 import subprocess
 import sys
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from dds_domain import domain_env
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport import dds_graph
@@ -27,14 +27,14 @@ from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
 from execution_engine.transport.selection import split_transport
 
 ROOT = Path(__file__).resolve().parent.parent
-LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
 BOUND = 10.0  # seconds any one condition may take on a loaded machine
 
 
 @pytest.fixture(scope="module")
-def env() -> dict[str, str]:
-    """A domain of its own on loopback, so parallel runs and other cells never meet this one."""
-    return {"ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK}
+def env() -> Iterator[dict[str, str]]:
+    """A domain of its own on loopback, so parallel runs and other cells never meet this one (dds_domain.py)."""
+    with domain_env() as claimed:
+        yield claimed
 
 
 def run_real(main: Callable[[Clock], Coroutine[Any, Any, Any]]) -> Any:
@@ -109,6 +109,7 @@ def test_a_failing_handler_answers_failure_and_reports_the_fault(env: dict[str, 
 def test_ros_discovery_info_lists_each_node_with_its_endpoints(env: dict[str, str]) -> None:
     """What `ros2 node list` and `ros2 topic info -v` read: ParticipantEntitiesInfo on ros_discovery_info."""
     async def main(clock: Clock) -> None:
+        # optional: cyclonedds (pip extra 'dds'), a plain DDS reader
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
@@ -146,7 +147,7 @@ def test_garbage_on_a_topic_is_counted_and_the_topic_keeps_working(env: dict[str
     the reader and is rejected and counted, nothing reaches the callback, nothing crashes, and the
     good samples after it still arrive."""
     async def main(clock: Clock) -> None:
-        from cyclonedds._clayer import ddspy_write
+        from cyclonedds._clayer import ddspy_write  # optional: cyclonedds (pip extra 'dds'); raw CDR out
 
         ours, rogue = DdsTransport(clock, env=env), DdsTransport(clock, env=env)
         try:

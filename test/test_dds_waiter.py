@@ -8,13 +8,11 @@ forever).  The transport ends as an rclpy one does when its executor dies: ``spi
 from __future__ import annotations
 
 import asyncio
-import random
 from typing import Any
 
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport.dds import DdsTransport
 
-LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
 BOUND = 10.0
 
 
@@ -31,8 +29,8 @@ class BrokenWaitSet:
         pass
 
 
-def test_a_waiter_that_stops_by_itself_closes_the_transport_with_its_error() -> None:
-    env = {"ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": LOOPBACK}
+def test_a_waiter_that_stops_by_itself_closes_the_transport_with_its_error(dds_env: dict[str, str]) -> None:
+    env = dds_env
 
     async def main(clock: Clock) -> tuple[BaseException | None, BaseException | None, bool]:
         transport = DdsTransport(clock, env=env)

@@ -20,10 +20,12 @@ from core_functions.primitives import TrajectoryResult
 from core_functions.robots import NEXTAGE_OPEN
 from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.app_model import load_application
+from execution_engine.app_model.diagnostics import MAX_DIAGNOSTICS
 from execution_engine.cli import main
 from execution_engine.clock import Clock
 from execution_engine.deployment import deploy_local
 from execution_engine.dry_run import dry_run
+from execution_engine.dry_run.report import DryRunReport, Finding
 from execution_engine.engine.report import RunReport
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
@@ -337,9 +339,6 @@ def test_flags_mode_reports_every_failure_not_only_the_first(tmp_path: Path) -> 
 
 
 def test_the_dry_run_report_stops_after_its_limit_with_how_many_more() -> None:
-    from execution_engine.app_model.diagnostics import MAX_DIAGNOSTICS
-    from execution_engine.dry_run.report import DryRunReport, Finding
-
     found = tuple(Finding("collision", "left_arm", str(k), "approach", "", "collision between a and b", "app.xml", k + 1, 5, 1.0) for k in range(MAX_DIAGNOSTICS + 37))
     report = DryRunReport("a", "app.xml", "nextage-sim", "simulated clock", found, (), 1.0, {}, len(found), len(found))
     lines = [str(d) for d in report.diagnostics()]

@@ -7,14 +7,21 @@ engine status, the trace, the run report (idle split) and the timeline.  All on 
 """
 from __future__ import annotations
 
+import asyncio
 import json
 from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from app_functions.registry import full_catalog
+from execution_engine.app_model import load_application
+from execution_engine.clock import run_with_clock, simulated_clock
+from execution_engine.deployment import deploy_local
 from execution_engine.timeline import build_timeline
 from execution_engine.timeline_plot import plot_timeline
+from robot_bridges.backend import BackendOptions
+from robot_bridges.registry import create_backend
 from test_dry_run import RIVET_CELL, call, cli, param, write_app
 
 GROUPS = ("left_arm", "right_arm")
@@ -168,15 +175,6 @@ def test_a_zone_order_that_deadlocks_with_a_flag_is_refused(tmp_path: Path) -> N
 
 def test_an_operator_stop_ends_a_wait_for_a_flag(tmp_path: Path) -> None:
     """A group waiting for a flag nobody will set soon: a stop ends the run at once, not at the timeout."""
-    import asyncio
-
-    from app_functions.registry import full_catalog
-    from execution_engine.app_model import load_application
-    from execution_engine.clock import run_with_clock, simulated_clock
-    from execution_engine.deployment import deploy_local
-    from robot_bridges.backend import BackendOptions
-    from robot_bridges.registry import create_backend
-
     path, _ = write(tmp_path, [
         {"left_arm": wait(500), "right_arm": call("wait_flag", param("late"))},
         {"left_arm": call("set_flag", param("late"))},

@@ -11,10 +11,12 @@ from typing import Any
 import pytest
 from app_builder import Cell, make_app
 
+from execution_engine.cli import main
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.engine.group_link import WATCH_PERIOD
 from execution_engine.machine.bridge_watch import WATCH_PERIOD as BRIDGE_WATCH_PERIOD
 from execution_engine.launcher import EXIT_NODE_DIED, NodeSpec, cell_nodes, launch, select
+from execution_engine.machine.zone_gate import ZoneGate
 
 ROOT = Path(__file__).resolve().parent.parent
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"
@@ -121,8 +123,6 @@ def test_a_motion_waiting_for_a_zone_ends_when_the_bridge_is_lost(run_sim: Any, 
     """A function whose next motion waits for an interference zone (here never granted) while the
     bridge's node leaves: nothing could ever move it, so it ends at once with the bridge named
     instead of waiting for the zone for ever."""
-    from execution_engine.machine.zone_gate import ZoneGate
-
     monkeypatch.setattr(ZoneGate, "admits", lambda gate, _primitive: gate.ctx.group != "left_arm")
 
     async def main(clock: Clock) -> tuple[Any, float]:
@@ -146,8 +146,6 @@ def test_a_motion_waiting_for_a_zone_ends_when_the_bridge_is_lost(run_sim: Any, 
 
 
 def test_launch_is_a_subcommand_with_one_line_errors(tmp_path: Path) -> None:
-    from execution_engine.cli import main
-
     out, err = io.StringIO(), io.StringIO()
     assert main(["launch", str(tmp_path / "missing.xml")], out, err) == 1
     assert err.getvalue() == f"error: {tmp_path / 'missing.xml'}: no such file\n"

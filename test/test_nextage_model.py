@@ -31,6 +31,7 @@ from lxml import etree
 from core_functions.geometry import Pose
 from core_functions.robots import NEXTAGE_OPEN
 from robot_bridges.backend import BridgeError, FaultKind
+from robot_bridges.nextage_sim.backend import HAND_TOOL
 from robot_bridges.nextage_sim.model import URDF_PATH, NextageModel
 
 MODEL = NextageModel()
@@ -231,8 +232,6 @@ def test_ik_honours_the_tool_offset() -> None:
 
 
 def test_a_target_reachable_only_beyond_a_limit_names_the_joint() -> None:
-    from robot_bridges.nextage_sim.backend import HAND_TOOL
-
     arm = NextageModel().arms["right_arm"]
     arm.tool = HAND_TOOL
     with pytest.raises(BridgeError) as info:  # tool straight down with no yaw: the wrist roll would pass 163 deg

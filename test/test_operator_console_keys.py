@@ -25,6 +25,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from execution_engine.cli import main
+from execution_engine.clock import real_clock
 from execution_engine.operator_console import MAX_LINE, PROMPT_KEYS, PROMPT_LINES, KeyDecoder, OperatorConsole
 from execution_engine.transport.local import LocalTransport
 
@@ -57,8 +59,6 @@ class Commands:
 
 
 def console_for(commands: Commands, out: io.StringIO) -> OperatorConsole:
-    from execution_engine.clock import real_clock
-
     transport = LocalTransport(real_clock().bind(asyncio.get_running_loop()))
     return OperatorConsole(transport.create_node("operator_console"), out, commands)
 
@@ -171,8 +171,6 @@ def test_run_quiet_and_interactive_prints_the_alarm_question_and_one_key_answers
                                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """``run -q --interactive`` at a terminal: the alarm that waits for the operator is printed with its
     answers (quiet hides progress, never a question), and ``s`` -- no Enter -- answers it."""
-    from execution_engine.cli import main
-
     keyboard, screen = terminal
     before = termios.tcgetattr(screen)
     rivet = (ROOT / "apps_xml" / "rivet_installation.xml").read_text(encoding="utf-8")

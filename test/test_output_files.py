@@ -3,7 +3,9 @@ its spelling (a symbolic or hard link, ``./``, ``..``, an SQLite sidecar); the r
 both, exit 2, and nothing is written; a write that fails during the run ends with exit 4."""
 from __future__ import annotations
 
+import argparse
 import io
+import math
 import os
 import sqlite3
 import stat
@@ -20,6 +22,7 @@ from execution_engine.checkpoint.store import CheckpointStore
 from execution_engine.cli import main
 from execution_engine.output_files import FilePlan, Output, Refused, same_file
 from execution_engine.recorder.cli_hook import record_node
+from operator_station.cli import build_station
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = (ROOT / "apps_xml" / "rivet_installation.xml").read_text().replace(
@@ -233,14 +236,11 @@ def test_a_timeline_that_cannot_be_written_ends_the_report_with_4(folder: Path) 
 
 # ------------------------------------------------------------------------------- studio
 def studio(folder: Path, **settings: object) -> tuple[object, object]:
-    import argparse
-    import math
-
     pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
+    # optional: starlette (pip extra 'studio'), which the station's server is built on
     from starlette.testclient import TestClient
 
-    from operator_station.cli import build_station
-    from operator_station.server import create_app
+    from operator_station.server import create_app  # optional: starlette
 
     args = argparse.Namespace(file="rivet.xml", replay=None, controller_host=None, controller_port=None, rsi_listen=None, fault=None, seed=0,
                               backend_option=None, robot=None, speed=math.inf, trace=None, trajectory_db=None, no_check=False)

@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 from machine_harness import Harness
+from robot_bridges.camera import vision
 from scripted_backend import ScriptedBackend
 
 from app_functions.registry import full_catalog
@@ -186,8 +187,6 @@ def test_the_bridge_accept_timeout_does_not_fire_when_the_computer_stalls() -> N
 # ----------------------------------------------------------------------- the rivet demonstrator
 def test_a_slow_detector_leaves_the_rivet_demonstrators_cycle_time_as_the_dry_run_predicts(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """Each hole detection burns 3 s of wall time; at x1000 the run still takes the dry run's 88.77 s."""
-    from robot_bridges.camera import vision
-
     app = load_application(APPS / "rivet_installation.xml", full_catalog())
     options = BackendOptions(robot=app.robot)
     predicted = dry_run(app, "nextage-sim", options, str(tmp_path / "t.sqlite"))

@@ -19,10 +19,11 @@ from mcap_ros2.decoder import DecoderFactory
 from execution_engine.cli import main
 from execution_engine.recorder.definitions import SEPARATOR, schema_text
 from execution_engine.recorder.reading import Recording, iter_messages, trace_records
-from execution_engine.recorder.recorder import reader_qos
+from execution_engine.recorder.recorder import Recorder, reader_qos
 from execution_engine.recorder.writer import McapSink
 from execution_engine.clock import Clock
 from execution_engine.transport import msgs, typed
+from execution_engine.transport.local import LocalTransport
 from execution_engine.transport.qos import EVENTS, LATCHED, SENSOR, Durability, Reliability
 from execution_engine.transport.wire import EngineEvent, EngineStatus, GroupProgress, SmStatus, SmStructure, TransitionSpec
 
@@ -284,9 +285,6 @@ class Unknown:
 
 
 def test_a_topic_of_a_type_without_definition_is_skipped_and_said(run_sim: Any, caplog: pytest.LogCaptureFixture) -> None:
-    from execution_engine.recorder.recorder import Recorder
-    from execution_engine.transport.local import LocalTransport
-
     stream = io.BytesIO()
     stream.close = lambda: None  # type: ignore[method-assign]
 

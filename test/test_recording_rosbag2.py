@@ -12,8 +12,10 @@ from pathlib import Path
 
 import yaml
 from mcap.reader import make_reader
+from mcap.writer import CompressionType
 
 from execution_engine.recorder.bag_metadata import qos_yaml
+from execution_engine.recorder.encoder import Encoder
 from execution_engine.recorder.reading import Recording, iter_messages
 from execution_engine.recorder.writer import McapSink
 from execution_engine.transport import msgs
@@ -94,9 +96,6 @@ def test_the_rosbag2_metadata_record_matches_the_summary(tmp_path: Path) -> None
 
 
 def test_a_type_without_interface_file_gets_an_empty_hash() -> None:
-    from execution_engine.recorder.encoder import Encoder
-    from mcap.writer import CompressionType
-
     encoder = Encoder(1024, CompressionType.NONE)
     assert encoder._type_hash("nowhere_msgs/msg/Nothing") == ""  # noqa: SLF001
     assert encoder._type_hash("std_msgs/msg/String") == JAZZY_HASHES["std_msgs/msg/String"]  # noqa: SLF001

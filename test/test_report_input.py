@@ -15,7 +15,10 @@ from hypothesis import strategies as st
 from execution_engine.cli import main
 from execution_engine.recorder.reading import MAGIC, Recording, iter_messages
 from execution_engine.recorder.safe_read import MAX_CHUNK, NotARecording
+from execution_engine.recorder.writer import McapSink
 from execution_engine.run_report import summarize
+from execution_engine.transport import msgs
+from execution_engine.transport.qos import SENSOR
 
 FOUR_GB = 4 * 1024**3
 
@@ -110,10 +113,6 @@ def test_garbage_is_refused_in_one_line_naming_the_file(tmp_path: Path, content:
 
 
 def small_recording(tmp_path: Path) -> bytes:
-    from execution_engine.recorder.writer import McapSink
-    from execution_engine.transport import msgs
-    from execution_engine.transport.qos import SENSOR
-
     stream = io.BytesIO()
     stream.close = lambda: None  # type: ignore[method-assign]
     sink = McapSink(stream, "memory", chunk_size=400)

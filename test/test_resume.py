@@ -16,11 +16,18 @@ from typing import Any
 
 import pytest
 
+from app_builder import Cell, make_app
 from app_functions.registry import full_catalog
+from core_functions.primitives import TrajectoryResult
+from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.app_model import load_application
-from execution_engine.checkpoint.resume import sits_out
+from execution_engine.app_model.model import Call
+from execution_engine.checkpoint.resume import ResumePlan, sits_out
 from execution_engine.checkpoint.store import CheckpointStore
 from execution_engine.cli import main
+from execution_engine.engine.operator import Flags, decide
+from execution_engine.transport.msgs import Trigger
+from execution_engine.transport.wire import engine_service
 
 RIVET = "apps_xml/rivet_installation.xml"
 ROOT = Path(__file__).resolve().parent.parent
@@ -135,13 +142,6 @@ OPS3 = [{"left_arm": ("gripper_open",), "right_arm": ("gripper_open",)}, {"right
 
 @pytest.mark.parametrize("answer", ["skip", "reset"])
 def test_nothing_moves_until_the_operator_answers_for_an_interrupted_function(run_sim: Any, answer: str) -> None:
-    from app_builder import Cell, make_app
-
-    from execution_engine.app_model.model import Call
-    from execution_engine.checkpoint.resume import ResumePlan
-    from execution_engine.transport.msgs import Trigger
-    from execution_engine.transport.wire import engine_service
-
     app = make_app(OPS3)
     skipped: list[str] = []
 
@@ -176,8 +176,6 @@ def test_nothing_moves_until_the_operator_answers_for_an_interrupted_function(ru
 
 
 def test_skip_answers_only_the_alarm_of_an_interrupted_function() -> None:
-    from execution_engine.engine.operator import Flags, decide
-
     assert decide("skip", "running", Flags(False, False))[0] is False
     ok, answer = decide("skip", "alarm", Flags(False, False))  # a failed function's alarm: retry or stop, not skip
     assert not ok and "use reset or stop" in answer
@@ -188,9 +186,6 @@ def test_skip_answers_only_the_alarm_of_an_interrupted_function() -> None:
 def test_resume_from_something_that_is_not_a_checkpoint_is_one_line_and_changes_nothing(tmp_path: Path, content: Any) -> None:
     path = tmp_path / "cp.sqlite"
     if content == "trajectories":  # another database of this program: the trajectory store
-        from core_functions.primitives import TrajectoryResult
-        from core_functions.trajectory_store import TrajectoryStore
-
         store = TrajectoryStore(path)
         store.save("right_arm", "sweep", TrajectoryResult(("a",), ((0.0,),), (0.0,)), "plan", 0.0)
         store.close()

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from app_functions.registry import full_catalog
+from execution_engine.app_model import load_application
 from execution_engine.timeline import build_timeline
 from test_dry_run import cli
 
@@ -32,9 +34,6 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[int, str, 
 
 def holes(app: str) -> dict[tuple[str, str], str]:
     """(operation, group) -> the hole of each debur_drilling / insert_rivet call."""
-    from app_functions.registry import full_catalog
-    from execution_engine.app_model import load_application
-
     loaded = load_application(Path(app), full_catalog())
     return {(op.id, g): c.params[0] for op in loaded.operations for g, c in op.calls.items() if c.function in ("debur_drilling", "insert_rivet")}
 

@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 import setuptools
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend
+from robot_bridges.vplus.backend import VPlusBackend
 from scripted_backend import ScriptedBackend
 
 from core_functions.geometry import Pose
@@ -204,9 +206,6 @@ def test_a_backend_without_urdf_publishes_neither(run_sim: Any) -> None:
 
 
 def test_the_world_frames_agree_robot_urdf_root_and_backends() -> None:
-    from robot_bridges.kuka_rsi.backend import KukaRsiBackend
-    from robot_bridges.vplus.backend import VPlusBackend
-
     assert UrdfTree(NEXTAGE_URDF.read_text(encoding="utf-8")).root == NEXTAGE_OPEN.world_frame == NextageSimBackend.world_frame
     assert VPlusBackend.world_frame == ADEPT_VIPER_S850.world_frame
     assert KukaRsiBackend.world_frame == KUKA_KR.world_frame

@@ -12,6 +12,7 @@ import logging
 import os
 import signal
 import time
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,7 @@ from execution_engine.transport.qos import CLOCK, COMMANDS, EVENTS, SENSOR
 from execution_engine.transport.ros import RosTransport
 from execution_engine.transport.wire import SmStatus, bridge_topic, sm_topic
 from robot_bridges.bridge_node import BridgeNode
-from robot_bridges.nextage_sim.node import declare_nextage_parameters
+from robot_bridges.nextage_sim.node import BACKEND, declare_nextage_parameters
 from robot_bridges.nextage_sim.node import main as nextage_main
 from robot_bridges.node import run_bridge
 
@@ -167,11 +168,6 @@ def test_a_simulator_faster_than_real_time_publishes_clock(fake_rclpy: Any) -> N
 
     async def main(clock: Clock) -> None:
         # The simulator node and a listener in one process, through the real bridge entry point's body.
-        from functools import partial
-
-        from robot_bridges.nextage_sim.node import BACKEND, declare_nextage_parameters
-        from robot_bridges.node import run_bridge
-
         transport = RosTransport(clock, ["sim", "--ros-args", "-p", "speed:=10.0"])
         try:
             node = transport.create_node("nextage_sim_bridge")
@@ -192,11 +188,6 @@ def test_a_simulator_faster_than_real_time_publishes_clock(fake_rclpy: Any) -> N
 
 def test_joint_states_of_the_simulator_carry_ros_time(fake_rclpy: Any) -> None:
     async def main(clock: Clock) -> JointState:
-        from functools import partial
-
-        from robot_bridges.nextage_sim.node import BACKEND, declare_nextage_parameters
-        from robot_bridges.node import run_bridge
-
         transport = RosTransport(clock, ["sim"])
         try:
             inbox = Inbox()
@@ -276,8 +267,6 @@ def test_a_type_mismatch_says_how_to_quote(fake_rclpy: Any, capsys: pytest.Captu
 
 def test_the_simulator_starts_with_initial_pose_off_from_the_command_line(fake_rclpy: Any) -> None:
     async def body(node: Node, outcome: Outcome) -> None:
-        from robot_bridges.nextage_sim.node import declare_nextage_parameters
-
         setup = declare_nextage_parameters(node)
         outcome.code = ExitCode.OK if setup.options.extra["initial_pose"] == "off" else ExitCode.FAILED
 
@@ -363,8 +352,6 @@ def test_overrides_get_the_declared_type_and_description(fake_rclpy: Any) -> Non
         transport = RosTransport(clock, ["sim", "--ros-args", "-p", "speed:=2", "-p", "initial_pose:=off"])
         try:
             node = transport.create_node("nextage_sim_bridge")
-            from robot_bridges.nextage_sim.node import declare_nextage_parameters
-
             declare_nextage_parameters(node)
             ros_node = node.ros_node
             return ros_node.get_parameter("speed").value, ros_node.describe_parameter("speed"), ros_node.describe_parameter("initial_pose")

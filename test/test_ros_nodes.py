@@ -17,6 +17,7 @@ import pytest
 import ros_fake_context
 import ros_fake_msgs
 import ros_fake_qos
+from execution_engine.recorder.reading import Recording, iter_messages, trace_records
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
 from core_functions.robots import NEXTAGE_OPEN
@@ -194,8 +195,6 @@ def test_a_cell_of_ros_nodes_runs_an_application_and_reports(fake_rclpy: Any, tm
 
 
 def test_the_engine_records_the_ros_graph_with_its_record_parameter(fake_rclpy: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from execution_engine.recorder.reading import Recording, iter_messages, trace_records
-
     app = tmp_path / "smoke.xml"
     app.write_text(SMOKE_APP)
     record = tmp_path / "ros.mcap"

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 
 import pytest
 from hypothesis import given
@@ -166,8 +167,6 @@ ROS_I_CONFIG = parse_config(
 def _element_tree_packet(root_attribute: str, sort: bool) -> bytes:
     """A <Rob> packet as Python's ElementTree writes it (ROS-I's simulator): str() of floats, and
     under Python 2 the attributes sorted by name."""
-    import xml.etree.ElementTree as ET
-
     def element(parent: ET.Element, tag: str, attributes: dict[str, str]) -> None:
         ET.SubElement(parent, tag, dict(sorted(attributes.items())) if sort else attributes)
 

@@ -19,12 +19,14 @@ from core_functions.geometry import Pose
 from execution_engine.clock import Clock
 from robot_bridges.kuka_rsi.codec import PacketCodec
 from robot_bridges.kuka_rsi.config import RsiConfig, default_config, default_config_path, parse_config
-from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
+from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink, RsiLoop
 from robot_bridges.kuka_rsi.interface import RsiInterface
 from robot_bridges.kuka_rsi.kinematics import KukaArm
 from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.pipe import FramedPipe
 from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
 from robot_bridges.kuka_rsi.sim_network import SimulatorThread
+from robot_bridges.kuka_rsi.slots import layout, robot_block_size
 from robot_bridges.kuka_rsi.spoofer import Flood
 from robot_bridges.kuka_rsi.streaming import ToolPathError
 
@@ -167,10 +169,6 @@ def test_malformed_packets_are_rejected_without_disturbing_the_loop(rig: Callabl
 def test_oversized_datagrams_from_the_robot_address_are_rejected() -> None:
     """From the robot's address and port (before its port is known, any port of its IP): counted
     per reason and refused, never decoded into what the robot reported."""
-    from robot_bridges.kuka_rsi.external import RsiLoop
-    from robot_bridges.kuka_rsi.pipe import FramedPipe
-    from robot_bridges.kuka_rsi.slots import layout, robot_block_size
-
     ours, theirs = FramedPipe.pair()
     loop = RsiLoop([RobotLink("kr0", "127.0.0.1")], LoopSettings(port=0), layout(memoryview(bytearray(robot_block_size())), 1), FramedPipe(theirs, blocking_send=False))
     try:
@@ -272,7 +270,7 @@ def test_commands_are_refused_until_the_robot_follows_corrections(rig: Callable[
     assert not ok and "A5" in message and kind == "joint_limit"
 
 
-def _holdon_config(holdon: str) -> RsiConfig:
+def holdon_config(holdon: str) -> RsiConfig:
     return parse_config(default_config_path().read_text().replace('HOLDON="1"', f'HOLDON="{holdon}"'), f"holdon{holdon}.xml")
 
 
@@ -281,7 +279,7 @@ def test_holdon_behaves_as_configured(rig: Callable[..., Rig], holdon: str) -> N
     """Relative corrections: a late packet repeats the last increment (HOLDON=1) or adds none
     (HOLDON=0); either way the external system knows what the robot did, goes on from there
     without a jump, and the robot ends on the target."""
-    r = rig(context=RsiContext(start_deg=READY, correction_mode="relative"), config=_holdon_config(holdon), reply_grace=WITHHELD_GRACE).start()
+    r = rig(context=RsiContext(start_deg=READY, correction_mode="relative"), config=holdon_config(holdon), reply_grace=WITHHELD_GRACE).start()
     r.correcting()
     target = np.radians([90, -80, 85, 0, 30, 0])
     cmd = r.iface.set_axial_pos(0, target, 0.5, 5.0)
@@ -420,10 +418,6 @@ def test_the_loop_runs_in_its_own_process() -> None:
 def test_of_several_waiting_packets_only_the_newest_of_each_robot_is_answered() -> None:
     """After a stall the socket holds several packets; the older ones are late already, and
     answering them would step the generator for cycles the robot held still."""
-    from robot_bridges.kuka_rsi.external import RsiLoop
-    from robot_bridges.kuka_rsi.pipe import FramedPipe
-    from robot_bridges.kuka_rsi.slots import layout, robot_block_size
-
     links = [RobotLink("a", "127.0.0.1"), RobotLink("b", "127.0.0.2")]
     ours, theirs = FramedPipe.pair()
     loop = RsiLoop(links, LoopSettings(port=0), layout(memoryview(bytearray(2 * robot_block_size())), 2), FramedPipe(theirs, blocking_send=False))

@@ -5,9 +5,11 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock
+from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.transport.local import LocalTransport
 from execution_engine.transport.port import TransportError
+from robot_bridges.backend import BackendOptions
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.node import declare_kuka_parameters
 
 
@@ -29,10 +31,6 @@ def test_defaults_start_the_simulator_and_a_real_controller_is_named(run_sim: An
 def test_the_trust_and_start_up_options_are_node_parameters(run_sim: Any) -> None:
     """What a ROS user of a real controller must be able to set: the cross-check's tolerances, the
     wait for the first packet, and the port the controller sends from."""
-    from execution_engine.clock import real_clock, run_with_clock
-    from robot_bridges.backend import BackendOptions
-    from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
-
     async def declare(clock: Clock) -> BackendOptions:
         bus = LocalTransport(clock)
         defaults = declare_kuka_parameters(bus.create_node("kuka_rsi_bridge")).options

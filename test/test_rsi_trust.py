@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from execution_engine.cli import main as cli_main
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.krc_model import RsiContext
 from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
-from test_rsi_loop import DT, READY, WAIT, Rig, rig  # noqa: F401 - rig is the fixture
+from test_rsi_loop import ARM, DT, READY, WAIT, Rig, holdon_config, rig  # noqa: F401 - rig is the fixture
 
 VMAX = np.array(RobotLink("kr", "127.0.0.1").max_joint_speed)  # rad/s, the robot model's axis speeds
 OFF = {"setpoint_tolerance_deg": (math.inf,) * 6}  # the cross-check switched off, to see what is planned
@@ -125,8 +126,6 @@ def test_a_peer_whose_every_packet_is_refused_ends_the_wait_with_what_was_wrong(
 
 
 def test_the_command_line_ends_a_refused_peer_in_one_line_without_a_traceback() -> None:
-    from execution_engine.cli import main as cli_main
-
     app = Path(__file__).resolve().parents[1] / "apps_xml" / "kuka_rsi_demo.xml"
     out, err = io.StringIO(), io.StringIO()
     options = ["simulator=accelerated", "sim_root_attribute=Kind", "connect_timeout=0.5"]
@@ -142,10 +141,8 @@ def test_the_command_line_ends_a_refused_peer_in_one_line_without_a_traceback() 
 def test_relative_corrections_with_dropped_replies_still_end_on_every_target(rig: Callable[..., Rig], holdon: str) -> None:
     """Relative mode: a dropped increment is repeated (HOLDON=1) or lost (HOLDON=0) by the
     controller; the external system knows which from RSI's rules and goes on from there."""
-    from test_rsi_loop import ARM, _holdon_config
-
     context = RsiContext(start_deg=READY, correction_mode="relative")
-    r = rig(context=context, config=_holdon_config(holdon), faults=Faults(drop=0.05, seed=3)).start()
+    r = rig(context=context, config=holdon_config(holdon), faults=Faults(drop=0.05, seed=3)).start()
     r.correcting()
     here = r.iface.state(0).tcp()
     goal = here.translated(0.05, 0.1, -0.05)

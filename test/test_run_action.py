@@ -8,10 +8,19 @@ from typing import Any
 
 from app_builder import Cell
 
+from core_functions.robots import NEXTAGE_OPEN
+from crossing_cell import COLLIDING, CROSSING, WAIT_OPERATION, CollisionWatch
 from execution_engine.clock import Clock
+from execution_engine.deployment import deploy_local
+from execution_engine.dry_run.cell_start import CellStarts
 from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplication, RunApplicationGoal, RunApplicationServer, SendGoal
 from execution_engine.transport.action import UUID, CancelGoal, CancelGoalRequest, GoalInfo, GoalStatus, GoalStatusArray, STATUS_QOS
-from execution_engine.transport.qos import COMMANDS
+from execution_engine.transport.msgs import JointState
+from execution_engine.transport.qos import COMMANDS, SENSOR
+from execution_engine.transport.wire import JOINT_STATES
+from rclpy_like import RclpyLikeActionClient
+from robot_bridges.backend import BackendOptions
+from robot_bridges.registry import create_backend
 
 TINY = """<?xml version="1.0"?>
 <application name="tiny" robot="nextage" version="1">
@@ -111,8 +120,6 @@ def test_a_client_that_learns_of_its_goal_from_the_answer_sees_it_run_and_can_ca
     """rclpy's ActionClient (and so ``ros2 action send_goal``) knows a goal from its goal response
     on and drops status entries of goals it does not know: the server answers first, then says
     ACCEPTED/EXECUTING, so the client sees the goal run, its Ctrl-C cancels it, the next goal runs."""
-    from rclpy_like import RclpyLikeActionClient
-
     async def main(clock: Clock) -> tuple[Any, ...]:
         cell = await Cell(clock, durations={"move_joints": 30.0}).start()
         RunApplicationServer(cell.deployment.engine.node, cell.deployment.engine)
@@ -148,17 +155,6 @@ def test_a_client_that_learns_of_its_goal_from_the_answer_sees_it_run_and_can_ca
 async def _nextage_goal_cell(clock: Clock) -> tuple[Any, Any, Any, Any]:
     """The Nextage simulator (collision check on), machines, and the engine serving goals as its
     process does: each goal's run checked from joint_states first (execution_engine/nodes.py)."""
-    from crossing_cell import CollisionWatch
-    from execution_engine.deployment import deploy_local
-    from execution_engine.dry_run.cell_start import CellStarts
-    from execution_engine.transport.msgs import JointState
-    from execution_engine.transport.qos import SENSOR
-    from execution_engine.transport.wire import JOINT_STATES
-    from robot_bridges.backend import BackendOptions
-    from robot_bridges.registry import create_backend
-    from core_functions.robots import NEXTAGE_OPEN
-    from rclpy_like import RclpyLikeActionClient
-
     backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN))
     deployment = await deploy_local(clock, NEXTAGE_OPEN, backend, machine_parameters={"trajectory_db": ":memory:"})
     engine = deployment.engine
@@ -170,8 +166,6 @@ async def _nextage_goal_cell(clock: Clock) -> tuple[Any, Any, Any, Any]:
 
 
 def test_after_a_cancelled_goal_the_next_one_goes_back_safely_first_and_never_crosses_the_hands(run_sim: Any) -> None:
-    from crossing_cell import CROSSING, WAIT_OPERATION
-
     async def main(clock: Clock) -> tuple[Any, ...]:
         deployment, _, client, watch = await _nextage_goal_cell(clock)
         try:
@@ -200,8 +194,6 @@ def test_after_a_cancelled_goal_the_next_one_goes_back_safely_first_and_never_cr
 
 
 def test_a_goal_whose_run_would_collide_is_aborted_with_the_findings_and_nothing_moves(run_sim: Any) -> None:
-    from crossing_cell import COLLIDING
-
     async def main(clock: Clock) -> tuple[Any, Any, Any]:
         deployment, backend, client, _ = await _nextage_goal_cell(clock)
         try:

@@ -15,6 +15,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
+import httpx  # noqa: E402
+import orjson  # noqa: E402
 from starlette.testclient import TestClient  # noqa: E402
 from starlette.websockets import WebSocketDisconnect  # noqa: E402
 
@@ -23,6 +25,7 @@ from operator_station.access import TOKEN_PATTERN, Access, AccessError, read_tok
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.guard import host_problem, media_type, origin_problem  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
+from operator_station.testing import serve  # noqa: E402
 from starlette.datastructures import Headers  # noqa: E402
 from test_studio_server import BASE, CATALOG, FEED, ROOT, cell_dir, client_for, rivet, station_args, wait_until  # noqa: E402, F401
 
@@ -140,8 +143,6 @@ def test_any_origin_but_the_stations_own_is_a_refusal(origin: bytes, path: str) 
                                   None, "application/jsonp", "text/json", "application/json-seq", "application/json,text/plain", "garbage"])
 def test_a_body_that_is_not_declared_json_is_refused_before_it_is_read(cell_dir: Path, kind: str | None) -> None:
     """What a form or a no-cors fetch can send without a preflight (text/plain, form types) is never taken, JSON inside or not."""
-    import orjson
-
     station, client, document = rivet(cell_dir)
     headers = {"Content-Type": kind} if kind is not None else {}
     body = orjson.dumps({"path": "planted.xml", "document": document})
@@ -152,8 +153,6 @@ def test_a_body_that_is_not_declared_json_is_refused_before_it_is_read(cell_dir:
 
 
 def test_json_with_a_charset_is_json(cell_dir: Path) -> None:
-    import orjson
-
     _, client, document = rivet(cell_dir)
     answer = client.post("/api/save", content=orjson.dumps({"path": "c.xml", "document": document}), headers={"Content-Type": "application/json; charset=utf-8"})
     assert answer.json()["ok"] and (cell_dir / "c.xml").is_file()
@@ -329,10 +328,6 @@ def test_a_body_is_counted_as_it_streams_and_nothing_past_the_limit_is_read(cell
 
 def test_a_station_on_a_socket_stops_reading_a_huge_body(cell_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Over a real loopback connection: the client can push the limit plus what the sockets buffer, then the station hangs up."""
-    import httpx
-
-    from operator_station.testing import serve
-
     monkeypatch.setattr(server, "MAX_BODY", 1 << 20)
     served = serve(build_station(station_args(), CATALOG, cell_dir))
     pushed = 0

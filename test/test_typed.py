@@ -6,13 +6,17 @@ with the topic, the type and the field named, and changes nothing.
 """
 from __future__ import annotations
 
-import random
 from typing import Any
 
 import pytest
 import ros_fake_msgs
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from execution_engine.transport.dds import DdsTransport
+from execution_engine.transport.dds_convert import DdsConverter
+from execution_engine.transport.idl import InterfaceRegistry
+from execution_engine.transport.port import poll_until
+from execution_engine.transport.ros_convert import MessageConverter
 from machine_harness import Harness
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from test_ros_transport import Inbox, matched, run_real, with_transport
@@ -22,7 +26,7 @@ from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, MoveJoints
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.observers import RunObserver
-from execution_engine.transport import codec, msgs, typed
+from execution_engine.transport import codec, dds_graph, msgs, typed
 from execution_engine.transport.msgs import Header, Time
 from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
 from execution_engine.transport.ros import RosTransport
@@ -273,19 +277,15 @@ def test_the_rclpy_side_receives_the_built_interface_types(fake_rclpy: Any) -> N
 
 
 # ============================================================================== DDS transport
-def test_over_dds_the_topics_carry_the_package_types_by_their_ros_names() -> None:
+def test_over_dds_the_topics_carry_the_package_types_by_their_ros_names(dds_env: dict[str, str]) -> None:
     """A ROS 2 reader of ``dual_arm_executive_interfaces/msg/EngineStatus`` (DDS type
     ``dual_arm_executive_interfaces::msg::dds_::EngineStatus_``) reads the engine's status field by field."""
     pytest.importorskip("cyclonedds")
+    # optional: cyclonedds (pip extra 'dds'), a plain DDS reader
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
 
-    from execution_engine.transport import dds_graph
-    from execution_engine.transport.dds import DdsTransport
-    from execution_engine.transport.port import poll_until
-
-    loopback = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
-    env = {"ROS_DOMAIN_ID": str(random.randint(100, 232)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": loopback}
+    env = dds_env
 
     async def main(clock: Clock) -> None:
         ours, tool = DdsTransport(clock, env=env), DdsTransport(clock, env=env)
@@ -314,10 +314,6 @@ def test_over_dds_the_topics_carry_the_package_types_by_their_ros_names() -> Non
 def test_sync_cell_and_located_cross_both_ros_wires_intact(sample: Any) -> None:
     """The rclpy transport (the built package's classes) and the DDS transport (CDR as rmw_cyclonedds
     writes it) carry the typed sync, cell and located messages field for field, poses included."""
-    from execution_engine.transport.dds_convert import DdsConverter
-    from execution_engine.transport.idl import InterfaceRegistry
-    from execution_engine.transport.ros_convert import MessageConverter
-
     msg = typed.to_msg(sample, CLOCK)
     ros = MessageConverter(ros_fake_msgs.resolve)
     over_ros = ros.from_ros(type(msg), ros.to_ros(msg))

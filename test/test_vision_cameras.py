@@ -12,10 +12,12 @@ from core_functions.geometry import Pose
 from core_functions.primitives import MoveCartesian, MoveJoints, Vision
 from execution_engine.app_model import load_application
 from execution_engine.clock import Clock
-from robot_bridges.backend import BridgeError, FaultKind
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.camera.sources import FileCamera
 from robot_bridges.camera.vision import CameraVision
+from robot_bridges.nextage_sim import vision
 from robot_bridges.nextage_sim.backend import HAND_TOOL, NextageSimBackend
+from robot_bridges.registry import create_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 APP = load_application(ROOT / "apps_xml" / "rivet_installation.xml", full_catalog())
@@ -114,10 +116,6 @@ def test_measure_on_a_feature_is_the_sharpness_of_the_live_image(run_sim) -> Non
 
 
 def test_the_hand_eye_mount_is_configurable(run_sim) -> None:  # type: ignore[no-untyped-def]
-    from robot_bridges.backend import BackendOptions
-    from robot_bridges.nextage_sim import vision
-    from robot_bridges.registry import create_backend
-
     default = vision.CAMERAS["left_hand_camera"].mount
     text = " ".join(f"{v:.12g}" for v in (*default.position, *default.rpy()))
     shifted = " ".join(f"{v:.12g}" for v in (*default.compose(Pose(0.005, 0.0, 0.0)).position, *default.rpy()))
@@ -144,9 +142,6 @@ def test_the_hand_eye_mount_is_configurable(run_sim) -> None:  # type: ignore[no
 
 
 def test_a_bad_mount_option_is_a_one_line_error(run_sim) -> None:  # type: ignore[no-untyped-def]
-    from robot_bridges.backend import BackendOptions
-    from robot_bridges.registry import create_backend
-
     async def main(clock: Clock) -> str:
         with pytest.raises(ValueError) as error:
             await create_backend("nextage-sim", clock, BackendOptions(robot=APP.robot, extra={"right_hand_camera_mount": "1 2 3"}))

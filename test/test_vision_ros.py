@@ -20,14 +20,16 @@ from core_functions.primitives import MoveCartesian, Vision, VisionResult
 from core_functions.vision.camera import Intrinsics
 from execution_engine.app_model import load_application
 from execution_engine.clock import Clock
+from execution_engine.deployment import deploy_local
 from execution_engine.transport.local import LocalTransport
 from execution_engine.transport.msgs import ByteBuffer, CameraInfo, Header, Image, Time
 from execution_engine.transport.qos import SENSOR
 from execution_engine.transport.ros_convert import MessageConverter
-from robot_bridges.backend import BridgeError, FaultKind
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.camera.ros_camera import attach_cameras, from_messages, to_messages
 from robot_bridges.camera.sources import Frame
 from robot_bridges.nextage_sim.backend import HAND_TOOL, NextageSimBackend
+from robot_bridges.registry import create_backend
 from test_vision_cameras import ROOT
 
 APP = load_application(ROOT / "apps_xml" / "rivet_installation.xml", full_catalog())
@@ -184,10 +186,6 @@ def test_random_image_messages_give_an_image_or_a_value_error(height: int, width
 
 
 def test_the_bridge_publishes_every_image_of_the_demonstrator_when_asked(run_sim) -> None:  # type: ignore[no-untyped-def]
-    from execution_engine.deployment import deploy_local
-    from robot_bridges.backend import BackendOptions
-    from robot_bridges.registry import create_backend
-
     async def main(clock: Clock) -> tuple[bool, dict[str, int]]:
         backend = await create_backend("nextage-sim", clock, BackendOptions(robot=APP.robot))
         deployment = await deploy_local(clock, APP.robot, backend, machine_parameters={"trajectory_db": ":memory:"}, bridge_parameters={"publish_images": True})

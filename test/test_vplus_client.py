@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 from collections.abc import Callable, Coroutine
 from typing import Any
 
@@ -9,9 +10,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from execution_engine.clock import Clock, run_with_clock, simulated_clock
+from execution_engine.clock import Clock, real_clock, run_with_clock, simulated_clock
 from robot_bridges.vplus import codec
-from robot_bridges.vplus.client import CommandTimeout, ConnectionLost, ProtocolError, VPlusClient, ControllerLink
+from robot_bridges.vplus.client import (
+    CommandTimeout,
+    ConnectionLost,
+    ControllerLink,
+    Exchange,
+    ProtocolError,
+    VPlusClient,
+)
+from robot_bridges.vplus.codec import Message, set_speed
 
 Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
 
@@ -167,12 +176,6 @@ def test_bad_arguments_are_refused(run_sim: Run) -> None:
 
 def test_ids_are_unique_within_a_joined_batch_even_when_the_generator_repeats() -> None:
     """32-bit random ids collide in large joined batches (birthday bound); the client must not send one id twice."""
-    import itertools
-
-    from execution_engine.clock import real_clock
-    from robot_bridges.vplus.client import VPlusClient
-    from robot_bridges.vplus.codec import set_speed
-
     repeating = itertools.cycle(["0000000a", "0000000a", "0000000b", "0000000a", "0000000c"])
     client = VPlusClient("127.0.0.1", 1234, real_clock(), make_id=lambda: next(repeating))
     messages = client._messages([set_speed(10), set_speed(20), set_speed(30)])
@@ -180,9 +183,6 @@ def test_ids_are_unique_within_a_joined_batch_even_when_the_generator_repeats() 
 
 
 def test_a_failure_report_of_a_huge_batch_stays_short() -> None:
-    from robot_bridges.vplus.client import Exchange
-    from robot_bridges.vplus.codec import Message, set_speed
-
     messages = tuple(Message(f"{i:08x}", set_speed(50)) for i in range(5000))
     text = str(Exchange(unknown=messages))
     assert "5000 messages: 00000000:set_speed:50 ... 00001387:set_speed:50" in text and len(text) < 300
