@@ -105,6 +105,9 @@ FILES: dict[str, str | bytes] = {
     "bidi_id.xml": app(op("left_arm", "gripper_open")).replace('<operation id="1">', '<operation id="1\u202egnp.exe">'),
     "huge.xml": b"<application>" + b" " * (33 * 1024 * 1024) + b"</application>",
 }
+#: The mode each file is written with, whatever the umask the tests run under (a row about who may read
+#: a file must not hold only under the usual 022); every other file: its owner's only.
+MODES: dict[str, int] = {"shared_token": 0o644}
 
 
 @dataclass(frozen=True)
@@ -250,9 +253,7 @@ def test_the_table_has_at_least_40_kinds_of_fault_and_every_file_it_names_exists
 @pytest.mark.parametrize("row", ROWS, ids=[r.id for r in ROWS])
 def test_row(row: Row, tmp_path: Path, request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(ROOT)
-    for name, content in FILES.items():
-        if f"{{tmp}}/{name}" in row.command:
-            (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+    write_files(row, tmp_path)
     values = {"tmp": str(tmp_path)}
     if needs_peers(row):
         values.update(request.getfixturevalue("peers"))
@@ -265,6 +266,37 @@ def test_row(row: Row, tmp_path: Path, request: pytest.FixtureRequest, monkeypat
     assert "Traceback" not in output, output
     assert pattern(row.message, values).search(output), f"expected a line {row.message!r}, got:\n{output}"
     assert code == row.exit_code, output
+
+
+def write_files(row: Row, folder: Path) -> None:
+    """The files ``row`` names under {tmp}, each with its mode set (MODES), not left to the umask."""
+    for name, content in FILES.items():
+        if f"{{tmp}}/{name}" in row.command:
+            path = folder / name
+            path.write_bytes(content if isinstance(content, bytes) else content.encode())
+            path.chmod(MODES.get(name, 0o600))
+
+
+@pytest.mark.parametrize("umask", [0o077, 0o022, 0o000], ids=["077", "022", "000"])
+def test_every_file_a_row_reads_has_its_mode_whatever_the_umask(umask: int, tmp_path: Path) -> None:
+    previous = os.umask(umask)
+    try:
+        for row in ROWS:
+            write_files(row, tmp_path)
+    finally:
+        os.umask(previous)
+    written = {path.name: path.stat().st_mode & 0o777 for path in tmp_path.iterdir()}
+    assert written == {name: MODES.get(name, 0o600) for name in written} and set(MODES) <= set(written)
+
+
+@pytest.mark.parametrize("row", [r for r in ROWS if any(f"{{tmp}}/{name}" in r.command for name in MODES)], ids=lambda r: r.id)
+def test_a_row_about_a_files_mode_holds_under_umask_077(row: Row, tmp_path: Path, request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Under umask 077 a file the test had left to the umask would be its owner's only: row 92 held only under 022."""
+    previous = os.umask(0o077)
+    try:
+        test_row(row, tmp_path, request, monkeypatch)
+    finally:
+        os.umask(previous)
 
 
 def test_a_traceback_only_with_v(peers: dict[str, str], monkeypatch: pytest.MonkeyPatch) -> None:
