@@ -6,6 +6,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from lxml import etree
+
 from app_model_support import APP_XML, CELL_XML, small_catalog
 
 from execution_engine.app_model import ApplicationError, load_application, load_cell, validate_application
@@ -76,8 +78,6 @@ def test_external_entities_and_dtds_are_refused_without_network(tmp_path: Path, 
 
 def test_the_parser_itself_resolves_nothing(tmp_path: Path, listener: socket.socket) -> None:
     """Defence in depth: even if a DOCTYPE got past the refusal, lxml is set to expand and fetch nothing."""
-    from lxml import etree
-
     port = listener.getsockname()[1]
     secret = tmp_path / "secret.txt"
     secret.write_text("TOP SECRET")
