@@ -10,6 +10,13 @@ controller counts 519 late replies (IPOC 3741927000) (x137 in the last 1 s)``.  
 keeps coming that is one line a second; after a quiet window the next one is printed at once
 again.  What is still held when the command ends is printed then.
 
+Every process of ours prints its log this way: each command of the command line
+(:class:`ConsoleLog`), each node process -- under ``launch`` or ``ros2 run`` -- whether it prints
+its own log (over DDS: :func:`node_console`) or hands it to rcutils under rclpy
+(:mod:`execution_engine.transport.ros_logging` aggregates before it forwards), and the operator
+station, whose web server logs through the root logger.  So a bridge flooding a warning under
+``launch`` is one line a second there too, not the flood.
+
 A *kind* is the logger, the level and the message with its numbers masked: the same warning with
 another count, time, IPOC or port is the same kind; two different warnings never are.  The
 window's end is kept by a :class:`~execution_engine.engine.wall_clock.WallClock` (tests move a
@@ -26,6 +33,7 @@ from typing import IO
 from execution_engine.engine.wall_clock import RealWallClock, WallClock, WallTimer
 
 FORMAT = "%(levelname)s %(name)s: %(message)s"
+NODE_FORMAT = "[%(levelname)s] [%(name)s]: %(message)s"  # a node process's lines, as rcutils prints them
 WINDOW = 1.0  # s: at most one line per kind in this time
 MAX_KINDS = 1000  # kinds remembered at once; beyond it, records pass as they come (memory stays bounded)
 
@@ -172,3 +180,17 @@ class ConsoleLog:
         self.handler.close()
         if self._previous_level is not None:
             root.setLevel(self._previous_level)
+
+
+def node_console(stream: IO[str], level: int, wall_clock: WallClock | None = None) -> AggregatingHandler:
+    """The console of a node process that prints its own log (over DDS, where no rcutils prints it):
+    on the root logger for the process's life, in rcutils' line format, each kind of warning once and
+    then one counted line per kind and second.  logging's own shutdown at the process's exit closes it
+    (before the stream's handler, made first), which prints what is still held."""
+    target = logging.StreamHandler(stream)
+    target.setFormatter(logging.Formatter(NODE_FORMAT))
+    handler = AggregatingHandler(target, WINDOW, wall_clock)
+    root = logging.getLogger()
+    root.setLevel(level)
+    root.addHandler(handler)
+    return handler

@@ -15,7 +15,10 @@ station.  :class:`StationServer` orders the shutdown itself:
 Every connection is bounded: at most :data:`MAX_CONNECTIONS` at once (503 beyond), WebSocket
 messages from a page of at most :data:`WS_MAX_SIZE` bytes (the page sends none), idle
 keep-alive connections closed after 5 s; ``X-Forwarded-*`` headers are not believed (no proxy
-is in front of a station), so the log's client addresses are the peers'.
+is in front of a station), so the log's client addresses are the peers'.  uvicorn's own log goes
+through the command's console like every other record (no handlers of uvicorn's): a warning it
+repeats -- a scanner's invalid requests -- is one counted line a second
+(:mod:`execution_engine.console_log`), not one line per request.
 """
 from __future__ import annotations
 
@@ -40,9 +43,10 @@ WS_MAX_SIZE = 64 << 10
 
 
 def server_config(app: Any, host: str, port: int) -> uvicorn.Config:
-    """uvicorn's settings for a station: the bounds above, nothing from proxies, no lifespan."""
+    """uvicorn's settings for a station: the bounds above, nothing from proxies, no lifespan, its log
+    through the root logger (``log_config=None``: uvicorn's loggers get no handlers and propagate)."""
     return uvicorn.Config(
-        app, host=host, port=port, log_level="warning", lifespan="off", ws="websockets-sansio",
+        app, host=host, port=port, log_level="warning", log_config=None, lifespan="off", ws="websockets-sansio",
         proxy_headers=False, server_header=False, limit_concurrency=MAX_CONNECTIONS, ws_max_size=WS_MAX_SIZE,
         timeout_keep_alive=5, timeout_graceful_shutdown=GRACE,  # type: ignore[arg-type] - uvicorn takes float seconds
     )

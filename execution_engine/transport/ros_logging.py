@@ -8,12 +8,19 @@ each record goes to the rclpy logger of the node it belongs to (by logger name),
 process's first node, and rcutils prints it, publishes it on ``/rosout`` and filters it by the
 ``--log-level`` the user gave -- which also sets the Python level, so nothing rcutils would
 print is dropped before it gets there.
+
+A warning that repeats is aggregated before it is forwarded, as every console of ours does
+(:class:`~execution_engine.console_log.AggregatingHandler`): the first of a kind at once, then one
+line per kind and second with its count, so neither the console of ``ros2 launch`` nor
+``/rosout`` gets the flood.  What is held when the process's last node goes is forwarded then.
 """
 from __future__ import annotations
 
 import logging
 import threading
 from typing import Any
+
+from execution_engine.console_log import AggregatingHandler
 
 #: rcutils severities (rclpy.logging.LoggingSeverity values) -- the same numbers as Python's levels.
 _SEVERITIES = (10, 20, 30, 40, 50)
@@ -54,6 +61,11 @@ class RosLogHandler(logging.Handler):
     @property
     def empty(self) -> bool:
         return not self._loggers
+
+    def routes(self) -> list[str]:
+        """The Python logger names routed to a node."""
+        with self._lock_nodes:
+            return list(self._loggers)
 
     def _target(self, name: str) -> Any:
         with self._lock_nodes:
@@ -97,16 +109,19 @@ def _log(target: Any, severity: int, text: str) -> None:
 
 _HANDLER_LOCK = threading.Lock()
 _HANDLER: RosLogHandler | None = None
+_FRONT: AggregatingHandler | None = None  # on the root logger: aggregates, then hands to _HANDLER
 
 
 def install(python_name: str, ros_logger: Any) -> RosLogHandler:
-    """Attach the process's handler to the root logger (once) and route ``python_name`` to
-    ``ros_logger``; the root level follows the rclpy logger's effective level (``--log-level``)."""
-    global _HANDLER
+    """Attach the process's handler to the root logger (once, behind the aggregation) and route
+    ``python_name`` to ``ros_logger``; the root level follows the rclpy logger's effective level
+    (``--log-level``)."""
+    global _HANDLER, _FRONT
     with _HANDLER_LOCK:
         if _HANDLER is None:
             _HANDLER = RosLogHandler()
-            logging.getLogger().addHandler(_HANDLER)
+            _FRONT = AggregatingHandler(_HANDLER)
+            logging.getLogger().addHandler(_FRONT)
         handler = _HANDLER
     handler.attach(python_name, ros_logger)
     try:
@@ -119,13 +134,17 @@ def install(python_name: str, ros_logger: Any) -> RosLogHandler:
 
 
 def uninstall(python_name: str) -> None:
-    """Stop routing ``python_name``; the handler leaves the root logger with its last node."""
-    global _HANDLER
+    """Stop routing ``python_name``; the handler leaves the root logger with its last node, after
+    forwarding what the aggregation still holds (while that node can still log it)."""
+    global _HANDLER, _FRONT
     with _HANDLER_LOCK:
-        handler = _HANDLER
+        handler, front = _HANDLER, _FRONT
         if handler is None:
             return
+        if front is not None and handler.routes() in ([python_name], []):  # the last node goes
+            logging.getLogger().removeHandler(front)
+            front.close()  # what it holds is forwarded now, while the node can still log it
+            _FRONT = None
         handler.detach(python_name)
         if handler.empty:
-            logging.getLogger().removeHandler(handler)
             _HANDLER = None

@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from execution_engine.clock import Clock
+from execution_engine.console_log import node_console
 from execution_engine.transport.dds import DdsTransport  # cyclonedds itself is imported only when one starts
 from execution_engine.transport.port import RosArgumentsError
 
@@ -51,12 +52,9 @@ def split_transport(argv: Sequence[str]) -> tuple[str, list[str]]:
 
 
 def dds_transport(clock: Clock, argv: Sequence[str]) -> DdsTransport:
-    """The DDS transport of a node process; Python logging to stderr as rcutils prints it."""
+    """The DDS transport of a node process; Python logging to stderr as rcutils prints it, a warning
+    that repeats as one counted line per second (:func:`~execution_engine.console_log.node_console`)."""
     transport = DdsTransport(clock, argv)
     if not logging.getLogger().handlers:
-        logging.basicConfig(
-            level=transport.args.log_level or logging.INFO,
-            format="[%(levelname)s] [%(name)s]: %(message)s",
-            stream=sys.stderr,
-        )
+        node_console(sys.stderr, transport.args.log_level or logging.INFO)
     return transport
