@@ -219,10 +219,15 @@ class FollowingClock(Clock):
     time, or a run at ten times real time reports wall seconds and gives the robot a tenth of
     the time it was promised.  The source calls :meth:`advance_to` with its time (seconds since
     1970); run time 0 is its first tick, sleeps and timeouts fire when the source passes them.
+    While the source is silent, time stands still: a simulator that stalls (a busy computer, a
+    bridge holding its time while a machine answers) never makes a timeout here fire early.
 
     Nothing may wait forever on a source that stopped: when no tick came for ``stall_timeout``
-    wall seconds while something waits, ``on_stall`` is told and every pending timer fires, so
-    each wait ends in its own timeout and reports it.
+    wall seconds while something waits, ``on_stall`` is told (once per silence) and every pending
+    timer fires, so each wait ends in its own timeout and reports it.  From then until the source
+    ticks again the clock runs on the wall clock at the source's last rate, so a loop that waits
+    again (a poll until a deadline) gets to its deadline instead of waiting in steps of the stall
+    bound for ever; when the source is back, run time goes on from where it is (never back).
     """
 
     def __init__(self, *, stall_timeout: float = 10.0, on_stall: Callable[[str], None] | None = None) -> None:
@@ -231,13 +236,15 @@ class FollowingClock(Clock):
             raise ValueError(f"stall_timeout must be a positive number of seconds, got {stall_timeout!r}")
         self.stall_timeout = stall_timeout
         self.on_stall = on_stall
-        self._start: float | None = None  # source time at run time 0
+        self._start: float | None = None  # source time at run time 0 (moved on when a silence ends)
         self._source = 0.0  # latest source time
         self._timers: list[_SourceTimer] = []
         self._order = itertools.count()
         self._last_tick_wall = 0.0
         self._rate = 1.0  # source seconds per wall second, measured between ticks
         self._watchdog: asyncio.TimerHandle | None = None
+        self._free: tuple[float, float, float] | None = None  # silent past the bound: (loop time, run time, epoch) it began at
+        self._free_timer: asyncio.TimerHandle | None = None
         self.stalls = 0
 
     @property
@@ -261,10 +268,21 @@ class FollowingClock(Clock):
         """True once the source has given a time."""
         return self._start is not None
 
+    @property
+    def stalled(self) -> bool:
+        """True while the source has been silent past the stall bound (the clock runs on the wall clock)."""
+        return self._free is not None
+
     def now(self) -> float:
+        if self._free is not None:
+            since, base, _ = self._free
+            return base + max(0.0, self.loop.time() - since) * self._rate
         return 0.0 if self._start is None else self._source - self._start
 
     def epoch_now(self) -> float:
+        if self._free is not None:
+            _, base, epoch = self._free
+            return epoch + self.now() - base
         return self._source
 
     def to_wall(self, run_seconds: float) -> float:
@@ -276,7 +294,14 @@ class FollowingClock(Clock):
         if not math.isfinite(source_seconds):
             return
         wall = self.loop.time()
-        if self._start is None:
+        if self._free is not None:  # back after a silence: on from the run time reached meanwhile
+            self._start = source_seconds - self.now()
+            self._source = source_seconds
+            self._free = None
+            if self._free_timer is not None:
+                self._free_timer.cancel()
+                self._free_timer = None
+        elif self._start is None:
             self._start = self._source = source_seconds
         elif source_seconds > self._source:
             elapsed = wall - self._last_tick_wall
@@ -285,15 +310,20 @@ class FollowingClock(Clock):
             self._source = source_seconds
         self._last_tick_wall = wall
         self._fire(lambda timer: timer.due <= self.now())
+        if self._timers:
+            self._arm_watchdog()
 
     def call_later(self, delay: float, callback: Callable[..., Any], *args: Any) -> asyncio.TimerHandle:
         """Run ``callback`` on the loop once the source has advanced ``delay`` run seconds."""
         timer = _SourceTimer(self.now() + max(0.0, delay), next(self._order), callback, args)
-        if delay <= 0 and self._start is not None:
+        if delay <= 0 and (self._start is not None or self._free is not None):
             self.loop.call_soon(callback, *args)
             return timer  # type: ignore[return-value] - same cancel() protocol
         heapq.heappush(self._timers, timer)
-        self._arm_watchdog()
+        if self._free is not None:
+            self._arm_free_timer()
+        else:
+            self._arm_watchdog()
         return timer  # type: ignore[return-value]
 
     async def sleep(self, seconds: float) -> None:
@@ -341,6 +371,8 @@ class FollowingClock(Clock):
 
     def _check_stall(self) -> None:
         self._watchdog = None
+        if self._free is not None:
+            return
         self._timers = [t for t in self._timers if not t.cancelled]
         heapq.heapify(self._timers)
         if not self._timers:
@@ -348,13 +380,33 @@ class FollowingClock(Clock):
         if self.loop.time() - self._last_tick_wall >= self.stall_timeout:
             self.stalls += 1
             if self.on_stall is not None:
-                self.on_stall(f"no time from the clock source for {self.stall_timeout:g} s: pending waits end now")
+                self.on_stall(
+                    f"no time from the clock source for {self.stall_timeout:g} s: pending waits end now, "
+                    f"and time runs on the wall clock at x{self._rate:.3g} until it ticks again"
+                )
             self._fire(lambda timer: True)
+            self._free = (self.loop.time(), self.now(), self._source if self._start is not None else time.time())
             return
         self._arm_watchdog()
 
+    def _arm_free_timer(self) -> None:
+        """While silent past the bound: wake for the next timer on the wall clock."""
+        if self._free_timer is not None:
+            self._free_timer.cancel()
+        self._free_timer = None
+        while self._timers and self._timers[0].cancelled:
+            heapq.heappop(self._timers)
+        if self._timers:
+            self._free_timer = self.loop.call_later(max(0.0, self._timers[0].due - self.now()) / self._rate, self._free_tick)
+
+    def _free_tick(self) -> None:
+        self._free_timer = None
+        if self._free is not None:
+            self._fire(lambda timer: timer.due <= self.now() + 1e-9)
+            self._arm_free_timer()
+
     def __repr__(self) -> str:
-        return f"FollowingClock(now={self.now():.3f}, x{self._rate:.3g})"
+        return f"FollowingClock(now={self.now():.3f}, x{self._rate:.3g}{', stalled' if self._free else ''})"
 
 
 def _resolve(waiter: asyncio.Future[None]) -> None:

@@ -45,7 +45,7 @@ from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_nod
 EXIT_NODE_DIED = 6  # a node other than the engine ended before the engine did
 EXIT_USAGE = 2
 EXIT_INVALID = 1
-_SPEED_PARAMETER = {"nextage-sim": "speed", "kuka-rsi": "speed"}  # back ends whose bridge can run faster than real time
+_SPEED_PARAMETER = {"nextage-sim": "speed"}  # back ends whose bridge can run faster than real time (RSI runs on the robot's clock)
 _ENTRY = {"engine": ("execution_engine.nodes", "engine_main"), "machine": ("execution_engine.nodes", "group_machine_main")}
 
 
@@ -90,17 +90,24 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
     if speed != 1.0:
         parameter = _SPEED_PARAMETER.get(backend)
         if parameter is None:
-            raise ValueError(f"--speed {speed:g}: the {backend} bridge drives a real controller in real time (no speed parameter)")
+            raise ValueError(
+                f"--speed {speed:g}: the {backend} bridge runs in real time, on the controller's clock; "
+                f"only {', '.join(sorted(_SPEED_PARAMETER))} runs at another speed"
+            )
         bridge += ["-p", f"{parameter}:={speed!r}"]
+    # A simulator at another speed than real time is the cell's clock (it publishes /clock): every
+    # other node measures its waits, timeouts and the report in the robot's time, as with use_sim_time:=true.
+    followers = () if speed == 1.0 else ("-p", "use_sim_time:=true")
     specs = [NodeSpec(bridge_node_name(backend), (*_python(f"robot_bridges.{module}.node", "main"), *bridge))]
     for group in app.robot.group_names:
         name = machine_node_name(group)
         specs.append(NodeSpec(name, (
             *_python(*_ENTRY["machine"]), *common, "-r", f"__node:={name}", "-p", f"group:={group}", "-p", f"robot:={app.robot.name}",
+            *followers,
         )))
     specs.append(NodeSpec(ENGINE_NODE, (
         *_python(*_ENTRY["engine"]), *common, "-p", f"application:={app_file.resolve()}", "-p", "exit_when_done:=true",
-        *(() if check else ("-p", "check:=false")),
+        *(() if check else ("-p", "check:=false")), *followers,
     )))
     return specs
 

@@ -167,6 +167,10 @@ class _PacedSelector(_OwnSelector):
             self._since = None
             return self._real.select(None)
         start = loop.wall()
+        until = loop.held_until(start)
+        if until is not None:  # a bounded hold: waiting for another process's answer, for a while
+            self._since = None
+            return self._real.select(until - start)
         if self._since is not None:
             self._worked = min(self._worked + max(0.0, start - self._since), CATCH_UP)
         if timeout is None:  # no timer: whatever wakes the loop, the wait was idle
@@ -210,6 +214,7 @@ class PacedLoop(_HeldExecutorWork, asyncio.SelectorEventLoop):
         self.wall = wall
         self.paced = False
         self.holds = 0  # Clock.held() depth and executor work pending: time stands still while positive
+        self._bounded: dict[object, float] = {}  # hold_for(): key -> wall time it ends at the latest
         self._now = 0.0
         super().__init__(_PacedSelector(self))
 
@@ -226,6 +231,28 @@ class PacedLoop(_HeldExecutorWork, asyncio.SelectorEventLoop):
         """Selector: ``seconds`` of idle waiting pass as loop time."""
         if seconds > 0:
             self._now += seconds
+
+    def hold_for(self, key: object, wall_seconds: float) -> None:
+        """Paced: time stands still until :meth:`release` of ``key`` or ``wall_seconds`` from now, whichever
+        comes first; unlike :attr:`holds`, a hold that nobody releases ends by itself.
+
+        For work done in another process that the robot would not wait for in a cell on one loop
+        (a machine choosing its next primitive): that work takes no robot time while it stays
+        within the bound, and time goes on past the bound, so a peer that went quiet delays the
+        simulation by the bound at most, never stops it.  Unpaced (a real controller) it is ignored.
+        """
+        if self.paced:
+            self._bounded[key] = self.wall() + max(0.0, wall_seconds)
+
+    def release(self, key: object) -> None:
+        """End :meth:`hold_for`'s hold of ``key`` (no matter if it has ended by itself)."""
+        self._bounded.pop(key, None)
+
+    def held_until(self, wall_now: float) -> float | None:
+        """The wall time the latest live bounded hold ends at; None when none is live (expired ones go)."""
+        for key in [k for k, end in self._bounded.items() if end <= wall_now]:
+            del self._bounded[key]
+        return max(self._bounded.values(), default=None)
 
     def run_in_executor(self, executor: Executor | None, func: Callable[..., T], *args: Any) -> asyncio.Future[T]:
         """Paced: time stands still while a worker thread does what the loop waits for."""

@@ -12,7 +12,10 @@ the bridge -- and :func:`cell_description` adds the rest:
 * the launch arguments every ROS user expects: ``application``, ``namespace`` (every node),
   ``use_sim_time`` (the bool parameter of every node; ``/clock`` is remapped to
   ``<namespace>/clock``, so each cell follows its own clock) and ``log_level``
-  (``--ros-args --log-level``).
+  (``--ros-args --log-level``);
+* a simulator that runs at another speed than real time is the cell's clock: it publishes
+  ``/clock``, and the machines and the engine then follow it (``use_sim_time`` true whatever the
+  argument says), so their timeouts and the engine's report are in the robot's time.
 
 Launch arguments reach parameters through :func:`typed`: launch_ros would otherwise read them
 with YAML rules, and ``host:=off`` would arrive as the bool ``false``.
@@ -22,7 +25,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import LaunchConfiguration, OrSubstitution
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
@@ -51,14 +54,14 @@ def _ros_arguments() -> list:
     ]
 
 
-def _node(executable: str, name: str, config: str, overrides: dict) -> Node:
+def _node(executable: str, name: str, config: str, overrides: dict, sim_time: ParameterValue) -> Node:
     """One node of the cell in ``namespace``: the YAML section named like the node, then ``overrides``."""
     return Node(
         package=PACKAGE,
         executable=executable,
         name=name,
         namespace=LaunchConfiguration("namespace"),
-        parameters=[config, {**overrides, "use_sim_time": typed("use_sim_time", bool)}],
+        parameters=[config, {**overrides, "use_sim_time": sim_time}],
         remappings=[("/clock", "clock")],  # rclpy's time source reads /clock: each cell follows its own
         ros_arguments=["--log-level", LaunchConfiguration("log_level")],
         output="screen",
@@ -74,16 +77,22 @@ def cell_description(
     application: str,
     arguments: list,
     bridge_parameters: dict,
+    simulated: object = None,
 ) -> LaunchDescription:
     """The cell of one back end.
 
     ``config``: the YAML in ``share/<package>/config``; ``robot`` and ``groups``: the robot model
     the machines drive; ``bridge``: the bridge executable (and node name); ``application``: the
     default application in ``share/<package>/apps_xml``; ``arguments``: the back end's own
-    ``DeclareLaunchArgument``s; ``bridge_parameters``: the bridge parameters they set.
+    ``DeclareLaunchArgument``s; ``bridge_parameters``: the bridge parameters they set;
+    ``simulated``: a substitution that is ``true`` when the bridge's simulator runs at another
+    speed than real time and publishes ``/clock`` (None: it never does), which the machines and
+    the engine then follow.
     """
     share = get_package_share_directory(PACKAGE)
     config_file = os.path.join(share, "config", config)
+    own_time = typed("use_sim_time", bool)
+    following = own_time if simulated is None else ParameterValue(OrSubstitution(LaunchConfiguration("use_sim_time"), simulated), value_type=bool)
     actions = [
         DeclareLaunchArgument(
             "application",
@@ -92,9 +101,9 @@ def cell_description(
         ),
         *arguments,
         *_ros_arguments(),
-        _node(bridge, bridge, config_file, bridge_parameters),
+        _node(bridge, bridge, config_file, bridge_parameters, own_time),
     ]
     for group in groups:
-        actions.append(_node("group_machine", f"{group}_machine", config_file, {"group": group, "robot": robot}))
-    actions.append(_node("execution_engine", "execution_engine", config_file, {"application": typed("application", str)}))
+        actions.append(_node("group_machine", f"{group}_machine", config_file, {"group": group, "robot": robot}, following))
+    actions.append(_node("execution_engine", "execution_engine", config_file, {"application": typed("application", str)}, following))
     return LaunchDescription(actions)

@@ -42,6 +42,7 @@ from execution_engine.transport.wire import (
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 from robot_bridges.camera.ros_camera import attach_cameras
 from robot_bridges.robot_state import RobotStatePublisher
+from robot_bridges.turnaround import Turnaround
 
 log = logging.getLogger(__name__)
 _REMEMBERED_IDS = 256  # command ids a re-sent command is recognised by (a machine keeps far fewer waiting)
@@ -69,6 +70,7 @@ class BridgeNode:
         self._camera = attach_cameras(node, backend)  # camera parameters: publish_images, camera_source (ROS image topics)
         self._state_task: asyncio.Task[None] | None = None
         self.errors: list[str] = []
+        self.turnaround: Turnaround | None = None  # hold_turnarounds(): a paced simulator in its own process
 
     # ---------------------------------------------------------------------------- lifecycle
     async def start(self) -> None:
@@ -87,6 +89,8 @@ class BridgeNode:
         self._state_task = asyncio.get_running_loop().create_task(self._publish_state_loop(), name="bridge state")
 
     async def close(self) -> None:
+        if self.turnaround is not None:
+            self.turnaround.release_all()
         for task in [*self._running.values(), *self._tasks]:
             task.cancel()
         if self._state_task:
@@ -96,6 +100,14 @@ class BridgeNode:
             await asyncio.gather(self._state_task, return_exceptions=True)
         await self.backend.close()
         self.node.destroy()
+
+    def hold_turnarounds(self) -> None:
+        """Robot time stands still while a group's next step is on its way from another process
+        (:mod:`robot_bridges.turnaround`); for a paced simulator's bridge in a process of its own."""
+        self.turnaround = Turnaround(
+            self.node, asyncio.get_running_loop(), self.backend.groups,
+            lambda: [group for group, task in self._running.items() if not task.done()],
+        )
 
     # ------------------------------------------------------------------------------ inbound
     def _on_cell(self, msg: Any) -> None:
@@ -116,6 +128,8 @@ class BridgeNode:
         if command.group != group:
             self._send(group, command.id, "error", error=f"command for group {command.group!r} arrived on {source}", fault=FaultKind.PROTOCOL)
             return
+        if self.turnaround is not None:
+            self.turnaround.commanded(group)
         if command.id in self._answered:  # re-sent: carried out once, answered again
             latest = self._answered[command.id]
             if latest is not None:
@@ -214,6 +228,8 @@ class BridgeNode:
         if command_id in self._answered:
             self._answered[command_id] = message
         self._feedback[group].publish(message)
+        if self.turnaround is not None and status in ("done", "measured"):
+            self.turnaround.hold(group)
 
     def _report(self, text: str) -> None:
         self.errors.append(text)

@@ -101,6 +101,7 @@ async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: 
         except BridgeError as error:
             raise StartupError(f"{backend}: {error}", ExitCode.FAILED) from None
         if setup.speed != 1.0:
+            bridge.hold_turnarounds()  # the machines and the engine are other processes
             ticking = asyncio.get_running_loop().create_task(publish_clock(node, clock, CLOCK_PERIOD * setup.speed), name="/clock")
         node.logger.info("%s: serving %s for %s", node.fully_qualified_name, robot_backend.name, ", ".join(robot_backend.groups))
         await serve_forever()

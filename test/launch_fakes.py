@@ -9,6 +9,7 @@ else a launch file calls is missing here and fails loudly.  The ``fake_launch`` 
 """
 from __future__ import annotations
 
+import math
 import re
 import sys
 import types
@@ -51,6 +52,51 @@ class LaunchConfiguration(Substitution):
         if self.default is None:
             raise SubstitutionFailure(f"launch configuration '{name}' does not exist")
         return perform(context, self.default)
+
+
+def _bool_like(text: str) -> bool:
+    return text.lower() in ("true", "false", "1", "0")
+
+
+def _float_like(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+class NotEqualsSubstitution(Substitution):
+    """launch.substitutions.NotEqualsSubstitution: 'true' unless both sides are equal -- as booleans when
+    both read as one (true/false/1/0), as numbers (math.isclose) when both read as one, else as text."""
+
+    def __init__(self, left: Any, right: Any) -> None:
+        self.left, self.right = left, right
+
+    def perform(self, context: LaunchContext) -> str:
+        left, right = (v if isinstance(v, (str, Substitution, list)) else str(v) for v in (self.left, self.right))
+        left, right = perform(context, left), perform(context, right)
+        if _bool_like(left) and _bool_like(right):
+            equal = (left.lower() in ("true", "1")) == (right.lower() in ("true", "1"))
+        elif _float_like(left) and _float_like(right):
+            equal = math.isclose(float(left), float(right))
+        else:
+            equal = left == right
+        return str(not equal).lower()
+
+
+class OrSubstitution(Substitution):
+    """launch.substitutions.OrSubstitution: each side typed as a bool (launch's YAML rules), 'true' or 'false'."""
+
+    def __init__(self, left: Any, right: Any) -> None:
+        self.left, self.right = left, right
+
+    def perform(self, context: LaunchContext) -> str:
+        try:
+            left, right = (coerce_to_type(perform(context, side), bool) for side in (self.left, self.right))
+        except (TypeError, ValueError) as error:
+            raise SubstitutionFailure(error) from None
+        return str(left or right).lower()
 
 
 def perform(context: LaunchContext, value: Any) -> str:
@@ -332,7 +378,10 @@ def launch_modules() -> dict[str, types.ModuleType]:
     return {
         "launch": module("launch", LaunchDescription=LaunchDescription, LaunchContext=LaunchContext, Action=Action, Substitution=Substitution),
         "launch.actions": module("launch.actions", DeclareLaunchArgument=DeclareLaunchArgument, GroupAction=GroupAction),
-        "launch.substitutions": module("launch.substitutions", LaunchConfiguration=LaunchConfiguration, SubstitutionFailure=SubstitutionFailure),
+        "launch.substitutions": module(
+            "launch.substitutions", LaunchConfiguration=LaunchConfiguration, SubstitutionFailure=SubstitutionFailure,
+            NotEqualsSubstitution=NotEqualsSubstitution, OrSubstitution=OrSubstitution,
+        ),
         "launch_ros": module("launch_ros"),
         "launch_ros.actions": module("launch_ros.actions", Node=LaunchNode, **push),
         "launch_ros.parameter_descriptions": module("launch_ros.parameter_descriptions", ParameterValue=ParameterValue),

@@ -34,10 +34,12 @@ from launch_fakes import (
     rclpy_section_matches,
     visit,
 )
+from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from scripted_backend import ScriptedBackend
+from test_ros_transport import run_real
 
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN, RobotModel
-from execution_engine.clock import Clock
+from execution_engine.clock import Clock, FollowingClock
 from execution_engine.deployment import deploy_local
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.machine.group_machine import GroupMachine
@@ -45,6 +47,7 @@ from execution_engine.nodes import declare_engine_parameters
 from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_node_name
 from execution_engine.transport.local import LocalTransport
 from execution_engine.transport.port import Node
+from execution_engine.transport.ros import RosTransport
 from execution_engine.transport.ros_convert import RCLPY_OWN_PARAMETERS
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.kuka_rsi.node import BACKEND as KUKA_RSI, declare_kuka_parameters
@@ -339,3 +342,39 @@ def test_the_config_loads_as_overrides_without_a_stray_key(cell: Cell, name: str
 def test_the_config_has_a_section_for_each_started_node_in_any_namespace(cell: Cell) -> None:
     keys = set(yaml.safe_load(cell.config.read_text()))
     assert keys == {f"/**/{name}" for name in cell.nodes}
+
+
+# ====================================================================== a simulator's clock
+@pytest.mark.parametrize(("speed", "use_sim_time", "follows"), [
+    ("10.0", "false", True), ("0.5", "false", True), ("1.0", "false", False), ("1", "false", False), ("1.0", "true", True),
+])
+def test_a_simulator_off_real_time_is_the_clock_the_machines_and_the_engine_follow(
+    speed: str, use_sim_time: str, follows: bool, fake_launch: None
+) -> None:
+    """speed:=10.0 makes the simulator publish /clock: every other node takes its time from it (their
+    timeouts, the engine's report), whatever use_sim_time says; the bridge is the clock, it follows nothing."""
+    cell = CELLS[0]
+    assert cell.name == "nextage_sim"
+    started = launch(cell, speed=speed, use_sim_time=use_sim_time)
+    for name, node in started.items():
+        expected = use_sim_time == "true" or (follows and name != cell.bridge)
+        assert node.effective_parameters()["use_sim_time"] is expected, f"{name} at speed:={speed}"
+
+
+def test_the_nodes_a_scaled_simulator_launches_run_on_its_clock_under_rclpy(fake_launch: None, fake_rclpy: Any) -> None:
+    """What ros2 launch hands each node of nextage_sim.launch.py speed:=10.0, given to the rclpy
+    transport (the fake rclpy): the engine and the machines measure time on /clock, the bridge does not."""
+    cell = CELLS[0]
+    started = launch(cell, speed="10.0")
+
+    async def main(clock: Clock) -> dict[str, bool]:
+        transport = RosTransport(clock, ["launched"])
+        try:
+            return {
+                name: isinstance(transport.create_node(name, parameters={"use_sim_time": node.effective_parameters()["use_sim_time"]}).clock, FollowingClock)
+                for name, node in started.items()
+            }
+        finally:
+            await transport.shutdown()
+
+    assert run_real(main) == {name: name != cell.bridge for name in cell.nodes}

@@ -22,7 +22,9 @@ transport takes and decodes the samples of every reader and hands them to the as
 ``call_soon_threadsafe``, in arrival order.  A sample that
 does not decode (truncated CDR, garbage) or does not convert is counted per topic
 (:attr:`DdsTransport.rejected`) and logged once per topic, never delivered, never fatal.
-Like the rclpy transport it runs in wall time; durations given to it are run seconds.
+Like the rclpy transport it runs in wall time; durations given to it are run seconds.  A node with
+``use_sim_time`` (declared as rclpy declares it) measures them on the simulator's ``/clock``
+(:mod:`~execution_engine.transport.sim_time`).
 """
 from __future__ import annotations
 
@@ -58,6 +60,7 @@ from execution_engine.transport.port import (
 )
 from execution_engine.transport.qos import QoS
 from execution_engine.transport.ros_args import raw_parameter_texts
+from execution_engine.transport.sim_time import STALL_TIMEOUT, USE_SIM_TIME, USE_SIM_TIME_DESCRIPTION, follow_clock
 
 M = TypeVar("M")
 log = logging.getLogger(__name__)
@@ -368,6 +371,9 @@ class DdsNode(EndpointNode):
         self.readers: list[bytes] = []
         self.writers: list[bytes] = []
         self.destroyed = False
+        # rclpy's own parameter, declared as rclpy declares it: with it, the run clock follows /clock
+        if self.declare_parameter(USE_SIM_TIME, False, USE_SIM_TIME_DESCRIPTION) is True:
+            self.clock = follow_clock(self, transport.loop, transport.clock_stall_timeout)
 
     def resolve(self, name: str) -> str:
         resolved = resolve_name(name, self.namespace, self.name)
@@ -395,7 +401,9 @@ class DdsTransport(Transport):
     """The nodes of one process on one Cyclone DDS participant (as rmw_cyclonedds_cpp has one per
     process), in ``ROS_DOMAIN_ID``.  Create it inside the running loop its clock is bound to;
     ``args`` is the process's argv (its ``--ros-args`` are read here).  ``lease`` (wall seconds)
-    is the liveliness lease of every writer; ``handler_timeout`` bounds a service handler (run s).
+    is the liveliness lease of every writer; ``handler_timeout`` bounds a service handler (run s);
+    ``clock_stall_timeout`` is how long a node with ``use_sim_time`` waits for ``/clock`` before
+    its waits end (wall seconds).
     """
 
     def __init__(
@@ -406,6 +414,7 @@ class DdsTransport(Transport):
         env: Mapping[str, str] | None = None,
         lease: float = 1.0,
         handler_timeout: float = 30.0,
+        clock_stall_timeout: float = STALL_TIMEOUT,
     ) -> None:
         super().__init__(clock)
         if clock.simulated:
@@ -417,6 +426,7 @@ class DdsTransport(Transport):
         self.loop = clock.loop
         self.lease = lease
         self.handler_timeout = handler_timeout
+        self.clock_stall_timeout = clock_stall_timeout
         self.registry = InterfaceRegistry()
         self.converter = DdsConverter(self.registry)
         self.domain_id = graph.domain_id(environment)

@@ -63,9 +63,9 @@ from execution_engine.transport.port import (
     resolve_name,
     validate_node_name,
 )
-from execution_engine.transport.qos import CLOCK, QoS
+from execution_engine.transport.qos import QoS
 from execution_engine.transport.ros_args import raw_parameter_texts
-from execution_engine.transport.wire import CLOCK_TOPIC
+from execution_engine.transport.sim_time import follow_clock
 from execution_engine.transport.ros_convert import (
     MessageConverter,
     offered_qos,
@@ -233,13 +233,7 @@ class RosNode(EndpointNode):
 
     def _follow_sim_time(self) -> FollowingClock:
         """The node's run clock follows ``/clock``; a silent source is a fault, not a hang."""
-        clock = FollowingClock(
-            stall_timeout=self.transport.clock_stall_timeout,
-            on_stall=lambda text: self.report_fault(CLOCK_TOPIC, TimeoutError(text)),
-        )
-        clock.bind(self.transport.loop)
-        self.create_subscription(ClockMessage, CLOCK_TOPIC, lambda msg: clock.advance_to(msg.clock.to_seconds()), CLOCK)
-        return clock
+        return follow_clock(self, self.transport.loop, self.transport.clock_stall_timeout)
 
     def now_stamp(self) -> Time:
         """The node's ROS clock: wall time, or ``/clock`` with ``use_sim_time``."""
