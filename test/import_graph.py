@@ -38,6 +38,7 @@ HEAVY_MODULES = {
     "operator_station.server": "starlette",  # optional: pip extra 'studio'
     "operator_station.serving": "uvicorn",  # optional: pip extra 'studio'
     "execution_engine.transport.link_transforms": "pinocchio",  # slow to load (0.1 s): the recorder's encoder, bridges without a URDF
+    "execution_engine.timeline_plot": "matplotlib",  # slow to load (0.4 s): report draws only when asked
 }
 
 

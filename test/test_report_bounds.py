@@ -165,7 +165,7 @@ def test_a_recording_at_a_time_no_run_has_skips_the_event_and_says_so(tmp_path: 
 
 # ------------------------------------------------------------------------------ timeline
 def test_drawing_a_long_run_makes_one_artist_per_look_not_per_bar(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from matplotlib.axes import Axes
+    from matplotlib.axes import Axes  # matplotlib is slow to load (0.4 s): only the drawing tests need it
 
     lines = []
     for i in range(3000):

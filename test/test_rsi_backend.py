@@ -6,9 +6,12 @@ because it counts robot cycles.  Its waits end on the loop's events.
 from __future__ import annotations
 
 import asyncio
+import io
+import json
 import math
 import re
 from collections.abc import Callable, Coroutine
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,12 +26,15 @@ from core_functions.primitives import (
     MoveCartesian,
     MoveJoints,
     MoveRelative,
+    RecordTrajectory,
     SetSpeed,
     Vision,
 )
-from execution_engine.clock import Clock
-from robot_bridges.backend import BridgeError, FaultKind
-from robot_bridges.kuka_rsi.backend import KukaRsiBackend
+from core_functions.robots import KUKA_KR, NEXTAGE_OPEN
+from execution_engine.cli import main as cli_main
+from execution_engine.clock import Clock, real_clock, run_with_clock, scaled_clock, simulated_clock
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
+from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.kinematics import KukaArm
 from robot_bridges.kuka_rsi.krc_model import RsiContext
@@ -291,19 +297,12 @@ def test_silence_from_the_controller_is_a_timeout(run_sim: Run) -> None:
 
 # ------------------------------------------------------------------------ the registry factory
 def _options(**kwargs: Any) -> Any:
-    from core_functions.robots import KUKA_KR
-    from robot_bridges.backend import BackendOptions
-
     return BackendOptions(robot=kwargs.pop("robot", KUKA_KR), **kwargs)
 
 
 def _create(clock: Clock, options: Any) -> KukaRsiBackend:
-    from robot_bridges.kuka_rsi.backend import create
-
     async def make(c: Clock) -> KukaRsiBackend:
         return await create(c, options)
-
-    from execution_engine.clock import run_with_clock
 
     return run_with_clock(make, clock)  # type: ignore[no-any-return]
 
@@ -326,17 +325,12 @@ def _create(clock: Clock, options: Any) -> KukaRsiBackend:
     ],
 )
 def test_the_factory_refuses_bad_options_with_a_clear_message(options: dict[str, Any], words: str) -> None:
-    from execution_engine.clock import real_clock
-
     with pytest.raises(ValueError) as caught:
         _create(real_clock(), _options(**options))
     assert words in str(caught.value)
 
 
 def test_the_factory_needs_the_robots_clock_and_a_kuka() -> None:
-    from core_functions.robots import NEXTAGE_OPEN
-    from execution_engine.clock import real_clock, scaled_clock, simulated_clock
-
     for clock in (simulated_clock(), scaled_clock(10.0)):
         with pytest.raises(ValueError, match="real-time clock"):
             _create(clock, _options())
@@ -345,8 +339,6 @@ def test_the_factory_needs_the_robots_clock_and_a_kuka() -> None:
 
 
 def test_the_factory_serves_a_real_controller_without_a_simulator() -> None:
-    from execution_engine.clock import real_clock
-
     backend = _create(real_clock(), _options(rsi_listen="127.0.0.1:0", host="10.0.0.5", extra={"mode": "relative", "cycle": "12"}))
     assert backend.simulator_spec is None and backend.iface is None  # not started: the bridge node starts it
     assert (backend.link.host, backend.link.correction_mode, backend.link.cycle_ms) == ("10.0.0.5", "relative", 12)
@@ -357,12 +349,6 @@ def test_the_factory_serves_a_real_controller_without_a_simulator() -> None:
 def test_the_demo_application_runs_to_finish_through_the_cli(tmp_path: Any) -> None:
     """``run FILE --robot kuka-rsi``: the engine, the group machine, the bridge node, the loop
     process, and the simulated controller (accelerated, so the robot does not take 15 s)."""
-    import io
-    import json
-    from pathlib import Path
-
-    from execution_engine.cli import main as cli_main
-
     app = Path(__file__).resolve().parents[1] / "apps_xml" / "kuka_rsi_demo.xml"
     trace = tmp_path / "trace.jsonl"
     out, err = io.StringIO(), io.StringIO()
@@ -374,12 +360,6 @@ def test_the_demo_application_runs_to_finish_through_the_cli(tmp_path: Any) -> N
 
 
 def test_an_rsi_stop_puts_the_machine_in_error_handling(tmp_path: Any) -> None:
-    import io
-    import json
-    from pathlib import Path
-
-    from execution_engine.cli import main as cli_main
-
     app = Path(__file__).resolve().parents[1] / "apps_xml" / "kuka_rsi_demo.xml"
     trace = tmp_path / "trace.jsonl"
     out, err = io.StringIO(), io.StringIO()
@@ -392,8 +372,6 @@ def test_an_rsi_stop_puts_the_machine_in_error_handling(tmp_path: Any) -> None:
 
 
 def test_recording_plans_through_waypoints_with_the_robots_generators(run_sim: Run) -> None:
-    from core_functions.primitives import RecordTrajectory
-
     async def body(b: KukaRsiBackend) -> None:
         start = b.tcp_pose("arm")
         assert start is not None
@@ -454,8 +432,6 @@ def test_primitives_plan_from_the_commanded_set_point_not_the_reported_one(run_s
         await b.execute("arm", ExecuteTrajectory("sweep", sweep.joint_names, sweep.points, sweep.times))
         steps = np.abs(np.diff(np.array(sim.model.trace), axis=0))
         assert np.max(steps[:, 4]) < math.radians(0.1)  # A5 stayed near 60 deg: no trip back to 30
-
-    from core_functions.primitives import RecordTrajectory
 
     off = RobotLink("kuka", "127.0.0.1", setpoint_tolerance_deg=(math.inf,) * 6)
     _with_backend(run_sim, body, quirks=Quirks(frozen_setpoint=True), link=off)

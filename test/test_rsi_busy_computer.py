@@ -17,6 +17,8 @@ from typing import Any
 
 import pytest
 
+import execution_engine.console_log as console_log
+from core_functions.robots import KUKA_KR
 from execution_engine.cli import main
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.engine.wall_clock import ManualWallClock
@@ -28,8 +30,6 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def made(**options: Any) -> KukaRsiBackend:
-    from core_functions.robots import KUKA_KR
-
     async def make(clock: Clock) -> KukaRsiBackend:
         return await create(clock, BackendOptions(robot=KUKA_KR, **options))
 
@@ -83,8 +83,6 @@ def test_late_replies_of_a_run_are_one_line_then_one_counted_line(tmp_path: Path
     """A run whose controller counts hundreds of late replies (a fifth of the replies dropped on
     arrival) logs the first, and then -- the console's wall clock frozen, so the whole run is one
     window -- one line that counts the rest, instead of a line per late reply."""
-    import execution_engine.console_log as console_log
-
     monkeypatch.setattr(console_log, "RealWallClock", ManualWallClock)
     app = tmp_path / "late.xml"
     app.write_text(

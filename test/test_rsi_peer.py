@@ -21,7 +21,7 @@ from test_rsi_loop import GRACE, READY, WAIT, Rig
 
 from core_functions.primitives import MoveJoints
 from core_functions.robots import KUKA_KR
-from execution_engine.clock import Clock, real_clock
+from execution_engine.clock import Clock, real_clock, run_with_clock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.codec import PacketCodec
@@ -220,8 +220,6 @@ def test_a_name_that_does_not_resolve_is_a_one_line_error_naming_the_option(opti
     async def make(clock: Clock) -> KukaRsiBackend:
         return await create(clock, BackendOptions(KUKA_KR, **options))  # type: ignore[arg-type]
 
-    from execution_engine.clock import run_with_clock
-
     with pytest.raises(ValueError) as caught:
         run_with_clock(make, real_clock())
     assert words in str(caught.value) and "\n" not in str(caught.value)
@@ -230,8 +228,6 @@ def test_a_name_that_does_not_resolve_is_a_one_line_error_naming_the_option(opti
 def test_names_become_ips_for_a_real_controller() -> None:
     async def make(clock: Clock) -> KukaRsiBackend:
         return await create(clock, BackendOptions(KUKA_KR, rsi_listen="localhost:49152", host="localhost", port=6008))
-
-    from execution_engine.clock import run_with_clock
 
     backend = run_with_clock(make, real_clock())
     assert (backend.link.host, backend.link.port, backend.settings.host) == ("127.0.0.1", 6008, "127.0.0.1")

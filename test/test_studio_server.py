@@ -8,6 +8,7 @@ import json
 import math
 import re
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -23,7 +24,7 @@ from starlette.testclient import TestClient  # noqa: E402
 from app_functions.registry import full_catalog  # noqa: E402
 from execution_engine.cli import main as cli_main  # noqa: E402
 from execution_engine.timeline import build_timeline  # noqa: E402
-from operator_station.cli import build_station  # noqa: E402
+from operator_station.cli import build_station, cmd_studio  # noqa: E402
 from operator_station.attach import AttachedSession  # noqa: E402
 from operator_station.feed import Feed  # noqa: E402
 from execution_engine.app_model import load_application  # noqa: E402
@@ -314,10 +315,6 @@ def test_attaching_without_the_application_is_one_line() -> None:
 @pytest.mark.parametrize("module", ["starlette", "uvicorn", "websockets"])
 def test_studio_without_its_extra_says_what_to_install(module: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Without websockets uvicorn serves the page but refuses the live feed; the command says so at once."""
-    import sys
-
-    from operator_station.cli import cmd_studio
-
     monkeypatch.setitem(sys.modules, module, None)  # as if not installed: importing it raises ImportError
     err = io.StringIO()
     assert cmd_studio(argparse.Namespace(file=None), full_catalog(), io.StringIO(), err) == 2
