@@ -60,6 +60,7 @@ from execution_engine.transport.port import (
 )
 from execution_engine.transport.qos import QoS
 from execution_engine.transport.ros_args import raw_parameter_texts
+from execution_engine.transport.ros_convert import failure_response
 from execution_engine.transport.sim_time import STALL_TIMEOUT, USE_SIM_TIME, USE_SIM_TIME_DESCRIPTION, follow_clock
 
 M = TypeVar("M")
@@ -70,7 +71,7 @@ _REPLY_MATCH_WAIT = 1.0  # wall seconds a reply waits at most for the caller's r
 
 
 def _import_cyclonedds() -> Any:
-    try:
+    try:  # optional: cyclonedds (pip extra 'dds'), imported when a DDS transport starts
         import cyclonedds.core
         import cyclonedds.domain
         import cyclonedds.pub
@@ -252,8 +253,6 @@ class _DdsService(ServiceServer):
             raise
         except Exception as error:  # noqa: BLE001 - the caller gets a failure answer, the node a fault
             self.node.report_fault(f"service {self.name}", error)
-            from execution_engine.transport.ros_convert import failure_response
-
             response, then = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}"), None
         await self._wait_for_client(client)
         if self.alive:

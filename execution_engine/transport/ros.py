@@ -139,7 +139,7 @@ class _Rclpy:
 
 
 def _import_rclpy() -> _Rclpy:
-    try:
+    try:  # optional: rclpy (a sourced ROS 2 environment), imported when the ros transport starts
         import rclpy
         import rclpy.qos
         from rcl_interfaces.msg import ParameterDescriptor, ParameterValue as ParameterValueMsg, SetParametersResult
