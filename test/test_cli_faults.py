@@ -30,6 +30,7 @@ import zstandard
 from dds_domain import domain_env, stop_group
 
 from execution_engine.cli import main
+from execution_engine.trace_report import read_trace
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "faults.md"
@@ -312,8 +313,6 @@ def test_a_traceback_only_with_v(peers: dict[str, str], monkeypatch: pytest.Monk
 
 
 def test_a_run_that_could_not_start_still_closes_its_trace_with_how_it_ended(peers: dict[str, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from execution_engine.trace_report import read_trace
-
     monkeypatch.chdir(ROOT)
     trace = tmp_path / "run.jsonl"
     argv = ["run", "apps_xml/vplus_pick_inspect.xml", "--no-check", "--host", "127.0.0.1", "--port", peers["closed_port"],
