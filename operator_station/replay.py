@@ -60,7 +60,9 @@ def load_replay(feed: Feed, path: Path) -> int:
     """Put the run's record at ``path`` into ``feed`` as a finished run; the number of records."""
     records, notes = read_records(path)
     groups = list(dict.fromkeys(r["group"] for r in records if isinstance(r.get("group"), str) and r["group"] != "engine"))
-    total = max((r["operations_total"] for r in records if r["event"] == "run_end" and _count(r.get("operations_total"))), default=0)
+    ended = [r["operations_total"] for r in records if r["event"] == "run_end" and _count(r.get("operations_total"))]
+    # a recording has no run_end: the operations it shows started are what is known of them
+    total = max(ended) if ended else len({r["operation"] for r in records if r["event"] == "function_start" and r.get("operation")})
     messages = [{"severity": "warning", "message": note} for note in notes]
     feed.begin("replay", printable(path.name), groups, structures={g: table_structure(g) for g in groups}, messages=messages, ended=True,
                status={"state": "replay", "operation_count": total, "t": records[-1]["t"] if records else 0.0})

@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import json
 import re
+import shutil
 import struct
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,7 @@ from operator_station.feed import Feed  # noqa: E402
 from operator_station.replay import load_replay  # noqa: E402
 from operator_station.timeline_view import TimelineView  # noqa: E402
 
+ROOT = Path(__file__).resolve().parents[1]
 #: What reading a file may hold at most (one chunk at a time, as report): the bound test_report_bounds.py uses.
 HELD = MAX_CHUNK + (16 << 20)
 
@@ -126,6 +128,25 @@ def test_a_recording_is_replayed_record_for_record_as_report_reads_it(tmp_path: 
     assert summarize(path).timeline.t_end == pytest.approx(feed.records[-1]["t"])
     # no end record in this crafted recording's run: the page says the run was cut, as report does
     assert summarize(path).cut == any("the run was cut" in m["message"] for m in feed.snapshot.messages)
+
+
+def test_a_runs_recording_replays_as_its_trace(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One run of the rivet demonstrator, traced and recorded: the station shows the same run from either file."""
+    shutil.copytree(ROOT / "apps_xml" / "cells", tmp_path / "cells")
+    shutil.copy(ROOT / "apps_xml" / "rivet_installation.xml", tmp_path / "rivet_installation.xml")
+    monkeypatch.chdir(tmp_path)
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["run", "rivet_installation.xml", "--speed", "max", "-q", "--no-check", "--trace", "run.jsonl", "--record", "run.mcap"], out, err) == 0, err.getvalue()
+    traced, recorded = Feed(), Feed()
+    assert load_replay(recorded, tmp_path / "run.mcap") == load_replay(traced, tmp_path / "run.jsonl") - 1  # the trace's run_end
+    assert traced.snapshot.groups == recorded.snapshot.groups == ["left_arm", "right_arm", "torso_head"]
+    assert traced.snapshot.messages == recorded.snapshot.messages == []  # both whole
+    assert traced.snapshot.status == recorded.snapshot.status == {"state": "replay", "operation_count": 10, "t": pytest.approx(traced.records[-1]["t"])}
+    by_trace, by_recording = TimelineView(traced).model(), TimelineView(recorded).model()
+    for key in ("groups", "end", "operations", "lanes", "idle", "busy", "retries"):
+        assert by_trace[key] == by_recording[key], key
+    assert repr(list(traced.joints)) == repr(list(recorded.joints))  # NaN where a joint was not reported yet: repr compares it
+    assert traced.snapshot.joint_names == recorded.snapshot.joint_names and len(traced.joints) > 10
 
 
 def test_times_no_run_has_are_skipped_and_said_as_report_says_them(tmp_path: Path) -> None:
