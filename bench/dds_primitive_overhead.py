@@ -6,7 +6,7 @@ Needs only ``pip install '.[dds]'``.  One run measures, side by side and interle
 * in-process: engine, three group machines and the Nextage simulator bridge as nodes of one process on
   the local transport (``bench/primitive_overhead.py``);
 * per-process over DDS: the same five nodes as five processes with ``--transport dds`` (bridge and three
-  ``group_machine`` processes started here, the engine in this process), in a random domain on loopback;
+  ``group_machine`` processes started here, the engine in this process), in a domain no test uses meanwhile, on loopback;
 * the floor: a raw cyclonedds round trip (a String of a bridge command's size to an echo process and
   back, no project code on either side);
 
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import statistics
 import subprocess
 import sys
@@ -33,7 +32,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT / "test"))
 
+from dds_domain import hold_domain  # noqa: E402
 from primitive_overhead import BenchFunctions  # noqa: E402
 from ros_primitive_overhead import ECHO_TEXT, in_process, per_process, start_nodes  # noqa: E402
 
@@ -187,7 +188,8 @@ def main() -> None:
         sys.exit(echo_process())
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
     LIBRARIES["bench"] = BenchFunctions
-    os.environ.update(ROS_DOMAIN_ID=str(random.randint(100, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", CYCLONEDDS_URI=LOOPBACK)
+    # a domain no test or other bench uses while this runs (test/dds_domain.py)
+    os.environ.update(ROS_DOMAIN_ID=str(hold_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", CYCLONEDDS_URI=LOOPBACK)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     local_runs, dds_runs, raw_runs = [], [], []
     processes = start_nodes(env, ("--transport", "dds"))

@@ -23,7 +23,6 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import random
 import statistics
 import subprocess
 import sys
@@ -34,7 +33,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT / "test"))
 
+from dds_domain import hold_domain  # noqa: E402
 from primitive_overhead import BenchFunctions, app  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
@@ -186,8 +187,7 @@ def main() -> None:
         sys.exit(echo_process())
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
     LIBRARIES["bench"] = BenchFunctions
-    domain = str(random.randint(100, 200))
-    os.environ["ROS_DOMAIN_ID"] = domain  # the cell of this bench only
+    os.environ["ROS_DOMAIN_ID"] = str(hold_domain())  # the cell of this bench only: no test or other bench uses it meanwhile (test/dds_domain.py)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     local_runs, ros_runs, echo_runs = [], [], []
     processes = start_nodes(env)

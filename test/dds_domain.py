@@ -62,6 +62,17 @@ def claimed_domain(folder: Path | None = None, ids: Sequence[int] = range(FIRST,
     raise NoFreeDomain(f"all {len(ids)} DDS domain ids {min(ids, default=0)}..{max(ids, default=0)} are claimed by running tests")
 
 
+_HELD: list[contextlib.ExitStack] = []
+
+
+def hold_domain() -> int:
+    """A domain claimed for the rest of this process (a bench's): the kernel gives it back when the process ends."""
+    stack = contextlib.ExitStack()
+    domain = stack.enter_context(claimed_domain())
+    _HELD.append(stack)
+    return domain
+
+
 def dds_env(domain: int, interfaces: str = LOOPBACK) -> dict[str, str]:
     """The environment of a participant of ``domain``: this host only, loopback only."""
     return {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "CYCLONEDDS_URI": interfaces}

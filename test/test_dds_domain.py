@@ -58,3 +58,24 @@ def test_a_claim_is_given_back_when_the_test_ends_and_the_environment_stays_on_t
         assert env["ROS_DOMAIN_ID"] == "12" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST" and "127.0.0.1" in env["CYCLONEDDS_URI"]
     with claimed_domain(tmp_path, [12]) as again:
         assert again == 12
+
+
+def test_a_bench_holds_its_domain_until_it_ends() -> None:
+    """A bench claims its domain for its whole process (hold_domain); once it ends, the domain is free."""
+    code = f"import sys; sys.path.insert(0, {str(ROOT / 'test')!r}); from dds_domain import hold_domain; print(hold_domain(), flush=True); sys.stdin.read()"
+    bench = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert bench.stdout is not None and bench.stdin is not None
+        domain = int(bench.stdout.readline())
+        with pytest.raises(NoFreeDomain), claimed_domain(ids=[domain]):
+            pass
+        bench.stdin.close()  # the bench ends
+        assert bench.wait(10.0) == 0
+        with claimed_domain(ids=[domain]) as again:
+            assert again == domain
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+            bench.wait(10.0)
+        assert bench.stdout is not None
+        bench.stdout.close()
