@@ -8,8 +8,11 @@ range from this one table and refuses anything outside it in one line naming the
 range.  The ranges are generous; what they exclude is a typo, a unit mix-up or a value no robot
 cell could mean.  docs/faults.md, README.md and the back ends' docs show them.
 
-The speed factor's limits are :data:`execution_engine.clock.MIN_SPEED` and ``MAX_SPEED``; the
-``speed`` row here is the same interval, for the tables and the readers below the clock.
+One name, one range -- except where a back end reads an option of the same name with a meaning
+of its own (``timeout``, ``tolerance_mm``): then each has its entry, scoped to that back end
+(:class:`Setting`), and the docs show both.  The speed factor's limits are
+:data:`execution_engine.clock.MIN_SPEED` and ``MAX_SPEED``; the ``speed`` row here is the same
+interval, for the tables and the readers below the clock.
 """
 from __future__ import annotations
 
@@ -74,66 +77,135 @@ def _shown(value: object) -> str:
 ANSWER = Range(0.1, 600.0, "s")
 #: The TCP/UDP port of a controller (0: pick a free one, where a simulator is started).
 PORT = Range(0, 65535, integer=True)
+#: A probability.
+CHANCE = Range(0.0, 1.0)
 
-#: Every numeric setting by name: (range, where it is read, what it is).
-OPTIONS: dict[str, tuple[Range, str, str]] = {
-    # -- the run (CLI)
-    "speed": (Range(0.01, 1000.0, "x real time"), "run/launch --speed, bridge parameter speed, vplus controller_speed",
-              "simulated seconds per wall second ('max' for simulated time, where offered)"),
-    "seed": (Range(0, 2**32 - 1, integer=True), "--seed, bridge parameter seed", "the simulator's random seed (vision noise)"),
-    "port": (PORT, "--port, bridge parameter port", "the controller's port"),
-    "grace": (Range(0.0, 600.0, "s"), "launch --grace", "how long the engine may end its run by itself after another node died"),
-    "stop_timeout": (Range(0.1, 600.0, "s"), "launch --stop-timeout, bridge parameter stop_timeout",
-                     "how long a node (a stopped primitive) may take to stop"),
+
+@dataclass(frozen=True)
+class Setting:
+    """One numeric setting: its range, where it is read and what it is.
+
+    ``scope`` is empty for a setting with one range wherever it is read; a back end (or program)
+    that reads an option of the same name with a meaning of its own -- ``timeout`` is an ack
+    allowance in seconds for V+ and a count of late packets for KUKA RSI -- has its own entry
+    under that name with its name as ``scope``, and a reader of such a name must say whose it reads.
+    """
+
+    name: str
+    allowed: Range
+    where: str
+    what: str
+    scope: str = ""
+
+    @property
+    def shown(self) -> str:
+        """``tolerance_mm (vplus)``: the name as the docs' table shows it."""
+        return f"{self.name} ({self.scope})" if self.scope else self.name
+
+
+#: Every numeric setting.
+SETTINGS: tuple[Setting, ...] = (
+    # -- the run, launch and the nodes they start (CLI, node parameters)
+    Setting("speed", Range(0.01, 1000.0, "x real time"),
+            "run/launch/studio --speed, bridge parameter speed, vplus controller_speed, the simulators' --speed",
+            "simulated seconds per wall second ('max' for simulated time, where offered)"),
+    Setting("seed", Range(0, 2**32 - 1, integer=True), "--seed, bridge parameter seed, the KR C4 simulator's --seed",
+            "the simulator's random seed (vision noise, injected faults)"),
+    Setting("port", PORT, "run --port, studio --port and --controller-port, bridge parameter port, the simulators' --port and --flood-port",
+            "a TCP/UDP port (0: a free one, where this program listens)"),
+    Setting("grace", Range(0.0, 600.0, "s"), "launch --grace", "how long the engine may end its run by itself after another node died"),
+    Setting("stop_timeout", Range(0.1, 600.0, "s"), "launch --stop-timeout, bridge parameter stop_timeout",
+            "how long a node (a stopped primitive) may take to stop"),
     # -- the Nextage simulator
-    "control_period": (Range(0.001, 0.5, "s"), "nextage-sim option and parameter control_period",
-                       "simulation step: joint limits and collisions are checked at every one (the dry run uses 0.5)"),
+    Setting("control_period", Range(0.001, 0.5, "s"), "nextage-sim option and parameter control_period",
+            "simulation step: joint limits and collisions are checked at every one (the dry run uses 0.5)"),
     # -- V+
-    "timeout": (ANSWER, "vplus option and parameter timeout", "ack allowance per command on top of its motion time"),
-    "retries": (Range(0, 100, integer=True), "vplus option and parameter retries", "connection attempts after the first"),
-    # -- KUKA RSI
-    "rsi_timeout": (Range(1, 100_000, integer=True), "kuka-rsi option timeout", "late packets in a row that stop the simulated RSI"),
-    "axis_monitor": (Range(0.001, 360.0, "deg"), "kuka-rsi option axis_monitor", "the simulated AXISCORRMON limit"),
-    "silence": (Range(0.01, 10.0, "s"), "kuka-rsi option silence", "time without packets that means the robot is lost"),
-    "connect_timeout": (ANSWER, "kuka-rsi option connect_timeout", "time to the controller's first valid packet"),
-    "linear_speed": (Range(0.001, 10.0, "m/s"), "kuka-rsi option linear_speed", "TCP speed at 100 %"),
-    "linear_accel": (Range(0.001, 100.0, "m/s^2"), "kuka-rsi option linear_accel", "TCP acceleration at 100 %"),
-    "tolerance": (Range(0.001, 10.0, "deg"), "kuka-rsi option tolerance", "how far a reported axis set point may lie from the commanded one"),
-    "tolerance_mm": (Range(0.001, 100.0, "mm"), "kuka-rsi option tolerance_mm", "how far the reported TCP may lie from the commanded one"),
-    "sim_drop": (Range(0.0, 1.0), "kuka-rsi option sim_drop", "probability the simulated controller discards a reply"),
+    Setting("timeout", ANSWER, "vplus option and parameter timeout", "ack allowance per command on top of its motion time", "vplus"),
+    Setting("retries", Range(0, 100, integer=True), "vplus option and parameter retries", "connection attempts after the first"),
+    Setting("tolerance_mm", Range(0.01, 50.0, "mm"), "vplus option and parameter tolerance_mm",
+            "how far a reported position may lie from the commanded one", "vplus"),
+    Setting("tolerance_deg", Range(0.01, 10.0, "deg"), "vplus option and parameter tolerance_deg",
+            "how far a reported orientation may lie from the commanded one"),
+    Setting("max_clients", Range(1, 1000, integer=True), "V+ simulator --max-clients", "clients served at once"),
+    Setting("idle_timeout", Range(0.001, 86_400.0, "s"), "V+ simulator --idle-timeout", "a client that sent no whole message this long is closed"),
+    Setting("reclaim_after", Range(0.001, 86_400.0, "s"), "V+ simulator --reclaim-after",
+            "with every slot taken, a new client takes the slot of one idle this long"),
+    Setting("run_for", Range(0.001, 604_800.0, "s"), "V+ simulator --run-for", "run time after which the simulator stops by itself (a week at most)"),
+    # -- KUKA RSI and the KR C4 simulator
+    Setting("cycle", Range(4, 12, "ms", integer=True), "kuka-rsi option and parameter cycle, KR C4 simulator --cycle",
+            "the controller's RSI cycle: 4 or 12 ms, nothing between"),
+    Setting("timeout", Range(1, 100_000, integer=True), "kuka-rsi option and parameter timeout, KR C4 simulator --timeout",
+            "late packets in a row that stop the simulated RSI", "kuka-rsi"),
+    Setting("axis_monitor", Range(0.001, 360.0, "deg"), "kuka-rsi option and parameter axis_monitor, KR C4 simulator --axis-monitor",
+            "the simulated AXISCORRMON limit"),
+    Setting("silence", Range(0.01, 10.0, "s"), "kuka-rsi option and parameter silence (the parameter's 0: the back end's default)",
+            "time without packets that means the robot is lost"),
+    Setting("connect_timeout", ANSWER, "kuka-rsi option and parameter connect_timeout", "time to the controller's first valid packet"),
+    Setting("linear_speed", Range(0.001, 10.0, "m/s"), "kuka-rsi option and parameter linear_speed", "TCP speed at 100 %"),
+    Setting("linear_accel", Range(0.001, 100.0, "m/s^2"), "kuka-rsi option and parameter linear_accel", "TCP acceleration at 100 %"),
+    Setting("tolerance", Range(0.001, 10.0, "deg"), "kuka-rsi option and parameter tolerance",
+            "how far a reported axis set point may lie from the commanded one"),
+    Setting("tolerance_mm", Range(0.001, 100.0, "mm"), "kuka-rsi option and parameter tolerance_mm",
+            "how far the reported TCP may lie from the commanded one", "kuka-rsi"),
+    Setting("sim_drop", CHANCE, "kuka-rsi option sim_drop, KR C4 simulator --drop", "probability the simulated controller discards a reply"),
+    Setting("loss", CHANCE, "KR C4 simulator --loss", "probability a packet the simulated controller sends is lost"),
+    Setting("garbage", CHANCE, "KR C4 simulator --garbage", "probability a packet the simulated controller sends is garbage"),
+    Setting("jitter_ms", Range(0.0, 1000.0, "ms"), "KR C4 simulator --jitter-ms", "random delay of each packet the simulated controller sends"),
+    Setting("cycles", Range(1, 10**12, integer=True), "KR C4 simulator --cycles", "cycles after which the simulator stops by itself"),
+    Setting("ipoc_step", Range(1, 1000, integer=True), "KR C4 simulator --ipoc-step", "the IPOC time stamp's step per cycle"),
+    Setting("reply_grace", Range(0.0, 60.0, "s"), "KR C4 simulator --reply-grace", "accelerated mode: wall time a reply is waited for (0: none)"),
+    Setting("rt_priority", Range(0, 99, integer=True), "KR C4 simulator --rt-priority", "SCHED_FIFO priority asked for (0: none)"),
+    # -- vision detect
+    Setting("focal_length", Range(0.1, 1e6, "px"), "vision detect --fx, --fy", "the camera's focal length"),
+    Setting("principal_point", Range(-1e6, 1e6, "px"), "vision detect --cx, --cy", "the camera's principal point"),
+    Setting("distance", Range(0.001, 100.0, "m"), "vision detect --distance", "distance of the plane along the optical axis"),
+    Setting("diameter", Range(1e-5, 1.0, "m"), "vision detect --diameter", "the expected hole diameter"),
     # -- node parameters
-    "startup_timeout": (Range(0.1, 3600.0, "s"), "engine parameter", "how long to wait for the group machines"),
-    "function_timeout": (Range(1.0, 86_400.0, "s"), "engine parameter", "longest a function may take"),
-    "service_timeout": (ANSWER, "engine parameter", "machine service call timeout"),
-    "bridge_timeout": (ANSWER, "machine parameter", "how fast a bridge must acknowledge a command"),
-    "primitive_timeout": (Range(1.0, 86_400.0, "s"), "machine parameter", "longest a primitive may run"),
-    "sync_timeout": (Range(0.1, 3600.0, "s"), "machine parameter", "how long partners may take to meet at a barrier"),
-    "state_period": (Range(0.001, 1.0, "s"), "bridge parameter", "joint_states / tcp_pose period"),
-    "camera_timeout": (Range(0.01, 600.0, "s"), "bridge parameter", "longest wait for an image from a ROS camera"),
-}
+    Setting("startup_timeout", Range(0.1, 3600.0, "s"), "engine parameter", "how long to wait for the group machines"),
+    Setting("function_timeout", Range(1.0, 86_400.0, "s"), "engine parameter", "longest a function may take"),
+    Setting("service_timeout", ANSWER, "engine parameter", "machine service call timeout"),
+    Setting("bridge_timeout", ANSWER, "machine parameter", "how fast a bridge must acknowledge a command"),
+    Setting("primitive_timeout", Range(1.0, 86_400.0, "s"), "machine parameter", "longest a primitive may run"),
+    Setting("sync_timeout", Range(0.1, 3600.0, "s"), "machine parameter", "how long partners may take to meet at a barrier"),
+    Setting("state_period", Range(0.001, 1.0, "s"), "bridge parameter", "joint_states / tcp_pose period"),
+    Setting("camera_timeout", Range(0.01, 600.0, "s"), "bridge parameter", "longest wait for an image from a ROS camera"),
+)
+
+#: The settings by (scope, name).
+OPTIONS: dict[tuple[str, str], Setting] = {(s.scope, s.name): s for s in SETTINGS}
 
 
-def bounds(name: str) -> Range:
-    """The range of setting ``name`` (KeyError for a name the table lacks: a defect)."""
-    return OPTIONS[name][0]
+def setting(name: str, scope: str = "") -> Setting:
+    """Setting ``name`` as ``scope`` reads it: its own entry, else the one every reader shares
+    (KeyError for a name the table lacks, or one with only scoped entries read without a scope: a defect)."""
+    found = OPTIONS.get((scope, name)) or OPTIONS.get(("", name))
+    if found is None:
+        raise KeyError(f"no range for setting {name!r}" + (f" of {scope}" if scope else ""))
+    return found
 
 
-def check(name: str, value: object, *, label: str | None = None) -> float:
+def bounds(name: str, scope: str = "") -> Range:
+    """The range of setting ``name`` (as ``scope`` reads it)."""
+    return setting(name, scope).allowed
+
+
+def check(name: str, value: object, *, label: str | None = None, scope: str = "") -> float:
     """``value`` of setting ``name`` within its range; RangeError naming ``label`` (default ``name``)."""
-    return bounds(name).check(label or name, value)
+    return bounds(name, scope).check(label or name, value)
 
 
-def check_int(name: str, value: object, *, label: str | None = None) -> int:
-    return bounds(name).check_int(label or name, value)
+def check_int(name: str, value: object, *, label: str | None = None, scope: str = "") -> int:
+    return bounds(name, scope).check_int(label or name, value)
 
 
-def argument_type(name: str) -> Callable[[str], float]:
-    """An argparse ``type=`` taking a value of setting ``name`` in its range: argparse's own one-line error otherwise."""
-    allowed = bounds(name)
+def argument_type(name: str, scope: str = "", *, label: str | None = None) -> Callable[[str], float]:
+    """An argparse ``type=`` taking a value of setting ``name`` in its range: argparse's own one-line error otherwise.
+    ``label``: how the refusal names the value (default the setting's name)."""
+    allowed = bounds(name, scope)
 
     def parse(text: str) -> float:
         try:
-            value = allowed.check(name, text)
+            value = allowed.check(label or name, text)
         except RangeError as error:
             raise argparse.ArgumentTypeError(str(error)) from None
         return int(value) if allowed.integer else value
@@ -143,5 +215,5 @@ def argument_type(name: str) -> Callable[[str], float]:
 
 
 def table() -> list[tuple[str, str, str, str]]:
-    """(setting, range, where, what) for the docs."""
-    return [(name.removeprefix("rsi_"), r.describe(), where, what) for name, (r, where, what) in OPTIONS.items()]
+    """(setting, range, where, what) for the docs; a scoped setting shown as ``name (scope)``."""
+    return [(s.shown, s.allowed.describe(), s.where, s.what) for s in SETTINGS]

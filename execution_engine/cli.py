@@ -41,7 +41,7 @@ from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulate
 from execution_engine.console_log import ConsoleLog
 from execution_engine.deployment import deploy_local
 from execution_engine import launcher
-from execution_engine.dry_run.check import check as dry_run_check
+from execution_engine.dry_run.check import check as dry_run_check, options_refusal
 from execution_engine.dry_run.simulators import setup_for
 from execution_engine.dry_run.start import StartRefused, start_checked
 from execution_engine.engine.report import RunReport
@@ -246,6 +246,10 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
     except (CheckpointError, Refused) as refusal:
         err.write(f"error: {refusal}\n")
         return EXIT_USAGE
+    refusal = options_refusal(args.file, backend_name(app, args), backend_options(app, args), args.speed, dry_run_first=not args.no_check)
+    if refusal is not None:  # every back-end option, before the dry run's seconds
+        err.write(refusal + "\n")
+        return EXIT_USAGE
     if not args.no_check:
         code, checked = dry_run_check(app, args.file, backend_name(app, args), backend_options(app, args), args.trajectory_db, out, err, summary=not args.quiet)
         args.checked = checked  # the verdict from the simulator's start; _run checks again if the robot is elsewhere
@@ -362,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--trace", metavar="PATH", help="write every event as a JSON line to PATH")
     run.add_argument("--robot", choices=("nextage-sim", "vplus", "kuka-rsi"), help="back end (default: the application robot's)")
     run.add_argument("--host", help="controller address (V+); none starts the simulator")
-    run.add_argument("--port", type=int, help="controller port (V+ default 1234)")
+    run.add_argument("--port", type=argument_type("port"), help="controller port (V+ default 1234), in [0, 65535]")
     run.add_argument("--rsi-listen", metavar="HOST:PORT", help="KUKA RSI: serve a real controller on this address")
     run.add_argument("--fault", action="append", metavar="GROUP:KIND@FRACTION", help="simulator fault injection, e.g. right_arm:joint_limit@0.5 (repeatable)")
     run.add_argument("--seed", type=argument_type("seed"), default=0, help="simulator random seed (vision noise) in [0, 4294967295]")

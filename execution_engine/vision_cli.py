@@ -13,16 +13,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import IO
 
+from core_functions.option_ranges import RangeError, bounds, check
 from core_functions.vision.camera import Intrinsics
 from core_functions.vision.holes import Hole, detect_head_on
 from core_functions.vision.image_file import ImageFileError, read_image
 
 EXIT_OK, EXIT_IMAGE, EXIT_USAGE = 0, 1, 2
-_NUMBERS = (("fx", "focal length along x (px)"), ("fy", "focal length along y (px)"), ("cx", "principal point x (px)"), ("cy", "principal point y (px)"), ("distance", "distance of the plane along the optical axis (m)"), ("diameter", "expected hole diameter (m)"))
+#: option -> (its setting in core_functions.option_ranges, what it is)
+_NUMBERS = {
+    "fx": ("focal_length", "focal length along x (px)"), "fy": ("focal_length", "focal length along y (px)"),
+    "cx": ("principal_point", "principal point x (px)"), "cy": ("principal_point", "principal point y (px)"),
+    "distance": ("distance", "distance of the plane along the optical axis (m)"), "diameter": ("diameter", "expected hole diameter (m)"),
+}
 
 
 def add_vision_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -30,25 +35,20 @@ def add_vision_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[
     tools = vision.add_subparsers(dest="vision_command", required=True)
     detect = tools.add_parser("detect", help="find holes of a diameter on a plane seen head-on; print centres (px, m) and diameters")
     detect.add_argument("image", metavar="IMAGE", help="image file (PNG, JPEG, TIFF, BMP, PGM, ...)")
-    for name, text in _NUMBERS:
-        detect.add_argument(f"--{name}", required=True, metavar=name.upper(), help=text)  # parsed here: one-line errors
+    for name, (setting, text) in _NUMBERS.items():  # parsed here: one-line errors
+        detect.add_argument(f"--{name}", required=True, metavar=name.upper(), help=f"{text}, in {bounds(setting).describe()}")
     detect.add_argument("--json", action="store_true", help='print {"holes": [{"center_px": [u, v], "center_m": [x, y, z], "diameter_m": d, "score": s}, ...]}')
 
 
-def _number(name: str, text: str, positive: bool) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value) or (positive and value <= 0):
-        raise ValueError(f"--{name}: {text!r} is not a {'positive ' if positive else ''}finite number")
-    return value
+def _number(name: str, text: str) -> float:
+    """``--NAME``'s value in its range (core_functions.option_ranges); RangeError naming the option and the range."""
+    return check(_NUMBERS[name][0], text, label=f"--{name}")
 
 
 def cmd_vision(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
     try:
-        values = {name: _number(name, getattr(args, name), name not in ("cx", "cy")) for name, _ in _NUMBERS}
-    except ValueError as error:
+        values = {name: _number(name, getattr(args, name)) for name in _NUMBERS}
+    except RangeError as error:
         err.write(f"error: {error}\n")
         return EXIT_USAGE
     try:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from core_functions.catalog import Catalog
+from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.printable import printable
 from core_functions.robots import find_robot
 from execution_engine.app_model.document import read_document
@@ -43,7 +44,7 @@ def add_parser(sub: Any) -> None:
     """Register ``studio`` on the CLI's subcommands, after ``run`` (whose run options it shares)."""
     studio = sub.add_parser("studio", help="the operator station in the browser: build, validate, run, watch and replay applications")
     studio.add_argument("file", nargs="?", metavar="APP.xml", help="the application to open in the builder")
-    studio.add_argument("--port", type=int, default=8080, help="HTTP port of the station (default 8080)")
+    studio.add_argument("--port", type=int, default=8080, help="HTTP port of the station, in [0, 65535] (default 8080; 0: a free one)")
     studio.add_argument("--host", default="127.0.0.1", help="address to serve on (default loopback; anything else is reachable from the network and needs the token)")
     studio.add_argument("--token-file", dest="token_file", metavar="FILE",
                         help="the token pages must present, kept in FILE (one line, mode 600); default: made at start and printed when not on loopback")
@@ -54,7 +55,8 @@ def add_parser(sub: Any) -> None:
     studio.add_argument("--transport", choices=("local", "ros"), default="local",
                         help="local: run the application in this process (default); ros: watch and command a cell running on the ROS graph (needs APP.xml for its groups, and rclpy)")
     studio.add_argument("--controller-host", dest="controller_host", help="V+ controller address (none starts the simulator); run's --host")
-    studio.add_argument("--controller-port", dest="controller_port", type=int, help="V+ controller port; run's --port")
+    studio.add_argument("--controller-port", dest="controller_port", type=argument_type("port", label="controller port"),
+                        help="V+ controller port, in [0, 65535]; run's --port")
     for action in sub.choices["run"]._actions:  # noqa: SLF001 - argparse has no public way to share options
         if action.dest in RUN_OPTIONS:
             studio._add_action(action)  # noqa: SLF001
@@ -132,8 +134,10 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
             return 2
     if not is_loopback(args.host):
         err.write(f"warning: serving on {args.host}: reachable from the network; every page and script must present the token\n")
-    if not 0 <= args.port <= 65535:
-        err.write(f"error: --port must be 0..65535, got {args.port}\n")
+    try:  # after the warning: whoever asked for the network learns it even from a typo in the port
+        bounds("port").check("--port", args.port)
+    except RangeError as error:
+        err.write(f"error: {error}\n")
         return 2
 
     try:

@@ -33,3 +33,15 @@ def backend_factory(name: str) -> BackendFactory:
 
 async def create_backend(name: str, clock: Clock, options: BackendOptions) -> RobotBackend:
     return await backend_factory(name)(clock, options)
+
+
+def check_options(name: str, options: BackendOptions, speed: float) -> None:
+    """Refuse ``options`` as back end ``name`` would for a run on a clock of ``speed`` (``math.inf``:
+    simulated time), building, connecting and starting nothing: each back end's ``parse_options``,
+    which its factory builds from, so the two cannot disagree.  ValueError/KeyError naming the option."""
+    target = BACKENDS.get(name)
+    if target is None:
+        backend_factory(name)  # the one-line KeyError naming the back ends
+        return
+    module = importlib.import_module(target.partition(":")[0])
+    module.parse_options(options, speed)

@@ -75,10 +75,12 @@ def test_without_json_one_line_per_hole(image: tuple[Path, np.ndarray]) -> None:
 @pytest.mark.parametrize(
     ("change", "code", "message"),
     [
-        ({"--fx": "abc"}, 2, "error: --fx: 'abc' is not a positive finite number"),
-        ({"--distance": "-1"}, 2, "error: --distance: '-1' is not a positive finite number"),
-        ({"--diameter": "nan"}, 2, "error: --diameter: 'nan' is not a positive finite number"),
-        ({"--cx": "inf"}, 2, "error: --cx: 'inf' is not a finite number"),
+        ({"--fx": "abc"}, 2, "error: --fx must be a number in [0.1, 1e+06] px, got 'abc'"),
+        ({"--distance": "-1"}, 2, "error: --distance must be a number in [0.001, 100] m, got '-1'"),
+        ({"--diameter": "nan"}, 2, "error: --diameter must be a number in [1e-05, 1] m, got 'nan'"),
+        ({"--cx": "inf"}, 2, "error: --cx must be a number in [-1e+06, 1e+06] px, got 'inf'"),
+        ({"--fy": "1e308"}, 2, "error: --fy must be a number in [0.1, 1e+06] px, got '1e308'"),  # finite, and no camera's
+        ({"--diameter": "5"}, 2, "error: --diameter must be a number in [1e-05, 1] m, got '5'"),
     ],
 )
 def test_bad_numbers_are_one_line_errors_with_exit_2(image: tuple[Path, np.ndarray], change: dict[str, str], code: int, message: str) -> None:

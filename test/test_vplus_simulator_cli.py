@@ -17,14 +17,17 @@ from robot_bridges.vplus.simulator import main
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--port", "70000"], "--port must be 0..65535"),
-        (["--speed", "0"], "--speed must be a number in [0.01, 1000] x real time, got 0"),
-        (["--speed", "1e308"], "--speed must be a number in [0.01, 1000] x real time, got 1e+308"),
-        (["--max-clients", "0"], "--max-clients must be >= 1"),
-        (["--idle-timeout", "0"], "--idle-timeout must be within (0, 86400] s, got 0"),
-        (["--idle-timeout", "inf"], "--idle-timeout must be within (0, 86400] s, got inf"),
-        (["--reclaim-after", "-1"], "--reclaim-after must be within (0, 86400] s, got -1"),
-        (["--reclaim-after", "1e9"], "--reclaim-after must be within (0, 86400] s, got 1e+09"),
+        (["--port", "70000"], "error: --port must be a whole number in [0, 65535], got 70000"),
+        (["--speed", "0"], "error: --speed must be a number in [0.01, 1000] x real time, got 0"),
+        (["--speed", "1e308"], "error: --speed must be a number in [0.01, 1000] x real time, got 1e+308"),
+        (["--max-clients", "0"], "error: --max-clients must be a whole number in [1, 1000], got 0"),
+        (["--max-clients", "1000000"], "error: --max-clients must be a whole number in [1, 1000], got 1000000"),
+        (["--idle-timeout", "0"], "error: --idle-timeout must be a number in [0.001, 86400] s, got 0"),
+        (["--idle-timeout", "inf"], "error: --idle-timeout must be a number in [0.001, 86400] s, got inf"),
+        (["--reclaim-after", "-1"], "error: --reclaim-after must be a number in [0.001, 86400] s, got -1"),
+        (["--reclaim-after", "1e9"], "error: --reclaim-after must be a number in [0.001, 86400] s, got 1e+09"),
+        (["--run-for", "inf"], "error: --run-for must be a number in [0.001, 604800] s, got inf"),
+        (["--run-for", "-5"], "error: --run-for must be a number in [0.001, 604800] s, got -5"),
     ],
 )
 def test_bad_arguments_are_refused_with_a_clear_message(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:

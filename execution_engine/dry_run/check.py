@@ -6,12 +6,15 @@ a dry run that breaks down is one clear message and an exit code, never a traceb
 from __future__ import annotations
 
 import logging
+import math
 from typing import IO
 
 from execution_engine.app_model.model import Application
 from execution_engine.dry_run.report import DryRunReport
 from execution_engine.dry_run.runner import DryRunError, dry_run
+from execution_engine.dry_run.simulators import setup_for
 from robot_bridges.backend import BackendOptions
+from robot_bridges.registry import check_options
 
 log = logging.getLogger(__name__)
 
@@ -53,3 +56,23 @@ def check(
     elif report.notes:
         err.write("".join(f"{file}: not checked: {note}\n" for note in report.notes))
     return (OK if report.ok else FOUND), report
+
+
+def options_refusal(file: str, backend: str, options: BackendOptions, speed: float, *, dry_run_first: bool) -> str | None:
+    """The line refusing a back-end option of ``run`` before anything runs, or None when every one is good.
+
+    The options the dry run would use (``dry_run_first``: when the run is checked) are read first and
+    refused as the dry run refuses them, then the run's own on a clock of ``speed`` (``math.inf``:
+    simulated time) as the run would: the same words as when they were refused after seconds of
+    dry run, or by the run after it (docs/faults.md rows 140-159)."""
+    if dry_run_first:
+        setup = setup_for(backend, options)
+        try:
+            check_options(backend, setup.options, math.inf if setup.simulated_clock else 1.0)
+        except (KeyError, ValueError, OSError) as error:
+            return f"error: cannot dry-run {file} on {backend}: {error}"
+    try:
+        check_options(backend, options, speed)
+    except (KeyError, ValueError, OSError) as error:
+        return f"error: cannot run {file}: {error}"
+    return None

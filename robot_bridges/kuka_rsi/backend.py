@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass
 
 from core_functions import option_ranges
 from core_functions.geometry import Pose
@@ -45,7 +46,7 @@ from core_functions.robots import KUKA_KR, RobotModel
 from execution_engine.clock import Clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
 from robot_bridges.kuka_rsi.arm_commands import ArmCommands, MotionLimits, Run
-from robot_bridges.kuka_rsi.config import ConfigError, load_config
+from robot_bridges.kuka_rsi.config import ConfigError, RsiConfig, load_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RsiInterface, RunnerMode
 from robot_bridges.kuka_rsi.kinematics import KR6_R900, URDF_PATH, KukaArm
@@ -288,6 +289,82 @@ _EXTRAS = (
 )
 
 
+@dataclass(frozen=True)
+class KukaSettings:
+    """The RSI options, parsed and checked (nothing resolved, bound or started yet)."""
+
+    runner: str
+    simulator: str
+    mode: str
+    cycle: int
+    timeout: int
+    axis_monitor: float
+    silence: float | None  # None: the back end's default for the kind of controller
+    connect_timeout: float
+    limits: MotionLimits
+    tolerance: float
+    tolerance_mm: float
+    config: RsiConfig | None
+    listen: Endpoint | None  # rsi_listen: a real controller
+    faults: Faults
+    quirks: Quirks
+    flood: Flood
+
+
+def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
+    """The ``kuka-rsi`` options checked against each other and the run's clock (``speed``;
+    ``math.inf`` for simulated time) before anything starts; ValueError naming the option.
+    Names (``host``, ``rsi_listen``) are resolved by :func:`create`, once."""
+    options.check("kuka-rsi", KUKA_KR, _EXTRAS)
+    if speed != 1.0:
+        raise ValueError("the kuka-rsi back end runs on the robot's real-time clock: run with --speed 1 (the default)")
+    if options.faults:
+        raise ValueError("the kuka-rsi back end takes no --fault (inject RSI faults with robot_bridges.kuka_rsi.sim_faults.Faults)")
+    extra = options.extra
+    runner = extra.get("runner", "process")
+    sim_runner = extra.get("simulator", "process")
+    mode = extra.get("mode", "absolute")
+    choices = (("runner", runner, ("process", "thread")), ("simulator", sim_runner, ("process", "thread", "accelerated")), ("mode", mode, ("absolute", "relative")))
+    for name, value, allowed in choices:
+        if value not in allowed:
+            raise ValueError(f"kuka-rsi: {name} must be {' or '.join(allowed)}, got {value!r}")
+    cycle_text = extra.get("cycle", "4").strip()
+    if cycle_text not in ("4", "12"):
+        raise ValueError(f"kuka-rsi: cycle must be 4 or 12 (ms), got {cycle_text!r}")
+
+    def number(name: str, default: str) -> float:  # in its range (core_functions.option_ranges), KUKA RSI's where it has its own
+        return option_ranges.check(name, extra.get(name, default), label=f"kuka-rsi: {name}", scope="kuka-rsi")
+
+    timeout = int(number("timeout", "100"))
+    monitor = number("axis_monitor", "360")
+    silence = number("silence", "0.1") if "silence" in extra else None
+    connect = number("connect_timeout", "10")
+    limits = MotionLimits(linear_speed=number("linear_speed", "1.0"), linear_accel=number("linear_accel", "2.0"))
+    tolerance = number("tolerance", "0.1")
+    tolerance_mm = number("tolerance_mm", "1.0")
+    try:
+        config = load_config(extra["config"]) if "config" in extra else None
+    except ConfigError as error:
+        raise ValueError(str(error)) from None
+    if options.port is not None:
+        option_ranges.check_int("port", options.port, label="kuka-rsi: port")
+    listen = None
+    if options.rsi_listen is not None:
+        try:
+            listen = Endpoint.parse(options.rsi_listen)
+        except ValueError as error:
+            raise ValueError(f"kuka-rsi: rsi_listen (--rsi-listen): {error}") from None
+        if options.host is None:
+            raise ValueError("kuka-rsi: with rsi_listen, give the controller's address as host: only its packets are answered")
+        if any(key.startswith("sim_") for key in extra):
+            raise ValueError("kuka-rsi: the sim_ options shape the simulated controller; a real one (rsi_listen) takes none")
+    elif options.host is not None:
+        raise ValueError("kuka-rsi: a real controller needs rsi_listen=HOST:PORT (its RSI configuration's IP_NUMBER:PORT) as well as host")
+    faults, quirks, flood = _misbehaviour(extra, options.seed)
+    return KukaSettings(runner, sim_runner, mode, int(cycle_text), timeout, monitor, silence, connect, limits, tolerance, tolerance_mm,
+                        config, listen, faults, quirks, flood)
+
+
 async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     """Registry factory (``kuka-rsi``): the simulated KR C4, or a real one with ``rsi_listen``.
 
@@ -315,76 +392,31 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     RSI runs on the robot's clock, so the application must too: a simulated or scaled clock
     would let the engine's timeouts run ahead of the robot.
     """
-    options.check("kuka-rsi", KUKA_KR, _EXTRAS)
-    if clock.simulated or clock.speed != 1.0:
-        raise ValueError("the kuka-rsi back end runs on the robot's real-time clock: run with --speed 1 (the default)")
-    if options.faults:
-        raise ValueError("the kuka-rsi back end takes no --fault (inject RSI faults with robot_bridges.kuka_rsi.sim_faults.Faults)")
-    extra = options.extra
-    runner = extra.get("runner", "process")
-    sim_runner = extra.get("simulator", "process")
-    mode = extra.get("mode", "absolute")
-    choices = (("runner", runner, ("process", "thread")), ("simulator", sim_runner, ("process", "thread", "accelerated")), ("mode", mode, ("absolute", "relative")))
-    for name, value, allowed in choices:
-        if value not in allowed:
-            raise ValueError(f"kuka-rsi: {name} must be {' or '.join(allowed)}, got {value!r}")
-    cycle_text = extra.get("cycle", "4").strip()
-    if cycle_text not in ("4", "12"):
-        raise ValueError(f"kuka-rsi: cycle must be 4 or 12 (ms), got {cycle_text!r}")
-    cycle = int(cycle_text)
-
-    def number(name: str, default: str, setting: str | None = None) -> float:  # in its range (core_functions.option_ranges)
-        return option_ranges.check(setting or name, extra.get(name, default), label=f"kuka-rsi: {name}")
-
-    timeout = int(number("timeout", "100", "rsi_timeout"))
-    monitor = number("axis_monitor", "360")
-    silence = number("silence", "0.1")
-    connect = number("connect_timeout", "10")
-    limits = MotionLimits(linear_speed=number("linear_speed", "1.0"), linear_accel=number("linear_accel", "2.0"))
-    tolerance = number("tolerance", "0.1")
-    tolerance_mm = number("tolerance_mm", "1.0")
-    try:
-        config = load_config(extra["config"]) if "config" in extra else None
-    except ConfigError as error:
-        raise ValueError(str(error)) from None
-    settings = LoopSettings(silence_timeout=silence, connect_timeout=connect)
-    trust = {"setpoint_tolerance_deg": (tolerance,) * 6, "tcp_tolerance_mm": tolerance_mm}
-    if options.port is not None and not 0 <= options.port < 65536:
-        raise ValueError(f"kuka-rsi: port must be 0..65535, got {options.port}")
-    if options.rsi_listen is not None:
-        try:
-            listen = Endpoint.parse(options.rsi_listen)
-        except ValueError as error:
-            raise ValueError(f"kuka-rsi: rsi_listen (--rsi-listen): {error}") from None
-        if options.host is None:
-            raise ValueError("kuka-rsi: with rsi_listen, give the controller's address as host: only its packets are answered")
-        if any(key.startswith("sim_") for key in extra):
-            raise ValueError("kuka-rsi: the sim_ options shape the simulated controller; a real one (rsi_listen) takes none")
+    s = parse_options(options, math.inf if clock.simulated else clock.speed)
+    trust = {"setpoint_tolerance_deg": (s.tolerance,) * 6, "tcp_tolerance_mm": s.tolerance_mm}
+    common = {"limits": s.limits, "robot": options.robot, "feedback_file": options.extra.get("feedback")}
+    if s.listen is not None:
+        assert options.host is not None and options.rsi_listen is not None  # parse_options
         # Names are resolved once, here; from now on the loop compares IPs.
-        listen_ip = resolve_ipv4(listen.host, f"kuka-rsi: rsi_listen (--rsi-listen) {options.rsi_listen!r}")
+        listen_ip = resolve_ipv4(s.listen.host, f"kuka-rsi: rsi_listen (--rsi-listen) {options.rsi_listen!r}")
         host_ip = resolve_ipv4(options.host, f"kuka-rsi: host (--host) {options.host!r}")
-        link = RobotLink("kuka", host_ip, options.port or None, config=config, correction_mode=mode, cycle_ms=cycle, **trust)  # type: ignore[arg-type]
-        backend = KukaRsiBackend(listen=(listen_ip, listen.port), link=link, simulator=None, runner=runner, settings=settings,  # type: ignore[arg-type]
-                                 limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
-    else:
-        if options.host is not None:
-            raise ValueError("kuka-rsi: a real controller needs rsi_listen=HOST:PORT (its RSI configuration's IP_NUMBER:PORT) as well as host")
-        context = RsiContext(cycle_ms=cycle, timeout=timeout, correction_mode=mode, axis_monitor_deg=(monitor,) * 6)
-        link = RobotLink("kuka", "127.0.0.1", None, config=config, correction_mode=mode, cycle_ms=cycle, **trust)  # type: ignore[arg-type]
-        accelerated = sim_runner == "accelerated"
-        if "silence" not in extra:
-            # The simulated controller is a process (or thread) of this computer, not hard real time:
-            # held back by a busy computer it goes quiet without being lost (SIMULATED_SILENCE).  In-process,
-            # the lockstep controller shares the application's GIL: a long computation there can hold it
-            # back for a while longer.  Neither is silence the loop may take for a stop.
-            settings = LoopSettings(silence_timeout=2.0 if accelerated else SIMULATED_SILENCE, connect_timeout=connect)
-        faults, quirks, flood = _misbehaviour(extra, options.seed)
-        spec = SimulatorSpec(
-            runner="thread" if accelerated else sim_runner, accelerated=accelerated, context=context, faults=faults, quirks=quirks, flood=flood,
-        )
-        backend = KukaRsiBackend(listen=("127.0.0.1", options.port or 0), link=link, simulator=spec, runner=runner,  # type: ignore[arg-type]
-                                 settings=settings, limits=limits, robot=options.robot, feedback_file=extra.get("feedback"))
-    return backend  # the bridge node starts it
+        link = RobotLink("kuka", host_ip, options.port or None, config=s.config, correction_mode=s.mode, cycle_ms=s.cycle, **trust)  # type: ignore[arg-type]
+        settings = LoopSettings(silence_timeout=0.1 if s.silence is None else s.silence, connect_timeout=s.connect_timeout)
+        return KukaRsiBackend(listen=(listen_ip, s.listen.port), link=link, simulator=None, runner=s.runner, settings=settings, **common)  # type: ignore[arg-type]
+    context = RsiContext(cycle_ms=s.cycle, timeout=s.timeout, correction_mode=s.mode, axis_monitor_deg=(s.axis_monitor,) * 6)
+    link = RobotLink("kuka", "127.0.0.1", None, config=s.config, correction_mode=s.mode, cycle_ms=s.cycle, **trust)  # type: ignore[arg-type]
+    accelerated = s.simulator == "accelerated"
+    # The simulated controller is a process (or thread) of this computer, not hard real time:
+    # held back by a busy computer it goes quiet without being lost (SIMULATED_SILENCE).  In-process,
+    # the lockstep controller shares the application's GIL: a long computation there can hold it
+    # back for a while longer.  Neither is silence the loop may take for a stop.
+    silence = s.silence if s.silence is not None else 2.0 if accelerated else SIMULATED_SILENCE
+    settings = LoopSettings(silence_timeout=silence, connect_timeout=s.connect_timeout)
+    spec = SimulatorSpec(
+        runner="thread" if accelerated else s.simulator, accelerated=accelerated, context=context, faults=s.faults, quirks=s.quirks, flood=s.flood,
+    )
+    return KukaRsiBackend(listen=("127.0.0.1", options.port or 0), link=link, simulator=spec, runner=s.runner,  # type: ignore[arg-type]
+                          settings=settings, **common)  # the bridge node starts it
 
 
 def _misbehaviour(extra: dict[str, str], seed: int) -> tuple[Faults, Quirks, Flood]:

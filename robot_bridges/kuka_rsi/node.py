@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from core_functions.option_ranges import Range, bounds
 from core_functions.robots import KUKA_KR
+from execution_engine.transport.bounded import declare_bounded
 from execution_engine.transport.port import Node
 from robot_bridges.backend import BackendOptions
 from robot_bridges.node import BridgeSetup, bridge_main
@@ -42,16 +42,13 @@ _NUMBER_OPTIONS = {
 }
 
 
-#: Parameters whose range goes by another name in core_functions.option_ranges (the back end checks each).
-_RANGES: dict[str, Range | None] = {"timeout": bounds("rsi_timeout"), "cycle": None}  # cycle: 4 or 12
-
-
 def declare_kuka_parameters(node: Node) -> BridgeSetup:
-    """The RSI bridge's parameters; an empty rsi_listen starts the simulator."""
+    """The RSI bridge's parameters; an empty rsi_listen starts the simulator.  Every number in its
+    range (KUKA RSI's own where the name has another meaning elsewhere), refused at start-up."""
     rsi_listen = str(node.declare_parameter("rsi_listen", "", "HOST:PORT of the controller's RSI configuration ('' = start a simulator)"))
     host = str(node.declare_parameter("host", "", "the controller's address (IP or name, resolved once at start): only its packets are answered (with rsi_listen)"))
-    port = int(node.declare_parameter(
-        "port", 0,
+    port = int(declare_bounded(
+        node, "port", 0,
         "with rsi_listen: the UDP port the controller sends from (0 = the port of its first valid packet); without: the port the loop listens on (0 = a free one)",
     ))
     extra: dict[str, str] = {}
@@ -60,12 +57,9 @@ def declare_kuka_parameters(node: Node) -> BridgeSetup:
         if value:
             extra[name] = value
     for name, (number, description) in _NUMBER_OPTIONS.items():
-        allowed = _RANGES[name] if name in _RANGES else bounds(name)
-        value = node.declare_parameter(name, number, description if allowed is None else f"{description}; range {allowed.describe()}")
+        value = declare_bounded(node, name, number, description, scope=BACKEND, unset=0.0 if name == "silence" else None)
         if not (name == "silence" and value == 0.0):
             extra[name] = str(value)
-    if not 0 <= port < 65536:
-        raise ValueError(f"port must be 0..65535, got {port}")
     options = BackendOptions(robot=KUKA_KR, host=host or None, port=port or None, rsi_listen=rsi_listen or None, extra=extra)
     return BridgeSetup(options)
 

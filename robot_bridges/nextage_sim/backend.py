@@ -21,6 +21,7 @@ wording of injected faults :mod:`~robot_bridges.nextage_sim.checks`.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -480,8 +481,21 @@ def parse_tool(text: str) -> Pose:
     return Pose.from_xyz_rpy(*values)
 
 
-async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
-    """Registry factory (``nextage-sim``): the simulator from CLI / launch options.
+@dataclass(frozen=True)
+class NextageSettings:
+    """The simulator's options, parsed and checked: what :func:`create` builds it from."""
+
+    initial_pose: str
+    control_period: float
+    tool: Pose
+    check_collisions: bool
+    camera_mounts: dict[str, Pose]
+    faults: tuple[FaultSpec, ...]
+
+
+def parse_options(options: BackendOptions, speed: float = 1.0) -> NextageSettings:
+    """The ``nextage-sim`` options checked, before anything is built or run (``speed``: the run's
+    clock, ``math.inf`` for simulated time -- a simulator takes any); ValueError naming the option.
 
     Understands ``faults``, ``seed`` and the extras ``initial_pose``, ``control_period``,
     ``tool`` (the TCP in the flange frame; default :data:`HAND_TOOL`), ``collision_check`` (``on``, the
@@ -496,22 +510,31 @@ async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
     if given:
         raise ValueError(f"the nextage-sim back end is a simulator and takes no {', '.join(given)}")
     period = option_ranges.check("control_period", options.extra.get("control_period", "0.01"), label="nextage-sim: control_period")
+    pose = options.extra.get("initial_pose", "initial")
+    if pose not in NEXTAGE_OPEN.poses:
+        raise ValueError(f"nextage-sim: initial_pose: unknown Nextage pose {pose!r} (known: {', '.join(NEXTAGE_OPEN.poses)})")
     tool = parse_tool(options.extra["tool"]) if "tool" in options.extra else HAND_TOOL
     check = options.extra.get("collision_check", "on")
     if check not in ("on", "off"):
         raise ValueError(f"nextage-sim: collision_check must be on or off, got {check!r}")
     mounts = {n: parse_mount(options.extra[f"{n}_mount"], f"nextage-sim: {n}_mount") for n in vision.REAL_CAMERAS if f"{n}_mount" in options.extra}
-    faults = [parse_fault(text) for text in options.faults]
+    faults = tuple(parse_fault(text) for text in options.faults)
     for spec, text in zip(faults, options.faults):  # an option error now, not a BridgeError out of the start
         if spec.group not in GROUPS:
             raise ValueError(f"nextage-sim: fault {text!r}: no group {spec.group!r} (groups: {', '.join(GROUPS)})")
+    return NextageSettings(pose, period, tool, check == "on", mounts, faults)
+
+
+async def create(clock: Clock, options: BackendOptions) -> NextageSimBackend:
+    """Registry factory (``nextage-sim``): the simulator from CLI / launch options (:func:`parse_options`)."""
+    settings = parse_options(options)
     return NextageSimBackend(
         clock,
-        initial_pose=options.extra.get("initial_pose", "initial"),
-        control_period=period,
+        initial_pose=settings.initial_pose,
+        control_period=settings.control_period,
         seed=options.seed,
-        faults=faults,
-        tools={"left_arm": tool, "right_arm": tool},
-        camera_mounts=mounts,
-        check_collisions=check == "on",
+        faults=list(settings.faults),
+        tools={"left_arm": settings.tool, "right_arm": settings.tool},
+        camera_mounts=settings.camera_mounts,
+        check_collisions=settings.check_collisions,
     )

@@ -60,7 +60,6 @@ from typing import Literal
 
 import numpy as np
 
-from core_functions import option_ranges
 from core_functions.geometry import Pose
 from core_functions.primitives import (
     Dwell,
@@ -105,6 +104,7 @@ from robot_bridges.vplus.kinematics import (
 from robot_bridges.vplus.camera_port import rendered_focus_camera
 from robot_bridges.vplus.job import Job
 from robot_bridges.vplus.measurement import MeasurementError, MeasurementPort, SimulatedFocusCamera
+from robot_bridges.vplus.options import parse_options
 from robot_bridges.vplus.simulator import DEFAULT_PORT, VPlusSimulator
 from robot_bridges.vplus.trajectory import TrajectoryPlanner, plan_replay
 from robot_bridges.vplus.trust import PoseTolerance, agree, disagreement
@@ -512,79 +512,34 @@ def _fault_kind(error: VPlusError) -> FaultKind:
 
 
 # ------------------------------------------------------------------------------ registry
-_EXTRAS = ("timeout", "retries", "linear", "camera", "controller_speed", "tolerance_mm", "tolerance_deg", "sim_frozen_pose")
-
-
 async def create(clock: Clock, options: BackendOptions) -> VPlusBackend:
     """Registry factory (``vplus``): a controller at ``host:port``, or, without a host, the simulator.
 
     Without a host an AdeptServer simulator is started in-process on 127.0.0.1 (``port``, or a
-    free one) and a simulated focus camera answers vision requests.  Extras: ``timeout`` (s, ack
-    allowance per command on top of the motion time), ``retries`` (connection attempts after the
-    first), ``linear`` (``joint`` or ``reject``), ``camera`` (``simulated``, ``rendered`` or ``none``:
-    what answers vision requests -- the sharpness model of the focus camera, the sharpness of its
-    rendered images (:mod:`robot_bridges.vplus.camera_port`), nothing; default ``simulated`` without
-    a host, ``none`` with one -- a real cell plugs its vision pipeline in as a :class:`MeasurementPort`,
-    e.g. a :class:`~robot_bridges.vplus.camera_port.CameraMeasurement` on a ROS camera), ``tolerance_mm``
+    free one) and a simulated focus camera answers vision requests.  Extras (checked by
+    :func:`robot_bridges.vplus.options.parse_options`): ``timeout`` (s, ack allowance per command on
+    top of the motion time), ``retries`` (connection attempts after the first), ``linear`` (``joint``
+    or ``reject``), ``camera`` (``simulated``, ``rendered`` or ``none``: what answers vision requests
+    -- the sharpness model of the focus camera, the sharpness of its rendered images
+    (:mod:`robot_bridges.vplus.camera_port`), nothing; default ``simulated`` without a host, ``none``
+    with one -- a real cell plugs its vision pipeline in as a :class:`MeasurementPort`, e.g. a
+    :class:`~robot_bridges.vplus.camera_port.CameraMeasurement` on a ROS camera), ``tolerance_mm``
     and ``tolerance_deg`` (how far a reported pose may lie from the commanded one: [0.01, 50] mm,
-    default 1; [0.01, 10] deg, default 0.5), and for the simulator only ``sim_frozen_pose`` (1: every
-    ack reports the pose it started at, home, wherever the arm is -- a controller that lies).
+    default 1; [0.01, 10] deg, default 0.5), ``controller_speed`` (a simulated controller's speed,
+    which the run's must match), and for the simulator only ``sim_frozen_pose`` (1: every ack
+    reports the pose it started at, home, wherever the arm is -- a controller that lies).
     """
-    options.check("vplus", ADEPT_VIPER_S850, _EXTRAS)
-    if options.host is not None:
-        # A real controller moves in real time: a scaled clock would divide every ack timeout by the
-        # speed factor (real motions "time out"), a simulated one would jump every network wait.
-        # Only a controller that is itself a simulator at that speed may be driven faster, and the
-        # user must say so (controller_speed), never the run's --speed alone.
-        controller_speed = option_ranges.check("speed", options.extra.get("controller_speed", "1"), label="vplus: controller_speed")
-        if clock.simulated or not math.isclose(clock.speed, controller_speed):
-            raise ValueError(
-                f"vplus: the controller at {options.host} runs at x{controller_speed:g} (a real one in real time): run with "
-                f"--speed {controller_speed:g}" + ("" if controller_speed != 1 else " (the default), or tell a simulated controller's speed with --backend-option controller_speed=F")
-            )
-    if options.rsi_listen is not None:
-        raise ValueError("the vplus back end takes no rsi_listen (that is for KUKA RSI)")
-    if options.faults:
-        raise ValueError("the vplus back end takes no --fault: inject V+ faults through robot_bridges.vplus.simulator.Faults")
-    timeout = option_ranges.check("timeout", options.extra.get("timeout", "5"), label="vplus: timeout")
-    retries = option_ranges.check_int("retries", options.extra.get("retries", "3"), label="vplus: retries")
-    tolerance = PoseTolerance.from_options(options.extra, "vplus")
-    frozen = options.extra.get("sim_frozen_pose", "0")
-    if frozen not in ("0", "1"):
-        raise ValueError(f"vplus: sim_frozen_pose is 0 or 1, got {frozen!r}")
-    if frozen == "1" and options.host is not None:
-        raise ValueError("vplus: sim_frozen_pose shapes the simulated controller; a real one (--host) takes none")
-    linear = options.extra.get("linear", "joint")
-    if linear not in ("joint", "reject"):
-        raise ValueError(f"vplus: linear must be 'joint' or 'reject', got {linear!r}")
-    if options.port is not None and not (0 <= options.port <= 65535):
-        raise ValueError(f"vplus: port must be 0..65535, got {options.port}")
-    camera = options.extra.get("camera", "none" if options.host is not None else "simulated")
-    if camera not in ("simulated", "rendered", "none"):
-        raise ValueError(f"vplus: camera must be 'simulated', 'rendered' or 'none', got {camera!r}")
+    settings = parse_options(options, math.inf if clock.simulated else clock.speed)
     measurement: MeasurementPort | None = None
-    if camera == "simulated":
+    if settings.camera == "simulated":
         measurement = SimulatedFocusCamera(seed=options.seed)
-    elif camera == "rendered":
+    elif settings.camera == "rendered":
         measurement = rendered_focus_camera(options.seed)
+    link = {"robot": options.robot, "measurement": measurement, "ack_timeout": settings.timeout, "retries": settings.retries,
+            "linear": settings.linear, "tolerance": settings.tolerance}
     if options.host is not None:
-        port = DEFAULT_PORT if options.port is None else options.port
-        return VPlusBackend(
-            clock, options.host, port, robot=options.robot, measurement=measurement, ack_timeout=timeout, retries=retries, linear=linear,  # type: ignore[arg-type]
-            tolerance=tolerance,
-        )
+        return VPlusBackend(clock, options.host, DEFAULT_PORT if options.port is None else options.port, **link)  # type: ignore[arg-type]
     simulator = await VPlusSimulator(clock, "127.0.0.1", options.port or 0).start()
-    if frozen == "1":
+    if settings.frozen_pose:
         simulator.faults.report_location = simulator.arm.location()
-    return VPlusBackend(
-        clock,
-        "127.0.0.1",
-        simulator.port,
-        robot=options.robot,
-        measurement=measurement,
-        ack_timeout=timeout,
-        retries=retries,
-        linear=linear,  # type: ignore[arg-type]
-        simulator=simulator,
-        tolerance=tolerance,
-    )
+    return VPlusBackend(clock, "127.0.0.1", simulator.port, simulator=simulator, **link)  # type: ignore[arg-type]

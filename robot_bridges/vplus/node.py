@@ -24,15 +24,13 @@ BACKEND = "vplus"
 def declare_vplus_parameters(node: Node) -> BridgeSetup:
     """The V+ bridge's parameters; an empty host starts the simulator."""
     host = str(node.declare_parameter("host", "", "AdeptServer address ('' = start the simulator on 127.0.0.1)"))
-    port = int(node.declare_parameter("port", 1234, "AdeptServer TCP port"))
-    timeout = float(declare_bounded(node, "timeout", 5.0, "ack allowance per command on top of its motion time (s)"))
+    port = int(declare_bounded(node, "port", 1234, "AdeptServer TCP port (without host: the simulator's, 0 = a free one)"))
+    timeout = float(declare_bounded(node, "timeout", 5.0, "ack allowance per command on top of its motion time (s)", scope=BACKEND))
     retries = int(declare_bounded(node, "retries", 3, "connection attempts after the first"))
     linear = str(node.declare_parameter("linear", "joint", "linear moves: 'joint' (run joint-interpolated) or 'reject'"))
     camera = str(node.declare_parameter("camera", "", "what answers vision requests: simulated, rendered (images of the focus camera), none ('' = simulated without host)"))
-    tolerance_mm = float(node.declare_parameter("tolerance_mm", 1.0, "how far a reported position may lie from the commanded one (mm, [0.01, 50])"))
-    tolerance_deg = float(node.declare_parameter("tolerance_deg", 0.5, "how far a reported orientation may lie from the commanded one (deg, [0.01, 10])"))
-    if not 0 < port < 65536:
-        raise ValueError(f"port must be 1..65535, got {port}")
+    tolerance_mm = float(declare_bounded(node, "tolerance_mm", 1.0, "how far a reported position may lie from the commanded one (mm)", scope=BACKEND))
+    tolerance_deg = float(declare_bounded(node, "tolerance_deg", 0.5, "how far a reported orientation may lie from the commanded one (deg)", scope=BACKEND))
     extra = {"timeout": repr(timeout), "retries": str(retries), "linear": linear, "tolerance_mm": repr(tolerance_mm), "tolerance_deg": repr(tolerance_deg)}
     if camera:
         extra["camera"] = camera

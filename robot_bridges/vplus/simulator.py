@@ -68,7 +68,6 @@ RECLAIM_AFTER = 30.0
 #: Bytes a client may send without a complete message among them before it is closed: the longest
 #: legal message is ~100 bytes, so this is junk, an endless trickle, not a slow command.
 MAX_JUNK = 4096
-MAX_SECONDS = 86400.0  # longest idle_timeout / reclaim_after accepted: a day
 _READ_SIZE = 2048  # AdeptServer's /BUFFER_SIZE
 _KEPT = 100_000  # entries of errors / received / acked kept for inspection (the oldest go first)
 _T = TypeVar("_T")
@@ -136,8 +135,7 @@ class VPlusSimulator:
         self.max_clients = max_clients
         self.max_line = max_line
         for name, value in (("idle_timeout", idle_timeout), ("reclaim_after", reclaim_after)):
-            if not 0 < value <= MAX_SECONDS:
-                raise ValueError(f"{name} must be within (0, {MAX_SECONDS:g}] s, got {value}")
+            bounds(name).check(name, value)  # its range (core_functions.option_ranges): a RangeError, a ValueError
         if max_junk < MAX_LINE:
             raise ValueError(f"max_junk must be >= {MAX_LINE} bytes (one line), got {max_junk}")
         self.idle_timeout = idle_timeout
@@ -413,18 +411,12 @@ async def serve(
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
-    if not (0 <= args.port <= 65535):
-        print(f"error: --port must be 0..65535, got {args.port}", file=sys.stderr)
-        return 2
-    if not bounds("speed").contains(args.speed):  # a scaled clock takes [0.01, 1000] (core_functions.option_ranges)
-        print(f"error: --speed must be a number in {bounds('speed').describe()}, got {args.speed:g}", file=sys.stderr)
-        return 2
-    if args.max_clients < 1:
-        print(f"error: --max-clients must be >= 1, got {args.max_clients}", file=sys.stderr)
-        return 2
-    for option, value in (("--idle-timeout", args.idle_timeout), ("--reclaim-after", args.reclaim_after)):
-        if not 0 < value <= MAX_SECONDS:
-            print(f"error: {option} must be within (0, {MAX_SECONDS:g}] s, got {value:g}", file=sys.stderr)
+    numbers = {"port": args.port, "speed": args.speed, "max_clients": args.max_clients, "idle_timeout": args.idle_timeout,
+               "reclaim_after": args.reclaim_after, "run_for": args.run_for}
+    for setting, value in numbers.items():  # each in its range (core_functions.option_ranges): one line, exit 2
+        if value is not None and not bounds(setting).contains(value):
+            print(f"error: --{setting.replace('_', '-')} must be a {'whole ' if bounds(setting).integer else ''}number in "
+                  f"{bounds(setting).describe()}, got {value if isinstance(value, int) else format(value, 'g')}", file=sys.stderr)
             return 2
     try:
         return run_with_clock(

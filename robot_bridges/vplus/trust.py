@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from core_functions.option_ranges import Range, bounds
 from robot_bridges.vplus.kinematics import location_to_matrix, matrix_to_location
 
 Matrix = NDArray[np.float64]
@@ -31,21 +32,19 @@ Matrix = NDArray[np.float64]
 #: model of a joint move, and catch any arm that did not go where it was sent.
 TOLERANCE_MM = 1.0
 TOLERANCE_DEG = 0.5
-#: The range each may be set in (closed intervals): finite, and never so wide that a report could
-#: stray a hand's width from the command unnoticed.
-TOLERANCE_MM_RANGE = (0.01, 50.0)
-TOLERANCE_DEG_RANGE = (0.01, 10.0)
 #: An ack pose this close to the one predicted confirms the commanded joints (else IK explains it).
 AGREE_MM, AGREE_DEG = 0.5, 0.05
+#: option -> default; each one's range, in core_functions.option_ranges (V+'s own tolerance_mm), is
+#: finite and never so wide that a report could stray a hand's width from the command unnoticed.
+_DEFAULTS = {"tolerance_mm": TOLERANCE_MM, "tolerance_deg": TOLERANCE_DEG}
 
 
-#: option -> (default, range, unit)
-_OPTIONS = {"tolerance_mm": (TOLERANCE_MM, TOLERANCE_MM_RANGE, "mm"), "tolerance_deg": (TOLERANCE_DEG, TOLERANCE_DEG_RANGE, "deg")}
+def _range(name: str) -> Range:
+    return bounds(name, "vplus")
 
 
 def _refusal(name: str, got: str) -> str:
-    _, (low, high), unit = _OPTIONS[name]
-    return f"{name} must be a number in [{low:g}, {high:g}] {unit}, got {got}"
+    return f"{name} must be a number in {_range(name).describe()}, got {got}"
 
 
 @dataclass(frozen=True)
@@ -57,15 +56,14 @@ class PoseTolerance:
 
     def __post_init__(self) -> None:
         for name, value in (("tolerance_mm", self.mm), ("tolerance_deg", self.deg)):
-            low, high = _OPTIONS[name][1]
-            if not (math.isfinite(value) and low <= value <= high):
+            if not _range(name).contains(value):
                 raise ValueError(_refusal(name, f"{value:g}"))
 
     @classmethod
     def from_options(cls, extra: Mapping[str, str], label: str) -> PoseTolerance:
         """The ``tolerance_mm`` / ``tolerance_deg`` back-end options; a ValueError naming the option otherwise."""
         values = []
-        for name, (default, _, _) in _OPTIONS.items():
+        for name, default in _DEFAULTS.items():
             text = extra.get(name)
             try:
                 values.append(default if text is None else float(text))
