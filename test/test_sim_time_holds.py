@@ -158,3 +158,26 @@ def test_after_a_stall_the_follower_runs_on_the_wall_clock_so_a_poll_reaches_its
     assert not failed and len(stalls) == 1 and "no time from the clock source for 3 s" in stalls[0]
     assert times[0] >= 61.0 and times[1] == pytest.approx(times[0]) and times[2] == pytest.approx(times[1] + 1.0)
     assert not still_stalled
+
+
+def test_a_simulator_slower_than_its_bound_never_makes_a_timeout_fire_early(run_sim: Any) -> None:
+    """A 1 s timeout of the source's time while the source says nothing for 8 s of wall time (under the
+    10 s bound: a busy computer, a bridge holding its time): the timeout has not fired, and fires once the
+    source passes it."""
+    async def main(clock: Clock) -> tuple[bool, bool, list[str]]:
+        stalls: list[str] = []
+        follower = FollowingClock(stall_timeout=10.0, on_stall=stalls.append)
+        follower.bind(clock.loop)
+        follower.advance_to(100.0)
+        waiting = asyncio.ensure_future(follower.wait_for(asyncio.Event().wait(), 1.0))
+        await clock.sleep(8.0)
+        early = waiting.done()
+        follower.advance_to(101.5)
+        try:
+            await clock.wait_for(waiting, 1.0)
+        except asyncio.TimeoutError:
+            pass
+        return early, waiting.done(), stalls
+
+    early, ended, stalls = run_sim(main)
+    assert not early and ended and stalls == []
