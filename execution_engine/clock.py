@@ -223,18 +223,24 @@ class FollowingClock(Clock):
     bridge holding its time while a machine answers) never makes a timeout here fire early.
 
     Nothing may wait forever on a source that stopped: when no tick came for ``stall_timeout``
-    wall seconds while something waits, ``on_stall`` is told (once per silence) and every pending
+    wall seconds while something waits (``first_tick_timeout`` before its first tick: a simulator
+    still starting -- importing its models, building its scene -- has not stopped), ``on_stall`` is told (once per silence) and every pending
     timer fires, so each wait ends in its own timeout and reports it.  From then until the source
     ticks again the clock runs on the wall clock at the source's last rate, so a loop that waits
     again (a poll until a deadline) gets to its deadline instead of waiting in steps of the stall
     bound for ever; when the source is back, run time goes on from where it is (never back).
     """
 
-    def __init__(self, *, stall_timeout: float = 10.0, on_stall: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self, *, stall_timeout: float = 10.0, on_stall: Callable[[str], None] | None = None, first_tick_timeout: float | None = None,
+    ) -> None:
         super().__init__(1.0)
-        if not (stall_timeout > 0 and math.isfinite(stall_timeout)):
-            raise ValueError(f"stall_timeout must be a positive number of seconds, got {stall_timeout!r}")
+        first_tick_timeout = stall_timeout if first_tick_timeout is None else first_tick_timeout
+        for name, value in (("stall_timeout", stall_timeout), ("first_tick_timeout", first_tick_timeout)):
+            if not (value > 0 and math.isfinite(value)):
+                raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
         self.stall_timeout = stall_timeout
+        self.first_tick_timeout = first_tick_timeout
         self.on_stall = on_stall
         self._start: float | None = None  # source time at run time 0 (moved on when a silence ends)
         self._source = 0.0  # latest source time
@@ -367,7 +373,7 @@ class FollowingClock(Clock):
 
     def _arm_watchdog(self) -> None:
         if self._watchdog is None:
-            self._watchdog = self.loop.call_later(self.stall_timeout / 2, self._check_stall)
+            self._watchdog = self.loop.call_later(self._bound() / 2, self._check_stall)
 
     def _check_stall(self) -> None:
         self._watchdog = None
@@ -377,17 +383,22 @@ class FollowingClock(Clock):
         heapq.heapify(self._timers)
         if not self._timers:
             return
-        if self.loop.time() - self._last_tick_wall >= self.stall_timeout:
+        if self.loop.time() - self._last_tick_wall >= self._bound():
             self.stalls += 1
             if self.on_stall is not None:
+                never = "" if self._start is not None else " (it never ticked)"
                 self.on_stall(
-                    f"no time from the clock source for {self.stall_timeout:g} s: pending waits end now, "
+                    f"no time from the clock source for {self._bound():g} s{never}: pending waits end now, "
                     f"and time runs on the wall clock at x{self._rate:.3g} until it ticks again"
                 )
             self._fire(lambda timer: True)
             self._free = (self.loop.time(), self.now(), self._source if self._start is not None else time.time())
             return
         self._arm_watchdog()
+
+    def _bound(self) -> float:
+        """Wall seconds of silence that make a stall: longer before the source's first tick."""
+        return self.stall_timeout if self._start is not None else self.first_tick_timeout
 
     def _arm_free_timer(self) -> None:
         """While silent past the bound: wake for the next timer on the wall clock."""

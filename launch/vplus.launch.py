@@ -40,7 +40,7 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument(
                 "port",
                 default_value="1234",
-                description="AdeptServer TCP port (1..65535); without host, the port the simulator listens on",
+                description="AdeptServer TCP port, in [0, 65535]; without host, the port the simulator listens on (0: a free one)",
             ),
         ],
         bridge_parameters={"host": typed("host", str), "port": typed("port", int)},

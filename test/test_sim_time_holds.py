@@ -181,3 +181,20 @@ def test_a_simulator_slower_than_its_bound_never_makes_a_timeout_fire_early(run_
 
     early, ended, stalls = run_sim(main)
     assert not early and ended and stalls == []
+
+
+def test_a_source_that_never_ticked_gets_the_longer_first_tick_bound(run_sim: Any) -> None:
+    """A simulator still starting (models, scene) has not stopped: the first tick may take longer than a stall."""
+    async def main(clock: Clock) -> tuple[float, list[str]]:
+        stalls: list[str] = []
+        follower = FollowingClock(stall_timeout=3.0, first_tick_timeout=8.0, on_stall=stalls.append)
+        follower.bind(clock.loop)
+        started = clock.now()
+        with pytest.raises(asyncio.TimeoutError):
+            await follower.wait_for(asyncio.Event().wait(), 100.0)
+        return clock.now() - started, stalls
+
+    waited, stalls = run_sim(main)
+    assert 8.0 <= waited <= 12.0 + 1e-6  # the bound, checked every half of it
+    assert stalls == ["no time from the clock source for 8 s (it never ticked): pending waits end now, "
+                      "and time runs on the wall clock at x1 until it ticks again"]

@@ -23,6 +23,9 @@ USE_SIM_TIME = "use_sim_time"
 USE_SIM_TIME_DESCRIPTION = "take the node's time (stamps, sleeps, timeouts) from <namespace>/clock instead of the wall clock"
 #: Wall seconds of silence on ``/clock`` after which a node's pending waits end with a fault.
 STALL_TIMEOUT = 10.0
+#: The same before ``/clock``'s first tick: the simulator may still be starting (its models, its scene),
+#: on a busy computer for longer than a running one may stall.
+FIRST_TICK_TIMEOUT = 20.0
 
 
 def follow_clock(node: Node, loop: asyncio.AbstractEventLoop, stall_timeout: float = STALL_TIMEOUT) -> FollowingClock:
@@ -30,6 +33,7 @@ def follow_clock(node: Node, loop: asyncio.AbstractEventLoop, stall_timeout: flo
     clock = FollowingClock(
         stall_timeout=stall_timeout,
         on_stall=lambda text: node.report_fault(CLOCK_TOPIC, TimeoutError(text)),
+        first_tick_timeout=max(stall_timeout, FIRST_TICK_TIMEOUT),
     )
     clock.bind(loop)
     node.create_subscription(ClockMessage, CLOCK_TOPIC, lambda msg: clock.advance_to(msg.clock.to_seconds()), CLOCK)
