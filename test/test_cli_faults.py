@@ -69,15 +69,14 @@ def trace(*records: dict[str, object]) -> str:
 #: The files rows name under {tmp}, as docs/faults.md describes them.
 FILES: dict[str, str | bytes] = {
     "not_xml.xml": "this is not XML at all\n",
+    "short_token": "secret\n",
+    "shared_token": "C" * 43 + "\n",
     "collide.xml": (  # both hands to the middle of the table at once
         '<?xml version="1.0"?>\n<application name="colliding" robot="nextage">\n  <operation id="1">\n'
         '    <left_arm><function name="move_to"><params><param value="0.34,0.0,0.10,180deg,0,90deg"/></params></function></left_arm>\n'
         '    <right_arm><function name="move_to"><params><param value="0.34,0.0,0.10,180deg,0,90deg"/></params></function></right_arm>\n'
         '  </operation>\n</application>\n'
     ),
-
-    "short_token": "secret\n",
-    "shared_token": "C" * 43 + "\n",
     "truncated.xml": RIVET[: len(RIVET) // 2],
     "entity.xml": '<?xml version="1.0"?>\n<!DOCTYPE a [<!ENTITY big "xxxxxxxx">]>\n<application name="t" robot="nextage">&big;</application>\n',
     "unknown_function.xml": app(op("left_arm", "fly_away")),
@@ -234,7 +233,6 @@ def run_process(argv: list[str], bound: float, home: Path | None = None) -> tupl
         finally:
             stop_group(process)  # a node its launch left behind, too
     return process.returncode, out + err
-
 
 
 ROWS = rows()
