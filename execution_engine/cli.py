@@ -37,11 +37,12 @@ from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.robots import ROBOTS
 from execution_engine.app_model import Application, ApplicationError, load_application, read_application
 from execution_engine.catalog_document import PARAM_TYPE_HELP, XML_USAGE, catalog_document
-from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
+from execution_engine.clock import Clock, run_with_clock
 from execution_engine.console_log import ConsoleLog
 from execution_engine.deployment import deploy_local
 from execution_engine import launcher
 from execution_engine.dry_run.check import check as dry_run_check, options_refusal
+from execution_engine.dry_run.report import DryRunReport
 from execution_engine.dry_run.simulators import setup_for
 from execution_engine.dry_run.start import StartRefused, start_checked
 from execution_engine.engine.report import RunReport
@@ -49,27 +50,28 @@ from execution_engine.observers import LivePrinter, QuestionPrinter, RunObserver
 from execution_engine.operator_console import OperatorConsole
 from execution_engine.output_files import WriteFailure
 from execution_engine.run_checks import Refused, check_trajectory_db, preflight
-from execution_engine.vision_cli import add_vision_parser, cmd_vision
+from execution_engine.settings import BackendSettings, Outputs, RunSettings, ValidateSettings
+from execution_engine.vision_cli import add_vision_parser, run_vision
 from operator_station import cli as studio
-from execution_engine.run_report import add_report_parser, cmd_report
+from execution_engine.run_report import add_report_parser, cmd_report, report_settings
 from execution_engine.checkpoint.store import CheckpointError
 from execution_engine.recorder.cli_hook import add_run_options, prepare_flight, start_recording, stop_recording
-from robot_bridges.backend import BackendOptions, BridgeError
+from robot_bridges.backend import BridgeError
 from robot_bridges.registry import create_backend
 
 EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_OUTPUT, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
 
 # ------------------------------------------------------------------------------ validate
-def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[str], args: argparse.Namespace | None = None) -> int:
-    """Check each file; with ``--simulate`` (``args.simulate``) also dry-run each valid one."""
-    if args is not None and args.simulate and args.trajectory_db:
+def cmd_validate(settings: ValidateSettings, catalog: Catalog, out: IO[str], err: IO[str]) -> int:
+    """Check each file; with ``--simulate`` also dry-run each valid one."""
+    if settings.simulate and settings.trajectory_db:
         try:  # the database the run will use: refused here as run refuses it
-            check_trajectory_db(args.trajectory_db, [Path(f) for f in files])
+            check_trajectory_db(settings.trajectory_db, [Path(f) for f in settings.files])
         except Refused as refusal:
             err.write(f"error: {refusal}\n")
             return EXIT_USAGE
     status = EXIT_OK
-    for file in files:
+    for file in settings.files:
         app, diagnostics = read_application(file, catalog)
         errors = [d for d in diagnostics if getattr(d, "severity", "error") == "error"]
         for diagnostic in diagnostics:
@@ -79,8 +81,9 @@ def cmd_validate(files: Sequence[str], catalog: Catalog, out: IO[str], err: IO[s
             err.write(f"{file}: {len(errors)} error(s)\n")
             continue
         out.write(f"{file}: valid\n")
-        if args is not None and args.simulate and app is not None:
-            code, report = dry_run_check(app, file, backend_name(app, args), backend_options(app, args), args.trajectory_db, out, err)
+        if settings.simulate and app is not None:
+            backend = settings.backend
+            code, report = dry_run_check(app, file, backend.backend_for(app), backend.backend_options(app), settings.trajectory_db, out, err)
             if report is not None and report.findings:
                 err.write(f"{file}: {len(report.findings)} problem(s) found by the dry run\n")
             status = max(status, code)
@@ -144,35 +147,21 @@ def parse_speed(text: str) -> float:
         raise argparse.ArgumentTypeError(f"speed must be a number in {speed.describe()} or 'max', got {text!r}") from None
 
 
-def backend_name(app: Application, args: argparse.Namespace) -> str:
-    """``--robot``, else the application robot's usual back end: the run and its dry run use the same."""
-    return str(args.robot or app.robot.default_backend)
-
-
-def backend_options(app: Application, args: argparse.Namespace) -> BackendOptions:
-    """The back end's options from the command line (``validate`` has no controller address or faults)."""
-    return BackendOptions(
-        robot=app.robot,
-        host=args.host,
-        port=args.port,
-        rsi_listen=args.rsi_listen,
-        faults=tuple(args.fault or ()),
-        seed=args.seed,
-        extra=dict(args.backend_option or ()),
-    )
-
-
 async def _run(
-    app: Application, args: argparse.Namespace, clock: Clock, out: IO[str], writer: TraceWriter | None, lost: list[WriteFailure] | None = None,
+    app: Application, settings: RunSettings, clock: Clock, out: IO[str], writer: TraceWriter | None, lost: list[WriteFailure] | None = None,
+    checked: DryRunReport | None = None,
 ) -> RunReport:
-    """The run; ``lost`` gets the outputs (recording, checkpoint) that could not be written whole."""
-    backend = await create_backend(backend_name(app, args), clock, backend_options(app, args))
-    machine_parameters = {"trajectory_db": args.trajectory_db} if args.trajectory_db else {}
+    """The run; ``lost`` gets the outputs (recording, checkpoint) that could not be written whole;
+    ``checked``: the dry run's verdict from the simulator's start (checked again if the robot is elsewhere)."""
+    name, options = settings.backend.backend_for(app), settings.backend.backend_options(app)
+    backend = await create_backend(name, clock, options)
+    trajectory_db = settings.outputs.trajectory_db
+    machine_parameters = {"trajectory_db": trajectory_db} if trajectory_db else {}
     # An alarm waits only when someone can answer it: in this process, an operator at a terminal
     # (--interactive); nobody else reaches the in-process engine.  While that person is waited
     # for, simulated time stands still instead of racing on.
-    operators = bool(args.interactive) and sys.stdin.isatty()
-    if args.interactive and not operators:
+    operators = settings.interactive and sys.stdin.isatty()
+    if settings.interactive and not operators:
         out.write("warning: --interactive: standard input is not a terminal, so there are no operator keys; an alarm ends the run at once\n")
     deployment = await deploy_local(
         clock, app.robot, backend, machine_parameters=machine_parameters, operators=operators, hold_for_operators=operators and clock.simulated,
@@ -182,20 +171,19 @@ async def _run(
         observer.sinks.append(writer.on_status)
         observer.engine_sinks.append(writer.on_engine)
         observer.event_sinks.append(writer.on_event)
-    if not args.quiet:
+    if not settings.quiet:
         printer = LivePrinter(out, (*app.robot.group_names, "engine"))
         observer.sinks.append(printer.on_status)
         observer.engine_sinks.append(printer.on_engine)
         observer.event_sinks.append(printer.on_event)
     elif operators:  # quiet hides progress, never a question the run waits on
         observer.engine_sinks.append(QuestionPrinter(out).on_engine)
-    recorder = await start_recording(args, app, deployment.transport, backend_name(app, args), observer)  # checkpoints after the trace
+    recorder = await start_recording(settings, app, deployment.transport, name, observer)  # checkpoints after the trace
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
     loop = asyncio.get_running_loop()
     interactive = console.attach_stdin(loop) if operators else False
-    setup = None if args.no_check else setup_for(backend_name(app, args), backend_options(app, args))  # checked where the robot is
-    checked = getattr(args, "checked", None)
-    run_task = loop.create_task(start_checked(deployment.engine, app, backend, clock, setup, args.trajectory_db, checked, recorder.resume, out))
+    setup = setup_for(name, options) if settings.check else None  # checked where the robot is
+    run_task = loop.create_task(start_checked(deployment.engine, app, backend, clock, setup, trajectory_db, checked, recorder.resume, out))
     interrupts = 0
 
     def on_interrupt() -> None:
@@ -228,43 +216,46 @@ async def _run(
         await deployment.close()
 
 
-def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[str]) -> int:
+def cmd_run(file: str, settings: RunSettings, catalog: Catalog, out: IO[str], err: IO[str]) -> int:
+    """Run the application ``file`` as ``settings`` say, each check first."""
     try:
-        app = load_application(args.file, catalog)
+        app = load_application(file, catalog)
     except ApplicationError as error:
         for diagnostic in error.diagnostics:
             err.write(f"{diagnostic}\n")
-        err.write(f"{args.file}: not run: {len(error.diagnostics)} problem(s)\n")
+        err.write(f"{file}: not run: {len(error.diagnostics)} problem(s)\n")
         return EXIT_INVALID
     try:
-        preflight(app, args)  # files and peers, before anything runs and without writing a byte
+        settings = preflight(app, settings)  # files and peers, before anything runs and without writing a byte
     except Refused as refusal:
         err.write(f"error: {refusal}\n")
         return EXIT_USAGE
     try:
-        prepare_flight(app, args)  # --resume, then every file read or written (output_files), before any is written
+        settings = prepare_flight(app, settings)  # --resume, then every file read or written (output_files), before any is written
     except (CheckpointError, Refused) as refusal:
         err.write(f"error: {refusal}\n")
         return EXIT_USAGE
-    refusal = options_refusal(args.file, backend_name(app, args), backend_options(app, args), args.speed, dry_run_first=not args.no_check)
+    name, options = settings.backend.backend_for(app), settings.backend.backend_options(app)
+    refusal = options_refusal(file, name, options, settings.speed, dry_run_first=settings.check)
     if refusal is not None:  # every back-end option, before the dry run's seconds
         err.write(refusal + "\n")
         return EXIT_USAGE
-    if not args.no_check:
-        code, checked = dry_run_check(app, args.file, backend_name(app, args), backend_options(app, args), args.trajectory_db, out, err, summary=not args.quiet)
-        args.checked = checked  # the verdict from the simulator's start; _run checks again if the robot is elsewhere
+    checked: DryRunReport | None = None  # the verdict from the simulator's start; _run checks again if the robot is elsewhere
+    if settings.check:
+        code, checked = dry_run_check(app, file, name, options, settings.outputs.trajectory_db, out, err, summary=not settings.quiet)
         if code != EXIT_OK:
             found = f"{len(checked.findings)} problem(s) found by the dry run" if checked is not None else "the dry run did not pass"
-            err.write(f"{args.file}: not run: {found}; use --no-check to run anyway\n")
+            err.write(f"{file}: not run: {found}; use --no-check to run anyway\n")
             return code
+    trace_path = settings.outputs.trace
     try:
-        trace = open(args.trace, "w", encoding="utf-8") if args.trace else None
+        trace = open(trace_path, "w", encoding="utf-8") if trace_path else None
     except OSError as error:
-        err.write(f"error: --trace {args.trace}: cannot be written ({error.strerror or error}); give a writable file\n")
+        err.write(f"error: --trace {trace_path}: cannot be written ({error.strerror or error}); give a writable file\n")
         return EXIT_USAGE
     writer = TraceWriter(trace) if trace is not None else None
     try:
-        return _run_recorded(app, args, out, err, writer)
+        return _run_recorded(app, file, settings, out, err, writer, checked)
     finally:
         if trace is not None:
             try:
@@ -273,32 +264,33 @@ def cmd_run(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[st
                 pass
 
 
-def _run_recorded(app: Application, args: argparse.Namespace, out: IO[str], err: IO[str], writer: TraceWriter | None) -> int:
+def _run_recorded(
+    app: Application, file: str, settings: RunSettings, out: IO[str], err: IO[str], writer: TraceWriter | None, checked: DryRunReport | None,
+) -> int:
     """Run, print the summary, close the trace with its run_end record; the exit code."""
-    clock = simulated_clock() if math.isinf(args.speed) else scaled_clock(args.speed)
     report: RunReport | None = None
     outcome = "error"
     lost: list[WriteFailure] = []  # outputs that could not be written whole: exit 4 after a good run
     try:
-        report = run_with_clock(lambda c: _run(app, args, c, out, writer, lost), clock)
+        report = run_with_clock(lambda c: _run(app, settings, c, out, writer, lost, checked), settings.clock())
     except BridgeError as error:  # the controller refused or never answered, before the first primitive
         code = EXIT_PEER
-        err.write(f"error: cannot run {args.file}: {error}; {PEER_ADVICE}\n")
-        _explain(error, args, err)
+        err.write(f"error: cannot run {file}: {error}; {PEER_ADVICE}\n")
+        _explain(error, settings.verbose, err)
     except StartRefused as refusal:  # the dry run from where the robot is found problems: nothing moved
         code, outcome = EXIT_INVALID, "refused"
-        err.write("".join(f"{line}\n" for line in refusal.lines) + f"{args.file}: not run: {refusal.reason}; use --no-check to run anyway\n")
+        err.write("".join(f"{line}\n" for line in refusal.lines) + f"{file}: not run: {refusal.reason}; use --no-check to run anyway\n")
     except (KeyError, ValueError, OSError, ConnectionError) as error:
         code = EXIT_USAGE
-        err.write(f"error: cannot run {args.file}: {error}\n")
-        _explain(error, args, err)
+        err.write(f"error: cannot run {file}: {error}\n")
+        _explain(error, settings.verbose, err)
     except asyncio.CancelledError:
         code, outcome = EXIT_STOPPED, "abandoned"
         err.write("run abandoned\n")
     except Exception as error:  # noqa: BLE001 - a defect: one line, the trace still closed, the traceback with -v
         code = EXIT_INTERNAL
-        err.write(f"error: the run of {args.file} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
-        _explain(error, args, err)
+        err.write(f"error: the run of {file} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
+        _explain(error, settings.verbose, err)
     if report is not None:
         out.write("\n" + "\n".join(report.summary_lines()) + "\n")
         outcome = report.outcome
@@ -309,7 +301,7 @@ def _run_recorded(app: Application, args: argparse.Namespace, out: IO[str], err:
         done, total = (report.operations_done, report.operations_total) if report is not None else (0, len(app.operations))
         writer.finish(t, outcome, code, done, total)
         if writer.error is not None:
-            lost.insert(0, WriteFailure("--trace", str(args.trace), writer.error.strerror or str(writer.error),
+            lost.insert(0, WriteFailure("--trace", str(settings.outputs.trace), writer.error.strerror or str(writer.error),
                                         f"{writer.lost} record(s) lost, the trace is incomplete"))
     for failure in lost:
         err.write(failure.line(outcome) + "\n")
@@ -323,9 +315,9 @@ PEER_ADVICE = (
 )
 
 
-def _explain(error: BaseException, args: argparse.Namespace, err: IO[str]) -> None:
+def _explain(error: BaseException, verbose: bool, err: IO[str]) -> None:
     """The traceback, for a developer, only with ``-v``."""
-    if getattr(args, "verbose", False):
+    if verbose:
         traceback.print_exception(error, file=err)
 
 
@@ -355,7 +347,6 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--backend-option", action="append", type=parse_option, metavar="KEY=VALUE", help="with --simulate: back-end option as for run, e.g. config=my_rsi.xml (repeatable)")
     validate.add_argument("--seed", type=argument_type("seed"), default=0, help="with --simulate: simulator random seed (vision noise) in [0, 4294967295], as for run")
     validate.add_argument("--trajectory-db", metavar="PATH", help="with --simulate: the trajectory database the run will use (read, never written)")
-    validate.set_defaults(host=None, port=None, rsi_listen=None, fault=None)
     functions = sub.add_parser("functions", help="list the function catalog")
     functions.add_argument("--json", action="store_true", help="machine-readable catalog")
     add_report_parser(sub)
@@ -396,29 +387,60 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
             return EXIT_STOPPED
         except Exception as error:  # noqa: BLE001 - a defect: one line for the operator, the traceback with -v
             err.write(f"error: {args.command} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
-            _explain(error, args, err)
+            _explain(error, args.verbose, err)
             return EXIT_INTERNAL
 
 
+# ------------------------------------------------------------------------------ settings
+def backend_settings(args: argparse.Namespace, host: str | None, port: int | None) -> BackendSettings:
+    """The back end of ``run``'s options (``studio`` takes them over; its controller's address is
+    ``--controller-host``/``--controller-port``, given here as ``host`` and ``port``)."""
+    return BackendSettings(
+        name=args.robot, host=host, port=port, rsi_listen=args.rsi_listen, faults=tuple(args.fault or ()), seed=args.seed,
+        options=tuple(args.backend_option or ()),
+    )
+
+
+def run_settings(args: argparse.Namespace) -> RunSettings:
+    """``run``'s options as the run takes them."""
+    return RunSettings(
+        backend=backend_settings(args, args.host, args.port),
+        speed=args.speed,
+        outputs=Outputs(trace=args.trace, record=args.record, checkpoint=args.checkpoint, trajectory_db=args.trajectory_db),
+        check=not args.no_check,
+        resume=args.resume,
+        on_interrupted=args.on_interrupted,
+        interactive=args.interactive,
+        quiet=args.quiet,
+        verbose=args.verbose,
+    )
+
+
+def validate_settings(args: argparse.Namespace) -> ValidateSettings:
+    """``validate``'s options: the files; with ``--simulate``, the back end whose simulator dry-runs them."""
+    backend = BackendSettings(name=args.robot, seed=args.seed, options=tuple(args.backend_option or ()))
+    return ValidateSettings(files=tuple(args.files), simulate=args.simulate, backend=backend, trajectory_db=args.trajectory_db)
+
+
 def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
-    """Run the chosen subcommand."""
+    """Run the chosen subcommand on the settings its arguments make."""
     catalog = full_catalog()
     if args.command == "validate":
-        return cmd_validate(args.files, catalog, out, err, args)
+        return cmd_validate(validate_settings(args), catalog, out, err)
     if args.command == "functions":
         return cmd_functions(catalog, args.json, out)
     if args.command == "launch":
-        return launcher.cmd_launch(args, out, err)
+        return launcher.cmd_launch(launcher.launch_settings(args), out, err)
     if args.command == "studio":
         return studio.cmd_studio(args, catalog, out, err)
     if args.command == "report":
-        return cmd_report(args, out, err)
+        return cmd_report(report_settings(args), out, err)
     if args.command == "vision":
-        return cmd_vision(args, out, err)
+        return run_vision(args, out, err)
     if Path(args.file).is_dir():
         err.write(f"error: {args.file}: is a directory, not an application file\n")
         return EXIT_INVALID
     if not Path(args.file).is_file():
         err.write(f"error: {args.file}: no such file\n")
         return EXIT_INVALID
-    return cmd_run(args, catalog, out, err)
+    return cmd_run(args.file, run_settings(args), catalog, out, err)

@@ -41,6 +41,7 @@ from execution_engine.app_model import ApplicationError, load_application
 from execution_engine.clock import Clock, real_clock, run_with_clock
 from execution_engine.resources import share_path
 from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_node_name
+from execution_engine.settings import LaunchSettings
 
 EXIT_NODE_DIED = 6  # a node other than the engine ended before the engine did
 EXIT_USAGE = 2
@@ -245,27 +246,35 @@ async def launch(clock: Clock, specs: list[NodeSpec], out: IO[str], grace: float
             loop.remove_signal_handler(sig)
 
 
-def cmd_launch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
-    path = Path(args.file)
+def launch_settings(args: argparse.Namespace) -> LaunchSettings:
+    """``launch``'s options."""
+    return LaunchSettings(
+        file=args.file, transport=args.transport, speed=args.speed, nodes=args.nodes, grace=args.grace, stop_timeout=args.stop_timeout,
+        check=not args.no_check,
+    )
+
+
+def cmd_launch(settings: LaunchSettings, out: IO[str], err: IO[str]) -> int:
+    path = Path(settings.file)
     if not path.is_file():
-        err.write(f"error: {args.file}: no such file\n")
+        err.write(f"error: {settings.file}: no such file\n")
         return EXIT_INVALID
-    if not args.speed > 0 or args.grace < 0 or args.stop_timeout <= 0:
+    if not settings.speed > 0 or settings.grace < 0 or settings.stop_timeout <= 0:
         err.write("error: --speed and --stop-timeout must be > 0, --grace >= 0\n")
         return EXIT_USAGE
     try:
-        specs = select(cell_nodes(path, args.transport, args.speed, not args.no_check), args.nodes)
+        specs = select(cell_nodes(path, settings.transport, settings.speed, settings.check), settings.nodes)
     except ApplicationError as error:
-        err.write(f"error: cannot launch {args.file}:\n" + "\n".join(str(d) for d in error.diagnostics) + "\n")
+        err.write(f"error: cannot launch {settings.file}:\n" + "\n".join(str(d) for d in error.diagnostics) + "\n")
         return EXIT_INVALID
     except (ValueError, FileNotFoundError) as error:
         err.write(f"error: {error}\n")
         return EXIT_USAGE
-    return int(run_with_clock(lambda clock: launch(clock, specs, out, args.grace, args.stop_timeout), real_clock()))
+    return int(run_with_clock(lambda clock: launch(clock, specs, out, settings.grace, settings.stop_timeout), real_clock()))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """For tests and scripts: the ``launch`` subcommand alone."""
     parser = argparse.ArgumentParser(prog="python -m execution_engine")
     add_parser(parser.add_subparsers(dest="command", required=True))
-    return cmd_launch(parser.parse_args(["launch", *(argv or [])]), sys.stdout, sys.stderr)
+    return cmd_launch(launch_settings(parser.parse_args(["launch", *(argv or [])])), sys.stdout, sys.stderr)

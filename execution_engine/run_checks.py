@@ -11,29 +11,33 @@ robot's groups.  :class:`Refused` carries the line; the CLI prints it and exits 
 """
 from __future__ import annotations
 
-import argparse
 import ipaddress
 import socket
 from collections.abc import Iterable
+from dataclasses import replace
 from pathlib import Path
 
 from execution_engine.app_model.model import Application
 from execution_engine.output_files import FilePlan, Output, Refused
+from execution_engine.settings import RunSettings
 
 __all__ = ["Refused", "check_faults", "check_trajectory_db", "preflight", "resolve", "resolve_endpoint", "run_files", "app_inputs"]
 
 
-def preflight(app: Application, args: argparse.Namespace) -> None:
-    """Check the options that name a peer or a group; resolve names once (``args`` is updated).
-    The files come once the run has named them all (:func:`run_files`, from ``prepare_flight``).
+def preflight(app: Application, settings: RunSettings) -> RunSettings:
+    """Check the options that name a peer or a group; resolve names once (the settings returned
+    name addresses).  The files come once the run has named them all (:func:`run_files`, from
+    ``prepare_flight``).
 
     Raises :class:`Refused` with one line; writes nothing.
     """
-    check_faults(args.fault or (), app.robot.group_names)
-    if args.host is not None:
-        args.host = resolve("--host", args.host)
-    if args.rsi_listen is not None:
-        args.rsi_listen = resolve_endpoint("--rsi-listen", args.rsi_listen)
+    backend = settings.backend
+    check_faults(backend.faults, app.robot.group_names)
+    if backend.host is not None:
+        backend = replace(backend, host=resolve("--host", backend.host))
+    if backend.rsi_listen is not None:
+        backend = replace(backend, rsi_listen=resolve_endpoint("--rsi-listen", backend.rsi_listen))
+    return replace(settings, backend=backend)
 
 
 def check_faults(faults: Iterable[str], groups: Iterable[str]) -> None:

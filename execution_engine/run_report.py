@@ -19,6 +19,7 @@ from core_functions.printable import printable
 from execution_engine.output_files import FilePlan, Output, Refused
 from execution_engine.record_limits import TIME_BOUND
 from execution_engine.record_reader import NotARecording, OverLimit, read_record
+from execution_engine.settings import ReportSettings
 from execution_engine.timeline import Timeline, TimelineBuilder
 
 EXIT_OK, EXIT_UNREADABLE, EXIT_USAGE, EXIT_OUTPUT = 0, 1, 2, 4  # as run's: a refused option 2, an output not written 4
@@ -118,15 +119,20 @@ def add_report_parser(sub: Any) -> None:
     report.add_argument("--no-timeline", action="store_true", help="print the summary only")
 
 
-def cmd_report(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
-    path = Path(args.file)
+def report_settings(args: argparse.Namespace) -> ReportSettings:
+    """``report``'s options."""
+    return ReportSettings(file=args.file, timeline=args.timeline, draw=not args.no_timeline)
+
+
+def cmd_report(settings: ReportSettings, out: IO[str], err: IO[str]) -> int:
+    path = Path(settings.file)
     if not path.is_file():
         err.write(f"error: {path}: no such file\n")
         return EXIT_UNREADABLE
-    target = None if args.no_timeline else Path(args.timeline) if args.timeline else path.with_name(path.stem + ".timeline.svg")
+    target = None if not settings.draw else Path(settings.timeline) if settings.timeline else path.with_name(path.stem + ".timeline.svg")
     if target is not None:
         try:  # before reading: the timeline is never the record it is drawn from
-            timeline_files(path, target, given=bool(args.timeline)).check()
+            timeline_files(path, target, given=bool(settings.timeline)).check()
         except Refused as refusal:
             err.write(f"error: {refusal}\n")
             return EXIT_USAGE

@@ -20,6 +20,7 @@ from core_functions.option_ranges import RangeError, bounds, check
 from core_functions.vision.camera import Intrinsics
 from core_functions.vision.holes import Hole, detect_head_on
 from core_functions.vision.image_file import ImageFileError, read_image
+from execution_engine.settings import DetectSettings
 
 EXIT_OK, EXIT_IMAGE, EXIT_USAGE = 0, 1, 2
 #: option -> (its setting in core_functions.option_ranges, what it is)
@@ -45,24 +46,35 @@ def _number(name: str, text: str) -> float:
     return check(_NUMBERS[name][0], text, label=f"--{name}")
 
 
-def cmd_vision(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
+def detect_settings(args: argparse.Namespace) -> DetectSettings:
+    """``vision detect``'s options, each number in its range: RangeError naming the option otherwise."""
+    values = {name: _number(name, vars(args)[name]) for name in _NUMBERS}
+    return DetectSettings(image=args.image, json=args.json, **values)
+
+
+def run_vision(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
+    """The ``vision`` subcommand: its settings (a number out of range: one line, exit 2), then the detection."""
     try:
-        values = {name: _number(name, getattr(args, name)) for name in _NUMBERS}
+        settings = detect_settings(args)
     except RangeError as error:
         err.write(f"error: {error}\n")
         return EXIT_USAGE
+    return cmd_vision(settings, out, err)
+
+
+def cmd_vision(settings: DetectSettings, out: IO[str], err: IO[str]) -> int:
     try:
-        image = read_image(Path(args.image))
+        image = read_image(Path(settings.image))
     except ImageFileError as error:
         err.write(f"error: {error}\n")
         return EXIT_IMAGE
     height, width = image.shape
-    intrinsics = Intrinsics(width, height, values["fx"], values["fy"], values["cx"], values["cy"])
-    holes = detect_head_on(image, intrinsics, values["distance"], values["diameter"])
-    if args.json:
+    intrinsics = Intrinsics(width, height, settings.fx, settings.fy, settings.cx, settings.cy)
+    holes = detect_head_on(image, intrinsics, settings.distance, settings.diameter)
+    if settings.json:
         out.write(json.dumps({"holes": [h.as_json() for h in holes]}) + "\n")
     else:
-        out.write(f"{args.image}: {len(holes)} hole(s) of {values['diameter'] * 1000:g} mm at {values['distance']:g} m\n")
+        out.write(f"{settings.image}: {len(holes)} hole(s) of {settings.diameter * 1000:g} mm at {settings.distance:g} m\n")
         for i, hole in enumerate(holes, start=1):
             out.write(_line(i, hole))
     return EXIT_OK

@@ -27,11 +27,12 @@ from execution_engine.app_model.document import read_document
 from execution_engine.output_files import FilePlan, Refused
 from execution_engine.record_reader import NotARecording, OverLimit
 from execution_engine.run_checks import run_files
+from execution_engine.settings import BackendSettings, Outputs, RunSettings
 from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
 from operator_station.attach import AttachedSession, ros_connect
 from operator_station.feed import Feed
 from operator_station.replay import load_replay
-from operator_station.session import RunSession, RunSettings
+from operator_station.session import RunSession
 
 log = logging.getLogger(__name__)
 
@@ -75,10 +76,21 @@ def build_station(args: argparse.Namespace, catalog: Catalog, root: Path, access
         return Station(catalog, feed, None, root, app_path, replay=True, access=access)
     if getattr(args, "transport", "local") == "ros":
         return _attached(args, catalog, feed, root, app_path, access)
-    options = {"host": args.controller_host, "port": args.controller_port, "rsi_listen": args.rsi_listen,
-               "faults": tuple(args.fault or ()), "seed": args.seed, "extra": dict(args.backend_option or ())}
-    settings = RunSettings(args.robot, options, args.speed, Path(args.trace) if args.trace else None, args.trajectory_db, not args.no_check)
-    return Station(catalog, feed, RunSession(feed, settings), root, app_path, access=access)
+    return Station(catalog, feed, RunSession(feed, run_settings(args)), root, app_path, access=access)
+
+
+def run_settings(args: argparse.Namespace) -> RunSettings:
+    """Every run the station starts goes as ``run`` would with these options (its controller is
+    ``--controller-host``/``--controller-port``: ``--host``/``--port`` are the station's own)."""
+    return RunSettings(
+        backend=BackendSettings(
+            name=args.robot, host=args.controller_host, port=args.controller_port, rsi_listen=args.rsi_listen, faults=tuple(args.fault or ()),
+            seed=args.seed, options=tuple(args.backend_option or ()),
+        ),
+        speed=args.speed,
+        outputs=Outputs(trace=args.trace, trajectory_db=args.trajectory_db),
+        check=not args.no_check,
+    )
 
 
 def studio_files(args: argparse.Namespace) -> FilePlan:

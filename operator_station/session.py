@@ -13,18 +13,15 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import math
 import threading
 from collections.abc import Callable, Coroutine
 from concurrent.futures import Future
-from dataclasses import dataclass
-from pathlib import Path
 from typing import IO, Any
 
 from core_functions.robots import RobotModel
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
-from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
+from execution_engine.clock import Clock, run_with_clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.dry_run.report import DryRunReport
 from execution_engine.dry_run.runner import DryRunError, dry_run
@@ -34,6 +31,7 @@ from execution_engine.engine.report import RunReport
 from execution_engine.observers import RunObserver, TraceWriter
 from execution_engine.output_files import FilePlan, Output, Refused, WriteFailure
 from execution_engine.run_checks import app_inputs, run_files
+from execution_engine.settings import RunSettings
 from execution_engine.transport import codec, typed
 from execution_engine.transport.msgs import Bool, JointState
 from execution_engine.transport.port import Node
@@ -52,22 +50,11 @@ SOURCE = "studio"
 EXIT_OK, EXIT_FAILED, EXIT_STOPPED = 0, 1, 3
 
 
-@dataclass(frozen=True)
-class RunSettings:
-    """What ``studio`` was started with, for every run it starts."""
-
-    backend: str | None  # --robot; None: the application robot's usual back end
-    options: dict[str, Any]  # host, port, rsi_listen, faults, seed, extra (BackendOptions without the robot)
-    speed: float  # math.inf: simulated time
-    trace: Path | None = None
-    trajectory_db: str | None = None
-    check: bool = True  # dry-run first (as run does), refuse on findings
-
-
 class RunSession:
     """At most one run at a time; :meth:`start` another once it has ended."""
 
     def __init__(self, feed: Feed, settings: RunSettings) -> None:
+        """``settings``: what ``studio`` was started with (``run``'s options), for every run it starts."""
         self.feed = feed
         self.settings = settings
         self._thread: threading.Thread | None = None
@@ -83,7 +70,7 @@ class RunSession:
         return self._thread is not None and self._thread.is_alive()
 
     def backend_name(self, app: Application) -> str:
-        return str(self.settings.backend or app.robot.default_backend)
+        return self.settings.backend.backend_for(app)
 
     def start(self, app: Application, operations: list[dict[str, Any]]) -> tuple[bool, str]:
         """Start ``app`` (validated) on a fresh deployment; False and why when a run is still going,
@@ -111,29 +98,30 @@ class RunSession:
 
     def trajectory_db(self, app: Application) -> str:
         """``--trajectory-db``, else the application's own database (as ``run`` uses), never a home directory's."""
-        return self.settings.trajectory_db or str(application_store(app.path))
+        return self.settings.outputs.trajectory_db or str(application_store(app.path))
 
     def files(self, app: Application) -> FilePlan:
         """Every file a run of ``app`` reads and writes, under ``run``'s rule (:mod:`execution_engine.output_files`)."""
-        derived = {} if self.settings.trajectory_db else {"--trajectory-db": "the application's own"}
-        return run_files(app_inputs(app), trace=str(self.settings.trace) if self.settings.trace else None, trajectory_db=self.trajectory_db(app),
-                         extra=self.settings.options.get("extra") or {}, derived=derived, command="studio run")
+        derived = {} if self.settings.outputs.trajectory_db else {"--trajectory-db": "the application's own"}
+        return run_files(app_inputs(app), trace=self.settings.outputs.trace, trajectory_db=self.trajectory_db(app),
+                         extra=self.settings.backend.extra, derived=derived, command="studio run")
 
     def outputs(self) -> list[Output]:
         """The files every run of this station writes, whatever the application: a saved application is none of them."""
-        return run_files((), trace=str(self.settings.trace) if self.settings.trace else None, trajectory_db=self.settings.trajectory_db,
-                         extra=self.settings.options.get("extra") or {}).outputs
+        outputs = self.settings.outputs
+        return run_files((), trace=outputs.trace, trajectory_db=outputs.trajectory_db, extra=self.settings.backend.extra).outputs
 
     # ------------------------------------------------------------------------ the run thread
     def _options(self, app: Application) -> BackendOptions:
-        return BackendOptions(robot=app.robot, **self.settings.options)
+        return self.settings.backend.backend_options(app)
 
     def _main(self, app: Application) -> None:
         try:
             if self.settings.check and not self._checked(app):
                 return
-            clock = simulated_clock() if math.isinf(self.settings.speed) else scaled_clock(self.settings.speed)
-            trace = open(self.settings.trace, "w", encoding="utf-8") if self.settings.trace else None  # noqa: SIM115 - closed below
+            clock = self.settings.clock()
+            trace_path = self.settings.outputs.trace
+            trace = open(trace_path, "w", encoding="utf-8") if trace_path else None  # noqa: SIM115 - closed below
             try:
                 self.report = run_with_clock(lambda c: self._run(app, c, trace), clock)
             finally:
@@ -190,7 +178,7 @@ class RunSession:
                 if each is not None:
                     each.finish(t_end, report.outcome, code, report.operations_done, report.operations_total)
             if writer is not None and writer.error is not None:  # said on the page, as run says it on its console
-                lost = WriteFailure("--trace", str(self.settings.trace), writer.error.strerror or str(writer.error),
+                lost = WriteFailure("--trace", str(self.settings.outputs.trace), writer.error.strerror or str(writer.error),
                                     f"{writer.lost} record(s) lost, the trace is incomplete")
                 self.feed.update(messages=[{"severity": "error", "message": lost.line(report.outcome, "the run's report").removeprefix("error: ")}])
             return report

@@ -10,6 +10,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("execution_engine", "core_functions", "app_functions", "robot_bridges", "operator_station")
 # Wiring may import back ends; nothing else may.
 WIRING = {"execution_engine/cli.py", "execution_engine/deployment.py", "execution_engine/nodes.py", "execution_engine/ros_main.py"}
+# The command line's settings name the back end's options (docs/architecture.md).
+WIRING |= {"execution_engine/settings.py"}
 # The dry run builds a robot's simulator and wraps its back end (docs/application_xml.md, "Checking before anything moves").
 WIRING |= {f"execution_engine/dry_run/{m}.py" for m in ("backend", "check", "runner", "simulators", "collisions", "placement", "cell_start")}
 # The operator station runs the engine and a back end in-process (docs/studio.md): wiring too.

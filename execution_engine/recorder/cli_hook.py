@@ -3,13 +3,14 @@
 Recording (``--record``), checkpoints (``--checkpoint``, by default next to the trace or the
 recording) and resuming (``--resume``, ``--on-interrupted``) are set up here, so ``cli.py`` only
 calls :func:`add_run_options`, :func:`prepare_flight` (before any file is written),
-:func:`start_recording` and :func:`stop_recording`.
+:func:`start_recording` and :func:`stop_recording`.  Below the options, everything reads the
+run's :class:`~execution_engine.settings.RunSettings`.
 """
 from __future__ import annotations
 
 import argparse
 import sqlite3
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO
 
@@ -25,6 +26,7 @@ from execution_engine.output_files import FilePlan, Output, WriteFailure, same_f
 from execution_engine.recorder.recorder import Recorder
 from execution_engine.recorder.writer import McapSink
 from execution_engine.run_checks import app_inputs, run_files
+from execution_engine.settings import Outputs, RunSettings
 from execution_engine.transport.port import Node, Transport
 
 
@@ -46,13 +48,14 @@ def add_run_options(run: argparse.ArgumentParser) -> None:
     )
 
 
-def checkpoint_path(args: argparse.Namespace) -> str | None:
+def checkpoint_path(settings: RunSettings) -> str | None:
     """``--checkpoint``, else the resumed checkpoint, else next to the trace or the recording (a file, not a device)."""
-    if getattr(args, "checkpoint", None):
-        return str(args.checkpoint)
-    if getattr(args, "resume", None):
-        return str(args.resume)
-    bases = [p for p in (getattr(args, "trace", None), getattr(args, "record", None)) if p and stores_data(p)]
+    outputs = settings.outputs
+    if outputs.checkpoint:
+        return str(outputs.checkpoint)
+    if settings.resume:
+        return str(settings.resume)
+    bases = [p for p in (outputs.trace, outputs.record) if p and stores_data(p)]
     if not bases:  # none, or devices (/dev/null): no folder to keep a checkpoint in
         return None
     base = bases[0]
@@ -60,33 +63,38 @@ def checkpoint_path(args: argparse.Namespace) -> str | None:
     return str(path.parent / (path.name.split(".")[0] + ".checkpoint.sqlite"))
 
 
-def prepare_flight(app: Application, args: argparse.Namespace) -> None:
+def prepare_flight(app: Application, settings: RunSettings) -> RunSettings:
     """Before anything is written: check ``--resume`` (CheckpointError naming what is wrong), name
     the resumed run's trace and recording (never the files of the run it continues), the
     checkpoint and the trajectory database, then check every file the run reads and writes
-    against each other (:func:`run_files`: Refused, one line, nothing written)."""
+    against each other (:func:`run_files`: Refused, one line, nothing written).  Returns the
+    settings with every output named."""
     derived: dict[str, str] = {}
-    resume = getattr(args, "resume", None)
+    resume = settings.resume
+    outputs = settings.outputs
     if resume:
-        _prepare_resume(app, args, str(resume), derived)
-    given = getattr(args, "checkpoint", None)
-    args.checkpoint = checkpoint_path(args)
-    if args.checkpoint and not given and not resume:
-        trace = getattr(args, "trace", None)
+        outputs = _prepare_resume(app, outputs, str(resume), derived)
+    given = outputs.checkpoint
+    outputs = replace(outputs, checkpoint=checkpoint_path(replace(settings, outputs=outputs)))
+    if outputs.checkpoint and not given and not resume:
+        trace = outputs.trace
         derived["--checkpoint"] = "next to --trace" if trace and stores_data(trace) else "next to --record"
-    if not getattr(args, "trajectory_db", None):  # the application's own, never a home directory's
-        args.trajectory_db = str(application_store(app.path))
+    if not outputs.trajectory_db:  # the application's own, never a home directory's
+        outputs = replace(outputs, trajectory_db=str(application_store(app.path)))
         derived["--trajectory-db"] = "the application's own"
     run_files(
-        app_inputs(app), trace=getattr(args, "trace", None), record=getattr(args, "record", None), checkpoint=args.checkpoint,
-        resume=resume, trajectory_db=args.trajectory_db, extra=dict(getattr(args, "backend_option", None) or ()), derived=derived,
+        app_inputs(app), trace=outputs.trace, record=outputs.record, checkpoint=outputs.checkpoint,
+        resume=resume, trajectory_db=outputs.trajectory_db, extra=settings.backend.extra, derived=derived,
     ).check()
+    return replace(settings, outputs=outputs)
 
 
-def _prepare_resume(app: Application, args: argparse.Namespace, resume: str, derived: dict[str, str]) -> None:
+def _prepare_resume(app: Application, outputs: Outputs, resume: str, derived: dict[str, str]) -> Outputs:
+    """The outputs of a resumed run: its own trace and recording, named after the run it continues
+    unless given (and then never that run's)."""
     if not Path(resume).is_file():
         raise CheckpointError(f"--resume {resume}: no such checkpoint file")
-    given = getattr(args, "checkpoint", None)
+    given = outputs.checkpoint
     if given and not same_file(given, resume):
         raise CheckpointError(f"--checkpoint {given}: a resumed run goes on writing the checkpoint it resumes (--resume {resume}); leave --checkpoint out")
     store = CheckpointStore(resume, read_only=True)
@@ -99,13 +107,14 @@ def _prepare_resume(app: Application, args: argparse.Namespace, resume: str, der
         store.close()
     earlier = [p for _, trace, record in runs for p in (trace, record) if p and stores_data(p)]  # (/dev/null holds no run)
     for option, column in (("trace", 1), ("record", 2)):
-        given = getattr(args, option, None)
+        given = getattr(outputs, option)
         last = next((str(r[column]) for r in reversed(runs) if r[column] and stores_data(r[column])), "")
         if given and any(same_file(given, p) for p in earlier):
             raise CheckpointError(f"--{option} {given}: that file holds the run being resumed; give a new file (or leave it out: {next_name(given, len(runs) + 1)})")
         if not given and last:
-            setattr(args, option, next_name(last, len(runs) + 1))
+            outputs = replace(outputs, **{option: next_name(last, len(runs) + 1)})
             derived[f"--{option}"] = "named after the resumed run's"
+    return outputs
 
 
 @dataclass
@@ -119,30 +128,31 @@ class Flight:
 
 
 async def start_recording(
-    args: argparse.Namespace, app: Application, transport: Transport, backend: str, observer: RunObserver | None = None
+    settings: RunSettings, app: Application, transport: Transport, backend: str, observer: RunObserver | None = None
 ) -> Flight:
-    """Start what the options ask for: a recorder node, checkpoints fed by ``observer``, the resume plan."""
+    """Start what the settings ask for: a recorder node, checkpoints fed by ``observer``, the resume plan."""
     flight = Flight()
-    path = checkpoint_path(args)
+    path = checkpoint_path(settings)
+    outputs = settings.outputs
     continues = ""
     if path:
-        resuming = bool(getattr(args, "resume", None))
+        resuming = bool(settings.resume)
         if not resuming:
             for suffix in ("", "-wal", "-shm"):  # a fresh run starts a fresh checkpoint
                 Path(path + suffix).unlink(missing_ok=True)
         catalog = full_catalog()
         store = flight.store = CheckpointStore(path)
         if resuming:
-            flight.resume = plan_resume(store, app, catalog, getattr(args, "on_interrupted", "ask"))
+            flight.resume = plan_resume(store, app, catalog, settings.on_interrupted)
             flight.resume.on_skip = lambda index, op, group: _skipped(store, index, op, group)
             continues = flight.resume.continues
-        store.begin_run(app_meta(app), getattr(args, "trace", None) or "", getattr(args, "record", None) or "", continues)
+        store.begin_run(app_meta(app), outputs.trace or "", outputs.record or "", continues)
         flight.writer = CheckpointWriter(store, app, catalog)
         if observer is not None:
             observer.sinks.append(flight.writer.on_status)
             observer.event_sinks.append(flight.writer.on_event)
-    if getattr(args, "record", None):
-        flight.recorder = record_node(transport.create_node("recorder"), args.record, app, backend, continues, derive_tf=True)
+    if outputs.record:
+        flight.recorder = record_node(transport.create_node("recorder"), outputs.record, app, backend, continues, derive_tf=True)
     return flight
 
 
