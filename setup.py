@@ -2,7 +2,7 @@
 
 colcon reads ``data_files`` to lay out ``share/dual_arm_executive`` the way ``ros2 launch`` and
 ament_index expect; pip installs the same files under ``<prefix>/share/dual_arm_executive``, where
-:mod:`execution_engine.resources` finds them when the source tree is not at hand.
+:mod:`core_functions.resources` finds them when the source tree is not at hand.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ setup(
     license="Apache-2.0",
     python_requires=">=3.10",
     packages=find_packages(
-        include=["execution_engine*", "core_functions*", "app_functions*", "robot_bridges*", "operator_station*"]
+        include=["core_functions*", "node_transport*", "app_functions*", "execution_engine*", "robot_bridges*", "operator_station*"]
     ),
     package_data={
         **{f"robot_bridges.{sim}": ["urdf/*.urdf"] for sim in ("nextage_sim", "vplus", "kuka_rsi")},

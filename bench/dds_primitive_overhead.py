@@ -39,8 +39,8 @@ from primitive_overhead import BenchFunctions  # noqa: E402
 from ros_primitive_overhead import ECHO_TEXT, in_process, per_process, start_nodes  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
-from execution_engine.clock import Clock, real_clock, run_with_clock  # noqa: E402
-from execution_engine.transport.dds import DdsTransport  # noqa: E402
+from node_transport.clock import Clock, real_clock, run_with_clock  # noqa: E402
+from node_transport.dds import DdsTransport  # noqa: E402
 
 LOOPBACK = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>'
 THROUGHPUT_MESSAGES = 20_000
@@ -50,8 +50,8 @@ def _raw_participant() -> object:
     """A bare cyclonedds participant in the bench's domain, configured as the transport's are."""
     from cyclonedds.domain import DomainParticipant
 
-    from execution_engine.transport.dds import _domain, _import_cyclonedds
-    from execution_engine.transport.dds_graph import domain_config, domain_id
+    from node_transport.dds import _domain, _import_cyclonedds
+    from node_transport.dds_graph import domain_config, domain_id
 
     _domain(_import_cyclonedds(), domain_id(os.environ), domain_config(os.environ))
     return DomainParticipant(domain_id(os.environ))
@@ -62,9 +62,9 @@ def _raw_endpoints(participant: object, read: str, write: str) -> tuple[object, 
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
 
-    from execution_engine.transport.dds_graph import dds_qos
-    from execution_engine.transport.idl import InterfaceRegistry
-    from execution_engine.transport.qos import COMMANDS
+    from node_transport.dds_graph import dds_qos
+    from node_transport.idl import InterfaceRegistry
+    from node_transport.qos import COMMANDS
 
     string = InterfaceRegistry().message("std_msgs/msg/String")
     writer = DataWriter(participant, Topic(participant, write, string), qos=dds_qos(COMMANDS))
@@ -131,17 +131,17 @@ def raw_round_trip(n: int) -> float:
             once()
         return (time.perf_counter() - t0) / n
     finally:  # no listener may fire into a finalizing interpreter
-        from execution_engine.transport.dds_entities import delete
+        from node_transport.dds_entities import delete
 
         delete(participant)
 
 
 THROUGHPUT_PUBLISHER = """
 import asyncio, sys
-from execution_engine.clock import real_clock, run_with_clock
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.msgs import Header, JointState
-from execution_engine.transport.qos import JOINT_STATES
+from node_transport.clock import real_clock, run_with_clock
+from node_transport.dds import DdsTransport
+from node_transport.msgs import Header, JointState
+from node_transport.qos import JOINT_STATES
 from core_functions.robots import NEXTAGE_OPEN
 
 async def main(clock):
@@ -165,9 +165,9 @@ run_with_clock(main, real_clock())
 
 async def joint_state_throughput(clock: Clock, env: dict[str, str]) -> tuple[float, int, int]:
     """(messages per second delivered, delivered, sent), publisher in a child process."""
-    from execution_engine.transport.dds import DdsTransport
-    from execution_engine.transport.msgs import JointState
-    from execution_engine.transport.qos import JOINT_STATES
+    from node_transport.dds import DdsTransport
+    from node_transport.msgs import JointState
+    from node_transport.qos import JOINT_STATES
 
     transport = DdsTransport(clock, ["bench"])
     times: list[float] = []

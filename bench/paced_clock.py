@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT))
 
 from app_functions.registry import full_catalog  # noqa: E402
 from execution_engine.app_model import Application, load_application  # noqa: E402
-from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock  # noqa: E402
+from node_transport.clock import Clock, run_with_clock, scaled_clock, simulated_clock  # noqa: E402
 from execution_engine.deployment import deploy_local  # noqa: E402
 from execution_engine.dry_run.runner import dry_run  # noqa: E402
 from execution_engine.engine.report import RunReport  # noqa: E402

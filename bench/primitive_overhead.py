@@ -29,7 +29,7 @@ from core_functions.functions import CoreFunctions, Skill  # noqa: E402
 from core_functions.primitives import SetSpeed  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
 from execution_engine.app_model.model import Application, Call, ErrorPolicy, Operation  # noqa: E402
-from execution_engine.clock import Clock, run_with_clock  # noqa: E402
+from node_transport.clock import Clock, run_with_clock  # noqa: E402
 from execution_engine.deployment import deploy_local  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402

@@ -45,7 +45,7 @@ from primitive_overhead import BenchFunctions, app  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
-from execution_engine.clock import Clock, run_with_clock  # noqa: E402
+from node_transport.clock import Clock, run_with_clock  # noqa: E402
 from execution_engine.deployment import Deployment, deploy_local  # noqa: E402
 from execution_engine.observers import RunObserver  # noqa: E402
 from execution_engine.recorder.recorder import Recorder  # noqa: E402

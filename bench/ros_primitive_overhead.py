@@ -40,7 +40,7 @@ from primitive_overhead import BenchFunctions, app  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
-from execution_engine.clock import Clock, real_clock, run_with_clock  # noqa: E402
+from node_transport.clock import Clock, real_clock, run_with_clock  # noqa: E402
 from execution_engine.deployment import deploy_local  # noqa: E402
 from execution_engine.engine.engine import ExecutionEngine  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
@@ -96,7 +96,7 @@ def start_nodes(env: dict[str, str], transport: tuple[str, ...] = ()) -> list[su
 async def per_process(clock: Clock, n: int, transport_class: Any = None) -> dict[str, float]:
     """Seconds per primitive with the engine in this process on ``transport_class`` (default: rclpy)."""
     if transport_class is None:
-        from execution_engine.transport.ros import RosTransport as transport_class
+        from node_transport.ros import RosTransport as transport_class
 
     transport = transport_class(clock, ["bench"])
     try:

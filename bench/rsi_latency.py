@@ -181,7 +181,7 @@ def accelerated(cycles: int, feedback: Path | None, switch_interval: float | Non
 async def engine_phase(port: int, seconds: float, feedback: Path) -> dict[str, object]:
     from app_functions.registry import full_catalog
     from execution_engine.app_model import load_application
-    from execution_engine.clock import real_clock
+    from node_transport.clock import real_clock
     from execution_engine.deployment import deploy_local
 
     app = load_application(str(ROOT / "apps_xml" / "kuka_rsi_demo.xml"), full_catalog())

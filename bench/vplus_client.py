@@ -28,7 +28,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from execution_engine.clock import Clock, real_clock, run_with_clock  # noqa: E402
+from node_transport.clock import Clock, real_clock, run_with_clock  # noqa: E402
 from robot_bridges.vplus import codec  # noqa: E402
 from robot_bridges.vplus.client import VPlusClient  # noqa: E402
 from robot_bridges.vplus.simulator import VPlusSimulator  # noqa: E402

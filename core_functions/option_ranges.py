@@ -11,7 +11,7 @@ cell could mean.  docs/faults.md, README.md and the back ends' docs show them.
 One name, one range -- except where a back end reads an option of the same name with a meaning
 of its own (``timeout``, ``tolerance_mm``): then each has its entry, scoped to that back end
 (:class:`Setting`), and the docs show both.  The speed factor's limits are
-:data:`execution_engine.clock.MIN_SPEED` and ``MAX_SPEED``; the ``speed`` row here is the same
+:data:`node_transport.clock.MIN_SPEED` and ``MAX_SPEED``; the ``speed`` row here is the same
 interval, for the tables and the readers below the clock.
 """
 from __future__ import annotations

@@ -37,8 +37,8 @@ from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.robots import ROBOTS
 from execution_engine.app_model import Application, ApplicationError, load_application, read_application
 from execution_engine.catalog_document import PARAM_TYPE_HELP, XML_USAGE, catalog_document
-from execution_engine.clock import Clock, run_with_clock
-from execution_engine.console_log import ConsoleLog
+from node_transport.clock import Clock, run_with_clock
+from node_transport.console_log import ConsoleLog
 from execution_engine.deployment import deploy_local
 from execution_engine import launcher
 from execution_engine.dry_run.check import check as dry_run_check, options_refusal

@@ -13,11 +13,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from core_functions.robots import RobotModel
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.machine.group_machine import GroupMachine
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.port import ParameterValue, Transport
+from node_transport.local import LocalTransport
+from node_transport.port import ParameterValue, Transport
 from robot_bridges.backend import RobotBackend
 from robot_bridges.bridge_node import BridgeNode
 

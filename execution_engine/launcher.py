@@ -38,8 +38,8 @@ from typing import IO
 from app_functions.registry import full_catalog
 from core_functions.option_ranges import argument_type
 from execution_engine.app_model import ApplicationError, load_application
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.resources import share_path
+from node_transport.clock import Clock, real_clock, run_with_clock
+from core_functions.resources import share_path
 from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_node_name
 from execution_engine.settings import LaunchSettings
 

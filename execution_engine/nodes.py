@@ -6,7 +6,7 @@
     ros2 run dual_arm_executive group_machine --ros-args -r __node:=left_arm_machine -p group:=left_arm
 
 Both are thin: the objects are the same :class:`ExecutionEngine` and :class:`GroupMachine` the
-embedded deployment builds, on a :class:`~execution_engine.transport.ros.RosTransport` node
+embedded deployment builds, on a :class:`~node_transport.ros.RosTransport` node
 instead of a local one; process start-up and shutdown are :mod:`execution_engine.ros_main`'s.
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ from execution_engine.ros_main import (
     startup_errors,
     warn_undeclared,
 )
-from execution_engine.transport.port import Node, TransportError
+from node_transport.port import Node, TransportError
 
 
 @dataclass(frozen=True)

@@ -28,10 +28,10 @@ from collections.abc import Callable, Iterable
 from typing import IO, Any, TypeVar
 
 from core_functions.printable import printable
-from execution_engine.transport import codec, typed
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import EVENTS
-from execution_engine.transport.wire import ENGINE_EVENTS, ENGINE_STATUS, EngineEvent, EngineStatus, SmStatus, sm_topic
+from node_transport import codec, typed
+from node_transport.port import Node
+from node_transport.qos import EVENTS
+from node_transport.wire import ENGINE_EVENTS, ENGINE_STATUS, EngineEvent, EngineStatus, SmStatus, sm_topic
 
 M = TypeVar("M")
 

@@ -27,9 +27,9 @@ from collections.abc import Awaitable, Callable, Coroutine
 from typing import IO, Any
 
 from execution_engine.engine.operator import CONSOLE_KEYS, console_source
-from execution_engine.transport.msgs import Trigger
-from execution_engine.transport.port import Node, TransportError
-from execution_engine.transport.wire import ENGINE_SERVICES, engine_service
+from node_transport.msgs import Trigger
+from node_transport.port import Node, TransportError
+from node_transport.wire import ENGINE_SERVICES, engine_service
 
 try:  # POSIX terminals; elsewhere the console reads lines
     import termios

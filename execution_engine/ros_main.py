@@ -25,10 +25,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
 
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport.port import Node, RosArgumentsError, TransportError
-from execution_engine.transport.ros import RosTransport  # rclpy itself is imported only when one starts
-from execution_engine.transport.selection import dds_transport, split_transport
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport.port import Node, RosArgumentsError, TransportError
+from node_transport.ros import RosTransport  # rclpy itself is imported only when one starts
+from node_transport.selection import dds_transport, split_transport
 
 log = logging.getLogger(__name__)
 

@@ -10,7 +10,7 @@ calls the engine's start service: a cell launched with ``autostart:=false`` wait
 
 The transport is made by a *connect* coroutine on the session's own loop and thread (a real
 clock): :func:`ros_connect` for a ROS graph; anything that returns a
-:class:`~execution_engine.transport.port.Transport` works the same (the tests attach to a cell on
+:class:`~node_transport.port.Transport` works the same (the tests attach to a cell on
 the in-process transport this way).
 """
 from __future__ import annotations
@@ -23,13 +23,13 @@ from typing import Any
 
 from core_functions.robots import RobotModel
 from execution_engine.app_model import Application
-from execution_engine.clock import Clock, real_clock, run_with_clock
+from node_transport.clock import Clock, real_clock, run_with_clock
 from execution_engine.observers import TraceWriter
-from execution_engine.transport.msgs import Bool, Trigger
-from execution_engine.transport.port import Transport, TransportError
-from execution_engine.transport.qos import LATCHED
-from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.wire import ENGINE_SERVICES, SAFETY_STOP, engine_service
+from node_transport.msgs import Bool, Trigger
+from node_transport.port import Transport, TransportError
+from node_transport.qos import LATCHED
+from node_transport.ros import RosTransport
+from node_transport.wire import ENGINE_SERVICES, SAFETY_STOP, engine_service
 from operator_station.feed import Feed
 from operator_station.session import FeedStream, observe, publish_safety
 

@@ -45,7 +45,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from core_functions.catalog import Catalog
 from execution_engine.app_model.document import AppDocument, DocumentError, read_document
-from execution_engine.transport.wire import ENGINE_SERVICES
+from node_transport.wire import ENGINE_SERVICES
 from operator_station import builder
 from operator_station.access import Access
 from operator_station.feed import Feed

@@ -18,7 +18,7 @@ keep-alive connections closed after 5 s; ``X-Forwarded-*`` headers are not belie
 is in front of a station), so the log's client addresses are the peers'.  uvicorn's own log goes
 through the command's console like every other record (no handlers of uvicorn's): a warning it
 repeats -- a scanner's invalid requests -- is one counted line a second
-(:mod:`execution_engine.console_log`), not one line per request.
+(:mod:`node_transport.console_log`), not one line per request.
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from typing import Any
 
 import uvicorn
 
-from execution_engine.clock import Clock, real_clock
+from node_transport.clock import Clock, real_clock
 
 log = logging.getLogger(__name__)
 

@@ -21,7 +21,7 @@ from typing import IO, Any
 from core_functions.robots import RobotModel
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
-from execution_engine.clock import Clock, run_with_clock
+from node_transport.clock import Clock, run_with_clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.dry_run.report import DryRunReport
 from execution_engine.dry_run.runner import DryRunError, dry_run
@@ -32,11 +32,11 @@ from execution_engine.observers import RunObserver, TraceWriter
 from execution_engine.output_files import FilePlan, Output, Refused, WriteFailure
 from execution_engine.run_checks import app_inputs, run_files
 from execution_engine.settings import RunSettings
-from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import Bool, JointState
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import LATCHED, SENSOR
-from execution_engine.transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
+from node_transport import codec, typed
+from node_transport.msgs import Bool, JointState
+from node_transport.port import Node
+from node_transport.qos import LATCHED, SENSOR
+from node_transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
 from operator_station.feed import Feed
 from robot_bridges import registry

@@ -30,12 +30,12 @@ from core_functions.robots import RobotModel
 
 # FaultKind is defined with the wire messages: it travels in the bridge's error feedback and on
 # to the engine, which decides from it alone whether a second try can succeed.
-from execution_engine.transport.wire import FaultKind
+from node_transport.wire import FaultKind
 
 __all__ = ["BackendOptions", "BridgeError", "FaultKind", "RobotBackend"]
 
 if TYPE_CHECKING:  # the cell snapshot is only a parameter type here
-    from execution_engine.transport.wire import CellSnapshot
+    from node_transport.wire import CellSnapshot
 
 
 class BridgeError(Exception):

@@ -24,13 +24,13 @@ from collections import OrderedDict
 from typing import Any
 
 from core_functions.primitives import PrimitiveResult, describe
-from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion
-from execution_engine.transport.bounded import declare_bounded
-from execution_engine.transport.port import Node, Publisher
-from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
-from execution_engine.transport.qos import JOINT_STATES as JOINT_STATES_QOS
-from execution_engine.transport.wire import (
+from node_transport import codec, typed
+from node_transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion
+from node_transport.bounded import declare_bounded
+from node_transport.port import Node, Publisher
+from node_transport.qos import COMMANDS, LATCHED, SENSOR
+from node_transport.qos import JOINT_STATES as JOINT_STATES_QOS
+from node_transport.wire import (
     ENGINE_CELL,
     JOINT_STATES,
     BridgeCommand,

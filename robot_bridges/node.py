@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
-from execution_engine.clock import Clock, FollowingClock, scaled_clock
+from node_transport.clock import Clock, FollowingClock, scaled_clock
 from execution_engine.ros_main import (
     ExitCode,
     Outcome,
@@ -30,10 +30,10 @@ from execution_engine.ros_main import (
     startup_errors,
     warn_undeclared,
 )
-from execution_engine.transport.msgs import ClockMessage, Time
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import CLOCK
-from execution_engine.transport.wire import CLOCK_TOPIC
+from node_transport.msgs import ClockMessage, Time
+from node_transport.port import Node
+from node_transport.qos import CLOCK
+from node_transport.wire import CLOCK_TOPIC
 from robot_bridges.backend import BackendOptions, BridgeError
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.registry import create_backend

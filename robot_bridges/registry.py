@@ -8,7 +8,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Awaitable, Callable
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions, RobotBackend
 
 BACKENDS: dict[str, str] = {

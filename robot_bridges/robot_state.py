@@ -17,10 +17,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from execution_engine.transport.msgs import String, TFMessage, Time
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import ROBOT_DESCRIPTION, TF, TF_STATIC
-from execution_engine.transport.wire import ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
+from node_transport.msgs import String, TFMessage, Time
+from node_transport.port import Node
+from node_transport.qos import ROBOT_DESCRIPTION, TF, TF_STATIC
+from node_transport.wire import ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 
 if TYPE_CHECKING:
     from core_functions.urdf_tree import UrdfTree
@@ -31,7 +31,7 @@ class RobotStatePublisher:
     """Publishes one robot's URDF and link transforms through ``node``."""
 
     def __init__(self, node: Node, urdf: str) -> None:
-        from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only for a robot with a URDF
+        from node_transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only for a robot with a URDF
 
         self.node = node
         self.links = LinkTransforms(urdf)

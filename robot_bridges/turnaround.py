@@ -23,11 +23,11 @@ import asyncio
 from collections.abc import Callable, Collection
 from typing import Any
 
-from execution_engine.clock import PacedLoop
-from execution_engine.transport import typed
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import COMMANDS, EVENTS
-from execution_engine.transport.wire import ENGINE_EVENTS, sm_topic
+from node_transport.clock import PacedLoop
+from node_transport import typed
+from node_transport.port import Node
+from node_transport.qos import COMMANDS, EVENTS
+from node_transport.wire import ENGINE_EVENTS, sm_topic
 
 #: The longest a group's turnaround is held, in wall seconds: well above a machine's answer on a
 #: busy computer (a few milliseconds; 100 ms at worst when it plans a long path), short enough that

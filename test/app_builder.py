@@ -10,13 +10,13 @@ from scripted_backend import ScriptedBackend
 
 from core_functions.robots import NEXTAGE_OPEN, RobotModel
 from execution_engine.app_model.model import Application, Call, ErrorPolicy, Operation
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.engine.report import RunReport
-from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import Trigger
-from execution_engine.transport.qos import EVENTS
-from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus, SmStatus, engine_service, sm_topic
+from node_transport import codec, typed
+from node_transport.msgs import Trigger
+from node_transport.qos import EVENTS
+from node_transport.wire import ENGINE_STATUS, EngineStatus, SmStatus, engine_service, sm_topic
 
 OpSpec = Mapping[str, Sequence[str]]  # group -> (function, *params)
 

@@ -9,7 +9,7 @@ import pytest
 from dds_domain import domain_env
 from hypothesis import HealthCheck, settings
 
-from execution_engine.clock import Clock, run_with_clock, simulated_clock
+from node_transport.clock import Clock, run_with_clock, simulated_clock
 
 T = TypeVar("T")
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The packages of the project; ``test`` holds top-level modules (helpers and tests).
-PACKAGES = ("execution_engine", "core_functions", "app_functions", "robot_bridges", "operator_station")
+PACKAGES = ("core_functions", "node_transport", "app_functions", "execution_engine", "robot_bridges", "operator_station")
 TESTS = "test"
 #: A function-level import says why it is not at the top: the library is optional or slow to load.
 REASON = re.compile(r"\b(optional|slow)\b", re.IGNORECASE)
@@ -37,7 +37,7 @@ REASON = re.compile(r"\b(optional|slow)\b", re.IGNORECASE)
 HEAVY_MODULES = {
     "operator_station.server": "starlette",  # optional: pip extra 'studio'
     "operator_station.serving": "uvicorn",  # optional: pip extra 'studio'
-    "execution_engine.transport.link_transforms": "pinocchio",  # slow to load (0.1 s): the recorder's encoder, bridges without a URDF
+    "node_transport.link_transforms": "pinocchio",  # slow to load (0.1 s): the recorder's encoder, bridges without a URDF
     "execution_engine.timeline_plot": "matplotlib",  # slow to load (0.4 s): report draws only when asked
 }
 
@@ -191,7 +191,7 @@ class _Visitor(ast.NodeVisitor):
                 self._add(node, module, alias.name)
 
     def _module_of(self, node: ast.expr) -> str | None:
-        """The project module an expression such as ``codec`` or ``execution_engine.transport.codec`` names."""
+        """The project module an expression such as ``codec`` or ``node_transport.codec`` names."""
         if isinstance(node, ast.Name):
             dotted = self.bound.get(node.id)
         elif isinstance(node, ast.Attribute):

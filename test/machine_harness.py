@@ -14,13 +14,13 @@ from scripted_backend import ScriptedBackend
 from core_functions.cell_index import CellFrame
 from core_functions.geometry import Pose
 from core_functions.robots import NEXTAGE_OPEN, RobotModel
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.machine.group_machine import GroupMachine
-from execution_engine.transport import codec, typed
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import Trigger, TriggerResponse
-from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
-from execution_engine.transport.wire import ENGINE_CELL, CellSnapshot, SmRequest, SmResult, SmStatus, sm_service, sm_topic
+from node_transport import codec, typed
+from node_transport.local import LocalTransport
+from node_transport.msgs import Trigger, TriggerResponse
+from node_transport.qos import COMMANDS, EVENTS, LATCHED
+from node_transport.wire import ENGINE_CELL, CellSnapshot, SmRequest, SmResult, SmStatus, sm_service, sm_topic
 from robot_bridges.bridge_node import BridgeNode
 
 CELL = CellSnapshot(

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplication, SendGoal
-from execution_engine.transport.action import UUID, CancelGoal, CancelGoalRequest, GoalInfo, GoalStatus, GoalStatusArray, STATUS_QOS
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import COMMANDS
+from node_transport.action import UUID, CancelGoal, CancelGoalRequest, GoalInfo, GoalStatus, GoalStatusArray, STATUS_QOS
+from node_transport.port import Node
+from node_transport.qos import COMMANDS
 
 ACTIVE = (GoalStatus.STATUS_ACCEPTED, GoalStatus.STATUS_EXECUTING)
 TERMINAL = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)

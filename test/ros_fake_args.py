@@ -27,7 +27,7 @@ from typing import Any
 
 import yaml
 
-from execution_engine.transport.ros_args import ros_argument_tokens
+from node_transport.ros_args import ros_argument_tokens
 
 
 class RCLError(RuntimeError):

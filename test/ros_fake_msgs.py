@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from execution_engine.transport.idl import interface_roots
-from execution_engine.transport.mirrors import registry
+from node_transport.idl import interface_roots
+from node_transport.mirrors import registry
 
 # ================================================================================= messages
 _DEFAULTS: dict[str, Callable[[], Any]] = {
@@ -315,7 +315,7 @@ for _action in INTERFACE_MODULES["dual_arm_executive_interfaces.action"].values(
 
 
 #: Where rosidl's Python class of an action keeps each part rcl_action puts on the wire (written out here, not
-#: taken from execution_engine.transport.ros_convert, so that the fake checks the transport's own table).
+#: taken from node_transport.ros_convert, so that the fake checks the transport's own table).
 ACTION_LAYOUT: dict[str, tuple[str, ...]] = {
     "Goal": ("Goal",),
     "Result": ("Result",),

@@ -28,7 +28,7 @@ from core_functions.primitives import (
     VisionResult,
 )
 from core_functions.robots import RobotModel
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 
 STEP = 0.01

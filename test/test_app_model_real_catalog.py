@@ -8,7 +8,7 @@ import pytest
 
 from app_functions.registry import full_catalog
 from execution_engine.app_model import load_application, load_cell, validate_application
-from execution_engine.resources import share_path
+from core_functions.resources import share_path
 
 CATALOG = full_catalog()
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from core_functions.robots import ROBOTS
-from execution_engine import resources
+from core_functions import resources
 from execution_engine.app_model.reader import GROUP_TAGS
 from execution_engine.app_model.schema import load_schema
 

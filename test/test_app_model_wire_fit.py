@@ -20,8 +20,8 @@ from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.app_model import Cell, Element, Frame, JointPose, load_application, validate_application, validate_cell
 from execution_engine.app_model import wire_fit
 from execution_engine.app_model.cell import read_cell_log
-from execution_engine.transport import codec
-from execution_engine.transport.wire import CellSnapshot
+from node_transport import codec
+from node_transport.wire import CellSnapshot
 
 CATALOG = small_catalog()
 TOO_LARGE = "is too large to run: its model with {frames} frames, 0 elements and 0 joint poses is over 4,194,304 bytes as a message"
@@ -40,7 +40,7 @@ def test_a_31000_frame_cell_is_refused_by_validate_as_every_machine_would(tmp_pa
     path.write_text(many_frames(31_000))
     assert 2.5e6 < path.stat().st_size < 3.2e6  # the 2.8 MB of the report
     assert [str(d) for d in validate_cell(path)] == [f"{path}:2:1: cell file {path} {TOO_LARGE.format(frames='31,000')}"
-                                                     " (the transport's limit, execution_engine.transport.codec.MAX_MESSAGE_BYTES), and every "
+                                                     " (the transport's limit, node_transport.codec.MAX_MESSAGE_BYTES), and every "
                                                      "group machine would refuse it; split the cell or leave out what this application does not use"]
     cell, _ = read_cell_log(path, fits=False)
     assert cell is not None
@@ -67,7 +67,7 @@ def test_an_application_with_a_cell_too_large_says_so_at_its_cell_and_still_chec
     path.write_text(text)
     found = [str(d) for d in validate_application(path, CATALOG)]
     assert found[0] == at(path, text, 'cell="', f"cell file {tmp_path / 'cells' / 'rivet_cell.xml'} {TOO_LARGE.format(frames='31,000')}"
-                          " (the transport's limit, execution_engine.transport.codec.MAX_MESSAGE_BYTES), and every group machine "
+                          " (the transport's limit, node_transport.codec.MAX_MESSAGE_BYTES), and every group machine "
                           "would refuse it; split the cell or leave out what this application does not use")
     assert any("unknown frame 'hole_x' in the cell model" in line for line in found)
 
@@ -121,7 +121,7 @@ def test_a_request_over_the_limit_is_refused_at_its_call(tmp_path: Path, monkeyp
     monkeypatch.setattr(codec, "MAX_MESSAGE_BYTES", 3000)  # what the check reads: the codec's own number
     found = [str(d) for d in validate_application(path, talk)]
     assert len(found) == 1 and found[0].startswith(at(path, text, "<function", "the request for say on left_arm in operation 1 would be "))
-    assert found[0].endswith("bytes, over the transport's limit of 3,000 (execution_engine.transport.codec.MAX_MESSAGE_BYTES); shorten its params")
+    assert found[0].endswith("bytes, over the transport's limit of 3,000 (node_transport.codec.MAX_MESSAGE_BYTES); shorten its params")
 
 
 def test_requests_far_below_the_limit_are_not_encoded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

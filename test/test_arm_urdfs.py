@@ -18,8 +18,8 @@ from hypothesis import strategies as st
 
 from core_functions.geometry import Pose
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, RobotModel
-from execution_engine.clock import Clock
-from execution_engine.transport.transforms import compose_to_root
+from node_transport.clock import Clock
+from node_transport.transforms import compose_to_root
 from robot_bridges.kuka_rsi import kinematics as kuka
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend
 from robot_bridges.vplus import kinematics as viper

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from execution_engine.clock import simulated_clock
+from node_transport.clock import simulated_clock
 from execution_engine.machine.bridge_watch import BridgeWatch
-from execution_engine.transport.local import LocalTransport
+from node_transport.local import LocalTransport
 
 
 class Feedback:

@@ -18,16 +18,16 @@ from app_functions.registry import full_catalog
 from core_functions.geometry import Pose
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.app_model import load_application
-from execution_engine.clock import Clock, run_with_clock, simulated_clock
+from node_transport.clock import Clock, run_with_clock, simulated_clock
 from execution_engine.deployment import deploy_local
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
-from execution_engine.transport import typed
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import TFMessage, Time
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import LATCHED, TF, TF_STATIC
-from execution_engine.transport.transforms import compose_to_root, tree_of
-from execution_engine.transport.wire import ENGINE_CELL, TF_STATIC_TOPIC, TF_TOPIC, CellSnapshot, LocatedFrames, sm_topic
+from node_transport import typed
+from node_transport.local import LocalTransport
+from node_transport.msgs import TFMessage, Time
+from node_transport.port import Node
+from node_transport.qos import LATCHED, TF, TF_STATIC
+from node_transport.transforms import compose_to_root, tree_of
+from node_transport.wire import ENGINE_CELL, TF_STATIC_TOPIC, TF_TOPIC, CellSnapshot, LocatedFrames, sm_topic
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 from core_functions.urdf_tree import UrdfTree

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock, VirtualTimeLoop, run_with_clock, scaled_clock, simulated_clock
+from node_transport.clock import Clock, VirtualTimeLoop, run_with_clock, scaled_clock, simulated_clock
 
 
 def test_simulated_clock_jumps_over_waits_and_orders_timers(run_sim: Any) -> None:

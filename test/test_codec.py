@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 from core_functions.geometry import Pose
 from core_functions.primitives import Dwell, EndEffector, MasterSlaveMove, MotionResult, MoveCartesian, MoveJoints, SetSpeed, Vision, VisionResult
-from execution_engine.transport import codec
-from execution_engine.transport.wire import (
+from node_transport import codec
+from node_transport.wire import (
     BridgeCommand,
     BridgeFeedback,
     CellSnapshot,

@@ -15,8 +15,8 @@ import pytest
 
 from execution_engine import cli
 from execution_engine.cli import main
-from execution_engine.console_log import FORMAT, AggregatingHandler, ConsoleLog, kind_of
-from execution_engine.engine.wall_clock import ManualWallClock
+from node_transport.console_log import FORMAT, AggregatingHandler, ConsoleLog, kind_of
+from node_transport.wall_clock import ManualWallClock
 
 LATE = "%s: the controller counts %d late replies (IPOC %d)"
 

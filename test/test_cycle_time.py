@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from app_builder import Cell, make_app
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 
 OPS = [{"left_arm": ("move_to_joint_pose", "initial"), "right_arm": ("move_to_joint_pose", "initial")}]
 

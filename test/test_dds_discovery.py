@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from execution_engine.transport import dds_graph
-from execution_engine.transport.port import TransportError
+from node_transport import dds_graph
+from node_transport.port import TransportError
 
 ROOT = Path(__file__).resolve().parent.parent
 BOUND = 10.0  # seconds the late joiner may take to find the cell on a loaded machine
@@ -31,10 +31,10 @@ RMW_LOCALHOST = (
 
 CELL = """
 import asyncio, sys
-from execution_engine.clock import real_clock, run_with_clock
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.msgs import String
-from execution_engine.transport.qos import COMMANDS
+from node_transport.clock import real_clock, run_with_clock
+from node_transport.dds import DdsTransport
+from node_transport.msgs import String
+from node_transport.qos import COMMANDS
 
 async def main(clock):
     transport = DdsTransport(clock)
@@ -58,9 +58,9 @@ from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
-from execution_engine.transport import dds_graph
-from execution_engine.transport.idl import InterfaceRegistry
-from execution_engine.transport.qos import COMMANDS
+from node_transport import dds_graph
+from node_transport.idl import InterfaceRegistry
+from node_transport.qos import COMMANDS
 
 domain_id, config, bound = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
 domain = Domain(domain_id, config)  # kept: the participant joins this configured domain

@@ -13,11 +13,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from execution_engine.engine.run_action import RunApplicationGoal, SendGoal
-from execution_engine.transport import mirrors, msgs, wire
-from execution_engine.transport.action import UUID
-from execution_engine.transport.dds_convert import DdsConverter
-from execution_engine.transport.idl import InterfaceError, InterfaceRegistry, dds_type_name, parse_message
-from execution_engine.transport.idl_hash import type_hash
+from node_transport import mirrors, msgs, wire
+from node_transport.action import UUID
+from node_transport.dds_convert import DdsConverter
+from node_transport.idl import InterfaceError, InterfaceRegistry, dds_type_name, parse_message
+from node_transport.idl_hash import type_hash
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "interfaces" / "dual_arm_executive_interfaces"

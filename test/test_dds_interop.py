@@ -19,11 +19,11 @@ from typing import Any
 import pytest
 from dds_domain import domain_env
 
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport import dds_graph
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.msgs import Trigger, TriggerResponse
-from execution_engine.transport.port import poll_until
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport import dds_graph
+from node_transport.dds import DdsTransport
+from node_transport.msgs import Trigger, TriggerResponse
+from node_transport.port import poll_until
 
 BOUND = 10.0  # seconds any one condition may take on a loaded machine
 XCDR1_LE = b"\x00\x01"  # the encapsulation kind RustDDS and rmw write: plain CDR, little endian
@@ -98,10 +98,10 @@ def test_a_client_without_clientid_gets_its_header_echoed_even_when_its_reply_re
 
 CHURN = """
 import asyncio, sys
-from execution_engine.clock import real_clock, run_with_clock
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.msgs import String
-from execution_engine.transport.qos import COMMANDS
+from node_transport.clock import real_clock, run_with_clock
+from node_transport.dds import DdsTransport
+from node_transport.msgs import String
+from node_transport.qos import COMMANDS
 
 async def main(clock):
     transport = DdsTransport(clock)

@@ -19,15 +19,15 @@ import pytest
 
 from crossing_cell import CROSSING, WAIT_OPERATION, CollisionWatch, start_nextage_cell
 from dds_domain import domain_env
-from execution_engine.clock import Clock, real_clock, run_with_clock
+from node_transport.clock import Clock, real_clock, run_with_clock
 from execution_engine.engine.run_action import ACTION_NAME, RunApplicationGoal
-from execution_engine.transport import dds_graph
-from execution_engine.transport.action import CancelGoalRequest, GoalInfo, GoalStatus
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.msgs import JointState
-from execution_engine.transport.port import poll_until
-from execution_engine.transport.qos import SENSOR
-from execution_engine.transport.wire import JOINT_STATES
+from node_transport import dds_graph
+from node_transport.action import CancelGoalRequest, GoalInfo, GoalStatus
+from node_transport.dds import DdsTransport
+from node_transport.msgs import JointState
+from node_transport.port import poll_until
+from node_transport.qos import SENSOR
+from node_transport.wire import JOINT_STATES
 from rclpy_like import RclpyLikeActionClient
 
 BOUND = 20.0  # seconds any one step may take on a loaded machine

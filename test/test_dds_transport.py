@@ -17,14 +17,14 @@ from typing import Any
 import pytest
 from dds_domain import domain_env
 
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport import dds_graph
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.dds_args import parse_ros_arguments, user_arguments
-from execution_engine.transport.msgs import Header, JointState, String, Time, Trigger, TriggerResponse
-from execution_engine.transport.port import RosArgumentsError, ServiceUnavailable, TransportError, poll_until
-from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
-from execution_engine.transport.selection import split_transport
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport import dds_graph
+from node_transport.dds import DdsTransport
+from node_transport.dds_args import parse_ros_arguments, user_arguments
+from node_transport.msgs import Header, JointState, String, Time, Trigger, TriggerResponse
+from node_transport.port import RosArgumentsError, ServiceUnavailable, TransportError, poll_until
+from node_transport.qos import COMMANDS, LATCHED, SENSOR
+from node_transport.selection import split_transport
 
 ROOT = Path(__file__).resolve().parent.parent
 BOUND = 10.0  # seconds any one condition may take on a loaded machine
@@ -177,10 +177,10 @@ def test_garbage_on_a_topic_is_counted_and_the_topic_keeps_working(env: dict[str
 
 PUBLISHER = """
 import asyncio, sys
-from execution_engine.clock import real_clock, run_with_clock
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.msgs import String
-from execution_engine.transport.qos import COMMANDS
+from node_transport.clock import real_clock, run_with_clock
+from node_transport.dds import DdsTransport
+from node_transport.msgs import String
+from node_transport.qos import COMMANDS
 
 async def main(clock):
     transport = DdsTransport(clock)

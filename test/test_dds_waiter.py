@@ -10,8 +10,8 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport.dds import DdsTransport
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport.dds import DdsTransport
 
 BOUND = 10.0
 

@@ -22,7 +22,7 @@ from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.app_model import load_application
 from execution_engine.app_model.diagnostics import MAX_DIAGNOSTICS
 from execution_engine.cli import main
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.deployment import deploy_local
 from execution_engine.dry_run import dry_run
 from execution_engine.dry_run.report import DryRunReport, Finding

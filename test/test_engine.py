@@ -8,11 +8,11 @@ import pytest
 from app_builder import Cell, make_app
 
 from execution_engine.app_model.model import ErrorPolicy
-from execution_engine.clock import Clock
-from execution_engine.transport import typed
-from execution_engine.transport.msgs import Bool
-from execution_engine.transport.qos import LATCHED
-from execution_engine.transport.wire import ENGINE_STATUS, SAFETY_STOP
+from node_transport.clock import Clock
+from node_transport import typed
+from node_transport.msgs import Bool
+from node_transport.qos import LATCHED
+from node_transport.wire import ENGINE_STATUS, SAFETY_STOP
 from robot_bridges.backend import FaultKind
 
 THREE_OPS = [

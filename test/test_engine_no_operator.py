@@ -13,9 +13,9 @@ from typing import Any
 from app_builder import Cell, make_app
 
 from execution_engine.app_model.model import ALARM_TIMEOUT, ErrorPolicy
-from execution_engine.clock import Clock
-from execution_engine.engine.wall_clock import ManualWallClock
-from execution_engine.transport.wire import FaultKind
+from node_transport.clock import Clock
+from node_transport.wall_clock import ManualWallClock
+from node_transport.wire import FaultKind
 
 OPS = [{"left_arm": ("move_to_joint_pose", "initial"), "right_arm": ("gripper_open",)}, {"left_arm": ("gripper_close",)}]
 

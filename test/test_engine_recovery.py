@@ -18,9 +18,9 @@ from app_functions.registry import full_catalog
 from core_functions.primitives import MoveJoints, MoveRelative, SetSpeed
 from execution_engine.app_model import load_application, validate_application
 from execution_engine.app_model.model import ErrorPolicy
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.engine.faults import RETRY_TABLE, verdict
-from execution_engine.transport.wire import FaultKind
+from node_transport.wire import FaultKind
 
 ARMS_BUSY = [{"left_arm": ("move_to_joint_pose", "initial"), "right_arm": ("gripper_open",)}, {"left_arm": ("gripper_close",)}]
 

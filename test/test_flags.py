@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from app_functions.registry import full_catalog
 from execution_engine.app_model import load_application
-from execution_engine.clock import run_with_clock, simulated_clock
+from node_transport.clock import run_with_clock, simulated_clock
 from execution_engine.deployment import deploy_local
 from execution_engine.timeline import build_timeline
 from execution_engine.timeline_plot import plot_timeline

@@ -22,7 +22,7 @@ from test_codec import MESSAGES, POSE, json_values
 
 from core_functions import primitives as prim
 from core_functions.geometry import Pose
-from execution_engine.transport import codec, json_schema, wire
+from node_transport import codec, json_schema, wire
 
 SCHEMA_DIR = Path(__file__).resolve().parents[1] / "schema" / "json"
 TYPES = json_schema.message_types()

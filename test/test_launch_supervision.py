@@ -12,7 +12,7 @@ import pytest
 from app_builder import Cell, make_app
 
 from execution_engine.cli import main
-from execution_engine.clock import Clock, real_clock, run_with_clock
+from node_transport.clock import Clock, real_clock, run_with_clock
 from execution_engine.engine.group_link import WATCH_PERIOD
 from execution_engine.machine.bridge_watch import WATCH_PERIOD as BRIDGE_WATCH_PERIOD
 from execution_engine.launcher import EXIT_NODE_DIED, NodeSpec, cell_nodes, launch, select

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("execution_engine", "core_functions", "app_functions", "robot_bridges", "operator_station")
+PACKAGES = ("execution_engine", "core_functions", "node_transport", "app_functions", "robot_bridges", "operator_station")
 # Wiring may import back ends; nothing else may.
 WIRING = {"execution_engine/cli.py", "execution_engine/deployment.py", "execution_engine/nodes.py", "execution_engine/ros_main.py"}
 # The command line's settings name the back end's options (docs/architecture.md).
@@ -16,7 +16,7 @@ WIRING |= {"execution_engine/settings.py"}
 WIRING |= {f"execution_engine/dry_run/{m}.py" for m in ("backend", "check", "runner", "simulators", "collisions", "placement", "cell_start")}
 # The operator station runs the engine and a back end in-process (docs/studio.md): wiring too.
 WIRING |= {"operator_station/session.py"}
-ROS_ADAPTERS = {"execution_engine/transport/ros.py"}
+ROS_ADAPTERS = {"node_transport/ros.py"}
 
 
 def imports() -> list[tuple[str, str]]:
@@ -59,7 +59,7 @@ def test_bridges_use_only_the_transport_port_and_the_clock_of_the_engine() -> No
         for f, m in IMPORTS
         if f.startswith("robot_bridges/")
         and m.startswith("execution_engine")
-        and not (m.startswith("execution_engine.transport") or m == "execution_engine.clock")
+        and not (m.startswith("node_transport") or m == "node_transport.clock")
         and not f.endswith("/node.py")
         and not (m.startswith("execution_engine.app_model") and f.endswith("/node.py"))
     ]

@@ -23,7 +23,7 @@ from core_functions.geometry import Pose
 from core_functions.primitives import ExecuteTrajectory, MoveJoints, RecordTrajectory, SetSpeed, TrajectoryResult
 from core_functions.robots import ADEPT_VIPER_S850, NEXTAGE_OPEN
 from core_functions.trajectory_store import TrajectoryStore
-from execution_engine.clock import Clock, run_with_clock, simulated_clock
+from node_transport.clock import Clock, run_with_clock, simulated_clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.nextage_sim.backend import HAND_TOOL, NextageSimBackend
 from robot_bridges.vplus.backend import VPlusBackend

@@ -10,11 +10,11 @@ from machine_harness import CELL, Harness
 from scripted_backend import VISION_OFFSET
 
 from core_functions.primitives import ExecuteTrajectory, MasterSlaveMove, MoveCartesian
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, TABLE_2
-from execution_engine.transport import typed
-from execution_engine.transport.qos import COMMANDS, LATCHED
-from execution_engine.transport.wire import sm_topic
+from node_transport import typed
+from node_transport.qos import COMMANDS, LATCHED
+from node_transport.wire import sm_topic
 
 
 def test_structure_and_state_are_latched_for_late_viewers(run_sim: Any) -> None:

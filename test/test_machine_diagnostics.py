@@ -5,10 +5,10 @@ from typing import Any
 
 from machine_harness import Harness
 
-from execution_engine.clock import Clock
-from execution_engine.transport.msgs import DiagnosticArray, DiagnosticStatus
-from execution_engine.transport.qos import DIAGNOSTICS
-from execution_engine.transport.wire import DIAGNOSTICS_TOPIC
+from node_transport.clock import Clock
+from node_transport.msgs import DiagnosticArray, DiagnosticStatus
+from node_transport.qos import DIAGNOSTICS
+from node_transport.wire import DIAGNOSTICS_TOPIC
 from robot_bridges.backend import FaultKind
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR

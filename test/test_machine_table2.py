@@ -13,7 +13,7 @@ import pytest
 from machine_harness import Harness
 
 from core_functions.primitives import TrajectoryResult, WorkState
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.machine.table import (
     ERROR_HANDLING,
     FINISH,

@@ -28,9 +28,9 @@ from core_functions.primitives import (
     Vision,
 )
 from core_functions.robots import NEXTAGE_OPEN
-from execution_engine.clock import Clock, run_with_clock, scaled_clock, simulated_clock
-from execution_engine.transport import codec
-from execution_engine.transport.wire import CellFrame, CellSnapshot
+from node_transport.clock import Clock, run_with_clock, scaled_clock, simulated_clock
+from node_transport import codec
+from node_transport.wire import CellFrame, CellSnapshot
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.nextage_sim.backend import NextageSimBackend, create
 

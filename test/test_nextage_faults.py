@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from core_functions.primitives import Dwell, FullBodyMove, MoveCartesian, MoveJoints, Vision
 from core_functions.robots import NEXTAGE_OPEN
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.nextage_sim.backend import NextageSimBackend
 from robot_bridges.nextage_sim.faults import FaultSpec, parse_fault

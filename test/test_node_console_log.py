@@ -17,12 +17,12 @@ import pytest
 import ros_fake_logging
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
-import execution_engine.console_log as console_log
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.engine.wall_clock import ManualWallClock
+import node_transport.console_log as console_log
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport.wall_clock import ManualWallClock
 from execution_engine.launcher import NodeSpec, launch
 from execution_engine.ros_main import ExitCode, Outcome, run_node
-from execution_engine.transport.port import Node
+from node_transport.port import Node
 
 #: A node process over DDS whose body floods one warning (the count in it changing) for FLOOD wall
 #: seconds, then says how many it logged and in how long, and ends (the launch ends with it).

@@ -26,9 +26,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from execution_engine.cli import main
-from execution_engine.clock import real_clock
+from node_transport.clock import real_clock
 from execution_engine.operator_console import MAX_LINE, PROMPT_KEYS, PROMPT_LINES, KeyDecoder, OperatorConsole
-from execution_engine.transport.local import LocalTransport
+from node_transport.local import LocalTransport
 
 ROOT = Path(__file__).resolve().parents[1]
 BOUND = 10.0  # s: the longest any wait below may take (each ends on the event it waits for)
@@ -116,8 +116,8 @@ def test_the_terminal_is_given_back_when_the_run_ends_in_an_exception(terminal: 
     child = (
         "import asyncio, sys\n"
         "from execution_engine.operator_console import OperatorConsole\n"
-        "from execution_engine.transport.local import LocalTransport\n"
-        "from execution_engine.clock import real_clock\n"
+        "from node_transport.local import LocalTransport\n"
+        "from node_transport.clock import real_clock\n"
         "async def main():\n"
         "    node = LocalTransport(real_clock().bind(asyncio.get_running_loop())).create_node('c')\n"
         "    console = OperatorConsole(node, sys.stdout, None)\n"

@@ -15,11 +15,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from core_functions.option_ranges import OPTIONS, SETTINGS, Range, RangeError, bounds, table
-from execution_engine.clock import Clock, MAX_SPEED, MIN_SPEED, run_with_clock, simulated_clock
+from node_transport.clock import Clock, MAX_SPEED, MIN_SPEED, run_with_clock, simulated_clock
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.machine.group_machine import GroupMachine
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.port import TransportError
+from node_transport.local import LocalTransport
+from node_transport.port import TransportError
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.camera.ros_camera import attach_cameras
 from robot_bridges.nextage_sim.backend import NextageSimBackend

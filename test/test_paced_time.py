@@ -20,7 +20,7 @@ from scripted_backend import ScriptedBackend
 from app_functions.registry import full_catalog
 from core_functions.primitives import Primitive, PrimitiveResult
 from execution_engine.app_model import load_application
-from execution_engine.clock import MAX_SPEED, MIN_SPEED, Clock, PacedLoop, run_with_clock, scaled_clock, simulated_clock
+from node_transport.clock import MAX_SPEED, MIN_SPEED, Clock, PacedLoop, run_with_clock, scaled_clock, simulated_clock
 from execution_engine.deployment import deploy_local
 from execution_engine.dry_run.runner import dry_run
 from execution_engine.engine.report import RunReport

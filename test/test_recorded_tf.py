@@ -15,14 +15,14 @@ import numpy as np
 from mcap.reader import make_reader
 
 from core_functions.urdf_tree import UrdfTree
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.recorder.recorder import Recorder
 from execution_engine.recorder.writer import McapSink
-from execution_engine.transport.link_transforms import LinkTransforms
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import Header, JointState
-from execution_engine.transport.qos import SENSOR
-from execution_engine.transport.wire import JOINT_STATES
+from node_transport.link_transforms import LinkTransforms
+from node_transport.local import LocalTransport
+from node_transport.msgs import Header, JointState
+from node_transport.qos import SENSOR
+from node_transport.wire import JOINT_STATES
 from robot_bridges.robot_state import RobotStatePublisher
 
 NEXTAGE_URDF = Path(__file__).resolve().parents[1] / "robot_bridges" / "nextage_sim" / "urdf" / "nextage_open.urdf"

@@ -21,11 +21,11 @@ from execution_engine.recorder.definitions import SEPARATOR, schema_text
 from execution_engine.recorder.reading import Recording, iter_messages, trace_records
 from execution_engine.recorder.recorder import Recorder, reader_qos
 from execution_engine.recorder.writer import McapSink
-from execution_engine.clock import Clock
-from execution_engine.transport import msgs, typed
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.qos import EVENTS, LATCHED, SENSOR, Durability, Reliability
-from execution_engine.transport.wire import EngineEvent, EngineStatus, GroupProgress, SmStatus, SmStructure, TransitionSpec
+from node_transport.clock import Clock
+from node_transport import msgs, typed
+from node_transport.local import LocalTransport
+from node_transport.qos import EVENTS, LATCHED, SENSOR, Durability, Reliability
+from node_transport.wire import EngineEvent, EngineStatus, GroupProgress, SmStatus, SmStructure, TransitionSpec
 
 RIVET = "apps_xml/rivet_installation.xml"
 

@@ -14,8 +14,8 @@ import time
 from mcap.reader import make_reader
 
 from execution_engine.recorder.writer import SYNC_GAP, McapSink
-from execution_engine.transport import msgs
-from execution_engine.transport.qos import EVENTS
+from node_transport import msgs
+from node_transport.qos import EVENTS
 
 
 class Memory(io.BytesIO):

@@ -13,10 +13,10 @@ from execution_engine.recorder.reading import MAGIC
 from execution_engine.recorder.writer import McapSink
 from execution_engine.recorder.safe_read import NotARecording
 from execution_engine.run_report import summarize
-from execution_engine.clock import Clock
-from execution_engine.transport import msgs, typed
-from execution_engine.transport.qos import EVENTS, SENSOR
-from execution_engine.transport.wire import SmStatus
+from node_transport.clock import Clock
+from node_transport import msgs, typed
+from node_transport.qos import EVENTS, SENSOR
+from node_transport.wire import SmStatus
 
 
 def small_recording() -> bytes:

@@ -18,8 +18,8 @@ from execution_engine.recorder.bag_metadata import qos_yaml
 from execution_engine.recorder.encoder import Encoder
 from execution_engine.recorder.reading import Recording, iter_messages
 from execution_engine.recorder.writer import McapSink
-from execution_engine.transport import msgs
-from execution_engine.transport.qos import EVENTS, LATCHED, SENSOR
+from node_transport import msgs
+from node_transport.qos import EVENTS, LATCHED, SENSOR
 
 #: from Jazzy's installed share/<pkg>/msg/<Name>.json (``type_hashes``)
 JAZZY_HASHES = {

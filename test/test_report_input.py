@@ -17,8 +17,8 @@ from execution_engine.recorder.reading import MAGIC, Recording, iter_messages
 from execution_engine.recorder.safe_read import MAX_CHUNK, NotARecording
 from execution_engine.recorder.writer import McapSink
 from execution_engine.run_report import summarize
-from execution_engine.transport import msgs
-from execution_engine.transport.qos import SENSOR
+from node_transport import msgs
+from node_transport.qos import SENSOR
 
 FOUR_GB = 4 * 1024**3
 

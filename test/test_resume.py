@@ -26,8 +26,8 @@ from execution_engine.checkpoint.resume import ResumePlan, sits_out
 from execution_engine.checkpoint.store import CheckpointStore
 from execution_engine.cli import main
 from execution_engine.engine.operator import Flags, decide
-from execution_engine.transport.msgs import Trigger
-from execution_engine.transport.wire import engine_service
+from node_transport.msgs import Trigger
+from node_transport.wire import engine_service
 
 RIVET = "apps_xml/rivet_installation.xml"
 ROOT = Path(__file__).resolve().parent.parent

@@ -19,14 +19,14 @@ from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, MoveCartesian, MoveJoints, MoveRelative, SetSpeed
 from core_functions.robots import ADEPT_VIPER_S850, NEXTAGE_OPEN
 from execution_engine.app_model.model import ErrorPolicy
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.deployment import deploy_local
 from execution_engine.engine.report import RunReport
 from execution_engine.machine.rebase import RelativeGoals, Step
-from execution_engine.transport import typed
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.qos import COMMANDS
-from execution_engine.transport.wire import BridgeCommand, BridgeFeedback, SmRequest, bridge_topic
+from node_transport import typed
+from node_transport.local import LocalTransport
+from node_transport.qos import COMMANDS
+from node_transport.wire import BridgeCommand, BridgeFeedback, SmRequest, bridge_topic
 from robot_bridges.backend import FaultKind, RobotBackend
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.nextage_sim.backend import NextageSimBackend

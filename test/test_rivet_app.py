@@ -19,11 +19,11 @@ from core_functions.geometry import Pose
 from core_functions.primitives import MoveCartesian
 from execution_engine.app_model import load_application
 from execution_engine.cli import main
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.deployment import deploy_local
-from execution_engine.transport import typed
-from execution_engine.transport.msgs import Trigger
-from execution_engine.transport.wire import BridgeCommand, BridgeFeedback, bridge_topic
+from node_transport import typed
+from node_transport.msgs import Trigger
+from node_transport.wire import BridgeCommand, BridgeFeedback, bridge_topic
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 

@@ -23,13 +23,13 @@ from core_functions.geometry import Pose
 from core_functions.primitives import MoveJoints
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN
 from core_functions.urdf_tree import UrdfTree
-from execution_engine.clock import Clock
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import JointState, String, TFMessage, Time
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import ROBOT_DESCRIPTION, SENSOR, TF, TF_STATIC
-from execution_engine.transport.transforms import compose_to_root, tree_of
-from execution_engine.transport.wire import JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
+from node_transport.clock import Clock
+from node_transport.local import LocalTransport
+from node_transport.msgs import JointState, String, TFMessage, Time
+from node_transport.port import Node
+from node_transport.qos import ROBOT_DESCRIPTION, SENSOR, TF, TF_STATIC
+from node_transport.transforms import compose_to_root, tree_of
+from node_transport.wire import JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 from robot_bridges.backend import BackendOptions
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.nextage_sim.backend import NextageSimBackend

@@ -13,9 +13,9 @@ import ros_fakes
 from hypothesis import given
 from hypothesis import strategies as st
 
-from execution_engine.transport import msgs
-from execution_engine.transport.port import TransportError
-from execution_engine.transport.qos import (
+from node_transport import msgs
+from node_transport.port import TransportError
+from node_transport.qos import (
     COMMANDS,
     DIAGNOSTICS,
     EVENTS,
@@ -29,7 +29,7 @@ from execution_engine.transport.qos import (
     QoS,
     Reliability,
 )
-from execution_engine.transport.ros_convert import (
+from node_transport.ros_convert import (
     MessageConverter,
     failure_response,
     import_ros_type,

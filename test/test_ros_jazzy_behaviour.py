@@ -30,15 +30,15 @@ from core_functions.robots import NEXTAGE_OPEN
 from execution_engine import nodes
 from execution_engine.app_model import load_application
 from execution_engine.engine.engine import ExecutionEngine
-from execution_engine.clock import Clock, FollowingClock
+from node_transport.clock import Clock, FollowingClock
 from execution_engine.ros_main import ExitCode, Outcome, machine_node_name, run_node
-from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import ClockMessage, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.port import Node, wait_until_matched
-from execution_engine.transport.qos import CLOCK, COMMANDS, EVENTS, SENSOR
-from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.wire import SmStatus, bridge_topic, sm_topic
+from node_transport import codec, typed
+from node_transport.msgs import ClockMessage, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
+from node_transport.local import LocalTransport
+from node_transport.port import Node, wait_until_matched
+from node_transport.qos import CLOCK, COMMANDS, EVENTS, SENSOR
+from node_transport.ros import RosTransport
+from node_transport.wire import SmStatus, bridge_topic, sm_topic
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.nextage_sim.node import BACKEND, declare_nextage_parameters
 from robot_bridges.nextage_sim.node import main as nextage_main

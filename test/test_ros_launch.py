@@ -39,16 +39,16 @@ from scripted_backend import ScriptedBackend
 from test_ros_transport import run_real
 
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN, RobotModel
-from execution_engine.clock import Clock, FollowingClock
+from node_transport.clock import Clock, FollowingClock
 from execution_engine.deployment import deploy_local
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.machine.group_machine import GroupMachine
 from execution_engine.nodes import declare_engine_parameters
 from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_node_name
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.port import Node
-from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.ros_convert import RCLPY_OWN_PARAMETERS
+from node_transport.local import LocalTransport
+from node_transport.port import Node
+from node_transport.ros import RosTransport
+from node_transport.ros_convert import RCLPY_OWN_PARAMETERS
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.kuka_rsi.node import BACKEND as KUKA_RSI, declare_kuka_parameters
 from robot_bridges.nextage_sim.node import BACKEND as NEXTAGE_SIM, declare_nextage_parameters

@@ -22,11 +22,11 @@ from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine import nodes
-from execution_engine.clock import Clock, real_clock, run_with_clock
+from node_transport.clock import Clock, real_clock, run_with_clock
 from execution_engine.machine.group_machine import GroupMachine
 from execution_engine.ros_main import ExitCode, Outcome, StartupError, machine_node_name, run_node
-from execution_engine.transport.port import Node
-from execution_engine.transport.ros import RosTransport
+from node_transport.port import Node
+from node_transport.ros import RosTransport
 from robot_bridges.nextage_sim.node import declare_nextage_parameters
 from robot_bridges.nextage_sim.node import main as nextage_main
 from robot_bridges.node import run_bridge

@@ -13,8 +13,8 @@ import pytest
 import ros_fake_msgs
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport.msgs import (
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport.msgs import (
     DiagnosticArray,
     DiagnosticStatus,
     Header,
@@ -26,10 +26,10 @@ from execution_engine.transport.msgs import (
     TransformStamped,
     Vector3,
 )
-from execution_engine.transport.port import TransportError
-from execution_engine.transport.qos import DIAGNOSTICS, TF_STATIC
-from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.ros_convert import MessageConverter
+from node_transport.port import TransportError
+from node_transport.qos import DIAGNOSTICS, TF_STATIC
+from node_transport.ros import RosTransport
+from node_transport.ros_convert import MessageConverter
 
 BOUND = 5.0  # s: only reached when something hangs
 converter = MessageConverter(ros_fake_msgs.resolve)

@@ -19,11 +19,11 @@ import ros_fake_parameters
 import ros_fake_qos
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport.msgs import Bool, Header, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
-from execution_engine.transport.port import ServiceUnavailable, TransportError, wait_until_matched
-from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR
-from execution_engine.transport.ros import RosTransport
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport.msgs import Bool, Header, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
+from node_transport.port import ServiceUnavailable, TransportError, wait_until_matched
+from node_transport.qos import COMMANDS, LATCHED, SENSOR
+from node_transport.ros import RosTransport
 
 T = TypeVar("T")
 BOUND = 5.0  # s: only ever reached when something hangs

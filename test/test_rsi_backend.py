@@ -32,7 +32,7 @@ from core_functions.primitives import (
 )
 from core_functions.robots import KUKA_KR, NEXTAGE_OPEN
 from execution_engine.cli import main as cli_main
-from execution_engine.clock import Clock, real_clock, run_with_clock, scaled_clock, simulated_clock
+from node_transport.clock import Clock, real_clock, run_with_clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink

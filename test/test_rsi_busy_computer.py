@@ -17,11 +17,11 @@ from typing import Any
 
 import pytest
 
-import execution_engine.console_log as console_log
+import node_transport.console_log as console_log
 from core_functions.robots import KUKA_KR
 from execution_engine.cli import main
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.engine.wall_clock import ManualWallClock
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport.wall_clock import ManualWallClock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.realtime import SIMULATED_SILENCE, SIMULATOR_PRIORITY, ask_realtime, realtime_advice

@@ -24,7 +24,7 @@ from test_linear_recording import stored  # the trajectory as execute_trajectory
 from core_functions.geometry import Pose
 from core_functions.primitives import ExecuteTrajectory, MoveJoints, RecordTrajectory, SetSpeed
 from core_functions.robots import KUKA_KR
-from execution_engine.clock import Clock, run_with_clock, simulated_clock
+from node_transport.clock import Clock, run_with_clock, simulated_clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend
 from robot_bridges.kuka_rsi.external import LoopSettings

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from core_functions.geometry import Pose
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.kuka_rsi.codec import PacketCodec
 from robot_bridges.kuka_rsi.config import RsiConfig, default_config, default_config_path, parse_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink, RsiLoop

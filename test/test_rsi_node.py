@@ -5,9 +5,9 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock, real_clock, run_with_clock
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.port import TransportError
+from node_transport.clock import Clock, real_clock, run_with_clock
+from node_transport.local import LocalTransport
+from node_transport.port import TransportError
 from robot_bridges.backend import BackendOptions
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.node import declare_kuka_parameters

@@ -21,7 +21,7 @@ from test_rsi_loop import GRACE, READY, WAIT, Rig
 
 from core_functions.primitives import MoveJoints
 from core_functions.robots import KUKA_KR
-from execution_engine.clock import Clock, real_clock, run_with_clock
+from node_transport.clock import Clock, real_clock, run_with_clock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
 from robot_bridges.kuka_rsi.codec import PacketCodec

@@ -10,14 +10,14 @@ from app_builder import Cell
 
 from core_functions.robots import NEXTAGE_OPEN
 from crossing_cell import COLLIDING, CROSSING, WAIT_OPERATION, CollisionWatch
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.deployment import deploy_local
 from execution_engine.dry_run.cell_start import CellStarts
 from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplication, RunApplicationGoal, RunApplicationServer, SendGoal
-from execution_engine.transport.action import UUID, CancelGoal, CancelGoalRequest, GoalInfo, GoalStatus, GoalStatusArray, STATUS_QOS
-from execution_engine.transport.msgs import JointState
-from execution_engine.transport.qos import COMMANDS, SENSOR
-from execution_engine.transport.wire import JOINT_STATES
+from node_transport.action import UUID, CancelGoal, CancelGoalRequest, GoalInfo, GoalStatus, GoalStatusArray, STATUS_QOS
+from node_transport.msgs import JointState
+from node_transport.qos import COMMANDS, SENSOR
+from node_transport.wire import JOINT_STATES
 from rclpy_like import RclpyLikeActionClient
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend

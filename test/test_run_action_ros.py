@@ -21,9 +21,9 @@ from test_run_action import TINY
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplicationGoal, SendGoal
 from execution_engine.nodes import serve_goals
-from execution_engine.transport.action import UUID, GoalStatus
-from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.ros_convert import import_ros_type
+from node_transport.action import UUID, GoalStatus
+from node_transport.ros import RosTransport
+from node_transport.ros_convert import import_ros_type
 
 BAD_APP = """<?xml version="1.0"?>
 <application name="tiny" robot="nextage" version="1">

@@ -13,12 +13,12 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock, FollowingClock, real_clock, run_with_clock, scaled_clock
-from execution_engine.transport import typed
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.port import poll_until
-from execution_engine.transport.qos import COMMANDS, EVENTS
-from execution_engine.transport.wire import ENGINE_EVENTS, EngineEvent, SmRequest, SmResult, sm_topic
+from node_transport.clock import Clock, FollowingClock, real_clock, run_with_clock, scaled_clock
+from node_transport import typed
+from node_transport.local import LocalTransport
+from node_transport.port import poll_until
+from node_transport.qos import COMMANDS, EVENTS
+from node_transport.wire import ENGINE_EVENTS, EngineEvent, SmRequest, SmResult, sm_topic
 from robot_bridges.turnaround import Turnaround
 
 FAST = 1000.0  # a robot second is a wall millisecond

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.smach import (
     HISTORY,
     CallbackState,

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from core_functions.robots import NEXTAGE_OPEN
 from crossing_cell import WAIT_OPERATION, CollisionWatch, crossing_app
 from execution_engine.app_model.model import Application
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.dry_run.report import DryRunReport
 from execution_engine.dry_run.runner import dry_run
@@ -34,9 +34,9 @@ from execution_engine.dry_run.start import (
     plan_start,
     start_checked,
 )
-from execution_engine.transport.msgs import JointState
-from execution_engine.transport.qos import SENSOR
-from execution_engine.transport.wire import JOINT_STATES
+from node_transport.msgs import JointState
+from node_transport.qos import SENSOR
+from node_transport.wire import JOINT_STATES
 from robot_bridges.backend import BackendOptions, RobotBackend
 from robot_bridges.registry import create_backend
 

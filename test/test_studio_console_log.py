@@ -12,7 +12,7 @@ import re
 import pytest
 
 pytest.importorskip("uvicorn", reason="the studio extra (starlette, uvicorn) is not installed")
-from execution_engine.console_log import ConsoleLog  # noqa: E402
+from node_transport.console_log import ConsoleLog  # noqa: E402
 from operator_station.serving import server_config  # noqa: E402
 
 

@@ -28,10 +28,10 @@ from operator_station.cli import build_station, cmd_studio  # noqa: E402
 from operator_station.attach import AttachedSession  # noqa: E402
 from operator_station.feed import Feed  # noqa: E402
 from execution_engine.app_model import load_application  # noqa: E402
-from execution_engine.clock import Clock, scaled_clock  # noqa: E402
+from node_transport.clock import Clock, scaled_clock  # noqa: E402
 from execution_engine.deployment import deploy_local  # noqa: E402
-from execution_engine.transport.local import LocalTransport  # noqa: E402
-from execution_engine.transport.port import Transport  # noqa: E402
+from node_transport.local import LocalTransport  # noqa: E402
+from node_transport.port import Transport  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 from operator_station.replay import load_replay  # noqa: E402

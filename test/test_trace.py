@@ -8,7 +8,7 @@ from pathlib import Path
 
 from execution_engine.observers import TraceWriter
 from execution_engine.trace_report import read_trace
-from execution_engine.transport.wire import EngineStatus, SmStatus
+from node_transport.wire import EngineStatus, SmStatus
 
 
 class Recording(io.StringIO):

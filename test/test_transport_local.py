@@ -5,11 +5,11 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import Bool, String, Trigger
-from execution_engine.transport.port import ServiceUnavailable, TransportError, resolve_name
-from execution_engine.transport.qos import COMMANDS, LATCHED, SENSOR, Durability, History, QoS, Reliability, rclpy_qos_kwargs
+from node_transport.clock import Clock
+from node_transport.local import LocalTransport
+from node_transport.msgs import Bool, String, Trigger
+from node_transport.port import ServiceUnavailable, TransportError, resolve_name
+from node_transport.qos import COMMANDS, LATCHED, SENSOR, Durability, History, QoS, Reliability, rclpy_qos_kwargs
 
 
 def test_delivery_is_asynchronous_and_in_order(run_sim: Any) -> None:

@@ -12,11 +12,11 @@ import pytest
 import ros_fake_msgs
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from execution_engine.transport.dds import DdsTransport
-from execution_engine.transport.dds_convert import DdsConverter
-from execution_engine.transport.idl import InterfaceRegistry
-from execution_engine.transport.port import poll_until
-from execution_engine.transport.ros_convert import MessageConverter
+from node_transport.dds import DdsTransport
+from node_transport.dds_convert import DdsConverter
+from node_transport.idl import InterfaceRegistry
+from node_transport.port import poll_until
+from node_transport.ros_convert import MessageConverter
 from machine_harness import Harness
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from test_ros_transport import Inbox, matched, run_real, with_transport
@@ -24,13 +24,13 @@ from test_ros_transport import Inbox, matched, run_real, with_transport
 from core_functions.cell_index import CellFrame
 from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, MoveJoints
-from execution_engine.clock import Clock, real_clock, run_with_clock
+from node_transport.clock import Clock, real_clock, run_with_clock
 from execution_engine.observers import RunObserver
-from execution_engine.transport import codec, dds_graph, msgs, typed
-from execution_engine.transport.msgs import Header, Time
-from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
-from execution_engine.transport.ros import RosTransport
-from execution_engine.transport.wire import (
+from node_transport import codec, dds_graph, msgs, typed
+from node_transport.msgs import Header, Time
+from node_transport.qos import COMMANDS, EVENTS, LATCHED
+from node_transport.ros import RosTransport
+from node_transport.wire import (
     BridgeCommand,
     BridgeFeedback,
     CellSnapshot,

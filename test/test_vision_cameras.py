@@ -11,7 +11,7 @@ from app_functions.registry import full_catalog
 from core_functions.geometry import Pose
 from core_functions.primitives import MoveCartesian, MoveJoints, Vision
 from execution_engine.app_model import load_application
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.camera.sources import FileCamera
 from robot_bridges.camera.vision import CameraVision

@@ -19,12 +19,12 @@ from app_functions.registry import full_catalog
 from core_functions.primitives import MoveCartesian, Vision, VisionResult
 from core_functions.vision.camera import Intrinsics
 from execution_engine.app_model import load_application
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.deployment import deploy_local
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.msgs import ByteBuffer, CameraInfo, Header, Image, Time
-from execution_engine.transport.qos import SENSOR
-from execution_engine.transport.ros_convert import MessageConverter
+from node_transport.local import LocalTransport
+from node_transport.msgs import ByteBuffer, CameraInfo, Header, Image, Time
+from node_transport.qos import SENSOR
+from node_transport.ros_convert import MessageConverter
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.camera.ros_camera import attach_cameras, from_messages, to_messages
 from robot_bridges.camera.sources import Frame

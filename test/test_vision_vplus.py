@@ -11,7 +11,7 @@ from test_vplus_app import APPS, Run, at_focus_distance, drive
 
 from core_functions.primitives import Vision
 from execution_engine.cli import main
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.vplus.camera_port import rendered_focus_camera
 

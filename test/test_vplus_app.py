@@ -23,7 +23,7 @@ from core_functions.robots import ADEPT_VIPER_S850
 from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.app_model.cell import load_cell
 from execution_engine.cli import main as cli_main
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.vplus.backend import VPlusBackend
 from robot_bridges.vplus.measurement import SimulatedFocusCamera
 from robot_bridges.vplus.simulator import VPlusSimulator

@@ -23,7 +23,7 @@ from core_functions.primitives import (
     Vision,
 )
 from core_functions.robots import ADEPT_VIPER_S850, NEXTAGE_OPEN
-from execution_engine.clock import Clock, real_clock, run_with_clock, scaled_clock, simulated_clock
+from node_transport.clock import Clock, real_clock, run_with_clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.vplus.backend import VPlusBackend, create
 from robot_bridges.vplus.codec import Skill

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from execution_engine.clock import Clock, real_clock, run_with_clock, simulated_clock
+from node_transport.clock import Clock, real_clock, run_with_clock, simulated_clock
 from robot_bridges.vplus import codec
 from robot_bridges.vplus.client import (
     CommandTimeout,

@@ -5,9 +5,9 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock
-from execution_engine.transport.local import LocalTransport
-from execution_engine.transport.port import TransportError
+from node_transport.clock import Clock
+from node_transport.local import LocalTransport
+from node_transport.port import TransportError
 from robot_bridges.registry import create_backend
 from robot_bridges.vplus.node import BACKEND, declare_vplus_parameters
 

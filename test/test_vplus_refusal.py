@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.vplus import codec
 from robot_bridges.vplus.client import ConnectError, VPlusClient, VPlusError
 from robot_bridges.vplus.simulator import VPlusSimulator

@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.vplus import codec
 from robot_bridges.vplus.client import VPlusClient, VPlusError
 from robot_bridges.vplus.simulator import MAX_CLIENTS, VPlusSimulator

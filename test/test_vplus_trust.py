@@ -19,7 +19,7 @@ import pytest
 
 from core_functions.primitives import EndEffector, MoveCartesian, MoveJoints
 from execution_engine.cli import main as cli_main
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.vplus.backend import VPlusBackend
 from robot_bridges.vplus.kinematics import HOME_DEG, location_to_pose

@@ -26,7 +26,7 @@ from core_functions.suggest import NameIndex
 from execution_engine.app_model.diagnostics import Diagnostic, Location
 from execution_engine.app_model.frame_tree import WORLD, order_frames
 from execution_engine.app_model.zones import ZONE_KIND, Zone, zone_frame
-from execution_engine.transport.wire import CellSnapshot
+from node_transport.wire import CellSnapshot
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from lxml import etree
 
-from execution_engine.resources import share_path
+from core_functions.resources import share_path
 
 XS = "{http://www.w3.org/2001/XMLSchema}"
 

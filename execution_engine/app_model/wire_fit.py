@@ -24,8 +24,8 @@ from core_functions.robots import RobotModel
 from execution_engine.app_model.cell_model import Cell
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
 from execution_engine.app_model.frame_tree import WORLD
-from execution_engine.transport import codec
-from execution_engine.transport.wire import CellSnapshot, SmRequest
+from node_transport import codec
+from node_transport.wire import CellSnapshot, SmRequest
 
 #: JSON of one character at its widest: a character outside the BMP escaped as two \uXXXX.
 _WIDEST_CHAR = 12
@@ -112,7 +112,7 @@ def check_snapshot(cell: Cell, where: Location, display: str, log: DiagnosticLog
     log.append(Diagnostic.at(where, (
         f"cell file {display} is too large to run: its model with {len(cell.frames):,} frames, "
         f"{len(cell.elements):,} elements and {len(cell.joint_poses):,} joint poses is over {limit:,} bytes as a message "
-        f"(the transport's limit, execution_engine.transport.codec.MAX_MESSAGE_BYTES), and every group machine "
+        f"(the transport's limit, node_transport.codec.MAX_MESSAGE_BYTES), and every group machine "
         f"would refuse it; split the cell or leave out what this application does not use"
     )))
     return False
@@ -160,5 +160,5 @@ def check_requests(
         if size > limit:
             log.append(Diagnostic.at(locate(at), (
                 f"the request for {function} on {group} in operation {operation} would be {size:,} bytes, over the "
-                f"transport's limit of {limit:,} (execution_engine.transport.codec.MAX_MESSAGE_BYTES); shorten its params"
+                f"transport's limit of {limit:,} (node_transport.codec.MAX_MESSAGE_BYTES); shorten its params"
             )))

@@ -23,7 +23,7 @@ from execution_engine.engine.dispatch import ApplicationAborted
 from execution_engine.engine.operator import CONSOLE_KEYS
 from execution_engine.recorder.recorder import file_digest
 from execution_engine.trace_report import read_trace
-from execution_engine.transport.wire import engine_service
+from node_transport.wire import engine_service
 
 if TYPE_CHECKING:
     from execution_engine.engine.engine import ExecutionEngine

@@ -15,7 +15,7 @@ import sqlite3
 from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application, Call
 from execution_engine.checkpoint.store import STARTED, CheckpointStore
-from execution_engine.transport.wire import EngineEvent, SmStatus
+from node_transport.wire import EngineEvent, SmStatus
 
 log = logging.getLogger(__name__)
 

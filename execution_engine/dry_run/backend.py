@@ -42,7 +42,7 @@ from core_functions.trajectory_store import StoredTrajectory, TrajectoryStore
 from execution_engine.dry_run.motions import GripRecord, MotionRecord, planned, straight
 from execution_engine.dry_run.recorder import Recorder
 from execution_engine.dry_run.report import Span
-from execution_engine.transport.wire import CellSnapshot
+from node_transport.wire import CellSnapshot
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 
 MISSING_TRAJECTORY = "missing_trajectory"

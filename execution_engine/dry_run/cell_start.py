@@ -20,10 +20,10 @@ from execution_engine.dry_run.start import MeasuredState, StartRefused, Untruste
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.engine.report import RunReport
 from execution_engine.engine.run_action import GoalOutcome
-from execution_engine.transport.msgs import JointState
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import SENSOR
-from execution_engine.transport.wire import JOINT_STATES
+from node_transport.msgs import JointState
+from node_transport.port import Node
+from node_transport.qos import SENSOR
+from node_transport.wire import JOINT_STATES
 from robot_bridges.backend import BackendOptions
 
 

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 from core_functions.robots import RobotModel
 from execution_engine.app_model.model import Application, Call
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.dry_run.report import Finding, Span, TimeBase
 from execution_engine.engine.waits import FlagWait
 

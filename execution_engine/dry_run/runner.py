@@ -27,7 +27,7 @@ from app_functions.registry import full_catalog
 from core_functions.catalog import Catalog
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
-from execution_engine.clock import Clock, real_clock, run_with_clock, simulated_clock
+from node_transport.clock import Clock, real_clock, run_with_clock, simulated_clock
 from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.engine.report import GroupError
 from execution_engine.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
@@ -36,9 +36,9 @@ from execution_engine.dry_run.placement import place
 from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
 from execution_engine.dry_run.report import CollisionCheck, DryRunReport, Finding, JointPositions, group_times
 from execution_engine.dry_run.simulators import DryRunSetup, setup_for
-from execution_engine.transport import typed
-from execution_engine.transport.qos import COMMANDS
-from execution_engine.transport.wire import SmResult, sm_topic
+from node_transport import typed
+from node_transport.qos import COMMANDS
+from node_transport.wire import SmResult, sm_topic
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 

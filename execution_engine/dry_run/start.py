@@ -29,7 +29,7 @@ from typing import Any, Protocol
 
 from core_functions.robots import RobotModel
 from execution_engine.app_model.model import WAIT, Application, Call
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.dry_run.placement import PlacementError
 from execution_engine.dry_run.report import DryRunReport, Finding, JointPositions
 from execution_engine.dry_run.runner import DryRunError, dry_run_setup

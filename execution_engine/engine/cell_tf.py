@@ -23,12 +23,12 @@ from typing import Any
 
 from core_functions.cell_index import CellIndex
 from core_functions.robots import RobotModel
-from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import TFMessage, Time, TransformStamped
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import LATCHED, TF_STATIC
-from execution_engine.transport.transforms import transform_stamped
-from execution_engine.transport.wire import TF_STATIC_TOPIC, CellSnapshot, LocatedFrames, sm_topic
+from node_transport import codec, typed
+from node_transport.msgs import TFMessage, Time, TransformStamped
+from node_transport.port import Node
+from node_transport.qos import LATCHED, TF_STATIC
+from node_transport.transforms import transform_stamped
+from node_transport.wire import TF_STATIC_TOPIC, CellSnapshot, LocatedFrames, sm_topic
 
 WORLD = "world"
 

@@ -16,16 +16,16 @@ from typing import TYPE_CHECKING
 from core_functions.limits import DURATION
 from execution_engine.engine.operator import CONSOLE_KEYS, ENDED, Flags, decide
 from execution_engine.engine.report import OperatorAction, RunReport
-from execution_engine.engine.wall_clock import WallClock, wake_loop
+from node_transport.wall_clock import WallClock, wake_loop
 from execution_engine.machine.table import PAUSE, READY, WORKING_STATES
-from execution_engine.transport.msgs import Bool, Trigger, TriggerRequest, TriggerResponse
-from execution_engine.transport.wire import SAFETY_STOP, EngineEvent, engine_service
+from node_transport.msgs import Bool, Trigger, TriggerRequest, TriggerResponse
+from node_transport.wire import SAFETY_STOP, EngineEvent, engine_service
 
 if TYPE_CHECKING:
     from execution_engine.app_model.model import Operation
-    from execution_engine.clock import Clock
+    from node_transport.clock import Clock
     from execution_engine.engine.group_link import GroupLink
-    from execution_engine.transport.port import Node
+    from node_transport.port import Node
 
 
 class OperatorCommands:

@@ -10,7 +10,7 @@ import asyncio
 from dataclasses import dataclass
 
 from execution_engine.app_model.model import Call
-from execution_engine.transport.wire import SmRequest, SmResult
+from node_transport.wire import SmRequest, SmResult
 
 
 @dataclass

@@ -37,15 +37,15 @@ from execution_engine.engine.flags_mode import FlagsMode
 from execution_engine.engine.group_link import GroupLink
 from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
-from execution_engine.engine.wall_clock import RealWallClock, WallClock
+from node_transport.wall_clock import RealWallClock, WallClock
 from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
-from execution_engine.transport import typed
-from execution_engine.transport.msgs import Bool, Trigger
-from execution_engine.transport.bounded import declare_bounded
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import EVENTS, LATCHED
-from execution_engine.transport.wire import (
+from node_transport import typed
+from node_transport.msgs import Bool, Trigger
+from node_transport.bounded import declare_bounded
+from node_transport.port import Node
+from node_transport.qos import EVENTS, LATCHED
+from node_transport.wire import (
     ENGINE_CELL,
     ENGINE_EVENTS,
     ENGINE_SERVICES,

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from execution_engine.transport.wire import FaultKind
+from node_transport.wire import FaultKind
 
 
 @dataclass(frozen=True)

@@ -21,9 +21,9 @@ from typing import Protocol
 
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.engine.waits import FlagWait
-from execution_engine.transport.wire import FaultKind, SmRequest, SmResult
+from node_transport.wire import FaultKind, SmRequest, SmResult
 
 SET_FLAG, WAIT_FLAG = "set_flag", "wait_flag"
 ENGINE_FUNCTIONS = (SET_FLAG, WAIT_FLAG)

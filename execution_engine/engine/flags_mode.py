@@ -19,10 +19,10 @@ from execution_engine.engine.dispatch import ApplicationAborted
 from execution_engine.engine.flags import ENGINE_FUNCTIONS
 from execution_engine.engine.report import GroupError
 from execution_engine.machine.table import ERROR_HANDLING, READY
-from execution_engine.transport.wire import SmRequest, SmResult
+from node_transport.wire import SmRequest, SmResult
 
 if TYPE_CHECKING:
-    from execution_engine.clock import Clock
+    from node_transport.clock import Clock
     from execution_engine.engine.dispatch import Dispatch
     from execution_engine.engine.group_link import GroupLink
     from execution_engine.engine.report import RunReport

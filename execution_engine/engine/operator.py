@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from execution_engine.transport.wire import ENGINE_SERVICES
+from node_transport.wire import ENGINE_SERVICES
 
 #: Engine states a run has ended in.
 ENDED = ("finished", "failed", "stopped")

@@ -31,11 +31,11 @@ from typing import Any
 from app_functions.registry import full_catalog
 from execution_engine.app_model import Application, read_application
 from execution_engine.engine.engine import ExecutionEngine
-from execution_engine.transport import codec, mirrors, typed
-from execution_engine.transport.action import ActionServer, GoalHandle
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import EVENTS
-from execution_engine.transport.wire import ENGINE_STATUS, EngineStatus
+from node_transport import codec, mirrors, typed
+from node_transport.action import ActionServer, GoalHandle
+from node_transport.port import Node
+from node_transport.qos import EVENTS
+from node_transport.wire import ENGINE_STATUS, EngineStatus
 
 ACTION_NAME = "execution_engine/run_application"
 _PACKAGE = "dual_arm_executive_interfaces"

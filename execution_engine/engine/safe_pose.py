@@ -31,7 +31,7 @@ from typing import Protocol
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call
 from execution_engine.engine.report import SafePoseStep
-from execution_engine.transport.wire import FaultKind, SmResult
+from node_transport.wire import FaultKind, SmResult
 
 #: Retreat faults that mean "not possible from here", after which the arm still moves.
 RETREAT_IMPOSSIBLE = (FaultKind.UNREACHABLE, FaultKind.JOINT_LIMIT, FaultKind.UNSUPPORTED)

@@ -26,12 +26,12 @@ from typing import Any
 from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application
 from execution_engine.app_model.zones import ENGINE, call_zones, parse_key
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.engine.waits import FlagWait
-from execution_engine.transport import codec, typed
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import COMMANDS
-from execution_engine.transport.wire import SYNC_TOPIC, SyncMessage
+from node_transport import codec, typed
+from node_transport.port import Node
+from node_transport.qos import COMMANDS
+from node_transport.wire import SYNC_TOPIC, SyncMessage
 
 Publish = Callable[..., None]  # (group, zone, state, operation, kind)
 CallKey = tuple[str, str]  # (operation id, group)

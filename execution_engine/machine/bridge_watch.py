@@ -4,7 +4,7 @@ A bridge process killed mid-motion (``kill -9`` says no goodbye) or cut off from
 would otherwise be noticed only when the wait runs out: ``bridge_timeout`` for an
 acknowledgement, ``primitive_timeout`` (minutes) for a motion.  The bridge's feedback publisher
 is the sign of life: over DDS it asserts liveliness with a lease (1 s, see
-:mod:`execution_engine.transport.dds`), and a subscription counts only live publishers.  While a
+:mod:`node_transport.dds`), and a subscription counts only live publishers.  While a
 working state waits for the bridge it checks every :data:`WATCH_PERIOD`; once the count is zero
 the wait ends as a CONNECTION fault naming the bridge's node (ErrorHandling; the engine stops the
 other groups), within the lease plus :data:`WATCH_PERIOD` of the loss.
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from execution_engine.transport.port import Node, Subscription
+from node_transport.port import Node, Subscription
 
 WATCH_PERIOD = 0.1  # run seconds between checks while a state waits for the bridge
 

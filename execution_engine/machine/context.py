@@ -18,15 +18,15 @@ from core_functions.cell_index import CellIndex
 from core_functions.functions import CoreFunctions
 from core_functions.primitives import Primitive
 from core_functions.robots import RobotModel
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.machine.bridge_watch import BridgeWatch
 from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
 from execution_engine.machine.rebase import RelativeGoals
 from execution_engine.machine.zone_gate import ZoneGate
-from execution_engine.transport import codec, typed
-from execution_engine.transport.port import Node, Publisher, Subscription, wait_until_matched
-from execution_engine.transport.wire import BridgeCommand, FaultKind, SmRequest, SmResult, SmStatus, SyncMessage
+from node_transport import codec, typed
+from node_transport.port import Node, Publisher, Subscription, wait_until_matched
+from node_transport.wire import BridgeCommand, FaultKind, SmRequest, SmResult, SmStatus, SyncMessage
 
 
 @dataclass(frozen=True)

@@ -18,10 +18,10 @@ from collections.abc import Callable
 
 from execution_engine.machine.context import MachineContext
 from execution_engine.machine.table import ERROR_HANDLING, PAUSE, STOP
-from execution_engine.transport.msgs import DiagnosticArray, DiagnosticStatus, Header, KeyValue
-from execution_engine.transport.port import Node, TransportError
-from execution_engine.transport.qos import DIAGNOSTICS
-from execution_engine.transport.wire import DIAGNOSTICS_TOPIC
+from node_transport.msgs import DiagnosticArray, DiagnosticStatus, Header, KeyValue
+from node_transport.port import Node, TransportError
+from node_transport.qos import DIAGNOSTICS
+from node_transport.wire import DIAGNOSTICS_TOPIC
 
 #: diagnostic_updater's default period (s of run time).
 PERIOD = 1.0

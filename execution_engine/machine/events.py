@@ -13,8 +13,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Literal, Union
 
-from execution_engine.clock import Clock
-from execution_engine.transport.wire import BridgeFeedback, FaultKind, SmRequest, SyncMessage
+from node_transport.clock import Clock
+from node_transport.wire import BridgeFeedback, FaultKind, SmRequest, SyncMessage
 
 OperatorCommand = Literal["pause", "resume", "stop", "reset"]
 

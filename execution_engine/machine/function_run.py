@@ -12,7 +12,7 @@ from typing import Any
 from core_functions.catalog import FunctionSpec
 from core_functions.functions import Skill
 from core_functions.primitives import Primitive
-from execution_engine.transport.wire import SmRequest
+from node_transport.wire import SmRequest
 
 
 class SkillError(RuntimeError):

@@ -52,12 +52,12 @@ from execution_engine.machine.table import (
     WORKING_STATES,
 )
 from execution_engine.smach import StateMachine, StructureInfo, TransitionRecord, UserData
-from execution_engine.transport import codec, typed
-from execution_engine.transport.msgs import Trigger, TriggerRequest, TriggerResponse
-from execution_engine.transport.bounded import declare_bounded
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import COMMANDS, EVENTS, LATCHED
-from execution_engine.transport.wire import (
+from node_transport import codec, typed
+from node_transport.msgs import Trigger, TriggerRequest, TriggerResponse
+from node_transport.bounded import declare_bounded
+from node_transport.port import Node
+from node_transport.qos import COMMANDS, EVENTS, LATCHED
+from node_transport.wire import (
     ENGINE_CELL,
     MACHINE_SERVICES,
     SYNC_TOPIC,

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from core_functions.cell_index import CellIndex
 from core_functions.geometry import Pose
-from execution_engine.transport import typed
-from execution_engine.transport.port import Node
-from execution_engine.transport.qos import LATCHED
-from execution_engine.transport.wire import LocatedFrames, sm_topic
+from node_transport import typed
+from node_transport.port import Node
+from node_transport.qos import LATCHED
+from node_transport.wire import LocatedFrames, sm_topic
 
 
 class LocatedFramesPublisher:

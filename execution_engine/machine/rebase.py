@@ -28,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from core_functions.primitives import MotionResult, MoveCartesian, MoveJoints, MoveRelative, Primitive, describe
-from execution_engine.transport.wire import SmRequest
+from node_transport.wire import SmRequest
 
 CallKey = tuple[str, str, tuple[str, ...]]
 

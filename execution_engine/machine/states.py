@@ -41,7 +41,7 @@ from execution_engine.machine.table import (
     signals_of,
 )
 from execution_engine.smach import State
-from execution_engine.transport.wire import BridgeFeedback, FaultKind
+from node_transport.wire import BridgeFeedback, FaultKind
 
 UD_KEYS = ("primitive", "resume_command", "early_done", "error", "fault", "stop_reason")
 _EPSILON = 1e-9  # run seconds: a deadline this close is reached (float sums never land on it exactly)

@@ -21,9 +21,9 @@ from core_functions.cell_index import CellIndex
 from core_functions.geometry import Pose
 from core_functions.primitives import ExecuteTrajectory, MotionResult, MoveCartesian, MoveJoints, MoveRelative, RecordTrajectory
 from execution_engine.app_model.zones import ENGINE, ZONE_KIND, inside_box, zone_key
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.machine.function_run import FunctionRun
-from execution_engine.transport.wire import SyncMessage
+from node_transport.wire import SyncMessage
 
 _MOVES = (MoveJoints, MoveCartesian, MoveRelative, RecordTrajectory, ExecuteTrajectory)
 Box = tuple[Pose, tuple[float, float, float]]

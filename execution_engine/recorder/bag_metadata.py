@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from execution_engine.transport.qos import Durability, QoS, Reliability
+from node_transport.qos import Durability, QoS, Reliability
 
 #: RMW_DURATION_INFINITE as rosbag2 writes an infinite deadline, lifespan or liveliness lease
 INFINITE = {"sec": 9223372036, "nsec": 854775807}

@@ -27,7 +27,7 @@ from execution_engine.recorder.recorder import Recorder
 from execution_engine.recorder.writer import McapSink
 from execution_engine.run_checks import app_inputs, run_files
 from execution_engine.settings import Outputs, RunSettings
-from execution_engine.transport.port import Node, Transport
+from node_transport.port import Node, Transport
 
 
 def add_run_options(run: argparse.ArgumentParser) -> None:

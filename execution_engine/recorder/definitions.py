@@ -12,7 +12,7 @@ from __future__ import annotations
 import re
 from functools import lru_cache
 
-from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
+from node_transport.idl import InterfaceError, InterfaceRegistry
 
 SEPARATOR = "=" * 80
 

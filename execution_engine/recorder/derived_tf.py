@@ -6,7 +6,7 @@ on the control path: at ``--speed max`` that alone cost the run some 14 % of its
 an in-process run (``run --record``) the bridge's ``tf`` is a pure function of its own
 ``joint_states`` and URDF, stamped like the state and published in the same step; so the
 recorder asks the encoder to do what the bridge would have done, with the same code
-(:class:`~execution_engine.transport.link_transforms.LinkTransforms`), and writes each ``tf``
+(:class:`~node_transport.link_transforms.LinkTransforms`), and writes each ``tf``
 message right after its joint state, with the same log time.  A recording made this way holds
 the ``tf`` a listener would have received, message for message.
 """
@@ -16,8 +16,8 @@ import dataclasses
 from typing import Any
 
 from execution_engine.recorder.frames import ros_fields
-from execution_engine.transport.msgs import TFMessage, Time
-from execution_engine.transport.qos import QoS
+from node_transport.msgs import TFMessage, Time
+from node_transport.qos import QoS
 
 TF_TYPE = TFMessage.ROS_TYPE
 
@@ -55,7 +55,7 @@ class DerivedTf:
         A URDF pinocchio cannot read, or a joint state whose names and positions differ in
         length, gives no ``tf`` -- the bridge could not have published one either."""
         if topic == self.description:
-            from execution_engine.transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only when asked
+            from node_transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only when asked
 
             try:
                 self.links = LinkTransforms(str(msg.get("data", "")))

@@ -39,9 +39,9 @@ from execution_engine.recorder.bag_metadata import NOT_STARTED, BagTopic, bag_me
 from execution_engine.recorder.definitions import schema_text
 from execution_engine.recorder.derived_tf import TF_TYPE, DerivedTf
 from execution_engine.recorder.frames import frame, read_frame
-from execution_engine.transport.idl import InterfaceError, InterfaceRegistry
-from execution_engine.transport.idl_hash import type_hash
-from execution_engine.transport.qos import QoS
+from node_transport.idl import InterfaceError, InterfaceRegistry
+from node_transport.idl_hash import type_hash
+from node_transport.qos import QoS
 
 LIBRARY = "dual_arm_executive recorder (mcap, mcap-ros2-support)"
 NICE = 10  # the encoder's niceness above the run's: it takes spare CPU time, not the machines'

@@ -31,8 +31,8 @@ from mcap_ros2.decoder import DecoderFactory
 from execution_engine.observers import engine_record, trace_record
 from execution_engine.record_limits import GroupCount, OverLimit, time_problem
 from execution_engine.recorder.safe_read import DamagedRecord, NotARecording, outer_records, records
-from execution_engine.transport import codec, typed
-from execution_engine.transport.wire import EngineEvent, SmStatus
+from node_transport import codec, typed
+from node_transport.wire import EngineEvent, SmStatus
 
 MAGIC = b"\x89MCAP0\r\n"
 _STATUS = re.compile(r"^(?:/[A-Za-z0-9_]+)*/([A-Za-z0-9_]+)/sm/status$")

@@ -25,10 +25,10 @@ from typing import Any
 from execution_engine.machine.table import FINISH
 from execution_engine.recorder.definitions import known
 from execution_engine.recorder.writer import McapSink, RecordingStats
-from execution_engine.transport import typed
-from execution_engine.transport.port import Node, Subscription, TopicInfo, TransportError, poll_until
-from execution_engine.transport.qos import Durability, History, QoS, Reliability
-from execution_engine.transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC, sm_topic
+from node_transport import typed
+from node_transport.port import Node, Subscription, TopicInfo, TransportError, poll_until
+from node_transport.qos import Durability, History, QoS, Reliability
+from node_transport.wire import ENGINE_STATUS, JOINT_STATES, ROBOT_DESCRIPTION_TOPIC, TF_TOPIC, sm_topic
 
 POLL = 0.5  # run seconds between looks for new topics (rosbag2 polls every 0.1 s of wall time)
 DEPTH = 1000  # a recorder keeps up with bursts: every state change matters

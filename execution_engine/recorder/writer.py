@@ -39,7 +39,7 @@ from typing import IO, Any
 
 
 from execution_engine.recorder.frames import frame, pickled, read_frame
-from execution_engine.transport.qos import QoS
+from node_transport.qos import QoS
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from collections.abc import Callable, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from execution_engine.smach.introspection import MachineObserver, StructureInfo, TransitionRecord
 from execution_engine.smach.state import State
 from execution_engine.smach.userdata import UserData

@@ -23,11 +23,11 @@ from numpy.typing import NDArray
 
 from core_functions.geometry import Pose
 from core_functions.vision.camera import Intrinsics
-from execution_engine.clock import Clock
-from execution_engine.transport.msgs import ByteBuffer, CameraInfo, Header, Image, RegionOfInterest, Time
-from execution_engine.transport.bounded import declare_bounded
-from execution_engine.transport.port import Node, Publisher
-from execution_engine.transport.qos import SENSOR
+from node_transport.clock import Clock
+from node_transport.msgs import ByteBuffer, CameraInfo, Header, Image, RegionOfInterest, Time
+from node_transport.bounded import declare_bounded
+from node_transport.port import Node, Publisher
+from node_transport.qos import SENSOR
 from robot_bridges.camera.sources import CameraSource, CaptureError, Frame
 from robot_bridges.camera.spec import CameraSpec
 from robot_bridges.camera.vision import CameraVision

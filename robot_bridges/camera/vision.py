@@ -26,7 +26,7 @@ from robot_bridges.camera.sources import CameraSource, CaptureError, Frame
 from robot_bridges.camera.spec import CameraSpec
 
 if TYPE_CHECKING:
-    from execution_engine.transport.wire import CellSnapshot
+    from node_transport.wire import CellSnapshot
 
 #: (camera, its optical frame in the world at capture) for each camera taking part.
 Placed = Sequence[tuple[CameraSpec, Pose]]

@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 
 from core_functions.geometry import Pose
-from execution_engine.transport.wire import CellSnapshot
+from node_transport.wire import CellSnapshot
 
 #: A slot frame farther than this from the TCP when the gripper closes is not what it picked (m).
 GRASP_REACH = 0.03

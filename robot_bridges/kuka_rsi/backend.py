@@ -43,7 +43,7 @@ from core_functions.primitives import (
     describe,
 )
 from core_functions.robots import KUKA_KR, RobotModel
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
 from robot_bridges.kuka_rsi.arm_commands import ArmCommands, MotionLimits, Run
 from robot_bridges.kuka_rsi.config import ConfigError, RsiConfig, load_config

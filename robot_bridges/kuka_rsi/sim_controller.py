@@ -14,7 +14,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 
-from execution_engine.clock import real_clock
+from node_transport.clock import real_clock
 from robot_bridges.kuka_rsi.config import RsiConfig, RsiRoles
 from robot_bridges.kuka_rsi.external import RobotLink
 from robot_bridges.kuka_rsi.krc_model import RsiContext

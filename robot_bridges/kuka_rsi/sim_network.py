@@ -6,7 +6,7 @@ stamp) before the next cycle, only datagrams from the external system's address 
 of :class:`~.sim_faults.Faults` (jitter, lost packets, garbage, replies dropped).  :func:`run_lockstep`
 (accelerated: the next packet goes out as soon as the reply is in or known missing; lateness is counted against
 the simulated cycle, so 100,000 cycles run in seconds and deterministically) and :func:`run_realtime` (a fixed
-clock from the injected :class:`~execution_engine.clock.Clock`) drive a :class:`~.krc_model.KrcModel`;
+clock from the injected :class:`~node_transport.clock.Clock`) drive a :class:`~.krc_model.KrcModel`;
 :class:`SimulatorThread` runs one of them for tests and for an in-process bridge.
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.kuka_rsi.config import RsiConfig, RsiRoles
 from robot_bridges.kuka_rsi.krc_model import KrcModel, RsiContext, RsiStopped
 from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks

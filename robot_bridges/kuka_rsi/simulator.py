@@ -29,7 +29,7 @@ What it reproduces, because the bridge must cope with it (seed 003; ARCHITECTURE
 on a UDP socket: :func:`~.sim_network.run_lockstep` (accelerated: the next packet goes out as soon as the reply
 is in or known missing; lateness is counted against the simulated cycle, so 100,000 cycles run in seconds and
 deterministically) and :func:`~.sim_network.run_realtime` (a fixed clock from the injected
-:class:`~execution_engine.clock.Clock`); ``sim_faults`` holds what it does wrong on purpose.  This module is
+:class:`~node_transport.clock.Clock`); ``sim_faults`` holds what it does wrong on purpose.  This module is
 its command line: ``python -m robot_bridges.kuka_rsi.simulator``.
 """
 from __future__ import annotations
@@ -44,7 +44,7 @@ import threading
 from collections.abc import Sequence
 
 from core_functions.option_ranges import argument_type
-from execution_engine.clock import Clock, real_clock, run_with_clock
+from node_transport.clock import Clock, real_clock, run_with_clock
 from robot_bridges.kuka_rsi.config import default_config, load_config
 from robot_bridges.kuka_rsi.krc_model import KrcModel, RsiContext, RsiStopped
 from robot_bridges.kuka_rsi.realtime import ask_realtime

@@ -3,7 +3,7 @@
 Groups ``left_arm``, ``right_arm`` and ``torso_head``; world frame ``WAIST``.  Every primitive of
 :mod:`core_functions.primitives` is executed the way the real robot would: planned completely
 first (IK, limits, continuity -- so a bad request fails before anything moves), then played on
-the injected :class:`~execution_engine.clock.Clock`, one control period at a time, so that
+the injected :class:`~node_transport.clock.Clock`, one control period at a time, so that
 ``joint_state()`` and ``tcp_pose()`` show the motion in progress and the simulation runs at real
 time, 10x, or in virtual time purely by the choice of clock.
 
@@ -50,7 +50,7 @@ from core_functions.primitives import (
     describe,
 )
 from core_functions.robots import NEXTAGE_OPEN
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
 from robot_bridges.camera.sources import RenderedCamera
 from robot_bridges.camera.spec import parse_mount
@@ -64,7 +64,7 @@ from robot_bridges.nextage_sim.model import WORLD_FRAME, ArmKinematics, NextageM
 from robot_bridges.nextage_sim.trajectory import CartesianLimits, Motion, plan_joint_move, plan_replay, sample
 
 if TYPE_CHECKING:
-    from execution_engine.transport.wire import CellSnapshot
+    from node_transport.wire import CellSnapshot
 
 GROUPS: tuple[str, ...] = ("left_arm", "right_arm", "torso_head")
 

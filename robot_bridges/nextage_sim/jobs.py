@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 
 from core_functions.primitives import Primitive, describe
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.nextage_sim.faults import FaultSpec
 

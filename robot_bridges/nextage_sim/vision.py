@@ -29,7 +29,7 @@ from robot_bridges.camera.render import Optics
 from robot_bridges.camera.spec import CameraSpec, body_mount, look_at_mount
 
 if TYPE_CHECKING:  # the cell snapshot is only a parameter type here
-    from execution_engine.transport.wire import CellSnapshot
+    from node_transport.wire import CellSnapshot
 
 #: Capture plus image processing time of one vision primitive (s).
 VISION_TIME = 0.25

@@ -80,7 +80,7 @@ from core_functions.primitives import (
     describe,
 )
 from core_functions.robots import ADEPT_VIPER_S850, RobotModel
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
 from robot_bridges.vplus import codec
 from robot_bridges.vplus.client import (

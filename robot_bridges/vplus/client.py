@@ -29,7 +29,7 @@ from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.vplus.codec import (
     MAX_LINE,
     Ack,

@@ -13,8 +13,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from core_functions.robots import ADEPT_VIPER_S850
-from execution_engine.transport.bounded import declare_bounded
-from execution_engine.transport.port import Node
+from node_transport.bounded import declare_bounded
+from node_transport.port import Node
 from robot_bridges.backend import BackendOptions
 from robot_bridges.node import BridgeSetup, bridge_main
 

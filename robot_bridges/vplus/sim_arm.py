@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from execution_engine.clock import Clock
+from node_transport.clock import Clock
 from robot_bridges.vplus.codec import Command, Skill
 from robot_bridges.vplus.kinematics import (
     HOME_DEG,

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from typing import TypeVar
 
 from core_functions.option_ranges import bounds
-from execution_engine.clock import Clock, run_with_clock, scaled_clock
+from node_transport.clock import Clock, run_with_clock, scaled_clock
 from robot_bridges.vplus.codec import (
     MAX_LINE,
     Ack,

@@ -1,0 +1,185 @@
+"""ROS 2 actions over the port: rcl_action's server, made of three services and two topics.
+
+An action ``<name>`` of type ``pkg/action/Name`` is, on the wire, what rcl_action makes of it:
+services ``<name>/_action/send_goal``, ``<name>/_action/get_result`` and
+``<name>/_action/cancel_goal`` (``action_msgs/srv/CancelGoal``), and topics
+``<name>/_action/feedback`` and ``<name>/_action/status`` (``action_msgs/msg/GoalStatusArray``,
+reliable and transient local, depth 1).  Built only from the port's services and publishers, the
+server works on every transport that can carry the types: over DDS ``ros2 action send_goal``
+reaches it, on the local transport the tests drive it.
+
+The owner supplies ``execute(handle) -> result`` (a coroutine; its return ends the goal as
+succeeded, or aborted when ``handle.aborted`` is set; cancelled when a cancel was accepted),
+``accept(goal) -> reason or None`` and ``cancel(handle)`` (start stopping; ``execute`` returns when
+stopped).  ``get_result`` waits for the goal's end, however long the job: its handler is marked
+``long_running`` so a transport does not time it out.
+
+The order on the wire is rcl_action's (rclpy's ActionClient depends on it): the goal response
+first, then the status array with the goal ACCEPTED, then EXECUTING (:class:`~.port.Reply`); a
+cancel's CANCELING before the cancel response; the terminal status before the result response.
+An ended goal is forgotten after :data:`RESULT_TIMEOUT`, as rcl_action's ``result_timeout``.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from node_transport import mirrors
+from node_transport.msgs import Time
+from node_transport.port import Node, Reply
+from node_transport.qos import COMMANDS, Durability, History, QoS, Reliability
+
+log = logging.getLogger(__name__)
+
+#: Seconds an ended goal (its status and result) is kept, rcl_action's default ``result_timeout``.
+RESULT_TIMEOUT = 900.0
+#: rcl_action_qos_profile_status_default
+STATUS_QOS = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
+
+
+UUID = mirrors.mirror("unique_identifier_msgs/msg/UUID")
+GoalInfo = mirrors.mirror("action_msgs/msg/GoalInfo")
+GoalStatus = mirrors.mirror("action_msgs/msg/GoalStatus")
+GoalStatusArray = mirrors.mirror("action_msgs/msg/GoalStatusArray")
+CancelGoal = mirrors.service("action_msgs/srv/CancelGoal")
+CancelGoalRequest, CancelGoalResponse = CancelGoal.Request, CancelGoal.Response
+
+_ENDED = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
+
+
+@dataclass
+class GoalHandle:
+    """One accepted goal: its id, goal, status, and how it ended."""
+
+    goal_id: Any  # a UUID mirror
+    goal: Any
+    stamp: Time
+    status: int = 1  # GoalStatus.STATUS_ACCEPTED
+    result: Any = None
+    aborted: bool = False  # execute() sets it for a goal that failed
+    cancel_requested: bool = False
+    done: asyncio.Event = field(default_factory=asyncio.Event)
+
+    @property
+    def info(self) -> Any:
+        return GoalInfo(self.goal_id, self.stamp)
+
+
+class ActionServer:
+    """The server side of action ``name`` (mirror bundle ``action``: Goal, Result, Feedback,
+    SendGoal, GetResult, FeedbackMessage) on ``node``."""
+
+    def __init__(
+        self,
+        node: Node,
+        action: type,
+        name: str,
+        *,
+        execute: Callable[[GoalHandle], Awaitable[Any]],
+        accept: Callable[[Any], str | None],
+        cancel: Callable[[GoalHandle], None],
+    ) -> None:
+        self.node = node
+        self.action = action
+        self.name = node.resolve(name)
+        self._execute, self._accept, self._cancel = execute, accept, cancel
+        self.goals: dict[tuple[int, ...], GoalHandle] = {}
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._expiries: list[asyncio.TimerHandle] = []
+        base = f"{self.name}/_action"
+        node.create_service(action.SendGoal, f"{base}/send_goal", self._on_send_goal)
+        get_result = self._on_get_result
+        node.create_service(action.GetResult, f"{base}/get_result", get_result)
+        node.create_service(CancelGoal, f"{base}/cancel_goal", self._on_cancel_goal)
+        self._feedback = node.create_publisher(action.FeedbackMessage, f"{base}/feedback", COMMANDS)
+        self._status = node.create_publisher(GoalStatusArray, f"{base}/status", STATUS_QOS)
+
+    # ------------------------------------------------------------------------- services
+    async def _on_send_goal(self, request: Any) -> Any:
+        """Accept or refuse; an accepted goal's status goes out only after this response.
+
+        rclpy's ActionClient makes a goal known when the goal response arrives and drops status
+        entries of unknown goals; a status published first is lost to it (and latched at depth 1,
+        never sent again), so ``ros2 action send_goal`` would never see the goal run and its
+        Ctrl-C would not cancel.  rcl_action's order, kept here: response, then ACCEPTED and
+        EXECUTING, then the terminal status, then the result."""
+        stamp = self.node.now_stamp()
+        reason = "its id is in use" if request.goal_id.uuid in self.goals else self._accept(request.goal)
+        if reason is not None:
+            self.node.logger.warning("%s: goal refused: %s", self.name, reason)
+            return self.action.SendGoal.Response(False, stamp)
+        handle = GoalHandle(request.goal_id, request.goal, stamp)
+        self.goals[request.goal_id.uuid] = handle
+        return Reply(self.action.SendGoal.Response(True, stamp), lambda: self._start(handle))
+
+    def _start(self, handle: GoalHandle) -> None:
+        """The goal response is on its way: announce the goal, then execute it."""
+        self._publish_status()  # ACCEPTED
+        task = asyncio.get_running_loop().create_task(self._run(handle), name=f"{self.name} goal")
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _run(self, handle: GoalHandle) -> None:
+        if handle.status == GoalStatus.STATUS_ACCEPTED:  # a cancel may have come first: it stays CANCELING
+            handle.status = GoalStatus.STATUS_EXECUTING
+            self._publish_status()
+        try:
+            handle.result = await self._execute(handle)
+            if handle.cancel_requested:
+                handle.status = GoalStatus.STATUS_CANCELED
+            else:
+                handle.status = GoalStatus.STATUS_ABORTED if handle.aborted else GoalStatus.STATUS_SUCCEEDED
+        except Exception as error:  # noqa: BLE001 - the goal ends aborted; the node hears why
+            self.node.report_fault(f"action {self.name}", error)
+            handle.result = self.action.Result()
+            handle.status = GoalStatus.STATUS_ABORTED
+        handle.done.set()
+        self._publish_status()
+        self._expiries.append(self.node.clock.call_later(RESULT_TIMEOUT, self._expire, handle.goal_id.uuid))
+
+    def _expire(self, uuid: tuple[int, ...]) -> None:
+        """rcl_action forgets an ended goal after its result timeout: the status array stays bounded."""
+        if self.goals.pop(uuid, None) is not None:
+            self._publish_status()
+
+    async def _on_get_result(self, request: Any) -> Any:
+        handle = self.goals.get(request.goal_id.uuid)
+        if handle is None:
+            return self.action.GetResult.Response(GoalStatus.STATUS_UNKNOWN, self.action.Result())
+        await handle.done.wait()
+        return self.action.GetResult.Response(handle.status, handle.result)
+
+    _on_get_result.long_running = True  # type: ignore[attr-defined]
+
+    async def _on_cancel_goal(self, request: Any) -> Any:
+        wanted = request.goal_info.goal_id.uuid
+        everything = not any(wanted)
+        chosen = [h for h in self.goals.values() if everything or h.goal_id.uuid == wanted]
+        if not chosen:
+            return CancelGoalResponse(CancelGoalResponse.ERROR_UNKNOWN_GOAL_ID, ())
+        active = [h for h in chosen if h.status not in _ENDED]
+        if not active:
+            return CancelGoalResponse(CancelGoalResponse.ERROR_GOAL_TERMINATED, ())
+        for handle in active:
+            handle.cancel_requested = True
+            handle.status = GoalStatus.STATUS_CANCELING
+            self._cancel(handle)
+        self._publish_status()
+        return CancelGoalResponse(CancelGoalResponse.ERROR_NONE, tuple(h.info for h in active))
+
+    # --------------------------------------------------------------------------- topics
+    def publish_feedback(self, handle: GoalHandle, feedback: Any) -> None:
+        self._feedback.publish(self.action.FeedbackMessage(handle.goal_id, feedback))
+
+    def _publish_status(self) -> None:
+        self._status.publish(GoalStatusArray(tuple(GoalStatus(h.info, h.status) for h in self.goals.values())))
+
+    async def close(self) -> None:
+        for timer in self._expiries:
+            timer.cancel()
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)

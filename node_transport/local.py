@@ -1,0 +1,308 @@
+"""The in-process transport: the embedded default and the deterministic test bed.
+
+It keeps the semantics a ROS 2 deployment relies on, so nothing works here that would break
+over DDS: delivery is asynchronous (never inside ``publish``), each subscription has its own
+KEEP_LAST queue of ``depth`` that drops the oldest message, TRANSIENT_LOCAL publishers replay
+their last ``depth`` messages to late subscribers, incompatible QoS pairs do not connect, and a
+service call fails when nobody serves the name.  Message objects are frozen dataclasses, so they
+are shared, not copied.
+"""
+from __future__ import annotations
+
+import asyncio
+from collections import deque
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Any, Generic, TypeVar
+
+from node_transport.clock import Clock
+from node_transport.port import (
+    Node,
+    ParameterValue,
+    Publisher,
+    ServiceClient,
+    ServiceServer,
+    ServiceUnavailable,
+    Subscription,
+    TopicInfo,
+    Transport,
+    TransportError,
+    unwrap_reply,
+)
+from node_transport.qos import COMMANDS, Durability, History, QoS
+
+M = TypeVar("M")
+
+
+class _LocalSubscription(Subscription[M], Generic[M]):
+    def __init__(self, node: LocalNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS):
+        self.node = node
+        self.msg_type = msg_type
+        self.topic = topic
+        self.qos = qos
+        self._callback = callback
+        maxlen = None if qos.history is History.KEEP_ALL else qos.depth
+        self._queue: deque[M] = deque(maxlen=maxlen)
+        self._scheduled = False
+        self.alive = True
+
+    def deliver(self, msg: M) -> None:
+        if not self.alive:
+            return
+        self._queue.append(msg)
+        if not self._scheduled:
+            self._scheduled = True
+            self.node.bus.loop.call_soon(self._drain)
+
+    def _drain(self) -> None:
+        self._scheduled = False
+        while self._queue and self.alive:
+            msg = self._queue.popleft()
+            try:
+                self._callback(msg)
+            except Exception as error:  # noqa: BLE001 - reported, never swallowed
+                self.node.report_fault(f"subscription {self.topic}", error)
+
+    def destroy(self) -> None:
+        self.alive = False
+        self._queue.clear()
+        self.node.bus.remove_subscription(self)
+
+    def get_publisher_count(self) -> int:
+        return len(self.node.bus.matching_publishers(self)) if self.alive else 0
+
+    def publisher_nodes(self) -> list[str]:
+        return sorted({p.node.fully_qualified_name for p in self.node.bus.matching_publishers(self)}) if self.alive else []
+
+
+class _LocalPublisher(Publisher[M], Generic[M]):
+    def __init__(self, node: LocalNode, msg_type: type[M], topic: str, qos: QoS):
+        self.node = node
+        self.msg_type = msg_type
+        self.topic = topic
+        self.qos = qos
+        self.history: deque[M] = deque(maxlen=qos.depth if qos.durability is Durability.TRANSIENT_LOCAL else 0)
+        self.alive = True
+
+    def publish(self, msg: M) -> None:
+        if not self.alive:
+            raise TransportError(f"publisher on {self.topic} of {self.node.fully_qualified_name} was destroyed")
+        self._check(msg)
+        if self.qos.durability is Durability.TRANSIENT_LOCAL:
+            self.history.append(msg)
+        for sub in self.node.bus.matching_subscriptions(self):
+            sub.deliver(msg)
+
+    def get_subscription_count(self) -> int:
+        return len(self.node.bus.matching_subscriptions(self))
+
+
+class _LocalService(ServiceServer):
+    def __init__(self, node: LocalNode, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]):
+        self.node = node
+        self.srv_type = srv_type
+        self.name = name
+        self.handler = handler
+
+    def destroy(self) -> None:
+        self.node.bus.remove_service(self)
+
+
+class _LocalClient(ServiceClient[Any, Any]):
+    def __init__(self, node: LocalNode, srv_type: type, name: str):
+        self.node = node
+        self.srv_type = srv_type
+        self.name = name
+
+    async def wait_for_service(self, timeout: float) -> bool:
+        deadline = self.node.clock.now() + timeout
+        while self.node.bus.service(self.name) is None:
+            if self.node.clock.now() >= deadline:
+                return False
+            await self.node.clock.sleep(min(0.05, max(0.0, deadline - self.node.clock.now())))
+        return True
+
+    async def call(self, request: Any, timeout: float = 5.0) -> Any:
+        if type(request) is not self.srv_type.Request:
+            raise TransportError(f"service {self.name} takes {self.srv_type.Request.__name__}, got {type(request).__name__}")
+        server = self.node.bus.service(self.name)
+        if server is None:
+            raise ServiceUnavailable(f"no server for service {self.name}")
+        if server.srv_type is not self.srv_type:
+            raise TransportError(f"service {self.name} is {server.srv_type.__name__}, client expects {self.srv_type.__name__}")
+        # The handler runs as its own task, like a server in another process: cancelling the
+        # caller's wait (timeout) must not cancel the server's work half-way.
+        task = self.node.bus.loop.create_task(server.handler(request), name=f"service {self.name}")
+        try:
+            answer = await self.node.clock.wait_for(asyncio.shield(task), timeout)
+        except BaseException:  # the caller gave up; whatever the handler does after its answer still happens
+            task.add_done_callback(lambda done: _follow_up_later(server, done))
+            raise
+        response, then = unwrap_reply(answer)
+        if then is not None:  # after the caller has the response in hand, as the other transports do it
+            self.node.bus.loop.call_soon(_follow_up, server, then)
+        if type(response) is not self.srv_type.Response:
+            raise TransportError(f"service {self.name} answered {type(response).__name__}")
+        return response
+
+
+def _follow_up(server: _LocalService, then: Callable[[], None]) -> None:
+    try:
+        then()
+    except Exception as error:  # noqa: BLE001 - the serving node hears of it, like a handler's fault
+        server.node.report_fault(f"service {server.name} (after its answer)", error)
+
+
+def _follow_up_later(server: _LocalService, done: asyncio.Task[Any]) -> None:
+    if done.cancelled() or done.exception() is not None:
+        return
+    _, then = unwrap_reply(done.result())
+    if then is not None:
+        _follow_up(server, then)
+
+
+class LocalNode(Node):
+    def __init__(
+        self,
+        bus: LocalTransport,
+        name: str,
+        namespace: str,
+        parameters: Mapping[str, ParameterValue] | None,
+    ) -> None:
+        super().__init__(name, namespace, bus.clock, parameters)
+        self.bus = self.transport = bus
+        self._endpoints: list[Any] = []
+
+    def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]:
+        pub = _LocalPublisher(self, msg_type, self.resolve(topic), qos)
+        self.bus.add_publisher(pub)
+        self._endpoints.append(pub)
+        self.bus.publisher_created(TopicInfo(pub.topic, msg_type, (qos,)))
+        return pub
+
+    def create_subscription(
+        self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS
+    ) -> Subscription[M]:
+        sub = _LocalSubscription(self, msg_type, self.resolve(topic), callback, qos)
+        self.bus.add_subscription(sub)
+        self._endpoints.append(sub)
+        return sub
+
+    def create_service(self, srv_type: type, name: str, handler: Callable[[Any], Awaitable[Any]]) -> ServiceServer:
+        server = _LocalService(self, srv_type, self.resolve(name), handler)
+        self.bus.add_service(server)
+        self._endpoints.append(server)
+        return server
+
+    def create_client(self, srv_type: type, name: str) -> ServiceClient[Any, Any]:
+        return _LocalClient(self, srv_type, self.resolve(name))
+
+    def topic_names_and_types(self) -> list[TopicInfo]:
+        return self.bus.topics()
+
+    def destroy(self) -> None:
+        for endpoint in self._endpoints:
+            if isinstance(endpoint, _LocalPublisher):
+                endpoint.alive = False
+                self.bus.remove_publisher(endpoint)
+            else:
+                endpoint.destroy()
+        self._endpoints.clear()
+        self.bus.remove_node(self)
+
+
+class LocalTransport(Transport):
+    """All nodes of one process, on one asyncio loop."""
+
+    def __init__(self, clock: Clock) -> None:
+        super().__init__(clock)
+        self._publishers: dict[str, list[_LocalPublisher[Any]]] = {}
+        self._subscriptions: dict[str, list[_LocalSubscription[Any]]] = {}
+        # publisher -> the subscriptions it reaches: worked out once, not on every publish (a
+        # running cell publishes thousands of messages a second and rarely changes its graph)
+        self._matches: dict[_LocalPublisher[Any], tuple[_LocalSubscription[Any], ...]] = {}
+        self._services: dict[str, _LocalService] = {}
+        self._types: dict[str, type] = {}
+        self._nodes: dict[str, LocalNode] = {}
+
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop:
+        return self.clock.loop
+
+    def create_node(
+        self, name: str, namespace: str = "/", parameters: Mapping[str, ParameterValue] | None = None
+    ) -> LocalNode:
+        node = LocalNode(self, name, namespace, parameters)
+        if node.fully_qualified_name in self._nodes:
+            raise TransportError(f"a node named {node.fully_qualified_name} already exists")
+        self._nodes[node.fully_qualified_name] = node
+        return node
+
+    def remove_node(self, node: LocalNode) -> None:
+        self._nodes.pop(node.fully_qualified_name, None)
+
+    def node_names(self) -> list[str]:
+        return sorted(self._nodes)
+
+    async def shutdown(self) -> None:
+        for node in list(self._nodes.values()):
+            node.destroy()
+
+    # ------------------------------------------------------------------------------ wiring
+    def _claim_type(self, topic: str, msg_type: type) -> None:
+        known = self._types.setdefault(topic, msg_type)
+        if known is not msg_type:
+            raise TransportError(f"topic {topic} carries {known.__name__}; cannot use it for {msg_type.__name__}")
+
+    def add_publisher(self, pub: _LocalPublisher[Any]) -> None:
+        self._claim_type(pub.topic, pub.msg_type)
+        self._publishers.setdefault(pub.topic, []).append(pub)
+
+    def remove_publisher(self, pub: _LocalPublisher[Any]) -> None:
+        pubs = self._publishers.get(pub.topic, [])
+        if pub in pubs:
+            pubs.remove(pub)
+        self._matches.pop(pub, None)
+
+    def add_subscription(self, sub: _LocalSubscription[Any]) -> None:
+        self._claim_type(sub.topic, sub.msg_type)
+        self._subscriptions.setdefault(sub.topic, []).append(sub)
+        self._matches.clear()
+        for pub in self._publishers.get(sub.topic, []):
+            if sub.qos.compatible_with(pub.qos) and sub.qos.durability is Durability.TRANSIENT_LOCAL:
+                for msg in pub.history:
+                    sub.deliver(msg)
+
+    def remove_subscription(self, sub: _LocalSubscription[Any]) -> None:
+        subs = self._subscriptions.get(sub.topic, [])
+        if sub in subs:
+            subs.remove(sub)
+        self._matches.clear()
+
+    def matching_publishers(self, sub: _LocalSubscription[Any]) -> list[_LocalPublisher[Any]]:
+        return [p for p in self._publishers.get(sub.topic, []) if sub.qos.compatible_with(p.qos)]
+
+    def matching_subscriptions(self, pub: _LocalPublisher[Any]) -> tuple[_LocalSubscription[Any], ...]:
+        found = self._matches.get(pub)
+        if found is None:
+            found = self._matches[pub] = tuple(s for s in self._subscriptions.get(pub.topic, []) if s.qos.compatible_with(pub.qos))
+        return found
+
+    def add_service(self, server: _LocalService) -> None:
+        if server.name in self._services:
+            raise TransportError(f"service {server.name} is already served by {self._services[server.name].node.fully_qualified_name}")
+        self._services[server.name] = server
+
+    def remove_service(self, server: _LocalService) -> None:
+        if self._services.get(server.name) is server:
+            del self._services[server.name]
+
+    def service(self, name: str) -> _LocalService | None:
+        return self._services.get(name)
+
+    def topics(self) -> list[TopicInfo]:
+        """Every topic that has a live publisher, with the QoS each offers."""
+        return [
+            TopicInfo(topic, self._types[topic], tuple(p.qos for p in pubs))
+            for topic, pubs in sorted(self._publishers.items())
+            if pubs
+        ]
