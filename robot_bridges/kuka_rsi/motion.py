@@ -36,6 +36,8 @@ _DEG = math.pi / 180.0
 MAX_HELD_CYCLES = 1000
 #: Decimals of a DOUBLE in a packet (the codec's "%.6f").
 PACKET_DECIMALS = 6
+#: The Cartesian correction's tags, for messages.
+_RK_NAMES = ("X", "Y", "Z", "A", "B", "C")
 
 
 def _pose(p: Vector, r: Matrix) -> Matrix:
@@ -255,7 +257,7 @@ class Motion:
     # ---------------------------------------------------------------------------- stepping
     def step(self) -> str | None:
         """One cycle: the generator or the stream proposes, the limiter disposes.  A message when a
-        stream had to be stopped."""
+        stream had to be stopped, or a proposal that is not a number made the robot brake."""
         if self.mode == "stream":
             self._step_stream()
         elif self.mode == "joint":
@@ -266,7 +268,30 @@ class Motion:
         elif not self.cart.done:
             self.cart.step()
             self._set_rk(self.cart.position, self.cart.rotation)
+        if not np.isfinite(self.ak if self.space() == "joint" else self.rk).all():
+            return self._brake_instead()
         return self._limit()
+
+    def _brake_instead(self) -> str:
+        """A proposed correction that is not a number is never sent (NaN passes every comparison of
+        the limiter): the motion brakes instead, from the set point the controller holds, at the
+        speed it holds it with, within the limits; the command stops and the reason is reported."""
+        joint = self.space() == "joint"
+        bad = ", ".join(f"{n} {v}" for n, v in zip(AXES if joint else _RK_NAMES, self.ak if joint else self.rk) if not math.isfinite(v))
+        self.cursor, self.mode = None, self.space()
+        self._catch_up()  # the generator on the held set point, at the speed it is held with
+        if joint:
+            self.joint.halt()
+            self.joint.step()
+            self.ak = (self.joint.position - self.q_ref) / _DEG
+        else:
+            self.cart.halt()
+            self.cart.step()
+            self._set_rk(self.cart.position, self.cart.rotation)
+        self._limit()
+        text = f"the {'axis' if joint else 'Cartesian'} correction computed for this cycle is not a number ({bad}); it was not sent, the robot brakes from its set point"
+        self._warn("not a number", text)
+        return text
 
     def _set_rk(self, p: Vector, r: Matrix) -> None:
         a, b, c = matrix_to_abc(r @ self.base[:3, :3].T)

@@ -37,6 +37,9 @@ Matrix = NDArray[np.float64]
 #: Below these, a generator at its target is at rest (m or rad, m/s or rad/s).
 POSITION_EPS = 1e-9
 VELOCITY_EPS = 1e-9
+#: Beyond this many braking steps (units of ``accel dt^2``) the braking speed is the continuous
+#: curve's: far above any speed limit, so the limit decides.
+FAR_CYCLES = 1e15
 
 
 class GroupNorm:
@@ -65,6 +68,9 @@ def braking_speed(distance: float, accel: float, dt: float) -> float:
         return 0.0
     step = accel * dt
     cycles = distance / (step * dt)  # the distance in units of accel dt^2
+    if not cycles <= FAR_CYCLES:
+        # The whole-cycle correction is below rounding there, and ceil() of an overflowed count raises.
+        return math.sqrt(2.0 * distance) * math.sqrt(accel)
     m = max(0, math.ceil((math.sqrt(1.0 + 8.0 * cycles) - 3.0) / 2.0))
     if m * (m + 1) / 2 >= cycles:  # guard the ceil against rounding
         m = max(0, m - 1)
@@ -145,14 +151,21 @@ class VectorOTG:
 
 
 def next_velocity(error: Vector, velocity: Vector, vmax: Vector, amax: Vector, dt: float, norm: GroupNorm) -> Vector:
-    """One cycle of the braking-curve law (see the module docstring)."""
-    size_v = norm(error, vmax)
-    if size_v > 0.0:
-        # Move along ``error``: lam = 1 is the whole remaining distance.  lam' may not exceed
+    """One cycle of the braking-curve law (see the module docstring).
+
+    The error is measured in units of its largest component: its sizes against the limits then
+    lie between the limits' reciprocals, whatever the error's magnitude.  Measured as it is, a
+    subnormal remainder (a target like 1e-300 rad on one axis, the others landed exactly) had a
+    size whose reciprocal overflowed to inf; ``0 * inf`` made the set point NaN, the controller
+    refused every reply, and RSI stopped after 100 late packets.
+    """
+    scale = float(np.max(np.abs(error)))
+    if scale > 0.0:
+        # Move along ``unit``: lam = scale is the whole remaining distance.  lam' may not exceed
         # 1 / size_v (speed limit) and the braking speed at deceleration 1 / size_a.
-        size_a = norm(error, amax)
-        rate = min(1.0 / size_v, braking_speed(1.0, 1.0 / size_a, dt))
-        wanted = error * rate
+        unit = error / scale
+        size_v, size_a = norm(unit, vmax), norm(unit, amax)
+        wanted = unit * min(1.0 / size_v, braking_speed(scale, 1.0 / size_a, dt))
     else:
         wanted = np.zeros_like(velocity)
     change = wanted - velocity
