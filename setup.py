@@ -33,7 +33,7 @@ setup(
     license="Apache-2.0",
     python_requires=">=3.10",
     packages=find_packages(
-        include=["core_functions*", "node_transport*", "app_functions*", "execution_engine*", "robot_bridges*", "operator_station*"]
+        include=["core_functions*", "node_transport*", "app_functions*", "execution_engine*", "robot_bridges*", "cell_runner*", "operator_station*"]
     ),
     package_data={
         **{f"robot_bridges.{sim}": ["urdf/*.urdf"] for sim in ("nextage_sim", "vplus", "kuka_rsi")},
@@ -58,12 +58,12 @@ setup(
     zip_safe=True,
     entry_points={
         "console_scripts": [
-            "execution_engine = execution_engine.nodes:engine_main",
-            "group_machine = execution_engine.nodes:group_machine_main",
-            "nextage_sim_bridge = robot_bridges.nextage_sim.node:main",
-            "vplus_bridge = robot_bridges.vplus.node:main",
+            "execution_engine = cell_runner.nodes:engine_main",
+            "group_machine = cell_runner.nodes:group_machine_main",
+            "nextage_sim_bridge = cell_runner.bridge_nodes.nextage_sim:main",
+            "vplus_bridge = cell_runner.bridge_nodes.vplus:main",
             "vplus_simulator = robot_bridges.vplus.simulator:main",
-            "kuka_rsi_bridge = robot_bridges.kuka_rsi.node:main",
+            "kuka_rsi_bridge = cell_runner.bridge_nodes.kuka_rsi:main",
             "kuka_rsi_simulator = robot_bridges.kuka_rsi.simulator:main",
         ]
     },

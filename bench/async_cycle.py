@@ -17,8 +17,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app_functions.registry import full_catalog  # noqa: E402
+from cell_runner.dry_run import dry_run  # noqa: E402
 from execution_engine.app_model import load_application  # noqa: E402
-from execution_engine.dry_run import dry_run  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -4,7 +4,7 @@ Usage: python bench/collision_sweep.py [--copies 1 2 4 8 16] [--repeat 3]
 
 The paper's rivet demonstrator with its deburr/pick/insert operations repeated ``copies`` times
 (every copy the same four holes: the same motions again, so the work per motion is the same and
-only the count grows) is dry-run in this process; the sweep (execution_engine/dry_run/collisions.py)
+only the count grows) is dry-run in this process; the sweep (cell_runner/dry_run/collisions.py)
 is timed on its own, beside the rest of the dry run (the baseline: the engine, machines, skills
 and simulator that produce the motions).  Per size: motions and configurations checked, sweep
 time, time per motion and per configuration, and the sweep's share of the whole dry run.  "Close
@@ -24,10 +24,10 @@ from lxml import etree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import execution_engine.dry_run.runner as runner  # noqa: E402
 from app_functions.registry import full_catalog  # noqa: E402
+from cell_runner.dry_run import dry_run  # noqa: E402
+import cell_runner.dry_run.runner as runner  # noqa: E402
 from execution_engine.app_model import load_application  # noqa: E402
-from execution_engine.dry_run import dry_run  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

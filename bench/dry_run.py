@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from load_validate import catalog, generate, measure  # noqa: E402
 
-from execution_engine.cli import main as cli  # noqa: E402
+from cell_runner.cli import main as cli  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"

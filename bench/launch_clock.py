@@ -29,8 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from app_functions.registry import full_catalog  # noqa: E402
+from cell_runner.dry_run.runner import dry_run  # noqa: E402
 from execution_engine.app_model import load_application  # noqa: E402
-from execution_engine.dry_run.runner import dry_run  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 
 APP = ROOT / "apps_xml" / "rivet_installation.xml"

@@ -41,11 +41,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from app_functions.registry import full_catalog  # noqa: E402
+from cell_runner.deployment import deploy_local  # noqa: E402
+from cell_runner.dry_run.runner import dry_run  # noqa: E402
 from execution_engine.app_model import Application, load_application  # noqa: E402
-from node_transport.clock import Clock, run_with_clock, scaled_clock, simulated_clock  # noqa: E402
-from execution_engine.deployment import deploy_local  # noqa: E402
-from execution_engine.dry_run.runner import dry_run  # noqa: E402
 from execution_engine.engine.report import RunReport  # noqa: E402
+from node_transport.clock import Clock, run_with_clock, scaled_clock, simulated_clock  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 

@@ -24,13 +24,13 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app_functions.registry import LIBRARIES  # noqa: E402
+from cell_runner.deployment import deploy_local  # noqa: E402
 from core_functions.catalog import ParamSpec, ParamType, skill  # noqa: E402
 from core_functions.functions import CoreFunctions, Skill  # noqa: E402
 from core_functions.primitives import SetSpeed  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
 from execution_engine.app_model.model import Application, Call, ErrorPolicy, Operation  # noqa: E402
 from node_transport.clock import Clock, run_with_clock  # noqa: E402
-from execution_engine.deployment import deploy_local  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 

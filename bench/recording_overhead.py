@@ -44,12 +44,12 @@ sys.path.insert(0, str(HERE))
 from primitive_overhead import BenchFunctions, app  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
+from cell_runner.deployment import Deployment, deploy_local  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
-from node_transport.clock import Clock, run_with_clock  # noqa: E402
-from execution_engine.deployment import Deployment, deploy_local  # noqa: E402
 from execution_engine.observers import RunObserver  # noqa: E402
 from execution_engine.recorder.recorder import Recorder  # noqa: E402
 from execution_engine.recorder.writer import McapSink, RecordingStats  # noqa: E402
+from node_transport.clock import Clock, run_with_clock  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 
@@ -188,7 +188,7 @@ def demo(speed: str, rounds: int) -> dict[str, Any]:
 def rsi(seconds: float, rounds: int, echo: bool) -> dict[str, Any]:
     """The 4 ms loop's late replies without and with the recorder in the engine's process,
     ``rounds`` of each, alternating."""
-    import execution_engine.deployment as deployment_module
+    import cell_runner.deployment as deployment_module
     import rsi_latency
 
     original: Callable[..., Awaitable[Deployment]] = deployment_module.deploy_local

@@ -39,10 +39,11 @@ from dds_domain import hold_domain  # noqa: E402
 from primitive_overhead import BenchFunctions, app  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
+from cell_runner.deployment import deploy_local  # noqa: E402
+from cell_runner.libraries import APPLICATION_FUNCTIONS  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
-from node_transport.clock import Clock, real_clock, run_with_clock  # noqa: E402
-from execution_engine.deployment import deploy_local  # noqa: E402
 from execution_engine.engine.engine import ExecutionEngine  # noqa: E402
+from node_transport.clock import Clock, real_clock, run_with_clock  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 
@@ -83,7 +84,7 @@ async def in_process(clock: Clock, n: int) -> dict[str, float]:
 def start_nodes(env: dict[str, str], transport: tuple[str, ...] = ()) -> list[subprocess.Popen[bytes]]:
     """The simulator bridge and one machine per group, each its own process, as a launch file starts them
     (``transport``: e.g. ``("--transport", "dds")``; by default rclpy)."""
-    bridge = [sys.executable, "-c", "import sys; from robot_bridges.nextage_sim.node import main; sys.exit(main(sys.argv))",
+    bridge = [sys.executable, "-c", "import sys; from cell_runner.bridge_nodes.nextage_sim import main; sys.exit(main(sys.argv))",
               *transport, "--ros-args", "-p", "state_period:=1.0"]
     processes = [subprocess.Popen(bridge, env=env, cwd=ROOT)]
     for group in NEXTAGE_OPEN.group_names:
@@ -100,7 +101,7 @@ async def per_process(clock: Clock, n: int, transport_class: Any = None) -> dict
 
     transport = transport_class(clock, ["bench"])
     try:
-        engine = ExecutionEngine(transport.create_node("execution_engine", parameters=ENGINE_PARAMETERS))
+        engine = ExecutionEngine(transport.create_node("execution_engine", parameters=ENGINE_PARAMETERS), APPLICATION_FUNCTIONS.catalog(None))
         await time_runs(engine, max(10, n // 10))
         return await time_runs(engine, n)
     finally:
@@ -174,7 +175,7 @@ def raw_round_trip(n: int) -> float:
 
 def machine_process() -> int:
     """Child mode: a group machine that also knows the bench skill."""
-    from execution_engine.nodes import group_machine_main
+    from cell_runner.nodes import group_machine_main
 
     LIBRARIES["bench"] = BenchFunctions
     return group_machine_main([sys.argv[0], *sys.argv[2:]])

@@ -182,7 +182,7 @@ async def engine_phase(port: int, seconds: float, feedback: Path) -> dict[str, o
     from app_functions.registry import full_catalog
     from execution_engine.app_model import load_application
     from node_transport.clock import real_clock
-    from execution_engine.deployment import deploy_local
+    from cell_runner.deployment import deploy_local
 
     app = load_application(str(ROOT / "apps_xml" / "kuka_rsi_demo.xml"), full_catalog())
     backend = KukaRsiBackend(listen=("127.0.0.1", port), simulator=None, runner="process", feedback_file=str(feedback))

@@ -1,5 +1,7 @@
-"""Execution engine: application model, engine, SMACH-style group machines, transports and CLI.
+"""The execution engine: the application model, the engine, the SMACH-style group machines, the recorder and checkpoints.
 
-Kept free of imports so that ``robot_bridges`` can use the transport port and the clock
-(``node_transport``, ``node_transport.clock``) without loading the engine.
+It works over the transport port (``node_transport``) with any function library handed to it
+(:mod:`execution_engine.function_library`); what starts it -- the command line, the node
+processes, the dry run -- is ``cell_runner``'s.  ``python -m execution_engine`` is the program's
+entry (``__main__.py``), which composes the command line with the operator station.
 """

@@ -1,8 +1,12 @@
-"""``python -m execution_engine``: see :mod:`execution_engine.cli`."""
+"""``python -m execution_engine``: the program's entry (see :mod:`operator_station.program`).
+
+An entry composes every layer and nothing imports it, so it may import from the top: the command
+line of ``cell_runner`` with the operator station's ``studio``.
+"""
 import os
 import sys
 
-from execution_engine.cli import main
+from operator_station.program import main
 
 try:
     sys.exit(main())

@@ -1,6 +1,6 @@
 """The run's timeline (the paper's Fig. 12): one lane per robot group, what each did and when.
 
-A model only -- no drawing: the report renders it with matplotlib (:mod:`execution_engine.run_report`)
+A model only -- no drawing: the report renders it with matplotlib (:mod:`cell_runner.run_report`)
 and the operator station draws it live in the browser, so both show the same thing from the same
 events.  It is built from trace records (the dicts of :mod:`execution_engine.observers`, as a
 JSON-lines trace holds them and as :mod:`execution_engine.recorder.reading` rebuilds them from a

@@ -13,7 +13,7 @@ and ``execution_engine`` (runs ``application``), all in ``namespace``: cells lau
 ports; real ones each on their own ``rsi_listen``).  RSI runs on the robot's clock, so there is no
 ``speed``.  Every other parameter comes from ``config/kuka_rsi.yaml``; the node names here are the
 sections of that file and the names the embedded deployment gives the same nodes
-(execution_engine/ros_main.py).  What every launch file of the package shares is in
+(cell_runner/ros_main.py).  What every launch file of the package shares is in
 ``cell_description.py`` beside this file.
 """
 import os

@@ -13,7 +13,7 @@ nodes take their ROS time from ``<namespace>/clock``; at a ``speed`` other than 
 publishes that clock and the machines and the engine follow it anyway, so every timeout and the
 engine's report are in the robot's time (the cycle time the dry run predicts).  Every other parameter comes from
 ``config/nextage_sim.yaml``; the node names here are the sections of that file and the names the
-embedded deployment gives the same nodes (execution_engine/ros_main.py).  What every launch file of
+embedded deployment gives the same nodes (cell_runner/ros_main.py).  What every launch file of
 the package shares is in ``cell_description.py`` beside this file.
 """
 import os

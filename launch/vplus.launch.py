@@ -12,7 +12,7 @@ launched with ``namespace:=cell_a`` and ``namespace:=cell_b`` run side by side -
 ones need two ``port`` values, since each simulator listens on its own.  The simulator runs in real
 time (the bridge has no ``speed``).  Every other parameter comes from ``config/vplus.yaml``; the
 node names here are the sections of that file and the names the embedded deployment gives the same
-nodes (execution_engine/ros_main.py).  What every launch file of the package shares is in
+nodes (cell_runner/ros_main.py).  What every launch file of the package shares is in
 ``cell_description.py`` beside this file.
 """
 import os

@@ -50,8 +50,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-from node_transport.clock import Clock, FollowingClock
 from node_transport import ros_logging, typed
+from node_transport.clock import Clock, FollowingClock
 from node_transport.msgs import CAMERA_TYPES, MESSAGE_TYPES, ClockMessage, Time
 from node_transport.port import (
     EndpointNode,
@@ -65,7 +65,6 @@ from node_transport.port import (
 )
 from node_transport.qos import QoS
 from node_transport.ros_args import raw_parameter_texts
-from node_transport.sim_time import follow_clock
 from node_transport.ros_convert import (
     MessageConverter,
     offered_qos,
@@ -74,6 +73,7 @@ from node_transport.ros_convert import (
     user_overrides,
 )
 from node_transport.ros_endpoints import RosClient, RosPublisher, RosService, RosSubscription, settle
+from node_transport.sim_time import follow_clock
 
 M = TypeVar("M")
 log = logging.getLogger(__name__)
@@ -339,7 +339,7 @@ class RosTransport(Transport):
     (ROS arguments such as ``--ros-args -p name:=value`` are parsed by rclpy; ones rcl refuses
     raise :class:`RosArgumentsError`).  rclpy's own SIGINT/SIGTERM handlers are not installed:
     the process's asyncio loop handles signals and shuts the transport down in order (see
-    :mod:`execution_engine.ros_main`).  ``handler_timeout`` bounds how long an executor thread
+    :mod:`cell_runner.ros_main`).  ``handler_timeout`` bounds how long an executor thread
     waits for a service handler and ``shutdown_timeout`` how long shutdown waits for callbacks in
     flight, both in run seconds; ``clock_stall_timeout`` how long a node with ``use_sim_time``
     waits for ``/clock`` before its waits end (wall seconds).

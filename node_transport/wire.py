@@ -288,6 +288,21 @@ def tcp_pose_topic(group: str) -> str:
     return f"{group}/tcp_pose"
 
 
+# The nodes of a cell: the embedded deployment, the launch files and ``launch`` give them these
+# names, and the engine names a lost machine by its node.
+ENGINE_NODE = "execution_engine"
+
+
+def machine_node_name(group: str) -> str:
+    """The node of a group's state machine."""
+    return f"{group}_machine"
+
+
+def bridge_node_name(backend: str) -> str:
+    """The node of a bridge, from the back end's registry name (``nextage-sim`` -> ``nextage_sim_bridge``)."""
+    return f"{backend.replace('-', '_')}_bridge"
+
+
 ENGINE_STATUS = "execution_engine/status"
 ENGINE_EVENTS = "execution_engine/events"
 ENGINE_CELL = "execution_engine/cell"

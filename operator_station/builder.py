@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from cell_runner.catalog_document import catalog_document
+from cell_runner.output_files import FilePlan, Output, Refused
 from core_functions.catalog import Catalog
 from core_functions.robots import find_robot
 from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
 from execution_engine.app_model.document import AppDocument, Placement, read_document, serialize
-from execution_engine.catalog_document import catalog_document
-from execution_engine.output_files import FilePlan, Output, Refused
 
 
 @dataclass(frozen=True)
@@ -104,7 +104,7 @@ def save_document(document: AppDocument, path: Path, catalog: Catalog, outputs: 
     """Write the document to ``path`` only if it validates there; the messages either way.
 
     ``path`` may be the application itself (that is saving), never its cell nor one of
-    ``outputs`` (the station's runs' files): run's rule, :mod:`execution_engine.output_files`.
+    ``outputs`` (the station's runs' files): run's rule, :mod:`cell_runner.output_files`.
     The file is replaced atomically (a temporary file beside it, then a rename), so a crash
     never leaves half an application behind.
     """

@@ -19,15 +19,15 @@ import sys
 from pathlib import Path
 from typing import IO, Any
 
+from cell_runner.output_files import FilePlan, Refused
+from cell_runner.run_checks import run_files
+from cell_runner.settings import BackendSettings, Outputs, RunSettings
 from core_functions.catalog import Catalog
 from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.printable import printable
 from core_functions.robots import find_robot
 from execution_engine.app_model.document import read_document
-from execution_engine.output_files import FilePlan, Refused
 from execution_engine.record_reader import NotARecording, OverLimit
-from execution_engine.run_checks import run_files
-from execution_engine.settings import BackendSettings, Outputs, RunSettings
 from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
 from operator_station.attach import AttachedSession, ros_connect
 from operator_station.feed import Feed

@@ -18,21 +18,21 @@ from collections.abc import Callable, Coroutine
 from concurrent.futures import Future
 from typing import IO, Any
 
+from cell_runner.deployment import Deployment, deploy_local
+from cell_runner.dry_run.report import DryRunReport
+from cell_runner.dry_run.runner import DryRunError, dry_run
+from cell_runner.dry_run.simulators import setup_for
+from cell_runner.dry_run.start import StartRefused, backend_measure, backend_source, check_run
+from cell_runner.output_files import FilePlan, Output, Refused, WriteFailure
+from cell_runner.run_checks import app_inputs, run_files
+from cell_runner.settings import RunSettings
 from core_functions.robots import RobotModel
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
-from node_transport.clock import Clock, run_with_clock
-from execution_engine.deployment import Deployment, deploy_local
-from execution_engine.dry_run.report import DryRunReport
-from execution_engine.dry_run.runner import DryRunError, dry_run
-from execution_engine.dry_run.simulators import setup_for
-from execution_engine.dry_run.start import StartRefused, backend_measure, backend_source, check_run
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import RunObserver, TraceWriter
-from execution_engine.output_files import FilePlan, Output, Refused, WriteFailure
-from execution_engine.run_checks import app_inputs, run_files
-from execution_engine.settings import RunSettings
 from node_transport import codec, typed
+from node_transport.clock import Clock, run_with_clock
 from node_transport.msgs import Bool, JointState
 from node_transport.port import Node
 from node_transport.qos import LATCHED, SENSOR
@@ -101,7 +101,7 @@ class RunSession:
         return self.settings.outputs.trajectory_db or str(application_store(app.path))
 
     def files(self, app: Application) -> FilePlan:
-        """Every file a run of ``app`` reads and writes, under ``run``'s rule (:mod:`execution_engine.output_files`)."""
+        """Every file a run of ``app`` reads and writes, under ``run``'s rule (:mod:`cell_runner.output_files`)."""
         derived = {} if self.settings.outputs.trajectory_db else {"--trajectory-db": "the application's own"}
         return run_files(app_inputs(app), trace=self.settings.outputs.trace, trajectory_db=self.trajectory_db(app),
                          extra=self.settings.backend.extra, derived=derived, command="studio run")

@@ -8,12 +8,12 @@ from typing import Any
 
 from scripted_backend import ScriptedBackend
 
+from cell_runner.deployment import Deployment, deploy_local
 from core_functions.robots import NEXTAGE_OPEN, RobotModel
 from execution_engine.app_model.model import Application, Call, ErrorPolicy, Operation
-from node_transport.clock import Clock
-from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.engine.report import RunReport
 from node_transport import codec, typed
+from node_transport.clock import Clock
 from node_transport.msgs import Trigger
 from node_transport.qos import EVENTS
 from node_transport.wire import ENGINE_STATUS, EngineStatus, SmStatus, engine_service, sm_topic

@@ -16,13 +16,14 @@ from typing import Any
 import numpy as np
 
 from app_functions.registry import full_catalog
+from cell_runner import nodes
+from cell_runner.bridge_nodes.common import run_bridge
+from cell_runner.bridge_nodes.nextage_sim import declare_nextage_parameters
+from cell_runner.ros_main import Outcome
 from core_functions.robots import NEXTAGE_OPEN
-from execution_engine import nodes
 from execution_engine.app_model import Application, read_application
-from execution_engine.ros_main import Outcome, machine_node_name
+from node_transport.wire import machine_node_name
 from robot_bridges.collision import scene_for
-from robot_bridges.nextage_sim.node import declare_nextage_parameters
-from robot_bridges.node import run_bridge
 
 MIDDLE = '<param value="0.34,0.0,0.10,180deg,0,90deg"/>'
 CROSSING = f"""<?xml version="1.0"?>

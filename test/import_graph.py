@@ -27,7 +27,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The packages of the project; ``test`` holds top-level modules (helpers and tests).
-PACKAGES = ("core_functions", "node_transport", "app_functions", "execution_engine", "robot_bridges", "operator_station")
+PACKAGES = ("core_functions", "node_transport", "app_functions", "execution_engine", "robot_bridges", "cell_runner", "operator_station")
 TESTS = "test"
 #: A function-level import says why it is not at the top: the library is optional or slow to load.
 REASON = re.compile(r"\b(optional|slow)\b", re.IGNORECASE)

@@ -11,12 +11,13 @@ from typing import Any
 
 from scripted_backend import ScriptedBackend
 
+from cell_runner.libraries import APPLICATION_FUNCTIONS
 from core_functions.cell_index import CellFrame
 from core_functions.geometry import Pose
 from core_functions.robots import NEXTAGE_OPEN, RobotModel
-from node_transport.clock import Clock
 from execution_engine.machine.group_machine import GroupMachine
 from node_transport import codec, typed
+from node_transport.clock import Clock
 from node_transport.local import LocalTransport
 from node_transport.msgs import Trigger, TriggerResponse
 from node_transport.qos import COMMANDS, EVENTS, LATCHED
@@ -56,7 +57,7 @@ class Harness:
         self.tasks = []
         for group in self.robot.group_names:
             params = {"group": group, "robot": self.robot.name, "trajectory_db": ":memory:", **self.parameters}
-            machine = GroupMachine(self.transport.create_node(f"{group}_machine", parameters=params))
+            machine = GroupMachine(self.transport.create_node(f"{group}_machine", parameters=params), APPLICATION_FUNCTIONS)
             self.machines[group] = machine
             self.status[group] = []
             self.engine.create_subscription(

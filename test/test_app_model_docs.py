@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from app_functions.registry import full_catalog
+from cell_runner.cli import main
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.app_model import check_joint_poses, read_cell, validate_application
-from execution_engine.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "application_xml.md"

@@ -15,13 +15,14 @@ from machine_harness import CELL, Harness
 from scripted_backend import VISION_OFFSET
 
 from app_functions.registry import full_catalog
+from cell_runner.deployment import deploy_local
 from core_functions.geometry import Pose
 from core_functions.robots import NEXTAGE_OPEN
+from core_functions.urdf_tree import UrdfTree
 from execution_engine.app_model import load_application
-from node_transport.clock import Clock, run_with_clock, simulated_clock
-from execution_engine.deployment import deploy_local
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from node_transport import typed
+from node_transport.clock import Clock, run_with_clock, simulated_clock
 from node_transport.local import LocalTransport
 from node_transport.msgs import TFMessage, Time
 from node_transport.port import Node
@@ -30,7 +31,6 @@ from node_transport.transforms import compose_to_root, tree_of
 from node_transport.wire import ENGINE_CELL, TF_STATIC_TOPIC, TF_TOPIC, CellSnapshot, LocatedFrames, sm_topic
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
-from core_functions.urdf_tree import UrdfTree
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from app_functions.registry import full_catalog
-from execution_engine.cli import main
+from cell_runner.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"

@@ -29,8 +29,8 @@ import pytest
 import zstandard
 from dds_domain import domain_env, stop_group
 
-from execution_engine.cli import main
 from execution_engine.trace_report import read_trace
+from operator_station.program import main
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "faults.md"

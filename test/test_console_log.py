@@ -13,8 +13,8 @@ import re
 
 import pytest
 
-from execution_engine import cli
-from execution_engine.cli import main
+from cell_runner import cli
+from cell_runner.cli import main
 from node_transport.console_log import FORMAT, AggregatingHandler, ConsoleLog, kind_of
 from node_transport.wall_clock import ManualWallClock
 
@@ -106,7 +106,7 @@ def test_the_kind_masks_numbers_but_not_words() -> None:
 def test_every_command_of_the_cli_logs_through_it_and_leaves_the_root_logger_as_it_was(monkeypatch: pytest.MonkeyPatch) -> None:
     """``main()`` installs the handler for its command and removes it again: a repeated warning of
     any module comes out as one counted line, on this command's own stream."""
-    def noisy(args: object, out: object, err: object) -> int:
+    def noisy(args: object, out: object, err: object, extra: object = ()) -> int:
         for n in range(300):
             logging.getLogger("robot_bridges.kuka_rsi.backend").warning(LATE, "kuka_rsi 127.0.0.1:0 (simulated)", n + 1, n)
         return 0

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import pytest
 
-from execution_engine.cli import build_parser, main
+from operator_station.program import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

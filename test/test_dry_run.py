@@ -14,19 +14,19 @@ from typing import Any
 
 import pytest
 
-import execution_engine.dry_run.runner as runner
 from app_functions.registry import full_catalog
+from cell_runner.cli import main
+from cell_runner.deployment import deploy_local
+from cell_runner.dry_run import dry_run
+from cell_runner.dry_run.report import DryRunReport, Finding
+import cell_runner.dry_run.runner as runner
 from core_functions.primitives import TrajectoryResult
 from core_functions.robots import NEXTAGE_OPEN
 from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.app_model import load_application
 from execution_engine.app_model.diagnostics import MAX_DIAGNOSTICS
-from execution_engine.cli import main
-from node_transport.clock import Clock
-from execution_engine.deployment import deploy_local
-from execution_engine.dry_run import dry_run
-from execution_engine.dry_run.report import DryRunReport, Finding
 from execution_engine.engine.report import RunReport
+from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 

@@ -16,13 +16,13 @@ from typing import Any
 import pytest
 from app_builder import Cell, make_app
 
+from cell_runner.operator_console import OperatorConsole
 from execution_engine.app_model.model import ErrorPolicy
-from node_transport.clock import Clock, VirtualTimeLoop, run_with_clock, simulated_clock
-from node_transport.wall_clock import ManualWallClock, RealWallClock, wake_loop
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
-from execution_engine.operator_console import OperatorConsole
+from node_transport.clock import Clock, VirtualTimeLoop, run_with_clock, simulated_clock
 from node_transport.msgs import Bool
 from node_transport.qos import LATCHED
+from node_transport.wall_clock import ManualWallClock, RealWallClock, wake_loop
 from node_transport.wire import SAFETY_STOP, FaultKind
 
 OPS = [{"left_arm": ("move_to_joint_pose", "initial"), "right_arm": ("gripper_open",)}, {"left_arm": ("gripper_close",)}]

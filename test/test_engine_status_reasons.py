@@ -14,10 +14,10 @@ from typing import Any
 
 from app_builder import Cell, make_app
 
+from cell_runner.operator_console import OperatorConsole
 from execution_engine.app_model.model import ErrorPolicy
-from node_transport.clock import Clock
 from execution_engine.observers import LivePrinter, RunObserver, TraceWriter
-from execution_engine.operator_console import OperatorConsole
+from node_transport.clock import Clock
 from node_transport.wire import FaultKind
 
 OPS = [{"left_arm": ("move_to_joint_pose", "initial")}, {"left_arm": ("gripper_close",)}, {"left_arm": ("gripper_open",)}]

@@ -15,11 +15,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app_functions.registry import full_catalog
+from cell_runner.deployment import deploy_local
 from execution_engine.app_model import load_application
-from node_transport.clock import run_with_clock, simulated_clock
-from execution_engine.deployment import deploy_local
 from execution_engine.timeline import build_timeline
 from execution_engine.timeline_plot import plot_timeline
+from node_transport.clock import run_with_clock, simulated_clock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 from test_dry_run import RIVET_CELL, call, cli, param, write_app

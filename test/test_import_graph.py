@@ -1,18 +1,12 @@
-"""Issue 21's rules on the imports between files, held on the source (the walk: ``import_graph.py``).
-
-No import cycle between files (type-only and function-level imports count: they are how cycles hide); no
-underscore name of another module, imported or reached through the module; a function-level import only for a
-library that is optional or slow to load, with a comment saying which, never the project's own module to hide
-a cycle (only the few project modules that load such a library themselves, listed in ``HEAVY_MODULES``).
+"""The import walk itself (``import_graph.py``), on small trees of its own: what it counts as an import, a cycle,
+a private name and a function-level import with its reason.  The rules it serves are held on the project's
+source by ``test_layering.py``.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
-
 from import_graph import (
-    HEAVY_MODULES,
     Project,
     Walk,
     cycles,
@@ -25,42 +19,6 @@ from import_graph import (
     unexplained,
     walk,
 )
-
-WALK = walk()
-
-
-def test_no_import_cycle_between_files() -> None:
-    found = cycles(graph(WALK.imports))
-    lines = []
-    for component in found:
-        members = set(component)
-        lines.append(" <-> ".join(component))
-        lines += [f"    {describe(i)}" for i in WALK.imports if i.file in members and i.target in members and i.target != i.file]
-    assert found == [], "import cycles between files:\n" + "\n".join(lines)
-
-
-def test_no_private_name_of_another_module_is_used() -> None:
-    taken = [describe(i) for i in private_imports(WALK)]
-    reached = [f"{u.file}:{u.line}: {u.module}.{u.name}" for u in WALK.private_uses]
-    assert taken + reached == [], "underscore names of another module:\n" + "\n".join(taken + reached)
-
-
-def test_every_function_level_import_says_why_it_is_not_at_the_top() -> None:
-    lines = [describe(i) for i in unexplained(WALK.imports)]
-    assert lines == [], "function-level imports without a comment saying the library is optional or slow:\n" + "\n".join(lines)
-
-
-def test_no_function_level_import_of_the_projects_own_modules() -> None:
-    lines = [describe(i) for i in project_modules_in_functions(WALK.imports)]
-    assert lines == [], "the project's own modules imported inside functions (import them at the top):\n" + "\n".join(lines)
-
-
-@pytest.mark.parametrize(("module", "library"), sorted(HEAVY_MODULES.items()))
-def test_a_project_module_imported_in_a_function_really_loads_its_heavy_library(module: str, library: str) -> None:
-    """The exemption is true (importing the module loads the library) and used (some function imports it)."""
-    assert library in loads_at_import(WALK, module)
-    assert any(i.module == module for i in function_level(WALK.imports))
-
 
 # ------------------------------------------------------------------ the walk on a tree of its own
 def _tree(root: Path, files: dict[str, str]) -> Walk:

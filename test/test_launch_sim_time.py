@@ -18,9 +18,9 @@ import pytest
 from dds_domain import stop_group
 
 from app_functions.registry import full_catalog
+from cell_runner.dry_run.runner import dry_run
+from cell_runner.launcher import cell_nodes
 from execution_engine.app_model import load_application
-from execution_engine.dry_run.runner import dry_run
-from execution_engine.launcher import cell_nodes
 from robot_bridges.backend import BackendOptions
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -11,12 +11,12 @@ from typing import Any
 import pytest
 from app_builder import Cell, make_app
 
-from execution_engine.cli import main
-from node_transport.clock import Clock, real_clock, run_with_clock
+from cell_runner.cli import main
+from cell_runner.launcher import EXIT_NODE_DIED, NodeSpec, cell_nodes, launch, select
 from execution_engine.engine.group_link import WATCH_PERIOD
 from execution_engine.machine.bridge_watch import WATCH_PERIOD as BRIDGE_WATCH_PERIOD
-from execution_engine.launcher import EXIT_NODE_DIED, NodeSpec, cell_nodes, launch, select
 from execution_engine.machine.zone_gate import ZoneGate
+from node_transport.clock import Clock, real_clock, run_with_clock
 
 ROOT = Path(__file__).resolve().parent.parent
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"

@@ -17,18 +17,18 @@ import pytest
 import ros_fake_logging
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
-import node_transport.console_log as console_log
+from cell_runner.launcher import NodeSpec, launch
+from cell_runner.ros_main import ExitCode, Outcome, run_node
 from node_transport.clock import Clock, real_clock, run_with_clock
-from node_transport.wall_clock import ManualWallClock
-from execution_engine.launcher import NodeSpec, launch
-from execution_engine.ros_main import ExitCode, Outcome, run_node
+import node_transport.console_log as console_log
 from node_transport.port import Node
+from node_transport.wall_clock import ManualWallClock
 
 #: A node process over DDS whose body floods one warning (the count in it changing) for FLOOD wall
 #: seconds, then says how many it logged and in how long, and ends (the launch ends with it).
 FLOODER = """
 import logging, sys, time
-from execution_engine.ros_main import run_node
+from cell_runner.ros_main import run_node
 
 async def body(node, outcome):
     log = logging.getLogger("robot_bridges.kuka_rsi.backend")

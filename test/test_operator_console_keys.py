@@ -25,9 +25,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from execution_engine.cli import main
+from cell_runner.cli import main
+from cell_runner.operator_console import MAX_LINE, PROMPT_KEYS, PROMPT_LINES, KeyDecoder, OperatorConsole
 from node_transport.clock import real_clock
-from execution_engine.operator_console import MAX_LINE, PROMPT_KEYS, PROMPT_LINES, KeyDecoder, OperatorConsole
 from node_transport.local import LocalTransport
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,7 +115,7 @@ def test_the_terminal_is_given_back_when_the_run_ends_in_an_exception(terminal: 
     before = termios.tcgetattr(screen)
     child = (
         "import asyncio, sys\n"
-        "from execution_engine.operator_console import OperatorConsole\n"
+        "from cell_runner.operator_console import OperatorConsole\n"
         "from node_transport.local import LocalTransport\n"
         "from node_transport.clock import real_clock\n"
         "async def main():\n"

@@ -14,19 +14,20 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from cell_runner.bridge_nodes.kuka_rsi import declare_kuka_parameters
+from cell_runner.bridge_nodes.nextage_sim import declare_nextage_parameters
+from cell_runner.bridge_nodes.vplus import declare_vplus_parameters
+from cell_runner.libraries import APPLICATION_FUNCTIONS
 from core_functions.option_ranges import OPTIONS, SETTINGS, Range, RangeError, bounds, table
-from node_transport.clock import Clock, MAX_SPEED, MIN_SPEED, run_with_clock, simulated_clock
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.machine.group_machine import GroupMachine
+from node_transport.clock import Clock, MAX_SPEED, MIN_SPEED, run_with_clock, simulated_clock
 from node_transport.local import LocalTransport
 from node_transport.port import TransportError
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.camera.ros_camera import attach_cameras
-from robot_bridges.nextage_sim.backend import NextageSimBackend
-from robot_bridges.kuka_rsi.node import declare_kuka_parameters
 from robot_bridges.kuka_rsi.simulator import main as kuka_simulator
-from robot_bridges.nextage_sim.node import declare_nextage_parameters
-from robot_bridges.vplus.node import declare_vplus_parameters
+from robot_bridges.nextage_sim.backend import NextageSimBackend
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -88,11 +89,11 @@ def _refusal(build: Any, parameters: dict[str, Any]) -> str:
 
 
 def _machine(transport: LocalTransport, parameters: dict[str, Any]) -> None:
-    GroupMachine(transport.create_node("left_arm_machine", parameters={"group": "left_arm", "trajectory_db": ":memory:", **parameters}))
+    GroupMachine(transport.create_node("left_arm_machine", parameters={"group": "left_arm", "trajectory_db": ":memory:", **parameters}), APPLICATION_FUNCTIONS)
 
 
 def _engine(transport: LocalTransport, parameters: dict[str, Any]) -> None:
-    ExecutionEngine(transport.create_node("execution_engine", parameters=parameters))
+    ExecutionEngine(transport.create_node("execution_engine", parameters=parameters), APPLICATION_FUNCTIONS.catalog(None))
 
 
 def _bridge(transport: LocalTransport, parameters: dict[str, Any]) -> None:

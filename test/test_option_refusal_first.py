@@ -16,9 +16,9 @@ from typing import Any
 import pytest
 from test_cli_faults import ROWS, Row, pattern
 
+from cell_runner import cli
+from cell_runner.dry_run import check
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN
-from execution_engine import cli
-from execution_engine.dry_run import check
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import check_options
 

@@ -16,13 +16,13 @@ from pathlib import Path
 import pytest
 
 from app_functions.registry import full_catalog
+from cell_runner.output_files import FilePlan, Output, Refused, same_file
+from cell_runner.record_hook import record_node
 from execution_engine.app_model import load_application
 from execution_engine.checkpoint.resume import app_meta
 from execution_engine.checkpoint.store import CheckpointStore
-from execution_engine.cli import main
-from execution_engine.output_files import FilePlan, Output, Refused, same_file
-from execution_engine.recorder.cli_hook import record_node
 from operator_station.cli import build_station
+from operator_station.program import main
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = (ROOT / "apps_xml" / "rivet_installation.xml").read_text().replace(

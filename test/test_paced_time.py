@@ -18,12 +18,12 @@ from robot_bridges.camera import vision
 from scripted_backend import ScriptedBackend
 
 from app_functions.registry import full_catalog
+from cell_runner.deployment import deploy_local
+from cell_runner.dry_run.runner import dry_run
 from core_functions.primitives import Primitive, PrimitiveResult
 from execution_engine.app_model import load_application
-from node_transport.clock import MAX_SPEED, MIN_SPEED, Clock, PacedLoop, run_with_clock, scaled_clock, simulated_clock
-from execution_engine.deployment import deploy_local
-from execution_engine.dry_run.runner import dry_run
 from execution_engine.engine.report import RunReport
+from node_transport.clock import MAX_SPEED, MIN_SPEED, Clock, PacedLoop, run_with_clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 

@@ -16,13 +16,13 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from execution_engine.cli import main
+from cell_runner.cli import main
 from execution_engine.recorder.definitions import SEPARATOR, schema_text
 from execution_engine.recorder.reading import Recording, iter_messages, trace_records
 from execution_engine.recorder.recorder import Recorder, reader_qos
 from execution_engine.recorder.writer import McapSink
-from node_transport.clock import Clock
 from node_transport import msgs, typed
+from node_transport.clock import Clock
 from node_transport.local import LocalTransport
 from node_transport.qos import EVENTS, LATCHED, SENSOR, Durability, Reliability
 from node_transport.wire import EngineEvent, EngineStatus, GroupProgress, SmStatus, SmStructure, TransitionSpec

@@ -9,12 +9,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from cell_runner.run_report import summarize
 from execution_engine.recorder.reading import MAGIC
-from execution_engine.recorder.writer import McapSink
 from execution_engine.recorder.safe_read import NotARecording
-from execution_engine.run_report import summarize
-from node_transport.clock import Clock
+from execution_engine.recorder.writer import McapSink
 from node_transport import msgs, typed
+from node_transport.clock import Clock
 from node_transport.qos import EVENTS, SENSOR
 from node_transport.wire import SmStatus
 

@@ -34,13 +34,13 @@ from test_report_bounds import (  # noqa: E402
     zeros_bomb,
 )
 
+from cell_runner.run_report import summarize  # noqa: E402
 from core_functions.printable import is_unsafe  # noqa: E402
-from execution_engine.cli import main  # noqa: E402
 from execution_engine.record_limits import MAX_GROUPS  # noqa: E402
 from execution_engine.record_reader import NotARecording, OverLimit, read_record  # noqa: E402
 from execution_engine.recorder.safe_read import MAX_CHUNK  # noqa: E402
-from execution_engine.run_report import summarize  # noqa: E402
 from operator_station.feed import Feed  # noqa: E402
+from operator_station.program import main  # noqa: E402
 from operator_station.replay import load_replay  # noqa: E402
 from operator_station.timeline_view import TimelineView  # noqa: E402
 

@@ -22,16 +22,16 @@ import zstandard
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from cell_runner.cli import main
+from cell_runner.run_report import summarize
 from core_functions.printable import is_unsafe, printable, unsafe_character
-from node_transport.clock import Clock
-from execution_engine.cli import main
 from execution_engine.record_limits import MAX_GROUPS, OverLimit
 from execution_engine.recorder.reading import MAGIC
 from execution_engine.recorder.safe_read import MAX_CHUNK, Budget, NotARecording
 from execution_engine.recorder.writer import McapSink
-from execution_engine.run_report import summarize
 from execution_engine.trace_report import read_trace
 from node_transport import typed
+from node_transport.clock import Clock
 from node_transport.qos import EVENTS
 from node_transport.wire import SmStatus
 

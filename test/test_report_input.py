@@ -12,11 +12,11 @@ import zstandard
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from execution_engine.cli import main
+from cell_runner.cli import main
+from cell_runner.run_report import summarize
 from execution_engine.recorder.reading import MAGIC, Recording, iter_messages
 from execution_engine.recorder.safe_read import MAX_CHUNK, NotARecording
 from execution_engine.recorder.writer import McapSink
-from execution_engine.run_report import summarize
 from node_transport import msgs
 from node_transport.qos import SENSOR
 

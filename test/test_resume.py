@@ -18,13 +18,13 @@ import pytest
 
 from app_builder import Cell, make_app
 from app_functions.registry import full_catalog
+from cell_runner.cli import main
 from core_functions.primitives import TrajectoryResult
 from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.app_model import load_application
 from execution_engine.app_model.model import Call
 from execution_engine.checkpoint.resume import ResumePlan, sits_out
 from execution_engine.checkpoint.store import CheckpointStore
-from execution_engine.cli import main
 from execution_engine.engine.operator import Flags, decide
 from node_transport.msgs import Trigger
 from node_transport.wire import engine_service

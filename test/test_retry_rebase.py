@@ -15,15 +15,15 @@ from app_builder import make_app
 from machine_harness import Harness
 from scripted_backend import ScriptedBackend
 
+from cell_runner.deployment import deploy_local
 from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, MoveCartesian, MoveJoints, MoveRelative, SetSpeed
 from core_functions.robots import ADEPT_VIPER_S850, NEXTAGE_OPEN
 from execution_engine.app_model.model import ErrorPolicy
-from node_transport.clock import Clock
-from execution_engine.deployment import deploy_local
 from execution_engine.engine.report import RunReport
 from execution_engine.machine.rebase import RelativeGoals, Step
 from node_transport import typed
+from node_transport.clock import Clock
 from node_transport.local import LocalTransport
 from node_transport.qos import COMMANDS
 from node_transport.wire import BridgeCommand, BridgeFeedback, SmRequest, bridge_topic

@@ -15,13 +15,13 @@ from typing import Any
 import pytest
 
 from app_functions.registry import full_catalog
+from cell_runner.cli import main
+from cell_runner.deployment import deploy_local
 from core_functions.geometry import Pose
 from core_functions.primitives import MoveCartesian
 from execution_engine.app_model import load_application
-from execution_engine.cli import main
-from node_transport.clock import Clock
-from execution_engine.deployment import deploy_local
 from node_transport import typed
+from node_transport.clock import Clock
 from node_transport.msgs import Trigger
 from node_transport.wire import BridgeCommand, BridgeFeedback, bridge_topic
 from robot_bridges.backend import BackendOptions

@@ -26,23 +26,25 @@ from test_ros_nodes import SMOKE_APP
 from test_ros_transport import BOUND, Inbox, matched, run_real, with_transport
 
 from app_functions.registry import full_catalog
+from cell_runner import nodes
+from cell_runner.bridge_nodes.common import run_bridge
+from cell_runner.bridge_nodes.nextage_sim import BACKEND, declare_nextage_parameters
+from cell_runner.bridge_nodes.nextage_sim import main as nextage_main
+from cell_runner.libraries import APPLICATION_FUNCTIONS
+from cell_runner.ros_main import ExitCode, Outcome, run_node
 from core_functions.robots import NEXTAGE_OPEN
-from execution_engine import nodes
 from execution_engine.app_model import load_application
 from execution_engine.engine.engine import ExecutionEngine
-from node_transport.clock import Clock, FollowingClock
-from execution_engine.ros_main import ExitCode, Outcome, machine_node_name, run_node
 from node_transport import codec, typed
-from node_transport.msgs import ClockMessage, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
+from node_transport.clock import Clock, FollowingClock
 from node_transport.local import LocalTransport
+from node_transport.msgs import ClockMessage, JointState, String, Time, Trigger, TriggerRequest, TriggerResponse
 from node_transport.port import Node, wait_until_matched
 from node_transport.qos import CLOCK, COMMANDS, EVENTS, SENSOR
 from node_transport.ros import RosTransport
+from node_transport.wire import machine_node_name
 from node_transport.wire import SmStatus, bridge_topic, sm_topic
 from robot_bridges.bridge_node import BridgeNode
-from robot_bridges.nextage_sim.node import BACKEND, declare_nextage_parameters
-from robot_bridges.nextage_sim.node import main as nextage_main
-from robot_bridges.node import run_bridge
 
 
 # ============================================================================ 1. discovery
@@ -94,7 +96,7 @@ async def run_cell(clock: Clock, app: Path) -> tuple[Any, list[dict[str, Any]]]:
             viewer.create_subscription(
                 typed.MachineStatusMsg, sm_topic(group, "status"), lambda m: statuses.append(codec.to_primitive(typed.from_msg(SmStatus, m, clock))), EVENTS
             )
-        engine = ExecutionEngine(transport.create_node("execution_engine"))
+        engine = ExecutionEngine(transport.create_node("execution_engine"), APPLICATION_FUNCTIONS.catalog(None))
         report = await clock.wait_for(engine.run(load_application(app, full_catalog())), BOUND)
         return report, statuses
     finally:

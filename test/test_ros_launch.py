@@ -38,22 +38,23 @@ from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from scripted_backend import ScriptedBackend
 from test_ros_transport import run_real
 
+from cell_runner.bridge_nodes.common import BridgeSetup
+from cell_runner.bridge_nodes.kuka_rsi import BACKEND as KUKA_RSI, declare_kuka_parameters
+from cell_runner.bridge_nodes.nextage_sim import BACKEND as NEXTAGE_SIM, declare_nextage_parameters
+from cell_runner.bridge_nodes.vplus import BACKEND as VPLUS, declare_vplus_parameters
+from cell_runner.deployment import deploy_local
+from cell_runner.libraries import APPLICATION_FUNCTIONS
+from cell_runner.nodes import declare_engine_parameters
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN, RobotModel
-from node_transport.clock import Clock, FollowingClock
-from execution_engine.deployment import deploy_local
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.machine.group_machine import GroupMachine
-from execution_engine.nodes import declare_engine_parameters
-from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_node_name
+from node_transport.clock import Clock, FollowingClock
 from node_transport.local import LocalTransport
 from node_transport.port import Node
 from node_transport.ros import RosTransport
 from node_transport.ros_convert import RCLPY_OWN_PARAMETERS
+from node_transport.wire import ENGINE_NODE, bridge_node_name, machine_node_name
 from robot_bridges.bridge_node import BridgeNode
-from robot_bridges.kuka_rsi.node import BACKEND as KUKA_RSI, declare_kuka_parameters
-from robot_bridges.nextage_sim.node import BACKEND as NEXTAGE_SIM, declare_nextage_parameters
-from robot_bridges.node import BridgeSetup
-from robot_bridges.vplus.node import BACKEND as VPLUS, declare_vplus_parameters
 
 
 
@@ -311,12 +312,12 @@ async def _declared(clock: Clock, cell: Cell, name: str, overrides: dict[str, An
     node = LocalTransport(clock).create_node(name, parameters=overrides)
     if name == ENGINE_NODE:
         declare_engine_parameters(node)
-        ExecutionEngine(node)
+        ExecutionEngine(node, APPLICATION_FUNCTIONS.catalog(None))
     elif name == cell.bridge:
         cell.declare(node)
         BridgeNode(node, ScriptedBackend(clock, cell.robot, {}))
     else:
-        GroupMachine(node).close()
+        GroupMachine(node, APPLICATION_FUNCTIONS).close()
     return node
 
 

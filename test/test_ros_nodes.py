@@ -20,16 +20,17 @@ import ros_fake_qos
 from execution_engine.recorder.reading import Recording, iter_messages, trace_records
 from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 
+from cell_runner import nodes
+from cell_runner.bridge_nodes.common import run_bridge
+from cell_runner.bridge_nodes.nextage_sim import declare_nextage_parameters
+from cell_runner.bridge_nodes.nextage_sim import main as nextage_main
+from cell_runner.ros_main import ExitCode, Outcome, StartupError, run_node
 from core_functions.robots import NEXTAGE_OPEN
-from execution_engine import nodes
-from node_transport.clock import Clock, real_clock, run_with_clock
 from execution_engine.machine.group_machine import GroupMachine
-from execution_engine.ros_main import ExitCode, Outcome, StartupError, machine_node_name, run_node
+from node_transport.clock import Clock, real_clock, run_with_clock
 from node_transport.port import Node
 from node_transport.ros import RosTransport
-from robot_bridges.nextage_sim.node import declare_nextage_parameters
-from robot_bridges.nextage_sim.node import main as nextage_main
-from robot_bridges.node import run_bridge
+from node_transport.wire import machine_node_name
 
 BOUND = 20.0  # s: only reached when something hangs
 

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from cell_runner.cli import main as cli_main
 from core_functions.geometry import Pose
 from core_functions.primitives import (
     Dwell,
@@ -31,7 +32,6 @@ from core_functions.primitives import (
     Vision,
 )
 from core_functions.robots import KUKA_KR, NEXTAGE_OPEN
-from execution_engine.cli import main as cli_main
 from node_transport.clock import Clock, real_clock, run_with_clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create

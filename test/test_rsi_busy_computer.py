@@ -17,10 +17,10 @@ from typing import Any
 
 import pytest
 
-import node_transport.console_log as console_log
+from cell_runner.cli import main
 from core_functions.robots import KUKA_KR
-from execution_engine.cli import main
 from node_transport.clock import Clock, real_clock, run_with_clock
+import node_transport.console_log as console_log
 from node_transport.wall_clock import ManualWallClock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create

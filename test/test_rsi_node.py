@@ -5,12 +5,12 @@ from typing import Any
 
 import pytest
 
+from cell_runner.bridge_nodes.kuka_rsi import declare_kuka_parameters
 from node_transport.clock import Clock, real_clock, run_with_clock
 from node_transport.local import LocalTransport
 from node_transport.port import TransportError
 from robot_bridges.backend import BackendOptions
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend, create
-from robot_bridges.kuka_rsi.node import declare_kuka_parameters
 
 
 def test_defaults_start_the_simulator_and_a_real_controller_is_named(run_sim: Any) -> None:

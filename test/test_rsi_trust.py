@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from execution_engine.cli import main as cli_main
+from cell_runner.cli import main as cli_main
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.krc_model import RsiContext
 from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks

@@ -10,11 +10,11 @@ from app_builder import Cell
 
 from core_functions.robots import NEXTAGE_OPEN
 from crossing_cell import COLLIDING, CROSSING, WAIT_OPERATION, CollisionWatch
-from node_transport.clock import Clock
-from execution_engine.deployment import deploy_local
-from execution_engine.dry_run.cell_start import CellStarts
+from cell_runner.deployment import deploy_local
+from cell_runner.dry_run.cell_start import CellStarts
 from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplication, RunApplicationGoal, RunApplicationServer, SendGoal
 from node_transport.action import UUID, CancelGoal, CancelGoalRequest, GoalInfo, GoalStatus, GoalStatusArray, STATUS_QOS
+from node_transport.clock import Clock
 from node_transport.msgs import JointState
 from node_transport.qos import COMMANDS, SENSOR
 from node_transport.wire import JOINT_STATES
@@ -154,7 +154,7 @@ def test_a_client_that_learns_of_its_goal_from_the_answer_sees_it_run_and_can_ca
 # ============================================== every goal checked from where the robot is (finding 4)
 async def _nextage_goal_cell(clock: Clock) -> tuple[Any, Any, Any, Any]:
     """The Nextage simulator (collision check on), machines, and the engine serving goals as its
-    process does: each goal's run checked from joint_states first (execution_engine/nodes.py)."""
+    process does: each goal's run checked from joint_states first (cell_runner/nodes.py)."""
     backend = await create_backend("nextage-sim", clock, BackendOptions(robot=NEXTAGE_OPEN))
     deployment = await deploy_local(clock, NEXTAGE_OPEN, backend, machine_parameters={"trajectory_db": ":memory:"})
     engine = deployment.engine

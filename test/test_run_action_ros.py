@@ -18,9 +18,10 @@ from ros_fakes import fake_rclpy  # noqa: F401 - fixture
 from test_ros_transport import BOUND, run_real, with_transport
 from test_run_action import TINY
 
+from cell_runner.libraries import APPLICATION_FUNCTIONS
+from cell_runner.nodes import serve_goals
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplicationGoal, SendGoal
-from execution_engine.nodes import serve_goals
 from node_transport.action import UUID, GoalStatus
 from node_transport.ros import RosTransport
 from node_transport.ros_convert import import_ros_type
@@ -47,7 +48,7 @@ def test_an_actions_parts_resolve_to_rosidl_classes(fake_rclpy: Any) -> None:
 def test_the_engine_under_rclpy_serves_run_application(fake_rclpy: Any) -> None:
     async def body(transport: RosTransport) -> tuple[Any, Any, bool, Any]:
         engine_node = transport.create_node("execution_engine")
-        server = serve_goals(engine_node, ExecutionEngine(engine_node))
+        server = serve_goals(engine_node, ExecutionEngine(engine_node, APPLICATION_FUNCTIONS.catalog(None)))
         caller = transport.create_node("action_client")
         base = f"/{ACTION_NAME}/_action"
         send, result = caller.create_client(SendGoal, f"{base}/send_goal"), caller.create_client(GetResult, f"{base}/get_result")
@@ -73,7 +74,7 @@ def test_get_result_waits_for_the_run_however_long_not_the_handler_timeout(fake_
     the run outlasts the bound: no machine answers within the engine's startup_timeout."""
     async def body(transport: RosTransport) -> tuple[Any, float]:
         engine_node = transport.create_node("execution_engine", parameters={"startup_timeout": 1.5})
-        serve_goals(engine_node, ExecutionEngine(engine_node))
+        serve_goals(engine_node, ExecutionEngine(engine_node, APPLICATION_FUNCTIONS.catalog(None)))
         caller = transport.create_node("action_client")
         base = f"/{ACTION_NAME}/_action"
         send, result = caller.create_client(SendGoal, f"{base}/send_goal"), caller.create_client(GetResult, f"{base}/get_result")

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from lxml import etree
 
-from execution_engine.cli import main
+from cell_runner.cli import main
 
 RIVET = "apps_xml/rivet_installation.xml"
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from execution_engine.cli import main
+from cell_runner.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 APPS = sorted((ROOT / "apps_xml").rglob("*.xml"))

@@ -17,13 +17,11 @@ from hypothesis import strategies as st
 
 from core_functions.robots import NEXTAGE_OPEN
 from crossing_cell import WAIT_OPERATION, CollisionWatch, crossing_app
-from execution_engine.app_model.model import Application
-from node_transport.clock import Clock
-from execution_engine.deployment import Deployment, deploy_local
-from execution_engine.dry_run.report import DryRunReport
-from execution_engine.dry_run.runner import dry_run
-from execution_engine.dry_run.simulators import DryRunSetup, setup_for
-from execution_engine.dry_run.start import (
+from cell_runner.deployment import Deployment, deploy_local
+from cell_runner.dry_run.report import DryRunReport
+from cell_runner.dry_run.runner import dry_run
+from cell_runner.dry_run.simulators import DryRunSetup, setup_for
+from cell_runner.dry_run.start import (
     ResumeFrom,
     StartRefused,
     UntrustedState,
@@ -34,6 +32,8 @@ from execution_engine.dry_run.start import (
     plan_start,
     start_checked,
 )
+from execution_engine.app_model.model import Application
+from node_transport.clock import Clock
 from node_transport.msgs import JointState
 from node_transport.qos import SENSOR
 from node_transport.wire import JOINT_STATES

@@ -32,9 +32,9 @@ from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import Select, WebDriverWait  # noqa: E402
 
 from app_functions.registry import full_catalog  # noqa: E402
-from execution_engine.cli import main as cli_main  # noqa: E402
 from execution_engine.timeline import build_timeline  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
+from operator_station.program import main as cli_main  # noqa: E402
 from operator_station.testing import ServedStation, serve  # noqa: E402
 from test_studio_server import station_args  # noqa: E402
 

@@ -22,23 +22,23 @@ pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) i
 from starlette.testclient import TestClient  # noqa: E402
 
 from app_functions.registry import full_catalog  # noqa: E402
-from execution_engine.cli import main as cli_main  # noqa: E402
-from execution_engine.timeline import build_timeline  # noqa: E402
-from operator_station.cli import build_station, cmd_studio  # noqa: E402
-from operator_station.attach import AttachedSession  # noqa: E402
-from operator_station.feed import Feed  # noqa: E402
+from cell_runner.deployment import deploy_local  # noqa: E402
+from cell_runner.run_report import summarize  # noqa: E402
 from execution_engine.app_model import load_application  # noqa: E402
+from execution_engine.record_reader import NotARecording, OverLimit  # noqa: E402
+from execution_engine.timeline import build_timeline  # noqa: E402
 from node_transport.clock import Clock, scaled_clock  # noqa: E402
-from execution_engine.deployment import deploy_local  # noqa: E402
 from node_transport.local import LocalTransport  # noqa: E402
 from node_transport.port import Transport  # noqa: E402
-from robot_bridges.backend import BackendOptions  # noqa: E402
-from robot_bridges.registry import create_backend  # noqa: E402
+from operator_station.attach import AttachedSession  # noqa: E402
+from operator_station.cli import build_station, cmd_studio  # noqa: E402
+from operator_station.feed import Feed  # noqa: E402
+from operator_station.program import main as cli_main  # noqa: E402
 from operator_station.replay import load_replay  # noqa: E402
-from execution_engine.record_reader import NotARecording, OverLimit  # noqa: E402
-from execution_engine.run_report import summarize  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
 from operator_station.timeline_view import TimelineView  # noqa: E402
+from robot_bridges.backend import BackendOptions  # noqa: E402
+from robot_bridges.registry import create_backend  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CATALOG = full_catalog()

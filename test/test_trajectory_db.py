@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from cell_runner.cli import main
 from core_functions.primitives import TrajectoryResult
 from core_functions.trajectory_store import TrajectoryExists, TrajectoryStore, application_store
-from execution_engine.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 PATH = TrajectoryResult(("a", "b"), ((0.0, 0.0), (0.1, 0.2)), (0.0, 1.0))

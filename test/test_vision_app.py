@@ -19,8 +19,8 @@ from typing import Any
 import pytest
 
 from app_functions.registry import full_catalog
+from cell_runner.cli import main
 from execution_engine.app_model import load_application
-from execution_engine.cli import main
 from robot_bridges.camera.render import Optics
 from robot_bridges.nextage_sim import vision
 

@@ -12,8 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from vision_scenes import DIAMETER, INTRINSICS, looking_down, shoot
 
+from cell_runner.cli import main
 from core_functions.vision.holes import find_holes, head_on
-from execution_engine.cli import main
 
 DISTANCE = 0.08
 HOLES = ((0.003, -0.002), (-0.012, 0.006))

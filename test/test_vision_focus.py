@@ -15,9 +15,9 @@ from typing import Any
 import pytest
 
 from app_functions.registry import full_catalog
+from cell_runner.cli import main
 from core_functions.geometry import Pose
 from execution_engine.app_model import load_application
-from execution_engine.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -16,11 +16,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app_functions.registry import full_catalog
+from cell_runner.deployment import deploy_local
 from core_functions.primitives import MoveCartesian, Vision, VisionResult
 from core_functions.vision.camera import Intrinsics
 from execution_engine.app_model import load_application
 from node_transport.clock import Clock
-from execution_engine.deployment import deploy_local
 from node_transport.local import LocalTransport
 from node_transport.msgs import ByteBuffer, CameraInfo, Header, Image, Time
 from node_transport.qos import SENSOR

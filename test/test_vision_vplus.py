@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 from test_vplus_app import APPS, Run, at_focus_distance, drive
 
+from cell_runner.cli import main
 from core_functions.primitives import Vision
-from execution_engine.cli import main
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.vplus.camera_port import rendered_focus_camera

@@ -16,13 +16,13 @@ from typing import Any
 import pytest
 
 from app_functions.focus_approach import FocusApproach, FocusNotFound
+from cell_runner.cli import main as cli_main
 from core_functions.functions import Skill, SkillContext
 from core_functions.geometry import Pose
 from core_functions.primitives import MoveCartesian, MoveRelative, SetSpeed, Vision
 from core_functions.robots import ADEPT_VIPER_S850
 from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.app_model.cell import load_cell
-from execution_engine.cli import main as cli_main
 from node_transport.clock import Clock
 from robot_bridges.vplus.backend import VPlusBackend
 from robot_bridges.vplus.measurement import SimulatedFocusCamera

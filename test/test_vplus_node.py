@@ -5,11 +5,11 @@ from typing import Any
 
 import pytest
 
+from cell_runner.bridge_nodes.vplus import BACKEND, declare_vplus_parameters
 from node_transport.clock import Clock
 from node_transport.local import LocalTransport
 from node_transport.port import TransportError
 from robot_bridges.registry import create_backend
-from robot_bridges.vplus.node import BACKEND, declare_vplus_parameters
 
 
 def test_defaults_start_the_simulator_and_overrides_reach_the_backend(run_sim: Any) -> None:

@@ -17,8 +17,8 @@ from typing import Any
 
 import pytest
 
+from cell_runner.cli import main as cli_main
 from core_functions.primitives import EndEffector, MoveCartesian, MoveJoints
-from execution_engine.cli import main as cli_main
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.vplus.backend import VPlusBackend

@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING
 from core_functions.limits import DURATION
 from execution_engine.engine.operator import CONSOLE_KEYS, ENDED, Flags, decide
 from execution_engine.engine.report import OperatorAction, RunReport
-from node_transport.wall_clock import WallClock, wake_loop
 from execution_engine.machine.table import PAUSE, READY, WORKING_STATES
 from node_transport.msgs import Bool, Trigger, TriggerRequest, TriggerResponse
+from node_transport.wall_clock import WallClock, wake_loop
 from node_transport.wire import SAFETY_STOP, EngineEvent, engine_service
 
 if TYPE_CHECKING:
@@ -32,7 +32,7 @@ class OperatorCommands:
     """The operator's side of the engine (commands, safety stop, alarms)."""
 
     #: Every stop asked for, taken or not: a run that is still being checked before it starts
-    #: (execution_engine/dry_run/start.py) is not started when this changed meanwhile.
+    #: (cell_runner/dry_run/start.py) is not started when this changed meanwhile.
     stops_asked: int = 0
 
     if TYPE_CHECKING:  # the engine's own state, which these methods read and change

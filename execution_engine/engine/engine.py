@@ -25,7 +25,6 @@ from collections.abc import Iterable
 from dataclasses import replace
 from typing import Protocol
 
-from app_functions.registry import full_catalog
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
@@ -37,14 +36,14 @@ from execution_engine.engine.flags_mode import FlagsMode
 from execution_engine.engine.group_link import GroupLink
 from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
-from node_transport.wall_clock import RealWallClock, WallClock
 from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from node_transport import typed
-from node_transport.msgs import Bool, Trigger
 from node_transport.bounded import declare_bounded
+from node_transport.msgs import Bool, Trigger
 from node_transport.port import Node
 from node_transport.qos import EVENTS, LATCHED
+from node_transport.wall_clock import RealWallClock, WallClock
 from node_transport.wire import (
     ENGINE_CELL,
     ENGINE_EVENTS,
@@ -75,7 +74,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
     def __init__(
         self,
         node: Node,
-        catalog: Catalog | None = None,
+        catalog: Catalog,
         wall_clock: WallClock | None = None,
         *,
         operators: bool = True,
@@ -92,7 +91,8 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self.hold_for_operators = hold_for_operators
         #: The operator's clock (alarm_timeout): wall time even when the run clock is scaled or simulated.
         self.wall_clock: WallClock = wall_clock or RealWallClock()
-        self.catalog = catalog or full_catalog()
+        #: The functions applications may call: the library the wiring chose (execution_engine.function_library).
+        self.catalog = catalog
         self.autostart = bool(node.declare_parameter("autostart", True, "start running as soon as the machines are ready"))
         self.startup_timeout = float(declare_bounded(node, "startup_timeout", 15.0, "how long to wait for the group machines (s)"))
         self.function_timeout = float(declare_bounded(node, "function_timeout", 3600.0, "longest a function may take (s)"))

@@ -16,13 +16,12 @@ import itertools
 import uuid
 from typing import Any
 
-from node_transport.clock import Clock
-from execution_engine.ros_main import machine_node_name
 from node_transport import codec, typed
+from node_transport.clock import Clock
 from node_transport.msgs import Trigger
 from node_transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
 from node_transport.qos import COMMANDS, LATCHED
-from node_transport.wire import FaultKind, SmRequest, SmResult, sm_service, sm_topic
+from node_transport.wire import FaultKind, SmRequest, SmResult, machine_node_name, sm_service, sm_topic
 
 WATCH_PERIOD = 0.1  # run seconds between checks that a machine with waiting requests is still there
 

@@ -11,7 +11,7 @@ validated first: one with errors ends the goal aborted, its diagnostics in ``rep
 the engine's status as it changes (operation, index, count, each group's state and function);
 the result is the outcome (``finished``, ``failed``, ``stopped``, ``invalid``, ``refused``), ``ok``
 and the run's report.  How the application is run is the owner's (``runner``): the engine
-process's checks it from where the robot is first (execution_engine/dry_run/cell_start.py), so a
+process's checks it from where the robot is first (cell_runner/dry_run/cell_start.py), so a
 goal whose run would collide, or after a cancelled one would start from mid-application, is
 refused with the dry run's findings as its report, or starts with a way back the dry run proved
 safe.  A cancel is the operator's stop: every group's motion stopped, then Finish, and the goal
@@ -28,7 +28,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from app_functions.registry import full_catalog
 from execution_engine.app_model import Application, read_application
 from execution_engine.engine.engine import ExecutionEngine
 from node_transport import codec, mirrors, typed
@@ -80,7 +79,7 @@ class RunApplicationServer:
         self.node = node
         self.engine = engine
         self.runner = runner or self._run_unchecked
-        self.catalog = full_catalog()
+        self.catalog = engine.catalog  # goals are read against the engine's library
         self.current: GoalHandle | None = None
         self.busy = False  # a goal was accepted and has not ended
         self.server = ActionServer(node, RunApplication, ACTION_NAME, execute=self._execute, accept=self._accept, cancel=self._cancel)

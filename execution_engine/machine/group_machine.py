@@ -18,10 +18,10 @@ import os
 from pathlib import Path
 from typing import Any
 
-from app_functions.registry import full_catalog, functions_class
 from core_functions.functions import SkillContext
 from core_functions.robots import find_robot
 from core_functions.trajectory_store import TrajectoryStore
+from execution_engine.function_library import FunctionLibrary
 from execution_engine.machine.context import MachineConfig, MachineContext, Publishers
 from execution_engine.machine.diagnostics import MachineDiagnostics
 from execution_engine.machine.events import (
@@ -53,8 +53,8 @@ from execution_engine.machine.table import (
 )
 from execution_engine.smach import StateMachine, StructureInfo, TransitionRecord, UserData
 from node_transport import codec, typed
-from node_transport.msgs import Trigger, TriggerRequest, TriggerResponse
 from node_transport.bounded import declare_bounded
+from node_transport.msgs import Trigger, TriggerRequest, TriggerResponse
 from node_transport.port import Node
 from node_transport.qos import COMMANDS, EVENTS, LATCHED
 from node_transport.wire import (
@@ -88,9 +88,12 @@ def default_trajectory_db() -> str:
 
 
 class GroupMachine:
-    """One group's machine, its node wiring and its supervision."""
+    """One group's machine, its node wiring and its supervision.
 
-    def __init__(self, node: Node) -> None:
+    ``library`` gives the catalog and the functions class of the libraries the node's ``libraries``
+    parameter chooses; the wiring hands it in, so a machine runs any function library."""
+
+    def __init__(self, node: Node, library: FunctionLibrary) -> None:
         self.node = node
         self.clock = node.clock
         self.group = str(node.declare_parameter("group", "left_arm", "the robot group this machine drives"))
@@ -117,7 +120,7 @@ class GroupMachine:
             )
         self.store = TrajectoryStore(db)
         skill_context = SkillContext(self.group, self.robot, None, self.store, self.clock.now)
-        functions = functions_class(chosen)(skill_context)
+        functions = library.functions_class(chosen)(skill_context)
         self.events = EventQueue(self.clock)
         g = self.group
         publishers = Publishers(
@@ -132,7 +135,7 @@ class GroupMachine:
             group=g,
             node=node,
             robot=self.robot,
-            catalog=full_catalog(chosen),
+            catalog=library.catalog(chosen),
             functions=functions,
             events=self.events,
             publishers=publishers,

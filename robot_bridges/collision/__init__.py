@@ -3,7 +3,7 @@
 :mod:`scene` measures distances between the robot's links (the URDF's ``<collision>``), its
 tools and held parts and the cell's boxes; :mod:`bodies` reads the cell's boxes and what a
 gripper holds from the cell model; :mod:`robots` says which URDF and TCPs each robot uses.
-The dry run sweeps every motion with it (execution_engine/dry_run/collisions.py), the Nextage
+The dry run sweeps every motion with it (cell_runner/dry_run/collisions.py), the Nextage
 simulator checks every control period (docs/application_xml.md, "Collisions").
 """
 from robot_bridges.collision.bodies import CellBox, HeldPart, cell_boxes, held_part

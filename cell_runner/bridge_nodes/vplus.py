@@ -12,11 +12,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from cell_runner.bridge_nodes.common import BridgeSetup, bridge_main
 from core_functions.robots import ADEPT_VIPER_S850
 from node_transport.bounded import declare_bounded
 from node_transport.port import Node
 from robot_bridges.backend import BackendOptions
-from robot_bridges.node import BridgeSetup, bridge_main
 
 BACKEND = "vplus"
 

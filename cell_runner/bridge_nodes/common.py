@@ -1,4 +1,4 @@
-"""The shared body of every bridge's ``ros2 run`` entry point (``<backend>/node.py``: nextage_sim, vplus, kuka_rsi).
+"""The shared body of every bridge's ``ros2 run`` entry point (``bridge_nodes/<backend>.py``: nextage_sim, vplus, kuka_rsi).
 
 A bridge executable differs from another only in its back end and in the parameters that
 configure it.  So an entry point is one line::
@@ -9,7 +9,7 @@ configure it.  So an entry point is one line::
 where ``declare_...(node)`` declares the back end's parameters on the node and returns a
 :class:`BridgeSetup`.  This module builds the back end through the registry, wraps it in the
 same :class:`BridgeNode` the embedded deployment uses, and serves until the process stops;
-process start-up, signals and exit codes are :mod:`execution_engine.ros_main`'s.
+process start-up, signals and exit codes are :mod:`cell_runner.ros_main`'s.
 """
 from __future__ import annotations
 
@@ -19,21 +19,20 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
-from node_transport.clock import Clock, FollowingClock, scaled_clock
-from execution_engine.ros_main import (
+from cell_runner.ros_main import (
     ExitCode,
     Outcome,
     StartupError,
-    bridge_node_name,
     run_node,
     serve_forever,
     startup_errors,
     warn_undeclared,
 )
+from node_transport.clock import Clock, FollowingClock, scaled_clock
 from node_transport.msgs import ClockMessage, Time
 from node_transport.port import Node
 from node_transport.qos import CLOCK
-from node_transport.wire import CLOCK_TOPIC
+from node_transport.wire import CLOCK_TOPIC, bridge_node_name
 from robot_bridges.backend import BackendOptions, BridgeError
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.registry import create_backend

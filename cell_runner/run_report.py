@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from cell_runner.output_files import FilePlan, Output, Refused
+from cell_runner.settings import ReportSettings
 from core_functions.printable import printable
-from execution_engine.output_files import FilePlan, Output, Refused
 from execution_engine.record_limits import TIME_BOUND
 from execution_engine.record_reader import NotARecording, OverLimit, read_record
-from execution_engine.settings import ReportSettings
 from execution_engine.timeline import Timeline, TimelineBuilder
 
 EXIT_OK, EXIT_UNREADABLE, EXIT_USAGE, EXIT_OUTPUT = 0, 1, 2, 4  # as run's: a refused option 2, an output not written 4

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from execution_engine.dry_run.report import Span
+from cell_runner.dry_run.report import Span
 
 Vector = NDArray[np.float64]
 #: Positions of a motion's joints ``t`` seconds into it.

@@ -9,10 +9,10 @@ import logging
 import math
 from typing import IO
 
+from cell_runner.dry_run.report import DryRunReport
+from cell_runner.dry_run.runner import DryRunError, dry_run
+from cell_runner.dry_run.simulators import setup_for
 from execution_engine.app_model.model import Application
-from execution_engine.dry_run.report import DryRunReport
-from execution_engine.dry_run.runner import DryRunError, dry_run
-from execution_engine.dry_run.simulators import setup_for
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import check_options
 

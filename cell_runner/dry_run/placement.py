@@ -10,9 +10,9 @@ on the way (the dry run sweeps collisions itself, from the measured state on).
 """
 from __future__ import annotations
 
+from cell_runner.dry_run.report import JointPositions
 from core_functions.primitives import MoveJoints
 from core_functions.robots import RobotModel
-from execution_engine.dry_run.report import JointPositions
 from robot_bridges.backend import BridgeError, RobotBackend
 
 #: How close (rad) the simulator must come to each measured joint: a simulator that talks in

@@ -12,10 +12,12 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from cell_runner.libraries import APPLICATION_FUNCTIONS
 from core_functions.robots import RobotModel
-from node_transport.clock import Clock
 from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.function_library import FunctionLibrary
 from execution_engine.machine.group_machine import GroupMachine
+from node_transport.clock import Clock
 from node_transport.local import LocalTransport
 from node_transport.port import ParameterValue, Transport
 from robot_bridges.backend import RobotBackend
@@ -53,11 +55,13 @@ async def deploy_local(
     transport: LocalTransport | None = None,
     operators: bool = True,
     hold_for_operators: bool = False,
+    library: FunctionLibrary = APPLICATION_FUNCTIONS,
 ) -> Deployment:
     """Start every node of a robot cell on one in-process transport.
 
     ``operators`` and ``hold_for_operators`` go to :class:`ExecutionEngine`: whether anyone can
-    answer an alarm, and whether simulated time stands still while they are waited for.
+    answer an alarm, and whether simulated time stands still while they are waited for.  ``library``:
+    the functions applications may call (default: every library this program ships).
     """
     transport = transport or LocalTransport(clock)
     node_name = re.sub(r"\W+", "_", backend.name).strip("_") or "robot"
@@ -66,9 +70,9 @@ async def deploy_local(
     machines: dict[str, GroupMachine] = {}
     for group in robot.group_names:
         params = {"group": group, "robot": robot.name, **(machine_parameters or {})}
-        machines[group] = GroupMachine(transport.create_node(f"{group}_machine", parameters=params))
+        machines[group] = GroupMachine(transport.create_node(f"{group}_machine", parameters=params), library)
     engine = ExecutionEngine(
-        transport.create_node("execution_engine", parameters=engine_parameters), operators=operators, hold_for_operators=hold_for_operators,
+        transport.create_node("execution_engine", parameters=engine_parameters), library.catalog(None), operators=operators, hold_for_operators=hold_for_operators,
     )
     deployment = Deployment(transport, engine, machines, bridge)
     loop = asyncio.get_running_loop()

@@ -5,8 +5,8 @@
 each group's timeline (docs/application_xml.md, "Checking before anything moves").  This is
 wiring: it builds back ends, so it may import ``robot_bridges``.
 """
-from execution_engine.dry_run.report import DryRunReport, Finding, GroupTime, Span, TimeBase
-from execution_engine.dry_run.runner import DryRunError, dry_run, run_dry
-from execution_engine.dry_run.simulators import DryRunSetup, setup_for
+from cell_runner.dry_run.report import DryRunReport, Finding, GroupTime, Span, TimeBase
+from cell_runner.dry_run.runner import DryRunError, dry_run, run_dry
+from cell_runner.dry_run.simulators import DryRunSetup, setup_for
 
 __all__ = ["DryRunError", "DryRunReport", "DryRunSetup", "Finding", "GroupTime", "Span", "TimeBase", "dry_run", "run_dry", "setup_for"]

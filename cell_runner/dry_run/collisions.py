@@ -15,10 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cell_runner.dry_run.motions import GripRecord, MotionRecord
+from cell_runner.dry_run.recorder import Recorder
 from core_functions.geometry import Pose
 from execution_engine.app_model.model import Application
-from execution_engine.dry_run.motions import GripRecord, MotionRecord
-from execution_engine.dry_run.recorder import Recorder
 from robot_bridges.collision import CollisionScene, Contact, cell_boxes, held_part, scene_for
 from robot_bridges.collision.scene import STATIC
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from cell_runner.dry_run.report import JointPositions
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
-from execution_engine.dry_run.report import JointPositions
 
 #: A way back is run as its own application: nothing to retry (the same motion fails the same way)
 #: and no safe pose to fall back to (it is the way to safety).

@@ -36,18 +36,18 @@ from pathlib import Path
 from typing import IO
 
 from app_functions.registry import full_catalog
+from cell_runner.settings import LaunchSettings
 from core_functions.option_ranges import argument_type
+from core_functions.resources import share_path
 from execution_engine.app_model import ApplicationError, load_application
 from node_transport.clock import Clock, real_clock, run_with_clock
-from core_functions.resources import share_path
-from execution_engine.ros_main import ENGINE_NODE, bridge_node_name, machine_node_name
-from execution_engine.settings import LaunchSettings
+from node_transport.wire import ENGINE_NODE, bridge_node_name, machine_node_name
 
 EXIT_NODE_DIED = 6  # a node other than the engine ended before the engine did
 EXIT_USAGE = 2
 EXIT_INVALID = 1
 _SPEED_PARAMETER = {"nextage-sim": "speed"}  # back ends whose bridge can run faster than real time (RSI runs on the robot's clock)
-_ENTRY = {"engine": ("execution_engine.nodes", "engine_main"), "machine": ("execution_engine.nodes", "group_machine_main")}
+_ENTRY = {"engine": ("cell_runner.nodes", "engine_main"), "machine": ("cell_runner.nodes", "group_machine_main")}
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
     # A simulator at another speed than real time is the cell's clock (it publishes /clock): every
     # other node measures its waits, timeouts and the report in the robot's time, as with use_sim_time:=true.
     followers = () if speed == 1.0 else ("-p", "use_sim_time:=true")
-    specs = [NodeSpec(bridge_node_name(backend), (*_python(f"robot_bridges.{module}.node", "main"), *bridge))]
+    specs = [NodeSpec(bridge_node_name(backend), (*_python(f"cell_runner.bridge_nodes.{module}", "main"), *bridge))]
     for group in app.robot.group_names:
         name = machine_node_name(group)
         specs.append(NodeSpec(name, (

@@ -27,39 +27,53 @@ import math
 import signal
 import sys
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, NoReturn
+from typing import IO, Any, NoReturn
 
 from app_functions.registry import full_catalog
+from cell_runner import launcher
+from cell_runner.catalog_document import PARAM_TYPE_HELP, XML_USAGE, catalog_document
+from cell_runner.deployment import deploy_local
+from cell_runner.dry_run.check import check as dry_run_check, options_refusal
+from cell_runner.dry_run.report import DryRunReport
+from cell_runner.dry_run.simulators import setup_for
+from cell_runner.dry_run.start import StartRefused, start_checked
+from cell_runner.operator_console import OperatorConsole
+from cell_runner.output_files import WriteFailure
+from cell_runner.record_hook import add_run_options, prepare_flight, start_recording, stop_recording
+from cell_runner.run_checks import Refused, check_trajectory_db, preflight
+from cell_runner.run_report import add_report_parser, cmd_report, report_settings
+from cell_runner.settings import BackendSettings, Outputs, RunSettings, ValidateSettings
+from cell_runner.vision_cli import add_vision_parser, run_vision
 from core_functions.catalog import Catalog
 from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.robots import ROBOTS
 from execution_engine.app_model import Application, ApplicationError, load_application, read_application
-from execution_engine.catalog_document import PARAM_TYPE_HELP, XML_USAGE, catalog_document
-from node_transport.clock import Clock, run_with_clock
-from node_transport.console_log import ConsoleLog
-from execution_engine.deployment import deploy_local
-from execution_engine import launcher
-from execution_engine.dry_run.check import check as dry_run_check, options_refusal
-from execution_engine.dry_run.report import DryRunReport
-from execution_engine.dry_run.simulators import setup_for
-from execution_engine.dry_run.start import StartRefused, start_checked
+from execution_engine.checkpoint.store import CheckpointError
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import LivePrinter, QuestionPrinter, RunObserver, TraceWriter
-from execution_engine.operator_console import OperatorConsole
-from execution_engine.output_files import WriteFailure
-from execution_engine.run_checks import Refused, check_trajectory_db, preflight
-from execution_engine.settings import BackendSettings, Outputs, RunSettings, ValidateSettings
-from execution_engine.vision_cli import add_vision_parser, run_vision
-from operator_station import cli as studio
-from execution_engine.run_report import add_report_parser, cmd_report, report_settings
-from execution_engine.checkpoint.store import CheckpointError
-from execution_engine.recorder.cli_hook import add_run_options, prepare_flight, start_recording, stop_recording
+from node_transport.clock import Clock, run_with_clock
+from node_transport.console_log import ConsoleLog
 from robot_bridges.backend import BridgeError
 from robot_bridges.registry import create_backend
 
 EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_OUTPUT, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
+
+
+@dataclass(frozen=True)
+class ExtraCommand:
+    """A subcommand a package above this one adds to the program (the operator station's ``studio``).
+
+    The command line cannot import what sits above it; the program's entry
+    (``execution_engine/__main__.py``) hands such commands in instead.  ``add_parser`` adds the
+    subcommand to argparse's subparsers; ``run`` takes its parsed arguments, the catalog and the
+    output streams and returns the exit code."""
+
+    name: str
+    add_parser: Callable[[Any], None]
+    run: Callable[[argparse.Namespace, Catalog, IO[str], IO[str]], int]
 
 # ------------------------------------------------------------------------------ validate
 def cmd_validate(settings: ValidateSettings, catalog: Catalog, out: IO[str], err: IO[str]) -> int:
@@ -336,7 +350,7 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(extra: Sequence[ExtraCommand] = ()) -> argparse.ArgumentParser:
     parser = OneLineParser(prog="python -m execution_engine", description="Skill-based robot applications in XML.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -367,13 +381,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     run.add_argument("--no-check", action="store_true", help="start without the dry run on the simulator (validate --simulate) that otherwise comes first")
     add_run_options(run)
-    studio.add_parser(sub)
+    for command in extra:
+        command.add_parser(sub)
     launcher.add_parser(sub)  # one process per node, over DDS or rclpy
     return parser
 
 
-def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr) -> int:
-    parser = build_parser()
+def main(
+    argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[str] = sys.stderr, extra: Sequence[ExtraCommand] = (),
+) -> int:
+    parser = build_parser(extra)
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):  # --help, usage and errors to the caller's streams
             args = parser.parse_args(argv)
@@ -381,7 +398,7 @@ def main(argv: Sequence[str] | None = None, out: IO[str] = sys.stdout, err: IO[s
         return EXIT_USAGE if exit_.code else EXIT_OK
     with ConsoleLog(err, args.verbose):  # every command's log: a warning that repeats is one counted line a second
         try:
-            return dispatch(args, out, err)
+            return dispatch(args, out, err, extra)
         except KeyboardInterrupt:
             err.write("interrupted\n")
             return EXIT_STOPPED
@@ -422,7 +439,7 @@ def validate_settings(args: argparse.Namespace) -> ValidateSettings:
     return ValidateSettings(files=tuple(args.files), simulate=args.simulate, backend=backend, trajectory_db=args.trajectory_db)
 
 
-def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
+def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str], extra: Sequence[ExtraCommand] = ()) -> int:
     """Run the chosen subcommand on the settings its arguments make."""
     catalog = full_catalog()
     if args.command == "validate":
@@ -431,8 +448,9 @@ def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str]) -> int:
         return cmd_functions(catalog, args.json, out)
     if args.command == "launch":
         return launcher.cmd_launch(launcher.launch_settings(args), out, err)
-    if args.command == "studio":
-        return studio.cmd_studio(args, catalog, out, err)
+    for command in extra:
+        if args.command == command.name:
+            return command.run(args, catalog, out, err)
     if args.command == "report":
         return cmd_report(report_settings(args), out, err)
     if args.command == "vision":

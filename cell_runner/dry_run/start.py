@@ -27,15 +27,15 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
+from cell_runner.dry_run.placement import PlacementError
+from cell_runner.dry_run.report import DryRunReport, Finding, JointPositions
+from cell_runner.dry_run.runner import DryRunError, dry_run_setup
+from cell_runner.dry_run.simulators import DryRunSetup
+from cell_runner.dry_run.way_back import WayBack, away, candidates
 from core_functions.robots import RobotModel
 from execution_engine.app_model.model import WAIT, Application, Call
-from node_transport.clock import Clock
-from execution_engine.dry_run.placement import PlacementError
-from execution_engine.dry_run.report import DryRunReport, Finding, JointPositions
-from execution_engine.dry_run.runner import DryRunError, dry_run_setup
-from execution_engine.dry_run.simulators import DryRunSetup
-from execution_engine.dry_run.way_back import WayBack, away, candidates
 from execution_engine.engine.report import RunReport
+from node_transport.clock import Clock
 
 #: Joints closer than this (rad, 0.06 deg) are where a check assumed them: encoder noise, not a move.
 TOLERANCE = 1e-3

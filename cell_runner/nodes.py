@@ -7,7 +7,7 @@
 
 Both are thin: the objects are the same :class:`ExecutionEngine` and :class:`GroupMachine` the
 embedded deployment builds, on a :class:`~node_transport.ros.RosTransport` node
-instead of a local one; process start-up and shutdown are :mod:`execution_engine.ros_main`'s.
+instead of a local one; process start-up and shutdown are :mod:`cell_runner.ros_main`'s.
 """
 from __future__ import annotations
 
@@ -17,27 +17,27 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from app_functions.registry import full_catalog
-from execution_engine.app_model import Application, ApplicationError, load_application
-from execution_engine.dry_run.cell_start import CellStarts
-from execution_engine.dry_run.start import StartRefused
-from execution_engine.engine.engine import ExecutionEngine
-from execution_engine.engine.report import RunReport
-from execution_engine.engine.run_action import RunApplicationServer
-from execution_engine.machine.group_machine import GroupMachine, default_trajectory_db
-from execution_engine.output_files import Refused
-from execution_engine.recorder.cli_hook import record_node, stop_recording
-from execution_engine.ros_main import (
-    ENGINE_NODE,
+from cell_runner.dry_run.cell_start import CellStarts
+from cell_runner.dry_run.start import StartRefused
+from cell_runner.libraries import APPLICATION_FUNCTIONS
+from cell_runner.output_files import Refused
+from cell_runner.record_hook import record_node, stop_recording
+from cell_runner.ros_main import (
     ExitCode,
     Outcome,
     StartupError,
-    machine_node_name,
     run_node,
     serve_forever,
     startup_errors,
     warn_undeclared,
 )
+from execution_engine.app_model import Application, ApplicationError, load_application
+from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.engine.report import RunReport
+from execution_engine.engine.run_action import RunApplicationServer
+from execution_engine.machine.group_machine import GroupMachine, default_trajectory_db
 from node_transport.port import Node, TransportError
+from node_transport.wire import ENGINE_NODE, machine_node_name
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     RunApplication action up (or, with ``wait_for_goals`` and no application, only serve goals)."""
     with startup_errors():
         settings = declare_engine_parameters(node)
-        engine = ExecutionEngine(node)
+        engine = ExecutionEngine(node, APPLICATION_FUNCTIONS.catalog(None))
     starts = CellStarts(node, engine, settings.trajectory_db or default_trajectory_db(), engine.startup_timeout) if settings.check else None
     goals = serve_goals(node, engine, starts)
     warn_undeclared(node)
@@ -154,7 +154,7 @@ async def _run_checked(engine: ExecutionEngine, app: Application, starts: CellSt
 async def run_group_machine(node: Node, outcome: Outcome) -> None:
     """One group's state machine, serving until stopped."""
     with startup_errors():
-        machine = GroupMachine(node)
+        machine = GroupMachine(node, APPLICATION_FUNCTIONS)
     warn_undeclared(node)
     if node.name != machine_node_name(machine.group):
         node.logger.warning(

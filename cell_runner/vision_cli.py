@@ -16,11 +16,11 @@ import json
 from pathlib import Path
 from typing import IO
 
+from cell_runner.settings import DetectSettings
 from core_functions.option_ranges import RangeError, bounds, check
 from core_functions.vision.camera import Intrinsics
 from core_functions.vision.holes import Hole, detect_head_on
 from core_functions.vision.image_file import ImageFileError, read_image
-from execution_engine.settings import DetectSettings
 
 EXIT_OK, EXIT_IMAGE, EXIT_USAGE = 0, 1, 2
 #: option -> (its setting in core_functions.option_ranges, what it is)

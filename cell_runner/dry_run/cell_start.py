@@ -14,9 +14,9 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
+from cell_runner.dry_run.simulators import setup_for
+from cell_runner.dry_run.start import MeasuredState, StartRefused, UntrustedState, check_run, measured
 from execution_engine.app_model.model import Application
-from execution_engine.dry_run.simulators import setup_for
-from execution_engine.dry_run.start import MeasuredState, StartRefused, UntrustedState, check_run, measured
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.engine.report import RunReport
 from execution_engine.engine.run_action import GoalOutcome

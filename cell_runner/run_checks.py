@@ -3,7 +3,7 @@
 An option that cannot work must fail in one line at the start, naming the option and what to do,
 and change nothing -- not after a dry run, not half-way through a shift, never as a traceback.
 So every file the run reads or writes is listed here (:func:`run_files`) and checked by the one
-rule of :mod:`execution_engine.output_files` without writing a byte, controller names are
+rule of :mod:`cell_runner.output_files` without writing a byte, controller names are
 resolved once (the run then talks to addresses, and a name that resolves to nothing is an
 option error, not a "no answer within 2 s" much later), and ``--fault`` is checked against the
 robot's groups.  :class:`Refused` carries the line; the CLI prints it and exits with
@@ -17,9 +17,9 @@ from collections.abc import Iterable
 from dataclasses import replace
 from pathlib import Path
 
+from cell_runner.output_files import FilePlan, Output, Refused
+from cell_runner.settings import RunSettings
 from execution_engine.app_model.model import Application
-from execution_engine.output_files import FilePlan, Output, Refused
-from execution_engine.settings import RunSettings
 
 __all__ = ["Refused", "check_faults", "check_trajectory_db", "preflight", "resolve", "resolve_endpoint", "run_files", "app_inputs"]
 

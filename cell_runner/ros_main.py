@@ -32,18 +32,6 @@ from node_transport.selection import dds_transport, split_transport
 
 log = logging.getLogger(__name__)
 
-ENGINE_NODE = "execution_engine"
-
-
-def machine_node_name(group: str) -> str:
-    """The node of a group's state machine, as the embedded deployment and the launch files name it."""
-    return f"{group}_machine"
-
-
-def bridge_node_name(backend: str) -> str:
-    """The node of a bridge, from the back end's registry name (``nextage-sim`` -> ``nextage_sim_bridge``)."""
-    return f"{backend.replace('-', '_')}_bridge"
-
 
 class ExitCode(IntEnum):
     """What a node process exits with."""

@@ -10,11 +10,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
+from cell_runner.dry_run.report import Finding, Span, TimeBase
 from core_functions.robots import RobotModel
 from execution_engine.app_model.model import Application, Call
-from node_transport.clock import Clock
-from execution_engine.dry_run.report import Finding, Span, TimeBase
 from execution_engine.engine.waits import FlagWait
+from node_transport.clock import Clock
 
 #: Where a group is: (operation id, function) of the function its machine runs, or None.
 CallLocator = Callable[[str], tuple[str, str] | None]

@@ -24,19 +24,19 @@ from pathlib import Path
 from typing import Any
 
 from app_functions.registry import full_catalog
+from cell_runner.deployment import Deployment, deploy_local
+from cell_runner.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
+from cell_runner.dry_run.collisions import scene_of, sweep
+from cell_runner.dry_run.placement import place
+from cell_runner.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
+from cell_runner.dry_run.report import CollisionCheck, DryRunReport, Finding, JointPositions, group_times
+from cell_runner.dry_run.simulators import DryRunSetup, setup_for
 from core_functions.catalog import Catalog
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
-from node_transport.clock import Clock, real_clock, run_with_clock, simulated_clock
-from execution_engine.deployment import Deployment, deploy_local
 from execution_engine.engine.report import GroupError
-from execution_engine.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
-from execution_engine.dry_run.collisions import scene_of, sweep
-from execution_engine.dry_run.placement import place
-from execution_engine.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
-from execution_engine.dry_run.report import CollisionCheck, DryRunReport, Finding, JointPositions, group_times
-from execution_engine.dry_run.simulators import DryRunSetup, setup_for
 from node_transport import typed
+from node_transport.clock import Clock, real_clock, run_with_clock, simulated_clock
 from node_transport.qos import COMMANDS
 from node_transport.wire import SmResult, sm_topic
 from robot_bridges.backend import BackendOptions

@@ -19,6 +19,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from cell_runner.dry_run.motions import GripRecord, MotionRecord, planned, straight
+from cell_runner.dry_run.recorder import Recorder
+from cell_runner.dry_run.report import Span
 from core_functions.geometry import Pose
 from core_functions.primitives import (
     EndEffector,
@@ -39,9 +42,6 @@ from core_functions.primitives import (
     describe,
 )
 from core_functions.trajectory_store import StoredTrajectory, TrajectoryStore
-from execution_engine.dry_run.motions import GripRecord, MotionRecord, planned, straight
-from execution_engine.dry_run.recorder import Recorder
-from execution_engine.dry_run.report import Span
 from node_transport.wire import CellSnapshot
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 
@@ -49,7 +49,7 @@ MISSING_TRAJECTORY = "missing_trajectory"
 #: The controller (or the link to it) failed rather than the application: the same one twice in a
 #: row means it will not recover within this run.
 _CONTROLLER_KINDS = (FaultKind.CONTROLLER, FaultKind.CONNECTION, FaultKind.TIMEOUT, FaultKind.PROTOCOL, FaultKind.INTERNAL)
-#: Primitives that move joints: each is kept for the collision sweep (execution_engine/dry_run/collisions.py).
+#: Primitives that move joints: each is kept for the collision sweep (cell_runner/dry_run/collisions.py).
 _MOTIONS = (MoveJoints, MoveCartesian, MoveRelative, ExecuteTrajectory, FullBodyMove, MasterSlaveMove)
 
 

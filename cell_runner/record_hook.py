@@ -4,7 +4,7 @@ Recording (``--record``), checkpoints (``--checkpoint``, by default next to the 
 recording) and resuming (``--resume``, ``--on-interrupted``) are set up here, so ``cli.py`` only
 calls :func:`add_run_options`, :func:`prepare_flight` (before any file is written),
 :func:`start_recording` and :func:`stop_recording`.  Below the options, everything reads the
-run's :class:`~execution_engine.settings.RunSettings`.
+run's :class:`~cell_runner.settings.RunSettings`.
 """
 from __future__ import annotations
 
@@ -15,6 +15,9 @@ from pathlib import Path
 from typing import IO
 
 from app_functions.registry import full_catalog
+from cell_runner.output_files import FilePlan, Output, WriteFailure, same_file, stores_data
+from cell_runner.run_checks import app_inputs, run_files
+from cell_runner.settings import Outputs, RunSettings
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
 from execution_engine.app_model.model import Operation
@@ -22,11 +25,8 @@ from execution_engine.checkpoint.resume import ANSWERS, ResumePlan, app_meta, ch
 from execution_engine.checkpoint.store import SKIPPED, CheckpointError, CheckpointStore
 from execution_engine.checkpoint.writer import CheckpointWriter
 from execution_engine.observers import RunObserver
-from execution_engine.output_files import FilePlan, Output, WriteFailure, same_file, stores_data
 from execution_engine.recorder.recorder import Recorder
 from execution_engine.recorder.writer import McapSink
-from execution_engine.run_checks import app_inputs, run_files
-from execution_engine.settings import Outputs, RunSettings
 from node_transport.port import Node, Transport
 
 
