@@ -101,10 +101,15 @@ def _prepare_resume(app: Application, outputs: Outputs, resume: str, derived: di
     try:
         check_same(store, app)
         runs = store.runs()
+        left = plan_resume(store, app, full_catalog(), ANSWERS[0], write=False)
     except sqlite3.Error as error:  # tables of the right names, not of the right shape
         raise CheckpointError(f"--resume {resume}: not a checkpoint of this program ({error})") from None
     finally:
         store.close()
+    total = len(app.operations)
+    if left.index >= total:  # a run resumed is a run interrupted: one that did everything has nothing to go on with
+        raise CheckpointError(f"--resume {resume}: the run it holds did every operation ({total} of {total}): nothing is left to resume; "
+                              "run without --resume to start again")
     earlier = [p for _, trace, record in runs for p in (trace, record) if p and stores_data(p)]  # (/dev/null holds no run)
     for option, column in (("trace", 1), ("record", 2)):
         given = getattr(outputs, option)

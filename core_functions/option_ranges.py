@@ -28,27 +28,39 @@ class RangeError(ValueError):
 
 @dataclass(frozen=True)
 class Range:
-    """The closed interval a setting may take, in ``unit``; ``integer`` settings take whole numbers."""
+    """The closed interval a setting may take, in ``unit``; ``integer`` settings take whole numbers.
+
+    ``choices``: a setting that takes only some values of its interval (a KUKA controller's RSI
+    cycle is 4 or 12 ms, nothing between) lists them, and only they are in range."""
 
     lower: float
     upper: float
     unit: str = ""
     integer: bool = False
+    choices: tuple[float, ...] = ()
 
     def describe(self) -> str:
-        """``[0.1, 600] s``: the interval as users read it (whole numbers for an integer setting)."""
-        low, high = (f"{int(v)}" if self.integer else f"{v:g}" for v in (self.lower, self.upper))
-        return f"[{low}, {high}]" + (f" {self.unit}" if self.unit else "")
+        """``[0.1, 600] s``, or ``4 or 12 ms``: the values as users read them (whole numbers for an integer setting)."""
+        def shown(v: float) -> str:
+            return f"{int(v)}" if self.integer else f"{v:g}"
+
+        unit = f" {self.unit}" if self.unit else ""
+        if self.choices:
+            *first, last = (shown(v) for v in self.choices)
+            return (f"{', '.join(first)} or {last}" if first else last) + unit
+        return f"[{shown(self.lower)}, {shown(self.upper)}]{unit}"
 
     def contains(self, value: float) -> bool:
-        return math.isfinite(value) and self.lower <= value <= self.upper and (not self.integer or float(value).is_integer())
+        inside = math.isfinite(value) and self.lower <= value <= self.upper and (not self.integer or float(value).is_integer())
+        return inside and (not self.choices or value in self.choices)
 
     def check(self, name: str, value: object) -> float:
         """``value`` (a number, or its text) as a float within the range; RangeError naming ``name`` otherwise."""
         number = self._number(value)
         if number is None or not self.contains(number):
             kind = "a whole number" if self.integer else "a number"
-            raise RangeError(f"{name} must be {kind} in {self.describe()}, got {_shown(value)}")
+            allowed = self.describe() if self.choices else f"{kind} in {self.describe()}"
+            raise RangeError(f"{name} must be {allowed}, got {_shown(value)}")
         return number
 
     def check_int(self, name: str, value: object) -> int:
@@ -132,7 +144,7 @@ SETTINGS: tuple[Setting, ...] = (
             "with every slot taken, a new client takes the slot of one idle this long"),
     Setting("run_for", Range(0.001, 604_800.0, "s"), "V+ simulator --run-for", "run time after which the simulator stops by itself (a week at most)"),
     # -- KUKA RSI and the KR C4 simulator
-    Setting("cycle", Range(4, 12, "ms", integer=True), "kuka-rsi option and parameter cycle, KR C4 simulator --cycle",
+    Setting("cycle", Range(4, 12, "ms", integer=True, choices=(4, 12)), "kuka-rsi option and parameter cycle, KR C4 simulator --cycle",
             "the controller's RSI cycle: 4 or 12 ms, nothing between"),
     Setting("timeout", Range(1, 100_000, integer=True), "kuka-rsi option and parameter timeout, KR C4 simulator --timeout",
             "late packets in a row that stop the simulated RSI", "kuka-rsi"),

@@ -63,10 +63,11 @@ def test_a_value_is_either_in_its_range_or_refused_naming_it(value: Any) -> None
             checked = allowed.check(name, value)
         except RangeError as error:
             message = str(error)
-            assert message.startswith(f"{name} must be a ") and allowed.describe() in message and "\n" not in message
+            assert message.startswith(f"{name} must be ") and allowed.describe() in message and "\n" not in message
         else:
             assert math.isfinite(checked) and allowed.lower <= checked <= allowed.upper
             assert not allowed.integer or checked.is_integer()
+            assert not allowed.choices or checked in allowed.choices
 
 
 def test_integer_settings_refuse_fractions_and_floats_refuse_text() -> None:
@@ -75,6 +76,17 @@ def test_integer_settings_refuse_fractions_and_floats_refuse_text() -> None:
         Range(0, 10, integer=True).check("n", "2.5")
     with pytest.raises(RangeError, match=r"^t must be a number in \[0.1, 600\] s, got True$"):
         Range(0.1, 600, "s").check("t", True)
+
+
+def test_a_setting_with_choices_takes_only_those_and_says_so() -> None:
+    """The RSI cycle is 4 or 12 ms: 8 lies inside [4, 12] and is still no cycle a controller runs."""
+    cycle = bounds("cycle")
+    assert cycle.describe() == "4 or 12 ms"
+    assert [cycle.contains(v) for v in (4, 8, 12, 4.5)] == [True, False, True, False]
+    with pytest.raises(RangeError, match=r"^cycle must be 4 or 12 ms, got '8'$"):
+        cycle.check("cycle", "8")
+    assert Range(1, 3, choices=(1, 2, 3)).describe() == "1, 2 or 3"
+    assert ("cycle", "4 or 12 ms") in [(row[0].strip("`"), row[1]) for row in table()]
 
 
 # ------------------------------------------------------------------------------ node parameters
@@ -140,7 +152,8 @@ def _kuka(transport: LocalTransport, parameters: dict[str, Any]) -> None:
         (_kuka, {"tolerance_mm": 200.0}, "/kuka_rsi_bridge: parameter 'tolerance_mm' must be a number in [0.001, 100] mm, got 200"),
         (_kuka, {"silence": 20.0}, "/kuka_rsi_bridge: parameter 'silence' must be a number in [0.01, 10] s, got 20"),
         (_kuka, {"connect_timeout": math.inf}, "/kuka_rsi_bridge: parameter 'connect_timeout' must be a number in [0.1, 600] s, got inf"),
-        (_kuka, {"cycle": 100}, "/kuka_rsi_bridge: parameter 'cycle' must be a whole number in [4, 12] ms, got 100"),
+        (_kuka, {"cycle": 100}, "/kuka_rsi_bridge: parameter 'cycle' must be 4 or 12 ms, got 100"),
+        (_kuka, {"cycle": 8}, "/kuka_rsi_bridge: parameter 'cycle' must be 4 or 12 ms, got 8"),  # inside [4, 12], still no RSI cycle
         (_kuka, {"port": -1}, "/kuka_rsi_bridge: parameter 'port' must be a whole number in [0, 65535], got -1"),
     ],
 )

@@ -197,3 +197,25 @@ def test_resume_from_something_that_is_not_a_checkpoint_is_one_line_and_changes_
     assert code == 2 and err.getvalue().count("\n") == 1 and "Traceback" not in err.getvalue()
     assert ("not a checkpoint" in err.getvalue()) or ("holds no run" in err.getvalue())
     assert path.read_bytes() == before and not (tmp_path / "t.jsonl").exists()
+
+
+def test_resuming_a_run_that_did_everything_is_refused_and_writes_nothing(tmp_path: Path) -> None:
+    """A finished run has nothing to go on with: no second trace, no new run in its checkpoint, exit 2."""
+    trace, checkpoint = tmp_path / "run.jsonl", tmp_path / "run.checkpoint.sqlite"
+    assert main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--trace", str(trace)], io.StringIO(), io.StringIO()) == 0
+    store = CheckpointStore(checkpoint, read_only=True)
+    runs_before = store.runs()
+    store.close()
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if not p.name.endswith(("-wal", "-shm"))}
+    err = io.StringIO()
+    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", str(checkpoint)], io.StringIO(), err)
+    total = len(load_application(RIVET, full_catalog()).operations)
+    assert code == 2 and err.getvalue() == (
+        f"error: --resume {checkpoint}: the run it holds did every operation ({total} of {total}): nothing is left to resume; "
+        "run without --resume to start again\n"
+    )
+    after = {p.name: p.read_bytes() for p in tmp_path.iterdir() if not p.name.endswith(("-wal", "-shm"))}
+    assert after == before  # no run.resume2.jsonl beside it, the trace and the checkpoint as they were
+    store = CheckpointStore(checkpoint, read_only=True)
+    assert store.runs() == runs_before
+    store.close()

@@ -312,7 +312,8 @@ def _create(clock: Clock, options: Any) -> KukaRsiBackend:
     [
         ({"extra": {"bogus": "1"}}, "unknown option(s) bogus"),
         ({"extra": {"runner": "fiber"}}, "runner must be process or thread"),
-        ({"extra": {"cycle": "four"}}, "kuka-rsi: cycle must be 4 or 12 (ms), got 'four'"),
+        ({"extra": {"cycle": "four"}}, "kuka-rsi: cycle must be 4 or 12 ms, got 'four'"),
+        ({"extra": {"cycle": "8"}}, "kuka-rsi: cycle must be 4 or 12 ms, got '8'"),
         ({"extra": {"silence": "0"}}, "kuka-rsi: silence must be a number in [0.01, 10] s, got '0'"),
         ({"extra": {"connect_timeout": "inf"}}, "kuka-rsi: connect_timeout must be a number in [0.1, 600] s, got 'inf'"),
         ({"extra": {"timeout": "2.5"}}, "kuka-rsi: timeout must be a whole number in [1, 100000], got '2.5'"),

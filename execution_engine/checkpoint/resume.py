@@ -119,36 +119,35 @@ class ResumePlan:
         return replace(operation, calls=calls)
 
 
-def reconcile(store: CheckpointStore, app: Application) -> int:
+def reconcile(store: CheckpointStore, app: Application, *, write: bool = True) -> set[tuple[int, str]]:
     """Take over results that reached an earlier run's trace but not the checkpoint.
 
     The trace is written first, the checkpoint right after (a kill can land between the two); a
     trace line is only there if the function completed, so such a function counts as done.
-    The number of results taken over."""
+    Returns every (operation index, group) done; ``write`` False only works it out (a store opened
+    read-only, to check a ``--resume`` before anything is written)."""
     index = {op.id: i for i, op in enumerate(app.operations)}
     done = store.done()
-    taken = 0
 
     def take(record: dict[str, object], run: int) -> None:
-        nonlocal taken
         operation, group = str(record.get("operation")), str(record.get("group"))
         if record.get("event") == "function_end" and record.get("outcome") == SUCCEEDED and operation in index:
             if (index[operation], group) not in done:
                 done.add((index[operation], group))
-                store.function_event(index[operation], operation, group, str(record.get("function", "")), 0, SUCCEEDED, float(str(record.get("t", 0.0))), run)
-                taken += 1
+                if write:
+                    store.function_event(index[operation], operation, group, str(record.get("function", "")), 0, SUCCEEDED, float(str(record.get("t", 0.0))), run)
 
     for run, trace, _ in store.runs():
         if trace and Path(trace).is_file():
             read_trace(trace, lambda record, run=run: take(record, run))
-    return taken
+    return done
 
 
-def plan_resume(store: CheckpointStore, app: Application, catalog: Catalog, answer: str) -> ResumePlan:
-    """Where to start: the first operation with a group whose function has not completed."""
+def plan_resume(store: CheckpointStore, app: Application, catalog: Catalog, answer: str, *, write: bool = True) -> ResumePlan:
+    """Where to start: the first operation with a group whose function has not completed (``write``:
+    see :func:`reconcile`)."""
     check_same(store, app)
-    reconcile(store, app)
-    done = store.done()
+    done = reconcile(store, app, write=write)
     touched = {r.op_index for r in store.functions()}
     runs = store.runs()
     continues = ", ".join(p for _, trace, record in runs[-1:] for p in (trace, record) if p)

@@ -328,13 +328,11 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
     for name, value, allowed in choices:
         if value not in allowed:
             raise ValueError(f"kuka-rsi: {name} must be {' or '.join(allowed)}, got {value!r}")
-    cycle_text = extra.get("cycle", "4").strip()
-    if cycle_text not in ("4", "12"):
-        raise ValueError(f"kuka-rsi: cycle must be 4 or 12 (ms), got {cycle_text!r}")
 
     def number(name: str, default: str) -> float:  # in its range (core_functions.option_ranges), KUKA RSI's where it has its own
         return option_ranges.check(name, extra.get(name, default), label=f"kuka-rsi: {name}", scope="kuka-rsi")
 
+    cycle = int(number("cycle", "4"))  # 4 or 12 ms: the table lists the two
     timeout = int(number("timeout", "100"))
     monitor = number("axis_monitor", "360")
     silence = number("silence", "0.1") if "silence" in extra else None
@@ -361,7 +359,7 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
     elif options.host is not None:
         raise ValueError("kuka-rsi: a real controller needs rsi_listen=HOST:PORT (its RSI configuration's IP_NUMBER:PORT) as well as host")
     faults, quirks, flood = _misbehaviour(extra, options.seed)
-    return KukaSettings(runner, sim_runner, mode, int(cycle_text), timeout, monitor, silence, connect, limits, tolerance, tolerance_mm,
+    return KukaSettings(runner, sim_runner, mode, cycle, timeout, monitor, silence, connect, limits, tolerance, tolerance_mm,
                         config, listen, faults, quirks, flood)
 
 

@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--config", help="RSI Ethernet configuration XML (default: the package's)")
     p.add_argument("--to", default="", help="external system HOST:PORT (default: IP_NUMBER:PORT of the config)")
     p.add_argument("--bind", default="127.0.0.1:0", help="address the controller sends from (default 127.0.0.1:0)")
-    p.add_argument("--cycle", type=int, default=4, choices=(4, 12), help="RSI cycle in ms")
+    p.add_argument("--cycle", type=argument_type("cycle"), default=4, help="RSI cycle in ms: 4 or 12")
     p.add_argument("--accelerated", action="store_true", help="lockstep: next packet as soon as the reply is in")
     p.add_argument("--speed", type=argument_type("speed"), default=1.0, help="real-time mode: run faster than real time by this factor, in [0.01, 1000]")
     p.add_argument("--cycles", type=argument_type("cycles"), default=None, help="stop after this many cycles, in [1, 1000000000000]")
