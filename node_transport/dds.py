@@ -11,10 +11,12 @@ the wire is what ``rmw_cyclonedds_cpp`` of ROS 2 Jazzy puts there, so ``ros2 nod
   number); a server answers only once its reply writer has matched the client's reply reader
   (the ``clientid=`` user data, as rmw does; for a client without it, such as ros2-client on
   RustDDS, a reply reader of the caller's participant), so a first answer is not lost;
-* every writer asserts automatic liveliness with a lease of ``lease`` seconds (1 s by default):
-  a subscription's :meth:`get_publisher_count` counts only *live* publishers, so a peer killed or
+* every writer asserts automatic liveliness with a lease of ``lease`` seconds (1 s by default),
+  and every transport pulses four times per lease (:mod:`~node_transport.dds_pulse`): a
+  subscription's :meth:`get_publisher_count` counts only *live* publishers, so a peer killed or
   cut off drops out of it within the lease -- that is how the engine notices a lost machine
-  (:mod:`execution_engine.engine.group_link`).
+  (:mod:`execution_engine.engine.group_link`) -- and a peer that was silent for a moment counts
+  again as soon as it pulses (Cyclone's own liveliness comes back only when the writer writes).
 
 Threads: no Cyclone listeners (a write of this process waiting for a listener that waits for the
 GIL hangs the process, see :mod:`~node_transport.dds_waiter`); one waiter thread per
@@ -41,6 +43,7 @@ from node_transport import dds_graph as graph
 from node_transport.dds_args import RosArguments, parse_ros_arguments, user_arguments
 from node_transport.dds_convert import DdsConverter
 from node_transport.dds_entities import Caller, Taker, delete, matched, matched_handles
+from node_transport.dds_pulse import LiveCount, Pulse
 from node_transport.dds_waiter import DdsWaiter
 from node_transport.idl import InterfaceError, InterfaceRegistry
 from node_transport.idl_hash import type_hash_user_data
@@ -138,6 +141,7 @@ class _DdsSubscription(Subscription[M], Generic[M]):
             qos=graph.dds_qos(qos, user_data=transport.type_hash(msg_type.ROS_TYPE)),  # type: ignore[attr-defined]
         )
         node.add_entity(self.reader, reader=True)
+        self._live = LiveCount(self.reader, transport.pulse)
         self._watch = transport.waiter.watch(self.reader, self._on_data)
 
     def _on_data(self) -> None:
@@ -154,10 +158,11 @@ class _DdsSubscription(Subscription[M], Generic[M]):
             transport.call_soon(self._deliver, msg)
 
     def get_publisher_count(self) -> int:
-        """Matched publishers whose liveliness holds: a killed peer drops out within its lease."""
+        """Matched publishers whose liveliness holds (:class:`~node_transport.dds_pulse.LiveCount`):
+        a killed peer drops out within its lease, one that pulses again is back at once."""
         if not self.alive:
             return 0
-        return int(self.reader.get_liveliness_changed_status().alive_count)
+        return self._live.count()
 
     def publisher_nodes(self) -> list[str]:
         """The nodes of the matched publishers, from what their processes put on ros_discovery_info."""
@@ -462,6 +467,9 @@ class DdsTransport(Transport):
         self._discovery_reader = self.dds.sub.DataReader(
             self.participant, discovery_topic, qos=graph.dds_qos(graph.DISCOVERY_READER, user_data=self.type_hash(graph.DISCOVERY_TYPE)),
         )
+        self.pulse = Pulse(self, lease)
+        self.waiter.watch(self.pulse.reader, self.pulse.on_data)
+        self.waiter.every(self.pulse.beat)
         self.stopping = False
 
     # ------------------------------------------------------------------------- plumbing
@@ -571,6 +579,8 @@ class DdsTransport(Transport):
         self._publish_graph()
         self._deleted = True
         self.waiter.close()
+        delete(self.pulse.reader)
+        delete(self.pulse.writer)
         delete(self._discovery_reader)
         delete(self._discovery)
         delete(self.participant)

@@ -18,6 +18,7 @@ from typing import Any
 log = logging.getLogger(__name__)
 
 PERIOD = 0.2  # wall seconds a wait lasts when nothing arrives (how soon a stop is seen at the latest)
+MIN_WAIT = 0.001  # wall seconds: the shortest wait, so a tick that is due at once cannot spin the thread
 JOIN_TIMEOUT = 5.0  # wall seconds close() waits for the thread (a handler takes at most a bounded batch)
 
 
@@ -33,6 +34,7 @@ class DdsWaiter:
         self._watched: dict[int, tuple[Any, Callable[[], None]]] = {}
         self._lock = threading.Lock()
         self._stopping = False
+        self._every: Callable[[], float] | None = None
         self.failures = 0  # handler exceptions, logged (a handler is meant never to raise)
         self._thread = threading.Thread(target=self._run, name=f"dds waiter {name}", daemon=True)
         self._thread.start()
@@ -46,6 +48,11 @@ class DdsWaiter:
             self._waitset.attach(condition)
         return condition
 
+    def every(self, tick: Callable[[], float]) -> None:
+        """Call ``tick`` on this thread at each wake; it answers the seconds until it wants the next
+        call (the wait is never longer: what is due is not late because nothing arrived)."""
+        self._every = tick
+
     def forget(self, condition: Any) -> None:
         """Stop calling the handler of ``condition`` (before its reader is deleted)."""
         with self._lock:
@@ -58,10 +65,10 @@ class DdsWaiter:
     def _run(self) -> None:
         from cyclonedds.util import duration  # optional: pip extra 'dds', only when a DDS transport runs
 
-        timeout = duration(seconds=PERIOD)
+        wait = PERIOD
         while not self._stopping:
             try:
-                self._waitset.wait(timeout)
+                self._waitset.wait(duration(seconds=wait))
             except Exception as error:  # noqa: BLE001 - the waitset is being deleted, or a defect: said, then stop
                 if not self._stopping:
                     log.error("dds: the waiter thread stops: %s: %s", type(error).__name__, error)
@@ -79,6 +86,21 @@ class DdsWaiter:
                 except Exception as error:  # noqa: BLE001 - a defect in a handler: logged, the others go on
                     self.failures += 1
                     log.error("dds: a reader's handler failed: %s: %s", type(error).__name__, error)
+            wait = self._tick()
+
+    def _tick(self) -> float:
+        """The periodic call, if any; how long the next wait may last."""
+        tick = self._every
+        if tick is None or self._stopping:
+            return PERIOD
+        try:
+            return min(PERIOD, max(MIN_WAIT, tick()))
+        except self._dds.core.DDSException:
+            return PERIOD  # its writer is being deleted
+        except Exception as error:  # noqa: BLE001 - a defect: logged, the readers go on
+            self.failures += 1
+            log.error("dds: the waiter's periodic call failed: %s: %s", type(error).__name__, error)
+            return PERIOD
 
     def close(self) -> None:
         """Stop the thread (waits for a handler under way)."""
