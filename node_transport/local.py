@@ -6,6 +6,12 @@ KEEP_LAST queue of ``depth`` that drops the oldest message, TRANSIENT_LOCAL publ
 their last ``depth`` messages to late subscribers, incompatible QoS pairs do not connect, and a
 service call fails when nobody serves the name.  Message objects are frozen dataclasses, so they
 are shared, not copied.
+
+A message crosses once: a typed topic's wire dataclass (:mod:`node_transport.carriage`) is
+handed over as the object itself (:meth:`LocalPublisher.publish_object`) to the subscriptions
+that take objects (``create_subscription(..., objects=cls)``), with a copy of its dicts and lists
+for each, as a receiver off the wire has its own; only subscriptions that want the typed message
+(a recorder, a test, a latecomer on a latched topic) have it built, once per publish.
 """
 from __future__ import annotations
 
@@ -33,12 +39,31 @@ from node_transport.qos import COMMANDS, Durability, History, QoS
 M = TypeVar("M")
 
 
-class _LocalSubscription(Subscription[M], Generic[M]):
-    def __init__(self, node: LocalNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS):
+class Carried:
+    """One :meth:`LocalPublisher.publish_object`: the object, how a receiver gets its own copy of
+    the object's dicts and lists (None: nothing in it can change), and its message when built."""
+
+    __slots__ = ("obj", "copy", "msg")
+
+    def __init__(self, obj: Any, copy: Callable[[Any], Any] | None, msg: Any) -> None:
+        self.obj, self.copy, self.msg = obj, copy, msg
+
+    def item_for(self, objects: type | None) -> Any:
+        """What a subscription that takes objects of class ``objects`` (None: messages) receives."""
+        if objects is type(self.obj):
+            return self.obj if self.copy is None else self.copy(self.obj)
+        return self.msg
+
+
+class LocalSubscription(Subscription[M], Generic[M]):
+    def __init__(
+        self, node: LocalNode, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS, objects: type | None = None
+    ) -> None:
         self.node = node
         self.msg_type = msg_type
         self.topic = topic
         self.qos = qos
+        self.objects = objects  # the wire class it takes as objects; messages otherwise
         self._callback = callback
         maxlen = None if qos.history is History.KEEP_ALL else qos.depth
         self._queue: deque[M] = deque(maxlen=maxlen)
@@ -74,13 +99,13 @@ class _LocalSubscription(Subscription[M], Generic[M]):
         return sorted({p.node.fully_qualified_name for p in self.node.bus.matching_publishers(self)}) if self.alive else []
 
 
-class _LocalPublisher(Publisher[M], Generic[M]):
+class LocalPublisher(Publisher[M], Generic[M]):
     def __init__(self, node: LocalNode, msg_type: type[M], topic: str, qos: QoS):
         self.node = node
         self.msg_type = msg_type
         self.topic = topic
         self.qos = qos
-        self.history: deque[M] = deque(maxlen=qos.depth if qos.durability is Durability.TRANSIENT_LOCAL else 0)
+        self.history: deque[M | Carried] = deque(maxlen=qos.depth if qos.durability is Durability.TRANSIENT_LOCAL else 0)
         self.alive = True
 
     def publish(self, msg: M) -> None:
@@ -91,6 +116,24 @@ class _LocalPublisher(Publisher[M], Generic[M]):
             self.history.append(msg)
         for sub in self.node.bus.matching_subscriptions(self):
             sub.deliver(msg)
+
+    def publish_object(self, obj: Any, message: Callable[[], M], copy: Callable[[Any], Any] | None) -> None:
+        """Hand ``obj`` (checked by the caller: exactly what decoding its ``message()`` would give)
+        to the subscriptions that take its class, and ``message()`` -- built once, here, only when
+        a subscription or the latched history wants it -- to the others."""
+        if not self.alive:
+            raise TransportError(f"publisher on {self.topic} of {self.node.fully_qualified_name} was destroyed")
+        subs = self.node.bus.matching_subscriptions(self)
+        latched = self.qos.durability is Durability.TRANSIENT_LOCAL
+        cls = type(obj)
+        msg = message() if latched or any(sub.objects is not cls for sub in subs) else None
+        if msg is not None:
+            self._check(msg)
+        carried = Carried(obj, copy, msg)
+        if latched:
+            self.history.append(carried)
+        for sub in subs:
+            sub.deliver(carried.item_for(sub.objects))
 
     def get_subscription_count(self) -> int:
         return len(self.node.bus.matching_subscriptions(self))
@@ -172,17 +215,19 @@ class LocalNode(Node):
         self.bus = self.transport = bus
         self._endpoints: list[Any] = []
 
-    def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> Publisher[M]:
-        pub = _LocalPublisher(self, msg_type, self.resolve(topic), qos)
+    def create_publisher(self, msg_type: type[M], topic: str, qos: QoS = COMMANDS) -> LocalPublisher[M]:
+        pub = LocalPublisher(self, msg_type, self.resolve(topic), qos)
         self.bus.add_publisher(pub)
         self._endpoints.append(pub)
         self.bus.publisher_created(TopicInfo(pub.topic, msg_type, (qos,)))
         return pub
 
     def create_subscription(
-        self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS
-    ) -> Subscription[M]:
-        sub = _LocalSubscription(self, msg_type, self.resolve(topic), callback, qos)
+        self, msg_type: type[M], topic: str, callback: Callable[[M], None], qos: QoS = COMMANDS, *, objects: type | None = None
+    ) -> LocalSubscription[M]:
+        """As every transport's; ``objects``: the callback also takes that wire class's objects as
+        published by :meth:`LocalPublisher.publish_object` (:mod:`node_transport.carriage`)."""
+        sub = LocalSubscription(self, msg_type, self.resolve(topic), callback, qos, objects)
         self.bus.add_subscription(sub)
         self._endpoints.append(sub)
         return sub
@@ -201,7 +246,7 @@ class LocalNode(Node):
 
     def destroy(self) -> None:
         for endpoint in self._endpoints:
-            if isinstance(endpoint, _LocalPublisher):
+            if isinstance(endpoint, LocalPublisher):
                 endpoint.alive = False
                 self.bus.remove_publisher(endpoint)
             else:
@@ -215,11 +260,11 @@ class LocalTransport(Transport):
 
     def __init__(self, clock: Clock) -> None:
         super().__init__(clock)
-        self._publishers: dict[str, list[_LocalPublisher[Any]]] = {}
-        self._subscriptions: dict[str, list[_LocalSubscription[Any]]] = {}
+        self._publishers: dict[str, list[LocalPublisher[Any]]] = {}
+        self._subscriptions: dict[str, list[LocalSubscription[Any]]] = {}
         # publisher -> the subscriptions it reaches: worked out once, not on every publish (a
         # running cell publishes thousands of messages a second and rarely changes its graph)
-        self._matches: dict[_LocalPublisher[Any], tuple[_LocalSubscription[Any], ...]] = {}
+        self._matches: dict[LocalPublisher[Any], tuple[LocalSubscription[Any], ...]] = {}
         self._services: dict[str, _LocalService] = {}
         self._types: dict[str, type] = {}
         self._nodes: dict[str, LocalNode] = {}
@@ -253,35 +298,35 @@ class LocalTransport(Transport):
         if known is not msg_type:
             raise TransportError(f"topic {topic} carries {known.__name__}; cannot use it for {msg_type.__name__}")
 
-    def add_publisher(self, pub: _LocalPublisher[Any]) -> None:
+    def add_publisher(self, pub: LocalPublisher[Any]) -> None:
         self._claim_type(pub.topic, pub.msg_type)
         self._publishers.setdefault(pub.topic, []).append(pub)
 
-    def remove_publisher(self, pub: _LocalPublisher[Any]) -> None:
+    def remove_publisher(self, pub: LocalPublisher[Any]) -> None:
         pubs = self._publishers.get(pub.topic, [])
         if pub in pubs:
             pubs.remove(pub)
         self._matches.pop(pub, None)
 
-    def add_subscription(self, sub: _LocalSubscription[Any]) -> None:
+    def add_subscription(self, sub: LocalSubscription[Any]) -> None:
         self._claim_type(sub.topic, sub.msg_type)
         self._subscriptions.setdefault(sub.topic, []).append(sub)
         self._matches.clear()
         for pub in self._publishers.get(sub.topic, []):
             if sub.qos.compatible_with(pub.qos) and sub.qos.durability is Durability.TRANSIENT_LOCAL:
                 for msg in pub.history:
-                    sub.deliver(msg)
+                    sub.deliver(msg.item_for(sub.objects) if type(msg) is Carried else msg)
 
-    def remove_subscription(self, sub: _LocalSubscription[Any]) -> None:
+    def remove_subscription(self, sub: LocalSubscription[Any]) -> None:
         subs = self._subscriptions.get(sub.topic, [])
         if sub in subs:
             subs.remove(sub)
         self._matches.clear()
 
-    def matching_publishers(self, sub: _LocalSubscription[Any]) -> list[_LocalPublisher[Any]]:
+    def matching_publishers(self, sub: LocalSubscription[Any]) -> list[LocalPublisher[Any]]:
         return [p for p in self._publishers.get(sub.topic, []) if sub.qos.compatible_with(p.qos)]
 
-    def matching_subscriptions(self, pub: _LocalPublisher[Any]) -> tuple[_LocalSubscription[Any], ...]:
+    def matching_subscriptions(self, pub: LocalPublisher[Any]) -> tuple[LocalSubscription[Any], ...]:
         found = self._matches.get(pub)
         if found is None:
             found = self._matches[pub] = tuple(s for s in self._subscriptions.get(pub.topic, []) if s.qos.compatible_with(pub.qos))

@@ -21,13 +21,12 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections import OrderedDict
-from typing import Any
 
 from core_functions.primitives import PrimitiveResult, describe
-from node_transport import codec, typed
+from node_transport.carriage import TypedPublisher, subscribe
 from node_transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion
 from node_transport.bounded import declare_bounded
-from node_transport.port import Node, Publisher
+from node_transport.port import Node
 from node_transport.qos import COMMANDS, LATCHED, SENSOR
 from node_transport.qos import JOINT_STATES as JOINT_STATES_QOS
 from node_transport.wire import (
@@ -57,16 +56,16 @@ class BridgeNode:
         self.clock = node.clock
         self.state_period = float(declare_bounded(node, "state_period", 0.05, "joint_states / tcp_pose period (s)"))
         self.stop_timeout = float(declare_bounded(node, "stop_timeout", 5.0, "longest a stopped primitive may take to end (s)"))
-        self._feedback: dict[str, Publisher[Any]] = {}  # typed.BridgeFeedbackMsg
-        self._answered: OrderedDict[str, Any | None] = OrderedDict()  # command id -> latest feedback
+        self._feedback: dict[str, TypedPublisher[BridgeFeedback]] = {}
+        self._answered: OrderedDict[str, BridgeFeedback | None] = OrderedDict()  # command id -> latest feedback
         self._running: dict[str, asyncio.Task[None]] = {}
         self._tasks: set[asyncio.Task[None]] = set()
         self._joint_pub = node.create_publisher(JointState, JOINT_STATES, JOINT_STATES_QOS)
         self._tcp_pubs = {g: node.create_publisher(PoseStamped, tcp_pose_topic(g), SENSOR) for g in backend.groups}
         self._robot_state = RobotStatePublisher.for_backend(node, backend)  # robot_description, tf: for RViz
         for group in backend.groups:
-            self._feedback[group] = node.create_publisher(typed.BridgeFeedbackMsg, bridge_topic(group, "feedback"), COMMANDS)
-        node.create_subscription(typed.CellSnapshotMsg, ENGINE_CELL, self._on_cell, LATCHED)
+            self._feedback[group] = TypedPublisher(node, BridgeFeedback, bridge_topic(group, "feedback"), COMMANDS)
+        subscribe(node, CellSnapshot, ENGINE_CELL, self.backend.set_cell, lambda error: self._report(f"ignored cell model: {error}"), LATCHED)
         self._camera = attach_cameras(node, backend)  # camera parameters: publish_images, camera_source (ROS image topics)
         self._state_task: asyncio.Task[None] | None = None
         self.errors: list[str] = []
@@ -83,8 +82,9 @@ class BridgeNode:
         """
         await self.backend.start()
         for group in self.backend.groups:
-            self.node.create_subscription(
-                typed.BridgeCommandMsg, bridge_topic(group, "command"), lambda msg, g=group: self._on_command(g, msg), COMMANDS
+            subscribe(
+                self.node, BridgeCommand, bridge_topic(group, "command"), lambda command, g=group: self._on_command(g, command),
+                lambda error: self._report(f"rejected command: {error}"), COMMANDS,
             )
         self._state_task = asyncio.get_running_loop().create_task(self._publish_state_loop(), name="bridge state")
 
@@ -110,22 +110,9 @@ class BridgeNode:
         )
 
     # ------------------------------------------------------------------------------ inbound
-    def _on_cell(self, msg: Any) -> None:
-        try:
-            cell = typed.from_msg(CellSnapshot, msg, self.clock, source=self.node.resolve(ENGINE_CELL))
-        except codec.WireError as error:
-            self._report(f"ignored cell model: {error}")
-            return
-        self.backend.set_cell(cell)
-
-    def _on_command(self, group: str, msg: Any) -> None:
-        source = self.node.resolve(bridge_topic(group, "command"))
-        try:
-            command = typed.from_msg(BridgeCommand, msg, self.clock, source=source)
-        except codec.WireError as error:
-            self._report(f"rejected command: {error}")
-            return
+    def _on_command(self, group: str, command: BridgeCommand) -> None:
         if command.group != group:
+            source = self.node.resolve(bridge_topic(group, "command"))
             self._send(group, command.id, "error", error=f"command for group {command.group!r} arrived on {source}", fault=FaultKind.PROTOCOL)
             return
         if self.turnaround is not None:
@@ -224,10 +211,9 @@ class BridgeNode:
     ) -> None:
         """One feedback message; an error carries its FaultKind, so the machine need not parse text."""
         feedback = BridgeFeedback(id=command_id, group=group, status=status, error=error, fault=fault, result=result, t=self.clock.now())  # type: ignore[arg-type]
-        message = typed.to_msg(feedback, self.clock)
         if command_id in self._answered:
-            self._answered[command_id] = message
-        self._feedback[group].publish(message)
+            self._answered[command_id] = feedback
+        self._feedback[group].publish(feedback)
         if self.turnaround is not None and status in ("done", "measured"):
             self.turnaround.hold(group)
 

@@ -17,6 +17,7 @@ import uuid
 from typing import Any
 
 from node_transport import codec, typed
+from node_transport.carriage import TypedPublisher, subscribe
 from node_transport.clock import Clock
 from node_transport.msgs import Trigger
 from node_transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
@@ -37,8 +38,9 @@ class GroupLink:
         self._pending: dict[str, asyncio.Future[SmResult]] = {}
         self._ids = itertools.count(1)
         self._session = uuid.uuid4().hex[:6]
-        self._requests = node.create_publisher(typed.MachineRequestMsg, sm_topic(group, "request"), COMMANDS)
-        self._results = node.create_subscription(typed.MachineResultMsg, sm_topic(group, "result"), self._on_result, COMMANDS)
+        self._requests = TypedPublisher(node, SmRequest, sm_topic(group, "request"), COMMANDS)
+        self._results = subscribe(node, SmResult, sm_topic(group, "result"), self._on_result, self._reject, COMMANDS)
+        self._state_source = node.resolve(sm_topic(group, "state"))
         node.create_subscription(typed.MachineStateMsg, sm_topic(group, "state"), self._on_state, LATCHED)
         self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
         self.rejected: list[str] = []
@@ -57,7 +59,7 @@ class GroupLink:
     def send(self, request: SmRequest) -> asyncio.Future[SmResult]:
         future: asyncio.Future[SmResult] = asyncio.get_running_loop().create_future()
         self._pending[request.id] = future
-        self._requests.publish(typed.to_msg(request, self.clock))
+        self._requests.publish(request)
         if self._watch is None or self._watch.done():
             self._watch = asyncio.get_running_loop().create_task(self._watch_machine(), name=f"{self.group} machine watch")
         return future
@@ -81,20 +83,18 @@ class GroupLink:
             await self.clock.sleep(WATCH_PERIOD)
 
     def send_end(self) -> None:
-        self._requests.publish(typed.to_msg(SmRequest(id=self.new_id(), kind="end"), self.clock))
+        self._requests.publish(SmRequest(id=self.new_id(), kind="end"))
 
     def forget(self, request_id: str) -> None:
         future = self._pending.pop(request_id, None)
         if future is not None and not future.done():
             future.cancel()
 
-    def _on_result(self, msg: Any) -> None:
-        try:
-            result = typed.from_msg(SmResult, msg, self.clock, source=self.node.resolve(sm_topic(self.group, "result")))
-        except codec.WireError as error:
-            self.rejected.append(str(error))
-            self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
-            return
+    def _reject(self, error: codec.WireError) -> None:
+        self.rejected.append(str(error))
+        self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
+
+    def _on_result(self, result: SmResult) -> None:
         future = self._pending.pop(result.id, None)
         if future is not None and not future.done():
             future.set_result(result)
@@ -102,10 +102,9 @@ class GroupLink:
     # ------------------------------------------------------------------------------ state
     def _on_state(self, msg: Any) -> None:
         try:
-            self.state = typed.read_state(msg, source=self.node.resolve(sm_topic(self.group, "state")))
+            self.state = typed.read_state(msg, source=self._state_source)
         except codec.WireError as error:
-            self.rejected.append(str(error))
-            self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
+            self._reject(error)
             return
         self._state_changed.set()
 

@@ -24,7 +24,8 @@ from execution_engine.machine.events import EventQueue
 from execution_engine.machine.function_run import FunctionRun, SkillError
 from execution_engine.machine.rebase import RelativeGoals
 from execution_engine.machine.zone_gate import ZoneGate
-from node_transport import codec, typed
+from node_transport import codec
+from node_transport.carriage import TypedPublisher
 from node_transport.port import Node, Publisher, Subscription, wait_until_matched
 from node_transport.wire import BridgeCommand, FaultKind, SmRequest, SmResult, SmStatus, SyncMessage
 
@@ -46,11 +47,11 @@ class MachineConfig:
 
 @dataclass
 class Publishers:
-    result: Publisher[Any]  # typed.MachineResultMsg
-    status: Publisher[Any]  # typed.MachineStatusMsg
+    result: TypedPublisher[SmResult]
+    status: TypedPublisher[SmStatus]
     state: Publisher[Any]  # typed.MachineStateMsg
-    bridge: Publisher[Any]  # typed.BridgeCommandMsg
-    sync: Publisher[Any]  # typed.SyncMsg
+    bridge: TypedPublisher[BridgeCommand]
+    sync: TypedPublisher[SyncMessage]
 
 
 class MachineContext:
@@ -90,7 +91,7 @@ class MachineContext:
         self._feedback = feedback
         self.bridge_watch = BridgeWatch(node, feedback)  # a working state's check that the bridge is alive
         self._bridge_linked = False  # both directions to the bridge have matched
-        self._sent: dict[str, Any] = {}  # unacknowledged bridge commands, for resending
+        self._sent: dict[str, BridgeCommand] = {}  # unacknowledged bridge commands, for resending
         self.cell_arrived = asyncio.Event()
         self.zones = ZoneGate(self)  # interference zones: ask before a motion enters one
         self.goals = RelativeGoals()  # the goals relative moves resolved to: a retry re-bases them (machine/rebase.py)
@@ -135,8 +136,7 @@ class MachineContext:
         if "result" in fields and fields["result"] is not None:
             fields["result"] = codec.to_primitive(fields["result"])
         values = {"state": self.state_name, **defaults, **fields}
-        message = SmStatus(group=self.group, event=event, t=self.clock.now(), **values)  # type: ignore[arg-type]
-        self.pub.status.publish(typed.to_msg(message, self.clock))
+        self.pub.status.publish(SmStatus(group=self.group, event=event, t=self.clock.now(), **values))  # type: ignore[arg-type]
 
     async def link_bridge(self) -> str | None:
         """Wait (bounded) until the command topic and the feedback topic have matched the bridge:
@@ -154,19 +154,18 @@ class MachineContext:
         """Publish a bridge command; returns its id (feedback carries the same id)."""
         cid = command_id or self.new_id()
         command = BridgeCommand(id=cid, group=self.group, op=op, primitive=primitive)  # type: ignore[arg-type]
-        message = typed.to_msg(command, self.clock)
-        self._sent[cid] = message
+        self._sent[cid] = command
         if len(self._sent) > 16:  # only the newest few can still be waiting for their answer
             del self._sent[next(iter(self._sent))]
-        self.pub.bridge.publish(message)
+        self.pub.bridge.publish(command)
         return cid
 
     def resend_bridge(self, command_id: str) -> None:
         """The same command again, same id: the bridge runs an id once and repeats its last answer."""
-        message = self._sent.get(command_id)
-        if message is not None:
+        command = self._sent.get(command_id)
+        if command is not None:
             self._bridge_linked = False  # seen unanswered: check the link again before the next one
-            self.pub.bridge.publish(message)
+            self.pub.bridge.publish(command)
 
     def acknowledged(self, command_id: str) -> None:
         self._sent.pop(command_id, None)
@@ -175,7 +174,7 @@ class MachineContext:
         """Announce at a barrier; a failure carries its kind, so the partners report the same one."""
         message = SyncMessage(group=self.group, key=key, event=event, state=self.state_name, t=self.clock.now(), error=error, fault=fault)  # type: ignore[arg-type]
         self.record_sync(message)
-        self.pub.sync.publish(typed.to_msg(message, self.clock))
+        self.pub.sync.publish(message)
 
     def record_sync(self, message: SyncMessage) -> None:
         self.sync_board.setdefault(message.key, {})[message.group] = message
@@ -241,4 +240,4 @@ class MachineContext:
             t_end=now,
             primitives=primitives,
         )
-        self.pub.result.publish(typed.to_msg(result, self.clock))
+        self.pub.result.publish(result)

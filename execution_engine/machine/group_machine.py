@@ -53,6 +53,7 @@ from execution_engine.machine.table import (
 )
 from execution_engine.smach import StateMachine, StructureInfo, TransitionRecord, UserData
 from node_transport import codec, typed
+from node_transport.carriage import TypedPublisher, subscribe
 from node_transport.bounded import declare_bounded
 from node_transport.msgs import Trigger, TriggerRequest, TriggerResponse
 from node_transport.port import Node
@@ -61,10 +62,13 @@ from node_transport.wire import (
     ENGINE_CELL,
     MACHINE_SERVICES,
     SYNC_TOPIC,
+    BridgeCommand,
     BridgeFeedback,
     CellSnapshot,
     FaultKind,
     SmRequest,
+    SmResult,
+    SmStatus,
     SmStructure,
     SyncMessage,
     TransitionSpec,
@@ -124,13 +128,13 @@ class GroupMachine:
         self.events = EventQueue(self.clock)
         g = self.group
         publishers = Publishers(
-            result=node.create_publisher(typed.MachineResultMsg, sm_topic(g, "result"), COMMANDS),
-            status=node.create_publisher(typed.MachineStatusMsg, sm_topic(g, "status"), EVENTS),
+            result=TypedPublisher(node, SmResult, sm_topic(g, "result"), COMMANDS),
+            status=TypedPublisher(node, SmStatus, sm_topic(g, "status"), EVENTS),
             state=node.create_publisher(typed.MachineStateMsg, sm_topic(g, "state"), LATCHED),
-            bridge=node.create_publisher(typed.BridgeCommandMsg, bridge_topic(g, "command"), COMMANDS),
-            sync=node.create_publisher(typed.SyncMsg, SYNC_TOPIC, COMMANDS),
+            bridge=TypedPublisher(node, BridgeCommand, bridge_topic(g, "command"), COMMANDS),
+            sync=TypedPublisher(node, SyncMessage, SYNC_TOPIC, COMMANDS),
         )
-        self._structure_pub = node.create_publisher(typed.MachineStructureMsg, sm_topic(g, "structure"), LATCHED)
+        self._structure_pub = TypedPublisher(node, SmStructure, sm_topic(g, "structure"), LATCHED)
         self.ctx = MachineContext(
             group=g,
             node=node,
@@ -140,11 +144,11 @@ class GroupMachine:
             events=self.events,
             publishers=publishers,
             config=config,
-            feedback=node.create_subscription(typed.BridgeFeedbackMsg, bridge_topic(g, "feedback"), self._on_feedback, COMMANDS),
+            feedback=subscribe(node, BridgeFeedback, bridge_topic(g, "feedback"), self._on_feedback, self._bad_feedback, COMMANDS),
         )
-        node.create_subscription(typed.MachineRequestMsg, sm_topic(g, "request"), self._on_request, COMMANDS)
-        node.create_subscription(typed.SyncMsg, SYNC_TOPIC, self._on_sync, COMMANDS)
-        node.create_subscription(typed.CellSnapshotMsg, ENGINE_CELL, self._on_cell, LATCHED)
+        subscribe(node, SmRequest, sm_topic(g, "request"), self._on_request, self._bad_request, COMMANDS)
+        subscribe(node, SyncMessage, SYNC_TOPIC, self._on_sync, self._bad_sync, COMMANDS)
+        subscribe(node, CellSnapshot, ENGINE_CELL, self._on_cell, self._bad_cell, LATCHED)
         for command in MACHINE_SERVICES:
             node.create_service(Trigger, sm_service(g, command), lambda req, c=command: self._on_service(c, req))
         node.fault_handler = self._on_fault
@@ -179,7 +183,7 @@ class GroupMachine:
             states=(*structure.states, FINISH),
             transitions=tuple(TransitionSpec(s, o, t) for s, o, t in structure.transitions),
         )
-        self._structure_pub.publish(typed.to_msg(message, self.clock))
+        self._structure_pub.publish(message)
 
     def on_structure(self, structure: StructureInfo) -> None:
         """Structure is published once, when built (latched); nothing to do per run."""
@@ -203,40 +207,32 @@ class GroupMachine:
         return self.ctx.state_name
 
     # ---------------------------------------------------------------------------- inputs
-    def _on_request(self, msg: Any) -> None:
-        try:
-            request = typed.from_msg(SmRequest, msg, self.clock, source=self.node.resolve(sm_topic(self.group, "request")))
-        except codec.WireError as error:
-            self.ctx.status("error", error=f"rejected request: {error}")
-            self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
-            return
+    def _on_request(self, request: SmRequest) -> None:
         self.events.put(RequestEvent(request))
 
-    def _on_feedback(self, msg: Any) -> None:
-        try:
-            feedback = typed.from_msg(BridgeFeedback, msg, self.clock, source=self.node.resolve(bridge_topic(self.group, "feedback")))
-        except codec.WireError as error:
-            self.events.put(FaultEvent("bridge feedback", str(error), FaultKind.PROTOCOL))
-            return
+    def _bad_request(self, error: codec.WireError) -> None:
+        self.ctx.status("error", error=f"rejected request: {error}")
+        self.node.logger.error("%s: %s", self.node.fully_qualified_name, error)
+
+    def _on_feedback(self, feedback: BridgeFeedback) -> None:
         self.events.put(FeedbackEvent(feedback))
 
-    def _on_sync(self, msg: Any) -> None:
-        try:
-            message = typed.from_msg(SyncMessage, msg, self.clock, source=self.node.resolve(SYNC_TOPIC))
-        except codec.WireError as error:
-            self.node.logger.error("%s: ignored sync message: %s", self.node.fully_qualified_name, error)
-            return
+    def _bad_feedback(self, error: codec.WireError) -> None:
+        self.events.put(FaultEvent("bridge feedback", str(error), FaultKind.PROTOCOL))
+
+    def _on_sync(self, message: SyncMessage) -> None:
         if message.group == self.group:
             return
         self.ctx.record_sync(message)
         self.events.put(SyncEvent(message))
 
-    def _on_cell(self, msg: Any) -> None:
-        try:
-            snapshot = typed.from_msg(CellSnapshot, msg, self.clock, source=self.node.resolve(ENGINE_CELL))
-        except codec.WireError as error:
-            self.ctx.status("error", error=f"ignored cell model: {error}")
-            return
+    def _bad_sync(self, error: codec.WireError) -> None:
+        self.node.logger.error("%s: ignored sync message: %s", self.node.fully_qualified_name, error)
+
+    def _bad_cell(self, error: codec.WireError) -> None:
+        self.ctx.status("error", error=f"ignored cell model: {error}")
+
+    def _on_cell(self, snapshot: CellSnapshot) -> None:
         self.ctx.set_cell(snapshot.index())
         self.store.cell_sha256 = hashlib.sha256(codec.encode(snapshot).encode()).hexdigest()  # stamped on what is recorded for it
         self._located.attach(self.ctx.cell)

@@ -1,0 +1,313 @@
+"""Whether a message dataclass is exactly what decoding its JSON would give, and copying its mutable parts.
+
+In one process a message can travel as the very object its sender built instead of being encoded
+and decoded again (:mod:`node_transport.carriage`).  That is the same as the wire only when
+decoding the object's JSON (:func:`codec.from_primitive`) would give it back unchanged: every value
+of exactly the type the decoder makes -- a float field holds a ``float``, not an ``int`` or a numpy
+number; a tuple field a ``tuple``, not a list -- and within the decoder's limits: finite numbers,
+strings a JSON encoder takes, 64-bit integers, :data:`codec.MAX_MESSAGE_BYTES`, the nesting depth
+of :func:`codec.parse_json`.  :func:`exact` checks that, walking the value once; what it cannot
+vouch for travels the long way and is decoded, or refused, by its receiver as before.
+
+A decoded message holds dicts and lists of its own; :func:`copier` gives each receiver of a shared
+object that too, so no receiver sees another's (or the sender's) later changes.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import types
+from collections.abc import Callable
+from functools import lru_cache
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin
+
+from node_transport.codec import MAX_MESSAGE_BYTES, field_plan, is_tagged_union
+
+T = TypeVar("T")
+
+INT_RANGE = (-(2**63), 2**64 - 1)  # the integers orjson encodes
+JSON_DEPTH = 64  # the deepest JSON value codec.parse_json takes
+
+
+class Walk:
+    """What :func:`exact` found on its way: an upper bound of the value's JSON size in bytes, and
+    whether it holds a dict or a list (a receiver must get its own copy of those)."""
+
+    __slots__ = ("size", "mutable")
+
+    def __init__(self) -> None:
+        self.size = 0
+        self.mutable = False
+
+
+Exact = Callable[[Any, Walk], bool]
+
+
+def exact(cls: type[Any], obj: Any) -> Walk | None:
+    """The walk of ``obj`` when it is exactly the ``cls`` that decoding its JSON gives, else None."""
+    walk = Walk()
+    try:
+        ok = checker(cls)(obj, walk)
+    except RecursionError:
+        return None
+    return walk if ok and walk.size <= MAX_MESSAGE_BYTES else None
+
+
+# ------------------------------------------------------------------------------- scalars
+def _str(value: Any, walk: Walk) -> bool:
+    if type(value) is not str:
+        return False
+    if not value.isascii():
+        try:
+            value.encode()
+        except UnicodeEncodeError:  # a lone surrogate: no JSON encoder takes it
+            return False
+    walk.size += 6 * len(value) + 3  # every character escaped, the quotes, a separator
+    return True
+
+
+def _float(value: Any, walk: Walk) -> bool:
+    walk.size += 26
+    return type(value) is float and math.isfinite(value)
+
+
+def _int(value: Any, walk: Walk) -> bool:
+    walk.size += 22
+    return type(value) is int and INT_RANGE[0] <= value <= INT_RANGE[1]
+
+
+def _bool(value: Any, walk: Walk) -> bool:
+    walk.size += 6
+    return type(value) is bool
+
+
+def _none(value: Any, walk: Walk) -> bool:
+    walk.size += 5
+    return value is None
+
+
+def _never(value: Any, walk: Walk) -> bool:
+    return False
+
+
+def _json(value: Any, walk: Walk, depth: int = 0) -> bool:
+    """A JSON value as the parser gives it: dicts with string keys, lists, plain scalars."""
+    t = type(value)
+    if t is str:
+        return _str(value, walk)
+    if t is float:
+        return _float(value, walk)
+    if t is int:
+        return _int(value, walk)
+    if t is bool or value is None:
+        walk.size += 6
+        return True
+    if depth >= JSON_DEPTH:
+        return False
+    if t is list:
+        walk.mutable = True
+        walk.size += 2
+        return all(_json(v, walk, depth + 1) for v in value)
+    if t is dict:
+        walk.mutable = True
+        walk.size += 2
+        return all(_str(k, walk) and _json(v, walk, depth + 1) for k, v in value.items())
+    return False
+
+
+_SCALARS: dict[Any, Exact] = {float: _float, int: _int, bool: _bool, str: _str, None: _none, type(None): _none}
+
+
+# ------------------------------------------------------------------------------- checkers
+@lru_cache(maxsize=None)
+def checker(hint: Any) -> Exact:
+    """The check (built once per type) that a value is exactly what decoding gives for ``hint``."""
+    if hint is Any:
+        return _json
+    if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+        return _dataclass(hint)
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        return _enum(hint)
+    origin = get_origin(hint)
+    if origin is Literal:
+        return _literal(get_args(hint))
+    if origin in (Union, types.UnionType):
+        return _union(hint)
+    if origin in (list, tuple):
+        return _sequence(hint, origin)
+    if origin is dict:
+        return _dict(hint)
+    return _SCALARS.get(hint, _never)
+
+
+def _enum(hint: type[enum.Enum]) -> Exact:
+    width = 6 * max((len(str(m.value)) for m in hint), default=0) + 3
+
+    def exact_enum(value: Any, walk: Walk) -> bool:
+        walk.size += width
+        return type(value) is hint
+    return exact_enum
+
+
+def _literal(values: tuple[Any, ...]) -> Exact:
+    allowed = {(type(a), a) for a in values}  # True is not 1 here, as the decoder has it
+    width = 6 * max(len(str(a)) for a in values) + 3
+
+    def exact_literal(value: Any, walk: Walk) -> bool:
+        walk.size += width
+        try:
+            return (type(value), value) in allowed
+        except TypeError:  # unhashable
+            return False
+    return exact_literal
+
+
+def _union(hint: Any) -> Exact:
+    args = get_args(hint)
+    optional = type(None) in args
+    members = [a for a in args if a is not type(None)]
+    if is_tagged_union(hint):
+        by_type = {a: checker(a) for a in members}
+
+        def exact_tagged(value: Any, walk: Walk) -> bool:
+            if value is None:
+                walk.size += 5
+                return optional
+            check = by_type.get(type(value))
+            return check is not None and check(value, walk)
+        return exact_tagged
+    if len(members) != 1:  # which member the decoder picks depends on the value: not vouched for
+        return _never
+    check = checker(members[0])
+
+    def exact_optional(value: Any, walk: Walk) -> bool:
+        if value is None:
+            walk.size += 5
+            return optional
+        return check(value, walk)
+    return exact_optional
+
+
+def _sequence(hint: Any, origin: Any) -> Exact:
+    args = get_args(hint)
+    if origin is tuple and args and args[-1] is not Ellipsis:
+        fixed = tuple(checker(a) for a in args)
+
+        def exact_fixed(value: Any, walk: Walk) -> bool:
+            walk.size += 2
+            return type(value) is tuple and len(value) == len(fixed) and all(c(v, walk) for c, v in zip(fixed, value))
+        return exact_fixed
+    check = checker(args[0] if args else Any)
+    mutable = origin is list
+
+    def exact_sequence(value: Any, walk: Walk) -> bool:
+        if type(value) is not origin:
+            return False
+        if mutable:
+            walk.mutable = True
+        walk.size += 2
+        return all(check(v, walk) for v in value)
+    return exact_sequence
+
+
+def _dict(hint: Any) -> Exact:
+    key, item = get_args(hint) or (str, Any)
+    if key is not str:
+        return _never
+    check = checker(item)
+
+    def exact_dict(value: Any, walk: Walk) -> bool:
+        if type(value) is not dict:
+            return False
+        walk.mutable = True
+        walk.size += 2
+        return all(_str(k, walk) and check(v, walk) for k, v in value.items())
+    return exact_dict
+
+
+def _dataclass(cls: type) -> Exact:
+    plans = field_plan(cls)
+    fields = [(p.name, len(p.key) + 4) for p in plans]
+    checks: list[Exact] = []  # built on first use: dataclasses may refer to each other
+
+    def exact_dataclass(value: Any, walk: Walk) -> bool:
+        if type(value) is not cls:
+            return False
+        if not checks:
+            checks.extend(checker(p.hint) for p in plans)
+        walk.size += 16  # the braces and a "kind" tag
+        for (name, width), check in zip(fields, checks):
+            walk.size += width
+            if not check(getattr(value, name), walk):
+                return False
+        return True
+    return exact_dataclass
+
+
+# -------------------------------------------------------------------------------- copying
+def copier(cls: type[T]) -> Callable[[T], T]:
+    """A copy of a ``cls`` value (one :func:`exact` accepted) with every dict and list in it new
+    and the rest shared, as immutable as what a receiver decodes."""
+    copy = _copier(cls)
+    return copy if copy is not None else _same
+
+
+def _same(value: T) -> T:
+    return value
+
+
+def _copy_json(value: Any) -> Any:
+    t = type(value)
+    if t is dict:
+        return {k: _copy_json(v) for k, v in value.items()}
+    if t is list:
+        return [_copy_json(v) for v in value]
+    return value
+
+
+@lru_cache(maxsize=None)
+def _copier(hint: Any) -> Callable[[Any], Any] | None:
+    """The copy for ``hint``; None when its values hold nothing mutable (wire types do not refer to themselves)."""
+    if hint is Any:
+        return _copy_json
+    if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+        return _dataclass_copier(hint)
+    origin = get_origin(hint)
+    if origin in (Union, types.UnionType):
+        by_type = {get_origin(a) or a: c for a in get_args(hint) if a is not type(None) and (c := _copier(a)) is not None}
+        if not by_type:
+            return None
+        return lambda value: by_type[type(value)](value) if type(value) in by_type else value
+    if origin in (list, tuple):
+        return _sequence_copier(hint, origin)
+    if origin is dict:
+        item = _copier((get_args(hint) or (str, Any))[1])
+        if item is None:
+            return dict
+        return lambda value: {k: item(v) for k, v in value.items()}
+    return None
+
+
+def _sequence_copier(hint: Any, origin: Any) -> Callable[[Any], Any] | None:
+    args = [a for a in get_args(hint) if a is not Ellipsis] or [Any]
+    items = [_copier(a) for a in args]
+    if origin is tuple and len(args) > 1 and get_args(hint)[-1] is not Ellipsis:  # tuple[int, str]
+        if all(c is None for c in items):
+            return None
+        fixed = [c or _same for c in items]
+        return lambda value: tuple(c(v) for c, v in zip(fixed, value))
+    item = items[0]
+    if origin is tuple:
+        return None if item is None else (lambda value: tuple(item(v) for v in value))
+    return list if item is None else (lambda value: [item(v) for v in value])
+
+
+def _dataclass_copier(cls: type) -> Callable[[Any], Any] | None:
+    fields = [(p.name, c) for p in field_plan(cls) if (c := _copier(p.hint)) is not None]
+    if not fields:
+        return None
+
+    def copy_dataclass(value: Any) -> Any:
+        return dataclasses.replace(value, **{name: c(v) for name, c in fields if (v := getattr(value, name)) is not None})
+    return copy_dataclass
