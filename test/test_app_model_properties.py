@@ -11,8 +11,12 @@ from hypothesis import strategies as st
 from lxml import etree
 
 from execution_engine.app_model import ApplicationError, Diagnostic, load_application, load_cell, validate_application, validate_cell
+from execution_engine.app_model.diagnostics import DiagnosticLog
 from execution_engine.app_model.positions import DocumentWalk, SourceMap
+from execution_engine.app_model.reader import ApplicationReader
 from execution_engine.app_model.safe_xml import read_xml
+from execution_engine.app_model.schema import load_schema
+from execution_engine.app_model.structure import StructureCheck, validate_structure
 
 CATALOG = small_catalog()
 SETTINGS = settings(suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow], deadline=None)
@@ -196,7 +200,7 @@ def test_the_reader_walk_gives_every_element_its_own_offset(work: Path, cuts: li
     path.write_text(text)
     validate_application(path, CATALOG)
     assert visits
-    assert all(walk._aligned for walk in walks)  # the fast path held: no fallback to the element map
+    assert all(walk.aligned for walk in walks)  # the fast path held: no fallback to the element map
     truths: dict[str, dict[str, int]] = {}
     for (element, offset), walk in zip(visits, walks):  # the application's walk, and its cell's
         file = walk.source.file
@@ -206,3 +210,42 @@ def test_the_reader_walk_gives_every_element_its_own_offset(work: Path, cuts: li
             truths[file] = {doc.root.getroottree().getpath(e): o for e, o in doc.source._element_offsets().items()}
         assert offset == truths[file][element.getroottree().getpath(element)], element.tag
     assert str(path) in truths
+    # the reader's hottest loop visits <function> and <param> inline: each offset it kept is the
+    # start of an element of that name, none twice (truth: the map of every element)
+    doc, _ = read_xml(path)
+    assert doc is not None
+    by_offset = {o: e.tag for e, o in doc.source._element_offsets().items()}
+    reader = ApplicationReader(doc)
+    draft = reader.read()
+    assert reader.walk.aligned
+    kept = [(op.at, "operation") for op in draft.operations]
+    for op in draft.operations:
+        kept += [(call.at, "function") for call in op.calls.values()]
+        kept += [(at, "param") for call in op.calls.values() for at in call.param_at]
+    assert all(by_offset.get(offset) == tag for offset, tag in kept), kept
+    assert len({offset for offset, _ in kept}) == len(kept)
+
+
+@SETTINGS
+@given(cuts=st.lists(st.tuples(st.integers(0, len(APP_XML)), _JUNK), max_size=4), cell=st.booleans())
+def test_the_parser_finds_a_file_valid_exactly_when_the_structure_check_finds_nothing(
+    work: Path, cuts: list[tuple[int, str]], cell: bool,
+) -> None:
+    """A file the validating parser accepts skips the structure check: it must be a file that check
+    has nothing to say about, and every file it refuses must get the check's words."""
+    text = CELL_XML if cell else APP_XML
+    for position, junk in sorted(cuts, reverse=True):
+        tag_end = text.rfind(">", 0, min(position, len(text)))
+        if tag_end > 0:
+            text = text[:tag_end + 1] + junk + text[tag_end + 1:]
+    path = work / "mutant.xml"
+    path.write_text(text)
+    name = "cell" if cell else "application"
+    checked, _ = read_xml(path, schema=load_schema(name).schema)
+    plain, _ = read_xml(path)
+    assert (checked is None) == (plain is None)  # well-formed or not, whichever parser
+    if plain is None or checked is None:
+        return
+    found = [str(d) for d in StructureCheck(plain, load_schema(name), DiagnosticLog()).run()]
+    assert (checked.valid_against is not None) == (found == []), found
+    assert [str(d) for d in validate_structure(checked, name)] == found

@@ -17,8 +17,7 @@ from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell_l
 from execution_engine.app_model.flag_check import check_waits
 from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, DiagnosticLog, capped, has_errors
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
-from execution_engine.app_model.positions import SourceMap
-from execution_engine.app_model.reader import ApplicationDraft, ApplicationReader, OperationSite
+from execution_engine.app_model.reader import ApplicationDraft, ApplicationReader
 from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES
 from execution_engine.app_model.structure import read_structured
 from execution_engine.app_model.validation import ApplicationChecker, CheckedCall
@@ -54,6 +53,8 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
     if doc is None:
         return None, capped(log)
     draft = ApplicationReader(doc, log).read()
+    draft.source.detach()  # the drafts hold offsets, not elements: the tree can go before the cell and the checks
+    del doc
     cell, cell_broken = _read_cell(draft, log, max_bytes)
     robot = draft.robot
     if robot is None:
@@ -77,7 +78,7 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
         robot=robot,
         cell=cell,
         error_policy=policy,
-        operations=tuple(_freeze(op_site, calls, draft.source) for op_site, calls in zip(draft.operations, checked)),
+        operations=_freeze(draft, checked),
         description=draft.description,
         version=draft.version,
         sync=draft.sync,
@@ -120,21 +121,31 @@ def _check_requests(
     wire_fit.check_requests(calls, longest, draft.robot, draft.name, cell.name if cell is not None else "", policy.retries, log, draft.source.at_offset)
 
 
-def _freeze(site: OperationSite, calls: list[CheckedCall], source: SourceMap) -> Operation:
-    frozen: dict[str, Call] = {}
-    for checked in calls:
-        line, col = source.line_col(checked.site.at)
-        frozen[checked.site.group] = Call(
-            group=checked.site.group,
-            function=checked.site.function,
-            params=checked.params or (),
-            implicit=checked.site.implicit,
-            file=source.file,
-            line=line,
-            col=col,
-        )
-    line, col = source.line_col(site.at)
-    return Operation(id=site.id, name=site.name, line=line, col=col, calls=MappingProxyType(frozen))
+def _freeze(draft: ApplicationDraft, checked: list[list[CheckedCall]]) -> tuple[Operation, ...]:
+    """The immutable operations, each with its calls, placed at line and column.
+
+    Offsets come in document order (an operation, then its calls), so the lines are counted
+    on from one to the next (:meth:`SourceMap.line_cols`) instead of looked up in a table."""
+    source = draft.source
+    file = source.file
+
+    def offsets() -> Iterator[int]:
+        for site, calls in zip(draft.operations, checked):
+            yield site.at
+            for call in calls:
+                yield call.site.at
+
+    places = source.line_cols(offsets())
+    operations: list[Operation] = []
+    for site, calls in zip(draft.operations, checked):
+        line, col = next(places)
+        frozen: dict[str, Call] = {}
+        for call in calls:
+            call_line, call_col = next(places)
+            call_site = call.site
+            frozen[call_site.group] = Call(call_site.group, call_site.function, call.params or (), call_site.implicit, file, call_line, call_col)
+        operations.append(Operation(site.id, site.name, line, col, MappingProxyType(frozen)))
+    return tuple(operations)
 
 
 def load_application(path: Path | str, catalog: Catalog, *, max_bytes: int = DEFAULT_MAX_BYTES) -> Application:

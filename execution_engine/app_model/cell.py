@@ -37,7 +37,7 @@ def read_cell_log(
     structure_ok = not log.has_errors
     cell = CellReader(doc, log).read(structure_ok)
     if cell is not None and fits:
-        offsets = doc.source.start_tags()[0]
+        offsets = doc.source.tag_offsets()
         root = doc.source.at_offset(offsets[0] if offsets else 0)
         wire_fit.check_cell(cell, root, doc.file, log)
     return (cell if not log.has_errors else None), log

@@ -35,7 +35,7 @@ class ErrorPolicy:
     retreat: float = 0.05  # m an arm backs out along its tool axis before the safe pose; 0 = none
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: a 10^5-call application holds 10^5 of these
 class Call:
     """One group's function in one operation."""
 
@@ -52,7 +52,7 @@ class Call:
         return self.function == WAIT
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Operation:
     """One step: every group of the robot has a call (in the robot's group order)."""
 

@@ -28,6 +28,7 @@ from execution_engine.app_model.diagnostics import Location
 _TAGS = re.compile(r"<(?:!--.*?-->|!\[CDATA\[.*?\]\]>|\?.*?\?>|/|([^\s/>!?][^\s/>]*))", re.S)
 # Without comments, CDATA or processing instructions every "<" that is not "</" opens an element.
 _PLAIN_TAGS = re.compile(r"<([^\s/>!?][^\s/>]*)")
+_PLAIN_STARTS = re.compile(r"<(?=[^\s/>!?])")  # the same, offsets only (no name to copy out)
 _TAG_NAME = re.compile(r"<[^\s/>]+")
 _ATTRIBUTE = re.compile(r"""\s+([^\s=/>]+)\s*=\s*(?:"[^"]*"|'[^']*')""")
 _NEWLINE = re.compile("\n")
@@ -74,9 +75,21 @@ class SourceMap:
         self.text = text.replace("\r\n", "\n").replace("\r", "\n") if "\r" in text else text
         self._root = root
         self._line_starts: array[int] | None = None
+        self._starts: array[int] | None = None
         self._tags: tuple[array[int], list[str]] | None = None
         self._offsets: dict[etree._Element, int] | None = None
         self._located: dict[etree._Element, int] = {}
+
+    def attach(self, root: etree._Element) -> None:
+        """The tree parsed from this text, whose elements the map locates."""
+        self._root = root
+
+    def detach(self) -> None:
+        """Let the tree go once its elements have become offsets: a reader's drafts keep none, and
+        the tree is most of a large file's memory.  Offsets, lines and columns keep working."""
+        self._root = None
+        self._offsets = None
+        self._located = {}
 
     # ---------------------------------------------------------------- lines
     def _lines(self) -> array[int]:
@@ -91,7 +104,28 @@ class SourceMap:
         index = bisect.bisect_right(starts, offset) - 1
         return index + 1, offset - starts[index] + 1
 
+    def line_cols(self, offsets: Iterable[int]) -> Iterator[tuple[int, int]]:
+        """``line_col`` of each offset, counting the line breaks between one and the next.
+
+        For the offsets of a whole model, in document order as a reader finds them: a few short
+        counts each instead of the table of every line start (built only if an offset goes back)."""
+        text, line, line_start, last = self.text, 1, 0, 0
+        count, rfind = text.count, text.rfind
+        for offset in offsets:
+            if offset < last:
+                yield self.line_col(offset)
+                continue
+            breaks = count("\n", last, offset)
+            if breaks:
+                line += breaks
+                line_start = rfind("\n", last, offset) + 1
+            last = offset
+            yield line, offset - line_start + 1
+
     def at_offset(self, offset: int) -> Location:
+        if self._line_starts is None and offset < 65536:  # near the top (a root's attribute): no table of every line
+            line = self.text.count("\n", 0, offset) + 1
+            return Location(self.file, line, offset - (self.text.rfind("\n", 0, offset) + 1) + 1)
         line, col = self.line_col(offset)
         return Location(self.file, line, col)
 
@@ -103,20 +137,25 @@ class SourceMap:
         return Location(self.file, line, min(max(col, 1), end - starts[line - 1] + 1))
 
     # ---------------------------------------------------------------- start tags
+    def tag_offsets(self) -> array[int]:
+        """Offsets of every start tag, in document order (computed once)."""
+        if self._starts is None:
+            text = self.text
+            body = text[text.find("?>") + 2:] if text.startswith("<?xml") else text
+            if "<!--" in body or "<![CDATA[" in body or "<?" in body:
+                self._starts = array("q", [m.start() for m in _tag_matches(text)])
+            else:
+                self._starts = array("q", map(re.Match.start, _PLAIN_STARTS.finditer(text)))
+        return self._starts
+
     def start_tags(self) -> tuple[array[int], list[str]]:
         """Offsets and names of every start tag, in document order (computed once).
 
         The names are shared: one string per distinct tag, not one per element."""
         if self._tags is None:
-            text = self.text
-            offsets = array("q", [m.start() for m in _tag_matches(text)])
-            body = text[text.find("?>") + 2:] if text.startswith("<?xml") else text
-            if "<!--" in body or "<![CDATA[" in body or "<?" in body:
-                raw = [m.group(1) for m in _tag_matches(text)]
-            else:
-                raw = _PLAIN_TAGS.findall(text)
+            raw = [m.group(1) for m in _tag_matches(self.text)]
             shared: dict[str, str] = {}
-            self._tags = offsets, list(map(shared.setdefault, raw, raw))
+            self._tags = self.tag_offsets(), list(map(shared.setdefault, raw, raw))
         return self._tags
 
     def _element_offsets(self) -> dict[etree._Element, int]:
@@ -198,24 +237,37 @@ class DocumentWalk:
     A reader that walks the tree top-down and visits every element (skipping a subtree calls
     :meth:`skip`) sees them in the order of the scan, so the n-th visit gets the n-th start tag
     without a map from elements to offsets -- the map costs a third of loading a large file.
-    Each visit checks the name; after any disagreement the walk falls back to the map.
+    Each visit checks that the text there is ``<`` and the element's name; after any
+    disagreement the walk falls back to the map.  A hot loop may do the same inline with
+    ``offsets``, ``text`` and ``next`` (:meth:`at` for one element).
     """
 
     def __init__(self, source: SourceMap) -> None:
         self.source = source
-        self._offsets, self._names = source.start_tags()
-        self._next = 0
-        self._aligned = True
+        self.text = source.text
+        self.offsets = source.tag_offsets()
+        self.next = 0
+        self.aligned = True
 
     def visit(self, element: etree._Element) -> int:
-        index = self._next
-        self._next += 1
-        if self._aligned and index < len(self._names) and self._names[index] == element.tag:
-            return self._offsets[index]
-        self._aligned = False
+        index = self.next
+        self.next = index + 1
+        return self.at(index, element)
+
+    def at(self, index: int, element: etree._Element) -> int:
+        """The offset of ``element``, the ``index``-th element in document order.
+
+        The check is that the text there begins with ``<`` and the element's name: the scan finds
+        exactly the start tags of a well-formed text, so it is a guard, not a search.  A
+        namespaced element (``{uri}name`` against ``p:name``) fails it and takes the map."""
+        if self.aligned and index < len(self.offsets):
+            offset = self.offsets[index]
+            if self.text.startswith(element.tag, offset + 1):  # type: ignore[arg-type]
+                return offset
+        self.aligned = False
         return self.source.element_offset(element)
 
     def skip(self, element: etree._Element) -> None:
         """``element``'s subtree is not read: step over it (``element`` itself was visited)."""
         if len(element):
-            self._next += sum(1 for _ in element.iter(etree.Element)) - 1
+            self.next += sum(1 for _ in element.iter(etree.Element)) - 1

@@ -28,22 +28,19 @@ GROUP_TAGS = frozenset({"left_arm", "right_arm", "torso_head", "arm"})  # as in 
 
 
 @dataclass(slots=True)
-class ParamSite:
-    """One ``<param>`` as written; ``at`` is the offset of its start tag."""
-
-    value: str
-    name: str | None
-    at: int
-
-
-@dataclass(slots=True)
 class CallSite:
-    """One group's ``<function>`` (``at``: its offset), or the implicit wait of a group left out."""
+    """One group's ``<function>`` (``at``: its offset), or the implicit wait of a group left out.
+
+    The params as written, as parallel tuples -- a 10^5-call file has 10^5 of these, and tuples
+    cost a fraction of an object per param: ``values``, the offsets of their start tags
+    (``param_at``), and their ``name`` attributes (``names``: None when no param has one)."""
 
     group: str
     function: str
-    params: list[ParamSite]
+    values: tuple[str, ...]
+    param_at: tuple[int, ...]
     at: int
+    names: tuple[str | None, ...] | None = None
     implicit: bool = False
 
 
@@ -107,12 +104,13 @@ class ApplicationReader:
         if draft.robot is not None:
             self.groups = frozenset(draft.robot.group_names)
         ids: dict[str, OperationSite] = {}
+        read_operation = self.read_valid_operation if self.doc.valid_against is not None else self.read_operation
         for child in root:
             if not isinstance(child.tag, str):  # a comment or processing instruction
                 continue
             at = self.walk.visit(child)
             if child.tag == "operation":
-                operation = self.read_operation(child, at, draft.robot)
+                operation = read_operation(child, at, draft.robot)
                 if operation is None:
                     continue
                 first = ids.get(operation.id)
@@ -174,17 +172,18 @@ class ApplicationReader:
     def read_operation(self, element: etree._Element, at: int, robot: RobotModel | None) -> OperationSite | None:
         op_id = element.get("id")
         operation = OperationSite(id=(op_id or "").strip(), name=element.get("name"), at=at)
-        unsafe = unsafe_character(operation.id)
+        unsafe = None if operation.id.isascii() and operation.id.isprintable() else unsafe_character(operation.id)
         if unsafe is not None:  # consoles, traces and the page show ids: none may reorder or hide what follows it
             self.error(self.source.attribute_offset(at, "id"), f"operation id '{printable(operation.id)}' holds {unsafe}, which makes "
                        "an id look like another on a console or a page; use letters, digits and punctuation")
+        walk = self.walk
         for child in element:
-            if not isinstance(child.tag, str):
-                continue
-            child_at = self.walk.visit(child)
             group = child.tag
+            if not isinstance(group, str):
+                continue
+            child_at = walk.visit(child)
             if group not in GROUP_TAGS:
-                self.walk.skip(child)  # the schema reports unknown elements
+                walk.skip(child)  # the schema reports unknown elements
                 continue
             call = self.read_call(child, group)
             if robot is not None and group not in self.groups:
@@ -200,45 +199,146 @@ class ApplicationReader:
             operation.calls[group] = call
         return operation if op_id is not None else None
 
+    def read_valid_operation(self, element: etree._Element, at: int, robot: RobotModel | None) -> OperationSite:
+        """:meth:`read_operation` of a file the parser found valid against the schema, which says
+        what each element holds: groups of exactly one ``<function name>``, at most one ``<params>``,
+        and in it only ``<param value>`` elements, with nothing inside.  So no tag is asked for
+        below the group and nothing is skipped; each offset is still checked against the text
+        (:meth:`DocumentWalk.at` when it disagrees), as in the general reader."""
+        op_id = element.get("id") or ""
+        operation = OperationSite(id=op_id.strip(), name=element.get("name"), at=at)
+        unsafe = None if operation.id.isascii() and operation.id.isprintable() else unsafe_character(operation.id)
+        if unsafe is not None:
+            self.error(self.source.attribute_offset(at, "id"), f"operation id '{printable(operation.id)}' holds {unsafe}, which makes "
+                       "an id look like another on a console or a page; use letters, digits and punctuation")
+        walk = self.walk
+        offsets, text = walk.offsets, walk.text
+        index = walk.next
+        last = len(offsets) if walk.aligned else -1
+        calls = operation.calls
+        for child in element:
+            group = child.tag
+            if index < last and text.startswith(group, offsets[index] + 1):  # type: ignore[arg-type]
+                child_at = offsets[index]
+            else:
+                child_at, last = walk.at(index, child), -1
+            index += 1
+            call: CallSite | None = None
+            for function in child:
+                if index < last and text.startswith("function", offsets[index] + 1):
+                    function_at = offsets[index]
+                else:
+                    function_at, last = walk.at(index, function), -1
+                index += 1
+                values: list[str] = []
+                param_at: list[int] = []
+                names: list[str | None] | None = None
+                for holder in function:
+                    if not (index < last and text.startswith("params", offsets[index] + 1)):
+                        walk.at(index, holder)
+                        last = -1
+                    index += 1
+                    for param in holder:
+                        if index < last and text.startswith("param", offsets[index] + 1):
+                            param_at.append(offsets[index])
+                        else:
+                            param_at.append(walk.at(index, param))
+                            last = -1
+                        index += 1
+                        values.append(param.get("value", ""))
+                        name = param.get("name")
+                        if name is not None and names is None:
+                            names = [None] * (len(values) - 1)
+                        if names is not None:
+                            names.append(name)
+                call = CallSite(str(group), function.get("name", ""), tuple(values), tuple(param_at), function_at, tuple(names) if names is not None else None)
+            if call is None:
+                continue
+            if robot is not None and group not in self.groups:
+                self.error(child_at, f"{group} is not a group of {robot.name} (its groups: {', '.join(robot.group_names)})")
+                continue
+            first = calls.get(str(group))
+            if first is not None:
+                line = self.source.at_offset(first.at).line
+                self.error(child_at, f"group {group} appears twice in operation {operation.id} (first on line {line})")
+                continue
+            calls[str(group)] = call
+        walk.next = index
+        return operation
+
     def read_call(self, group_element: etree._Element, group: str) -> CallSite | None:
         """The group's first ``<function>``; every element below the group is visited.
 
         The hottest loop of loading (once per param of a 10^5-call file), hence the local names
-        and the inlined element tests.
-        """
-        visit, skip = self.walk.visit, self.walk.skip
+        and the walk's visit done inline: the n-th element in document order starts at the n-th
+        offset of the scan when the text there is ``<`` and its name (:meth:`DocumentWalk.at`
+        otherwise, which also falls back to the map of elements)."""
+        walk = self.walk
+        offsets, text = walk.offsets, walk.text
+        index = walk.next
+        last = len(offsets) if walk.aligned else -1
         call: CallSite | None = None
         complete = True
         for function in group_element:
-            if not isinstance(function.tag, str):
+            tag = function.tag
+            if not isinstance(tag, str):
                 continue
-            at = visit(function)
-            if function.tag != "function" or call is not None:
-                skip(function)  # the schema reports it
+            if index < last and text.startswith(tag, offsets[index] + 1):
+                at = offsets[index]
+            else:
+                at = walk.at(index, function)
+                last = -1
+            index += 1
+            if tag != "function" or call is not None:
+                walk.next = index
+                walk.skip(function)  # the schema reports it
+                index = walk.next
                 continue
-            params: list[ParamSite] = []
+            values: list[str] = []
+            param_at: list[int] = []
+            names: list[str | None] | None = None
             for holder in function:
-                if not isinstance(holder.tag, str):
+                tag = holder.tag
+                if not isinstance(tag, str):
                     continue
-                visit(holder)
-                if holder.tag != "params":
-                    skip(holder)
+                if not (index < last and text.startswith(tag, offsets[index] + 1)):
+                    walk.at(index, holder)
+                    last = -1
+                index += 1
+                if tag != "params":
+                    walk.next = index
+                    walk.skip(holder)
+                    index = walk.next
                     continue
                 for param in holder:
                     tag = param.tag
                     if not isinstance(tag, str):
                         continue
-                    param_at = visit(param)
+                    if index < last and text.startswith(tag, offsets[index] + 1):
+                        offset = offsets[index]
+                    else:
+                        offset = walk.at(index, param)
+                        last = -1
+                    index += 1
                     if len(param):
-                        skip(param)
+                        walk.next = index
+                        walk.skip(param)
+                        index = walk.next
                     value = param.get("value")
                     if tag != "param" or value is None:
                         complete = False  # the schema reports it; checking the count would add noise
                         continue
-                    params.append(ParamSite(value, param.get("name"), param_at))
+                    name = param.get("name")
+                    if name is not None and names is None:
+                        names = [None] * len(values)
+                    if names is not None:
+                        names.append(name)
+                    values.append(value)
+                    param_at.append(offset)
             name = function.get("name")
-            call = CallSite(group, name or "", params, at)
+            call = CallSite(group, name or "", tuple(values), tuple(param_at), at, tuple(names) if names is not None else None)
             complete = complete and bool(name)
+        walk.next = index
         return call if complete else None
 
 

@@ -58,19 +58,26 @@ _SYNTAX_REWRITES: tuple[tuple[re.Pattern[str], str], ...] = (
 
 @dataclass(frozen=True)
 class XmlDocument:
-    """A parsed, well-formed file: its root element and where everything is in the text."""
+    """A parsed, well-formed file: its root element and where everything is in the text.
+
+    ``valid_against``: the schema the parser found the file valid against while reading it (None:
+    not checked, or not valid -- then the structure check says why)."""
 
     path: Path
     root: etree._Element
     source: SourceMap
+    valid_against: etree.XMLSchema | None = None
 
     @property
     def file(self) -> str:
         return self.source.file
 
 
-def hardened_parser() -> etree.XMLParser:
-    """The parser every XML file goes through: no entities expanded, no network, no DTD, libxml2's size limits."""
+def hardened_parser(schema: etree.XMLSchema | None = None) -> etree.XMLParser:
+    """The parser every XML file goes through: no entities expanded, no network, no DTD, libxml2's size limits.
+
+    With ``schema`` it also validates while parsing (libxml2's streaming validation: no second
+    walk of the tree, and no node paths computed for errors) and refuses an invalid file."""
     # A new parser per file: its error log then holds this file's errors only.
     return etree.XMLParser(
         resolve_entities=False,
@@ -80,6 +87,7 @@ def hardened_parser() -> etree.XMLParser:
         huge_tree=False,  # keeps libxml2's limits: 256 levels of nesting, 10 MB per text or name
         remove_comments=True,
         remove_pis=True,
+        schema=schema,
     )
 
 
@@ -128,8 +136,11 @@ def _syntax_message(message: str) -> str:
     return message
 
 
-def read_xml(path: Path, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES) -> tuple[XmlDocument | None, list[Diagnostic]]:
-    """Parse ``path`` safely; the document, or None and the reasons (``display`` names the file)."""
+def read_xml(
+    path: Path, *, display: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES, schema: etree.XMLSchema | None = None,
+) -> tuple[XmlDocument | None, list[Diagnostic]]:
+    """Parse ``path`` safely; the document, or None and the reasons (``display`` names the file).
+    ``schema``: validate while parsing (:func:`parse_bytes`)."""
     file = display if display is not None else str(path)
     try:
         info = os.stat(path)
@@ -145,7 +156,7 @@ def read_xml(path: Path, *, display: str | None = None, max_bytes: int = DEFAULT
         return None, [Diagnostic(file, 1, 1, f"cannot read the file: {error.strerror or error}")]
     if len(data) > max_bytes:
         return None, [Diagnostic(file, 1, 1, f"the file is over the limit of {max_bytes} bytes")]
-    return parse_bytes(data, path=path, display=file)
+    return parse_bytes(data, path=path, display=file, schema=schema)
 
 
 def _read_at_most(path: Path, size: int, max_bytes: int) -> bytes:
@@ -178,9 +189,10 @@ def _too_many_nodes(display: str, data: bytes, text: str) -> Diagnostic | None:
     otherwise the start tags are scanned (comments, CDATA, instructions and end tags left out),
     stopping at the first one over a limit.
     """
-    start_tags_at_most = data.count(b"<") - data.count(b"</") - data.count(b"<!") - data.count(b"<?")
-    if start_tags_at_most <= MAX_ELEMENTS and data.count(b"=") <= MAX_ATTRIBUTES:
-        return None
+    if data.count(b"=") <= MAX_ATTRIBUTES:
+        opening = data.count(b"<")  # counts end tags too: usually enough to clear the file at once
+        if opening <= MAX_ELEMENTS or opening - data.count(b"</") - data.count(b"<!") - data.count(b"<?") <= MAX_ELEMENTS:
+            return None
     source = SourceMap(display, text)
     attributes = 0
     for index, (offset, count) in enumerate(start_tags_and_attributes(source.text)):
@@ -198,18 +210,32 @@ def _too_many_nodes(display: str, data: bytes, text: str) -> Diagnostic | None:
     return None
 
 
-def parse_bytes(data: bytes, *, path: Path, display: str) -> tuple[XmlDocument | None, list[Diagnostic]]:
-    """Parse bytes already read (and size-checked) as the content of ``path``."""
+def parse_bytes(
+    data: bytes, *, path: Path, display: str, schema: etree.XMLSchema | None = None,
+) -> tuple[XmlDocument | None, list[Diagnostic]]:
+    """Parse bytes already read (and size-checked) as the content of ``path``.
+
+    ``schema``: validate while parsing; a valid file comes back with ``valid_against`` set and
+    needs no structure check.  Any other file is parsed again without the schema, so a syntax
+    error is reported as one, and the structure check (bounded whatever the file) says what
+    the schema refuses -- the extra parse is paid only by files with a mistake."""
     text, problem = _decode(display, data)
     if text is None:
         return None, [problem] if problem else []
     problem = _refuse_declarations(display, text) or _too_many_nodes(display, data, text)
     if problem is not None:
         return None, [problem]
-    parser = hardened_parser()
+    if schema is not None:
+        try:
+            root = etree.fromstring(data, hardened_parser(schema))
+        except (etree.LxmlError, ValueError):
+            pass  # not valid, or not well-formed: the plain parse below says which
+        else:
+            if root is not None and _no_dtd(root):
+                return XmlDocument(path=path, root=root, source=SourceMap(display, text, root), valid_against=schema), []
     source = SourceMap(display, text)
     try:
-        root = etree.fromstring(data, parser)
+        root = etree.fromstring(data, hardened_parser())
     except etree.XMLSyntaxError as error:
         line, col = error.position if error.position else (1, 1)
         return None, [Diagnostic.at(source.at_line(line or 1, col or 1), _syntax_message(str(error.msg or error)))]
@@ -217,7 +243,12 @@ def parse_bytes(data: bytes, *, path: Path, display: str) -> tuple[XmlDocument |
         return None, [Diagnostic(display, 1, 1, f"cannot parse the file: {error}")]
     if root is None:
         return None, [Diagnostic(display, 1, 1, "no XML element found")]
-    docinfo = root.getroottree().docinfo
-    if getattr(docinfo, "doctype", "") or getattr(docinfo, "internalDTD", None) is not None:  # defence in depth
+    if not _no_dtd(root):  # defence in depth
         return None, [Diagnostic(display, 1, 1, "DTDs are not allowed")]
-    return XmlDocument(path=path, root=root, source=SourceMap(display, text, root)), []
+    source.attach(root)
+    return XmlDocument(path=path, root=root, source=source), []
+
+
+def _no_dtd(root: etree._Element) -> bool:
+    docinfo = root.getroottree().docinfo
+    return not getattr(docinfo, "doctype", "") and getattr(docinfo, "internalDTD", None) is None

@@ -26,7 +26,7 @@ _ACTIONS: tuple[ErrorAction, ...] = ("abort", "safe_pose", "alarm")
 MAX_SUGGESTIONS = 100
 
 
-@dataclass
+@dataclass(slots=True)
 class CheckedCall:
     """A call after checking: its catalog entry (None: unknown or built-in wait) and normalised params."""
 
@@ -58,6 +58,9 @@ class ApplicationChecker:
         self._contexts = {g: BindContext(robot, g, cell) for g in robot.group_names}
         self._plain_contexts = {g: BindContext(robot, g, cell, suggest=False) for g in robot.group_names}
         self._checked: dict[tuple[str, str, tuple[str, ...]], list[ParamError]] = {}
+        # (function, group, values) -> its catalog entry and complete params, for a call found clean
+        # (params, joint poses): a generated file repeats a handful of calls thousands of times.
+        self._clean: dict[tuple[str, str, tuple[str, ...]], tuple[FunctionSpec, tuple[str, ...]]] = {}
         self._groups = robot.group_names
         self._joint_pose_functions = {
             f.name for f in catalog.functions.values() if any(p.type is ParamType.JOINT_POSE for p in f.params)
@@ -94,16 +97,28 @@ class ApplicationChecker:
     def check(self) -> list[list[CheckedCall]]:
         """Each operation's calls, one per robot group, in the robot's group order."""
         checked: list[list[CheckedCall]] = []
+        groups, check_call, clean = self._groups, self.check_call, self._clean
+        # synchronised functions, by name: an operation without any skips their checks
+        synchronised = frozenset(name for name, f in self.catalog.functions.items() if f.sync in ("full_body", "master_slave"))
         for operation in self.draft.operations:
-            calls = [self.check_call(self.call_for(operation, group)) for group in self._groups]
-            self.check_full_body(operation, calls)
-            self.check_master_slave(operation, calls)
+            calls: list[CheckedCall] = []
+            by_group = operation.calls
+            for group in groups:
+                call = by_group.get(group)
+                if call is None:
+                    calls.append(self.check_call(self.call_for(operation, group)))
+                    continue
+                known = clean.get((call.function, group, call.values)) if call.names is None else None
+                calls.append(CheckedCall(call, *known) if known is not None else check_call(call))
+            if not synchronised.isdisjoint([call.function for call in by_group.values()]):
+                self.check_full_body(operation, calls)
+                self.check_master_slave(operation, calls)
             checked.append(calls)
         self.check_holds(self.draft.operations, checked)
         return checked
 
     def call_for(self, operation: OperationSite, group: str) -> CallSite:
-        return operation.calls.get(group) or CallSite(group=group, function=WAIT, params=[], at=operation.at, implicit=True)
+        return operation.calls.get(group) or CallSite(group=group, function=WAIT, values=(), param_at=(), at=operation.at, implicit=True)
 
     # ------------------------------------------------------------------ one call
     def check_call(self, call: CallSite) -> CheckedCall:
@@ -112,14 +127,14 @@ class ApplicationChecker:
         spec = self.catalog.get(call.function)
         if spec is None:
             if call.function == WAIT:  # built in when the catalog has no wait of its own
-                if call.params:
-                    self.error_at(call.params[0].at, "wait takes no params")
+                if call.values:
+                    self.error_at(call.param_at[0], "wait takes no params")
                     return CheckedCall(call, None, None)
                 return CheckedCall(call, None, ())
             hint = self.catalog.suggest(call.function) if self.suggesting() else ""
             self.error_at_attribute(call.at, "name", f"unknown function {call.function!r}{hint}")
             return CheckedCall(call, None, None)
-        texts = tuple(p.value for p in call.params)
+        texts = call.values
         ok = self.check_param_names(call, spec)
         key = (spec.name, call.group, texts)
         problems = self._checked.get(key)
@@ -135,28 +150,32 @@ class ApplicationChecker:
             elif self.cell_broken and spec.params[problem.index].type in _REFERENCE_TYPES:
                 continue  # the cell's own errors are reported; fix those first
             else:
-                self.error_at_attribute(call.params[problem.index].at, "value", problem.message)
+                self.error_at_attribute(call.param_at[problem.index], "value", problem.message)
                 ok = False
         ok = self.check_joint_pose_groups(call, spec, texts) and ok
         if not ok or len(texts) > len(spec.params):
             return CheckedCall(call, spec, None)
         defaults = tuple(p.default or "" for p in spec.params[len(texts):])
+        if not problems and call.function == spec.name:
+            self._clean[(call.function, call.group, texts)] = (spec, texts + defaults)
         return CheckedCall(call, spec, texts + defaults)
 
     def check_param_names(self, call: CallSite, spec: FunctionSpec) -> bool:
         """A ``name`` on a param must be the catalog's name at that position: params bind by position."""
         ok = True
+        if call.names is None:
+            return ok
         names = [p.name for p in spec.params]
-        for index, param in enumerate(call.params):
-            if param.name is None or (index < len(names) and names[index] == param.name):
+        for index, (name, at) in enumerate(zip(call.names, call.param_at)):
+            if name is None or (index < len(names) and names[index] == name):
                 continue
-            if param.name not in names:
-                self.error_at_attribute(param.at, "name", f"{spec.name} has no param named {param.name!r}; its params are {spec.signature()}")
+            if name not in names:
+                self.error_at_attribute(at, "name", f"{spec.name} has no param named {name!r}; its params are {spec.signature()}")
                 ok = False
             elif index < len(names):
-                self.error_at_attribute(param.at, "name", (
-                    f"param {index + 1} is named {param.name!r}, but {spec.name} takes {param.name!r} as param "
-                    f"{names.index(param.name) + 1} and {names[index]!r} here: params bind by position ({spec.signature()})"
+                self.error_at_attribute(at, "name", (
+                    f"param {index + 1} is named {name!r}, but {spec.name} takes {name!r} as param "
+                    f"{names.index(name) + 1} and {names[index]!r} here: params bind by position ({spec.signature()})"
                 ))
                 ok = False
         return ok
@@ -173,7 +192,7 @@ class ApplicationChecker:
             pose_group = self.cell.joint_pose(name).group
             if pose_group is not None and pose_group != call.group:
                 self.error_at_attribute(
-                    call.params[index].at, "value",
+                    call.param_at[index], "value",
                     f"param {index + 1} ({param.name}) of {spec.name}: joint pose {name!r} is for {pose_group}, not {call.group}",
                 )
                 ok = False
@@ -250,7 +269,7 @@ class ApplicationChecker:
 
     @staticmethod
     def describe(call: CheckedCall) -> str:
-        params = call.params if call.params is not None else tuple(p.value for p in call.site.params)
+        params = call.params if call.params is not None else call.site.values
         return f"{call.site.function}({', '.join(params)})"
 
     # ------------------------------------------------------------------ plausibility
