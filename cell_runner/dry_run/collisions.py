@@ -1,12 +1,17 @@
 """The collision sweep of a dry run: every motion of every group, at the times they would run.
 
-The dry run keeps each motion with its time (:mod:`motions`); here the robot is put through all
-of them together on the report's time line -- two arms that move at once are checked at the
-same instants, an arm that waits is checked where it waits -- every :data:`STEP` seconds of
-motion and at each motion's end, with the held parts that the grippers took and let go of on
-the way.  Each pair closer than the margin (robot_bridges/collision/scene.py) becomes a
-finding of kind ``collision`` at the call of every group involved, naming both bodies and the
-call of the other group, so a collision of two arms is reported at the lines of both functions.
+The dry run keeps each motion with its time and a bound on its joints' speeds (:mod:`motions`);
+here the robot is put through all of them together on the report's time line -- two arms that
+move at once are checked at the same instants, an arm that waits is checked where it waits --
+by conservative advancement (robot_bridges/collision/sweep.py): each pair of bodies is checked
+again when the joints moving it could have brought it within the margin, so every pair that
+comes closer than the margin less :data:`~robot_bridges.collision.sweep.RESOLUTION` at any
+instant is found, not only at samples.  The time line is cut where the speeds change (a motion
+starts or ends), where a gripper takes or lets go of a part, and where a call starts (a pair
+already too close is reported at that call too).  Each pair closer than the margin
+(robot_bridges/collision/scene.py) becomes a finding of kind ``collision`` at the call of every
+group involved, naming both bodies and the call of the other group, so a collision of two arms is
+reported at the lines of both functions.
 """
 from __future__ import annotations
 
@@ -21,16 +26,18 @@ from core_functions.geometry import Pose
 from execution_engine.app_model.model import Application
 from robot_bridges.collision import CollisionScene, Contact, cell_boxes, held_part, scene_for
 from robot_bridges.collision.scene import STATIC
+from robot_bridges.collision.sweep import Advancement
 
 COLLISION = "collision"
-#: Seconds of motion between two checks: at the Nextage's top joint speed (1 rad/s) no point of
-#: an arm travels more than 14 mm between two of them (and less at the speeds skills use).
-STEP = 0.02
+#: The former sweep's fixed step (s), kept as :func:`sweep`'s reference: at the Nextage's top joint speed
+#: (1 rad/s) a point of an arm travels up to 14 mm between two samples, and nothing between is proven.
+SAMPLED_STEP = 0.02
+_TIME = 1e-9  # s: instants this close are the same
 
 
 @dataclass(frozen=True)
 class SweepStats:
-    """How much the sweep checked: motions, configurations (samples) and body pairs found close."""
+    """How much the sweep checked: motions, configurations (instants checked) and body pairs found close."""
 
     motions: int
     samples: int
@@ -55,51 +62,125 @@ def sweep(
     motions: Sequence[MotionRecord],
     grips: Sequence[GripRecord],
     recorder: Recorder,
+    step: float | None = None,
 ) -> SweepStats:
-    """Check every motion (see the module docstring); findings go to ``recorder``."""
-    index = {name: k for k, name in enumerate(scene.joint_names)}
-    q = np.zeros(len(scene.joint_names))
-    for name, value in zip(*initial):
-        if name in index:
-            q[index[name]] = value
-    snapshot = app.cell.to_snapshot(app.robot) if app.cell is not None else None
-    ordered = sorted(motions, key=lambda m: m.start)
-    columns = [np.array([index[j] for j in m.joints if j in index], dtype=np.int64) for m in ordered]
-    keep = [np.array([k for k, j in enumerate(m.joints) if j in index], dtype=np.int64) for m in ordered]
-    times = sorted({t for m in ordered for t in _samples(m)} | {g.t for g in grips})
-    grip_queue = sorted(grips, key=lambda g: g.t)
-    calls = _Calls(app, recorder)
-    work: dict[str, tuple[Pose, ...]] = {}
-    worst: dict[tuple[str, str, str], tuple[Contact, float, tuple[str, str] | None]] = {}
-    started, active, g_next, samples, found = 0, [], 0, 0, 0
-    for t in times:
-        while started < len(ordered) and ordered[started].start <= t + 1e-12:
-            active.append(started)
-            motion = ordered[started]
-            ends = (motion.at(0.0)[keep[started]], motion.at(motion.duration)[keep[started]])
-            work[motion.group] = tuple(p for e in ends if (p := _tcp(scene, q, columns[started], e, motion.group)) is not None)
-            started += 1
-        still = []
-        for k in active:
-            motion = ordered[k]
-            q[columns[k]] = motion.at(t - motion.start)[keep[k]]
-            if t < motion.end - 1e-12:
-                still.append(k)
-        active = still
-        while g_next < len(grip_queue) and grip_queue[g_next].t <= t + 1e-12:
-            grip = grip_queue[g_next]
-            g_next += 1
-            if grip.group in scene.tcps:
-                scene.place(q)
-                tcp = Pose.from_matrix(scene.tcp_matrix(grip.group))
-                scene.set_held(grip.group, held_part(snapshot, tcp) if grip.closed and snapshot is not None else None)
-        samples += 1
-        for contact in scene.contacts(q, work):
-            found += 1
-            _note(worst, contact, t, calls.at(t))
-    for (group, operation, function), (contact, t, other) in worst.items():
-        recorder.add(group, operation, function, COLLISION, "", _message(contact, scene.margin, group, other, app), t)
-    return SweepStats(len(ordered), samples, found)
+    """Check every motion by conservative advancement (see the module docstring); findings go to ``recorder``.
+
+    ``step``: the former fixed sampling instead, every ``step`` seconds of motion and at each end
+    (:data:`SAMPLED_STEP` was the dry run's), which proves nothing between samples: kept as the
+    reference the benches measure against.
+    """
+    line = _Timeline(app, scene, initial, motions, grips)
+    findings = _Findings(app, recorder)
+    if line.first is None:
+        return SweepStats(0, 0, 0)
+    if step is not None:
+        times = sorted({t for m in line.ordered for t in _samples(m, step)} | {g.t for g in grips})
+        for t in times:
+            line.reach(t)
+            findings.note(t, scene.contacts(line.q, line.work))
+        findings.report(scene.margin)
+        return SweepStats(len(line.ordered), len(times), findings.found)
+    spans = [s.start for s in recorder.spans if s.start > line.first]
+    boundaries = sorted({line.first, *(m.start for m in line.ordered), *(m.end for m in line.ordered), *(g.t for g in grips), *spans})
+    engine = Advancement(scene, scene.margin)
+    previous = None
+    for b in boundaries:
+        if previous is not None:
+            for t, contacts in engine.advance(b, line.q_at):
+                findings.note(t, contacts)
+        held = line.reach(b)
+        engine.set_speeds(line.speeds(), b)
+        if held or previous is None:
+            engine.relayout(b)
+        engine.set_work(line.work, b)
+        engine.recheck_reported(b)
+        findings.note(b, engine.check_due(b, line.q))
+        previous = b
+    findings.report(scene.margin)
+    return SweepStats(len(line.ordered), engine.checks, findings.found)
+
+
+class _Timeline:
+    """Where the robot is along the dry run's motions: joints, held parts and work, as time goes on (only forward)."""
+
+    def __init__(self, app: Application, scene: CollisionScene, initial: tuple[tuple[str, ...], tuple[float, ...]],
+                 motions: Sequence[MotionRecord], grips: Sequence[GripRecord]) -> None:
+        self.scene = scene
+        index = {name: k for k, name in enumerate(scene.joint_names)}
+        self.q = np.zeros(len(scene.joint_names))
+        for name, value in zip(*initial):
+            if name in index:
+                self.q[index[name]] = value
+        self.snapshot = app.cell.to_snapshot(app.robot) if app.cell is not None else None
+        self.ordered = sorted(motions, key=lambda m: m.start)
+        self.columns = [np.array([index[j] for j in m.joints if j in index], dtype=np.int64) for m in self.ordered]
+        self.keep = [np.array([k for k, j in enumerate(m.joints) if j in index], dtype=np.int64) for m in self.ordered]
+        self._speeds = [np.asarray(m.speeds, dtype=float)[self.keep[k]] for k, m in enumerate(self.ordered)]
+        self.first = min([m.start for m in self.ordered] + [g.t for g in grips], default=None)
+        self.grips = sorted(grips, key=lambda g: g.t)
+        self.work: dict[str, tuple[Pose, ...]] = {}
+        self.active: list[int] = []
+        self._started = 0
+        self._grip = 0
+
+    def q_at(self, t: float) -> np.ndarray:
+        """The joints at ``t`` (no later than the next motion's start)."""
+        probe = self.q.copy()
+        for k in self.active:
+            probe[self.columns[k]] = self.ordered[k].at(t - self.ordered[k].start)[self.keep[k]]
+        return probe
+
+    def reach(self, t: float) -> bool:
+        """Move on to ``t``: motions started and ended by then, parts taken and let go of (True: a grip changed the bodies)."""
+        self.q = self.q_at(t)
+        self.active = [k for k in self.active if t < self.ordered[k].end - _TIME]
+        while self._started < len(self.ordered) and self.ordered[self._started].start <= t + _TIME:
+            k, motion = self._started, self.ordered[self._started]
+            ends = (motion.at(0.0)[self.keep[k]], motion.at(motion.duration)[self.keep[k]])
+            self.work[motion.group] = tuple(p for e in ends if (p := _tcp(self.scene, self.q, self.columns[k], e, motion.group)) is not None)
+            self.q[self.columns[k]] = motion.at(t - motion.start)[self.keep[k]]
+            if t < motion.end - _TIME:
+                self.active.append(k)
+            self._started += 1
+        held = False
+        while self._grip < len(self.grips) and self.grips[self._grip].t <= t + _TIME:
+            grip = self.grips[self._grip]
+            self._grip += 1
+            if grip.group in self.scene.tcps:
+                self.scene.place(self.q)
+                tcp = Pose.from_matrix(self.scene.tcp_matrix(grip.group))
+                closed = grip.closed and self.snapshot is not None
+                self.scene.set_held(grip.group, held_part(self.snapshot, tcp) if closed and self.snapshot is not None else None)
+                held = True
+        return held
+
+    def speeds(self) -> np.ndarray:
+        """Each joint's speed bound while the active motions run."""
+        rates = np.zeros(len(self.q))
+        for k in self.active:
+            rates[self.columns[k]] = np.maximum(rates[self.columns[k]], self._speeds[k])
+        return rates
+
+
+class _Findings:
+    """The closest contact of each call of each group, reported at the end (one finding per call)."""
+
+    def __init__(self, app: Application, recorder: Recorder) -> None:
+        self.app = app
+        self.recorder = recorder
+        self.calls = _Calls(app, recorder)
+        self.worst: dict[tuple[str, str, str], tuple[Contact, float, tuple[str, str] | None]] = {}
+        self.found = 0
+
+    def note(self, t: float, contacts: list[Contact]) -> None:
+        for contact in contacts:
+            self.found += 1
+            _note(self.worst, contact, t, self.calls.at(t))
+
+    def report(self, margin: float) -> None:
+        for (group, operation, function), (contact, t, other) in self.worst.items():
+            self.recorder.add(group, operation, function, COLLISION, "", _message(contact, margin, group, other, self.app), t)
 
 
 class _Calls:
@@ -133,12 +214,12 @@ class _Calls:
         return self.current
 
 
-def _samples(motion: MotionRecord) -> list[float]:
-    """Check times of one motion: its start, every STEP, its end."""
+def _samples(motion: MotionRecord, step: float) -> list[float]:
+    """Check times of one motion for the fixed sampling: its start, every ``step``, its end."""
     if motion.duration <= 0.0:
         return [motion.start]
-    count = int(motion.duration / STEP)
-    return [motion.start + k * STEP for k in range(count + 1)] + [motion.end]
+    count = int(motion.duration / step)
+    return [motion.start + k * step for k in range(count + 1)] + [motion.end]
 
 
 def _tcp(scene: CollisionScene, q: np.ndarray, columns: np.ndarray, end: np.ndarray, group: str) -> Pose | None:

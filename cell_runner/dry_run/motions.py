@@ -1,11 +1,13 @@
 """What a dry run remembers of every motion, for the collision sweep after it.
 
-Each motion is kept with the time it ran on the report's time base and a function giving its
-joints at any moment: the simulator's own planned motion where the back end shows it (the
-Nextage simulator's ``motion_observer``: the exact path, profile and all), otherwise the straight
-line in joint space from where the joints were to where they ended (exact in path for a
-point-to-point move, the way V+ and RSI drive their joints).  Gripper actions are kept too: a
-closing gripper takes the part under it, an opening one lets go.
+Each motion is kept with the time it ran on the report's time base, a function giving its
+joints at any moment and a bound on each joint's speed over the whole motion (what the collision
+sweep's conservative advancement steps by): the simulator's own planned motion where the back end
+shows it (the Nextage simulator's ``motion_observer``: the exact path, profile and all, and its
+exact peak speeds), otherwise the straight line in joint space from where the joints were to where
+they ended (exact in path for a point-to-point move, the way V+ and RSI drive their joints; its
+speed is the distance over the time).  Gripper actions are kept too: a closing gripper takes the
+part under it, an opening one lets go.
 """
 from __future__ import annotations
 
@@ -47,6 +49,11 @@ class MotionRecord:
     def duration(self) -> float:
         return self.span.duration
 
+    @property
+    def speeds(self) -> Vector:
+        """rad/s (or m/s) each of :attr:`joints` moves at most during the motion."""
+        return np.asarray(getattr(self.at, "speeds"), dtype=float)
+
 
 @dataclass(frozen=True)
 class GripRecord:
@@ -59,8 +66,19 @@ class GripRecord:
     closed: bool
 
 
-def straight(start: Sequence[float], end: Sequence[float], duration: float) -> Sampler:
-    """Joint-space straight line from ``start`` to ``end`` over ``duration`` seconds."""
+class Path:
+    """A sampler with the speed bound of its joints (``speeds``): what :func:`straight` and :func:`planned` give."""
+
+    def __init__(self, at: Sampler, speeds: Vector) -> None:
+        self._at = at
+        self.speeds = speeds
+
+    def __call__(self, t: float) -> Vector:
+        return self._at(t)
+
+
+def straight(start: Sequence[float], end: Sequence[float], duration: float) -> Path:
+    """Joint-space straight line from ``start`` to ``end`` over ``duration`` seconds, at constant speed."""
     a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
 
     def at(t: float) -> Vector:
@@ -69,14 +87,17 @@ def straight(start: Sequence[float], end: Sequence[float], duration: float) -> S
         s = min(max(t / duration, 0.0), 1.0)
         return a + (b - a) * s
 
-    return at
+    return Path(at, np.abs(b - a) / duration if duration > 0.0 else np.zeros(len(a)))
 
 
-def planned(motion: object, duration: float) -> Sampler:
-    """A simulator's motion object (``at(t)`` over ``[0, duration]``) as a sampler."""
+def planned(motion: object, duration: float) -> Path:
+    """A simulator's motion object (``at(t)`` over ``[0, duration]`` and ``speed_bound()``) as a sampler."""
     at = getattr(motion, "at")
+    bound = getattr(motion, "speed_bound", None)
+    if bound is None:
+        raise TypeError(f"{type(motion).__name__} gives no speed_bound(): the collision sweep cannot step along it")
 
     def sample(t: float) -> Vector:
         return np.asarray(at(min(max(t, 0.0), duration)), dtype=float)
 
-    return sample
+    return Path(sample, np.asarray(bound(), dtype=float))

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
 from robot_bridges.collision.bodies import CellBox, HeldPart
+from robot_bridges.collision.layout import Layout
 
 Vector = NDArray[np.float64]
 _Transform = getattr(coal, "Transform3s", None) or coal.Transform3f  # hpp-fcl's name for it
@@ -92,20 +93,27 @@ class ArmTcp:
     tool: Pose = Pose()
 
 
-class _Solid:
-    """A coal geometry with a bounding radius about its own origin (for the broad phase)."""
+class Solid:
+    """A coal geometry with a bounding sphere (for the broad phase) and where it hangs on the robot.
 
-    def __init__(self, body: Body, geometry: coal.CollisionGeometry, radius: float) -> None:
+    ``joint`` is the pinocchio joint that carries it (0: the world) and ``centre`` the sphere's
+    centre in that joint's frame: what the levers of conservative advancement are measured from.
+    """
+
+    def __init__(self, body: Body, geometry: coal.CollisionGeometry, radius: float, joint: int = 0, centre: Vector | None = None) -> None:
         self.body = body
         self.geometry = geometry
         self.radius = radius
+        self.joint = joint
+        self.centre = np.zeros(3) if centre is None else centre
 
 
 def _box_radius(size: Sequence[float]) -> float:
     return 0.5 * float(np.linalg.norm(size))
 
 
-def _transform(m: NDArray[np.float64]) -> Any:
+def transform(m: NDArray[np.float64]) -> Any:
+    """A 4x4 pose as coal's transform."""
     return _Transform(np.ascontiguousarray(m[:3, :3]), np.ascontiguousarray(m[:3, 3]))
 
 
@@ -124,7 +132,7 @@ class CollisionScene:
         #: The model's joint order (pinocchio's): what :meth:`contacts` takes.
         self.joint_names = tuple(self.model.names[j] for j in range(1, self.model.njoints))
         owner = {j: g.name for g in robot.groups for j in g.joint_names}
-        self._links: list[_Solid] = []
+        self._links: list[Solid] = []
         self._link_joint: list[int] = []
         for obj in self.geom.geometryObjects:
             link = self.model.frames[obj.parentFrame].name
@@ -140,36 +148,41 @@ class CollisionScene:
             else:
                 raise ValueError(f"{urdf}: collision geometry of {link} must be a box, cylinder or sphere, not {type(shape).__name__}")
             tcp = tcps.get(group)
-            self._links.append(_Solid(Body(group, link, tcp is not None and tcp.frame == link), shape, radius))
+            body = Body(group, link, tcp is not None and tcp.frame == link)
+            self._links.append(Solid(body, shape, radius, obj.parentJoint, np.array(obj.placement.translation, dtype=float)))
             self._link_joint.append(obj.parentJoint)
         self.tcps = dict(tcps)
         self._tcp_frame = {g: self.model.getFrameId(t.frame) for g, t in self.tcps.items()}
-        self._tools: dict[str, _Solid] = {}
+        self._tools: dict[str, Solid] = {}
         for group, tcp in self.tcps.items():
             self.set_tool(group, tcp.tool)
-        self._held: dict[str, tuple[HeldPart, _Solid]] = {}
-        self._boxes: list[tuple[CellBox, _Solid, NDArray[np.float64]]] = []
+        self._held: dict[str, tuple[HeldPart, Solid]] = {}
+        self._boxes: list[tuple[CellBox, Solid, NDArray[np.float64]]] = []
         self._link_pairs = self._robot_pairs()
+        self._layout: Layout | None = None
 
     # ------------------------------------------------------------------ what is in the scene
     def set_tool(self, group: str, tool: Pose) -> None:
         """The arm's TCP in its frame; a tool longer than 5 mm is a capsule from the flange to the TCP."""
         self.tcps[group] = ArmTcp(self.tcps[group].frame, tool)
+        self._layout = None
         length = float(np.linalg.norm(tool.position))
         if length > 0.005:
-            self._tools[group] = _Solid(Body(group, "tool", True), coal.Capsule(0.015, length), 0.5 * length + 0.015)
+            self._tools[group] = Solid(Body(group, "tool", True), coal.Capsule(0.015, length), 0.5 * length + 0.015)
         else:
             self._tools.pop(group, None)
 
     def set_cell(self, boxes: Sequence[CellBox]) -> None:
-        self._boxes = [(box, _Solid(Body(_CELL, box.frame), coal.Box(*box.size), _box_radius(box.size)), box.pose.matrix()) for box in boxes]
+        self._layout = None
+        self._boxes = [(box, Solid(Body(_CELL, box.frame), coal.Box(*box.size), _box_radius(box.size)), box.pose.matrix()) for box in boxes]
 
     def set_held(self, group: str, part: HeldPart | None) -> None:
         """What the arm's gripper holds now (None: nothing)."""
+        self._layout = None
         if part is None:
             self._held.pop(group, None)
             return
-        solid = _Solid(Body(group, f"held {part.element}", True), coal.Capsule(part.radius, part.length), 0.5 * part.length + part.radius)
+        solid = Solid(Body(group, f"held {part.element}", True), coal.Capsule(part.radius, part.length), 0.5 * part.length + part.radius)
         self._held[group] = (part, solid)
 
     def held(self, group: str) -> HeldPart | None:
@@ -215,77 +228,72 @@ class CollisionScene:
         pin.updateGeometryPlacements(self.model, self.data, self.geom, self.gdata, q)
         pin.updateFramePlacements(self.model, self.data)
 
-    def contacts(self, q: Vector, work: Mapping[str, Sequence[Pose]] | None = None) -> list[Contact]:
-        """Every pair of bodies closer than the margin at ``q``, closest pair of each body pair.
+    def layout(self) -> Layout:
+        """The scene's solids, pairs and levers as it is now (built once per change of tool, held part or cell)."""
+        if self._layout is None:
+            self._layout = self._build_layout()
+        return self._layout
 
-        ``work`` maps an arm to where its current motion starts and ends (its TCP there): the arm
-        works on the cell boxes within :data:`WORK_REACH` of either point (going in, coming out).
-        """
-        self.place(q)
-        solids: list[_Solid] = []
-        placements: list[NDArray[np.float64]] = []
-        for i, link in enumerate(self._links):
-            solids.append(link)
-            placements.append(self.gdata.oMg[i].homogeneous)
+    def _build_layout(self) -> Layout:
+        solids: list[Solid] = list(self._links)
+        attach: list[tuple[str, Any]] = [("link", i) for i in range(len(self._links))]
         extra: list[int] = []
         for group in self.tcps:
-            tcp = self.tcp_matrix(group)
-            tool = self._tools.get(group)
-            if tool is not None:
+            frame = self.model.frames[self._tcp_frame[group]]
+            tool = self.tcps[group].tool.matrix()
+            hung: list[tuple[Solid, NDArray[np.float64]]] = []
+            solid = self._tools.get(group)
+            if solid is not None:
                 back = np.eye(4)
                 back[2, 3] = -0.5 * float(np.linalg.norm(self.tcps[group].tool.position))
-                extra.append(len(solids))
-                solids.append(tool)
-                placements.append(tcp @ back)
+                hung.append((solid, tool @ back))
             held = self._held.get(group)
             if held is not None:
                 part, solid = held
                 along = np.eye(4)
                 along[2, 3] = 0.5 * (part.tip - part.top)
+                hung.append((solid, tool @ along))
+            for solid, offset in hung:
+                solid.joint = frame.parentJoint
+                solid.centre = np.asarray((frame.placement.homogeneous @ offset)[:3, 3], dtype=float)
                 extra.append(len(solids))
                 solids.append(solid)
-                placements.append(tcp @ along)
+                attach.append(("tcp", (self._tcp_frame[group], offset)))
         box_start = len(solids)
         for _, solid, matrix in self._boxes:
             solids.append(solid)
-            placements.append(matrix)
+            attach.append(("fixed", matrix))
         pairs = list(self._link_pairs)
         for e in extra:  # tools and held parts against everything not of their own group
             group = solids[e].body.group
             pairs += [(i, e) for i in range(box_start) if i != e and solids[i].body.group != group]
         movers = [i for i in range(box_start) if solids[i].body.group != STATIC]
         pairs += [(i, b) for i in movers for b in range(box_start, len(solids))]
-        return self._measure(solids, placements, pairs, self._working(work or {}, box_start, solids))
+        boxes = [(matrix, box.size) for box, _, matrix in self._boxes]
+        return Layout(self, solids, attach, box_start, pairs, boxes, WORK_REACH)
 
-    def _working(self, work: Mapping[str, Sequence[Pose]], box_start: int, solids: list[_Solid]) -> set[tuple[str, int]]:
-        """(arm, box index) pairs where the arm's end effector may touch: the box it works on."""
-        out: set[tuple[str, int]] = set()
-        for group, targets in work.items():
-            for target, (k, (box, _, matrix)) in ((t, b) for t in targets for b in enumerate(self._boxes)):
-                point = np.array(target.position)
-                local = matrix[:3, :3].T @ (point - matrix[:3, 3])
-                outside = np.maximum(np.abs(local) - 0.5 * np.array(box.size), 0.0)
-                if float(np.linalg.norm(outside)) <= WORK_REACH:
-                    out.add((group, box_start + k))
-        return out
+    def contacts(self, q: Vector, work: Mapping[str, Sequence[Pose]] | None = None) -> list[Contact]:
+        """Every pair of bodies closer than the margin at ``q``, closest pair of each body pair.
 
-    def _measure(self, solids: list[_Solid], placements: list[NDArray[np.float64]], pairs: list[tuple[int, int]], working: set[tuple[str, int]]) -> list[Contact]:
-        if not pairs:
+        ``work`` maps an arm to where its current motion starts and ends (its TCP there): the arm
+        works on the cell boxes within :data:`WORK_REACH` of either point (going in, coming out).
+        """
+        layout = self.layout()
+        if not len(layout):
             return []
+        placements = layout.place(q)
         centres = np.array([p[:3, 3] for p in placements])
-        radii = np.array([s.radius for s in solids])
-        ia = np.fromiter((p[0] for p in pairs), dtype=np.int64, count=len(pairs))
-        ib = np.fromiter((p[1] for p in pairs), dtype=np.int64, count=len(pairs))
-        gaps = np.linalg.norm(centres[ia] - centres[ib], axis=1) - radii[ia] - radii[ib]
-        near = np.nonzero(gaps < self.margin)[0]
-        request, found = coal.DistanceRequest(), []
-        for n in near:
-            i, k = int(ia[n]), int(ib[n])
-            a, b = solids[i], solids[k]
-            if (a.body.end_effector and (a.body.group, k) in working) or (b.body.end_effector and (b.body.group, i) in working):
-                continue
-            result = coal.DistanceResult()
-            distance = coal.distance(a.geometry, _transform(placements[i]), b.geometry, _transform(placements[k]), request, result)
+        gaps = np.linalg.norm(centres[layout.ia] - centres[layout.ib], axis=1) - layout.pair_radii
+        near = np.nonzero((gaps < self.margin) & ~layout.excluded(work or {}))[0]
+        found = []
+        for n in near.tolist():
+            i, k = int(layout.ia[n]), int(layout.ib[n])
+            distance = self.distance(layout.solids[i], placements[i], layout.solids[k], placements[k])
             if distance < self.margin:
-                found.append(Contact(a.body, b.body, float(distance)))
+                found.append(Contact(layout.solids[i].body, layout.solids[k].body, distance))
         return found
+
+    @staticmethod
+    def distance(a: Solid, at_a: NDArray[np.float64], b: Solid, at_b: NDArray[np.float64]) -> float:
+        """coal's distance between two solids at their poses (negative: how deep they overlap)."""
+        return float(coal.distance(a.geometry, transform(at_a), b.geometry, transform(at_b), coal.DistanceRequest(), coal.DistanceResult()))

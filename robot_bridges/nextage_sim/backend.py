@@ -58,6 +58,7 @@ from robot_bridges.camera.vision import CameraVision
 from robot_bridges.collision import CollisionScene, cell_boxes, held_part, scene_for
 from robot_bridges.nextage_sim import checks, planning, vision
 from robot_bridges.nextage_sim.faults import FaultPlan, FaultSpec, parse_fault
+from robot_bridges.nextage_sim.guard import CollisionGuard
 from robot_bridges.nextage_sim.hands import HandIO
 from robot_bridges.nextage_sim.jobs import DONE, Job, JobBoard, Tick
 from robot_bridges.nextage_sim.model import WORLD_FRAME, ArmKinematics, NextageModel
@@ -95,9 +96,11 @@ class NextageSimBackend(RobotBackend):
         self.cartesian_limits = cartesian_limits or CartesianLimits()
         #: Told of every motion as it starts: (groups, joint names, motion with ``at(t)``, duration).
         self.motion_observer: Callable[[frozenset[str], tuple[str, ...], Any, float], None] | None = None
-        #: The collision model checked every control period (None: not checked; the dry run sweeps instead).
+        #: The collision model every motion is swept with as it starts (None: not checked; the dry run sweeps instead).
         #: ``run`` turns it on (the ``collision_check`` option); a bare simulator for kinematics tests has it off.
         self.collisions: CollisionScene | None = scene_for(NEXTAGE_OPEN) if check_collisions else None
+        self._guard: CollisionGuard | None = None  # sweeps the running motions when they change (guard.py)
+        self._moving: dict[Job, Motion] = {}  # every job playing a motion, and its motion
         self._cell: CellSnapshot | None = None
         self._work: checks.Work = {}  # arm -> where its current motion starts and ends
         self._q = self.model.named_pose(initial_pose)
@@ -153,13 +156,16 @@ class NextageSimBackend(RobotBackend):
     async def pause(self, group: str) -> None:
         self._check_group(group)
         self._jobs.pause(group)
+        self._replan()
 
     async def resume(self, group: str) -> None:
         self._check_group(group)
         self._jobs.resume(group)
+        self._replan()
 
     async def stop(self, group: str) -> None:
         self._check_group(group)
+        self._replan()
         await self._jobs.stop(group)
 
     def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
@@ -173,6 +179,7 @@ class NextageSimBackend(RobotBackend):
 
     def set_cell(self, cell: CellSnapshot) -> None:
         self._cell = cell
+        self._replan()
         if self.collisions is not None:
             self.collisions.set_cell(cell_boxes(cell))
         self._vision.set_cell(cell)
@@ -185,6 +192,7 @@ class NextageSimBackend(RobotBackend):
     def set_tool(self, group: str, tool: Pose) -> None:
         """Make the arm's TCP ``tool`` (a pose in ``*ARM_JOINT5_Link``) instead of the flange."""
         self._arm(group).tool = tool
+        self._replan()
         if self.collisions is not None:
             self.collisions.set_tool(group, tool)
 
@@ -223,6 +231,7 @@ class NextageSimBackend(RobotBackend):
         if problem:
             raise ValueError(f"{group} cannot be guided there: {problem}")
         self._q[idx] = values
+        self._replan()
 
     # --------------------------------------------------------------------- primitives
     async def _set_speed(self, group: str, primitive: SetSpeed) -> MotionResult:
@@ -286,6 +295,7 @@ class NextageSimBackend(RobotBackend):
             tcp = self._arm(group).tcp_pose(self._q)
             closed = primitive.action == "gripper_close" and self._cell is not None
             self.collisions.set_held(group, held_part(self._cell, tcp) if closed and self._cell is not None else None)
+            self._replan()
         return EndEffectorResult(io=hand.snapshot())
 
     async def _look(self, group: str, primitive: Vision) -> VisionResult:
@@ -401,6 +411,8 @@ class NextageSimBackend(RobotBackend):
             self.motion_observer(job.groups, tuple(self.model.joint_names[int(i)] for i in motion.indices), motion, motion.duration)
 
         checks.note_work(self.model, self._q, self._work, job.groups, motion)
+        self._moving[job] = motion
+        self._replan()
 
         def tick(t: float) -> None:
             positions = motion.at(t)
@@ -408,9 +420,28 @@ class NextageSimBackend(RobotBackend):
             if problem:
                 raise BridgeError(FaultKind.JOINT_LIMIT, f"{group}: {describe(job.primitive)} at t = {t:.3f} s: {problem}")
             self._q[motion.indices] = positions
-            checks.check_collisions(self.collisions, self._q, self._work, job, t)
+            guard = self._guard_now()
+            if guard is not None:
+                checks.check_collisions(guard, self.clock.now(), self._q, self._moving, self._work, job, motion, t)
 
-        await self._run(job, motion.duration, tick, fault)
+        try:
+            await self._run(job, motion.duration, tick, fault)
+        finally:
+            del self._moving[job]
+            self._replan()
+
+    def _guard_now(self) -> CollisionGuard | None:
+        """The guard of the collision model in use (None: collisions are not checked)."""
+        if self.collisions is None:
+            self._guard = None
+        elif self._guard is None or self._guard.scene is not self.collisions:
+            self._guard = CollisionGuard(self.collisions)
+        return self._guard
+
+    def _replan(self) -> None:
+        """What the robot will do changed: the running motions are swept again at their next tick."""
+        if self._guard is not None:
+            self._guard.invalidate()
 
     async def _run(self, job: Job, duration: float, tick: Tick, fault: FaultSpec | None = None, marks: Sequence[float] = ()) -> None:
         """Play ``job`` over ``duration`` s of its own time (:meth:`JobBoard.run`), an injected fault worded here."""

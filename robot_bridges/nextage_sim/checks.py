@@ -9,7 +9,7 @@ that what is refused, and how it is said, can be read in one place.  Every check
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -18,8 +18,8 @@ from core_functions.primitives import Vision, describe
 from core_functions.robots import NEXTAGE_OPEN
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.camera.spec import CameraSpec
-from robot_bridges.collision import CollisionScene
 from robot_bridges.nextage_sim.faults import FaultSpec
+from robot_bridges.nextage_sim.guard import CollisionGuard
 from robot_bridges.nextage_sim.jobs import Job
 from robot_bridges.nextage_sim.model import ArmKinematics, NextageModel, describe_target
 from robot_bridges.nextage_sim.trajectory import Motion
@@ -53,17 +53,22 @@ def note_work(model: NextageModel, q: np.ndarray, work: Work, groups: frozenset[
             work[g] = (arm.tcp_pose(q), arm.tcp_pose(end))
 
 
-def check_collisions(scene: CollisionScene | None, q: np.ndarray, work: Work, job: Job, t: float) -> None:
-    """Stop the motion when two bodies touch (a vision-corrected target the dry run never saw, say)."""
-    if scene is None:
+def check_collisions(guard: CollisionGuard, now: float, q: np.ndarray, moving: Mapping[Job, Motion], work: Work, job: Job, motion: Motion, t: float) -> None:
+    """Stop the motion where two bodies touch (a vision-corrected target the dry run never saw, say).
+
+    The guard (robot_bridges/nextage_sim/guard.py) swept the running motions when they started;
+    here the tick only learns whether it has reached the first touch.  The joints are put back
+    where the bodies touched, and the fault says when that was.
+    """
+    touch = guard.check(now, job, t, q, moving, work)
+    if touch is None:
         return
-    hits = [c for c in scene.contacts(q, work) if c.collision]
-    if hits:
-        worst = min(hits, key=lambda c: c.distance)
-        raise BridgeError(
-            FaultKind.COLLISION,
-            f"{', '.join(sorted(job.groups))}: {describe(job.primitive)} at t = {t:.3f} s: {worst.describe(scene.margin)}",
-        )
+    back = min(max(0.0, t - (now - touch.at)), t)
+    q[motion.indices] = motion.at(back)
+    raise BridgeError(
+        FaultKind.COLLISION,
+        f"{', '.join(sorted(job.groups))}: {describe(job.primitive)} at t = {back:.3f} s: {touch.contact.describe(guard.scene.margin)}",
+    )
 
 
 def check_range(primitive: Vision, nominal: Pose | None, placed: Sequence[tuple[CameraSpec, Pose]]) -> None:

@@ -49,6 +49,12 @@ class Job:
         self.progress = 0.0
         self._last = now
 
+    def progress_at(self, now: float) -> float:
+        """Where the job's own time will be at clock ``now`` if nothing changes (held while paused)."""
+        if self.paused:
+            return self.progress
+        return min(self.progress + max(now - self._last, 0.0), self.duration)
+
     def advance(self, now: float) -> None:
         """Count the time since the last call unless paused, never past the horizon."""
         if not self.paused:

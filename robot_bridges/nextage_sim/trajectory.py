@@ -67,6 +67,11 @@ class Motion(ABC):
     def end(self) -> Vector:
         return self.at(self.duration)
 
+    @abstractmethod
+    def speed_bound(self) -> Vector:
+        """The most each joint's speed reaches anywhere on the motion (rad/s): what the collision
+        check's conservative advancement steps by (robot_bridges/collision/sweep.py)."""
+
     def breakpoints(self) -> Vector:
         """The instants where the joint path bends; between two of them it is a straight joint-space line.
 
@@ -87,6 +92,9 @@ class Hold(Motion):
     def at(self, t: float) -> Vector:
         return self.positions.copy()
 
+    def speed_bound(self) -> Vector:
+        return np.zeros(len(self.positions))
+
 
 class JointMove(Motion):
     """Straight line in joint space, every joint on the same trapezoid."""
@@ -101,6 +109,9 @@ class JointMove(Motion):
     def at(self, t: float) -> Vector:
         return self.start + (self.goal - self.start) * self.profile.position(t)
 
+    def speed_bound(self) -> Vector:
+        return _scaled(np.abs(self.goal - self.start), self.profile.velocity)
+
 
 class PathMove(Motion):
     """Joint samples along a path parameter, interpolated linearly, traversed by a trapezoid."""
@@ -114,6 +125,9 @@ class PathMove(Motion):
 
     def at(self, t: float) -> Vector:
         return _interpolate(self.knots, self.samples, self.profile.position(t))
+
+    def speed_bound(self) -> Vector:
+        return _scaled(_slopes(self.knots, self.samples), self.profile.velocity)
 
     def breakpoints(self) -> Vector:
         return np.array([self.profile.time_at(float(s)) for s in self.knots])
@@ -130,6 +144,9 @@ class TimedMove(Motion):
 
     def at(self, t: float) -> Vector:
         return _interpolate(self.times, self.points, t)
+
+    def speed_bound(self) -> Vector:
+        return _slopes(self.times, self.points)
 
     def breakpoints(self) -> Vector:
         return self.times.copy()
@@ -153,6 +170,29 @@ class Chain(Motion):
 
     def breakpoints(self) -> Vector:
         return np.concatenate([m.breakpoints() + start for m, start in zip(self.segments, self._starts)])
+
+    def speed_bound(self) -> Vector:
+        return np.max([m.speed_bound() for m in self.segments], axis=0)
+
+
+def _scaled(path_slope: Vector, peak: float) -> Vector:
+    """Joint speeds of a path whose parameter moves at most at ``peak`` (1/s): a joint that does not move has 0."""
+    return np.where(path_slope > 0.0, path_slope * peak, 0.0) if np.isfinite(peak) else np.where(path_slope > 0.0, np.inf, 0.0)
+
+
+def _slopes(knots: Vector, samples: NDArray[np.float64]) -> Vector:
+    """Each joint's steepest change per unit of ``knots`` between neighbouring samples, linearly interpolated.
+
+    A jump (two samples at one knot) has no bound: inf, which the collision check refuses to step along;
+    one below 1e-9 (a rounding step a replay accepts) is no motion.
+    """
+    if len(knots) < 2:
+        return np.zeros(samples.shape[1] if samples.ndim == 2 else 0)
+    steps = np.abs(np.diff(samples, axis=0))
+    spans = np.diff(knots)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slopes = np.where(steps > 1e-9, np.where(spans > _EPS, steps / np.maximum(spans, _EPS), np.inf), 0.0)
+    return np.max(slopes, axis=0)
 
 
 def _interpolate(knots: Vector, samples: NDArray[np.float64], x: float) -> Vector:
