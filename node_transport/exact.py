@@ -56,13 +56,8 @@ def exact(cls: type[Any], obj: Any) -> Walk | None:
 
 # ------------------------------------------------------------------------------- scalars
 def _str(value: Any, walk: Walk) -> bool:
-    if type(value) is not str:
+    if type(value) is not str or not (value.isascii() or _encodable(value)):
         return False
-    if not value.isascii():
-        try:
-            value.encode()
-        except UnicodeEncodeError:  # a lone surrogate: no JSON encoder takes it
-            return False
     walk.size += 6 * len(value) + 3  # every character escaped, the quotes, a separator
     return True
 
@@ -227,22 +222,92 @@ def _dict(hint: Any) -> Exact:
 
 
 def _dataclass(cls: type) -> Exact:
-    plans = field_plan(cls)
-    fields = [(p.name, len(p.key) + 4) for p in plans]
-    checks: list[Exact] = []  # built on first use: dataclasses may refer to each other
+    """The check of a message dataclass, compiled on first use (dataclasses may refer to each other):
+    it runs once per message on the hot path, so its scalar fields are checked inline, without a call
+    per field, as dataclasses' own generated __init__ does."""
+    compiled: list[Exact] = []
 
     def exact_dataclass(value: Any, walk: Walk) -> bool:
-        if type(value) is not cls:
-            return False
-        if not checks:
-            checks.extend(checker(p.hint) for p in plans)
-        walk.size += 16  # the braces and a "kind" tag
-        for (name, width), check in zip(fields, checks):
-            walk.size += width
-            if not check(getattr(value, name), walk):
-                return False
-        return True
+        if not compiled:
+            compiled.append(_compile(cls))
+        return compiled[0](value, walk)
     return exact_dataclass
+
+
+class _Source:
+    """The lines of one generated check, and the objects its code refers to by name."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.names: dict[str, Any] = {"encodable": _encodable, "INT_MIN": INT_RANGE[0], "INT_MAX": INT_RANGE[1]}
+        self.width = 16  # the braces and a "kind" tag
+        self.depth = 0
+
+    def name(self, obj: Any) -> str:
+        key = f"n{len(self.names)}"
+        self.names[key] = obj
+        return key
+
+    def scalar(self, x: str, hint: Any, pad: str) -> list[str] | None:
+        """Inline lines that return False unless ``x`` is exact for a scalar ``hint`` (None: not a scalar)."""
+        fail = "return False"
+        if hint is str:
+            return [f"{pad}if type({x}) is not str or not ({x}.isascii() or encodable({x})): {fail}",
+                    f"{pad}size += 6 * len({x}) + 3"]
+        if hint is float:  # x - x is NaN for infinities and NaN
+            return [f"{pad}if type({x}) is not float or {x} - {x} != 0.0: {fail}", f"{pad}size += 26"]
+        if hint is int:
+            return [f"{pad}if type({x}) is not int or not INT_MIN <= {x} <= INT_MAX: {fail}", f"{pad}size += 22"]
+        if hint is bool:
+            return [f"{pad}if type({x}) is not bool: {fail}", f"{pad}size += 6"]
+        if isinstance(hint, type) and issubclass(hint, enum.Enum):
+            width = 6 * max((len(str(m.value)) for m in hint), default=0) + 3
+            return [f"{pad}if type({x}) is not {self.name(hint)}: {fail}", f"{pad}size += {width}"]
+        if get_origin(hint) is Literal and all(type(a) is str for a in get_args(hint)):
+            width = 6 * max(len(a) for a in get_args(hint)) + 3
+            return [f"{pad}if type({x}) is not str or {x} not in {self.name(frozenset(get_args(hint)))}: {fail}", f"{pad}size += {width}"]
+        return None
+
+    def field(self, x: str, hint: Any, pad: str) -> list[str]:
+        """Lines that return False unless ``x`` is exact for ``hint``: inline where they can be."""
+        inline = self.scalar(x, hint, pad)
+        if inline is not None:
+            return inline
+        origin, args = get_origin(hint), get_args(hint)
+        members = [a for a in args if a is not type(None)]
+        if origin in (Union, types.UnionType) and len(members) == 1 and type(None) in args and not is_tagged_union(hint):
+            inner = self.scalar(x, members[0], pad + "    ")
+            if inner is not None:
+                return [f"{pad}if {x} is None:", f"{pad}    size += 5", f"{pad}else:", *inner]
+        if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+            self.depth += 1
+            item = f"i{self.depth}"
+            inner = self.scalar(item, args[0], pad + "    ")
+            if inner is not None:
+                return [f"{pad}if type({x}) is not tuple: return False", f"{pad}size += 2", f"{pad}for {item} in {x}:", *inner]
+        return [f"{pad}if not {self.name(checker(hint))}({x}, walk): return False"]
+
+
+def _compile(cls: type) -> Exact:
+    source = _Source()
+    body = [f"    if type(value) is not {source.name(cls)}: return False", "    size = 0"]
+    for plan in field_plan(cls):
+        source.width += len(plan.key) + 4  # the key, its quotes, colon and comma
+        body.append(f"    v = value.{plan.name}")
+        body.extend(source.field("v", plan.hint, "    "))
+    body += [f"    walk.size += size + {source.width}", "    return True"]
+    code = "\n".join(["def exact_message(value, walk):", *body])
+    namespace = dict(source.names)
+    exec(compile(code, f"<exact check of {cls.__name__}>", "exec"), namespace)  # noqa: S102 - our own generated code
+    return namespace["exact_message"]  # type: ignore[no-any-return]
+
+
+def _encodable(text: str) -> bool:
+    try:
+        text.encode()
+    except UnicodeEncodeError:  # a lone surrogate: no JSON encoder takes it
+        return False
+    return True
 
 
 # -------------------------------------------------------------------------------- copying

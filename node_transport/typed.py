@@ -96,16 +96,28 @@ class Epoch(Protocol):
 
 
 # ---------------------------------------------------------------------------------- time
+_EPOCHS: dict[float, Time] = {}  # a clock's epoch as a Time: worked out once, stamps are made per state change
+
+
+def _epoch_time(epoch: float) -> Time:
+    time = _EPOCHS.get(epoch)
+    if time is None:
+        if len(_EPOCHS) >= 64:
+            _EPOCHS.clear()
+        time = _EPOCHS[epoch] = Time.from_seconds(epoch)
+    return time
+
+
 def stamp_of(clock: Epoch, t: float) -> Time:
     """The ROS time of run time ``t`` on ``clock`` (what :meth:`Node.now_stamp` gives at ``t``)."""
-    epoch, offset = Time.from_seconds(clock.epoch), Time.from_seconds(t)
+    epoch, offset = _epoch_time(clock.epoch), Time.from_seconds(t)
     total = (epoch.sec + offset.sec) * _NANO + epoch.nanosec + offset.nanosec
     return Time(total // _NANO, total % _NANO)
 
 
 def run_time(clock: Epoch, stamp: Any) -> float:
     """Run time on ``clock`` of a ROS time stamp (the inverse of :func:`stamp_of`)."""
-    epoch = Time.from_seconds(clock.epoch)
+    epoch = _epoch_time(clock.epoch)
     return (stamp.sec - epoch.sec) + (stamp.nanosec - epoch.nanosec) * 1e-9
 
 

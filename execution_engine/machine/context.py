@@ -125,6 +125,11 @@ class MachineContext:
         return None
 
     # ---------------------------------------------------------------------------- publish
+    @property
+    def watched(self) -> bool:
+        """Whether anyone reads the status events: a state builds what only they need only then."""
+        return self.pub.status.get_subscription_count() > 0
+
     def status(self, event: str, **fields: Any) -> None:
         """Publish one status event (the trace and the viewers are built from these)."""
         if self.pub.status.get_subscription_count() == 0:

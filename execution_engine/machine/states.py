@@ -232,7 +232,8 @@ class WorkingState(MachineState):
         ctx = self.ctx
         primitive = userdata["primitive"]
         assert ctx.run is not None
-        ctx.status("primitive_start", primitive=describe(primitive), index=ctx.run.started)
+        if ctx.watched:
+            ctx.status("primitive_start", primitive=describe(primitive), index=ctx.run.started)
         step = ctx.goals.current
         if step is not None and step.refusal is not None:
             return fail(userdata, FaultKind.UNSUPPORTED, step.refusal)
@@ -344,7 +345,8 @@ class WorkingState(MachineState):
         if type(result) is not primitive.RESULT:
             answered = f"the bridge answered a {type(result).__name__}, not a {primitive.RESULT.__name__}"
             return fail(userdata, FaultKind.PROTOCOL, f"{describe(primitive)}: {answered}")
-        ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done", result=result)
+        if ctx.watched:
+            ctx.status("primitive_end", primitive=describe(primitive), index=index, outcome="done", result=result)
         ctx.zones.moved(primitive, result)
         try:
             ctx.run.advance(result)
