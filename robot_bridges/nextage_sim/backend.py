@@ -104,6 +104,7 @@ class NextageSimBackend(RobotBackend):
         self._cell: CellSnapshot | None = None
         self._work: checks.Work = {}  # arm -> where its current motion starts and ends
         self._q = self.model.named_pose(initial_pose)
+        self._results: dict[str, tuple[bytes, Pose | None, MotionResult]] = {}  # group -> the joints and tool of its last result
         self._speed = dict.fromkeys(GROUPS, 1.0)
         self._jobs = JobBoard(clock, float(control_period))
         self._hands = {g: HandIO() for g in self.model.arms}
@@ -487,8 +488,17 @@ class NextageSimBackend(RobotBackend):
         checks.require_within_limits(self.model, self._q, group, idx, values, what)
 
     def _result(self, group: str) -> MotionResult:
+        """Where the group is. A primitive that moved nothing (set_speed, a dwell) gets the group's last
+        result again, without forward kinematics: the same joints and tool give the same TCP, bit for bit."""
+        arm = self.model.arms.get(group)
+        joints, tool = self._q.tobytes(), None if arm is None else arm.tool
+        last = self._results.get(group)
+        if last is not None and last[0] == joints and last[1] == tool:
+            return last[2]
         names = NEXTAGE_OPEN.group(group).joint_names
-        return MotionResult(names, tuple(float(self._q[self.model.index(n)]) for n in names), self.tcp_pose(group))
+        result = MotionResult(names, tuple(float(self._q[self.model.index(n)]) for n in names), self.tcp_pose(group))
+        self._results[group] = (joints, tool, result)
+        return result
 
 
 #: The default TCP: at the wrist flange (origin of ``*ARM_JOINT5_Link``), z pointing out of the hand
