@@ -18,6 +18,7 @@ from robot_bridges.vplus.client import (
     ControllerLink,
     Exchange,
     ProtocolError,
+    Turn,
     VPlusClient,
 )
 from robot_bridges.vplus.codec import Message, set_speed
@@ -208,3 +209,34 @@ def test_an_ack_in_the_same_loop_pass_as_its_deadline_completes_the_call(run_sim
         return raised
 
     assert run_sim(main) == []
+
+
+def test_calls_take_turns_in_order_and_a_cancelled_waiter_never_keeps_the_turn() -> None:
+    """The client's turn (one call at a time, in arrival order) as asyncio.Lock promised it:
+    waiters go in order; one cancelled while waiting, or just after being handed the turn, passes
+    it on; the turn is free once everybody has left."""
+    async def scenario() -> list[str]:
+        turn = Turn()
+        order: list[str] = []
+        assert turn.take_now() and not turn.take_now()
+
+        async def call(name: str) -> None:
+            await turn.take()
+            order.append(name)
+            await asyncio.sleep(0)
+            turn.leave()
+
+        waiting = asyncio.create_task(call("cancelled while waiting"))
+        handed = asyncio.create_task(call("handed the turn, then cancelled"))
+        second, third = asyncio.create_task(call("second")), asyncio.create_task(call("third"))
+        await asyncio.sleep(0)
+        waiting.cancel()
+        await asyncio.sleep(0)
+        turn.leave()  # hands the turn to the first still waiting...
+        handed.cancel()  # ...which is cancelled before it runs
+        results = await asyncio.gather(waiting, handed, second, third, return_exceptions=True)
+        assert [type(r) for r in results] == [asyncio.CancelledError, asyncio.CancelledError, type(None), type(None)]
+        assert not turn.busy and not turn.waiters and turn.take_now()
+        return order
+
+    assert asyncio.run(scenario()) == ["second", "third"]

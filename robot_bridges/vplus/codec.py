@@ -26,7 +26,7 @@ differently (the real one never acks it).
 from __future__ import annotations
 
 import math
-import os
+import random
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -96,14 +96,21 @@ class FrameError(DecodeError):
 
 
 # ----------------------------------------------------------------------------------- ids
+#: Where ids come from: 32 random bits per message, from a generator seeded by the system's entropy
+#: once.  An id only has to differ from the ids still in flight or recently given up on (the
+#: client checks that); nothing is protected by its being unguessable, and a system call per
+#: message (os.urandom) is not needed for that.
+_IDS = random.Random()
+
+
 def new_id() -> str:
     """An id as pyadept makes one: 8 random lowercase hex digits.
 
     pyadept takes the first 8 characters of ``str(uuid.uuid4())``; those are 32 random bits (the
-    version nibble comes later), so 4 random bytes in hex are the same thing, at a fraction of the
-    cost.
+    version nibble comes later), so 32 random bits in hex are the same thing, at a fraction of
+    the cost.
     """
-    return os.urandom(4).hex()
+    return f"{_IDS.getrandbits(32):08x}"
 
 
 def check_id(msg_id: str) -> str:
@@ -183,7 +190,7 @@ class Command:
         return self.payload()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: one per message written, one Ack per line read
 class Message:
     """A command message: an id and the command it carries."""
 
@@ -232,7 +239,7 @@ def decode_message(line: bytes) -> Message:
 
 
 # --------------------------------------------------------------------------------- acks
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Ack:
     """The server's acknowledgement of one message.
 
@@ -253,18 +260,33 @@ class Ack:
         return f"{self.id}:{self.status}:{times}:{pose}".encode("ascii") + DELIMITER
 
 
-_NUM = rb"(-?[0-9]{1,10}(?:\.[0-9]{1,6})?)"
-_ACK_LINE = re.compile(rb"([0-9A-Za-z]{1,%d}):([a-z_]{1,16}):%s,%s:%s" % (MAX_ID_LENGTH, _NUM, _NUM, b",".join([_NUM] * 6)))
+_NUM = rb"-?[0-9]{1,10}(?:\.[0-9]{1,6})?"  # no groups: the line is split once it has matched
+_ACK_LINE = re.compile(rb"[0-9A-Za-z]{1,%d}:[a-z_]{1,16}:%s,%s:%s" % (MAX_ID_LENGTH, _NUM, _NUM, b",".join([_NUM] * 6)))
+
+
+#: The last pose read, as written and as numbers: an arm at rest (speed, gripper, air, the break
+#: after an arrival) acks one after the other with the same pose, which is then not read again.
+#: One tuple, replaced whole, so a reader in another thread sees a matching pair.
+_last_pose: tuple[bytes, tuple[float, float, float, float, float, float]] = (b"", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
 
 def decode_ack(line: bytes) -> Ack:
-    """Parse one ack line (without its delimiter), as the client does."""
-    match = _ACK_LINE.fullmatch(line)
-    if match is not None:  # the fast path, for the acks a server actually sends
-        g = match.groups()
-        pose = (float(g[4]), float(g[5]), float(g[6]), float(g[7]), float(g[8]), float(g[9]))
-        return Ack(g[0].decode("ascii"), float(g[2]), float(g[3]), pose, g[1].decode("ascii"))
-    return decode_ack_by_fields(line)
+    """Parse one ack line (without its delimiter), as the client does.
+
+    The whole line is matched against the ack's grammar first, every number included; only a
+    line that passes it is taken apart (by the fields that failed, in :func:`decode_ack_by_fields`,
+    otherwise)."""
+    global _last_pose
+    if _ACK_LINE.fullmatch(line) is None:
+        return decode_ack_by_fields(line)
+    msg_id, status, times, written = line.split(b":")
+    t_recv, t_done = times.split(b",")
+    seen, pose = _last_pose
+    if written != seen:
+        x, y, z, yaw, pitch, roll = written.split(b",")
+        pose = (float(x), float(y), float(z), float(yaw), float(pitch), float(roll))
+        _last_pose = (written, pose)
+    return Ack(msg_id.decode("ascii"), float(t_recv), float(t_done), pose, "done" if status == b"done" else status.decode("ascii"))
 
 
 def decode_ack_by_fields(line: bytes) -> Ack:
@@ -304,8 +326,9 @@ class LineSplitter:
         return self._tail
 
     def feed(self, data: bytes) -> list[bytes]:
-        if not self._tail and data.endswith(DELIMITER) and 2 < len(data) <= self.max_line + 2 and data.find(DELIMITER) == len(data) - 2:
-            return [data[:-2]]  # the common case: one whole line per segment
+        end = len(data) - 2
+        if data.find(DELIMITER) == end and 0 < end <= self.max_line and not self._tail:
+            return [data[:end]]  # the common case: one whole line per segment
         buffer = self._tail + data if self._tail else bytes(data)
         if DELIMITER not in buffer:
             self._check(buffer)
