@@ -15,18 +15,20 @@ Exit codes (docs/faults.md lists every refusal with its message and code):
 * 70 a defect of this program (one line; ``-v`` shows the traceback).
 
 Every failure ends in one line naming the file, option or peer and what to do; a traceback only with
-``-v``.
+``-v``.  The codes are :mod:`cell_runner.exits`'.
+
+Each subcommand imports what it uses when it runs: ``run`` (:mod:`cell_runner.run_command`) and
+``validate --simulate`` load the back ends, the simulators and the dry run (numpy, pinocchio, coal);
+``validate``, ``functions`` and ``report`` start without them (test/test_fast_start.py).
 """
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import json
 import math
-import signal
 import sys
-import traceback
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,31 +37,17 @@ from typing import IO, Any, NoReturn
 from app_functions.registry import full_catalog
 from cell_runner import launcher
 from cell_runner.catalog_document import PARAM_TYPE_HELP, XML_USAGE, catalog_document
-from cell_runner.deployment import deploy_local
-from cell_runner.dry_run.check import check as dry_run_check, options_refusal
-from cell_runner.dry_run.report import DryRunReport
-from cell_runner.dry_run.simulators import setup_for
-from cell_runner.dry_run.start import StartRefused, start_checked
-from cell_runner.operator_console import OperatorConsole
-from cell_runner.output_files import WriteFailure
-from cell_runner.record_hook import add_run_options, prepare_flight, start_recording, stop_recording
-from cell_runner.run_checks import Refused, check_trajectory_db, preflight
-from cell_runner.run_report import add_report_parser, cmd_report, report_settings
-from cell_runner.settings import BackendSettings, Outputs, RunSettings, ValidateSettings
+from cell_runner.exits import EXIT_INTERNAL, EXIT_INVALID, EXIT_OK, EXIT_STOPPED, EXIT_USAGE, explain
+from cell_runner.run_checks import Refused, check_trajectory_db
+from cell_runner.settings import BackendSettings, Outputs, ReportSettings, RunSettings, ValidateSettings
 from cell_runner.vision_cli import add_vision_parser, run_vision
 from core_functions.catalog import Catalog
 from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.robots import ROBOTS
-from execution_engine.app_model import Application, ApplicationError, load_application, read_application
-from execution_engine.checkpoint.store import CheckpointError
-from execution_engine.engine.report import RunReport
-from execution_engine.observers import LivePrinter, QuestionPrinter, RunObserver, TraceWriter
-from node_transport.clock import Clock, run_with_clock
+from execution_engine.checkpoint.store import ANSWERS
+from execution_engine.app_model import read_application
 from node_transport.console_log import ConsoleLog
-from robot_bridges.backend import BridgeError
-from robot_bridges.registry import create_backend
 
-EXIT_OK, EXIT_INVALID, EXIT_USAGE, EXIT_STOPPED, EXIT_OUTPUT, EXIT_PEER, EXIT_INTERNAL = 0, 1, 2, 3, 4, 5, 70
 
 
 @dataclass(frozen=True)
@@ -86,6 +74,7 @@ def cmd_validate(settings: ValidateSettings, catalog: Catalog, out: IO[str], err
             return EXIT_USAGE
     status = EXIT_OK
     for file in settings.files:
+        read_at = time.time()  # a dry run's verdict is kept only for files unchanged since
         app, diagnostics = read_application(file, catalog)
         errors = [d for d in diagnostics if getattr(d, "severity", "error") == "error"]
         for diagnostic in diagnostics:
@@ -96,8 +85,14 @@ def cmd_validate(settings: ValidateSettings, catalog: Catalog, out: IO[str], err
             continue
         out.write(f"{file}: valid\n")
         if settings.simulate and app is not None:
+            # slow to load: the dry run loads the simulators and the collision scene (numpy, pinocchio, coal)
+            from cell_runner.dry_run.check import check as dry_run_check
+
             backend = settings.backend
-            code, report = dry_run_check(app, file, backend.backend_for(app), backend.backend_options(app), settings.trajectory_db, out, err)
+            avoid = [*settings.files, *([settings.trajectory_db] if settings.trajectory_db else [])]
+            code, report = dry_run_check(
+                app, file, backend.backend_for(app), backend.backend_options(app), settings.trajectory_db, out, err, read_at=read_at, avoid=avoid,
+            )
             if report is not None and report.findings:
                 err.write(f"{file}: {len(report.findings)} problem(s) found by the dry run\n")
             status = max(status, code)
@@ -161,185 +156,44 @@ def parse_speed(text: str) -> float:
         raise argparse.ArgumentTypeError(f"speed must be a number in {speed.describe()} or 'max', got {text!r}") from None
 
 
-async def _run(
-    app: Application, settings: RunSettings, clock: Clock, out: IO[str], writer: TraceWriter | None, lost: list[WriteFailure] | None = None,
-    checked: DryRunReport | None = None,
-) -> RunReport:
-    """The run; ``lost`` gets the outputs (recording, checkpoint) that could not be written whole;
-    ``checked``: the dry run's verdict from the simulator's start (checked again if the robot is elsewhere)."""
-    name, options = settings.backend.backend_for(app), settings.backend.backend_options(app)
-    backend = await create_backend(name, clock, options)
-    trajectory_db = settings.outputs.trajectory_db
-    machine_parameters = {"trajectory_db": trajectory_db} if trajectory_db else {}
-    # An alarm waits only when someone can answer it: in this process, an operator at a terminal
-    # (--interactive); nobody else reaches the in-process engine.  While that person is waited
-    # for, simulated time stands still instead of racing on.
-    operators = settings.interactive and sys.stdin.isatty()
-    if settings.interactive and not operators:
-        out.write("warning: --interactive: standard input is not a terminal, so there are no operator keys; an alarm ends the run at once\n")
-    deployment = await deploy_local(
-        clock, app.robot, backend, machine_parameters=machine_parameters, operators=operators, hold_for_operators=operators and clock.simulated,
-    )
-    observer = RunObserver(deployment.transport.create_node("run_observer"), app.robot.group_names)
-    if writer is not None:  # before the console: whatever the console shows is in the trace already
-        observer.sinks.append(writer.on_status)
-        observer.engine_sinks.append(writer.on_engine)
-        observer.event_sinks.append(writer.on_event)
-    if not settings.quiet:
-        printer = LivePrinter(out, (*app.robot.group_names, "engine"))
-        observer.sinks.append(printer.on_status)
-        observer.engine_sinks.append(printer.on_engine)
-        observer.event_sinks.append(printer.on_event)
-    elif operators:  # quiet hides progress, never a question the run waits on
-        observer.engine_sinks.append(QuestionPrinter(out).on_engine)
-    recorder = await start_recording(settings, app, deployment.transport, name, observer)  # checkpoints after the trace
-    console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
-    loop = asyncio.get_running_loop()
-    interactive = console.attach_stdin(loop) if operators else False
-    setup = setup_for(name, options) if settings.check else None  # checked where the robot is
-    run_task = loop.create_task(start_checked(deployment.engine, app, backend, clock, setup, trajectory_db, checked, recorder.resume, out))
-    interrupts = 0
-
-    def on_interrupt() -> None:
-        nonlocal interrupts
-        interrupts += 1
-        if interrupts == 1:
-            out.write("\ninterrupt: stopping the application (Ctrl-C again to abandon)\n")
-            console.spawn(console.command("stop", "Ctrl-C"), loop)
-        else:
-            run_task.cancel()
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        try:
-            loop.add_signal_handler(sig, on_interrupt)
-        except (NotImplementedError, RuntimeError):
-            pass
-    try:
-        return await run_task
-    finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
-                loop.remove_signal_handler(sig)
-            except (NotImplementedError, RuntimeError):
-                pass
-        if interactive:
-            console.detach_stdin(loop)  # the terminal as it was, also after Ctrl-C or an exception
-        failures = await stop_recording(recorder, out)
-        if lost is not None:
-            lost.extend(failures)
-        await deployment.close()
-
-
-def cmd_run(file: str, settings: RunSettings, catalog: Catalog, out: IO[str], err: IO[str]) -> int:
-    """Run the application ``file`` as ``settings`` say, each check first."""
-    try:
-        app = load_application(file, catalog)
-    except ApplicationError as error:
-        for diagnostic in error.diagnostics:
-            err.write(f"{diagnostic}\n")
-        err.write(f"{file}: not run: {len(error.diagnostics)} problem(s)\n")
-        return EXIT_INVALID
-    try:
-        settings = preflight(app, settings)  # files and peers, before anything runs and without writing a byte
-    except Refused as refusal:
-        err.write(f"error: {refusal}\n")
-        return EXIT_USAGE
-    try:
-        settings = prepare_flight(app, settings)  # --resume, then every file read or written (output_files), before any is written
-    except (CheckpointError, Refused) as refusal:
-        err.write(f"error: {refusal}\n")
-        return EXIT_USAGE
-    name, options = settings.backend.backend_for(app), settings.backend.backend_options(app)
-    refusal = options_refusal(file, name, options, settings.speed, dry_run_first=settings.check)
-    if refusal is not None:  # every back-end option, before the dry run's seconds
-        err.write(refusal + "\n")
-        return EXIT_USAGE
-    checked: DryRunReport | None = None  # the verdict from the simulator's start; _run checks again if the robot is elsewhere
-    if settings.check:
-        code, checked = dry_run_check(app, file, name, options, settings.outputs.trajectory_db, out, err, summary=not settings.quiet)
-        if code != EXIT_OK:
-            found = f"{len(checked.findings)} problem(s) found by the dry run" if checked is not None else "the dry run did not pass"
-            err.write(f"{file}: not run: {found}; use --no-check to run anyway\n")
-            return code
-    trace_path = settings.outputs.trace
-    try:
-        trace = open(trace_path, "w", encoding="utf-8") if trace_path else None
-    except OSError as error:
-        err.write(f"error: --trace {trace_path}: cannot be written ({error.strerror or error}); give a writable file\n")
-        return EXIT_USAGE
-    writer = TraceWriter(trace) if trace is not None else None
-    try:
-        return _run_recorded(app, file, settings, out, err, writer, checked)
-    finally:
-        if trace is not None:
-            try:
-                trace.close()
-            except OSError:  # already counted by the writer: its records were lost, not the run
-                pass
-
-
-def _run_recorded(
-    app: Application, file: str, settings: RunSettings, out: IO[str], err: IO[str], writer: TraceWriter | None, checked: DryRunReport | None,
-) -> int:
-    """Run, print the summary, close the trace with its run_end record; the exit code."""
-    report: RunReport | None = None
-    outcome = "error"
-    lost: list[WriteFailure] = []  # outputs that could not be written whole: exit 4 after a good run
-    try:
-        report = run_with_clock(lambda c: _run(app, settings, c, out, writer, lost, checked), settings.clock())
-    except BridgeError as error:  # the controller refused or never answered, before the first primitive
-        code = EXIT_PEER
-        err.write(f"error: cannot run {file}: {error}; {PEER_ADVICE}\n")
-        _explain(error, settings.verbose, err)
-    except StartRefused as refusal:  # the dry run from where the robot is found problems: nothing moved
-        code, outcome = EXIT_INVALID, "refused"
-        err.write("".join(f"{line}\n" for line in refusal.lines) + f"{file}: not run: {refusal.reason}; use --no-check to run anyway\n")
-    except (KeyError, ValueError, OSError, ConnectionError) as error:
-        code = EXIT_USAGE
-        err.write(f"error: cannot run {file}: {error}\n")
-        _explain(error, settings.verbose, err)
-    except asyncio.CancelledError:
-        code, outcome = EXIT_STOPPED, "abandoned"
-        err.write("run abandoned\n")
-    except Exception as error:  # noqa: BLE001 - a defect: one line, the trace still closed, the traceback with -v
-        code = EXIT_INTERNAL
-        err.write(f"error: the run of {file} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
-        _explain(error, settings.verbose, err)
-    if report is not None:
-        out.write("\n" + "\n".join(report.summary_lines()) + "\n")
-        outcome = report.outcome
-        code = EXIT_OK if report.ok else EXIT_STOPPED if report.outcome == "stopped" else EXIT_INVALID
-    code = EXIT_OUTPUT if lost and code == EXIT_OK else code
-    if writer is not None:
-        t = report.t_end if report is not None else writer.last_t
-        done, total = (report.operations_done, report.operations_total) if report is not None else (0, len(app.operations))
-        writer.finish(t, outcome, code, done, total)
-        if writer.error is not None:
-            lost.insert(0, WriteFailure("--trace", str(settings.outputs.trace), writer.error.strerror or str(writer.error),
-                                        f"{writer.lost} record(s) lost, the trace is incomplete"))
-    for failure in lost:
-        err.write(failure.line(outcome) + "\n")
-    return EXIT_OUTPUT if lost and code == EXIT_OK else code
-
-
-#: What an operator can do about a controller that would not take the run (exit 5).
-PEER_ADVICE = (
-    "check that the controller is on, reachable from this machine and serving on that address and port "
-    "(--host/--port, --rsi-listen) and that no other client holds it, then run again"
-)
-
-
-def _explain(error: BaseException, verbose: bool, err: IO[str]) -> None:
-    """The traceback, for a developer, only with ``-v``."""
-    if verbose:
-        traceback.print_exception(error, file=err)
-
-
 def parse_option(text: str) -> tuple[str, str]:
     key, sep, value = text.partition("=")
     if not sep or not key.strip():
         raise argparse.ArgumentTypeError(f"back-end options are KEY=VALUE, got {text!r}")
     return key.strip(), value.strip()
+
+
+# --------------------------------------------------------------------- report, recorder
+def add_report_parser(sub: Any) -> None:
+    """The ``report`` subcommand on the CLI's subparsers."""
+    report = sub.add_parser("report", help="summarise a run from its recording (.mcap) or trace (.jsonl) and draw its timeline")
+    report.add_argument("file", metavar="RUN.mcap|TRACE.jsonl")
+    report.add_argument("--timeline", metavar="OUT.svg|OUT.png", help="where to write the timeline (default: next to FILE, .timeline.svg)")
+    report.add_argument("--no-timeline", action="store_true", help="print the summary only")
+
+
+def report_settings(args: argparse.Namespace) -> ReportSettings:
+    """``report``'s options."""
+    return ReportSettings(file=args.file, timeline=args.timeline, draw=not args.no_timeline)
+
+
+def add_run_options(run: argparse.ArgumentParser) -> None:
+    """``run``'s options of the flight recorder (cell_runner/record_hook.py): recording, checkpoint, resuming."""
+    run.add_argument(
+        "--record", metavar="RUN.mcap",
+        help="record every topic of the run to an MCAP file that Foxglove, PlotJuggler and ros2 bag open "
+             "(read it back with: python -m execution_engine report RUN.mcap)",
+    )
+    run.add_argument(
+        "--checkpoint", metavar="PATH",
+        help="SQLite file of the run's progress after every function result (default: next to --trace or --record, "
+             "NAME.checkpoint.sqlite; none without them)",
+    )
+    run.add_argument("--resume", metavar="CHECKPOINT", help="go on with a run that crashed or was killed, from its checkpoint")
+    run.add_argument(
+        "--on-interrupted", choices=ANSWERS, default="ask",
+        help="with --resume: what to do with a function the crash interrupted: ask the operator (default), redo it, or skip it",
+    )
 
 
 # ---------------------------------------------------------------------------------- main
@@ -404,7 +258,7 @@ def main(
             return EXIT_STOPPED
         except Exception as error:  # noqa: BLE001 - a defect: one line for the operator, the traceback with -v
             err.write(f"error: {args.command} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
-            _explain(error, args.verbose, err)
+            explain(error, args.verbose, err)
             return EXIT_INTERNAL
 
 
@@ -452,6 +306,8 @@ def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str], extra: Sequen
         if args.command == command.name:
             return command.run(args, catalog, out, err)
     if args.command == "report":
+        from cell_runner.run_report import cmd_report  # slow to load: the recording's reader (mcap, its ROS 2 decoder)
+
         return cmd_report(report_settings(args), out, err)
     if args.command == "vision":
         return run_vision(args, out, err)
@@ -461,4 +317,7 @@ def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str], extra: Sequen
     if not Path(args.file).is_file():
         err.write(f"error: {args.file}: no such file\n")
         return EXIT_INVALID
+    # slow to load: the run loads the back ends, the simulators and the dry run (numpy, pinocchio, coal)
+    from cell_runner.run_command import cmd_run
+
     return cmd_run(args.file, run_settings(args), catalog, out, err)

@@ -1,14 +1,13 @@
-"""What ``run`` needs of the flight recorder: its options, and start/stop around a run.
+"""What ``run`` needs of the flight recorder: start/stop around a run (its options are the command line's).
 
 Recording (``--record``), checkpoints (``--checkpoint``, by default next to the trace or the
-recording) and resuming (``--resume``, ``--on-interrupted``) are set up here, so ``cli.py`` only
-calls :func:`add_run_options`, :func:`prepare_flight` (before any file is written),
-:func:`start_recording` and :func:`stop_recording`.  Below the options, everything reads the
+recording) and resuming (``--resume``, ``--on-interrupted``) are set up here, so ``run`` only
+calls :func:`prepare_flight` (before any file is written), :func:`start_recording` and
+:func:`stop_recording`.  Below the options, everything reads the
 run's :class:`~cell_runner.settings.RunSettings`.
 """
 from __future__ import annotations
 
-import argparse
 import sqlite3
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -21,31 +20,13 @@ from cell_runner.settings import Outputs, RunSettings
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
 from execution_engine.app_model.model import Operation
-from execution_engine.checkpoint.resume import ANSWERS, ResumePlan, app_meta, check_same, next_name, plan_resume
-from execution_engine.checkpoint.store import SKIPPED, CheckpointError, CheckpointStore
+from execution_engine.checkpoint.resume import ResumePlan, app_meta, check_same, next_name, plan_resume
+from execution_engine.checkpoint.store import ANSWERS, SKIPPED, CheckpointError, CheckpointStore
 from execution_engine.checkpoint.writer import CheckpointWriter
 from execution_engine.observers import RunObserver
 from execution_engine.recorder.recorder import Recorder
 from execution_engine.recorder.writer import McapSink
 from node_transport.port import Node, Transport
-
-
-def add_run_options(run: argparse.ArgumentParser) -> None:
-    run.add_argument(
-        "--record", metavar="RUN.mcap",
-        help="record every topic of the run to an MCAP file that Foxglove, PlotJuggler and ros2 bag open "
-             "(read it back with: python -m execution_engine report RUN.mcap)",
-    )
-    run.add_argument(
-        "--checkpoint", metavar="PATH",
-        help="SQLite file of the run's progress after every function result (default: next to --trace or --record, "
-             "NAME.checkpoint.sqlite; none without them)",
-    )
-    run.add_argument("--resume", metavar="CHECKPOINT", help="go on with a run that crashed or was killed, from its checkpoint")
-    run.add_argument(
-        "--on-interrupted", choices=ANSWERS, default="ask",
-        help="with --resume: what to do with a function the crash interrupted: ask the operator (default), redo it, or skip it",
-    )
 
 
 def checkpoint_path(settings: RunSettings) -> str | None:

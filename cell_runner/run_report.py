@@ -9,7 +9,6 @@ corrections; and the Fig. 12 timeline of every group as SVG or PNG (:mod:`.timel
 """
 from __future__ import annotations
 
-import argparse
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -109,19 +108,6 @@ def summarize(path: str | Path) -> RunSummary:
     timeline = builder.snapshot()
     extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator")]
     return RunSummary(str(path), header, timeline, recording.cut, extra)
-
-
-def add_report_parser(sub: Any) -> None:
-    """The ``report`` subcommand on the CLI's subparsers."""
-    report = sub.add_parser("report", help="summarise a run from its recording (.mcap) or trace (.jsonl) and draw its timeline")
-    report.add_argument("file", metavar="RUN.mcap|TRACE.jsonl")
-    report.add_argument("--timeline", metavar="OUT.svg|OUT.png", help="where to write the timeline (default: next to FILE, .timeline.svg)")
-    report.add_argument("--no-timeline", action="store_true", help="print the summary only")
-
-
-def report_settings(args: argparse.Namespace) -> ReportSettings:
-    """``report``'s options."""
-    return ReportSettings(file=args.file, timeline=args.timeline, draw=not args.no_timeline)
 
 
 def cmd_report(settings: ReportSettings, out: IO[str], err: IO[str]) -> int:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 from core_functions.option_ranges import bounds
 from execution_engine.app_model import Application
-from execution_engine.checkpoint.resume import ANSWERS
+from execution_engine.checkpoint.store import ANSWERS
 from node_transport.clock import Clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions
 

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
-from numpy.typing import NDArray
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
 
-Matrix = NDArray[np.float64]
+    Matrix = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -44,6 +46,8 @@ class Pose:
 
     @staticmethod
     def from_matrix(m: Matrix) -> Pose:
+        import numpy as np  # slow to load (0.1 s): only matrices need it, validate and functions never do
+
         qx, qy, qz, qw = matrix_to_quaternion(np.asarray(m, dtype=float)[:3, :3])
         return Pose(float(m[0, 3]), float(m[1, 3]), float(m[2, 3]), qx, qy, qz, qw)
 
@@ -60,6 +64,8 @@ class Pose:
         return quaternion_to_rpy(self.qx, self.qy, self.qz, self.qw)
 
     def matrix(self) -> Matrix:
+        import numpy as np  # slow to load (0.1 s): only matrices need it, validate and functions never do
+
         m = np.eye(4)
         m[:3, :3] = quaternion_to_matrix(self.qx, self.qy, self.qz, self.qw)
         m[:3, 3] = (self.x, self.y, self.z)
@@ -67,11 +73,25 @@ class Pose:
 
     # ------------------------------------------------------------------------ algebra
     def compose(self, other: Pose) -> Pose:
-        """``self * other``: ``other`` expressed in this frame, returned in this frame's parent."""
-        return Pose.from_matrix(self.matrix() @ other.matrix())
+        """``self * other``: ``other`` expressed in this frame, returned in this frame's parent.
+
+        Quaternion algebra in plain floats: no numpy, so reading a cell (validate) does not load it, and
+        a few times faster than 4x4 matrices for one pose."""
+        ax, ay, az, aw = self.qx, self.qy, self.qz, self.qw
+        bx, by, bz, bw = other.qx, other.qy, other.qz, other.qw
+        px, py, pz = rotate(self.quaternion, other.position)
+        q = (
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        )
+        return Pose(self.x + px, self.y + py, self.z + pz, *_canonical(*q))
 
     def inverse(self) -> Pose:
-        return Pose.from_matrix(np.linalg.inv(self.matrix()))
+        conjugate = (-self.qx, -self.qy, -self.qz, self.qw)
+        px, py, pz = rotate(conjugate, self.position)
+        return Pose(-px, -py, -pz, *_canonical(*conjugate))
 
     def translated(self, dx: float = 0.0, dy: float = 0.0, dz: float = 0.0) -> Pose:
         """Shift along the *parent's* axes, keeping the orientation."""
@@ -117,7 +137,17 @@ def quaternion_to_rpy(qx: float, qy: float, qz: float, qw: float) -> tuple[float
     return roll, pitch, yaw
 
 
+def rotate(q: tuple[float, float, float, float], v: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The vector ``v`` rotated by the unit quaternion ``q`` (x, y, z, w): v + 2w (u x v) + 2 u x (u x v)."""
+    qx, qy, qz, qw = q
+    vx, vy, vz = v
+    tx, ty, tz = 2.0 * (qy * vz - qz * vy), 2.0 * (qz * vx - qx * vz), 2.0 * (qx * vy - qy * vx)
+    return (vx + qw * tx + qy * tz - qz * ty, vy + qw * ty + qz * tx - qx * tz, vz + qw * tz + qx * ty - qy * tx)
+
+
 def quaternion_to_matrix(qx: float, qy: float, qz: float, qw: float) -> Matrix:
+    import numpy as np  # slow to load (0.1 s): only matrices need it, validate and functions never do
+
     return np.array(
         [
             [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
@@ -142,9 +172,15 @@ def matrix_to_quaternion(r: Matrix) -> tuple[float, float, float, float]:
     else:
         s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
         qw, qx, qy, qz = (r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s
-    if qw < 0:  # one canonical sign, so equal rotations give equal quaternions
+    return _canonical(float(qx), float(qy), float(qz), float(qw))
+
+
+def _canonical(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float, float]:
+    """One sign (w >= 0; at w = 0 the largest component positive, as Shepperd's method gives it) and unit length,
+    so equal rotations give equal quaternions."""
+    if qw < 0 or (qw == 0 and max((qx, qy, qz), key=abs) < 0):
         qx, qy, qz, qw = -qx, -qy, -qz, -qw
-    return _normalized(float(qx), float(qy), float(qz), float(qw))
+    return _normalized(qx, qy, qz, qw)
 
 
 def _normalized(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float, float]:

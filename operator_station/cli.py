@@ -23,7 +23,7 @@ from cell_runner.output_files import FilePlan, Refused
 from cell_runner.run_checks import run_files
 from cell_runner.settings import BackendSettings, Outputs, RunSettings
 from core_functions.catalog import Catalog
-from core_functions.option_ranges import RangeError, argument_type, bounds
+from core_functions.option_ranges import RangeError, bounds
 from core_functions.printable import printable
 from core_functions.robots import find_robot
 from execution_engine.app_model.document import read_document
@@ -35,32 +35,6 @@ from operator_station.replay import load_replay
 from operator_station.session import RunSession
 
 log = logging.getLogger(__name__)
-
-
-#: Options ``studio`` takes over from ``run`` (same meaning, same parsing: the two cannot drift apart).
-RUN_OPTIONS = ("robot", "speed", "trace", "rsi_listen", "fault", "seed", "backend_option", "trajectory_db", "no_check")
-
-
-def add_parser(sub: Any) -> None:
-    """Register ``studio`` on the CLI's subcommands, after ``run`` (whose run options it shares)."""
-    studio = sub.add_parser("studio", help="the operator station in the browser: build, validate, run, watch and replay applications")
-    studio.add_argument("file", nargs="?", metavar="APP.xml", help="the application to open in the builder")
-    studio.add_argument("--port", type=int, default=8080, help="HTTP port of the station, in [0, 65535] (default 8080; 0: a free one)")
-    studio.add_argument("--host", default="127.0.0.1", help="address to serve on (default loopback; anything else is reachable from the network and needs the token)")
-    studio.add_argument("--token-file", dest="token_file", metavar="FILE",
-                        help="the token pages must present, kept in FILE (one line, mode 600); default: made at start and printed when not on loopback")
-    studio.add_argument("--allowed-host", dest="allowed_host", action="append", default=[], metavar="NAME",
-                        help="a host name pages reach the station by, besides its address, this computer's name and localhost (repeatable)")
-    studio.add_argument("--replay", metavar="RUN.mcap|TRACE.jsonl",
-                        help="show a finished run's recording or trace instead of running anything (read as report reads it)")
-    studio.add_argument("--transport", choices=("local", "ros"), default="local",
-                        help="local: run the application in this process (default); ros: watch and command a cell running on the ROS graph (needs APP.xml for its groups, and rclpy)")
-    studio.add_argument("--controller-host", dest="controller_host", help="V+ controller address (none starts the simulator); run's --host")
-    studio.add_argument("--controller-port", dest="controller_port", type=argument_type("port", label="controller port"),
-                        help="V+ controller port, in [0, 65535]; run's --port")
-    for action in sub.choices["run"]._actions:  # noqa: SLF001 - argparse has no public way to share options
-        if action.dest in RUN_OPTIONS:
-            studio._add_action(action)  # noqa: SLF001
 
 
 def build_station(args: argparse.Namespace, catalog: Catalog, root: Path, access: Any = None) -> Any:

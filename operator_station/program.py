@@ -12,7 +12,16 @@ from collections.abc import Sequence
 from typing import IO
 
 from cell_runner import cli
-from operator_station.cli import add_parser, cmd_studio
+from core_functions.catalog import Catalog
+from operator_station.studio_options import add_parser
+
+
+def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str], err: IO[str]) -> int:
+    """``studio``: the station, imported when it is asked for (the other subcommands start without it)."""
+    from operator_station import cli as station  # slow to load: sessions and simulators load numpy, pinocchio and coal
+
+    return station.cmd_studio(args, catalog, out, err)
+
 
 STUDIO = cli.ExtraCommand("studio", add_parser, cmd_studio)
 

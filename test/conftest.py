@@ -1,6 +1,7 @@
 """Shared fixtures: simulated time, a local transport, and hypothesis profiles."""
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Callable, Coroutine, Iterator
 from typing import Any, TypeVar
@@ -16,6 +17,14 @@ T = TypeVar("T")
 settings.register_profile("ci", deadline=None, max_examples=200, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("dev", deadline=None, max_examples=60, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+
+@pytest.fixture(autouse=True)
+def kept_verdicts(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each test keeps the dry run's verdicts in a folder of its own (cell_runner/dry_run/verdict_cache.py): a test
+    sees the program as a first run does, never a verdict another test or the person running them kept."""
+    base = tmp_path_factory.getbasetemp() / "kept_verdicts"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(base / hashlib.sha256(request.node.nodeid.encode()).hexdigest()[:16]))
 
 
 @pytest.fixture

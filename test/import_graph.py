@@ -39,6 +39,13 @@ HEAVY_MODULES = {
     "operator_station.serving": "uvicorn",  # optional: pip extra 'studio'
     "node_transport.link_transforms": "pinocchio",  # slow to load (0.1 s): the recorder's encoder, bridges without a URDF
     "execution_engine.timeline_plot": "matplotlib",  # slow to load (0.4 s): report draws only when asked
+    # The subcommands that need the back ends, the simulators or the camera, imported when they run so that
+    # validate, functions and report start without numpy, pinocchio, coal and OpenCV (test_fast_start.py):
+    "cell_runner.run_command": "numpy",  # run: back ends, simulators, dry run (numpy, pinocchio, coal: 0.5 s)
+    "cell_runner.dry_run.check": "numpy",  # validate --simulate: the dry run (numpy, pinocchio, coal)
+    "cell_runner.vision_detect": "cv2",  # vision detect: OpenCV (0.2 s)
+    "cell_runner.run_report": "mcap",  # report: the recording's reader and its ROS 2 decoder (0.05 s)
+    "operator_station.cli": "numpy",  # studio: sessions, simulators, dry run (numpy, pinocchio, coal)
 }
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from test_cli_faults import ROWS, Row, pattern
 
-from cell_runner import cli
+from cell_runner import cli, run_command
 from cell_runner.dry_run import check
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR, NEXTAGE_OPEN
 from robot_bridges.backend import BackendOptions
@@ -43,7 +43,7 @@ def test_a_refused_back_end_option_is_refused_before_the_dry_run(row: Row, monke
 
     monkeypatch.chdir(ROOT)
     monkeypatch.setattr(check, "dry_run", never)
-    monkeypatch.setattr(cli, "run_with_clock", never)
+    monkeypatch.setattr(run_command, "run_with_clock", never)
     out, err = io.StringIO(), io.StringIO()
     code = cli.main(shlex.split(row.command)[3:], out, err)
     assert code == row.exit_code, err.getvalue()

@@ -1,17 +1,24 @@
 """The dry run as the command line shows it: findings like validation diagnostics, then the prediction.
 
 ``validate --simulate`` and the check before ``run`` share this, so both print the same lines and
-a dry run that breaks down is one clear message and an exit code, never a traceback.
+a dry run that breaks down is one clear message and an exit code, never a traceback.  A passed
+verdict is kept (:mod:`.verdict_cache`): the same application, cell, robot, options, trajectory
+database and program are not dry-run again, and one line says whose verdict holds.
 """
 from __future__ import annotations
 
 import logging
 import math
+import os
+import time
+from collections.abc import Iterable
+from pathlib import Path
 from typing import IO
 
 from cell_runner.dry_run.report import DryRunReport
 from cell_runner.dry_run.runner import DryRunError, dry_run
 from cell_runner.dry_run.simulators import setup_for
+from cell_runner.dry_run.verdict_cache import Verdict, VerdictCache, verdict_key
 from execution_engine.app_model.model import Application
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import check_options
@@ -19,6 +26,9 @@ from robot_bridges.registry import check_options
 log = logging.getLogger(__name__)
 
 OK, FOUND, SETUP = 0, 1, 2  # the CLI's EXIT_OK, EXIT_INVALID, EXIT_USAGE
+#: An application or cell file changed this little before it was read may have changed while it was read (file
+#: systems keep modification times to a second or two): its verdict is neither taken from the cache nor kept.
+SETTLED = 2.0
 
 
 def check(
@@ -31,12 +41,25 @@ def check(
     err: IO[str],
     *,
     summary: bool = True,
+    read_at: float | None = None,
+    avoid: Iterable[str | Path] = (),
+    cache: VerdictCache | None = None,
 ) -> tuple[int, DryRunReport | None]:
     """Dry-run ``app``; print its findings to ``err`` and (with ``summary``) the prediction to ``out``.
 
     Returns (status, report): ``FOUND`` when anything was found or the dry run could not check
     everything, ``SETUP`` when the back end refuses the options (the run would refuse them too).
+    ``read_at``: when (``time.time()``) reading ``app``'s files began; with it, a passed verdict is
+    kept in ``cache`` (default: the per-user one) and a kept one is used instead of a dry run (one
+    line to ``out`` with ``summary``); never over a file of ``avoid`` (the run's inputs and outputs).
     """
+    cache = cache if cache is not None else VerdictCache()
+    key = _key(app, backend, options, trajectory_db, read_at)
+    kept = cache.get(key) if key is not None else None
+    if kept is not None:
+        if summary:
+            out.write(kept.line() + "\n")
+        return OK, kept.report
     try:
         report = dry_run(app, backend, options, trajectory_db)
     except (KeyError, ValueError, OSError, ConnectionError) as error:
@@ -55,7 +78,24 @@ def check(
         out.write("\n".join(report.summary_lines()) + "\n")
     elif report.notes:
         err.write("".join(f"{file}: not checked: {note}\n" for note in report.notes))
+    if report.ok and key is not None and _key(app, backend, options, trajectory_db, read_at) == key:  # nothing changed meanwhile
+        cache.put(key, Verdict(report, time.time()), avoid)
     return (OK if report.ok else FOUND), report
+
+
+def _key(app: Application, backend: str, options: BackendOptions, trajectory_db: str | None, read_at: float | None) -> str | None:
+    """The verdict's key (:func:`.verdict_key`), None when none may be used: no ``read_at``, a file that cannot be
+    read, or an application or cell file modified since reading began (or just before: :data:`SETTLED`)."""
+    if read_at is None:
+        return None
+    sources = [app.path] + ([app.cell.path] if app.cell is not None and app.cell.path is not None else [])
+    try:
+        if any(os.stat(path).st_mtime > read_at - SETTLED for path in sources):
+            return None
+        return verdict_key(app, setup_for(backend, options), trajectory_db)
+    except OSError as error:
+        log.info("dry run: no kept verdict: %s", error)
+        return None
 
 
 def options_refusal(file: str, backend: str, options: BackendOptions, speed: float, *, dry_run_first: bool) -> str | None:

@@ -16,9 +16,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-import numpy as np
-
-from core_functions.geometry import Pose
+from core_functions.geometry import Pose, rotate
 from execution_engine.app_model.diagnostics import Location
 
 
@@ -64,9 +62,9 @@ def zone_frame(zone: Zone, parent_pose: Pose) -> tuple[Pose, dict[str, str]]:
 
 def inside_box(pose: Pose, size: tuple[float, float, float], point: tuple[float, float, float]) -> bool:
     """Whether a world point lies in the box centred at ``pose`` (its axes) with sides ``size``."""
-    m = pose.matrix()
-    local = m[:3, :3].T @ (np.array(point) - m[:3, 3])
-    return bool(np.all(np.abs(local) <= 0.5 * np.array(size) + 1e-9))
+    conjugate = (-pose.qx, -pose.qy, -pose.qz, pose.qw)  # into the box's axes; plain floats, so validate needs no numpy
+    local = rotate(conjugate, (point[0] - pose.x, point[1] - pose.y, point[2] - pose.z))
+    return all(abs(c) <= 0.5 * s + 1e-9 for c, s in zip(local, size))
 
 
 def call_zones(cell: object, params: Iterable[str]) -> tuple[str, ...]:

@@ -28,9 +28,6 @@ from node_transport.wire import engine_service
 if TYPE_CHECKING:
     from execution_engine.engine.engine import ExecutionEngine
 
-ANSWERS = ("ask", "redo", "skip")
-
-
 def sits_out(app: Application, catalog: Catalog, call: Call) -> bool:
     """A ``wait`` without seconds is never sent to the machine: nothing of it can be interrupted."""
     if call.function != "wait":

@@ -32,6 +32,9 @@ CREATE TABLE IF NOT EXISTS counters(key TEXT PRIMARY KEY, value INTEGER NOT NULL
 """
 STARTED, SUCCEEDED, SKIPPED = "started", "succeeded", "skipped"
 DONE = (SUCCEEDED, SKIPPED)
+#: What a resumed run does with a function a crash interrupted (``--on-interrupted``): ask the operator, run it again,
+#: or skip it.  Here, with the file's states, so the command line reads them without loading the resume's planner.
+ANSWERS = ("ask", "redo", "skip")
 
 
 class CheckpointError(ValueError):
