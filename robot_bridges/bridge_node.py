@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import types
 from collections import OrderedDict
+from collections.abc import Coroutine, Generator
+from typing import Any
 
 from core_functions.primitives import PrimitiveResult, describe
 from node_transport.carriage import TypedPublisher, subscribe
@@ -44,6 +47,36 @@ from robot_bridges.robot_state import RobotStatePublisher
 from robot_bridges.turnaround import Turnaround
 
 log = logging.getLogger(__name__)
+
+
+def start_now(coro: Coroutine[Any, Any, None], name: str) -> asyncio.Task[None] | None:
+    """Run ``coro`` up to its first wait here and now: the task that carries it on from there, or None
+    when it finished without waiting.  A primitive that is over in its first step then costs no task
+    and no turn of the loop (what Python 3.12's eager tasks do); one that waits goes on as a task."""
+    try:
+        waiting = coro.send(None)
+    except StopIteration:
+        return None
+    return asyncio.get_running_loop().create_task(_carry_on(coro, waiting), name=name)
+
+
+@types.coroutine
+def _carry_on(coro: Coroutine[Any, Any, None], waiting: Any) -> Generator[Any, Any, None]:
+    """Steps ``coro`` on from its first wait, as a task steps a coroutine: what the task is sent or
+    thrown (a cancellation) goes into it, what it waits on goes up to the task."""
+    while True:
+        try:
+            sent = yield waiting
+        except BaseException as error:  # noqa: BLE001 - passed on: the coroutine decides, as under a task
+            try:
+                waiting = coro.throw(error)
+            except StopIteration:
+                return
+        else:
+            try:
+                waiting = coro.send(sent)
+            except StopIteration:
+                return
 _REMEMBERED_IDS = 256  # command ids a re-sent command is recognised by (a machine keeps far fewer waiting)
 
 
@@ -138,16 +171,12 @@ class BridgeNode:
         if busy is not None and not busy.done():
             self._send(group, command.id, "error", error=f"{FaultKind.BUSY.value}: {group} is already executing a primitive", fault=FaultKind.BUSY)
             return
-        loop = asyncio.get_running_loop()
-        task = loop.create_task(self._execute(command), name=f"bridge {group} {command.id}")
+        task = start_now(self._execute(command), f"bridge {group} {command.id}")
+        if task is None:  # done in its first step (set_speed, an I/O toggle): 'done' is sent already
+            self._running.pop(group, None)
+            return
         self._running[group] = task
-        # 'accepted' tells the machine a long primitive is under way; one that is already done
-        # after its first step (set_speed, an I/O toggle) goes straight to 'done'.
-        loop.call_soon(self._accept_if_running, group, command.id, task)
-
-    def _accept_if_running(self, group: str, command_id: str, task: asyncio.Task[None]) -> None:
-        if not task.done():
-            self._send(group, command_id, "accepted")
+        self._send(group, command.id, "accepted")  # a long primitive is under way
 
     async def _execute(self, command: BridgeCommand) -> None:
         assert command.primitive is not None
