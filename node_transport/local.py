@@ -265,6 +265,7 @@ class LocalTransport(Transport):
         # publisher -> the subscriptions it reaches: worked out once, not on every publish (a
         # running cell publishes thousands of messages a second and rarely changes its graph)
         self._matches: dict[LocalPublisher[Any], tuple[LocalSubscription[Any], ...]] = {}
+        self._sources: dict[LocalSubscription[Any], tuple[LocalPublisher[Any], ...]] = {}  # the other way (a watch asks it per wait)
         self._services: dict[str, _LocalService] = {}
         self._types: dict[str, type] = {}
         self._nodes: dict[str, LocalNode] = {}
@@ -301,12 +302,14 @@ class LocalTransport(Transport):
     def add_publisher(self, pub: LocalPublisher[Any]) -> None:
         self._claim_type(pub.topic, pub.msg_type)
         self._publishers.setdefault(pub.topic, []).append(pub)
+        self._sources.clear()
 
     def remove_publisher(self, pub: LocalPublisher[Any]) -> None:
         pubs = self._publishers.get(pub.topic, [])
         if pub in pubs:
             pubs.remove(pub)
         self._matches.pop(pub, None)
+        self._sources.clear()
 
     def add_subscription(self, sub: LocalSubscription[Any]) -> None:
         self._claim_type(sub.topic, sub.msg_type)
@@ -322,9 +325,13 @@ class LocalTransport(Transport):
         if sub in subs:
             subs.remove(sub)
         self._matches.clear()
+        self._sources.pop(sub, None)
 
-    def matching_publishers(self, sub: LocalSubscription[Any]) -> list[LocalPublisher[Any]]:
-        return [p for p in self._publishers.get(sub.topic, []) if sub.qos.compatible_with(p.qos)]
+    def matching_publishers(self, sub: LocalSubscription[Any]) -> tuple[LocalPublisher[Any], ...]:
+        found = self._sources.get(sub)
+        if found is None:
+            found = self._sources[sub] = tuple(p for p in self._publishers.get(sub.topic, []) if sub.qos.compatible_with(p.qos))
+        return found
 
     def matching_subscriptions(self, pub: LocalPublisher[Any]) -> tuple[LocalSubscription[Any], ...]:
         found = self._matches.get(pub)
