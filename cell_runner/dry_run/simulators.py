@@ -11,7 +11,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from robot_bridges.backend import BackendOptions, RobotBackend
-from robot_bridges.kuka_rsi.backend import KukaRsiBackend
 
 #: Nextage simulator control period in the dry run (0.01 s in a run).  A planned motion stays within
 #: the joint limits between its checked samples (the limits are a box, the samples are interpolated
@@ -39,6 +38,8 @@ class DryRunSetup:
 
 def _kuka_seconds(backend: RobotBackend) -> Callable[[], float]:
     """RSI's own time: cycles (IPOC steps) the simulated controller has run."""
+    from robot_bridges.kuka_rsi.backend import KukaRsiBackend  # slow to load (0.05 s, numpy): only a KUKA dry run needs it
+
     if not isinstance(backend, KukaRsiBackend):
         raise TypeError(f"RSI cycles asked of {backend.name}")
     kuka, cycle = backend, backend.link.cycle_ms / 1000.0
