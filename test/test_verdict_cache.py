@@ -207,9 +207,17 @@ def test_the_key_changes_with_everything_the_dry_run_depends_on(tmp_path: Path, 
     assert key(db=str(tmp_path / "other.sqlite")) == with_cell  # another database, none there either: the same dry run
     (tmp_path / "other.sqlite").write_bytes(b"SQLite format 3\x00" + bytes(100))
     seen.add(key(db=str(tmp_path / "other.sqlite")))  # its content
+    program = cache_module.program_digest
     monkeypatch.setattr(cache_module, "program_digest", lambda: "another program")
     seen.add(key())  # the program
-    assert len(seen) == 6
+    monkeypatch.setattr(cache_module, "program_digest", program)
+    elsewhere = tmp_path / "copy"
+    elsewhere.mkdir()
+    shutil.copyfile(path, elsewhere / "app.xml")
+    shutil.copyfile(cell, elsewhere / "cell.xml")
+    path = elsewhere / "app.xml"
+    seen.add(key())  # the same bytes elsewhere: its report names another file
+    assert len(seen) == 7
 
 
 # ----------------------------------------------------------------------- on the command line

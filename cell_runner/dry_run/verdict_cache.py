@@ -2,7 +2,7 @@
 
 A dry run of the demonstrator takes seconds; an integrator runs the same application again and again.
 A verdict is kept under a key made of everything the dry run depends on (:func:`verdict_key`): the
-application's and its cell's bytes, the robot, the simulator and its options (and the bytes of any file an
+application's place and bytes, its cell's bytes, the robot, the simulator and its options (and the bytes of any file an
 option names), the trajectory database the dry run copies, and the program itself (the bytes of its
 packages, URDFs included, the Python and the numerical libraries' versions).  Any change gives another key,
 so a kept verdict is never one of another application, cell, robot model or program.
@@ -125,6 +125,7 @@ def verdict_key(app: Application, setup: DryRunSetup, trajectory_db: str | None)
     _feed(digest, "format", str(FORMAT).encode())
     _feed(digest, "program", program_digest().encode())
     _feed(digest, "application", _file_bytes(app.path) or b"")
+    _feed(digest, "where", os.path.realpath(app.path).encode())  # the report names its file; relative paths resolve from it
     cell = app.cell.path if app.cell is not None and app.cell.path is not None else None
     _feed(digest, "cell", b"" if cell is None else _file_bytes(cell) or b"")
     _feed(digest, "robot", app.robot.name.encode())
