@@ -5,7 +5,8 @@ Usage: python bench/load_validate.py [--operations 10000 50000] [--repeat 5] [--
 For each size the two are timed side by side in one process, interleaved (the order alternating
 from round to round), ``--repeat`` rounds; each round gives a ratio load+validate / parse (CPU
 time: steady on a shared machine; wall time printed too), and the median and the range of those
-ratios are the figures.  Peak memory: each side once more in a fresh process of its own
+ratios are the figures.  Each side's time includes tidying the C heap after it (glibc's
+``malloc_trim``): freeing a large tree otherwise leaves its cost to whichever side runs next.  Peak memory: each side once more in a fresh process of its own
 (``VmHWM``: the resident peak, which counts libxml2's tree as well as Python's objects), the bare
 parse with nothing but ``lxml.etree`` imported, the load with what it needs (the catalog); the
 children alternate too.  Aims (issue 22): ratio <= 3x and peak <= 1.5x at both sizes.
@@ -25,6 +26,7 @@ Last line: JSON.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import resource
 import statistics
@@ -328,6 +330,28 @@ def _peak(kind: str, path: Path) -> dict[str, float]:
     return json.loads(child.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
+def _settled(action: Callable[[], object]) -> Callable[[], None]:
+    """``action``, then glibc's heap tidied (``malloc_trim``) within the time taken.
+
+    Freeing a tree of 10^5 libxml2 nodes leaves as many free chunks, which glibc sorts at the next
+    large allocation: some 40 ms that would otherwise fall on whichever side runs next.  Each side
+    pays for its own (nothing on a C library without ``malloc_trim``)."""
+    trim = _malloc_trim()
+
+    def run() -> None:
+        action()
+        if trim is not None:
+            trim(0)
+    return run
+
+
+def _malloc_trim() -> Callable[[int], int] | None:
+    try:
+        return ctypes.CDLL(None).malloc_trim  # type: ignore[no-any-return]
+    except (OSError, AttributeError):
+        return None
+
+
 def side_by_side(functions: Catalog, path: Path, repeat: int) -> dict[str, object]:
     """Parse and load + validate of one file, interleaved; then each side's peak in a fresh process."""
     parse_wall: list[float] = []
@@ -338,7 +362,7 @@ def side_by_side(functions: Catalog, path: Path, repeat: int) -> dict[str, objec
         etree.parse(str(path))
         load_application(path, functions)
     for round_ in range(repeat):
-        sides = [("parse", lambda: etree.parse(str(path))), ("load", lambda: load_application(path, functions))]
+        sides = [("parse", _settled(lambda: etree.parse(str(path)))), ("load", _settled(lambda: load_application(path, functions)))]
         for name, action in sides if round_ % 2 == 0 else reversed(sides):
             (wall,), (cpu,) = measure(action, 1)
             (parse_wall if name == "parse" else load_wall).append(wall)

@@ -87,6 +87,9 @@ class ApplicationReader:
         self.walk = DocumentWalk(doc.source)
         self.diagnostics = log if log is not None else DiagnosticLog()
         self.groups: frozenset[str] = GROUP_TAGS
+        #: One string for each distinct param value and function name: a large file repeats a
+        #: few hundred of them (frames, speeds, modes) tens of thousands of times.
+        self.shared: dict[str, str] = {}
 
     def error(self, at: int, message: str) -> None:
         if self.diagnostics.full:
@@ -216,9 +219,11 @@ class ApplicationReader:
         index = walk.next
         last = len(offsets) if walk.aligned else -1
         calls = operation.calls
+        shared = self.shared.setdefault
         for child in element:
-            group = child.tag
-            if index < last and text.startswith(group, offsets[index] + 1):  # type: ignore[arg-type]
+            tag = child.tag
+            group = shared(tag, tag)  # type: ignore[arg-type]
+            if index < last and text.startswith(group, offsets[index] + 1):
                 child_at = offsets[index]
             else:
                 child_at, last = walk.at(index, child), -1
@@ -245,24 +250,29 @@ class ApplicationReader:
                             param_at.append(walk.at(index, param))
                             last = -1
                         index += 1
-                        values.append(param.get("value", ""))
+                        value = param.get("value", "")
+                        values.append(shared(value, value))
                         name = param.get("name")
                         if name is not None and names is None:
                             names = [None] * (len(values) - 1)
                         if names is not None:
                             names.append(name)
-                call = CallSite(str(group), function.get("name", ""), tuple(values), tuple(param_at), function_at, tuple(names) if names is not None else None)
+                function_name = function.get("name", "")
+                call = CallSite(
+                    group, shared(function_name, function_name), tuple(values), tuple(param_at), function_at,
+                    tuple(names) if names is not None else None,
+                )
             if call is None:
                 continue
             if robot is not None and group not in self.groups:
                 self.error(child_at, f"{group} is not a group of {robot.name} (its groups: {', '.join(robot.group_names)})")
                 continue
-            first = calls.get(str(group))
+            first = calls.get(group)
             if first is not None:
                 line = self.source.at_offset(first.at).line
                 self.error(child_at, f"group {group} appears twice in operation {operation.id} (first on line {line})")
                 continue
-            calls[str(group)] = call
+            calls[group] = call
         walk.next = index
         return operation
 
@@ -333,7 +343,7 @@ class ApplicationReader:
                         names = [None] * len(values)
                     if names is not None:
                         names.append(name)
-                    values.append(value)
+                    values.append(self.shared.setdefault(value, value))
                     param_at.append(offset)
             name = function.get("name")
             call = CallSite(group, name or "", tuple(values), tuple(param_at), at, tuple(names) if names is not None else None)
