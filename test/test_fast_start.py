@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_report_bounds import status_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 #: What only running a robot (back ends, simulators, the dry run), the camera or a transport needs.
@@ -72,6 +73,15 @@ def test_report_of_a_trace_loads_no_slow_library_until_it_draws(tmp_path: Path) 
     code, loaded, out = started("report", str(trace(tmp_path / "run.jsonl")))
     assert code == 0 and (tmp_path / "run.timeline.svg").is_file()
     assert set(loaded) == {"matplotlib", "numpy"}
+
+
+def test_report_of_a_recording_loads_only_its_reader(tmp_path: Path) -> None:
+    """A recording needs the MCAP reader (mcap, its ROS 2 decoder), nothing of the robot."""
+    recording = tmp_path / "run.mcap"
+    recording.write_bytes(status_recording(2))
+    code, loaded, out = started("report", str(recording), "--no-timeline")
+    assert (code, loaded) == (0, [])
+    assert out.startswith(f"recording {recording}: 2 message(s)")
 
 
 def test_validate_of_a_broken_application_says_so_without_loading_them(tmp_path: Path) -> None:
