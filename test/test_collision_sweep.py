@@ -143,11 +143,17 @@ def random_motion(rng: np.random.Generator) -> tuple[object, np.ndarray]:
 
 @pytest.mark.parametrize("seed", range(5))
 def test_no_joint_of_a_planned_motion_is_faster_than_its_speed_bound(seed: int) -> None:
-    """The bound the sweep steps by holds at every millisecond of a trapezoid move followed by a replay."""
-    motion, _ = random_motion(np.random.default_rng(seed))
-    bound = motion.speed_bound()
+    """The bound the sweep steps by holds at every half millisecond of a trapezoid move followed by a replay,
+    over the whole motion and over any stretch of it (the bound of a stretch, smaller on a ramp)."""
+    rng = np.random.default_rng(seed)
+    motion, _ = random_motion(rng)
     times = np.arange(0.0, motion.duration, 0.0005)
     positions = np.array([motion.at(float(t)) for t in times])
     speeds = np.abs(np.diff(positions, axis=0)) / np.diff(times)[:, None]
+    bound = motion.speed_bound()
     assert np.all(speeds <= bound * (1 + 1e-6) + 1e-9)
     assert np.all(np.max(speeds, axis=0) >= 0.9 * bound)  # and it is not loose
+    for _ in range(20):
+        a, b = sorted(rng.uniform(0.0, motion.duration, 2))
+        inside = (times[:-1] >= a) & (times[1:] <= b)
+        assert np.all(speeds[inside] <= motion.speed_bound(a, b) * (1 + 1e-6) + 1e-9)

@@ -26,7 +26,7 @@ from core_functions.geometry import Pose
 from execution_engine.app_model.model import Application
 from robot_bridges.collision import CollisionScene, Contact, cell_boxes, held_part, scene_for
 from robot_bridges.collision.scene import STATIC
-from robot_bridges.collision.sweep import Advancement
+from robot_bridges.collision.sweep import PIECES, Advancement
 
 COLLISION = "collision"
 #: The former sweep's fixed step (s), kept as :func:`sweep`'s reference: at the Nextage's top joint speed
@@ -82,15 +82,16 @@ def sweep(
         findings.report(scene.margin)
         return SweepStats(len(line.ordered), len(times), findings.found)
     spans = [s.start for s in recorder.spans if s.start > line.first]
-    boundaries = sorted({line.first, *(m.start for m in line.ordered), *(m.end for m in line.ordered), *(g.t for g in grips), *spans})
+    pieces = [m.start + m.duration * k / PIECES for m in line.ordered for k in range(1, PIECES)]
+    boundaries = sorted({line.first, *(m.start for m in line.ordered), *(m.end for m in line.ordered), *(g.t for g in grips), *spans, *pieces})
     engine = Advancement(scene, scene.margin)
     previous = None
-    for b in boundaries:
+    for n, b in enumerate(boundaries):
         if previous is not None:
             for t, contacts in engine.advance(b, line.q_at):
                 findings.note(t, contacts)
         held = line.reach(b)
-        engine.set_speeds(line.speeds(), b)
+        engine.set_speeds(line.speeds(b, boundaries[n + 1] if n + 1 < len(boundaries) else b), b)
         if held or previous is None:
             engine.relayout(b)
         engine.set_work(line.work, b)
@@ -116,7 +117,6 @@ class _Timeline:
         self.ordered = sorted(motions, key=lambda m: m.start)
         self.columns = [np.array([index[j] for j in m.joints if j in index], dtype=np.int64) for m in self.ordered]
         self.keep = [np.array([k for k, j in enumerate(m.joints) if j in index], dtype=np.int64) for m in self.ordered]
-        self._speeds = [np.asarray(m.speeds, dtype=float)[self.keep[k]] for k, m in enumerate(self.ordered)]
         self.first = min([m.start for m in self.ordered] + [g.t for g in grips], default=None)
         self.grips = sorted(grips, key=lambda g: g.t)
         self.work: dict[str, tuple[Pose, ...]] = {}
@@ -155,11 +155,13 @@ class _Timeline:
                 held = True
         return held
 
-    def speeds(self) -> np.ndarray:
-        """Each joint's speed bound while the active motions run."""
+    def speeds(self, start: float, end: float) -> np.ndarray:
+        """Each joint's speed bound between ``start`` and ``end`` (no motion starting in between)."""
         rates = np.zeros(len(self.q))
         for k in self.active:
-            rates[self.columns[k]] = np.maximum(rates[self.columns[k]], self._speeds[k])
+            motion = self.ordered[k]
+            bound = motion.speeds_between(start - motion.start, end - motion.start)[self.keep[k]]
+            rates[self.columns[k]] = np.maximum(rates[self.columns[k]], bound)
         return rates
 
 

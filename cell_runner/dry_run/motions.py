@@ -52,7 +52,11 @@ class MotionRecord:
     @property
     def speeds(self) -> Vector:
         """rad/s (or m/s) each of :attr:`joints` moves at most during the motion."""
-        return np.asarray(getattr(self.at, "speeds"), dtype=float)
+        return self.speeds_between(0.0, self.duration)
+
+    def speeds_between(self, start: float, end: float) -> Vector:
+        """The same between ``start`` and ``end`` s into the motion (a ramp is slower than the cruise)."""
+        return np.asarray(getattr(self.at, "bound")(start, end), dtype=float)
 
 
 @dataclass(frozen=True)
@@ -67,11 +71,12 @@ class GripRecord:
 
 
 class Path:
-    """A sampler with the speed bound of its joints (``speeds``): what :func:`straight` and :func:`planned` give."""
+    """A sampler with the speed bound of its joints between two instants (``bound(start, end)``):
+    what :func:`straight` and :func:`planned` give."""
 
-    def __init__(self, at: Sampler, speeds: Vector) -> None:
+    def __init__(self, at: Sampler, bound: Callable[[float, float], Vector]) -> None:
         self._at = at
-        self.speeds = speeds
+        self.bound = bound
 
     def __call__(self, t: float) -> Vector:
         return self._at(t)
@@ -87,11 +92,12 @@ def straight(start: Sequence[float], end: Sequence[float], duration: float) -> P
         s = min(max(t / duration, 0.0), 1.0)
         return a + (b - a) * s
 
-    return Path(at, np.abs(b - a) / duration if duration > 0.0 else np.zeros(len(a)))
+    speeds = np.abs(b - a) / duration if duration > 0.0 else np.zeros(len(a))
+    return Path(at, lambda start, end: speeds)
 
 
 def planned(motion: object, duration: float) -> Path:
-    """A simulator's motion object (``at(t)`` over ``[0, duration]`` and ``speed_bound()``) as a sampler."""
+    """A simulator's motion object (``at(t)`` over ``[0, duration]`` and ``speed_bound(start, end)``) as a sampler."""
     at = getattr(motion, "at")
     bound = getattr(motion, "speed_bound", None)
     if bound is None:
@@ -100,4 +106,4 @@ def planned(motion: object, duration: float) -> Path:
     def sample(t: float) -> Vector:
         return np.asarray(at(min(max(t, 0.0), duration)), dtype=float)
 
-    return Path(sample, np.asarray(bound(), dtype=float))
+    return Path(sample, lambda start, end: np.asarray(bound(max(start, 0.0), end), dtype=float))

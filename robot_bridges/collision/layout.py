@@ -64,7 +64,7 @@ class Layout:
         self.radii = np.array([s.radius for s in self.solids], dtype=float)
         self.pair_radii = self.radii[self.ia] + self.radii[self.ib] if len(pairs) else np.zeros(0)
         self.levers = self._levers()
-        self._groups = [s.body.group for s in self.solids]
+        self._excused: dict[tuple[Any, ...], NDArray[np.bool_]] = {}  # work -> its mask (work recurs: the same holes)
 
     def __len__(self) -> int:
         return len(self.ia)
@@ -94,6 +94,10 @@ class Layout:
         mask = np.zeros(len(self.ia), dtype=bool)
         if not work or len(self.boxes) == 0:
             return mask
+        key = tuple(sorted((group, tuple(targets)) for group, targets in work.items()))
+        known = self._excused.get(key)
+        if known is not None:
+            return known.copy()
         working: set[tuple[str, int]] = set()
         for group, targets in work.items():
             for target in targets:
@@ -103,11 +107,11 @@ class Layout:
                     outside = np.maximum(np.abs(local) - 0.5 * np.asarray(size), 0.0)
                     if float(np.linalg.norm(outside)) <= self.work_reach:
                         working.add((group, self.box_start + k))
-        if not working:
-            return mask
-        for n, (i, k) in enumerate(zip(self.ia.tolist(), self.ib.tolist())):
+        for n, (i, k) in enumerate(zip(self.ia.tolist(), self.ib.tolist())) if working else ():
             a, b = self.solids[i].body, self.solids[k].body
             mask[n] = (a.end_effector and (a.group, k) in working) or (b.end_effector and (b.group, i) in working)
+        if len(self._excused) < 256:  # an arm's work changes once per motion; a few hundred states at most recur
+            self._excused[key] = mask.copy()
         return mask
 
     # ------------------------------------------------------------------ levers

@@ -13,9 +13,10 @@ What is proven, with ``threshold`` T and ``resolution`` r (the minimum step, in 
 * a pair found at least T + r apart stays at least T apart until its next check (exact);
 * a pair found between T and T + r apart is checked again after r of travel: it stays at least
   T - r apart until then (the one place the proof gives away r);
-* a pair found closer than T is reported (a :class:`Contact`) and followed in steps of at least r
-  (half its distance while apart, so a pair reported apart never touched between two checks
-  farther than 2r apart).
+* a pair found closer than T is reported (a :class:`Contact`); while apart it is followed in steps
+  of its distance (at least r), so a pair reported apart did not touch between two checks that
+  found it at least r apart; once touching it is a collision and is checked again only at the
+  caller's next boundary (:meth:`Advancement.recheck_reported`: where a call starts, say).
 
 So every pair that comes closer than T - r at any instant is reported, and every pair reported
 is closer than T at the instant reported.  A distance is measured by coal where the bounding
@@ -41,6 +42,8 @@ RESOLUTION = 0.001
 #: Pairs whose bounding spheres are this much farther apart than the threshold are not measured
 #: exactly: the spheres' gap is a lower bound and already gives a long step (m).
 EXACT_BEYOND = 0.15
+#: A motion's speed bound is taken per this many equal pieces of it (slower on its ramps: longer steps).
+PIECES = 8
 _TIME = 1e-9  # s: checks this close are the same instant
 
 
@@ -171,19 +174,23 @@ class Advancement:
     def _allowance(self, d: Vector) -> Vector:
         """The travel a pair found ``d`` apart may make before its next check (module docstring)."""
         T, r = self.threshold, self.resolution
-        return np.where(d >= T + r, d - T, np.where(d >= T, r, np.where(d > 0.0, np.maximum(r, 0.5 * d), np.maximum(r, -d))))
+        return np.where(d >= T + r, d - T, np.where(d >= T, r, np.where(d > 0.0, np.maximum(r, d), np.inf)))
 
 
 @dataclass(frozen=True)
 class Track:
     """One motion on a time line: joints ``columns`` (the scene's order) follow ``at(t - start)`` for
-    ``duration`` seconds (held at the ends), no joint faster than ``speeds`` (rad/s)."""
+    ``duration`` seconds (held at the ends), no joint faster than ``speeds`` (rad/s) -- or than
+    ``speeds(a, b)`` between ``a`` and ``b`` s into it."""
 
     columns: NDArray[np.int64]
     start: float
     duration: float
     at: Callable[[float], Vector]
-    speeds: Vector
+    speeds: Vector | Callable[[float, float], Vector]
+
+    def bound(self, a: float, b: float) -> Vector:
+        return np.asarray(self.speeds(a, b) if callable(self.speeds) else self.speeds, dtype=float)
 
     @property
     def end(self) -> float:
@@ -206,7 +213,8 @@ def sweep_tracks(
     engine = Advancement(scene, threshold, resolution)
     engine.set_work(work or {}, start)
     engine.relayout(start)
-    boundaries = sorted({start, *(x for t in tracks for x in (t.start, t.end) if x > start)})
+    cuts = [t.start + t.duration * k / PIECES for t in tracks if callable(t.speeds) for k in range(1, PIECES)]
+    boundaries = sorted({start, *(x for t in tracks for x in (t.start, t.end) if x > start), *(x for x in cuts if x > start)})
 
     def q_at(time: float) -> Vector:
         probe = np.array(q, dtype=float)
@@ -214,18 +222,18 @@ def sweep_tracks(
             probe[track.columns] = track.at(time - track.start)
         return probe
 
-    def rates(time: float) -> Vector:
+    def rates(time: float, until: float) -> Vector:
         out = np.zeros(len(q))
         for track in tracks:
             if track.start - _TIME <= time < track.end - _TIME:
-                out[track.columns] = np.maximum(out[track.columns], track.speeds)
+                out[track.columns] = np.maximum(out[track.columns], track.bound(time - track.start, until - track.start))
         return out
 
     previous = None
-    for boundary in boundaries:
+    for n, boundary in enumerate(boundaries):
         if previous is not None:
             yield from engine.advance(boundary, q_at)
-        engine.set_speeds(rates(boundary), boundary)
+        engine.set_speeds(rates(boundary, boundaries[n + 1] if n + 1 < len(boundaries) else boundary), boundary)
         found = engine.check_due(boundary, q_at(boundary))
         yield boundary, found
         previous = boundary

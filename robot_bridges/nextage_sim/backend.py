@@ -101,6 +101,7 @@ class NextageSimBackend(RobotBackend):
         self.collisions: CollisionScene | None = scene_for(NEXTAGE_OPEN) if check_collisions else None
         self._guard: CollisionGuard | None = None  # sweeps the running motions when they change (guard.py)
         self._moving: dict[Job, Motion] = {}  # every job playing a motion, and its motion
+        self._tcps: dict[str, tuple[tuple[bytes, Pose], Pose]] = {}  # arm -> ((joints, tool), TCP there): tcp_pose's last answer
         self._cell: CellSnapshot | None = None
         self._work: checks.Work = {}  # arm -> where its current motion starts and ends
         self._q = self.model.named_pose(initial_pose)
@@ -174,9 +175,17 @@ class NextageSimBackend(RobotBackend):
         return names, tuple(float(self._q[self.model.index(n)]) for n in names)
 
     def tcp_pose(self, group: str) -> Pose | None:
+        """The arm's TCP now; kept until a joint or the tool changes (the state is published every period,
+        a set_speed or dwell answers with it: no forward kinematics for a robot that did not move)."""
         self._check_group(group)
         arm = self.model.arms.get(group)
-        return None if arm is None else arm.tcp_pose(self._q)
+        if arm is None:
+            return None
+        key = (self._q.tobytes(), arm.tool)
+        kept = self._tcps.get(group)
+        if kept is None or kept[0] != key:
+            kept = self._tcps[group] = (key, arm.tcp_pose(self._q))
+        return kept[1]
 
     def set_cell(self, cell: CellSnapshot) -> None:
         self._cell = cell
@@ -193,6 +202,7 @@ class NextageSimBackend(RobotBackend):
     def set_tool(self, group: str, tool: Pose) -> None:
         """Make the arm's TCP ``tool`` (a pose in ``*ARM_JOINT5_Link``) instead of the flange."""
         self._arm(group).tool = tool
+        self._tcps.pop(group, None)
         self._replan()
         if self.collisions is not None:
             self.collisions.set_tool(group, tool)

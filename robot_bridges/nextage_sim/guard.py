@@ -87,7 +87,7 @@ class CollisionGuard:
 
 def first_touch(scene: CollisionScene, q: np.ndarray, tracks: Sequence[tuple[Motion, float]], work: Mapping[str, Sequence[Pose]], now: float) -> Touch | None:
     """The first instant from ``now`` at which two bodies touch, each motion started at its clock time."""
-    timed = [Track(m.indices, start, m.duration, m.at, np.asarray(m.speed_bound(), dtype=float)) for m, start in tracks]
+    timed = [Track(m.indices, start, m.duration, m.at, m.speed_bound) for m, start in tracks]
     for t, contacts in sweep_tracks(scene, q, timed, TOUCHING, RESOLUTION, work, now):
         if contacts:
             return Touch(t, min(contacts, key=lambda c: c.distance))

@@ -28,6 +28,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -68,9 +69,10 @@ class Motion(ABC):
         return self.at(self.duration)
 
     @abstractmethod
-    def speed_bound(self) -> Vector:
-        """The most each joint's speed reaches anywhere on the motion (rad/s): what the collision
-        check's conservative advancement steps by (robot_bridges/collision/sweep.py)."""
+    def speed_bound(self, start: float = 0.0, end: float = math.inf) -> Vector:
+        """The most each joint's speed reaches between ``start`` and ``end`` s into the motion (rad/s):
+        what the collision check's conservative advancement steps by (robot_bridges/collision/sweep.py).
+        Slower stretches (a ramp, a short segment) give a smaller bound, so longer steps."""
 
     def breakpoints(self) -> Vector:
         """The instants where the joint path bends; between two of them it is a straight joint-space line.
@@ -92,7 +94,7 @@ class Hold(Motion):
     def at(self, t: float) -> Vector:
         return self.positions.copy()
 
-    def speed_bound(self) -> Vector:
+    def speed_bound(self, start: float = 0.0, end: float = math.inf) -> Vector:
         return np.zeros(len(self.positions))
 
 
@@ -109,8 +111,8 @@ class JointMove(Motion):
     def at(self, t: float) -> Vector:
         return self.start + (self.goal - self.start) * self.profile.position(t)
 
-    def speed_bound(self) -> Vector:
-        return _scaled(np.abs(self.goal - self.start), self.profile.velocity)
+    def speed_bound(self, start: float = 0.0, end: float = math.inf) -> Vector:
+        return _scaled(np.abs(self.goal - self.start), _peak_rate(self.profile, start, end))
 
 
 class PathMove(Motion):
@@ -126,8 +128,13 @@ class PathMove(Motion):
     def at(self, t: float) -> Vector:
         return _interpolate(self.knots, self.samples, self.profile.position(t))
 
-    def speed_bound(self) -> Vector:
-        return _scaled(_slopes(self.knots, self.samples), self.profile.velocity)
+    def speed_bound(self, start: float = 0.0, end: float = math.inf) -> Vector:
+        s0, s1 = self.profile.position(start), self.profile.position(min(end, self.duration))
+        return _scaled(_window(self.knots, self._slopes, s0, s1), _peak_rate(self.profile, start, end))
+
+    @cached_property
+    def _slopes(self) -> NDArray[np.float64]:
+        return _slopes(self.knots, self.samples)
 
     def breakpoints(self) -> Vector:
         return np.array([self.profile.time_at(float(s)) for s in self.knots])
@@ -145,7 +152,11 @@ class TimedMove(Motion):
     def at(self, t: float) -> Vector:
         return _interpolate(self.times, self.points, t)
 
-    def speed_bound(self) -> Vector:
+    def speed_bound(self, start: float = 0.0, end: float = math.inf) -> Vector:
+        return _window(self.times, self._slopes, start, end)
+
+    @cached_property
+    def _slopes(self) -> NDArray[np.float64]:
         return _slopes(self.times, self.points)
 
     def breakpoints(self) -> Vector:
@@ -171,8 +182,22 @@ class Chain(Motion):
     def breakpoints(self) -> Vector:
         return np.concatenate([m.breakpoints() + start for m, start in zip(self.segments, self._starts)])
 
-    def speed_bound(self) -> Vector:
-        return np.max([m.speed_bound() for m in self.segments], axis=0)
+    def speed_bound(self, start: float = 0.0, end: float = math.inf) -> Vector:
+        bounds = [m.speed_bound(max(start - t0, 0.0), end - t0) for m, t0 in zip(self.segments, self._starts.tolist())
+                  if t0 <= end and t0 + m.duration >= start]
+        return np.max(bounds, axis=0) if bounds else np.zeros(len(self.indices))
+
+
+def _peak_rate(profile: Trapezoid, start: float, end: float) -> float:
+    """The most ds/dt of a trapezoid between ``start`` and ``end``: rising on the first ramp, flat, falling on the last."""
+    if profile.duration <= 0.0:
+        return profile.velocity
+    start, end = max(start, 0.0), min(end, profile.duration)
+    if end <= profile.ramp:
+        return profile.acceleration * max(end, 0.0)
+    if start >= profile.duration - profile.ramp:
+        return profile.acceleration * max(profile.duration - start, 0.0)
+    return profile.velocity
 
 
 def _scaled(path_slope: Vector, peak: float) -> Vector:
@@ -180,19 +205,29 @@ def _scaled(path_slope: Vector, peak: float) -> Vector:
     return np.where(path_slope > 0.0, path_slope * peak, 0.0) if np.isfinite(peak) else np.where(path_slope > 0.0, np.inf, 0.0)
 
 
-def _slopes(knots: Vector, samples: NDArray[np.float64]) -> Vector:
-    """Each joint's steepest change per unit of ``knots`` between neighbouring samples, linearly interpolated.
+def _window(knots: Vector, slopes: NDArray[np.float64], low: float, high: float) -> Vector:
+    """Each joint's steepest slope (rows of :func:`_slopes`) over the knot intervals that reach into ``[low, high]``."""
+    if len(slopes) == 0:
+        return np.zeros(slopes.shape[1])
+    first = max(int(np.searchsorted(knots, low, side="right")) - 1, 0)
+    last = min(max(int(np.searchsorted(knots, high, side="left")), first + 1), len(slopes))
+    return np.max(slopes[first:last], axis=0)
+
+
+def _slopes(knots: Vector, samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each joint's change per unit of ``knots`` on each interval between neighbouring samples (rows).
 
     A jump (two samples at one knot) has no bound: inf, which the collision check refuses to step along;
     one below 1e-9 (a rounding step a replay accepts) is no motion.
     """
+    width = samples.shape[1] if samples.ndim == 2 else 0
     if len(knots) < 2:
-        return np.zeros(samples.shape[1] if samples.ndim == 2 else 0)
+        return np.zeros((0, width))
     steps = np.abs(np.diff(samples, axis=0))
     spans = np.diff(knots)[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         slopes = np.where(steps > 1e-9, np.where(spans > _EPS, steps / np.maximum(spans, _EPS), np.inf), 0.0)
-    return np.max(slopes, axis=0)
+    return slopes
 
 
 def _interpolate(knots: Vector, samples: NDArray[np.float64], x: float) -> Vector:
