@@ -20,8 +20,8 @@ the wire is what ``rmw_cyclonedds_cpp`` of ROS 2 Jazzy puts there, so ``ros2 nod
 
 Threads: no Cyclone listeners (a write of this process waiting for a listener that waits for the
 GIL hangs the process, see :mod:`~node_transport.dds_waiter`); one waiter thread per
-transport takes and decodes the samples of every reader and hands them to the asyncio loop with
-``call_soon_threadsafe``, in arrival order.  A sample that
+transport takes and decodes the samples of every reader and hands them to the asyncio loop in
+arrival order, all that one wake took in one ``call_soon_threadsafe`` (:class:`~node_transport.dds_waiter.Inbox`).  A sample that
 does not decode (truncated CDR, garbage) or does not convert is counted per topic
 (:attr:`DdsTransport.rejected`) and logged once per topic, never delivered, never fatal.
 Like the rclpy transport it runs in wall time; durations given to it are run seconds.  A node with
@@ -42,9 +42,9 @@ from node_transport.clock import Clock
 from node_transport import dds_graph as graph
 from node_transport.dds_args import RosArguments, parse_ros_arguments, user_arguments
 from node_transport.dds_convert import DdsConverter
-from node_transport.dds_entities import Caller, Taker, delete, matched, matched_handles
+from node_transport.dds_entities import Caller, Taker, delete, matched
 from node_transport.dds_pulse import LiveCount, Pulse
-from node_transport.dds_waiter import DdsWaiter
+from node_transport.dds_waiter import DdsWaiter, Inbox
 from node_transport.idl import InterfaceError, InterfaceRegistry
 from node_transport.idl_hash import type_hash_user_data
 from node_transport.port import (
@@ -121,7 +121,8 @@ class _DdsPublisher(Publisher[M], Generic[M]):
         self.writer.write(self.node.transport.converter.to_wire(msg))
 
     def get_subscription_count(self) -> int:
-        return len(matched_handles(self.writer, subscriptions=True)) if self.alive else 0
+        """Matched subscriptions: Cyclone's count, one call (a machine asks before every status event)."""
+        return int(self.writer.get_publication_matched_status().current_count) if self.alive else 0
 
     def destroy(self) -> None:
         if self.alive:
@@ -155,7 +156,7 @@ class _DdsSubscription(Subscription[M], Generic[M]):
             except Exception as error:  # noqa: BLE001 - garbage that decoded: still garbage
                 transport.reject(self.topic, f"{type(error).__name__}: {error}")
                 continue
-            transport.call_soon(self._deliver, msg)
+            transport.inbox.put(self._deliver, msg)
 
     def get_publisher_count(self) -> int:
         """Matched publishers whose liveliness holds (:class:`~node_transport.dds_pulse.LiveCount`):
@@ -238,7 +239,7 @@ class _DdsService(ServiceServer):
             except Exception as error:  # noqa: BLE001
                 transport.reject(f"{self.name} (request)", f"{type(error).__name__}: {error}")
                 continue
-            transport.call_soon(self._start, request, int(sample.guid), int(sample.seq), client)
+            transport.inbox.put(self._start, request, int(sample.guid), int(sample.seq), client)
 
     def _start(self, request: Any, guid: int, seq: int, client: Caller) -> None:
         if self.alive:
@@ -309,7 +310,7 @@ class _DdsClient(ServiceClient[Any, Any]):
             except Exception as error:  # noqa: BLE001
                 transport.reject(f"{self.name} (reply)", f"{type(error).__name__}: {error}")
                 continue
-            transport.call_soon(self._settle, int(sample.seq), response)
+            transport.inbox.put(self._settle, int(sample.seq), response)
 
     def _settle(self, seq: int, response: Any) -> None:
         future = self._pending.pop(seq, None)
@@ -445,6 +446,8 @@ class DdsTransport(Transport):
         self.spin_error: BaseException | None = None
         self._closed = asyncio.Event()
         self.waiter = DdsWaiter(self.dds, self.participant, f"domain {self.domain_id}", on_stop=self._waiter_stopped)
+        self.inbox = Inbox(self.loop)  # what the waiter's thread takes reaches the loop once per wake
+        self.waiter.after_each(self.inbox.hand_over)
         self._topics: dict[tuple[str, type], Any] = {}
         self._hashes: dict[str, bytes] = {}
         self._ids = itertools.count(1)

@@ -9,6 +9,8 @@ mirror (as rosidl holds it).
 """
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
 from typing import Any, TypeVar
 
 from node_transport.idl import InterfaceError, InterfaceRegistry
@@ -16,12 +18,22 @@ from node_transport.port import TransportError
 from node_transport.ros_convert import MessageConverter, mirror_fields, sequence_item
 
 M = TypeVar("M")
+#: a field's conversion: (value, path of the message) -> converted value
+Step = Callable[[Any, str], Any]
+_PLAIN = (str, float, int, bool)  # field types whose values pass unchanged when they have exactly that type
 
 
 class DdsConverter(MessageConverter):
+    """The rclpy converter's rules, with each mirror's fields planned once (issue 22): a value that
+    already has its field's exact type (a ``str`` for a string, a ``float`` for a float64, a nested
+    mirror of its declared class) goes through as it is; anything else takes the general path,
+    which converts it or refuses it naming the field, as before."""
+
     def __init__(self, registry: InterfaceRegistry) -> None:
         self.registry = registry
         super().__init__(self._resolve)
+        self._outbound: dict[type, Callable[[Any, str], Any]] = {}
+        self._inbound: dict[type, Callable[[Any, str], Any]] = {}
 
     def _resolve(self, ros_type: str) -> type:
         try:
@@ -39,10 +51,10 @@ class DdsConverter(MessageConverter):
         return cls
 
     def to_wire(self, msg: Any) -> Any:
-        return self.to_ros(msg)
+        return self._plan_out(type(msg))(msg, "")
 
     def from_wire(self, mirror: type[M], sample: Any) -> M:
-        return self.from_ros(mirror, sample)
+        return self._plan_in(mirror)(sample, "")  # type: ignore[no-any-return]
 
     def to_wire_service(self, wire_type: type, msg: Any, guid: int, seq: int) -> Any:
         """A request or reply sample with rmw_cyclonedds_cpp's header."""
@@ -55,6 +67,51 @@ class DdsConverter(MessageConverter):
             return wire_type(**fields)
         except TypeError as error:
             raise TransportError(f"cannot build {wire_type.__name__} from {type(msg).__name__}: {error}") from None
+
+    # ------------------------------------------------------------------------ field plans
+    def _plan_out(self, mirror: type) -> Callable[[Any, str], Any]:
+        plan = self._outbound.get(mirror)
+        if plan is None:
+            cls = self.ros_class(mirror)  # checks the mirror against its interface file, once
+            steps = [(name, self._step_out(hint)) for name, hint in mirror_fields(mirror)]
+            ros_type = mirror.ROS_TYPE  # type: ignore[attr-defined]
+
+            def plan(msg: Any, path: str) -> Any:
+                kwargs = {name: step(getattr(msg, name), f"{path}.{name}" if path else name) for name, step in steps}
+                try:
+                    return cls(**kwargs)
+                except (AssertionError, TypeError, ValueError, AttributeError) as error:
+                    raise TransportError(f"cannot build {ros_type} from {mirror.__name__}: {error or type(error).__name__}") from None
+
+            self._outbound[mirror] = plan
+        return plan
+
+    def _step_out(self, hint: Any) -> Step:
+        return _step(hint, self._value_to_ros, lambda value, path: self._plan_out(hint)(value, path) if type(value) is hint
+                     else self._value_to_ros(hint, value, path), tuple, list)
+
+    def _plan_in(self, mirror: type) -> Callable[[Any, str], Any]:
+        plan = self._inbound.get(mirror)
+        if plan is None:
+            steps = [(name, self._step_in(hint)) for name, hint in mirror_fields(mirror)]
+            ros_type = mirror.ROS_TYPE  # type: ignore[attr-defined]
+
+            def plan(sample: Any, path: str) -> Any:
+                kwargs = {}
+                for name, step in steps:
+                    where = f"{path}.{name}" if path else name
+                    try:
+                        raw = getattr(sample, name)
+                    except AttributeError:
+                        raise TransportError(f"{ros_type}: received message has no field {where!r}") from None
+                    kwargs[name] = step(raw, where)
+                return mirror(**kwargs)
+
+            self._inbound[mirror] = plan
+        return plan
+
+    def _step_in(self, hint: Any) -> Step:
+        return _step(hint, self._value_from_ros, lambda value, path: self._plan_in(hint)(value, path), list, tuple)
 
     # ------------------------------------------------------------------ byte <-> bytes
     def _value_to_ros(self, hint: Any, value: Any, path: str) -> Any:
@@ -72,3 +129,22 @@ class DdsConverter(MessageConverter):
                 raise TransportError(f"field {path!r}: expected an octet, got {value!r}")
             return bytes([value])
         return super()._value_from_ros(hint, value, path)
+
+
+def _step(hint: Any, general: Callable[[Any, Any, str], Any], nested: Step, arrives: type, leaves: Callable[[Any], Any]) -> Step:
+    """One field's conversion: ``nested`` for a mirror, a plain value or a sequence of plain
+    values (``arrives`` as a tuple or list) of exactly its type as it is, the rest by ``general``."""
+    if hint in _PLAIN:
+        return lambda value, path: value if type(value) is hint else general(hint, value, path)
+    if _is_mirror(hint):
+        return nested
+    item = sequence_item(hint) if hint is not bytes else None
+    if item in _PLAIN:
+        return lambda value, path: (
+            leaves(value) if type(value) is arrives and all(type(v) is item for v in value) else general(hint, value, path)
+        )
+    return lambda value, path: general(hint, value, path)
+
+
+def _is_mirror(hint: Any) -> bool:
+    return isinstance(hint, type) and dataclasses.is_dataclass(hint)
