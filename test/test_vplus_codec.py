@@ -253,3 +253,41 @@ ack_numbers = st.floats(min_value=-99999, max_value=99999, allow_nan=False)
 def test_the_fast_ack_parser_agrees_with_the_field_by_field_one(msg_id: str, t1: float, t2: float, pose: tuple[float, ...]) -> None:
     line = Ack(msg_id, t1, t2, pose).encode()[:-2]  # type: ignore[arg-type]
     assert decode_ack(line) == codec.decode_ack_by_fields(line)
+
+
+_numbers = st.one_of(
+    st.sampled_from([0.0, -0.0, -0.0004, 0.0004, -0.0005, 0.0005, -0.00049999, 999999.9994, -999999.9994]),
+    st.floats(min_value=-999_999.0, max_value=999_999.0, allow_nan=False),
+)
+
+
+@given(st.from_regex(r"[0-9A-Za-z]{1,16}", fullmatch=True), st.tuples(*[_numbers] * 6), st.tuples(_numbers, _numbers))
+def test_an_ack_writes_every_number_as_format_number_does_and_reads_back(msg_id: str, pose: tuple[float, ...], times: tuple[float, float]) -> None:
+    """The ack is written in one formatting now: each number must still read as pyadept writes it
+    (three decimals, never '-0.000'), and decode to what the writer meant."""
+    t_recv, t_done = (abs(t) for t in times)
+    ack = codec.Ack(msg_id, t_recv, t_done, pose)  # type: ignore[arg-type]
+    numbers = [codec.format_number(t_recv, codec.MAX_TIMESTAMP), codec.format_number(t_done, codec.MAX_TIMESTAMP)]
+    expected = f"{msg_id}:done:{numbers[0]},{numbers[1]}:{','.join(codec.format_number(v) for v in pose)}\r\n".encode()
+    assert ack.encode() == expected
+    assert codec.decode_ack(expected[:-2]) == codec.Ack(msg_id, float(numbers[0]), float(numbers[1]), tuple(float(codec.format_number(v)) for v in pose))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("bad_value", "bad_time"), [(float("nan"), float("nan")), (float("inf"), -float("inf")), (1e6, 1e8), (-1e6, -1e8)])
+def test_an_ack_with_a_number_out_of_bounds_is_not_written(bad_value: float, bad_time: float) -> None:
+    with pytest.raises(ValueError):
+        codec.Ack("ab12", 0.0, 0.0, (0.0, bad_value, 0.0, 0.0, 0.0, 0.0)).encode()
+    with pytest.raises(ValueError):
+        codec.Ack("ab12", 0.0, bad_time, (0.0,) * 6).encode()  # type: ignore[arg-type]
+
+
+def test_a_command_read_again_is_the_same_and_a_refused_one_is_refused_every_time() -> None:
+    """The server keeps the commands it decoded, by their text: the same line gives an equal
+    message with its own id; a line it refused is refused again (nothing refused is kept)."""
+    first = codec.decode_message(b"0a1b2c3d:set_speed:50")
+    again = codec.decode_message(b"ffff0000:set_speed:50")
+    assert again == Message("ffff0000", first.command) and again.command == codec.set_speed(50)
+    for _ in range(2):
+        with pytest.raises(codec.DecodeError, match="set_speed takes a percentage"):
+            codec.decode_message(b"0a1b2c3d:set_speed:150")
+    assert codec.decode_message(b"0a1b2c3d:move_to:1,2,3,4,5,6").command.args == (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)

@@ -129,6 +129,14 @@ def format_number(value: float, limit: float = MAX_ABS_VALUE) -> str:
     return "0.000" if text == "-0.000" else text
 
 
+_ACK_FORMAT = "%s:%s:%.3f,%.3f:%.3f,%.3f,%.3f,%.3f,%.3f,%.3f"
+
+
+def _within(values: Sequence[float], limit: float) -> bool:
+    """Every value finite and below ``limit`` in magnitude (format_number's test, for several at once)."""
+    return all(math.isfinite(v) and abs(v) < limit for v in values)
+
+
 def _parse_numbers(text: str, count: int, what: str, line: bytes) -> tuple[float, ...]:
     parts = text.split(",")
     if len(parts) != count:
@@ -212,6 +220,13 @@ def encode_messages(messages: Sequence[Message]) -> bytes:
     return b"".join(m.encode() for m in messages)
 
 
+#: Commands already decoded, by the text after the id: a server reads the same few (break, speeds,
+#: gripper) again and again, and a command is immutable.  Only commands that decoded cleanly go in;
+#: bounded, and emptied when full.
+_DECODED: dict[str, Command] = {}
+_DECODED_MAX = 1024
+
+
 def decode_message(line: bytes) -> Message:
     """Parse one command message (without its delimiter), as the server does."""
     text = _ascii(line)
@@ -221,6 +236,10 @@ def decode_message(line: bytes) -> Message:
     msg_id = parts[0]
     if not _ID.fullmatch(msg_id):
         raise DecodeError(f"bad message id {msg_id!r}", line)
+    payload = text[len(msg_id) + 1:]
+    known = _DECODED.get(payload)
+    if known is not None:
+        return Message(msg_id, known)
     skill = _SKILLS.get(parts[1])
     if skill is None:
         raise UnknownSkill(f"unknown skill {parts[1]!r}", line, msg_id, parts[1])
@@ -228,14 +247,21 @@ def decode_message(line: bytes) -> Message:
     if arity == 0:
         if len(parts) == 3:
             raise DecodeError(f"{skill.value} takes no arguments", line)
-        return Message(msg_id, Command(skill))
+        return Message(msg_id, _remember(payload, Command(skill)))
     if len(parts) != 3:
         raise DecodeError(f"{skill.value} needs {arity} argument(s)", line)
     args = _parse_numbers(parts[2], arity, skill.value, line)
     try:
-        return Message(msg_id, Command(skill, args))
+        return Message(msg_id, _remember(payload, Command(skill, args)))
     except ValueError as error:
         raise DecodeError(str(error), line) from None
+
+
+def _remember(payload: str, command: Command) -> Command:
+    if len(_DECODED) >= _DECODED_MAX:
+        _DECODED.clear()
+    _DECODED[payload] = command
+    return command
 
 
 # --------------------------------------------------------------------------------- acks
@@ -255,9 +281,16 @@ class Ack:
     status: str = "done"
 
     def encode(self) -> bytes:
-        times = f"{format_number(self.t_recv, MAX_TIMESTAMP)},{format_number(self.t_done, MAX_TIMESTAMP)}"
-        pose = ",".join(format_number(v) for v in self.pose)
-        return f"{self.id}:{self.status}:{times}:{pose}".encode("ascii") + DELIMITER
+        t_recv, t_done, pose = self.t_recv, self.t_done, self.pose
+        if not (len(pose) == 6 and _within(pose, MAX_ABS_VALUE) and _within((t_recv, t_done), MAX_TIMESTAMP)):
+            times = f"{format_number(t_recv, MAX_TIMESTAMP)},{format_number(t_done, MAX_TIMESTAMP)}"  # raises the ValueError
+            return f"{self.id}:{self.status}:{times}:{','.join(format_number(v) for v in pose)}".encode("ascii") + DELIMITER
+        # every number as format_number writes it, in one formatting: a lone "-0.000" (and only a
+        # negative zero is written so with three decimals) becomes "0.000"
+        text = _ACK_FORMAT % (self.id, self.status, t_recv, t_done, *pose)
+        if "-0.000" in text:
+            text = ":".join(",".join("0.000" if n == "-0.000" else n for n in part.split(",")) for part in text.split(":"))
+        return text.encode("ascii") + DELIMITER
 
 
 _NUM = rb"-?[0-9]{1,10}(?:\.[0-9]{1,6})?"  # no groups: the line is split once it has matched
