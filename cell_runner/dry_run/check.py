@@ -53,9 +53,13 @@ def check(
     kept in ``cache`` (default: the per-user one) and a kept one is used instead of a dry run (one
     line to ``out`` with ``summary``); never over a file of ``avoid`` (the run's inputs and outputs).
     """
-    cache = cache if cache is not None else VerdictCache()
+    try:
+        cache = cache if cache is not None else VerdictCache()
+    except RuntimeError as error:  # no home folder to keep it in (HOME unset, no password entry): checked every time
+        log.info("dry run: no kept verdicts: %s", error)
+        read_at = None
     key = _key(app, backend, options, trajectory_db, read_at)
-    kept = cache.get(key) if key is not None else None
+    kept = cache.get(key) if key is not None and cache is not None else None
     if kept is not None:
         if summary:
             out.write(kept.line() + "\n")
@@ -78,7 +82,7 @@ def check(
         out.write("\n".join(report.summary_lines()) + "\n")
     elif report.notes:
         err.write("".join(f"{file}: not checked: {note}\n" for note in report.notes))
-    if report.ok and key is not None and _key(app, backend, options, trajectory_db, read_at) == key:  # nothing changed meanwhile
+    if report.ok and key is not None and cache is not None and _key(app, backend, options, trajectory_db, read_at) == key:  # nothing changed meanwhile
         cache.put(key, Verdict(report, time.time()), avoid)
     return (OK if report.ok else FOUND), report
 
