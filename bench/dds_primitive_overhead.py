@@ -1,7 +1,10 @@
 """Overhead per primitive with every node in its own process over Cyclone DDS (no ROS), beside the
 in-process figure, and joint-state throughput between two processes.
 
-Needs only ``pip install '.[dds]'``.  One run measures, side by side and interleaved (three rounds, medians):
+Needs only ``pip install '.[dds]'``.  One run measures, side by side and interleaved (five rounds by
+default; each round every side once, one after the other, and prints its own line; then the medians,
+and each ratio as the median of the rounds' own ratios, since the two sides of a round saw the same
+load):
 
 * in-process: engine, three group machines and the Nextage simulator bridge as nodes of one process on
   the local transport (``bench/primitive_overhead.py``);
@@ -16,7 +19,12 @@ primitives (machine <-> bridge per primitive).  Then joint-state throughput: a c
 ``sensor_msgs/JointState`` of the Nextage's 15 joints as fast as it can through the DDS transport,
 this process receives them through the DDS transport; messages per second delivered to the callback.
 
-Run:  python bench/dds_primitive_overhead.py [N]
+Each side waits for what it measures before the clock starts: the raw side until the echo has
+answered (both directions matched), the engine by a warm-up run of both applications (its link to the
+machines is bounded by ``startup_timeout``); the engine's DDS transport and the raw participant stay
+up through every round.
+
+Run:  python bench/dds_primitive_overhead.py [N] [ROUNDS]
 """
 from __future__ import annotations
 
@@ -36,9 +44,11 @@ sys.path.insert(0, str(ROOT / "test"))
 
 from dds_domain import hold_domain  # noqa: E402
 from primitive_overhead import BenchFunctions  # noqa: E402
-from ros_primitive_overhead import ECHO_TEXT, in_process, per_process, start_nodes  # noqa: E402
+from ros_primitive_overhead import ECHO_TEXT, ENGINE_PARAMETERS, applications, in_process, start_nodes, time_runs  # noqa: E402
 
 from app_functions.registry import LIBRARIES  # noqa: E402
+from cell_runner.libraries import APPLICATION_FUNCTIONS  # noqa: E402
+from execution_engine.engine.engine import ExecutionEngine  # noqa: E402
 from node_transport.clock import Clock, real_clock, run_with_clock  # noqa: E402
 from node_transport.dds import DdsTransport  # noqa: E402
 
@@ -90,50 +100,55 @@ def echo_process() -> int:
     return 0
 
 
-def raw_round_trip(n: int) -> float:
-    from cyclonedds.core import Listener
+class RawRoundTrip:
+    """A bare cyclonedds participant of this process pinging the echo process: no project code on the
+    way.  This side waits in a WaitSet on its own thread (no listener: the engine's DDS transport
+    writes from this process at the same time, see node_transport/dds_waiter.py)."""
 
-    participant = _raw_participant()
-    string, writer, (p, topic, qos, reader_class) = _raw_endpoints(participant, "rt/bench_pong", "rt/bench_ping")
-    answered = threading.Event()
+    def __init__(self) -> None:
+        from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
 
-    readers: list[object] = []
+        self.participant = _raw_participant()
+        self.string, self.writer, (p, topic, qos, reader_class) = _raw_endpoints(self.participant, "rt/bench_pong", "rt/bench_ping")
+        self.reader = reader_class(p, topic, qos=qos)
+        self.waitset = WaitSet(self.participant)
+        self.waitset.attach(ReadCondition(self.reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+        self.message = self.string(data=ECHO_TEXT)
 
-    def pong(_reader: object) -> None:
-        if readers and readers[0].take(N=64):  # type: ignore[attr-defined]
-            answered.set()
+    def ready(self, timeout: float = 60.0) -> None:
+        """Until the echo answers: both directions matched (discovery is per side)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.writer.get_matched_subscriptions():  # type: ignore[attr-defined]
+                try:
+                    self.once(0.1)
+                    return
+                except TimeoutError:
+                    pass
+            else:
+                time.sleep(0.01)
+        raise RuntimeError(f"the echo process did not answer within {timeout:g} s")
 
-    reader = reader_class(p, topic, qos=qos, listener=Listener(on_data_available=pong))
-    readers.append(reader)
-    deadline = time.monotonic() + 30.0
-    while not (writer.get_matched_subscriptions() and reader.get_matched_publications()):  # type: ignore[attr-defined]
-        if time.monotonic() > deadline:
-            raise RuntimeError("the echo process never matched")
-        time.sleep(0.01)
-    message = string(data=ECHO_TEXT)
-    for _ in range(300):  # until the echo's writer has matched our reader too (discovery is per side)
-        answered.clear()
-        writer.write(message)  # type: ignore[attr-defined]
-        if answered.wait(0.1):
-            break
+    def once(self, timeout: float = 5.0) -> None:
+        from cyclonedds.util import duration
 
-    def once() -> None:
-        answered.clear()
-        writer.write(message)  # type: ignore[attr-defined]
-        if not answered.wait(5.0):
-            raise RuntimeError("the echo process stopped answering")
+        self.writer.write(self.message)  # type: ignore[attr-defined]
+        while not self.reader.take(N=64):  # type: ignore[attr-defined]
+            if not self.waitset.wait(duration(seconds=timeout)):
+                raise TimeoutError("the echo process stopped answering")
 
-    try:
+    def seconds_per_round_trip(self, n: int) -> float:
         for _ in range(max(10, n // 10)):
-            once()
+            self.once()
         t0 = time.perf_counter()
         for _ in range(n):
-            once()
+            self.once()
         return (time.perf_counter() - t0) / n
-    finally:  # no listener may fire into a finalizing interpreter
+
+    def close(self) -> None:
         from node_transport.dds_entities import delete
 
-        delete(participant)
+        delete(self.participant)
 
 
 THROUGHPUT_PUBLISHER = """
@@ -183,45 +198,103 @@ async def joint_state_throughput(clock: Clock, env: dict[str, str]) -> tuple[flo
     return (len(times) - 1) / (times[-1] - times[0]), len(times), THROUGHPUT_MESSAGES
 
 
+ROUNDS = 5
+
+
+def cpu_seconds(pids: list[int]) -> float:
+    """CPU time (user + system) the processes ``pids`` have used so far (Linux /proc)."""
+    total = 0
+    for pid in pids:
+        with open(f"/proc/{pid}/stat") as stream:
+            fields = stream.read().rsplit(")", 1)[1].split()
+        total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK")
+
+
+async def measure(clock: Clock, n: int, rounds: int, nodes: list[int], echo: int) -> list[dict[str, float]]:
+    """Seconds per primitive or round trip, ``rounds`` times, each round all sides one after the other;
+    beside each wall figure the CPU all the processes of that side used for it (``cpu_*``): on a shared
+    host the wall figure follows the load, the CPU figure much less."""
+    raw = RawRoundTrip()
+    transport = DdsTransport(clock, ["bench"])
+    engine_side, raw_side = [os.getpid(), *nodes], [os.getpid(), echo]
+    try:
+        raw.ready()  # the echo answers
+        engine = ExecutionEngine(transport.create_node("execution_engine", parameters=ENGINE_PARAMETERS), APPLICATION_FUNCTIONS.catalog(None))
+        await time_runs(engine, max(10, n // 10))  # the engine links to the machines (bounded) and warms up
+        rows = []
+        for index in range(rounds):
+            cpu = cpu_seconds(raw_side)
+            row = {"raw": raw.seconds_per_round_trip(n)}
+            row["cpu_raw"] = (cpu_seconds(raw_side) - cpu) / (n + max(10, n // 10))
+            for path, application in applications(n).items():
+                cpu, t0 = cpu_seconds(engine_side), time.perf_counter()
+                report = await engine.run(application)  # type: ignore[arg-type]
+                row[f"dds_{path}"] = (time.perf_counter() - t0) / n
+                row[f"cpu_dds_{path}"] = (cpu_seconds(engine_side) - cpu) / n
+                assert report.ok, report.summary_lines()
+            row.update({f"local_{path}": seconds for path, seconds in (await in_process(clock, n)).items()})
+            rows.append(row)
+            print(f"round {index + 1}: raw round trip {row['raw'] * 1e6:7.1f} us (CPU {row['cpu_raw'] * 1e6:5.0f} us) | "
+                  f"over DDS, within a skill {row['dds_skill'] * 1e6:7.1f} us = {row['dds_skill'] / row['raw']:4.1f}x raw "
+                  f"(CPU {row['cpu_dds_skill'] * 1e6:5.0f} us = {row['cpu_dds_skill'] / row['cpu_raw']:4.1f}x), one per function "
+                  f"{row['dds_function'] * 1e6:7.1f} us | in one process {row['local_skill'] * 1e6:6.1f} / "
+                  f"{row['local_function'] * 1e6:6.1f} us", flush=True)
+        return rows
+    finally:
+        raw.close()
+        await transport.shutdown()
+
+
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--echo":
         sys.exit(echo_process())
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
+    rounds = int(sys.argv[2]) if len(sys.argv) > 2 else ROUNDS
     LIBRARIES["bench"] = BenchFunctions
     # a domain no test or other bench uses while this runs (test/dds_domain.py)
     os.environ.update(ROS_DOMAIN_ID=str(hold_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", CYCLONEDDS_URI=LOOPBACK)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    local_runs, dds_runs, raw_runs = [], [], []
     processes = start_nodes(env, ("--transport", "dds"))
     processes.append(subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--echo"], env=env, cwd=ROOT))
     try:
-        for _ in range(3):  # interleaved, so all see the same machine load
-            local_runs.append(run_with_clock(lambda c: in_process(c, n), real_clock()))
-            dds_runs.append(run_with_clock(lambda c: per_process(c, n, DdsTransport), real_clock()))
-            raw_runs.append(raw_round_trip(n))
+        nodes, echo = [p.pid for p in processes[:-1]], processes[-1].pid
+        rows = run_with_clock(lambda c: measure(c, n, rounds, nodes, echo), real_clock())
     finally:
         for process in processes:
             process.terminate()
         for process in processes:
             process.wait(timeout=20)
     rate, delivered, sent = run_with_clock(lambda c: joint_state_throughput(c, env), real_clock())
-    us = {
-        f"{where}_{path}_us": round(statistics.median(r[path] for r in runs) * 1e6, 1)
-        for where, runs in (("in_process", local_runs), ("per_process_dds", dds_runs))
-        for path in ("function", "skill")
-    }
-    us["raw_cyclonedds_round_trip_us"] = round(statistics.median(raw_runs) * 1e6, 1)
-    ratios = {f"ratio_{path}": round(us[f"per_process_dds_{path}_us"] / us[f"in_process_{path}_us"], 2) for path in ("function", "skill")}
-    ratios["ratio_skill_vs_raw_round_trip"] = round(us["per_process_dds_skill_us"] / us["raw_cyclonedds_round_trip_us"], 2)
+
+    def median_us(key: str) -> float:
+        return round(statistics.median(row[key] for row in rows) * 1e6, 1)
+
+    def median_ratio(top: str, bottom: str) -> float:  # each round's own ratio: the two sides saw the same load
+        return round(statistics.median(row[top] / row[bottom] for row in rows), 2)
+
+    us = {f"{where}_{path}_us": median_us(f"{key}_{path}") for where, key in (("in_process", "local"), ("per_process_dds", "dds"))
+          for path in ("function", "skill")}
+    us["raw_cyclonedds_round_trip_us"] = median_us("raw")
+    us["cpu_per_process_dds_skill_us"] = median_us("cpu_dds_skill")
+    us["cpu_per_process_dds_function_us"] = median_us("cpu_dds_function")
+    us["cpu_raw_cyclonedds_round_trip_us"] = median_us("cpu_raw")
+    ratios = {f"ratio_{path}": median_ratio(f"dds_{path}", f"local_{path}") for path in ("function", "skill")}
+    ratios["ratio_skill_vs_raw_round_trip"] = median_ratio("dds_skill", "raw")
+    ratios["cpu_ratio_skill_vs_raw_round_trip"] = median_ratio("cpu_dds_skill", "cpu_raw")
     result = {
-        "primitives": n, "runs": 3, **us, **ratios,
+        "primitives": n, "runs": rounds, **us, **ratios,
         "joint_states_per_s": round(rate), "joint_states_delivered": delivered, "joint_states_sent": sent,
     }
+    print(f"medians of {rounds} rounds (ratios: each round's own, then the median):")
     for path, label in (("function", "one primitive per function"), ("skill", "within one skill")):
         print(f"{label:28s} in-process {us[f'in_process_{path}_us']:8.1f} us, per-process over DDS "
               f"{us[f'per_process_dds_{path}_us']:8.1f} us per primitive ({ratios[f'ratio_{path}']}x)")
     print(f"{'raw cyclonedds round trip':28s} {us['raw_cyclonedds_round_trip_us']:8.1f} us "
           f"(a primitive within a skill: {ratios['ratio_skill_vs_raw_round_trip']}x of it)")
+    print(f"{'CPU, all processes':28s} {us['cpu_per_process_dds_skill_us']:8.1f} us per primitive within a skill, "
+          f"{us['cpu_per_process_dds_function_us']:8.1f} us per function, {us['cpu_raw_cyclonedds_round_trip_us']:6.1f} us per raw "
+          f"round trip (skill: {ratios['cpu_ratio_skill_vs_raw_round_trip']}x)")
     print(f"{'joint_states (15 joints)':28s} {rate:8.0f} messages/s delivered ({delivered} of {sent}, reliable, depth 10)")
     print(json.dumps(result))
 

@@ -17,6 +17,7 @@ rather than one per sample.
 from __future__ import annotations
 
 import asyncio
+import collections
 import ctypes
 import itertools
 import logging
@@ -175,29 +176,35 @@ class DdsWaiter:
 
 
 class Inbox:
-    """What the waiter's handlers give the loop, handed over once per wake: a loop that is woken
-    per sample (``call_soon_threadsafe`` writes its wake-up pipe each time) spends more on waking
-    than on the sample, and the waiter waits for the GIL behind it each time."""
+    """What the waiter's handlers give the loop, handed over once per wake, and not at all while a
+    hand-over is still waiting for the loop: a loop that is woken per sample (``call_soon_threadsafe``
+    writes its wake-up pipe each time) spends more on waking than on the sample, and the waiter waits
+    for the GIL behind it each time."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
-        self._batch: list[tuple[Callable[..., Any], tuple[Any, ...]]] = []  # the waiter's thread only
+        self._queue: collections.deque[tuple[Callable[..., Any], tuple[Any, ...]]] = collections.deque()
+        self._scheduled = False  # a drain is on the loop's ready list and has not started
 
     def put(self, callback: Callable[..., Any], *args: Any) -> None:
-        """The waiter's thread: run ``callback(*args)`` on the loop, in this order, at the hand-over."""
-        self._batch.append((callback, args))
+        """The waiter's thread: run ``callback(*args)`` on the loop, in this order."""
+        self._queue.append((callback, args))
 
     def hand_over(self) -> None:
-        """The waiter's thread, after a wake's handlers: one call on the loop for all they gave."""
-        if self._batch:
-            batch, self._batch = self._batch, []
+        """The waiter's thread, after a wake's handlers: wake the loop unless a drain is already due
+        (it takes what was put before it starts: the flag is cleared before the queue is read)."""
+        if self._queue and not self._scheduled:
+            self._scheduled = True
             try:
-                self._loop.call_soon_threadsafe(self._run, batch)
+                self._loop.call_soon_threadsafe(self._drain)
             except RuntimeError:
-                pass  # the loop is closed: nobody is left to hear it
+                self._queue.clear()  # the loop is closed: nobody is left to hear it
 
-    def _run(self, batch: list[tuple[Callable[..., Any], tuple[Any, ...]]]) -> None:
-        for callback, args in batch:
+    def _drain(self) -> None:
+        self._scheduled = False
+        queue = self._queue
+        for _ in range(len(queue)):  # what came meanwhile has its own drain: other callbacks run between
+            callback, args = queue.popleft()
             try:
                 callback(*args)
             except Exception as error:  # noqa: BLE001 - one delivery's defect must not drop the others
