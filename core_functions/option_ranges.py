@@ -130,7 +130,7 @@ SETTINGS: tuple[Setting, ...] = (
             "how long a node (a stopped primitive) may take to stop"),
     # -- the Nextage simulator
     Setting("control_period", Range(0.001, 0.5, "s"), "nextage-sim option and parameter control_period",
-            "simulation step: joint limits and collisions are checked at every one (the dry run uses 0.5)"),
+            "simulation step: joint limits are checked at every one, collisions once per motion (the dry run uses 0.5)"),
     # -- V+
     Setting("timeout", ANSWER, "vplus option and parameter timeout", "ack allowance per command on top of its motion time", "vplus"),
     Setting("retries", Range(0, 100, integer=True), "vplus option and parameter retries", "connection attempts after the first"),

@@ -160,6 +160,7 @@ class CollisionScene:
         self._boxes: list[tuple[CellBox, Solid, NDArray[np.float64]]] = []
         self._link_pairs = self._robot_pairs()
         self._layout: Layout | None = None
+        self._layouts: dict[tuple[Any, ...], Layout] = {}  # (tools, held parts) -> its layout: they recur (pick, insert, let go)
 
     # ------------------------------------------------------------------ what is in the scene
     def set_tool(self, group: str, tool: Pose) -> None:
@@ -174,6 +175,7 @@ class CollisionScene:
 
     def set_cell(self, boxes: Sequence[CellBox]) -> None:
         self._layout = None
+        self._layouts.clear()
         self._boxes = [(box, Solid(Body(_CELL, box.frame), coal.Box(*box.size), _box_radius(box.size)), box.pose.matrix()) for box in boxes]
 
     def set_held(self, group: str, part: HeldPart | None) -> None:
@@ -231,7 +233,13 @@ class CollisionScene:
     def layout(self) -> Layout:
         """The scene's solids, pairs and levers as it is now (built once per change of tool, held part or cell)."""
         if self._layout is None:
-            self._layout = self._build_layout()
+            key = (tuple(t.tool for t in self.tcps.values()), tuple(sorted((g, part) for g, (part, _) in self._held.items())))
+            known = self._layouts.get(key)
+            if known is None:
+                known = self._build_layout()
+                if len(self._layouts) < 64:
+                    self._layouts[key] = known
+            self._layout = known
         return self._layout
 
     def _build_layout(self) -> Layout:

@@ -41,7 +41,10 @@ Vector = NDArray[np.float64]
 RESOLUTION = 0.001
 #: Pairs whose bounding spheres are this much farther apart than the threshold are not measured
 #: exactly: the spheres' gap is a lower bound and already gives a long step (m).
-EXACT_BEYOND = 0.15
+EXACT_BEYOND = 0.1
+#: A pair this far to falling due (a fraction of its wait) is checked with the pairs that are due: early is
+#: always safe, and pairs in step share one placement of the robot.
+EARLY = 0.25
 #: A motion's speed bound is taken per this many equal pieces of it (slower on its ramps: longer steps).
 PIECES = 8
 _TIME = 1e-9  # s: checks this close are the same instant
@@ -122,7 +125,7 @@ class Advancement:
             wait = np.where(budget <= 0.0, 0.0, np.where(rate > 0.0, budget / rate, np.inf))
         wait[self._excluded[pairs]] = np.inf
         self._due[pairs] = self._t_ref[pairs] + wait
-        self._half[pairs] = self._t_ref[pairs] + 0.5 * wait
+        self._half[pairs] = self._t_ref[pairs] + EARLY * wait
 
     # ------------------------------------------------------------------ checking
     def due(self) -> float:

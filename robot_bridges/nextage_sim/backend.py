@@ -141,7 +141,7 @@ class NextageSimBackend(RobotBackend):
 
     @property
     def control_period(self) -> float:
-        """s between two steps of a motion (and two checks of its limits and collisions)."""
+        """s between two steps of a motion (and two checks of its joint limits; collisions are proven per motion)."""
         return self._jobs.control_period
 
     async def close(self) -> None:
@@ -553,8 +553,8 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> NextageSetting
     default: two bodies touching stop the motion with a ``collision`` fault; ``off``) and ``<camera>_mount`` (a
     camera's hand-eye calibration, six numbers x y z roll pitch yaw in its link); a controller address makes
     no sense for a simulator and is refused rather than ignored.  ``control_period`` lies in its range
-    (core_functions.option_ranges: [0.001, 0.5] s): a longer step would let a motion pass a joint limit or a
-    collision between two checks.
+    (core_functions.option_ranges: [0.001, 0.5] s): a longer step would let a motion pass a joint limit
+    between two checks (collisions are proven per motion, whatever the period: guard.py).
     """
     options.check("nextage-sim", NEXTAGE_OPEN, _EXTRAS)
     given = [n for n, v in (("host", options.host), ("port", options.port), ("rsi_listen", options.rsi_listen)) if v is not None]
