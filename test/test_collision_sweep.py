@@ -18,9 +18,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from core_functions.geometry import Pose
+from core_functions.primitives import MoveJoints
 from core_functions.robots import KUKA_KR, NEXTAGE_OPEN
+from node_transport.clock import Clock, run_with_clock, simulated_clock
+from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.collision import CellBox, scene_for
 from robot_bridges.collision.sweep import RESOLUTION, Track, sweep_tracks
+from robot_bridges.nextage_sim.backend import NextageSimBackend
 from robot_bridges.nextage_sim.model import NextageModel
 from robot_bridges.nextage_sim.trajectory import Chain, plan_joint_move, plan_replay
 
@@ -32,6 +36,7 @@ NEXTAGE.set_cell([
     CellBox("post", Pose.from_xyz_rpy(0.45, -0.2, 0.1), (0.004, 0.004, 0.3)),
 ])
 INITIAL = MODEL.named_pose("initial")
+LEFT = NEXTAGE_OPEN.group("left_arm").joint_names
 
 
 def line(scene, group: str, a: np.ndarray, b: np.ndarray, start: float, duration: float) -> Track:
@@ -157,3 +162,33 @@ def test_no_joint_of_a_planned_motion_is_faster_than_its_speed_bound(seed: int) 
         a, b = sorted(rng.uniform(0.0, motion.duration, 2))
         inside = (times[:-1] >= a) & (times[1:] <= b)
         assert np.all(speeds[inside] <= motion.speed_bound(a, b) * (1 + 1e-6) + 1e-9)
+
+
+def test_the_simulator_sweeps_a_motion_once_and_stops_it_where_the_arm_touches() -> None:
+    """A 4 mm post stands where the left hand passes half-way through a shoulder turn: the simulator sweeps the
+    motion once as it starts (not at each of its control periods), fails it with a collision fault naming the
+    post, and leaves the arm where it touched (no deeper than the guard's 0.1 mm resolution, plus the margin
+    of coal's distance), not a control period further in."""
+    async def main(clock: Clock) -> None:
+        backend = NextageSimBackend(clock, check_collisions=True)
+        scene = backend.collisions
+        assert scene is not None
+        names, values = backend.joint_state()
+        start = np.array(values)
+        goal = start.copy()
+        goal[names.index("LARM_JOINT0")] += 0.6
+        mid = 0.5 * (start + goal)
+        scene.place(np.array([mid[names.index(n)] for n in scene.joint_names]))
+        hand = scene.gdata.oMg[[s.body.name for s in scene.layout().solids].index("LARM_JOINT5_Link")].translation
+        scene.set_cell([CellBox("post", Pose.from_xyz_rpy(float(hand[0]), float(hand[1]), float(hand[2])), (0.004, 0.004, 0.4))])
+        with pytest.raises(BridgeError) as info:
+            await backend.execute("left_arm", MoveJoints(positions=tuple(goal[names.index(n)] for n in LEFT), joint_names=LEFT))
+        assert info.value.kind is FaultKind.COLLISION and "collision between left_arm" in info.value.detail and "cell post" in info.value.detail
+        ticks = round(float(info.value.detail.split("at t = ")[1].split(" s")[0]) / backend.control_period)
+        assert ticks > 20 and backend._guard is not None and backend._guard.sweeps <= 2
+        names, values = backend.joint_state()
+        q = np.array([values[names.index(n)] for n in scene.joint_names])
+        touching = [c.distance for c in scene.contacts(q) if "post" in (c.a.name, c.b.name)]
+        assert touching and -0.001 <= min(touching) <= 0.0
+
+    run_with_clock(main, simulated_clock())
