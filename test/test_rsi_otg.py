@@ -56,20 +56,24 @@ def test_retargets_keep_velocity_continuous_and_within_the_limits(plan, lim) -> 
     vmax, amax = lim
     otg = VectorOTG([3], DT)
     otg.reset(np.zeros(3))
-    before = np.zeros(3)
+    # Every cycle's velocity, checked in bulk below (the same bounds on every cycle, without a numpy call per cycle):
+    # while retargeting, within vmax and changing by at most amax * DT a cycle; then, to the last target, smooth.
+    retargeting = [np.zeros(3)]
     for after_cycles, target in plan:
         otg.set_target(target, vmax, amax)
         for _ in range(after_cycles):
             otg.step()
-            assert np.linalg.norm(otg.velocity) <= vmax * (1 + 1e-9)
-            assert np.linalg.norm(otg.velocity - before) <= amax * DT * (1 + 1e-9)
-            before = otg.velocity.copy()
+            retargeting.append(otg.velocity.copy())
+    moving = np.array(retargeting)
+    assert (np.linalg.norm(moving[1:], axis=1) <= vmax * (1 + 1e-9)).all()
     final = np.array(plan[-1][1])
+    landing = [moving[-1]]
     for _ in range(200_000):
         if otg.step():
             break
-        assert np.linalg.norm(otg.velocity - before) <= amax * DT * (1 + 1e-9)
-        before = otg.velocity.copy()
+        landing.append(otg.velocity.copy())
+    steps = np.diff(np.concatenate([moving, np.array(landing[1:]).reshape(-1, 3)]), axis=0)
+    assert (np.linalg.norm(steps, axis=1) <= amax * DT * (1 + 1e-9)).all()
     assert otg.done and np.array_equal(otg.position, final)
 
 
