@@ -16,7 +16,8 @@ moment is not a dead process), and hears everybody else's.  A matched publisher 
 that pulses is live while that participant pulsed within the publisher's own lease: a process
 killed or cut off drops out within its lease as before, and one that pulses again is live again at
 once.  A publisher of a participant that does not pulse (a ROS 2 node on rmw_cyclonedds_cpp, a ROS
-2 tool) is judged by Cyclone's liveliness as before.  The topic has no ``rt/`` prefix, so ROS 2
+2 tool) is judged by Cyclone's liveliness as before, and so is one whose process holds its GIL for a
+while (no pulse, but Cyclone's threads renew its leases): the count is never below Cyclone's.  The topic has no ``rt/`` prefix, so ROS 2
 tools do not list it.
 """
 from __future__ import annotations
@@ -123,9 +124,12 @@ class LiveCount:
                 others += 1
             elif now - last <= lease:
                 live += 1
+        alive = int(self.reader.get_liveliness_changed_status().alive_count)
         if others:  # Cyclone cannot say which writers are alive, only how many: never more than are matched
-            live += min(others, int(self.reader.get_liveliness_changed_status().alive_count))
-        return live
+            live += min(others, alive)
+        # a peer whose Python is held up (a long call holding the GIL) does not pulse, but Cyclone's own
+        # threads still renew its writers' leases: what Cyclone counts alive is alive
+        return max(live, alive)
 
 
 def lease_of(qos: Any) -> float:

@@ -9,6 +9,9 @@ the fix, Cyclone marked that idle writer "not alive" for good (only a write of i
 and every later reader of this process saw it "matched but not alive", so the second engine's link
 failed after its whole timeout -- what busy hosts did by chance, in 5 runs of 5 of the bench.  Every
 wait is bounded by a deadline on a condition; the DDS transport runs on the wall clock by design.
+
+And the other way round: a peer that stops pulsing while Cyclone's threads still renew its leases (its
+Python held up by a long call) is not counted lost.
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -29,6 +33,7 @@ from execution_engine.engine.engine import ExecutionEngine
 from cell_runner.libraries import APPLICATION_FUNCTIONS
 from node_transport.clock import Clock, real_clock, run_with_clock
 from node_transport.dds import DdsTransport
+from node_transport.msgs import String
 from node_transport.port import poll_until
 from node_transport.qos import COMMANDS
 from node_transport.typed import MachineResultMsg
@@ -114,3 +119,57 @@ def test_a_second_engine_links_after_2000_primitives_and_a_stalled_machine(
     run_with_clock(first, real_clock())
     assert all(p.poll() is None for p in processes.values()), "a node process ended"
     run_with_clock(second, real_clock())
+
+
+QUIET_PUBLISHER = """
+import asyncio, sys
+from node_transport.clock import real_clock, run_with_clock
+from node_transport.dds import DdsTransport
+from node_transport.msgs import String
+from node_transport.qos import COMMANDS
+
+async def main(clock):
+    transport = DdsTransport(clock)
+    transport.create_node("busy").create_publisher(String, "left_arm/sm/result", COMMANDS)
+    print("ready", flush=True)
+    sys.stdin.readline()
+    transport.waiter.every(lambda: 0.2)  # no more pulses, as when its Python is held up: Cyclone's threads go on
+    print("quiet", flush=True)
+    await asyncio.get_running_loop().create_future()
+
+run_with_clock(main, real_clock())
+"""
+
+
+def test_a_peer_that_stops_pulsing_but_keeps_its_leases_still_counts() -> None:
+    """A process whose Python is held up does not pulse, but Cyclone renews its writers' leases: not lost."""
+    with domain_env() as env:  # the two processes alone: only the quiet one pulses to the watcher
+        quiet_peer(env)
+
+
+def quiet_peer(env: dict[str, str]) -> None:
+    child = subprocess.Popen([sys.executable, "-c", QUIET_PUBLISHER], cwd=ROOT, env={**os.environ, **env, "PYTHONPATH": str(ROOT)},
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout is not None and child.stdin is not None and child.stdout.readline().strip() == "ready"
+
+        async def main(clock: Clock) -> None:
+            transport = DdsTransport(clock, ["test"], env=env)
+            try:
+                sub = transport.create_node("watcher").create_subscription(String, "left_arm/sm/result", lambda _m: None, COMMANDS)
+                assert await poll_until(clock, lambda: sub.get_publisher_count() == 1 and bool(transport.pulse.heard), BOUND, 0.02)
+                child.stdin.write("\n")
+                child.stdin.flush()
+                assert child.stdout.readline().strip() == "quiet"
+                lease = transport.lease
+                # its last pulse grows older than the lease; all along the publisher counts
+                assert not await poll_until(clock, lambda: sub.get_publisher_count() != 1, 2 * lease + 0.5, 0.02)
+                newest = max(transport.pulse.heard.values())
+                assert time.monotonic() - newest > lease, "the peer kept pulsing: nothing was shown"
+            finally:
+                await transport.shutdown()
+
+        run_with_clock(main, real_clock())
+    finally:
+        child.kill()
+        child.wait(timeout=BOUND)
