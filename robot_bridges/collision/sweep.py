@@ -21,7 +21,12 @@ What is proven, with ``threshold`` T and ``resolution`` r (the minimum step, in 
 So every pair that comes closer than T - r at any instant is reported, and every pair reported
 is closer than T at the instant reported.  A distance is measured by coal where the bounding
 spheres say it may be small and taken as the spheres' gap (a lower bound: still a proof) where
-they are far apart -- the broad phase, vectorised over all pairs at once.
+they are far apart -- the broad phase, vectorised over all pairs at once.  coal's own broad phase
+(``DynamicAABBTreeCollisionManager``) does not fit here from Python: it answers one number for all
+its objects (the closest pair, links that touch by construction included: -37 mm at the Nextage's
+initial pose), its callback cannot be subclassed from Python in coal 3.0 to filter pairs or keep
+each pair's distance, and it costs 38 us per configuration against 15 us for the spheres' gaps of
+all 106 pairs of that scene in numpy (measured 2026-11-27).
 """
 from __future__ import annotations
 
