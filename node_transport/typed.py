@@ -23,6 +23,7 @@ receiver reports and ignores it as before.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, Protocol, TypeVar
 
@@ -110,8 +111,11 @@ def _epoch_time(epoch: float) -> Time:
 
 def stamp_of(clock: Epoch, t: float) -> Time:
     """The ROS time of run time ``t`` on ``clock`` (what :meth:`Node.now_stamp` gives at ``t``)."""
-    epoch, offset = _epoch_time(clock.epoch), Time.from_seconds(t)
-    total = (epoch.sec + offset.sec) * _NANO + epoch.nanosec + offset.nanosec
+    epoch, whole = _epoch_time(clock.epoch), math.floor(t)
+    nanosec = int(round((t - whole) * 1e9))  # as Time.from_seconds(t), without the Time
+    if nanosec == _NANO:
+        whole, nanosec = whole + 1, 0
+    total = (epoch.sec + whole) * _NANO + epoch.nanosec + nanosec
     return Time(total // _NANO, total % _NANO)
 
 
