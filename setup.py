@@ -53,7 +53,7 @@ setup(
     extras_require={
         "studio": STUDIO,
         "dds": ["cyclonedds>=11,<12", "pyyaml>=6"],
-        "test": ["cyclonedds>=11,<12", "pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18", *STUDIO, "httpx>=0.24", "selenium>=4.11"],
+        "test": ["cyclonedds>=11,<12", "pytest>=7", "hypothesis>=6.80", "pyyaml>=6", "jsonschema>=4.18", *STUDIO, "httpx>=0.24", "selenium>=4.11", "pytest-xdist>=3.5"],
     },
     zip_safe=True,
     entry_points={

@@ -19,12 +19,38 @@ settings.register_profile("dev", deadline=None, max_examples=60, suppress_health
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
 
+#: Test files whose point is real time (the KUKA RSI 4 ms loop and its simulated controller on the wall clock): under
+#: pytest-xdist (README's ``-n auto --dist loadgroup``) they share one worker, so no two real-time loops race each
+#: other for the cores; the rest of the suite spreads over the workers.
+REAL_TIME_FILES = frozenset({
+    "test_rsi_backend.py", "test_rsi_busy_computer.py", "test_rsi_linear_recording.py", "test_rsi_loop.py", "test_rsi_node.py",
+    "test_rsi_peer.py", "test_rsi_simulator.py", "test_rsi_streaming.py", "test_rsi_tiny_values.py", "test_rsi_trust.py",
+})
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "xdist_group(name): tests pytest-xdist's --dist loadgroup runs on one worker")
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's worker reads the groups off the marks
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.path.name in REAL_TIME_FILES:
+            item.add_marker(pytest.mark.xdist_group("real_time"))
+
+
 @pytest.fixture(autouse=True)
-def kept_verdicts(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Each test keeps the dry run's verdicts in a folder of its own (cell_runner/dry_run/verdict_cache.py): a test
-    sees the program as a first run does, never a verdict another test or the person running them kept."""
-    base = tmp_path_factory.getbasetemp() / "kept_verdicts"
-    monkeypatch.setenv("XDG_CACHE_HOME", str(base / hashlib.sha256(request.node.nodeid.encode()).hexdigest()[:16]))
+def private_home(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each test has a home and XDG folders of its own: the dry run's kept verdicts (cell_runner/dry_run/verdict_cache.py),
+    the machines' default trajectory database, anything a program keeps per user. A test sees the program as a first
+    run does, never what another test -- one running beside it on another xdist worker -- or the person running them
+    kept, and leaves nothing in the real home."""
+    base = tmp_path_factory.getbasetemp() / "homes" / hashlib.sha256(request.node.nodeid.encode()).hexdigest()[:16]
+    home = base / "home"
+    home.mkdir(parents=True, exist_ok=True)  # some programs (a browser) want it to exist
+    monkeypatch.setenv("HOME", str(home))
+    for name, folder in (("XDG_CACHE_HOME", "cache"), ("XDG_DATA_HOME", "data"), ("XDG_CONFIG_HOME", "config"), ("XDG_STATE_HOME", "state")):
+        monkeypatch.setenv(name, str(base / folder))
 
 
 @pytest.fixture
