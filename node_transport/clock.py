@@ -58,6 +58,10 @@ __all__ = [
 MIN_SPEED, MAX_SPEED = bounds("speed").lower, bounds("speed").upper
 
 
+#: How close to due asyncio runs a timer without waiting (its loops' ``_clock_resolution``).
+_TIMER_RESOLUTION = time.get_clock_info("monotonic").resolution
+
+
 class Clock:
     """Run time in seconds, sleeps and timeouts, all scaled by ``speed``.
 
@@ -150,9 +154,22 @@ class Clock:
         return max(0.0, run_seconds) / self._speed
 
     async def sleep(self, seconds: float) -> None:
-        """Sleep ``seconds`` of run time (0 or less just yields to other tasks)."""
-        self.loop  # noqa: B018 - binds on first use
-        await asyncio.sleep(self.to_wall(seconds))
+        """Sleep ``seconds`` of run time (0 or less just yields to other tasks).
+
+        A positive sleep always lets time move on.  asyncio runs a timer due within its clock's
+        resolution (``time.get_clock_info("monotonic").resolution``, 1 ns) at once, without waiting,
+        and a simulated or paced loop's time moves only while it waits; so a shorter sleep -- at x1000
+        a microsecond of run time -- would end at the instant it began, and a loop waiting for time to
+        pass a mark (a motion's end) would wait at that instant for ever.  Such a sleep lasts the
+        shortest wait the loop can tell apart instead (the float's own step counts too: a paced loop's
+        time is the computer's uptime)."""
+        loop = self.loop
+        delay = self.to_wall(seconds)
+        if delay > 0:
+            now = loop.time()
+            shortest = 2.0 * max(_TIMER_RESOLUTION, math.ulp(now))
+            delay = max(delay, shortest)
+        await asyncio.sleep(delay)
 
     async def sleep_until(self, run_time: float) -> None:
         """Sleep until run time ``run_time``; returns at once if it has passed."""

@@ -153,6 +153,26 @@ def test_a_scaled_clock_refuses_a_loop_that_counts_wall_time() -> None:
         asyncio.run(main())
 
 
+def test_a_sleep_shorter_than_the_loop_can_tell_apart_still_lets_time_pass() -> None:
+    """A motion's last sliver: at x1000 on a computer up for a month, sleeping the 1.7 ns left to a mark
+    (a wall wait far below asyncio's 1 ns timer resolution) once waited at the same instant for ever."""
+    month = 30 * 86400.0
+
+    async def main(clock: Clock) -> list[float]:
+        mark, seen = clock.now() + 1.7e-9, []
+        for _ in range(1000):  # bounded: a livelock ends the loop, not the test run
+            if clock.now() >= mark:
+                break
+            await clock.sleep(mark - clock.now())
+            seen.append(clock.now())
+        return seen
+
+    for make, wall in ((lambda: scaled_clock(FAST), lambda: time.monotonic() + month), (simulated_clock, None)):
+        seen = run_with_clock(main, make(), **({"wall": wall} if wall else {}))
+        assert 1 <= len(seen) <= 2, f"{len(seen)} sleeps to pass a mark 1.7 ns away"
+        assert seen == sorted(seen) and seen[-1] > seen[0] - 1e-12
+
+
 # ------------------------------------------------------------------------------ the machines
 class StallingBackend(ScriptedBackend):
     """A bridge whose computer stalls a minute before each primitive can be accepted."""
