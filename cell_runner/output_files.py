@@ -214,6 +214,15 @@ def check_contents(output: Output) -> None:
             raise Refused(f"{output.named}: is not an SQLite database ({error}); give the file RecordTrajectory wrote, or a new name") from None
 
 
+def _open_for_append(output: Output, target: Path) -> None:
+    """An existing file can be written: opened for appending, which changes nothing."""
+    try:
+        with open(target, "ab"):
+            pass
+    except OSError as error:
+        raise Refused(f"{output.named}: cannot be written ({error.strerror or error}); give a writable file") from None
+
+
 def check_writable(output: Output) -> None:
     """Open an existing output for appending (changes nothing), or create and remove a new one."""
     target = Path(output.path)
@@ -222,11 +231,7 @@ def check_writable(output: Output) -> None:
     except OSError:
         mode = None
     if mode is not None and stat.S_ISREG(mode):
-        try:
-            with open(target, "ab"):
-                pass
-        except OSError as error:
-            raise Refused(f"{output.named}: cannot be written ({error.strerror or error}); give a writable file") from None
+        _open_for_append(output, target)
         return
     if mode is not None:  # a device or a pipe: opened without waiting for a reader, closed again
         try:
@@ -247,6 +252,11 @@ def check_writable(output: Output) -> None:
             return
     try:
         fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    except FileExistsError:  # another run made it since we looked (two runs of one application at once)
+        if not target.is_file():
+            raise Refused(f"{output.named}: cannot be created (something else appeared there); give a writable path") from None
+        _open_for_append(output, target)  # the file it made, checked as any existing one
+        return
     except OSError as error:
         raise Refused(f"{output.named}: cannot be created ({error.strerror or error}); give a writable path") from None
     os.close(fd)

@@ -11,6 +11,7 @@ import sqlite3
 import stat
 import threading
 import time
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -118,6 +119,25 @@ def test_nothing_is_left_behind_by_the_checks(folder: Path) -> None:
     plan_with({}, [Output("--trace", str(folder / "new.jsonl"), "the trace"),
                    Output("--trajectory-db", str(folder / "a" / "b" / "t.sqlite"), "the trajectory database", sqlite=True, reads=True, makes_folders=True)]).check()
     assert snapshot(folder) == before and not (folder / "a").exists()
+
+
+def test_a_file_another_run_makes_meanwhile_is_checked_as_it_is_not_refused(folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two runs of one application at once: the other makes APP.trajectories.sqlite between this check's look and its
+    create; that is the database both will use, not a path that cannot be created (seen with two test workers)."""
+    made = folder / "rivet.trajectories.sqlite"
+    real_open, raced = os.open, []
+
+    def open_after_the_other_run(path: object, flags: int, *args: object) -> int:
+        if Path(str(path)) == made and flags & os.O_EXCL and not made.exists():  # the other run is quicker
+            with closing(sqlite3.connect(made)) as db:
+                db.execute("CREATE TABLE t (x)")
+            raced.append(made.read_bytes())
+        return real_open(path, flags, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(os, "open", open_after_the_other_run)
+    plan_with({}, [Output("--trajectory-db", str(made), "the trajectory database", sqlite=True, reads=True)]).check()
+    monkeypatch.undo()
+    assert raced and made.read_bytes() == raced[0]  # the other run's database, taken as it is and left as it was
 
 
 # -------------------------------------------------------------------------- run, end to end
