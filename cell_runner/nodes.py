@@ -16,7 +16,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from app_functions.registry import full_catalog
 from cell_runner.dry_run.cell_start import CellStarts
 from cell_runner.dry_run.start import StartRefused
 from cell_runner.libraries import APPLICATION_FUNCTIONS
@@ -80,7 +79,7 @@ def load_or_explain(path: str) -> Application:
     if not path:
         raise StartupError("parameter 'application' is required: --ros-args -p application:=/path/app.xml")
     try:
-        return load_application(Path(path), full_catalog())
+        return load_application(Path(path), APPLICATION_FUNCTIONS.catalog(None))
     except ApplicationError as error:
         errors = sum(1 for d in error.diagnostics if d.is_error)
         lines = [f"cannot run {path}: {errors} error(s)", *(str(d) for d in error.diagnostics)]

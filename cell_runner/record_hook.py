@@ -20,7 +20,7 @@ from cell_runner.settings import Outputs, RunSettings
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
 from execution_engine.app_model.model import Operation
-from execution_engine.checkpoint.resume import ResumePlan, app_meta, check_same, next_name, plan_resume
+from execution_engine.checkpoint.resume import ResumePlan, app_meta, next_name, plan_resume
 from execution_engine.checkpoint.store import ANSWERS, SKIPPED, CheckpointError, CheckpointStore
 from execution_engine.checkpoint.writer import CheckpointWriter
 from execution_engine.observers import RunObserver
@@ -80,9 +80,8 @@ def _prepare_resume(app: Application, outputs: Outputs, resume: str, derived: di
         raise CheckpointError(f"--checkpoint {given}: a resumed run goes on writing the checkpoint it resumes (--resume {resume}); leave --checkpoint out")
     store = CheckpointStore(resume, read_only=True)
     try:
-        check_same(store, app)
         runs = store.runs()
-        left = plan_resume(store, app, full_catalog(), ANSWERS[0], write=False)
+        left = plan_resume(store, app, full_catalog(), ANSWERS[0], write=False)  # checks it is this application's first
     except sqlite3.Error as error:  # tables of the right names, not of the right shape
         raise CheckpointError(f"--resume {resume}: not a checkpoint of this program ({error})") from None
     finally:
