@@ -15,8 +15,8 @@ and an SQLite file together with the ``-wal``/``-shm``/``-journal`` files SQLite
 the option and what to do, the first problem: an output that is a directory, lies in a folder
 that does not exist, cannot be created or written, is not a regular file where SQLite needs one;
 then an output that is the same file as an input or as another output (the line names both).
-Nothing is written: a path that does not exist yet is created and removed again, the only sure
-test of permissions and read-only mounts.  Files that are not regular files store nothing a
+Nothing is written: for a path that does not exist yet a file of an unused name is created in its
+folder and removed again, the only sure test of permissions and read-only mounts.  Files that are not regular files store nothing a
 write could destroy: ``/dev/null`` or ``/dev/full`` may be given for more than one output (a
 write to ``/dev/full`` then fails during the run and the command ends with its own exit code,
 :class:`WriteFailure`); a block device (a disk) is refused, a named pipe nobody reads is refused
@@ -28,6 +28,7 @@ import errno
 import os
 import sqlite3
 import stat
+import tempfile
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,8 @@ from pathlib import Path
 SQLITE_SIDECARS = ("-wal", "-shm", "-journal")
 #: Paths SQLite takes for a database that is no file.
 NOT_A_FILE = (":memory:", "")
+#: The longest file name Linux file systems take (ext4, xfs, btrfs, tmpfs: 255 bytes).
+NAME_MAX = 255
 
 
 class Refused(Exception):
@@ -184,6 +187,9 @@ def _head(subject: Output, suffix: str, other: str, other_suffix: str, other_pat
 def check_kind(output: Output) -> None:
     """What an output is, before it is compared with anything: not a directory, its folder there, the right kind."""
     target = Path(output.path)
+    for part in target.parts:  # before anything looks at the path: a stat of a name too long raises
+        if len(os.fsencode(part)) > NAME_MAX:
+            raise Refused(f"{output.named}: cannot be created (file name too long: {part[:20]}... has more than {NAME_MAX} bytes); give a shorter name")
     if target.is_dir() or not target.name:
         an = "an SQLite file" if output.sqlite else "a file name"
         raise Refused(f"{output.named}: is a directory; give {an}, e.g. {os.path.join(output.path, output.example)}")
@@ -224,7 +230,7 @@ def _open_for_append(output: Output, target: Path) -> None:
 
 
 def check_writable(output: Output) -> None:
-    """Open an existing output for appending (changes nothing), or create and remove a new one."""
+    """Open an existing output for appending (changes nothing), or check a new one can be made in its folder."""
     target = Path(output.path)
     try:
         mode: int | None = os.stat(target).st_mode
@@ -250,14 +256,23 @@ def check_writable(output: Output) -> None:
             if not os.access(existing, os.W_OK | os.X_OK):
                 raise Refused(f"{output.named}: the directory {target.parent} cannot be created in {existing}")
             return
+    _probe_folder(output, target)
+
+
+def _probe_folder(output: Output, target: Path) -> None:
+    """A new file can be made there: a file of a name nobody else uses is created in its folder and removed again.
+
+    The target's own name is never created by the check: another run of the same application may
+    make that very file (``APP.trajectories.sqlite``) between this create and its removal, and
+    the removal would then delete the other run's database -- or the other run's check would find
+    this one's probe and take it for something that cannot be written.  The name itself was checked
+    against the folder's limit by :func:`check_kind`, the one way a name fails where another succeeds.
+    """
+    target = Path(os.path.realpath(target))  # a dangling symbolic link is written where it points
+    folder = target.parent
     try:
-        fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-    except FileExistsError:  # another run made it since we looked (two runs of one application at once)
-        if not target.is_file():
-            raise Refused(f"{output.named}: cannot be created (something else appeared there); give a writable path") from None
-        _open_for_append(output, target)  # the file it made, checked as any existing one
-        return
+        fd, probe = tempfile.mkstemp(prefix=".write-check-", dir=folder)
     except OSError as error:
         raise Refused(f"{output.named}: cannot be created ({error.strerror or error}); give a writable path") from None
     os.close(fd)
-    os.unlink(target)
+    os.unlink(probe)

@@ -121,23 +121,68 @@ def test_nothing_is_left_behind_by_the_checks(folder: Path) -> None:
     assert snapshot(folder) == before and not (folder / "a").exists()
 
 
-def test_a_file_another_run_makes_meanwhile_is_checked_as_it_is_not_refused(folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Two runs of one application at once: the other makes APP.trajectories.sqlite between this check's look and its
-    create; that is the database both will use, not a path that cannot be created (seen with two test workers)."""
-    made = folder / "rivet.trajectories.sqlite"
-    real_open, raced = os.open, []
+def test_the_check_never_makes_or_removes_the_file_it_checks(folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two runs of one application at once: the other may make APP.trajectories.sqlite while this run checks it; a
+    check that created and removed that very name could delete the other run's database, or the other run's check
+    could find this one's probe and refuse it (seen with two test workers)."""
+    made, before = folder / "rivet.trajectories.sqlite", snapshot(folder)
+    real_open, real_unlink, touched = os.open, os.unlink, []
 
-    def open_after_the_other_run(path: object, flags: int, *args: object) -> int:
-        if Path(str(path)) == made and flags & os.O_EXCL and not made.exists():  # the other run is quicker
-            with closing(sqlite3.connect(made)) as db:
-                db.execute("CREATE TABLE t (x)")
-            raced.append(made.read_bytes())
+    def watched_open(path: object, flags: int, *args: object) -> int:
+        if Path(str(path)) == made:
+            touched.append(("open", flags))
         return real_open(path, flags, *args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(os, "open", open_after_the_other_run)
+    def watched_unlink(path: object, *args: object) -> None:
+        if Path(str(path)) == made:
+            touched.append(("unlink", 0))
+        real_unlink(path, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(os, "open", watched_open)
+    monkeypatch.setattr(os, "unlink", watched_unlink)
     plan_with({}, [Output("--trajectory-db", str(made), "the trajectory database", sqlite=True, reads=True)]).check()
     monkeypatch.undo()
-    assert raced and made.read_bytes() == raced[0]  # the other run's database, taken as it is and left as it was
+    assert touched == [] and not made.exists() and snapshot(folder) == before
+
+
+def test_two_runs_checking_one_new_database_at_once_both_pass_and_keep_it(folder: Path) -> None:
+    made = folder / "rivet.trajectories.sqlite"
+    plan = plan_with({}, [Output("--trajectory-db", str(made), "the trajectory database", sqlite=True, reads=True)])
+    failures: list[BaseException] = []
+    stop = threading.Event()
+
+    def the_other_run() -> None:  # checks, then makes the database, as a run does
+        try:
+            for _ in range(200):
+                plan.check()
+            with closing(sqlite3.connect(made)) as db:
+                db.execute("CREATE TABLE t (x)")
+        except BaseException as error:  # reported below, not lost with the thread
+            failures.append(error)
+        finally:
+            stop.set()
+
+    other = threading.Thread(target=the_other_run)
+    other.start()
+    checks = 0
+    while not stop.is_set() and checks < 100_000:
+        plan.check()
+        checks += 1
+    other.join(timeout=10)
+    assert failures == [] and not other.is_alive()
+    with closing(sqlite3.connect(f"{made.as_uri()}?mode=ro", uri=True)) as db:
+        assert db.execute("SELECT name FROM sqlite_master").fetchall() == [("t",)]
+
+
+def test_a_name_longer_than_the_folder_allows_is_refused(folder: Path) -> None:
+    with pytest.raises(Refused, match=r"--trace .*: cannot be created \(file name too long"):
+        plan_with({}, [Output("--trace", str(folder / ("x" * 300 + ".jsonl")), "the trace")]).check()
+
+
+def test_a_dangling_link_is_checked_where_it_points(folder: Path) -> None:
+    (folder / "link.jsonl").symlink_to(folder / "missing" / "run.jsonl")
+    with pytest.raises(Refused, match="cannot be created"):
+        plan_with({}, [Output("--trace", str(folder / "link.jsonl"), "the trace")]).check()
 
 
 # -------------------------------------------------------------------------- run, end to end
