@@ -282,7 +282,7 @@ def test_schema_errors_in_plain_words(work: Path) -> None:
         at(path, text, "<operation>", "<operation> needs the attribute id"),
         at(path, text, '<param value="drill_1">', "<param> cannot contain text; write values as attributes"),
         at(path, text, "<param/>", "<param> needs the attribute value"),
-        at(path, text, "<description>", "<description> is not allowed here inside <application>; expected <operation> "
+        at(path, text, "<description>", "<description> is not allowed here inside <application>; expected <operation>, <for_each>, <repeat> or <call> "
            "(<description> and <error_policy> come before the first <operation>, at most once each)"),
     ]
 

@@ -14,6 +14,8 @@ from types import MappingProxyType
 from core_functions.catalog import Catalog
 from execution_engine.app_model import wire_fit
 from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell_log
+from execution_engine.app_model.expand import Expander, merge_iterations
+from execution_engine.app_model.expanded_source import ExpandedSource
 from execution_engine.app_model.flag_check import check_waits
 from execution_engine.app_model.diagnostics import ApplicationError, Diagnostic, DiagnosticLog, capped, has_errors
 from execution_engine.app_model.model import WAIT, Application, Call, ErrorPolicy, Operation
@@ -59,6 +61,13 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
     robot = draft.robot
     if robot is None:
         return None, capped(log)
+    includes: tuple[Path, ...] = ()
+    expander: Expander | None = None
+    if draft.has_steps or "{" in draft.source.text:  # loops or calls, or a {variable} outside any
+        expander = Expander(draft, cell, cell_broken, log, lambda p, shown, own: _read_called(p, shown, own, max_bytes), path)
+        draft.operations, cell = expander.expand()
+        draft.source = expander.source
+        includes = tuple(expander.includes)
     if cell is not None:
         joint_problems = check_joint_poses(cell, robot)
         log.extend(joint_problems)
@@ -70,6 +79,8 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
     policy = checker.check_policy(draft.policy)
     _check_requests(draft, checked, catalog, cell, policy, log)
     check_waits(draft, checked, catalog, log, cell)
+    if expander is not None:
+        merge_iterations(log, expander.source.contexts, expander.unsubstituted)
     if log.has_errors:
         return None, capped(log)
     application = Application(
@@ -82,8 +93,20 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
         description=draft.description,
         version=draft.version,
         sync=draft.sync,
+        includes=includes,
     )
     return application, capped(log)
+
+
+def _read_called(path: Path, display: str, log: DiagnosticLog, max_bytes: int) -> ApplicationDraft | None:
+    """A called application's steps, read as the application itself is (its problems in ``log``)."""
+    doc, own = read_structured(path, "application", display=display, max_bytes=max_bytes)
+    log.merge(own)
+    if doc is None:
+        return None
+    draft = ApplicationReader(doc, log).read()
+    draft.source.detach()
+    return draft
 
 
 def _read_cell(draft: ApplicationDraft, log: DiagnosticLog, max_bytes: int) -> tuple[Cell | None, bool]:
@@ -127,6 +150,8 @@ def _freeze(draft: ApplicationDraft, checked: list[list[CheckedCall]]) -> tuple[
     Offsets come in document order (an operation, then its calls), so the lines are counted
     on from one to the next (:meth:`SourceMap.line_cols`) instead of looked up in a table."""
     source = draft.source
+    if isinstance(source, ExpandedSource):
+        return _freeze_expanded(draft, checked, source)
     file = source.file
 
     def offsets() -> Iterator[int]:
@@ -145,6 +170,21 @@ def _freeze(draft: ApplicationDraft, checked: list[list[CheckedCall]]) -> tuple[
             call_site = call.site
             frozen[call_site.group] = Call(call_site.group, call_site.function, call.params or (), call_site.implicit, file, call_line, call_col)
         operations.append(Operation(site.id, site.name, line, col, MappingProxyType(frozen)))
+    return tuple(operations)
+
+
+def _freeze_expanded(draft: ApplicationDraft, checked: list[list[CheckedCall]], source: ExpandedSource) -> tuple[Operation, ...]:
+    """:func:`_freeze` of an expanded application: each operation at its line inside its loop (or
+    in its called file), with the iteration it was made for."""
+    operations: list[Operation] = []
+    for site, calls in zip(draft.operations, checked):
+        where = source.at_offset(site.at)
+        frozen: dict[str, Call] = {}
+        for call in calls:
+            call_site = call.site
+            at = source.at_offset(call_site.at)
+            frozen[call_site.group] = Call(call_site.group, call_site.function, call.params or (), call_site.implicit, at.file, at.line, at.col)
+        operations.append(Operation(site.id, site.name, where.line, where.col, MappingProxyType(frozen), where.context))
     return tuple(operations)
 
 

@@ -10,7 +10,7 @@ position and ends with "and N more problems" (:func:`capped`).
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 from core_functions.printable import printable
@@ -23,11 +23,16 @@ MAX_DIAGNOSTICS = 100
 
 @dataclass(frozen=True, order=True)
 class Location:
-    """A 1-based line and column (in characters) of a file."""
+    """A 1-based line and column (in characters) of a file.
+
+    ``context``: for a place inside a loop or a called application, which iteration of it
+    (``for_each hole=drill_3``, ``call insert_block.xml hole=drill_3 at app.xml:20``): the same
+    line stands for every iteration, so a message about one of them names it."""
 
     file: str
     line: int
     col: int
+    context: str = field(default="", compare=False)
 
 
 @dataclass(frozen=True)
@@ -42,6 +47,8 @@ class Diagnostic:
 
     @staticmethod
     def at(where: Location, message: str, severity: Severity = "error") -> Diagnostic:
+        if where.context:
+            message = f"{message}{in_iteration(where.context)}"
         return Diagnostic(where.file, where.line, where.col, message, severity)
 
     @property
@@ -55,6 +62,11 @@ class Diagnostic:
         """The line a console shows: what came from the file with its control and bidi characters escaped."""
         prefix = "warning: " if self.severity == "warning" else ""
         return f"{printable(self.file)}:{self.line}:{self.col}: {prefix}{printable(self.message)}"
+
+
+def in_iteration(context: str) -> str:
+    """The words a message about one iteration ends with: `` (in for_each hole=drill_3)``."""
+    return f" (in {context})"
 
 
 @dataclass(frozen=True)

@@ -54,13 +54,18 @@ class Call:
 
 @dataclass(frozen=True, slots=True)
 class Operation:
-    """One step: every group of the robot has a call (in the robot's group order)."""
+    """One step: every group of the robot has a call (in the robot's group order).
+
+    ``origin``: the iteration an operation written inside a loop or a called application was
+    made for (``for_each hole=drill_3``, nested ones joined by `` > ``); "" for one written at the
+    top of the file.  Its ``line`` and ``col`` are those of the ``<operation>`` inside the loop."""
 
     id: str
     name: str | None
     line: int
     col: int
     calls: Mapping[str, Call]
+    origin: str = ""
 
 
 @dataclass(frozen=True)
@@ -78,6 +83,13 @@ class Application:
     #: ``operation`` (lock-step: every operation a barrier) or ``flags`` (each group in its own
     #: order, waiting only at wait_flag, synchronised functions and zones).
     sync: str = "operation"
+    #: The applications its ``<call>`` elements include (resolved paths, each once): a resume
+    #: checks them as it checks the application itself.
+    includes: tuple[Path, ...] = ()
+
+    def iterations(self) -> dict[str, str]:
+        """The origin of every operation made by a loop or a call, by operation id."""
+        return {operation.id: operation.origin for operation in self.operations if operation.origin}
 
     def operation(self, operation_id: str) -> Operation:
         for operation in self.operations:

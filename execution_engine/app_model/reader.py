@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Union
 
 from lxml import etree
 
@@ -21,10 +22,15 @@ from core_functions import limits
 from core_functions.printable import printable, unsafe_character
 from core_functions.robots import RobotModel, find_robot
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
+from execution_engine.app_model.expanded_source import ExpandedSource
 from execution_engine.app_model.positions import DocumentWalk, SourceMap
 from execution_engine.app_model.safe_xml import XmlDocument
 
 GROUP_TAGS = frozenset({"left_arm", "right_arm", "torso_head", "arm"})  # as in application.xsd
+#: The elements that hold or bring in operations (as in application.xsd), expanded by app_model.expand.
+STEP_TAGS = frozenset({"for_each", "repeat", "call"})
+#: The variable a loop counts its iterations in (from 1) when it does not name one.
+INDEX = "index"
 
 
 @dataclass(slots=True)
@@ -53,6 +59,36 @@ class OperationSite:
 
 
 @dataclass(slots=True)
+class LoopSite:
+    """A ``<for_each>`` (``values``: its ``in`` as written) or a ``<repeat>`` (``count``), with the
+    steps inside.  ``var``: the variable each value (for_each) or each count (repeat) is bound
+    to; ``index``: the for_each's position variable (``index`` unless named); ``named``: the
+    variables the file names itself, which a loop inside may not take again."""
+
+    kind: str
+    at: int
+    var: str
+    index: str | None = None
+    values: str = ""
+    count: int = 0
+    named: tuple[str, ...] = ()
+    body: list[Step] = field(default_factory=list)
+
+
+@dataclass(slots=True)
+class CallBlockSite:
+    """A ``<call application=...>`` and its ``<param name value>`` (``params``: name, value, offset)."""
+
+    at: int
+    application: str
+    params: list[tuple[str, str, int]] = field(default_factory=list)
+
+
+#: One step of an application's body, in document order: loops and calls are expanded later.
+Step = Union[OperationSite, LoopSite, CallBlockSite]
+
+
+@dataclass(slots=True)
 class PolicySite:
     """``<error_policy>`` as written; values the schema rejected are left at None."""
 
@@ -67,7 +103,7 @@ class PolicySite:
 
 @dataclass
 class ApplicationDraft:
-    source: SourceMap
+    source: SourceMap | ExpandedSource  # ExpandedSource once loops and calls are expanded (app_model.expand)
     name: str
     robot: RobotModel | None
     cell_path: Path | None = None
@@ -78,6 +114,10 @@ class ApplicationDraft:
     sync: str = "operation"  # how the groups keep together: "operation" (lock-step) or "flags"
     policy: PolicySite | None = None
     operations: list[OperationSite] = field(default_factory=list)
+    #: Every step in document order, loops and calls included (``operations`` then holds only the
+    #: top-level operations until app_model.expand replaces them with the expansion).
+    body: list[Step] = field(default_factory=list)
+    has_steps: bool = False  # a loop or a call is written: the body must be expanded
 
 
 class ApplicationReader:
@@ -123,6 +163,13 @@ class ApplicationReader:
                 else:
                     ids[operation.id] = operation
                 draft.operations.append(operation)
+                draft.body.append(operation)
+                continue
+            if child.tag in STEP_TAGS:
+                step = self.read_step(child, at, draft.robot)
+                if step is not None:
+                    draft.body.append(step)
+                    draft.has_steps = True
                 continue
             if child.tag == "description":
                 draft.description = (child.text or "").strip()
@@ -130,6 +177,52 @@ class ApplicationReader:
                 draft.policy = self.read_policy(child, at)
             self.walk.skip(child)
         return draft
+
+    def read_step(self, element: etree._Element, at: int, robot: RobotModel | None) -> LoopSite | CallBlockSite | None:
+        """A loop with the steps inside it, or a call with its params (None: the schema says what
+        is wrong with it).  Every element below is visited, in document order."""
+        if element.tag == "call":
+            call = CallBlockSite(at, (element.get("application") or "").strip())
+            for child in element:
+                if not isinstance(child.tag, str):
+                    continue
+                child_at = self.walk.visit(child)
+                self.walk.skip(child)
+                name, value = child.get("name"), child.get("value")
+                if child.tag == "param" and name is not None and value is not None:
+                    call.params.append((name.strip(), value, child_at))
+            return call if call.application else None
+        loop = self.read_loop_head(element, at)
+        read_operation = self.read_valid_operation if self.doc.valid_against is not None else self.read_operation
+        for child in element:
+            if not isinstance(child.tag, str):
+                continue
+            child_at = self.walk.visit(child)
+            if child.tag == "operation":
+                operation = read_operation(child, child_at, robot)
+                if operation is not None and loop is not None:
+                    loop.body.append(operation)
+            elif child.tag in STEP_TAGS:
+                step = self.read_step(child, child_at, robot)
+                if step is not None and loop is not None:
+                    loop.body.append(step)
+            else:
+                self.walk.skip(child)  # the schema reports it
+        return loop
+
+    @staticmethod
+    def read_loop_head(element: etree._Element, at: int) -> LoopSite | None:
+        """The loop's attributes; None when the schema refuses them (it says why)."""
+        var = (element.get("var") or "").strip()
+        if element.tag == "for_each":
+            values, index = element.get("in"), (element.get("index") or "").strip()
+            if not var or values is None or not values.strip():
+                return None
+            return LoopSite("for_each", at, var, index or INDEX, values=values, named=(var, index) if index else (var,))
+        count = (element.get("count") or "").strip()
+        if not count.isdigit() or not 1 <= int(count) <= 10_000:
+            return None
+        return LoopSite("repeat", at, var or INDEX, count=int(count), named=(var,) if var else ())
 
     def read_robot(self, root: etree._Element, at: int) -> RobotModel | None:
         name = root.get("robot")

@@ -35,6 +35,8 @@ _PLACEMENT_HINTS = {
     ("application", "error_policy"): "<description> and <error_policy> come before the first <operation>, at most once each",
     ("function", "param"): "params go inside <params>",
 }
+#: What may come after the head of an application, which libxml2 does not list once an unbounded choice has begun.
+_STEPS = ["operation", "for_each", "repeat", "call"]
 _GROUP_HINT = "a group runs exactly one <function> per operation; put the next one in a new <operation>"
 
 ELEMENT_MESSAGE = re.compile(r"^Element '([^']*)'(?:, attribute '([^']*)')?: (.*)$", re.S)
@@ -203,6 +205,8 @@ class Rewriter:
                 hint = f"did you mean <{close[0]}>?"
         if not expected and element not in allowed:
             expected = list(allowed)
+        if not expected and parent == "application":
+            expected = list(_STEPS)
         if expected:
             message += f"; expected {_one_of(expected)}"
         return message + (f" ({hint})" if hint else "")
