@@ -10,11 +10,19 @@ nearest hit gives the surface's albedo, darkened or brightened inside its discs 
 heads) with an edge ramp at least one pixel footprint wide (anti-aliasing).  Defocus is a
 Gaussian whose sigma follows the thin-lens circle of confusion, ``aperture * f * |1/z - 1/z_f|``,
 per pixel (the image blurred at a few levels and blended by depth).
+
+Cost: every step is worked out pixel by pixel, so only the pixels a surface or a disc can reach
+are computed (their bounding boxes in the image, widened against rounding), and
+what depends only on the camera (each pixel's ray, the lighting field) is computed once per
+camera.  The image is the same to the bit as computing every surface and disc over the whole
+image (``windows=False``, which the tests compare against), and as the renderer before these
+windows; a dry run sees the image the simulator's run sees.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -26,6 +34,8 @@ Array = NDArray[np.float64]
 
 #: What a ray that meets no surface sees (the dark cell floor far below), relative brightness.
 BACKGROUND = 0.12
+#: Pixels added around a computed window against rounding at its edges (a speed-up only: see _window).
+WINDOW_MARGIN = 2
 
 
 @dataclass(frozen=True)
@@ -94,68 +104,171 @@ def render(
     rng: np.random.Generator,
 ) -> NDArray[np.uint8]:
     """The 8-bit mono image of ``scene`` from a camera whose optical frame is ``camera_in_world`` (4x4)."""
-    radiance, depth = _radiance(scene, intrinsics, camera_in_world)
-    image = radiance * scene.lighting.field(intrinsics) * optics.gain
-    image = _defocus(image, optics.blur_sigma(intrinsics, depth))
+    bright, depth = radiance(scene, intrinsics, camera_in_world)
+    image = bright * _light(scene.lighting, intrinsics) * optics.gain
+    image = defocus(image, optics.blur_sigma(intrinsics, depth))
     noise = np.sqrt(optics.read_noise**2 + optics.shot_noise**2 * np.clip(image, 0.0, None))
     image = image + noise * rng.standard_normal(image.shape)
     return np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
 
 
-def _radiance(scene: Scene, intrinsics: Intrinsics, camera_in_world: Array) -> tuple[Array, Array]:
-    """Brightness before light and lens, and depth along the optical axis (m), per pixel."""
+@dataclass(frozen=True)
+class _Pixels:
+    """What depends only on the camera's intrinsics: each pixel's ray (x/z, y/z; z is 1) and its length."""
+
+    rx: Array
+    ry: Array
+    length: Array
+
+
+@lru_cache(maxsize=16)
+def _pixels(intrinsics: Intrinsics) -> _Pixels:
+    u, v = np.meshgrid(np.arange(intrinsics.width, dtype=float), np.arange(intrinsics.height, dtype=float))
+    rx, ry = (u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy
+    length = np.sqrt(rx * rx + ry * ry + 1.0)
+    for array in (rx, ry, length):
+        array.flags.writeable = False  # shared by every image of this camera
+    return _Pixels(rx, ry, length)
+
+
+@lru_cache(maxsize=16)
+def _light(lighting: Lighting, intrinsics: Intrinsics) -> Array:
+    """:meth:`Lighting.field`, computed once per camera and lighting (read only)."""
+    light = lighting.field(intrinsics)
+    light.flags.writeable = False
+    return light
+
+
+def _window(plane: Array, half_size: tuple[float, float], intrinsics: Intrinsics) -> tuple[slice, slice] | None:
+    """The pixels (rows, columns) the rectangle ``plane`` (4x4 in the camera) can cover; None: none.
+
+    A rectangle wholly in front of the camera projects to the convex hull of its projected
+    corners, so every pixel whose ray meets it lies in their bounding box (widened by
+    :data:`WINDOW_MARGIN` pixels against rounding).  One with a corner at or behind the camera's
+    plane may reach any pixel: the whole image.  Only a speed-up: a pixel outside the window is
+    one the rectangle does not cover, which the per-pixel test would also find.
+    """
     h, w = intrinsics.height, intrinsics.width
-    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    rays = np.stack(((u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy, np.ones_like(u)), axis=-1)
+    ex, ey = plane[:3, 0] * half_size[0], plane[:3, 1] * half_size[1]
+    corners = np.array([plane[:3, 3] + sx * ex + sy * ey for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)])
+    z = corners[:, 2]
+    if not np.all(z > 1e-6):
+        return (slice(0, h), slice(0, w)) if np.any(z > 0.0) else None
+    u = intrinsics.fx * corners[:, 0] / z + intrinsics.cx
+    v = intrinsics.fy * corners[:, 1] / z + intrinsics.cy
+    c0, c1 = max(0, math.floor(u.min()) - WINDOW_MARGIN), min(w, math.ceil(u.max()) + WINDOW_MARGIN + 1)
+    r0, r1 = max(0, math.floor(v.min()) - WINDOW_MARGIN), min(h, math.ceil(v.max()) + WINDOW_MARGIN + 1)
+    if c0 >= c1 or r0 >= r1:
+        return None
+    return slice(r0, r1), slice(c0, c1)
+
+
+def _moved(plane: Array, x: float, y: float) -> Array:
+    """``plane`` with its origin moved to (x, y) of its own xy plane."""
+    moved = plane.copy()
+    moved[:3, 3] = plane[:3, 3] + x * plane[:3, 0] + y * plane[:3, 1]
+    return moved
+
+
+def _within(inner: tuple[slice, slice] | None, outer: tuple[slice, slice]) -> tuple[slice, slice] | None:
+    """``inner`` (image rows, columns) clipped to ``outer`` and counted from ``outer``'s corner; None: no overlap."""
+    if inner is None:
+        return None
+    r0, r1 = max(inner[0].start, outer[0].start), min(inner[0].stop, outer[0].stop)
+    c0, c1 = max(inner[1].start, outer[1].start), min(inner[1].stop, outer[1].stop)
+    if r0 >= r1 or c0 >= c1:
+        return None
+    return slice(r0 - outer[0].start, r1 - outer[0].start), slice(c0 - outer[1].start, c1 - outer[1].start)
+
+
+def radiance(scene: Scene, intrinsics: Intrinsics, camera_in_world: Array, windows: bool = True) -> tuple[Array, Array]:
+    """Brightness before light and lens, and depth along the optical axis (m), per pixel.
+
+    Every quantity is worked out pixel by pixel (no sum across pixels), so a pixel's value does not
+    depend on which other pixels are computed with it: each surface is computed only over the pixels
+    it can cover (:func:`_window`; ``windows=False``: over the whole image, the reference the tests
+    compare against), and the image is the same to the bit.
+    """
+    h, w = intrinsics.height, intrinsics.width
+    pixels = _pixels(intrinsics)
     footprint = 1.0 / intrinsics.fx  # m per px per m of depth
     world_to_camera = np.linalg.inv(camera_in_world)
     depth = np.full((h, w), np.inf)
-    radiance = np.full((h, w), BACKGROUND)
+    bright = np.full((h, w), BACKGROUND)
     for surface in scene.surfaces:
         plane = world_to_camera @ surface.pose
-        rotation, origin = plane[:3, :3], plane[:3, 3]
-        normal = rotation[:, 2]
-        denom = rays @ normal
+        window = _window(plane, surface.half_size, intrinsics) if windows else (slice(0, h), slice(0, w))
+        if window is None:
+            continue
+        rx, ry = pixels.rx[window], pixels.ry[window]
+        (a0, a1, a2), (b0, b1, b2), (n0, n1, n2) = (tuple(map(float, plane[:3, k])) for k in range(3))
+        o0, o1, o2 = map(float, plane[:3, 3])
+        denom = rx * n0 + ry * n1 + n2
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(np.abs(denom) > 1e-9, float(origin @ normal) / denom, np.inf)
-        hit = rays * t[..., None] - origin
-        x, y = hit @ rotation[:, 0], hit @ rotation[:, 1]
-        visible = (t > 0) & (t < depth) & (np.abs(x) <= surface.half_size[0]) & (np.abs(y) <= surface.half_size[1])
+            t = np.where(np.abs(denom) > 1e-9, (o0 * n0 + o1 * n1 + o2 * n2) / denom, np.inf)
+        hx, hy, hz = rx * t - o0, ry * t - o1, t - o2
+        x, y = hx * a0 + hy * a1 + hz * a2, hx * b0 + hy * b1 + hz * b2
+        seen = depth[window]
+        visible = (t > 0) & (t < seen) & (np.abs(x) <= surface.half_size[0]) & (np.abs(y) <= surface.half_size[1])
         if not visible.any():
             continue
-        value = np.full((h, w), surface.albedo)
-        cosine = np.abs(denom) / np.linalg.norm(rays, axis=-1)
-        pixel_m = footprint * t / np.maximum(cosine, 0.05)  # a pixel's size on the surface, across the view
+        value = np.full(t.shape, surface.albedo)
+        pixel_m: Array | None = None
         for disc in surface.discs:
             r = 0.5 * disc.diameter
-            near = np.abs(x - disc.x) < r + 0.01
-            near &= np.abs(y - disc.y) < r + 0.01
-            near &= visible
+            around = _within(_window(_moved(plane, disc.x, disc.y), (r + 0.01, r + 0.01), intrinsics) if windows else window, window)
+            if around is None:
+                continue
+            dx, dy, dvisible = x[around], y[around], visible[around]
+            near = np.abs(dx - disc.x) < r + 0.01
+            near &= np.abs(dy - disc.y) < r + 0.01
+            near &= dvisible
             if not near.any():
                 continue
-            d = np.hypot(x[near] - disc.x, y[near] - disc.y) - r
-            ramp = np.maximum(disc.softness, pixel_m[near])
+            if pixel_m is None:  # a pixel's size on the surface, across the view
+                cosine = np.abs(denom) / pixels.length[window]
+                pixel_m = footprint * t / np.maximum(cosine, 0.05)
+            d = np.hypot(dx[near] - disc.x, dy[near] - disc.y) - r
+            ramp = np.maximum(disc.softness, pixel_m[around][near])
             inside = np.clip(0.5 - d / ramp, 0.0, 1.0)
-            value[near] = value[near] * (1.0 - inside) + disc.albedo * inside
-        radiance[visible] = value[visible]
-        depth[visible] = t[visible]
+            part = value[around]
+            part[near] = part[near] * (1.0 - inside) + disc.albedo * inside
+        bright[window][visible] = value[visible]
+        seen[visible] = t[visible]
     depth[~np.isfinite(depth)] = 10.0
-    return radiance, depth
+    return bright, depth
 
 
-def _defocus(image: Array, sigma: Array, levels: int = 5) -> Array:
-    """Blur each pixel by its own sigma: the image at a few blur levels, blended linearly by sigma."""
+def defocus(image: Array, sigma: Array, levels: int = 5) -> Array:
+    """Blur each pixel by its own sigma: the image at a few blur levels, blended linearly by sigma.
+
+    Each band of pixels between two levels is blended from its two levels only (no stack of every
+    level indexed per pixel); each level is blurred whole: OpenCV's row filter takes another code
+    path near a row's end, so a part of the image blurred alone can differ in its last bit.
+    """
     top = float(sigma.max())
     if top < 0.3:
         return image
     steps = np.linspace(float(sigma.min()), top, levels) if top - float(sigma.min()) > 0.3 else np.array([float(np.median(sigma))])
-    blurred = [image if s < 0.3 else cv2.GaussianBlur(image, (0, 0), float(s), borderType=cv2.BORDER_REPLICATE) for s in steps]
     if len(steps) == 1:
-        return blurred[0]
+        return _blurred(image, float(steps[0]))
     position = np.clip((sigma - steps[0]) / (steps[1] - steps[0]), 0.0, len(steps) - 1.0)
     lower = np.floor(position).astype(int)
     lower = np.minimum(lower, len(steps) - 2)
     weight = position - lower
-    stack = np.stack(blurred)
-    rows, cols = np.indices(image.shape)
-    return stack[lower, rows, cols] * (1.0 - weight) + stack[lower + 1, rows, cols] * weight
+    out = np.empty_like(image)
+    below: Array | None = None  # level k blurred, from the band before
+    for k in range(len(steps) - 1):
+        mask = lower == k
+        if not mask.any():
+            below = None
+            continue
+        low = below if below is not None else _blurred(image, float(steps[k]))
+        high = _blurred(image, float(steps[k + 1]))
+        out[mask] = low[mask] * (1.0 - weight[mask]) + high[mask] * weight[mask]
+        below = high
+    return out
+
+
+def _blurred(image: Array, sigma: float) -> Array:
+    return image if sigma < 0.3 else cv2.GaussianBlur(image, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
