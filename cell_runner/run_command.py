@@ -151,7 +151,7 @@ def cmd_run(file: str, settings: RunSettings, catalog: Catalog, out: IO[str], er
     except OSError as error:
         err.write(f"error: --trace {trace_path}: cannot be written ({error.strerror or error}); give a writable file\n")
         return EXIT_USAGE
-    writer = TraceWriter(trace) if trace is not None else None
+    writer = TraceWriter(trace, app.iterations()) if trace is not None else None
     try:
         return _run_recorded(app, file, settings, out, err, writer, checked)
     finally:

@@ -16,7 +16,8 @@ every change of the engine's state, ``operator`` (``command``, ``source``, ``sta
 engine state it came in, "alarm" for an answer to an alarm --, ``accepted``, ``answer``) on
 every operator command, and ``error`` (the message of a failed run or an alarm).  The last line
 of a complete trace is ``run_end`` (``outcome``, ``exit_code``, ``operations_done``,
-``operations_total``, ``records``); see :class:`TraceWriter` for what survives a crash.
+``operations_total``, ``records``); see :class:`TraceWriter` for what survives a crash.  A record of an
+operation a loop or a call made carries ``iteration`` (``for_each hole=drill_3``).
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ import errno
 import io
 import json
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import IO, Any, TypeVar
 
 from core_functions.printable import printable
@@ -123,8 +124,11 @@ class TraceWriter:
     kept, later records are counted as lost, and the caller reports it at the end.
     """
 
-    def __init__(self, stream: IO[str]) -> None:
+    def __init__(self, stream: IO[str], iterations: Mapping[str, str] | None = None) -> None:
+        """``iterations``: the loop iteration or call each expanded operation was made for, by id
+        (``Application.iterations``); a record of such an operation carries it as ``iteration``."""
         self.stream = stream
+        self.iterations: Mapping[str, str] = iterations or {}
         self.lines = 0
         self.lost = 0
         self.error: OSError | None = None
@@ -133,7 +137,11 @@ class TraceWriter:
         self._operation: str | None = None
 
     def on_status(self, status: SmStatus) -> None:
-        self._write(trace_record(status))
+        record = trace_record(status)
+        iteration = self.iterations.get(status.operation or "") if self.iterations else None
+        if iteration:
+            record["iteration"] = iteration
+        self._write(record)
 
     def on_engine(self, status: EngineStatus) -> None:
         if status.operation_id != self._operation:  # an operation boundary: make the record so far durable

@@ -15,7 +15,9 @@ from cell_runner.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 APPS = sorted((ROOT / "apps_xml").rglob("*.xml"))
-APPLICATIONS = [p for p in APPS if "<application" in p.read_text(encoding="utf-8")]
+#: apps_xml/blocks/ holds library blocks (docs/application_xml.md, "Sub-applications"): their {variables} are
+#: bound by the application that calls them, which is checked and dry-run here with them.
+APPLICATIONS = [p for p in APPS if "<application" in p.read_text(encoding="utf-8") and "blocks" not in p.relative_to(ROOT).parts]
 
 
 @pytest.mark.parametrize("path", APPLICATIONS, ids=lambda p: p.relative_to(ROOT).as_posix())

@@ -96,6 +96,7 @@ class Recorder:
             (operation.id, group): call for operation in app.operations for group, call in operation.calls.items()
         }
         self._lines = {operation.id: (operation.line, operation.col) for operation in app.operations}
+        self._origins = app.iterations()  # the loop iteration or call each expanded operation was made for
         self._findings: dict[tuple[str, str, str], Finding] = {}  # (operation, group, kind) -> the first one
         self._counts: dict[tuple[str, str, str], int] = {}
         self.spans: list[Span] = []
@@ -118,7 +119,7 @@ class Recorder:
         file = call.file if call is not None and call.file else str(self.app.path)
         line, col = (call.line, call.col) if call is not None and call.line else self._lines.get(operation, (0, 0))
         when = self.timing.elapsed() if t is None else t
-        self._findings[key] = Finding(kind, group, operation, function, primitive, message, file, line, col, when)
+        self._findings[key] = Finding(kind, group, operation, function, primitive, message, file, line, col, when, origin=self._origins.get(operation, ""))
         self._counts[key] = 1
 
     def findings(self) -> tuple[Finding, ...]:

@@ -43,13 +43,15 @@ class Finding:
     col: int
     t: float  # when, on the report's time base
     count: int = 1
+    origin: str = ""  # the iteration of a loop or call the operation was made for (Operation.origin)
 
     def diagnostic(self) -> Diagnostic:
         """The finding in the form validation prints: ``FILE:LINE:COL: operation 8 right_arm f: kind: ... (at 63.20 s)``;
         the time says how far into the run the robot would have got."""
         where = f"{self.primitive}: " if self.primitive else ""
         when = f"{self.count} times in this call, first at {self.t:.2f} s" if self.count > 1 else f"at {self.t:.2f} s"
-        text = f"operation {self.operation} {self.group} {self.function}: {self.kind}: {where}{self.message} ({when})"
+        made = f" ({self.origin})" if self.origin else ""
+        text = f"operation {self.operation}{made} {self.group} {self.function}: {self.kind}: {where}{self.message} ({when})"
         return Diagnostic(self.file, self.line, self.col, text)
 
 

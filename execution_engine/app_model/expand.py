@@ -102,6 +102,7 @@ class Expander:
         self.extra_frames: dict[str, Frame] = {}
         self.called: dict[Path, tuple[_Unit, ApplicationDraft] | None] = {}
         self.includes: list[Path] = []
+        self.refused: set[Path] = set()  # called files refused with their reason (robot, cell) already given
         #: Where a {variable} could not be substituted: the catalog's check of what is left there
         #: would only repeat the problem (merge_iterations drops it).
         self.unsubstituted: set[tuple[str, int, int]] = set()
@@ -170,7 +171,8 @@ class Expander:
             self.unsubstituted.add((where.file, where.line, where.col))
         for name in dict.fromkeys(unknown):
             known = ", ".join(sorted(env))
-            defined = f"the variables here: {known}" if known else "no loop or call around it defines any"
+            defined = f"the variables here: {known}" if known else (
+                "no loop or call around it defines any (a library block is checked through the application that calls it)")
             self.error(self.attribute(tag, attribute), f"unknown variable {{{name}}} in {what} {text!r}: {defined}")
         return out
 
@@ -195,14 +197,15 @@ class Expander:
         named: tuple[tuple[str, int], ...], base: int,
     ) -> None:
         at = base + loop.at
+        plain = self.source.base(unit.source, "") + loop.at  # the same in every iteration around it: said once
         if depth > MAX_DEPTH:
-            self.error(at, f"<{loop.kind}> is nested {depth} deep in loops and calls, more than the limit of {MAX_DEPTH}")
+            self.error(plain, f"<{loop.kind}> is nested {depth} deep in loops and calls, more than the limit of {MAX_DEPTH}")
             return
         taken = dict(named)
         for name in loop.named:
             if name in taken:
                 where = "var" if name == loop.var else "index"
-                self.error(self.attribute(at, where), (
+                self.error(self.attribute(plain, where), (
                     f"variable {{{name}}} is already the variable of the loop at line {self.source.at_offset(taken[name]).line}: "
                     "give this one another name"
                 ))
@@ -212,7 +215,7 @@ class Expander:
             return
         size = len(values) * self.size(loop.body, env, unit, chain, depth)
         if len(self.operations) + size > MAX_OPERATIONS:
-            self.error(at, (
+            self.error(plain, (
                 f"<{loop.kind}> expands to {size:,} operations ({len(values):,} iterations), which takes the application "
                 f"past the limit of {MAX_OPERATIONS:,} operations"
             ))
@@ -314,7 +317,7 @@ class Expander:
     def call(self, call: CallBlockSite, env: Mapping[str, str], unit: _Unit, path: tuple[str, ...], depth: int, chain: tuple[Path, ...], base: int) -> None:
         at = base + call.at
         if depth > MAX_DEPTH:
-            self.error(at, f"<call> is nested {depth} deep in loops and calls, more than the limit of {MAX_DEPTH}")
+            self.error(self.source.base(unit.source, "") + call.at, f"<call> is nested {depth} deep in loops and calls, more than the limit of {MAX_DEPTH}")
             return
         params: dict[str, str] = {}
         for name, value, param_at in call.params:
@@ -352,14 +355,15 @@ class Expander:
                 self.error(self.attribute(at, "application"), f"call cycle: {names}; an application cannot call itself, directly or through others")
             return None
         if path not in self.called:
-            self.called[path] = self.read(path, display, at)
+            self.called[path] = self.read(path, display, at, call.application)
         loaded = self.called[path]
-        if loaded is None and not quiet:
+        if loaded is None and not quiet and path not in self.refused:
             self.error(self.attribute(at, "application"), f"called application {call.application} has errors (listed with its name)"
                        if path.is_file() else f"called application {call.application} not found (looked for {path})")
         return loaded
 
-    def read(self, path: Path, display: str, at: int) -> tuple[_Unit, ApplicationDraft] | None:
+    def read(self, path: Path, display: str, at: int, shown: str) -> tuple[_Unit, ApplicationDraft] | None:
+        """The called file read and checked against the caller (``shown``: its name as the call writes it)."""
         own = DiagnosticLog()
         draft = self.read_called(path, display, own) if path.is_file() else None
         caller = self.source.at_offset(at)
@@ -373,17 +377,19 @@ class Expander:
         robot: RobotModel | None = self.draft.robot
         if draft.robot is None or robot is None or draft.robot.name != robot.name:
             theirs = draft.robot.name if draft.robot is not None else "no robot"
-            self.error(self.attribute(at, "application"), f"called application {display} is for {theirs}, this one for {robot.name if robot else '?'}")
+            self.error(self.attribute(at, "application"), f"called application {shown} is for {theirs}, this one for {robot.name if robot else '?'}")
+            self.refused.add(path)
             return None
         mine = self.draft.cell_path.resolve() if self.draft.cell_path is not None else None
         if draft.cell_path is not None and draft.cell_path.resolve() != mine:
             self.error(self.attribute(at, "application"), (
-                f"called application {display} names the cell {draft.cell_display}, this one {self.draft.cell_display or 'none'}: "
+                f"called application {shown} names the cell {draft.cell_display}, this one {self.draft.cell_display or 'none'}: "
                 "a called application works in the caller's cell (leave its cell= out, or name the same file)"
             ))
+            self.refused.add(path)
             return None
         if draft.policy is not None:
-            self.error(self.attribute(at, "application"), f"the <error_policy> of {display} does not apply: the calling application's does", "warning")
+            self.error(self.attribute(at, "application"), f"the <error_policy> of {shown} does not apply: the calling application's does", "warning")
         source = draft.source
         assert isinstance(source, SourceMap)
         self.includes.append(path)

@@ -41,7 +41,7 @@ def sits_out(app: Application, catalog: Catalog, call: Call) -> bool:
 def app_meta(app: Application) -> dict[str, str]:
     """What a checkpoint remembers of the application, to refuse resuming another one."""
     cell = app.cell.path if app.cell is not None else None
-    return {
+    meta = {
         "application": app.name,
         "application_path": str(app.path),
         "application_sha256": file_digest(app.path),
@@ -49,6 +49,9 @@ def app_meta(app: Application) -> dict[str, str]:
         "cell_sha256": file_digest(cell),
         "robot": app.robot.name,
     }
+    if app.includes:  # the applications its <call>s bring in: a changed block changes the operations too
+        meta["includes_sha256"] = "\n".join(f"{path}={file_digest(path)}" for path in app.includes)
+    return meta
 
 
 def check_same(store: CheckpointStore, app: Application) -> None:
@@ -60,6 +63,8 @@ def check_same(store: CheckpointStore, app: Application) -> None:
     if then.get("application_sha256") != now["application_sha256"]:
         changed.append(f"the application {now['application_path']} (was {then.get('application_path')}, sha256 "
                        f"{then.get('application_sha256', '?')[:12]}… then, {now['application_sha256'][:12]}… now)")
+    if then.get("includes_sha256", "") != now.get("includes_sha256", ""):
+        changed.append("an application it calls (" + ", ".join(_changed_includes(then.get("includes_sha256", ""), now.get("includes_sha256", ""))) + ")")
     if then.get("cell_sha256") != now["cell_sha256"]:
         changed.append(f"the cell model {now['cell_path'] or '(none)'} (was {then.get('cell_path') or '(none)'}, sha256 "
                        f"{then.get('cell_sha256', '?')[:12] or '-'}… then, {now['cell_sha256'][:12] or '-'}… now)")
@@ -68,6 +73,13 @@ def check_same(store: CheckpointStore, app: Application) -> None:
             f"{store.path}: cannot resume: {' and '.join(changed)} changed since the checkpoint; resuming would skip or repeat "
             "the wrong functions. Restore the files, or start the run afresh without --resume"
         )
+
+
+def _changed_includes(then: str, now: str) -> list[str]:
+    """The called files whose digest differs (or that came or went) between two checkpoints' lists."""
+    before = dict(item.rsplit("=", 1) for item in then.splitlines() if "=" in item)
+    after = dict(item.rsplit("=", 1) for item in now.splitlines() if "=" in item)
+    return sorted(path for path in before.keys() | after.keys() if before.get(path) != after.get(path))
 
 
 @dataclass
@@ -85,6 +97,8 @@ class ResumePlan:
     def message(self, engine: ExecutionEngine, operation: Operation, group: str) -> str:
         call = self.interrupted[group]
         where = f"{call.file}:{call.line}" if call.file else f"operation {operation.id}"
+        if operation.origin:
+            where += f", {operation.origin}"
         reset, skip, stop = (engine.node.resolve(engine_service(c)) for c in ("reset", "skip", "stop"))
         return (
             f"interrupted: {group} was running {call.function} of operation {operation.id} ({where}) when the run stopped "
