@@ -1,6 +1,6 @@
 """Start-up: how soon a command does its work, against starting Python and importing lxml.
 
-Usage: python bench/startup.py [--repeat 5] [--app apps_xml/rivet_installation.xml] [--before DIR]
+Usage: python bench/startup.py [--repeat 5] [--app apps_xml/rivet_installation.xml] [--before DIR] [--whole]
 
 Each case is a fresh process, as a person starts it (``python -m execution_engine ...`` from the source
 tree), timed from its start by wall clock and by the CPU it used (children's rusage):
@@ -11,7 +11,9 @@ tree), timed from its start by wall clock and by the CPU it used (children's rus
   fills the cache in a folder of this bench's own), until the first state transition is printed (a round in
   which the verdict was not found, because the program's files changed meanwhile, is counted and said);
 * ``run checked (fresh)``: the same with an empty cache: the dry run first (its own cost is bench/dry_run.py's);
-* ``run --no-check``: until the first state transition.
+* ``run --no-check``: until the first state transition;
+* with ``--whole``, ``run checked, whole (kept verdict)`` and ``run checked, whole (fresh)``: the same run to its
+  end (the demonstrator finished), its total CPU -- with the dry run first in the fresh case.
 
 A run is stopped (SIGTERM: the operator's stop) once its first transition is printed.  Cases are
 interleaved, round by round, so a machine shared with other work weighs on each alike; the figures are
@@ -75,16 +77,13 @@ def measure(case: Case, env: dict[str, str]) -> Sample:
     assert child.stdout is not None
     elapsed: float | None = None
     kept = False
-    if case.until_transition:
-        for line in child.stdout:
-            kept = kept or line.startswith(KEPT)
-            if TRANSITION in line:
-                elapsed = time.perf_counter() - start
-                child.send_signal(signal.SIGTERM)  # the operator's stop: the run ends at once
-                break
-        child.stdout.read()
-    else:
-        child.stdout.read()
+    for line in child.stdout:
+        kept = kept or line.startswith(KEPT)
+        if case.until_transition and TRANSITION in line:
+            elapsed = time.perf_counter() - start
+            child.send_signal(signal.SIGTERM)  # the operator's stop: the run ends at once
+            break
+    child.stdout.read()
     code = child.wait(TIMEOUT)
     if elapsed is None:
         elapsed = time.perf_counter() - start
@@ -111,6 +110,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--app", default="apps_xml/rivet_installation.xml")
     parser.add_argument("--before", metavar="DIR", type=Path, help="another tree (git archive COMMIT | tar -x -C DIR): its validate and runs, interleaved")
+    parser.add_argument("--whole", action="store_true", help="also the checked run to its end: its total CPU, verdict kept and fresh")
     args = parser.parse_args()
     cache = tempfile.mkdtemp(prefix="startup_kept_")
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "XDG_CACHE_HOME": cache}  # unbuffered: as on a terminal
@@ -124,6 +124,8 @@ def main() -> None:
         Case("run --no-check", [*run, "--no-check"], until_transition=True),
         Case("run checked (fresh)", run, until_transition=True, fresh_cache=True),
     ]
+    if args.whole:
+        cases += [Case("run checked, whole (kept verdict)", run), Case("run checked, whole (fresh)", run, fresh_cache=True)]
     if args.before is not None:
         before = args.before.resolve()
         cases += [
@@ -138,21 +140,21 @@ def main() -> None:
     if filled.returncode != 0:
         raise SystemExit(f"the first run (filling the cache) failed: {filled.stderr.strip()[-300:]}")
     found = rounds(cases, args.repeat, env, print)
-    kept_case = found["run checked (kept verdict)"]
-    missed = sum(1 for s in kept_case if not s.kept)  # the program's files changed meanwhile (a tree being edited): checked again
+    kept_cases = [name for name in found if "kept verdict" in name]
+    missed = sum(1 for name in kept_cases for s in found[name] if not s.kept)  # the program's files changed meanwhile (a tree being edited): checked again
     if missed:
-        print(f"run checked (kept verdict): {missed} of {len(kept_case)} found no kept verdict (the sources changed meanwhile) and dry-ran")
+        print(f"{', '.join(kept_cases)}: {missed} of {sum(len(found[n]) for n in kept_cases)} found no kept verdict (the sources changed meanwhile) and dry-ran")
     base = found["lxml"]
     summary: dict[str, object] = {"app": args.app, "repeat": args.repeat, "kept_verdict_missed": missed}
-    print(f"\n{'case':<28} {'wall ms (median)':>17} {'cpu ms (median)':>16} {'x lxml wall':>12} {'x lxml cpu':>11}")
+    print(f"\n{'case':<34} {'wall ms (median)':>17} {'cpu ms (median)':>16} {'x lxml wall':>12} {'x lxml cpu':>11}")
     for name, every in found.items():
-        pairs = [(s, b) for s, b in zip(every, base) if s.kept or name != "run checked (kept verdict)"] or list(zip(every, base))
+        pairs = [(s, b) for s, b in zip(every, base) if s.kept or name not in kept_cases] or list(zip(every, base))
         samples = [s for s, _ in pairs]
         wall = statistics.median(s.wall_ms for s in samples)
         cpu = statistics.median(s.cpu_ms for s in samples)
         ratio_wall = statistics.median(s.wall_ms / b.wall_ms for s, b in pairs)
         ratio_cpu = statistics.median(s.cpu_ms / max(b.cpu_ms, 1e-3) for s, b in pairs)
-        print(f"{name:<28} {wall:17.0f} {cpu:16.0f} {ratio_wall:12.1f} {ratio_cpu:11.1f}")
+        print(f"{name:<34} {wall:17.0f} {cpu:16.0f} {ratio_wall:12.1f} {ratio_cpu:11.1f}")
         summary[name] = {"wall_ms": round(wall, 1), "cpu_ms": round(cpu, 1), "ratio_wall": round(ratio_wall, 2), "ratio_cpu": round(ratio_cpu, 2),
                          "wall_ms_range": [round(min(s.wall_ms for s in samples), 1), round(max(s.wall_ms for s in samples), 1)]}
     print(json.dumps(summary))
