@@ -26,12 +26,14 @@ import asyncio
 import json
 import math
 import os
+import select
 import socket
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +51,8 @@ from robot_bridges.kuka_rsi.sim_network import latency_summary, run_lockstep  # 
 
 READY_DEG = (0.0, -80.0, 85.0, 0.0, 35.0, 0.0)
 CYCLE = 0.004
+READY = "ready"  # what the echo process prints once its socket is bound
+STARTUP_TIMEOUT = 60.0  # s: the most a process of this bench may take to be ready (a busy computer included)
 
 
 # ------------------------------------------------------------------------------- helpers
@@ -64,6 +68,7 @@ def echo_main(port: int, idle: float) -> None:
     sock.bind(("127.0.0.1", port))
     sock.settimeout(idle)
     buf = bytearray(65536)
+    print(READY, flush=True)
     try:
         while True:
             n, addr = sock.recvfrom_into(buf)
@@ -72,9 +77,18 @@ def echo_main(port: int, idle: float) -> None:
         pass
 
 
-def start_echo(idle: float = 5.0) -> tuple[subprocess.Popen[bytes], int]:
+def start_echo(idle: float = 5.0) -> tuple[subprocess.Popen[str], int]:
+    """The echo process, once it listens: a controller started before it would count its first
+    packets late, and after 100 of them in a row (0.4 s: a busy computer starting Python) stop RSI."""
     port = free_port()
-    proc = subprocess.Popen([sys.executable, __file__, "--echo", str(port), "--idle", str(idle)])
+    proc = subprocess.Popen([sys.executable, __file__, "--echo", str(port), "--idle", str(idle)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    ready, _, _ = select.select([proc.stdout], [], [], STARTUP_TIMEOUT)
+    line = proc.stdout.readline().strip() if ready else ""
+    if line != READY:
+        proc.kill()
+        proc.wait(10)
+        raise RuntimeError(f"the UDP echo process was not ready within {STARTUP_TIMEOUT:g} s ({line or 'no word'}, exit {proc.poll()})")
     return proc, port
 
 
@@ -178,7 +192,19 @@ def accelerated(cycles: int, feedback: Path | None, switch_interval: float | Non
 
 
 # ---------------------------------------------------------------- 2. real time with the engine
-async def engine_phase(port: int, seconds: float, feedback: Path) -> dict[str, object]:
+async def when_bound(backend: KukaRsiBackend, start: Callable[[], None]) -> None:
+    """``start`` the controller once the back end's RSI loop has bound its port, as the back end
+    itself starts its simulator: a controller sending before then counts every packet late and stops
+    RSI after 100 in a row (0.4 s), less than the loop's start takes on a busy computer."""
+    deadline = time.monotonic() + STARTUP_TIMEOUT
+    while backend.iface is None or backend.iface.events.address is None:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the RSI loop did not bind within {STARTUP_TIMEOUT:g} s")
+        await asyncio.sleep(0.01)
+    start()
+
+
+async def engine_phase(port: int, seconds: float, feedback: Path, start_controller: Callable[[], None]) -> dict[str, object]:
     from app_functions.registry import full_catalog
     from execution_engine.app_model import load_application
     from node_transport.clock import real_clock
@@ -187,7 +213,13 @@ async def engine_phase(port: int, seconds: float, feedback: Path) -> dict[str, o
     app = load_application(str(ROOT / "apps_xml" / "kuka_rsi_demo.xml"), full_catalog())
     backend = KukaRsiBackend(listen=("127.0.0.1", port), simulator=None, runner="process", feedback_file=str(feedback))
     clock = real_clock().bind(asyncio.get_running_loop())
-    deployment = await deploy_local(clock, KUKA_KR, backend)
+    starter = asyncio.create_task(when_bound(backend, start_controller))
+    try:
+        deployment = await deploy_local(clock, KUKA_KR, backend)
+    finally:
+        if not starter.done():
+            starter.cancel()
+    await starter  # the controller was started (or why not)
     runs, ok = 0, 0
     started = time.monotonic()
     while time.monotonic() - started < seconds:
@@ -205,17 +237,17 @@ def real_time(seconds: float, feedback: Path, echo: bool = True) -> dict[str, ob
     """The engine phase against a simulated KR C4; ``echo``: a second simulator drives the bare UDP
     echo baseline at the same time (two more processes on the machine, one of them real time)."""
     port = free_port()
-    # The engine phase may run past ``seconds`` by one application run (~20 s): the simulator outlasts it.
-    sim = start_simulator(port, seconds + 40.0)
-    echo_proc, echo_port = start_echo(idle=seconds + 60) if echo else (None, 0)
-    echo_sim = start_simulator(echo_port, seconds + 40.0, echo=True) if echo_proc is not None else None
+    echo_proc, echo_port = start_echo(idle=seconds + 120) if echo else (None, 0)
+    echo_sim = start_simulator(echo_port, seconds + 80.0, echo=True) if echo_proc is not None else None
+    started: list[subprocess.Popen[str]] = []
     try:
-        result = asyncio.run(engine_phase(port, seconds, feedback))
+        # The engine phase may run past ``seconds`` by one application run (~20 s): the simulator outlasts it.
+        result = asyncio.run(engine_phase(port, seconds, feedback, lambda: started.append(start_simulator(port, seconds + 40.0))))
     finally:
-        for proc in (sim, echo_sim):
+        for proc in (*started, echo_sim):
             if proc is not None:
                 proc.terminate()  # ends the run cleanly (SIGTERM): the summary is still printed
-    rsi, echo_summary = summary_of(sim, 30), summary_of(echo_sim, 30) if echo_sim is not None else {}
+    rsi, echo_summary = summary_of(started[0], 30), summary_of(echo_sim, 30) if echo_sim is not None else {}
     if echo_proc is not None:
         echo_proc.terminate()
         echo_proc.wait(10)
@@ -288,11 +320,12 @@ def runner_comparison(seconds: float) -> dict[str, object]:
 # ---------------------------------------------------------------- 3 + 4. reaction and cost
 def reaction_and_cost(trials: int, calls: int) -> dict[str, object]:
     port = free_port()
-    sim = start_simulator(port, 600.0)
     iface = RsiInterface([RobotLink("kr6", "127.0.0.1")], LoopSettings(port=port, silence_timeout=2.0), mode="process")
     iface.start()
+    sim: subprocess.Popen[str] | None = None
     try:
-        iface.wait_ready()
+        iface.wait_ready(STARTUP_TIMEOUT)  # the loop listens before the controller sends (see when_bound)
+        sim = start_simulator(port, 600.0)
         if not iface.wait_event(lambda: iface.events.connected[0], 30):
             raise RuntimeError("no packets from the simulator")
         first_ipoc = iface.state(0).ipoc
@@ -330,8 +363,10 @@ def reaction_and_cost(trials: int, calls: int) -> dict[str, object]:
             get_ns.append(c - b)
         overhead = min(clock() - clock() for _ in range(1000))
     finally:
-        sim.terminate()  # the controller first: a loop closed under it would leave it unanswered
-        summary = summary_of(sim, 30)
+        summary: dict[str, object] = {}
+        if sim is not None:
+            sim.terminate()  # the controller first: a loop closed under it would leave it unanswered
+            summary = summary_of(sim, 30)
         iface.close()
     ms = np.array(reactions or [0.0])
     return {
@@ -353,9 +388,9 @@ def main() -> int:
     parser.add_argument("--cycles", type=int, default=100_000, help="accelerated cycles (default 100000)")
     parser.add_argument("--trials", type=int, default=100, help="reaction-time trials (default 100)")
     parser.add_argument("--calls", type=int, default=100_000, help="setter/getter calls timed (default 100000)")
-    parser.add_argument("--quick", action="store_true", help="10 s, 10,000 cycles, 20 trials")
+    parser.add_argument("--quick", action="store_true", help="10 s, 10,000 cycles, 20 trials, 20,000 calls; 5 s per runner unless --compare-seconds is given")
     parser.add_argument("--skip-engine", action="store_true", help="leave out the real-time phase with the engine")
-    parser.add_argument("--compare-seconds", type=float, default=20.0, help="thread vs process runner under load, each (0: skip)")
+    parser.add_argument("--compare-seconds", type=float, default=None, help="thread vs process runner under load, each (default 20; 0: skip)")
     parser.add_argument("--echo", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--idle", type=float, default=5.0, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -363,7 +398,9 @@ def main() -> int:
         echo_main(args.echo, args.idle)
         return 0
     if args.quick:
-        args.seconds, args.cycles, args.trials, args.calls, args.compare_seconds = 10.0, 10_000, 20, 20_000, 5.0
+        args.seconds, args.cycles, args.trials, args.calls = 10.0, 10_000, 20, 20_000
+    if args.compare_seconds is None:
+        args.compare_seconds = 5.0 if args.quick else 20.0
     figures: dict[str, object] = {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory() as tmp:
         print(f"1. accelerated: {args.cycles} cycles (loop process, a move always running, saving every packet)")
