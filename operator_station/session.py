@@ -19,6 +19,7 @@ from concurrent.futures import Future
 from typing import IO, Any
 
 from cell_runner.deployment import Deployment, deploy_local
+from cell_runner.dry_run.check import keeping_for
 from cell_runner.dry_run.report import DryRunReport
 from cell_runner.dry_run.runner import DryRunError, dry_run
 from cell_runner.dry_run.simulators import setup_for
@@ -64,6 +65,7 @@ class RunSession:
         self._ready = threading.Event()
         self.report: RunReport | None = None
         self._verdict: DryRunReport | None = None  # the dry run before connecting, from the simulator's start
+        self._kept: str | None = None  # the line saying the verdict was kept (no dry run this time)
 
     @property
     def running(self) -> bool:
@@ -140,9 +142,22 @@ class RunSession:
             self.feed.update(ended=True)
 
     def _checked(self, app: Application) -> bool:
-        """The dry run ``run`` does first: its planned durations give the ETA; findings refuse the run."""
+        """The dry run ``run`` does first: its planned durations give the ETA; findings refuse the run.
+        A passed verdict is kept and used as ``run``'s is (:func:`~cell_runner.dry_run.check.keeping_for`,
+        keyed by the page's application as validated, not by the file on the disk)."""
+        self._kept = None
         try:
-            report = dry_run(app, self.backend_name(app), self._options(app), self.trajectory_db(app))
+            keeping = keeping_for(app, setup_for(self.backend_name(app), self._options(app)), self.trajectory_db(app))
+            kept = keeping.kept() if keeping is not None else None
+            if kept is not None:  # said on the page as run says it on its console
+                self._kept = kept.line()
+                self.feed.update(messages=[{"severity": "info", "message": self._kept}])
+                report = kept.report
+            else:
+                report = dry_run(app, self.backend_name(app), self._options(app), self.trajectory_db(app))
+                if keeping is not None:
+                    plan = self.files(app)
+                    keeping.keep(report, [i.path for i in plan.inputs] + [o.path for o in plan.outputs])
         except (KeyError, ValueError, OSError, ConnectionError, DryRunError) as error:
             self.feed.update(messages=[{"severity": "error", "message": f"not run: the dry run could not be done: {error}"}])
             return False
@@ -191,7 +206,7 @@ class RunSession:
         the findings when it must not start; a way back first when the robot is elsewhere)."""
         if not self.settings.check:
             return deployment.engine.run(app)
-        notes: list[dict[str, Any]] = []
+        notes: list[dict[str, Any]] = [{"severity": "info", "message": self._kept}] if self._kept else []
 
         def say(line: str) -> None:
             notes.append({"severity": "info", "message": line})

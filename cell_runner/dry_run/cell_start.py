@@ -7,6 +7,11 @@ carried out as :mod:`.start` says (the dry run uses the simulator of the applica
 back end with its default options, and the machines' trajectory database).  A refusal leaves the
 robot where it is: a goal ends aborted with outcome ``refused`` and the findings as its report;
 the engine process started with an application prints them and ends with exit code 1.
+
+As ``run``, the node first looks for the kept verdict of the application's dry run from the
+simulator's start (:mod:`.verdict_cache`, the same key as the command line's), else does that dry
+run and keeps its passed verdict: an unchanged application is not dry-run again by the next goal,
+the next launch or the command line, and the node's console says so.
 """
 from __future__ import annotations
 
@@ -14,7 +19,11 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
-from cell_runner.dry_run.simulators import setup_for
+from cell_runner.dry_run.check import keeping_for
+from cell_runner.dry_run.placement import PlacementError
+from cell_runner.dry_run.report import DryRunReport
+from cell_runner.dry_run.runner import DryRunError, dry_run_setup
+from cell_runner.dry_run.simulators import DryRunSetup, setup_for
 from cell_runner.dry_run.start import MeasuredState, StartRefused, UntrustedState, check_run, measured
 from execution_engine.app_model.model import Application
 from execution_engine.engine.engine import ExecutionEngine
@@ -81,8 +90,30 @@ class CellStarts:
     async def run(self, app: Application, say: Callable[[str], None]) -> RunReport:
         """Run ``app`` checked from the measured joints; StartRefused when it must not start."""
         setup = setup_for(app.robot.default_backend, BackendOptions(robot=app.robot))
-        run = await check_run(self.engine, app, setup, self.trajectory_db, self.measure_for(app), self.node.clock, say=say)
+        checked = await self.verdict(app, setup, say)
+        run = await check_run(self.engine, app, setup, self.trajectory_db, self.measure_for(app), self.node.clock, checked=checked, say=say)
         return await run.run()
+
+    async def verdict(self, app: Application, setup: DryRunSetup, say: Callable[[str], None]) -> DryRunReport | None:
+        """The dry run from the simulator's start, as ``run`` does first: the kept verdict (and a line saying
+        so), else a dry run whose passed verdict is kept; None when none can be kept (the start check then
+        dry-runs from the measured joints, as it always did).  The start check uses it only where the robot
+        is measured to be at that start; elsewhere it plans the way back to it."""
+        keeping = keeping_for(app, setup, self.trajectory_db)
+        if keeping is None:
+            return None
+        kept = keeping.kept()
+        if kept is not None:
+            say(kept.line())
+            return kept.report
+        with self.node.clock.held():  # a simulated clock stands still while the dry run blocks a thread
+            try:
+                report = await asyncio.to_thread(dry_run_setup, app, setup, self.trajectory_db)
+            except (DryRunError, PlacementError, KeyError, ValueError, OSError, ConnectionError) as error:
+                self.node.logger.info("%s: the dry run from the simulator's start: %s", self.node.fully_qualified_name, error)
+                return None  # the start check dry-runs again and refuses with its own words
+        keeping.keep(report, [p for p in (app.path, app.cell.path if app.cell is not None else None, self.trajectory_db) if p])
+        return report
 
     async def run_goal(self, app: Application) -> GoalOutcome:
         """A RunApplication goal's run: its outcome, ok and report (the findings when refused)."""

@@ -12,12 +12,14 @@ import math
 import os
 import time
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+from cell_runner.dry_run.app_digest import NotDigestible
 from cell_runner.dry_run.report import DryRunReport
 from cell_runner.dry_run.runner import DryRunError, dry_run
-from cell_runner.dry_run.simulators import setup_for
+from cell_runner.dry_run.simulators import DryRunSetup, setup_for
 from cell_runner.dry_run.verdict_cache import Verdict, VerdictCache, verdict_key
 from execution_engine.app_model.model import Application
 from robot_bridges.backend import BackendOptions
@@ -51,15 +53,14 @@ def check(
     everything, ``SETUP`` when the back end refuses the options (the run would refuse them too).
     ``read_at``: when (``time.time()``) reading ``app``'s files began; with it, a passed verdict is
     kept in ``cache`` (default: the per-user one) and a kept one is used instead of a dry run (one
-    line to ``out`` with ``summary``); never over a file of ``avoid`` (the run's inputs and outputs).
+    line to ``out`` with ``summary``); never over a file of ``avoid`` (the run's inputs and outputs):
+    :func:`keeping_for`, which the station and the engine nodes use too.
     """
     try:
-        cache = cache if cache is not None else VerdictCache()
-    except RuntimeError as error:  # no home folder to keep it in (HOME unset, no password entry): checked every time
-        log.info("dry run: no kept verdicts: %s", error)
-        read_at = None
-    key = _key(app, backend, options, trajectory_db, read_at)
-    kept = cache.get(key) if key is not None and cache is not None else None
+        keeping = keeping_for(app, setup_for(backend, options), trajectory_db, read_at, cache) if read_at is not None else None
+    except (KeyError, ValueError):  # options the back end refuses: the dry run below says which
+        keeping = None
+    kept = keeping.kept() if keeping is not None else None
     if kept is not None:
         if summary:
             out.write(kept.line() + "\n")
@@ -82,22 +83,63 @@ def check(
         out.write("\n".join(report.summary_lines()) + "\n")
     elif report.notes:
         err.write("".join(f"{file}: not checked: {note}\n" for note in report.notes))
-    if report.ok and key is not None and cache is not None and _key(app, backend, options, trajectory_db, read_at) == key:  # nothing changed meanwhile
-        cache.put(key, Verdict(report, time.time()), avoid)
+    if keeping is not None:
+        keeping.keep(report, avoid)
     return (OK if report.ok else FOUND), report
 
 
-def _key(app: Application, backend: str, options: BackendOptions, trajectory_db: str | None, read_at: float | None) -> str | None:
-    """The verdict's key (:func:`.verdict_key`), None when none may be used: no ``read_at``, a file that cannot be
-    read, or an application or cell file modified since reading began (or just before: :data:`SETTLED`)."""
-    if read_at is None:
+@dataclass(frozen=True)
+class Keeping:
+    """The kept verdict of one dry run of one application from the simulator's start: what ``run``,
+    ``validate --simulate``, the station and an engine node look up before dry-running, and keep after."""
+
+    app: Application
+    setup: DryRunSetup
+    trajectory_db: str | None
+    read_at: float | None
+    cache: VerdictCache
+    key: str
+
+    def kept(self) -> Verdict | None:
+        """The passed verdict kept for this dry run, or None (none, or one that cannot be trusted)."""
+        return self.cache.get(self.key)
+
+    def keep(self, report: DryRunReport, avoid: Iterable[str | Path] = ()) -> bool:
+        """Keep ``report`` if it passed and nothing it depends on changed while it ran (the key again); never
+        over a file of ``avoid`` (the run's inputs and outputs)."""
+        if not report.ok or _key(self.app, self.setup, self.trajectory_db, self.read_at) != self.key:
+            return False
+        return self.cache.put(self.key, Verdict(report, time.time()), avoid)
+
+
+def keeping_for(
+    app: Application, setup: DryRunSetup, trajectory_db: str | None, read_at: float | None = None, cache: VerdictCache | None = None
+) -> Keeping | None:
+    """The :class:`Keeping` of a dry run of ``app`` on ``setup`` reading ``trajectory_db``; None when no verdict
+    may be kept: no folder for them, a file that cannot be read, an application that cannot be digested.
+
+    ``read_at``: when (``time.time()``) reading the application's file began -- the command line's; then a file
+    modified since (or just before: :data:`SETTLED`) keeps nothing either.  The key holds the application as read
+    (:mod:`.app_digest`), so a caller holding it in memory (the station's page, a goal's XML) needs none."""
+    try:
+        cache = cache if cache is not None else VerdictCache()
+    except RuntimeError as error:  # no home folder to keep it in (HOME unset, no password entry): checked every time
+        log.info("dry run: no kept verdicts: %s", error)
         return None
+    key = _key(app, setup, trajectory_db, read_at)
+    return None if key is None else Keeping(app, setup, trajectory_db, read_at, cache, key)
+
+
+def _key(app: Application, setup: DryRunSetup, trajectory_db: str | None, read_at: float | None) -> str | None:
+    """The verdict's key (:func:`.verdict_key`), None when none may be used: a file that cannot be read, an
+    application that cannot be digested, or (with ``read_at``) an application or cell file modified since
+    reading began (or just before: :data:`SETTLED`)."""
     sources = [app.path] + ([app.cell.path] if app.cell is not None and app.cell.path is not None else [])
     try:
-        if any(os.stat(path).st_mtime > read_at - SETTLED for path in sources):
+        if read_at is not None and any(os.stat(path).st_mtime > read_at - SETTLED for path in sources):
             return None
-        return verdict_key(app, setup_for(backend, options), trajectory_db)
-    except OSError as error:
+        return verdict_key(app, setup, trajectory_db)
+    except (OSError, NotDigestible) as error:
         log.info("dry run: no kept verdict: %s", error)
         return None
 

@@ -2,7 +2,8 @@
 
 A dry run of the demonstrator takes seconds; an integrator runs the same application again and again.
 A verdict is kept under a key made of everything the dry run depends on (:func:`verdict_key`): the
-application's place and bytes, its cell's bytes, the robot, the simulator and its options (and the bytes of any file an
+application's place and bytes, the application as read (:mod:`.app_digest`: what the station's page or a
+goal holds, the operations its included files brought), its cell's bytes, the robot, the simulator and its options (and the bytes of any file an
 option names), the trajectory database the dry run copies, and the program itself (the bytes of its
 packages, URDFs included, the Python and the numerical libraries' versions).  Any change gives another key,
 so a kept verdict is never one of another application, cell, robot model or program.
@@ -35,6 +36,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from cell_runner.dry_run.app_digest import app_digest
 from cell_runner.dry_run.report import CollisionCheck, DryRunReport, GroupTime, JointPositions, Span
 from cell_runner.dry_run.simulators import DryRunSetup
 from cell_runner.output_files import same_file
@@ -120,12 +122,14 @@ def program_digest() -> str:
 
 def verdict_key(app: Application, setup: DryRunSetup, trajectory_db: str | None) -> str:
     """The key of a dry run of ``app`` on ``setup`` from the simulator's start, reading ``trajectory_db``
-    (the run's; None: the application's own, as the dry run reads it)."""
+    (the run's; None: the application's own, as the dry run reads it).  ``app`` itself is in it
+    (:mod:`.app_digest`), not only its file: :class:`~.app_digest.NotDigestible` when it cannot be."""
     digest = hashlib.sha256()
     _feed(digest, "format", str(FORMAT).encode())
     _feed(digest, "program", program_digest().encode())
     _feed(digest, "application", _file_bytes(app.path) or b"")
     _feed(digest, "where", os.path.realpath(app.path).encode())  # the report names its file; relative paths resolve from it
+    _feed(digest, "parsed", app_digest(app).encode())  # what is run: a page's document, a goal's XML, included files
     cell = app.cell.path if app.cell is not None and app.cell.path is not None else None
     _feed(digest, "cell", b"" if cell is None else _file_bytes(cell) or b"")
     _feed(digest, "robot", app.robot.name.encode())
