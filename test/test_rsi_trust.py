@@ -42,12 +42,14 @@ def test_a_peer_spelling_type_in_capitals_and_counting_packets_is_served(rig: Ca
     assert np.allclose(r.sim.model.trace[-1], target, atol=1e-7)  # type: ignore[index]
 
 
-def test_a_frozen_set_point_is_a_controller_fault_before_the_robot_moves_far(rig: Callable[..., Rig]) -> None:
-    r = rig(quirks=Quirks(frozen_setpoint=True)).start()
+def test_a_frozen_set_point_whose_robot_does_not_follow_is_a_controller_fault_before_the_robot_moves_far(rig: Callable[..., Rig]) -> None:
+    """A set point frozen at the start is a convention (ROS-I's simulator: test_rsi_conventions.py); then the
+    actual axes must follow what was commanded, and a peer whose AIPos runs off on its own is caught at once."""
+    r = rig(quirks=Quirks(frozen_setpoint=True, drift_axis=5, drift_deg=0.2, drift_actual=True)).start()
     r.correcting()
     ok, message, kind = r.done(r.iface.set_axial_pos(0, np.radians([0, -80, 85, 0, 90, 0]), 10.0, 60.0))
     assert not ok and kind == "controller"
-    assert "A5: commanded" in message and "the controller reports 30.000 deg (tolerance 0.100 deg)" in message
+    assert message.startswith("kr0: A5: the actual axis (AIPos) reads ") and "(tolerance 0.100 deg); the controller does not follow" in message
     r.wait(lambda: bool(r.iface.events.faults), "the fault event")
     assert r.iface.events.faults[0][:2] == (0, "controller")
     # The robot moved no further than the tolerance, plus the cycle of lag the check allows and the

@@ -26,6 +26,8 @@ import logging
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from core_functions import option_ranges
 from core_functions.geometry import Pose
 from core_functions.primitives import (
@@ -44,14 +46,15 @@ from core_functions.primitives import (
 )
 from core_functions.robots import KUKA_KR, RobotModel
 from node_transport.clock import Clock
-from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, JointLimits, RobotBackend
 from robot_bridges.kuka_rsi.arm_commands import ArmCommands, MotionLimits, Run
 from robot_bridges.kuka_rsi.config import ConfigError, RsiConfig, load_config
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.interface import RsiInterface, RunnerMode
 from robot_bridges.kuka_rsi.kinematics import KR6_R900, URDF_PATH, KukaArm
-from robot_bridges.kuka_rsi.krc_model import RsiContext
-from robot_bridges.kuka_rsi.loop_events import LoopEvents
+from robot_bridges.kuka_rsi.krc_model import PEERS, RsiContext, like_peer
+from robot_bridges.kuka_rsi.link import feedback_gaps, require_feedback
+from robot_bridges.kuka_rsi.loop_events import LoopEvents, say_once
 from robot_bridges.kuka_rsi.peer import resolve_ipv4
 from robot_bridges.kuka_rsi.realtime import SIMULATED_SILENCE, realtime_advice
 from robot_bridges.kuka_rsi.sim_controller import SimulatedController, SimulatorSpec
@@ -152,6 +155,9 @@ class KukaRsiBackend(RobotBackend):
         address = iface.events.address
         assert address is not None
         log.info("%s: RSI loop on %s:%d (%s)", self.name, address[0], address[1], iface.events.tuning)
+        gaps = feedback_gaps(self.config, self.roles)
+        if gaps:  # said once, here: what the configuration does not send switches off what needs it
+            say_once(logging.WARNING, f"{self.name}: {self.config.source} sends {'; '.join(gaps)}")
         advice = realtime_advice(iface.events.tuning)
         if advice is not None:
             log.warning("%s: %s", self.name, advice)
@@ -235,7 +241,12 @@ class KukaRsiBackend(RobotBackend):
 
     def _motion_result(self) -> MotionResult:
         state = self.events.state()
-        return MotionResult(self.spec.joint_names, tuple(state.actual_joints), state.tcp())
+        return MotionResult(self.spec.joint_names, tuple(state.actual_joints), self._tcp(state.actual_joints))
+
+    def _tcp(self, joints: tuple[float, ...]) -> Pose:
+        """The TCP of the actual axes by the kinematics every plan uses: what a configuration without
+        RIst lacks, and what a peer reporting RIst at zero (ROS-I's simulator) would get wrong."""
+        return Pose.from_matrix(self.arm.fk(np.array(joints)))
 
     # ------------------------------------------------------------------ pause, resume, stop
     async def pause(self, group: str) -> None:
@@ -275,7 +286,13 @@ class KukaRsiBackend(RobotBackend):
         self._check_group(group)
         if self.iface is None:
             return None
-        return self.events.state().tcp()
+        return self._tcp(self.events.state().actual_joints)
+
+    def joint_limits(self, group: str) -> JointLimits:
+        """The axis ranges, speeds and accelerations of the robot link, which the loop's generators keep to."""
+        self._check_group(group)
+        link = self.link
+        return JointLimits(self.spec.joint_names, link.lower, link.upper, link.max_joint_speed, link.max_joint_accel)
 
     def robot_description(self) -> str | None:
         """The KR 6 R900's URDF; None for an arm given other link lengths (the URDF would lie)."""
@@ -285,8 +302,9 @@ class KukaRsiBackend(RobotBackend):
 _EXTRAS = (
     "runner", "simulator", "config", "mode", "cycle", "timeout", "axis_monitor", "silence", "connect_timeout", "feedback",
     "linear_speed", "linear_accel", "tolerance", "tolerance_mm", "sim_frozen_setpoint", "sim_drop", "sim_drift", "sim_root_attribute",
-    "sim_flood",
+    "sim_flood", "sim_peer",
 )
+
 
 
 @dataclass(frozen=True)
@@ -309,6 +327,7 @@ class KukaSettings:
     faults: Faults
     quirks: Quirks
     flood: Flood
+    peer: str = "kr-c4"  # sim_peer: the controller the simulated one behaves like
 
 
 def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
@@ -342,6 +361,8 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
     tolerance_mm = number("tolerance_mm", "1.0")
     try:
         config = load_config(extra["config"]) if "config" in extra else None
+        if config is not None:  # what it truly needs, refused here in one line, checked or not
+            require_feedback(config, "kuka")
     except ConfigError as error:
         raise ValueError(str(error)) from None
     if options.port is not None:
@@ -359,8 +380,11 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
     elif options.host is not None:
         raise ValueError("kuka-rsi: a real controller needs rsi_listen=HOST:PORT (its RSI configuration's IP_NUMBER:PORT) as well as host")
     faults, quirks, flood = _misbehaviour(extra, options.seed)
+    peer = extra.get("sim_peer", "kr-c4")
+    if peer not in PEERS:
+        raise ValueError(f"kuka-rsi: sim_peer must be {' or '.join(PEERS)}, got {peer!r}")
     return KukaSettings(runner, sim_runner, mode, cycle, timeout, monitor, silence, connect, limits, tolerance, tolerance_mm,
-                        config, listen, faults, quirks, flood)
+                        config, listen, faults, quirks, flood, peer)
 
 
 async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
@@ -402,6 +426,7 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
         settings = LoopSettings(silence_timeout=0.1 if s.silence is None else s.silence, connect_timeout=s.connect_timeout)
         return KukaRsiBackend(listen=(listen_ip, s.listen.port), link=link, simulator=None, runner=s.runner, settings=settings, **common)  # type: ignore[arg-type]
     context = RsiContext(cycle_ms=s.cycle, timeout=s.timeout, correction_mode=s.mode, axis_monitor_deg=(s.axis_monitor,) * 6)
+    context, quirks = like_peer(s.peer, context, s.quirks)  # sim_peer: ROS-Industrial's simulator, say
     link = RobotLink("kuka", "127.0.0.1", None, config=s.config, correction_mode=s.mode, cycle_ms=s.cycle, **trust)  # type: ignore[arg-type]
     accelerated = s.simulator == "accelerated"
     # The simulated controller is a process (or thread) of this computer, not hard real time:
@@ -411,7 +436,7 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     silence = s.silence if s.silence is not None else 2.0 if accelerated else SIMULATED_SILENCE
     settings = LoopSettings(silence_timeout=silence, connect_timeout=s.connect_timeout)
     spec = SimulatorSpec(
-        runner="thread" if accelerated else s.simulator, accelerated=accelerated, context=context, faults=s.faults, quirks=s.quirks, flood=s.flood,
+        runner="thread" if accelerated else s.simulator, accelerated=accelerated, context=context, faults=s.faults, quirks=quirks, flood=s.flood, peer=s.peer,
     )
     return KukaRsiBackend(listen=("127.0.0.1", options.port or 0), link=link, simulator=spec, runner=s.runner,  # type: ignore[arg-type]
                           settings=settings, **common)  # the bridge node starts it

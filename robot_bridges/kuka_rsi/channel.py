@@ -21,7 +21,7 @@ import numpy as np
 
 from core_functions.geometry import quaternion_to_matrix
 from robot_bridges.kuka_rsi.codec import PacketCodec, Value
-from robot_bridges.kuka_rsi.config import FEEDBACK_KEYS, ConfigError
+from robot_bridges.kuka_rsi.convention import ReportCheck
 from robot_bridges.kuka_rsi.feedback import FeedbackLogger
 from robot_bridges.kuka_rsi.kinematics import abc_to_matrix, rotation_angle
 from robot_bridges.kuka_rsi.link import RobotLink, require_feedback
@@ -53,9 +53,7 @@ class Channel:
         heartbeat_cycles: int = 25,
     ) -> None:
         config = self.config = link.rsi_config()
-        require_feedback(config, link.name)
-        if config.onlysend:
-            raise ConfigError(f"robot {link.name}: {config.source} has ONLYSEND TRUE; the robot would ignore every reply")
+        require_feedback(config, link.name)  # refused before the loop starts, too (parse_options)
         self.index = index
         self.link = link
         self.slots = slots
@@ -72,25 +70,37 @@ class Channel:
         self.spoofed = 0  # datagrams from this robot's IP but another port
         roles = link.roles
         ri = self.rob.index
-        self._i_rist = [ri[f"RIst.{a}"] for a in "XYZABC"]
-        self._i_rsol = [ri[f"RSol.{a}"] for a in "XYZABC"]
-        self._i_aipos = [ri[f"AIPos.A{i}"] for i in range(1, 7)]
-        self._i_aspos = [ri[f"ASPos.A{i}"] for i in range(1, 7)]
+        # What the configuration does not send is None; require_feedback made sure of AIPos.
+        self._i_rist = _six(ri, "RIst", "X Y Z A B C")
+        self._i_rsol = _six(ri, "RSol", "X Y Z A B C")
+        self._i_aipos: list[int] = _six(ri, "AIPos", "A1 A2 A3 A4 A5 A6") or []
+        self._i_aspos = _six(ri, "ASPos", "A1 A2 A3 A4 A5 A6")
         self._i_delay = ri.get("Delay.D")
-        self._feedback_map = [ri[k] for k in FEEDBACK_KEYS]
+        # The shared record carries RIst, RSol, AIPos, ASPos: a report not sent shows its stand-in
+        # (the set point the actual value, and the other way round), or zeros (-1).
+        rist, rsol = self._i_rist or self._i_rsol, self._i_rsol or self._i_rist
+        self._feedback_map = [*(rist or [-1] * 6), *(rsol or [-1] * 6), *self._i_aipos, *(self._i_aspos or self._i_aipos)]
         self._state_scale = [1e-3, 1e-3, 1e-3, _DEG, _DEG, _DEG] * 2 + [_DEG] * 12
         self._send_bools = [i for i, f in enumerate(self.rob.fields) if f.type == "BOOL"]
         self._recv_bools = [i for i, f in enumerate(self.sen.fields) if f.type == "BOOL"]
         self._i_ak = [self.sen.index[k] for k in roles.axis_correction] if roles.axis(config) else None
-        self._i_rk = [self.sen.index[k] for k in roles.cart_correction] if roles.cartesian(config) else None
+        # Cartesian corrections need the TCP reported, set point or actual, to be checked against.
+        cart = roles.cartesian(config) and (self._i_rsol is not None or self._i_rist is not None)
+        self._i_rk = [self.sen.index[k] for k in roles.cart_correction] if cart else None
         self._i_correcting = ri[roles.correction_active] if roles.handshake(config) else None
         holdon = {f.key: f.holdon for f in self.sen.fields}
+        dt_ms = link.cycle_ms
+        check = ReportCheck(
+            np.radians(np.array(link.setpoint_tolerance_deg)), (link.tcp_tolerance_mm / 1000.0, math.radians(link.tcp_tolerance_deg)),
+            self._i_aspos is not None, round(max(link.follow_time * 1000.0, dt_ms)), self._note,
+        )
         self.motion = Motion(
             link,
             tuple(holdon.get(k, False) for k in roles.axis_correction),
             tuple(holdon.get(k, False) for k in roles.cart_correction),
-            lambda: self._pose_matrix(self._i_rsol),
+            self._reported_pose,
             self._warn,
+            check,
         )
         self.account = CycleAccount(link.ipoc_step, link.cycle_ms)
         self.correcting = False
@@ -196,6 +206,15 @@ class Channel:
         if n == 1 or n % 1000 == 0:
             self._emit(("warn", self.index, f"{self.link.name}: {text} ({n} so far)"))
 
+    def _note(self, level: int, text: str) -> None:
+        """Something the application should know once (a ``logging`` level): the convention found."""
+        self._emit(("note", self.index, level, f"{self.link.name}: {text}"))
+
+    def _reported_pose(self, actual: bool) -> np.ndarray | None:
+        """The controller's TCP in this packet (RIst with ``actual``, else RSol), None when not sent."""
+        idx = self._i_rist if actual else self._i_rsol
+        return None if idx is None else self._pose_matrix(idx)
+
     def _track_correcting(self) -> None:
         now = True if self._i_correcting is None else bool(self.rx[self._i_correcting])
         if now and not self.correcting:
@@ -207,7 +226,9 @@ class Channel:
     def _begin(self) -> None:
         """RSI_MOVECORR began: corrections are measured from the set point the controller reports
         now -- the one report taken as an input; from here on every report is checked."""
-        self.motion.begin(self._axes(self._i_aspos))
+        setpoint = self._axes(self._i_aspos or self._i_aipos)  # at rest: where the axes stand
+        self.motion.begin(setpoint)
+        self.motion.check.begin(None if self._i_aspos is None else setpoint, self._reported_pose(False))
         self.account.reset(self.ipoc, self._delay())
         self._fresh = True
 
@@ -232,7 +253,8 @@ class Channel:
 
     def _check_controller(self) -> None:
         """The controller must hold what we commanded; if not, stop trusting it for good."""
-        problem = self.motion.cross_check(self._axes(self._i_aspos))
+        setpoint = None if self._i_aspos is None else self._axes(self._i_aspos)
+        problem = self.motion.cross_check(setpoint, self._axes(self._i_aipos))
         if problem is None:
             return
         self.fault = f"{self.link.name}: {problem}"
@@ -431,7 +453,11 @@ class Channel:
                 return None
             i = int(np.argmax(off))
             return f"A{i + 1} is {math.degrees(float(off[i])):.4f} deg off"
-        p, r = self._pose(self._i_rist)
+        if self._i_rist is not None:
+            p, r = self._pose(self._i_rist)
+        else:  # no RIst sent: the TCP of the actual axes, by our kinematics
+            pose = self.motion.arm.fk(self._axes(self._i_aipos))
+            p, r = pose[:3, 3], pose[:3, :3]
         shift = float(np.linalg.norm(p - self._active_target[0]))
         turn = rotation_angle(r @ self._active_target[1].T)
         if shift <= self.link.position_tolerance and turn <= self.link.rotation_tolerance:
@@ -481,16 +507,17 @@ class Channel:
             motion.update_commanded()
             commanded = motion.commanded.tolist()
         else:
-            commanded = self._axes(self._i_aspos).tolist()  # nothing commanded yet: what the robot holds
+            commanded = self._axes(self._i_aspos or self._i_aipos).tolist()  # nothing commanded yet: what the robot holds
         if not motion.idle():
             status |= Status.MOVING
-        values = [float(rx[i]) * s for i, s in zip(self._feedback_map, self._state_scale)]  # type: ignore[arg-type]
+        values = [float(rx[i]) * s if i >= 0 else 0.0 for i, s in zip(self._feedback_map, self._state_scale)]  # type: ignore[arg-type]
         self.slots.state.write(
             t_ns, self.ipoc, self.cycles, delay, status, digouts, self.done_id, self.done_ok, self.active_id, self.rejected,
             motion.clamped, *values, *commanded,
         )
         if self._logger.enabled(self.index):
-            self._logger.push(self.index, (t_ns, self.ipoc, delay, *(rx[i] for i in self._i_rist), *(rx[i] for i in self._i_aipos)))  # type: ignore[arg-type]
+            tcp = (rx[i] for i in self._i_rist) if self._i_rist is not None else (0.0,) * 6
+            self._logger.push(self.index, (t_ns, self.ipoc, delay, *tcp, *(rx[i] for i in self._i_aipos)))  # type: ignore[arg-type]
         if self._wakes and self.cycles >= self._wakes[0]:
             while self._wakes and self.cycles >= self._wakes[0]:
                 self._wakes.pop(0)
@@ -518,6 +545,12 @@ class Channel:
                 values[4] = int(values[4]) | Status.LOST  # type: ignore[call-overload]
                 self.slots.state.write(*values)
             self.flush_events()
+
+
+def _six(index: dict[str, int], element: str, names: str) -> list[int] | None:
+    """The packet indices of ``element``'s six values, or None when the configuration does not send them all."""
+    keys = [f"{element}.{name}" for name in names.split()]
+    return [index[k] for k in keys] if all(k in index for k in keys) else None
 
 
 def _newer(slot: SeqSlot, seen: int) -> tuple[int, tuple[object, ...]] | None:

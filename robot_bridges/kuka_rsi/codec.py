@@ -136,11 +136,28 @@ def _layout_pattern(root: str, type_value: str, groups: dict[str, list[int]], fi
     return re.compile("".join(parts))
 
 
+#: The prefix a digit-led attribute name (kroshu's ``GPIO.01``: attribute ``01``) takes for lxml, and loses again.
+_DIGIT_PREFIX = "_rsi_"
+_TAG_TEXT = re.compile(rb"<([A-Za-z_][\w.-]*)((?:\s+[^\s=<>/\"']+\s*=\s*(?:\"[^\"]*\"|'[^']*'))*)(\s*/?)>")
+_ATTRIBUTE = re.compile(rb"(\s+)(\d[\w.-]*)(\s*=\s*(?:\"[^\"]*\"|'[^']*'))")
+
+
+def _name_digit_attributes(data: bytes) -> bytes:
+    """``data`` with every attribute name that starts with a digit -- which RSI writes for ``GPIO.01``, and
+    which is no XML name -- prefixed, so lxml reads the packet; only names are touched, never a value."""
+
+    def tag(match: re.Match[bytes]) -> bytes:
+        attributes = _ATTRIBUTE.sub(lambda a: a.group(1) + _DIGIT_PREFIX.encode() + a.group(2) + a.group(3), match.group(2))
+        return b"<" + match.group(1) + attributes + match.group(3) + b">"
+
+    return _TAG_TEXT.sub(tag, data)
+
+
 def _attributes(element: etree._Element) -> dict[str, str]:
     """An element's attributes by lower-case name; one name in two spellings is refused."""
     found: dict[str, str] = {}
     for name, value in element.attrib.items():
-        key = str(name).lower()
+        key = str(name).removeprefix(_DIGIT_PREFIX).lower()
         if key in found:
             raise PacketError(f"<{element.tag}> gives attribute {name!s} twice, in two spellings", "duplicate")
         found[key] = str(value)
@@ -181,6 +198,7 @@ class PacketCodec:
         self._template = "".join(parts).encode("ascii")
         self._fast = _layout_pattern(root, type_value, groups, self.fields)
         self._fast_fields = tuple((i, _CONVERTERS[self.fields[i].type], self.fields[i].key) for i in order)
+        self._digit_names = any(f.attribute is not None and f.attribute[:1].isdigit() for f in self.fields)
         self._parser = etree.XMLParser(
             resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False, remove_comments=True, remove_pis=True
         )
@@ -224,7 +242,7 @@ class PacketCodec:
             if match is not None:
                 return self._take(match, out)
         try:
-            root = etree.fromstring(data, self._parser)
+            root = etree.fromstring(_name_digit_attributes(data) if self._digit_names else data, self._parser)
         except etree.XMLSyntaxError as error:
             raise PacketError(f"not well-formed XML: {error.msg or error}", "xml") from None
         if root.tag != self.root:

@@ -50,13 +50,26 @@ _INTERNAL_SEND: dict[str, tuple[str, tuple[str, ...], ValueType]] = {
     "DEF_MECur": ("MECur", _EXTERNAL, "DOUBLE"),
     "DEF_Delay": ("Delay", ("D",), "LONG"),
 }
-#: The INTERNAL keyword of the RECEIVE section: a message shown on the teach pendant.
+#: Function generators of the technology parameters (``$TECHPAR_C`` / ``$TECHPAR``): RSI names 1..6.
+TECH_GENERATORS = 6
+#: ``DEF_Tech.C<n>`` (advance run) and ``DEF_Tech.T<n>`` (main run): the ten parameters of generator n,
+#: attributes ``C<n>1`` .. ``C<n>10`` of one shared ``<Tech>`` element, as KUKA's RSI puts them on the wire.
+_TECH: dict[str, tuple[str, tuple[str, ...], ValueType]] = {
+    f"DEF_Tech.{run}{n}": ("Tech", tuple(f"{run}{n}{m}" for m in range(1, 11)), "DOUBLE")
+    for run in ("C", "T")
+    for n in range(1, TECH_GENERATORS + 1)
+}
+_INTERNAL_SEND.update(_TECH)
+#: The INTERNAL keywords of the RECEIVE section: a message shown on the teach pendant, technology parameters.
 _INTERNAL_RECEIVE: dict[str, tuple[str, tuple[str, ...], ValueType]] = {
     "DEF_EStr": ("EStr", (), "STRING"),
+    **_TECH,
 }
 
 _NAME = r"[A-Za-z_][A-Za-z0-9_]*"
-_TAG = re.compile(rf"^{_NAME}(\.{_NAME})?$")
+# The attribute of a dotted TAG may start with a digit: kroshu's GPIO configurations name ``GPIO.01``,
+# which RSI writes as attribute ``01`` of ``<GPIO>`` (not an XML name; KUKA's own parsers scan for it).
+_TAG = re.compile(rf"^{_NAME}(\.[A-Za-z0-9_]+)?$")
 
 
 class ConfigError(ValueError):
@@ -256,7 +269,9 @@ def _read_element(
         raise ConfigError(f"{where}: HOLDON applies to RECEIVE elements only ({tag} is in SEND)")
     if tag.startswith("DEF_"):
         if tag not in internal:
-            known = ", ".join(sorted(internal))
+            known = ", ".join(sorted(k for k in internal if k not in _TECH))
+            if any(k in _TECH for k in internal):
+                known += f", DEF_Tech.C1..C{TECH_GENERATORS}, DEF_Tech.T1..T{TECH_GENERATORS}"
             raise ConfigError(f"{where}: {tag} is not a {section} keyword (known: {known})")
         if index_text != "INTERNAL":
             raise ConfigError(f"{where}: {tag} needs INDEX=\"INTERNAL\", got {index_text!r}")

@@ -105,3 +105,35 @@ def describe_joint_fault(axis: int, commanded: Vector, reported: Vector, toleran
         f"{math.degrees(float(reported[axis])):.3f} deg (tolerance {math.degrees(float(tolerance[axis])):.3f} deg); "
         "the controller does not hold the set point it was sent"
     )
+
+
+def joint_outside_tube(actual: Vector, window: Sequence[Vector], tolerance: Vector) -> tuple[int, float, float] | None:
+    """None when every actual axis (rad) lies between the lowest and the highest set point of ``window``
+    (the last cycles' commanded set points), widened by ``tolerance``; else the axis furthest out and
+    the span (low, high) it should lie in.
+
+    A servo's actual position trails its set point: whatever the lag, a following axis lies among the
+    set points it was given lately (a first-order lag is a weighted mean of them), never outside.
+    """
+    span = np.array(window)
+    low, high = span.min(axis=0), span.max(axis=0)
+    if ((actual >= low - tolerance) & (actual <= high + tolerance)).all():
+        return None
+    excess = np.maximum(low - actual, actual - high) / tolerance
+    axis = int(np.argmax(excess))
+    return axis, float(low[axis]), float(high[axis])
+
+
+def pose_outside_tube(actual: Matrix, window: Sequence[Matrix], tolerance_m: float, tolerance_rad: float) -> tuple[float, float] | None:
+    """The same for a TCP pose: its position within the box of the window's positions (widened by
+    ``tolerance_m``), its orientation within ``tolerance_rad`` plus the window's largest turn between two
+    cycles of the nearest orientation of the window; else ``(shift m, turn rad)`` beyond."""
+    positions = np.array([pose[:3, 3] for pose in window])
+    low, high = positions.min(axis=0) - tolerance_m, positions.max(axis=0) + tolerance_m
+    p = actual[:3, 3]
+    shift = float(np.linalg.norm(np.maximum(low - p, 0.0) + np.maximum(p - high, 0.0)))
+    spread = max((rotation_angle(b[:3, :3] @ a[:3, :3].T) for a, b in zip(window, list(window)[1:])), default=0.0)
+    turn = min(rotation_angle(actual[:3, :3] @ pose[:3, :3].T) for pose in window)
+    if shift <= 0.0 and turn <= tolerance_rad + spread:
+        return None
+    return shift, max(0.0, turn - spread)

@@ -96,6 +96,7 @@ class LoopEvents:
         self.tuning = ""
         self.faults: list[tuple[int, str, str]] = []
         self.warnings: list[str] = []
+        self.notes: list[str] = []  # what the loop found out once (the controller's set-point convention)
         self.done: dict[int, tuple[bool, str, str]] = {}  # command id -> ok, message, fault kind
         self.connected = [False] * robots
         self.feedback: list[str | None] = [None] * robots  # the file each robot's packets are saved to
@@ -116,6 +117,9 @@ class LoopEvents:
         elif kind == "warn":
             self.warnings.append(str(message[2]))
             del self.warnings[:-100]
+        elif kind == "note":
+            self.notes.append(str(message[3]))
+            del self.notes[:-100]
         elif kind == "done":
             self.done[int(message[2])] = (bool(message[3]), str(message[4]), str(message[5]))
             if len(self.done) > 10_000:

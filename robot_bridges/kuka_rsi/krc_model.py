@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 
 import numpy as np
@@ -24,6 +24,8 @@ from robot_bridges.kuka_rsi.setpoint import compose_cartesian
 from robot_bridges.kuka_rsi.sim_faults import Quirks
 
 HOME_DEG = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
+#: Where ROS-Industrial's kuka_rsi_simulator starts (its defaults).
+ROS_I_START_DEG = (0.0, -90.0, 90.0, 0.0, 90.0, 0.0)
 
 @dataclass(frozen=True)
 class RsiContext:
@@ -53,6 +55,25 @@ class RsiContext:
     @property
     def dt(self) -> float:
         return self.cycle_ms / 1000.0
+
+
+#: The controllers the simulated one can behave like, at their default settings.
+PEERS = ("kr-c4", "ros-industrial")
+
+
+def like_peer(peer: str, context: RsiContext, quirks: Quirks) -> tuple[RsiContext, Quirks]:
+    """``context`` and ``quirks`` as ``peer`` has them: ``kr-c4`` changes nothing; ``ros-industrial`` is
+    ROS-Industrial's ``kuka_rsi_simulator`` at its defaults -- its start pose (0 -90 90 0 90 0), AIPos taking
+    each correction at once (no servo lag), ASPos frozen at the start, RIst and RSol at zero,
+    ``<Rob TYPE="KUKA">``, an IPOC counting packets from 0."""
+    if peer == "kr-c4":
+        return context, quirks
+    if peer == "ros-industrial":
+        return (
+            replace(context, servo_time_constant=0.0, start_deg=ROS_I_START_DEG, ipoc_start=0),
+            replace(quirks, frozen_setpoint=True, root_attribute="TYPE", ipoc_step=1, zero_cartesian=True),
+        )
+    raise ValueError(f"the simulated controller behaves like {' or '.join(PEERS)}, not {peer!r}")
 
 
 class Program(Enum):
@@ -155,10 +176,15 @@ class KrcModel:
     def packet(self) -> bytes:
         """The ``<Rob>`` packet of the current cycle."""
         values = self._send_values
-        self._fill("RIst", self._cartesian("act", self.q_act))
+        actual = self.q_act + self._drift if self.quirks.drift_actual else self.q_act
         reported = self._reported_setpoint()
-        self._fill("RSol", self._cartesian("cmd", reported))
-        self._fill("AIPos", tuple(math.degrees(v) for v in self.q_act))
+        if self.quirks.zero_cartesian:
+            self._fill("RIst", (0.0,) * 6)
+            self._fill("RSol", (0.0,) * 6)
+        else:
+            self._fill("RIst", self._cartesian("act", actual))
+            self._fill("RSol", self._cartesian("cmd", reported))
+        self._fill("AIPos", tuple(math.degrees(v) for v in actual))
         self._fill("ASPos", tuple(math.degrees(v) for v in reported))
         index = self.rob.index
         if "Delay.D" in index:
@@ -192,7 +218,7 @@ class KrcModel:
         """The set point the packet reports: the real one, unless a quirk says otherwise."""
         if self.quirks.frozen_setpoint:
             return self._q_start
-        return self.q_cmd + self._drift if self.quirks.drift_axis else self.q_cmd
+        return self.q_cmd + self._drift if self.quirks.drift_axis and not self.quirks.drift_actual else self.q_cmd
 
     def _fill(self, element: str, six: Sequence[float]) -> None:
         index = self.rob.index

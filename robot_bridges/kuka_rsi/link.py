@@ -46,6 +46,9 @@ class RobotLink:
     tcp_tolerance_mm: float = 1.0
     tcp_tolerance_deg: float = 0.1
     report_lag_cycles: int = 1  # the report may show the set point of this many cycles before
+    # Where the controller reports no set point that follows the corrections (none sent, or frozen at the
+    # start), its actual axes must lie among the set points commanded over this many seconds: a servo's lag.
+    follow_time: float = 0.1
     ipoc_step: int | None = None  # IPOC increment per cycle; None: learned (KR C4: the cycle in ms)
 
     def __post_init__(self) -> None:
@@ -61,6 +64,8 @@ class RobotLink:
             raise ValueError(f"robot {self.name}: speed and acceleration limits must be finite and > 0")
         if not all(v > 0 for v in (*self.setpoint_tolerance_deg, self.tcp_tolerance_mm, self.tcp_tolerance_deg)):
             raise ValueError(f"robot {self.name}: set-point tolerances must be > 0 (math.inf: no cross-check)")
+        if not 0.0 < self.follow_time <= 1.0:
+            raise ValueError(f"robot {self.name}: follow_time must lie in (0, 1] s, got {self.follow_time}")
         if self.report_lag_cycles < 0 or (self.ipoc_step is not None and self.ipoc_step < 1):
             raise ValueError(f"robot {self.name}: report_lag_cycles must be >= 0 and ipoc_step >= 1")
 
@@ -68,11 +73,42 @@ class RobotLink:
         return self.config if self.config is not None else default_config()
 
 
+#: The one value the external system cannot do without: where the axes are.
+_ACTUAL_AXES = tuple(f"AIPos.A{i}" for i in range(1, 7))
+
+
 def require_feedback(config: RsiConfig, name: str) -> None:
-    """The external system needs the actual and set-point poses and axes in every packet."""
-    missing = [k for k in FEEDBACK_KEYS if not config.has_send(k)]
+    """The external system needs its replies read (ONLYSEND FALSE) and the actual axes in every packet:
+    without them it cannot know where the robot is, nor check what the controller does with its corrections.  Everything else a
+    configuration may lack only switches off what needs it (:func:`feedback_gaps`)."""
+    if config.onlysend:
+        raise ConfigError(f"robot {name}: {config.source} has ONLYSEND TRUE; the robot would ignore every reply")
+    missing = [k for k in _ACTUAL_AXES if not config.has_send(k)]
     if missing:
         raise ConfigError(
-            f"robot {name}: {config.source} must send DEF_RIst, DEF_RSol, DEF_AIPos and DEF_ASPos "
-            f"(missing {', '.join(missing[:4])})"
+            f"robot {name}: {config.source} must send DEF_AIPos, the actual axes (missing {', '.join(missing[:6])}): "
+            "without them the robot's position is unknown"
         )
+
+
+def feedback_gaps(config: RsiConfig, roles: RsiRoles) -> tuple[str, ...]:
+    """What the values a configuration does not send switch off, one sentence each (empty: nothing).
+
+    Nothing here weakens the limiter: it measures every step from the set point the external system
+    itself commanded, never from a value the controller reports.
+    """
+    sends = {k.split(".", 1)[0] for k in FEEDBACK_KEYS if config.has_send(k)}
+    gaps: list[str] = []
+    if "ASPos" not in sends:
+        gaps.append(
+            "no ASPos (the axes' set point): corrections count from the actual axes (AIPos) when RSI_MOVECORR begins, "
+            "and the cross-check compares AIPos with the set points the bridge itself commanded"
+        )
+    if roles.cartesian(config):
+        if "RSol" not in sends and "RIst" in sends:
+            gaps.append("no RSol (the TCP's set point): under Cartesian corrections the cross-check compares RIst with the commanded poses")
+        elif "RSol" not in sends:
+            gaps.append("neither RSol nor RIst (the TCP): Cartesian corrections (RKorr) are off, linear moves impossible")
+    if "RIst" not in sends:
+        gaps.append("no RIst (the actual TCP): the TCP is worked out from the actual axes")
+    return tuple(gaps)

@@ -20,6 +20,21 @@ from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface
 log = logging.getLogger("robot_bridges.kuka_rsi.backend")
 
 
+#: What this process has said once already (:func:`say_once`); bounded, it only spares repeats.
+_SAID: set[str] = set()
+
+
+def say_once(level: int, text: str) -> None:
+    """Log ``text`` at ``level`` the first time this process says it, at DEBUG after: a checked run
+    starts the back end twice (once to see where the robot is), and a fact is stated once in the console."""
+    if text in _SAID:
+        log.debug("%s", text)
+        return
+    if len(_SAID) < 1000:
+        _SAID.add(text)
+    log.log(level, "%s", text)
+
+
 class LoopEvents:
     """The loop as the back end sees it: its state, its events, the first fault, and bounded waits."""
 
@@ -72,6 +87,8 @@ class LoopEvents:
                 self.on_fault(str(message[2]), str(message[3]))
             elif message[0] == "warn":
                 log.warning("%s: %s", self.name, message[2])
+            elif message[0] == "note":
+                say_once(int(message[2]), f"{self.name}: {message[3]}")
             elif message[0] == "late":
                 log.warning("%s: the controller counts %d late replies (IPOC %d)", self.name, message[2], message[3])
             elif message[0] == "peer":

@@ -22,7 +22,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from robot_bridges.kuka_rsi.guard import AXES, describe_joint_fault, joint_disagreement, limit_joint_step, limit_vector_step, pose_disagreement
+from robot_bridges.kuka_rsi.convention import ReportCheck
+from robot_bridges.kuka_rsi.guard import AXES, limit_joint_step, limit_vector_step
 from robot_bridges.kuka_rsi.kinematics import KukaArm, abc_to_matrix, matrix_to_abc, rotation_angle
 from robot_bridges.kuka_rsi.link import RobotLink
 from robot_bridges.kuka_rsi.otg import CartesianOTG, VectorOTG, matrix_to_rotvec, rotvec_to_matrix
@@ -49,9 +50,18 @@ def _pose(p: Vector, r: Matrix) -> Matrix:
 class Motion:
     """The set point of one robot: generators, stream, corrections, and the controller's share of them."""
 
-    def __init__(self, link: RobotLink, holdon_ak: tuple[bool, ...], holdon_rk: tuple[bool, ...], reported_rsol: Callable[[], Matrix], warn: Callable[[str, str], None]) -> None:
-        """``reported_rsol`` reads the controller's RSol (4x4) of the current packet, taken only as
-        the offset between its kinematic model and ours; ``warn(key, text)`` reports a clamp."""
+    def __init__(
+        self,
+        link: RobotLink,
+        holdon_ak: tuple[bool, ...],
+        holdon_rk: tuple[bool, ...],
+        reported: Callable[[bool], Matrix | None],
+        warn: Callable[[str, str], None],
+        check: ReportCheck,
+    ) -> None:
+        """``reported(actual)`` reads the controller's TCP of the current packet (4x4): RSol, or with
+        ``actual`` RIst; None when the configuration does not send it.  Taken only as the offset between
+        its kinematic model and ours.  ``warn(key, text)`` reports a clamp; ``check`` is the cross-check."""
         self.link = link
         dt = self.dt = link.cycle_ms / 1000.0
         self.relative = link.correction_mode == "relative"
@@ -62,10 +72,13 @@ class Motion:
         self._linear = (link.max_linear_speed * dt, link.max_linear_accel * dt * dt)
         self._angular = (link.max_angular_speed * dt, link.max_angular_accel * dt * dt)
         self.tolerance = np.radians(np.array(link.setpoint_tolerance_deg))
-        self._reported_rsol = reported_rsol
+        self._reported = reported
         self._warn = warn
+        self.check = check
         depth = link.report_lag_cycles + 2
         self._depth = depth
+        # The commanded set points of the last follow_time: the path an actual position must lie on.
+        self._span = max(depth, math.ceil(link.follow_time / dt - 1e-9) + 1)
         self.ak_model = CorrectionModel(holdon_ak, self.relative, depth)
         self.rk_model = CorrectionModel(holdon_rk, self.relative, depth, compose_cartesian)
         self._keeps_moving = (self.relative and all(holdon_ak), self.relative and all(holdon_rk))
@@ -78,9 +91,11 @@ class Motion:
         self.q_ref = np.zeros(6)
         self.base = np.eye(4)  # the pose (our kinematics) the Cartesian correction is measured from
         self.calibration = np.eye(4)  # the controller's RSol = calibration @ our pose
+        self.actual_calibration = np.eye(4)  # the controller's RIst = actual_calibration @ our pose
         self.ak = np.zeros(6)  # deg: the absolute axis correction we want in force
         self.rk = np.zeros(6)  # mm / deg: the absolute Cartesian correction we want in force
         self.track: deque[Vector] = deque([np.zeros(6)] * depth, maxlen=depth)  # held set points, newest last
+        self.window: deque[Vector] = deque([np.zeros(6)], maxlen=self._span)  # the same, over follow_time
         self._fold_point = np.zeros(6)
         self._reply: tuple[Vector | None, Vector | None, tuple[float, float] | None] = (None, None, None)
         self._applied_cursor = (0.0, 0.0)
@@ -102,6 +117,7 @@ class Motion:
         self.joint.reset(q)
         self._fold_point = q.copy()
         self.track = deque([q.copy()] * self._depth, maxlen=self._depth)
+        self.window = deque([q.copy()], maxlen=self._span)
         self.commanded = q.copy()
         self._reply = (None, None, None)
         self.moved, self.quiet = True, 0
@@ -145,7 +161,9 @@ class Motion:
             position, rate = self._applied_cursor
             keeps = self._keeps_moving[0 if self.stream_space == "joint" else 1]
             self._applied_cursor = (position + rate, rate) if keeps else (position, 0.0)
-        self.track.append(self._held_now())
+        held = self._held_now()
+        self.track.append(held)
+        self.window.append(held)
 
     def _catch_up(self) -> None:
         """Go on from where the controller holds the set point, at the speed it holds it with."""
@@ -162,27 +180,17 @@ class Motion:
         self.moved = True
 
     # ---------------------------------------------------------------------------- the guard
-    def cross_check(self, aspos: Vector) -> str | None:
-        """None when the controller reports the set point we commanded (or the one a cycle or so
-        before it), within the tolerances; else what disagrees.  ``aspos``: the reported axes (rad);
-        under Cartesian corrections the reported RSol is checked instead."""
+    def cross_check(self, setpoint: Vector | None, actual: Vector) -> str | None:
+        """None when what the controller reports fits what we commanded (or the set point a cycle or so
+        before it), within the tolerances, by the convention it follows (:mod:`.convention`); else what
+        disagrees.  ``setpoint``: the reported ASPos (rad; None when not sent), ``actual``: AIPos; under
+        Cartesian corrections the reported RSol and RIst are checked instead."""
         recent = list(self.track)[-(self.link.report_lag_cycles + 1):]
         if self.space() == "joint":
-            found = joint_disagreement(aspos, recent, self.tolerance)
-            return None if found is None else describe_joint_fault(found[0], found[1], aspos, self.tolerance)
-        link = self.link
-        rsol = self._reported_rsol()
-        expected = [self.calibration @ pose for pose in recent]
-        off = pose_disagreement(rsol, expected, link.tcp_tolerance_mm / 1000.0, math.radians(link.tcp_tolerance_deg))
-        if off is None:
-            return None
-        commanded = np.round(expected[-1][:3, 3] * 1000.0, 3).tolist()
-        reported = np.round(rsol[:3, 3] * 1000.0, 3).tolist()
-        return (
-            f"TCP: commanded {commanded} mm, the controller reports {reported} mm ({off[0] * 1000.0:.3f} mm and "
-            f"{math.degrees(off[1]):.3f} deg apart; tolerance {link.tcp_tolerance_mm:g} mm, {link.tcp_tolerance_deg:g} deg); "
-            "the controller does not hold the set point it was sent"
-        )
+            return self.check.joints(recent, self.window, setpoint, actual)
+        rsol, rist = self._reported(False), self._reported(True)
+        mine = None if rist is None else np.linalg.inv(self.actual_calibration) @ rist
+        return self.check.pose([self.calibration @ pose for pose in recent], self.window, rsol, mine)
 
     def hold(self) -> None:
         """Stop changing the correction at once: the set point stays where the controller holds it."""
@@ -435,13 +443,17 @@ class Motion:
             self.ak, self.rk = (q - self.q_ref) / _DEG, np.zeros(6)
             self._fold_point = q.copy()
             self.track = deque([q.copy()] * self._depth, maxlen=self._depth)
+            self.window = deque([q.copy()], maxlen=self._span)
         else:
             q = self.q_ref + self.ak_model.total * _DEG
             self.base = self.arm.fk(q)
-            self.calibration = self._reported_rsol() @ np.linalg.inv(self.base)
+            rsol, rist = self._reported(False), self._reported(True)
+            self.calibration = np.eye(4) if rsol is None else rsol @ np.linalg.inv(self.base)
+            self.actual_calibration = np.eye(4) if rist is None else rist @ np.linalg.inv(self.base)
             self.cart.reset(self.base[:3, 3], self.base[:3, :3])
             self.ak, self.rk = self.ak_model.total.copy(), np.zeros(6)
             self.track = deque([self.base.copy()] * self._depth, maxlen=self._depth)
+            self.window = deque([self.base.copy()], maxlen=self._span)
         self.mode = space
         self.moved = True
 

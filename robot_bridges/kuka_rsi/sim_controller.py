@@ -38,6 +38,7 @@ class SimulatorSpec:
     faults: Faults = Faults()
     quirks: Quirks = Quirks()  # a misbehaving peer, for tests and demonstrations
     flood: Flood = Flood()  # a second sender on the controller's host (another port), for tests and demonstrations
+    peer: str = "kr-c4"  # the controller it behaves like (context and quirks already say so; a process is told again)
     rt_priority: int = SIMULATOR_PRIORITY  # SCHED_FIFO of a simulator process, above the loop's (a controller is hard real time); 0: none
 
 
@@ -102,6 +103,8 @@ class SimulatedController:
             "--rt-priority", str(spec.rt_priority),
         ]
         args += quirk_arguments(spec.faults, spec.quirks, spec.flood)
+        if spec.peer != "kr-c4":
+            args += ["--peer", spec.peer]
         if self.link.config is not None:
             args += ["--config", self.link.config.source]
         return args

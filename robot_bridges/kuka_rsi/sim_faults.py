@@ -36,6 +36,8 @@ class Quirks:
     drift_deg: float = 0.0  # ... by this much per cycle while RSI_MOVECORR runs
     root_attribute: str = "Type"  # how <Rob> spells its type attribute (ROS-I: "TYPE")
     ipoc_step: int | None = None  # IPOC increment per cycle; None: the cycle in ms, as a KR C4 (ROS-I: 1)
+    drift_actual: bool = False  # the drift shows in the actual axes (AIPos, RIst) instead of the set point
+    zero_cartesian: bool = False  # RIst and RSol read zero in every packet (ROS-I's kuka_rsi_simulator)
 
     def __post_init__(self) -> None:
         if not 0 <= self.drift_axis <= 6 or not math.isfinite(self.drift_deg):

@@ -46,7 +46,7 @@ from collections.abc import Sequence
 from core_functions.option_ranges import argument_type
 from node_transport.clock import Clock, real_clock, run_with_clock
 from robot_bridges.kuka_rsi.config import default_config, load_config
-from robot_bridges.kuka_rsi.krc_model import KrcModel, RsiContext, RsiStopped
+from robot_bridges.kuka_rsi.krc_model import PEERS, KrcModel, RsiContext, RsiStopped, like_peer
 from robot_bridges.kuka_rsi.realtime import ask_realtime
 from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
 from robot_bridges.kuka_rsi.sim_network import Endpoint, latency_summary, run_lockstep, run_realtime
@@ -78,6 +78,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--flood-port", type=argument_type("port"), default=0, help="the flooder's port on the controller's IP, in [0, 65535] (default 0: any free one)")
     p.add_argument("--reply-grace", type=argument_type("reply_grace"), default=0.25, help="accelerated mode: wall seconds to wait for a reply, in [0, 60]")
     p.add_argument("--rt-priority", type=argument_type("rt_priority"), default=0, help="try SCHED_FIFO at this priority, in [0, 99] (0: do not; a controller is hard real time)")
+    p.add_argument("--peer", choices=PEERS, default="kr-c4", help="behave like this controller at its defaults (ros-industrial: kuka_experimental's kuka_rsi_simulator)")
     p.add_argument("--accept-echo", action="store_true", help="benchmark baseline: a datagram equal to the packet is the reply")
     return p
 
@@ -97,6 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         quirks = Quirks(args.frozen_setpoint, axis, deg, args.root_attribute, args.ipoc_step)
         flood = Flood.parse(args.flood) if args.flood else Flood()
         flood = Flood(flood.rate, flood.content, flood.delay_jump, args.flood_port)
+        context, quirks = like_peer(args.peer, context, quirks)
         model = KrcModel(config, context, accept_echo=args.accept_echo, quirks=quirks)
     except (ValueError, OSError) as error:
         print(f"kuka_rsi simulator: {error}", file=sys.stderr)
