@@ -115,6 +115,7 @@ class OperationSpan:
     id: str
     t_start: float
     t_end: float | None = None
+    iteration: str = ""  # the loop iteration or call the operation was made for (the trace's ``iteration``)
 
 
 @dataclass(frozen=True)
@@ -200,7 +201,7 @@ class TimelineBuilder:
         bar = FunctionBar(lane.group, operation, function, t, attempt=attempt)
         lane.bars.append(bar)
         self._open[lane.group] = bar
-        span = self._operations.setdefault(operation, OperationSpan(operation, t))
+        span = self._operations.setdefault(operation, OperationSpan(operation, t, iteration=str(record.get("iteration") or "")))
         span.t_start = min(span.t_start, t)
 
     def _end_function(self, group: str, record: Mapping[str, Any], t: float) -> None:

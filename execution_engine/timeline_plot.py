@@ -105,7 +105,8 @@ def _operations(axes: Axes, timeline: Timeline, rows: int, span: float) -> None:
     shown, last = 0, -math.inf
     for operation in timeline.operations:
         if shown < MAX_LABELS and operation.t_start - last >= span / 100:
-            axes.text(operation.t_start, rows - 0.45, f"op {printable(operation.id)}", fontsize=6, rotation=90, va="bottom", ha="right", color="#555555")
+            made = f" ({printable(operation.iteration.split(' > ')[-1])})" if operation.iteration else ""  # the innermost loop's
+            axes.text(operation.t_start, rows - 0.45, f"op {printable(operation.id)}{made}", fontsize=6, rotation=90, va="bottom", ha="right", color="#555555")
             shown, last = shown + 1, operation.t_start
 
 

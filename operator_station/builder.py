@@ -111,6 +111,11 @@ def save_document(document: AppDocument, path: Path, catalog: Catalog, outputs: 
     app, messages, text = validate(document, path, catalog)
     if app is None:
         return False, messages
+    on_disk, _ = read_document(path) if path.is_file() else (None, [])
+    if on_disk is not None and on_disk.steps:  # the builder holds no loops or calls: saving would drop them
+        refusal = (f"{path} holds {', '.join(on_disk.steps)}, which the builder does not show: saving would drop them; "
+                   "edit the file as text, or save under another name")
+        return False, [*messages, PlacedMessage(refusal, "error", str(path), 1, 1, None, None, None, "application")]
     plan = FilePlan("application")
     if app.cell is not None and app.cell.path is not None:
         plan.read(f"the cell {app.cell.path}", app.cell.path)

@@ -22,7 +22,10 @@ from execution_engine.app_model.document import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = sorted([*ROOT.glob("apps_xml/*.xml"), *ROOT.glob("apps_xml/examples/*.xml")])
+#: The applications the builder holds whole; one with loops or calls (issue 24) it does not show, and does not
+#: save over (test_app_model_loops.py::test_the_builder_does_not_save_over_loops_it_cannot_show).
+SHIPPED = sorted(p for p in [*ROOT.glob("apps_xml/*.xml"), *ROOT.glob("apps_xml/examples/*.xml")]
+                 if not any(f"<{tag} " in p.read_text() for tag in ("for_each", "repeat", "call")))
 CATALOG = full_catalog()
 
 

@@ -9,7 +9,9 @@ from app_model_support import at, pos
 
 from app_functions.registry import full_catalog
 from execution_engine.app_model import ApplicationError, load_application, validate_application
+from execution_engine.app_model.document import read_document
 from execution_engine.app_model.expand import MAX_DEPTH, MAX_OPERATIONS
+from operator_station.builder import save_document
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
@@ -215,3 +217,14 @@ def test_a_variable_in_a_file_without_loops_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ApplicationError) as refused:
         load_application(path, CATALOG)
     assert str(refused.value.diagnostics[0]).startswith(at(path, text, 'value="{hole}"', "unknown variable {hole} in param 1 of debur_drilling"))
+
+
+def test_the_builder_does_not_save_over_loops_it_cannot_show(tmp_path: Path) -> None:
+    path = tmp_path / "loop.xml"
+    path.write_text((ROOT / "apps_xml" / "rivet_loop.xml").read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{CELL}"'))
+    document, _ = read_document(path)
+    assert document is not None and document.steps == ["<for_each> at line 18"] and [o.id for o in document.operations] == ["prepare", "home"]
+    before = path.read_bytes()
+    saved, messages = save_document(document, path, CATALOG)
+    assert not saved and path.read_bytes() == before
+    assert messages[-1].message == f"{path} holds <for_each> at line 18, which the builder does not show: saving would drop them; edit the file as text, or save under another name"

@@ -40,13 +40,25 @@ CELL = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
 
 
 def app(body: str, head: str = "", robot: str = "nextage", cell: str | None = None) -> str:
-    cell_attr = f' cell="{cell if cell is not None else CELL}"'
+    cell_attr = "" if cell == "" else f' cell="{cell if cell is not None else CELL}"'
     return f'<?xml version="1.0"?>\n<application name="t" robot="{robot}"{cell_attr}>\n{head}{body}</application>\n'
 
 
-def op(group: str, function: str, *params: str) -> str:
+def op(group: str, function: str, *params: str, op_id: str = "1") -> str:
     inner = "".join(f'<param value="{p}"/>' for p in params)
-    return f'  <operation id="1">\n    <{group}><function name="{function}"><params>{inner}</params></function></{group}>\n  </operation>\n'
+    return f'  <operation id="{op_id}">\n    <{group}><function name="{function}"><params>{inner}</params></function></{group}>\n  </operation>\n'
+
+
+def loop(head: str, body: str) -> str:
+    """``body`` inside the loop element ``head`` (for_each or repeat)."""
+    return f"  {head}\n{body}  </{head[1:].split()[0]}>\n"
+
+
+def nested(depth: int, body: str) -> str:
+    """``body`` inside ``depth`` repeats, each with its own variable."""
+    for level in range(depth):
+        body = loop(f'<repeat count="1" var="v{level}">', body)
+    return body
 
 
 def mcap_chunks(inner: bytes, count: int) -> bytes:
@@ -97,6 +109,11 @@ FILES: dict[str, str | bytes] = {
     "run.jsonl": '{"event": "run_start", "t": 0}\n',
     "run.svg": '{"event": "run_start", "t": 0}\n',
     "rsi.xml": (ROOT / "config" / "kuka_rsi_ethernet.xml").read_text(),
+    "rsi_no_aipos.xml": (ROOT / "config" / "kuka_rsi_ethernet.xml").read_text().replace('<ELEMENT TAG="DEF_AIPos" TYPE="DOUBLE" INDEX="INTERNAL"/>', ""),
+    "rsi_onlysend.xml": (ROOT / "config" / "kuka_rsi_ethernet.xml").read_text().replace("<ONLYSEND>FALSE</ONLYSEND>", "<ONLYSEND>TRUE</ONLYSEND>"),
+    "rsi_tech7.xml": (ROOT / "config" / "kuka_rsi_ethernet.xml").read_text().replace(
+        '<ELEMENT TAG="DEF_Delay" TYPE="LONG" INDEX="INTERNAL"/>', '<ELEMENT TAG="DEF_Delay" TYPE="LONG" INDEX="INTERNAL"/><ELEMENT TAG="DEF_Tech.C7" TYPE="DOUBLE" INDEX="INTERNAL"/>'
+    ),
     "zeros.mcap": mcap_chunks(bytes(64_000_000), 20),
     "unpacked.mcap": mcap_chunks(struct.pack("<BQ", 0x80, 64_000_000 - 9) + bytes(64_000_000 - 9), 20),
     "groups.jsonl": trace(*({"event": "function_start", "t": 0.01 * i, "group": f"g{i}"} for i in range(20_000))),
@@ -104,6 +121,22 @@ FILES: dict[str, str | bytes] = {
     "spoof.jsonl": trace({"event": "function_start", "t": 0.0}, {"event": "error", "t": 1.0, "error": "1\u202egnp.exe failed"}),
     "bidi_id.xml": app(op("left_arm", "gripper_open")).replace('<operation id="1">', '<operation id="1\u202egnp.exe">'),
     "huge.xml": b"<application>" + b" " * (33 * 1024 * 1024) + b"</application>",
+    # loops and calls (issue 24)
+    "loop_frame.xml": app(loop('<for_each var="hole" in="drill_1 drill_9">', op("left_arm", "debur_drilling", "{hole}", op_id="d_{hole}"))),
+    "loop_param.xml": app(loop('<repeat count="2">', op("left_arm", "set_speed", "150%", op_id="s_{index}"))),
+    "loop_variable.xml": app(loop('<for_each var="hole" in="drill_1">', op("left_arm", "debur_drilling", "{hol}", op_id="d_{hole}"))),
+    "loop_id.xml": app(loop('<for_each var="hole" in="drill_1 drill_2">', op("left_arm", "debur_drilling", "{hole}", op_id="debur"))),
+    "loop_kind.xml": app(loop('<for_each var="s" in="kind:screw">', op("right_arm", "gripper_open", op_id="o_{s}"))),
+    "loop_grid.xml": app(loop('<for_each var="s" in="grid:rivet_1 2y2 0.03 0.03">', op("right_arm", "gripper_open", op_id="o_{s}"))),
+    "loop_large.xml": app(loop('<repeat count="1000">', loop('<repeat count="1000" var="j">', op("right_arm", "gripper_open", op_id="o_{index}_{j}")))),
+    "loop_deep.xml": app(nested(9, op("right_arm", "gripper_open", op_id="deep"))),
+    "call_cycle.xml": app('  <call application="call_cycle.xml"/>\n'),
+    "call_missing.xml": app('  <call application="blocks/nowhere.xml"><param name="hole" value="drill_1"/></call>\n'),
+    "loop_collide.xml": app(loop('<for_each var="t" in="0.10 0.06 0.0">', (
+        '  <operation id="reach_{index}">\n'
+        '    <left_arm><function name="move_to"><params><param value="0.34,{t},0.10,180deg,0,90deg"/></params></function></left_arm>\n'
+        '    <right_arm><function name="move_to"><params><param value="0.34,-{t},0.10,180deg,0,90deg"/></params></function></right_arm>\n'
+        '  </operation>\n')), cell=""),
 }
 #: The mode each file is written with, whatever the umask the tests run under (a row about who may read
 #: a file must not hold only under the usual 022); every other file: its owner's only.

@@ -69,6 +69,9 @@ class AppDocument:
     operations: list[OperationEntry] = field(default_factory=list)
     header: list[str] = field(default_factory=list)  # comments above the root element
     trailer: list[str] = field(default_factory=list)  # comments after the last operation
+    #: The loops and calls of the file (``<for_each> at line 12``), which this document does not hold:
+    #: the builder shows the operations written at the top only, and must not save over the file.
+    steps: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         """Plain dicts and lists (``asdict`` without its deep copies: a 10,000-operation file in a tenth of the time)."""
@@ -79,7 +82,7 @@ class AppDocument:
                 "id": op.id, "name": op.name, "comments": list(op.comments),
                 "calls": [{"group": c.group, "function": c.function, "params": [{"value": p.value, "name": p.name} for p in c.params]} for c in op.calls],
             } for op in self.operations],
-            "header": list(self.header), "trailer": list(self.trailer),
+            "header": list(self.header), "trailer": list(self.trailer), "steps": list(self.steps),
         }
 
     @staticmethod
@@ -182,6 +185,8 @@ def parse_document(data: bytes, path: Path | str, *, max_bytes: int = DEFAULT_MA
         elif child.tag == "operation":
             document.operations.append(_read_operation(child, pending))
             pending = []
+        elif child.tag in ("for_each", "repeat", "call"):
+            document.steps.append(f"<{child.tag}> at line {child.sourceline}")
     document.trailer = pending
     return document, []
 

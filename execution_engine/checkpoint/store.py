@@ -61,7 +61,13 @@ class CheckpointStore:
         self.path = Path(path)
         try:
             if read_only:
-                self._db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True, isolation_level=None, timeout=5.0)
+                # A read-only connection to a WAL database makes its -wal and -shm files and, being
+                # read-only, cannot remove them when it closes: a refused --resume would leave two files
+                # beside the checkpoint.  A checkpoint without a -wal file has everything in the file
+                # itself (it was closed cleanly), so it is read as it stands (immutable: no lock, no side
+                # file); after a crash the -wal is there and holds the latest results, and is read.
+                immutable = "&immutable=1" if not Path(f"{self.path}-wal").exists() else ""
+                self._db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro{immutable}", uri=True, isolation_level=None, timeout=5.0)
                 tables = {row[0] for row in self._db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
                 missing = {"meta", "runs", "functions", "hands", "trajectories", "counters"} - tables
                 if missing:

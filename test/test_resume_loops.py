@@ -1,0 +1,110 @@
+"""Crash resume of an application made of loops and calls (issue 24 item 4): kill -9 in the second
+iteration, resume, and the run goes on at the iteration it was in, every function done once; a changed
+library block refuses the resume like a changed application."""
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from app_functions.registry import full_catalog
+from cell_runner.cli import main
+from execution_engine.app_model import load_application
+from execution_engine.checkpoint.resume import sits_out
+
+ROOT = Path(__file__).resolve().parent.parent
+BLOCKS = ROOT / "apps_xml" / "rivet_blocks.xml"
+
+
+def records(path: Path) -> list[dict[str, Any]]:
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:  # the line the kill cut
+            continue
+    return out
+
+
+def copy_application(folder: Path) -> Path:
+    """The demonstrator built from the library block, in a folder of its own (so its block can be changed)."""
+    (folder / "blocks").mkdir()
+    shutil.copy(ROOT / "apps_xml" / "blocks" / "rivet_block.xml", folder / "blocks" / "rivet_block.xml")
+    cell = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
+    for name, source in (("app.xml", BLOCKS), ("blocks/rivet_block.xml", ROOT / "apps_xml" / "blocks" / "rivet_block.xml")):
+        text = (folder / name).read_text() if (folder / name).exists() else source.read_text()
+        (folder / name).write_text(text.replace('cell="cells/rivet_cell.xml"', f'cell="{cell}"').replace('cell="../cells/rivet_cell.xml"', f'cell="{cell}"'))
+    return folder / "app.xml"
+
+
+def start_and_kill(app: Path, folder: Path, starts: int) -> Path:
+    """Run in a process of its own; kill -9 once the trace shows ``starts`` function starts of the second iteration."""
+    trace = folder / "run.jsonl"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "execution_engine", "run", str(app), "--speed", "max", "-q", "--no-check",
+         "--trace", str(trace), "--checkpoint", str(folder / "run.sqlite")],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    )
+    deadline = time.monotonic() + 120
+    mark = b'"iteration":"for_each hole=drill_2'
+    while process.poll() is None and time.monotonic() < deadline:
+        try:
+            lines = trace.read_bytes().splitlines()
+        except FileNotFoundError:  # not created yet
+            lines = []
+        if sum(1 for line in lines if mark in line and b'"event":"function_start"' in line) >= starts:
+            break
+        time.sleep(0.002)  # polling the file the run writes
+    assert process.poll() is None, f"the run ended before the kill: {process.stderr.read().decode() if process.stderr else ''}"
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait(30)
+    return trace
+
+
+@pytest.mark.parametrize("starts", [1, 2, 3])
+def test_kill_in_the_second_iteration_then_resume_does_every_function_once(tmp_path: Path, starts: int) -> None:
+    app = copy_application(tmp_path)
+    catalog = full_catalog()
+    application = load_application(app, catalog)
+    required = {(op.id, g) for op in application.operations for g, call in op.calls.items() if not sits_out(application, catalog, call)}
+    trace = start_and_kill(app, tmp_path, starts)
+    first = records(trace)
+    done_first = {(r["operation"], r["group"]) for r in first if r["event"] == "function_end" and r["outcome"] == "succeeded"}
+    left = next(op for op in application.operations if any((op.id, g) in required and (op.id, g) not in done_first for g in op.calls))
+    assert left.origin.startswith("for_each hole=drill_2"), "the kill landed in the second iteration"
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", str(tmp_path / "run.sqlite"),
+                 "--on-interrupted", "redo", "--trace", str(tmp_path / "resumed.jsonl")], out, err)
+    assert code == 0, err.getvalue()
+    second = records(tmp_path / "resumed.jsonl")
+    started = [r for r in second if r["event"] == "function_start"]
+    assert started[0]["operation"] == left.id and started[0]["iteration"] == left.origin  # on at the iteration it was in
+    done = Counter((r["operation"], r["group"]) for r in first + second if r["event"] == "function_end" and r["outcome"] == "succeeded")
+    assert set(done) == required and set(done.values()) == {1}, "every function completed exactly once across the two runs"
+    inserted = [r["iteration"] for r in first + second if r["event"] == "function_end" and r.get("function") == "insert_rivet" and r["outcome"] == "succeeded"]
+    assert sorted(i.split(" > ")[0] for i in inserted) == [f"for_each hole=drill_{n}" for n in range(1, 5)]  # one rivet per hole
+    assert second[-1]["event"] == "run_end" and second[-1]["outcome"] == "finished"
+
+
+def test_a_changed_block_refuses_the_resume_naming_it(tmp_path: Path) -> None:
+    app = copy_application(tmp_path)
+    err = io.StringIO()
+    assert main(["run", str(app), "--speed", "max", "-q", "--no-check", "--trace", str(tmp_path / "a.jsonl")], io.StringIO(), err) == 0, err.getvalue()
+    block = tmp_path / "blocks" / "rivet_block.xml"
+    block.write_text(block.read_text().replace("Debur one hole", "Debur a hole"))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", str(tmp_path / "a.checkpoint.sqlite")], out, err)
+    assert code == 2 and err.getvalue().count("\n") == 1
+    assert f"an application it calls ({block})" in err.getvalue() and "changed since the checkpoint" in err.getvalue()
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
