@@ -165,7 +165,7 @@ def record_node(
     recorder = Recorder(node, McapSink(stream, path), derive_tf=derive_tf)
     recorder.describe_run(app.path, app.cell.path if app.cell is not None else None, {
         "application": app.name, "robot": app.robot.name, "backend": backend, "continues": continues,
-    })
+    }, app.includes, app.iterations())
     recorder.start()
     return recorder
 

@@ -112,10 +112,11 @@ def run_files(
 
 
 def app_inputs(app: Application) -> list[tuple[str, str | Path]]:
-    """The application and its cell, as a refusal names them."""
-    found = [(f"the application {app.path}", app.path)]
+    """The application, its cell and the applications its ``<call>``s bring in, as a refusal names them."""
+    found: list[tuple[str, str | Path]] = [(f"the application {app.path}", app.path)]
     if app.cell is not None and app.cell.path is not None:
         found.append((f"the cell {app.cell.path}", app.cell.path))
+    found += [(f"the called application {path}", path) for path in app.includes]
     return found
 
 

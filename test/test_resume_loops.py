@@ -21,6 +21,7 @@ from app_functions.registry import full_catalog
 from cell_runner.cli import main
 from execution_engine.app_model import load_application
 from execution_engine.checkpoint.resume import sits_out
+from execution_engine.recorder.reading import Recording, iter_messages
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCKS = ROOT / "apps_xml" / "rivet_blocks.xml"
@@ -108,3 +109,24 @@ def test_a_changed_block_refuses_the_resume_naming_it(tmp_path: Path) -> None:
     assert code == 2 and err.getvalue().count("\n") == 1
     assert f"an application it calls ({block})" in err.getvalue() and "changed since the checkpoint" in err.getvalue()
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_a_recording_keeps_the_called_blocks_and_the_iterations_and_no_output_overwrites_a_block(tmp_path: Path) -> None:
+    app = copy_application(tmp_path)
+    block = tmp_path / "blocks" / "rivet_block.xml"
+    before = block.read_bytes()
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["run", str(app), "--speed", "max", "-q", "--no-check", "--trace", str(block)], out, err) == 2
+    assert err.getvalue() == (f"error: --trace {block}: is the same file as the called application {block.resolve()}, which this run reads; "
+                              "the trace would overwrite it: give another file\n")
+    assert block.read_bytes() == before
+    record = tmp_path / "run.mcap"
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["run", str(app), "--speed", "max", "-q", "--no-check", "--record", str(record)], out, err) == 0, err.getvalue()
+    recording = Recording(str(record))
+    for _ in iter_messages(record, recording, lambda topic, kind: False):
+        pass
+    assert recording.attachments["calls/rivet_block.xml"] == before
+    iterations = recording.metadata["dual_arm_executive_iterations"]
+    assert iterations["insert_drill_2"].startswith("for_each hole=drill_2 > call blocks/rivet_block.xml hole=drill_2 slot=rivet_2 at ")
+    assert "prepare" not in iterations and len(iterations) == 8

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import hashlib
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -179,13 +179,19 @@ class Recorder:
         application: Path,
         cell: Path | None,
         fields: Mapping[str, str],
+        includes: Sequence[Path] = (),
+        iterations: Mapping[str, str] | None = None,
     ) -> None:
-        """Store what ran: the application and cell files as attachments, and a metadata record."""
+        """Store what ran: the application, cell and called files as attachments, and a metadata
+        record; ``iterations`` (the loop iteration or call each expanded operation was made for, by
+        id) as a metadata record of its own, ``dual_arm_executive_iterations``."""
         stamp = self.node.now_stamp()
         now_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        for path, kind in ((application, "application"), (cell, "cell")):
+        for path, kind in ((application, "application"), (cell, "cell"), *((p, "calls") for p in includes)):
             if path is not None and Path(path).is_file():
                 self.sink.add_attachment(f"{kind}/{Path(path).name}", "application/xml", Path(path).read_bytes(), now_ns)
+        if iterations:
+            self.sink.add_metadata("dual_arm_executive_iterations", iterations)
         self.sink.add_metadata("dual_arm_executive", {
             "application_path": str(application),
             "clock_epoch": repr(self.node.clock.epoch),  # ROS time of run time 0: stamps -> the trace's t
