@@ -228,3 +228,21 @@ def test_the_builder_does_not_save_over_loops_it_cannot_show(tmp_path: Path) -> 
     saved, messages = save_document(document, path, CATALOG)
     assert not saved and path.read_bytes() == before
     assert messages[-1].message == f"{path} holds <for_each> at line 18, which the builder does not show: saving would drop them; edit the file as text, or save under another name"
+
+
+@pytest.mark.parametrize("sync", ["operation", "flags"])
+def test_loops_in_both_sync_modes_and_a_wait_no_iteration_can_end(tmp_path: Path, sync: str) -> None:
+    def flags(values: str, extra: str = "") -> str:
+        return (f'  <for_each var="v" in="a b">\n    <operation id="set_{{v}}"><left_arm><function name="set_flag"><params><param value="done_{{v}}"/>'
+                '</params></function></left_arm></operation>\n  </for_each>\n'
+                f'  <for_each var="v" in="{values}">\n    <operation id="wait_{{v}}"><right_arm><function name="wait_flag"><params>'
+                '<param value="done_{v}"/></params></function></right_arm></operation>\n  </for_each>\n')
+
+    good = app(flags("b a")).replace('robot="nextage"', f'robot="nextage" sync="{sync}"')
+    loaded = load_application(write(tmp_path, good), CATALOG)
+    assert loaded.sync == sync and [o.id for o in loaded.operations] == ["set_a", "set_b", "wait_b", "wait_a"]
+    text = app(flags("a b c")).replace('robot="nextage"', f'robot="nextage" sync="{sync}"')
+    path = write(tmp_path, text, "stuck.xml")
+    assert errors(path) == [at(path, text, '<function name="wait_flag">', (
+        "wait_flag('done_c') of right_arm can never end: no other group sets flag 'done_c' (no set_flag of that name in the application) (in for_each v=c)"
+    ))]
