@@ -246,3 +246,23 @@ def test_loops_in_both_sync_modes_and_a_wait_no_iteration_can_end(tmp_path: Path
     assert errors(path) == [at(path, text, '<function name="wait_flag">', (
         "wait_flag('done_c') of right_arm can never end: no other group sets flag 'done_c' (no set_flag of that name in the application) (in for_each v=c)"
     ))]
+
+
+def test_what_substitution_makes_is_held_to_what_may_be_written(tmp_path: Path) -> None:
+    block_text = block().replace('id="d_{hole}"', 'id="d_{hole}_{hole}"')
+    (tmp_path / "blk.xml").write_text(block_text)
+    long = "x" * 40
+    text = app(f'  <call application="blk.xml"><param name="hole" value="{long}"/></call>\n'
+               '  <call application="blk.xml"><param name="hole" value="a b"/></call>\n'
+               '  <for_each var="s" in="a&#x202E;b">\n' + op("o_{s}", "left_arm", "gripper_open") + "  </for_each>\n")
+    path = write(tmp_path, text)
+    found = errors(path)
+    assert at(tmp_path / "blk.xml", block_text, 'id="d_', (
+        f"operation id 'd_{{hole}}_{{hole}}' comes out 83 characters long, more than 64 (in call blk.xml hole={long} at {path}:3)"
+    )) in found
+    assert at(tmp_path / "blk.xml", block_text, 'id="d_', (
+        f"operation id 'd_{{hole}}_{{hole}}' comes out 'd_a b_a b', which holds a space; an id needs letters, digits and punctuation (in call blk.xml hole=a b at {path}:4)"
+    )) in found
+    assert at(path, text, 'id="o_{s}"', (
+        "operation id 'o_{s}' comes out 'o_a\\u202eb', which holds RIGHT-TO-LEFT OVERRIDE (U+202E); an id needs letters, digits and punctuation (in for_each s=a\\u202eb)"
+    )) in found

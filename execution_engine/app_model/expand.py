@@ -21,6 +21,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from core_functions.printable import printable, unsafe_character
 from core_functions.robots import RobotModel
 from execution_engine.app_model.cell_model import Cell, Frame
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, in_iteration
@@ -34,6 +35,11 @@ from execution_engine.app_model.reader import INDEX, ApplicationDraft, CallBlock
 MAX_OPERATIONS = 100_000
 #: Loops and calls inside each other: a pallet's layers, rows and columns, a block, its sub-block.
 MAX_DEPTH = 8
+#: Characters substitution may make in all (ids, names, values): what a 32 MiB file could hold, twice.
+#: Without it a value of many {var}s over long values, in many iterations, could take gigabytes.
+MAX_TEXT = 64 * 1024 * 1024
+#: What a substituted text may hold at most, as application.xsd holds what is written.
+_LONGEST = {"id": 64, "name": 256, "value": 4096, "in": 65536}
 _KIND = "kind:"
 _VARIABLE = re.compile(r"\{\{|\}\}|\{([A-Za-z_][A-Za-z0-9_]*)\}")
 _SEPARATORS = re.compile(r"[\s,]+")
@@ -106,6 +112,7 @@ class Expander:
         #: Where a {variable} could not be substituted: the catalog's check of what is left there
         #: would only repeat the problem (merge_iterations drops it).
         self.unsubstituted: set[tuple[str, int, int]] = set()
+        self.made_text = 0  # characters substitution made so far (MAX_TEXT)
 
     # ------------------------------------------------------------------ reporting
     def error(self, offset: int, message: str, severity: str = "error") -> None:
@@ -166,6 +173,12 @@ class Expander:
 
     def text(self, text: str, env: Mapping[str, str], tag: int, attribute: str, what: str) -> str:
         out, unknown = substitute(text, env)
+        if out is not text:
+            self.made_text += len(out)
+            if self.made_text > MAX_TEXT:
+                self.error(self.attribute(tag, attribute), f"substituting the loops' variables makes more than {MAX_TEXT:,} characters of text, the limit")
+                raise _TooLarge
+            self.check_made(out, text, tag, attribute, what)
         if unknown:
             where = self.source.at_offset(self.attribute(tag, attribute))
             self.unsubstituted.add((where.file, where.line, where.col))
@@ -175,6 +188,20 @@ class Expander:
                 "no loop or call around it defines any (a library block is checked through the application that calls it)")
             self.error(self.attribute(tag, attribute), f"unknown variable {{{name}}} in {what} {text!r}: {defined}")
         return out
+
+    def check_made(self, out: str, text: str, tag: int, attribute: str, what: str) -> None:
+        """What substitution made holds to what the schema holds a written text to (length; an id
+        also: no spaces, nothing that would make it look like another on a console)."""
+        longest = _LONGEST.get(attribute, 4096)
+        if len(out) > longest:
+            self.error(self.attribute(tag, attribute), f"{what} {text!r} comes out {len(out):,} characters long, more than {longest:,}")
+        elif attribute == "id":
+            unsafe = None if out.isascii() and out.isprintable() else unsafe_character(out)
+            if unsafe is None and (not out or any(c.isspace() for c in out)):
+                unsafe = "a space" if out else "nothing"
+            if unsafe is not None:
+                self.error(self.attribute(tag, attribute), f"{what} {text!r} comes out '{printable(out)}', which holds {unsafe}; "
+                           "an id needs letters, digits and punctuation")
 
     def duplicate(self, made: OperationSite, first: OperationSite, site: OperationSite, source: SourceMap) -> None:
         """Reported once per ``<operation>`` written, at its id (without the iteration: both are named)."""
