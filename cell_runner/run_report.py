@@ -37,6 +37,11 @@ class RunSummary:
         out = list(self.header)
         done = sum(1 for o in t.operations if o.t_end is not None)
         out.append(f"  operations: {len(t.operations)} started, {done} complete; run time {t.t_end - t.t_start:.3f} s")
+        made = [o for o in t.operations if o.iteration]
+        if made:  # operations a loop or a call made: where the run got to, by iteration
+            last = max(t.operations, key=lambda o: o.t_start)
+            where = f"; the last started: {last.id}" + (f" ({last.iteration})" if last.iteration else "")
+            out.append(f"  iterations: {len(made)} of them made by loops or calls{where}")
         for group, lane in t.lanes.items():
             total = max(t.t_end - t.t_start, 1e-9)
             failed = sum(1 for b in lane.bars if b.outcome in ("aborted", "preempted"))

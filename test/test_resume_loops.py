@@ -83,6 +83,10 @@ def test_kill_in_the_second_iteration_then_resume_does_every_function_once(tmp_p
     done_first = {(r["operation"], r["group"]) for r in first if r["event"] == "function_end" and r["outcome"] == "succeeded"}
     left = next(op for op in application.operations if any((op.id, g) in required and (op.id, g) not in done_first for g in op.calls))
     assert left.origin.startswith("for_each hole=drill_2"), "the kill landed in the second iteration"
+    out = io.StringIO()
+    assert main(["report", str(trace)], out, io.StringIO()) == 0
+    iterations = [line for line in out.getvalue().splitlines() if line.strip().startswith("iterations:")]
+    assert len(iterations) == 1 and " (for_each hole=drill_2 > call blocks/rivet_block.xml hole=drill_2 slot=rivet_2 at " in iterations[0]
     out, err = io.StringIO(), io.StringIO()
     code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", str(tmp_path / "run.sqlite"),
                  "--on-interrupted", "redo", "--trace", str(tmp_path / "resumed.jsonl")], out, err)
