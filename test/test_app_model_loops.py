@@ -266,3 +266,15 @@ def test_what_substitution_makes_is_held_to_what_may_be_written(tmp_path: Path) 
     assert at(path, text, 'id="o_{s}"', (
         "operation id 'o_{s}' comes out 'o_a\\u202eb', which holds RIGHT-TO-LEFT OVERRIDE (U+202E); an id needs letters, digits and punctuation (in for_each s=a\\u202eb)"
     )) in found
+
+
+def test_what_a_called_file_says_that_does_not_apply_is_a_warning(tmp_path: Path) -> None:
+    (tmp_path / "blk.xml").write_text(block(extra='<error_policy action="alarm"/>\n').replace('robot="nextage"', 'robot="nextage" sync="flags"'))
+    text = app('  <call application="blk.xml"><param name="hole" value="drill_1"/><param name="slot" value="rivet_1"/></call>\n')
+    path = write(tmp_path, text)
+    assert errors(path) == [
+        at(path, text, 'application="', 'warning: blk.xml says sync="flags", this application sync="operation": its operations run as this one\'s do'),
+        at(path, text, 'application="', "warning: the <error_policy> of blk.xml does not apply: the calling application's does"),
+        at(path, text, 'name="slot"', "warning: blk.xml uses no variable {slot} (it uses: hole)"),
+    ]
+    assert [o.id for o in load_application(path, CATALOG).operations] == ["d_drill_1"]

@@ -360,7 +360,7 @@ class Expander:
         for name, _, param_at in call.params:
             if name not in used:
                 self.error(self.attribute(base + param_at, "name"), (
-                    f"{called.display} uses no variable {{{name}}} (it uses: {', '.join(sorted(used)) or 'none'})"
+                    f"{call.application} uses no variable {{{name}}} (it uses: {', '.join(sorted(used)) or 'none'})"
                 ), "warning")
         caller = self.source.at_offset(at)
         bound = " ".join(f"{k}={v}" for k, v in params.items())
@@ -415,6 +415,10 @@ class Expander:
             ))
             self.refused.add(path)
             return None
+        if draft.sync != self.draft.sync:
+            self.error(self.attribute(at, "application"), (
+                f"{shown} says sync=\"{draft.sync}\", this application sync=\"{self.draft.sync}\": its operations run as this one's do"
+            ), "warning")
         if draft.policy is not None:
             self.error(self.attribute(at, "application"), f"the <error_policy> of {shown} does not apply: the calling application's does", "warning")
         source = draft.source
