@@ -167,8 +167,13 @@ def row(figure: Figure, outcome: Outcome | None) -> Row:
     except (TypeError, ValueError, ZeroDivisionError) as error:
         return absent(f"{outcome.bench}'s summary has an unusable figure ({error})")
     met = "-" if m.met is None else ("yes" if m.met else "**no**")
-    ratio = "-" if m.ratio is None else f"{m.ratio:.2f}x"
+    ratio = "-" if m.ratio is None else ratio_text(m.ratio)
     return Row(figure.path, m.figure, m.baseline, ratio, figure.aim, met, figure.section)
+
+
+def ratio_text(ratio: float) -> str:
+    """Three figures where they mean something: 0.105x, 1.44x, 23.9x."""
+    return f"{ratio:.3f}x" if ratio < 1 else f"{ratio:.2f}x" if ratio < 10 else f"{ratio:.1f}x"
 
 
 def build_rows(benches: Iterable[Bench], outcomes: Iterable[Outcome], suite: bool = True) -> list[Row]:
@@ -207,7 +212,8 @@ def markdown_section(rows: Sequence[Row], outcomes: Sequence[Outcome], meta: dic
     for bench in meta_benches(meta):
         o = by_name.get(bench.name)
         seconds, outcome = ("-", "not run") if o is None else (f"{o.seconds:.0f} s", "summary read" if o.summary is not None else cell(o.reason or ""))
-        runs.append(f"| `{bench.command()}` | {seconds} | {outcome} |")
+        command = meta.get("commands", {}).get(bench.name, bench.command())  # as it ran (--from: maybe an older figures.py)
+        runs.append(f"| `{command}` | {seconds} | {outcome} |")
     return "\n".join([
         BEGIN,
         "## Every aim at a glance (issue 22's table, re-measured)",
@@ -300,9 +306,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         benches = meta_benches(meta)
     else:
         benches = select(args.only, args.issue_only)
-        meta = {"command": "nice .venv/bin/python " + " ".join(["bench/all.py", *(sys.argv[1:] if argv is None else argv)]),
+        words = list(sys.argv[1:] if argv is None else argv)
+        if "--save" in words:  # where the summaries were kept is no part of how they were measured
+            at = words.index("--save")
+            del words[at:at + 2]
+        meta = {"command": "nice .venv/bin/python " + " ".join(["bench/all.py", *words]),
                 "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "head": head(),
-                "cpus": os.cpu_count(), "load_before": os.getloadavg()[0], "benches": [b.name for b in benches]}
+                "cpus": os.cpu_count(), "load_before": os.getloadavg()[0], "benches": [b.name for b in benches],
+                "commands": {b.name: b.command() for b in benches}}
         started = time.monotonic()
         outcomes = run_all(benches, args.budget)
         meta.update(load_after=os.getloadavg()[0], seconds=time.monotonic() - started)

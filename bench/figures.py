@@ -147,7 +147,7 @@ def _simulator_run(s: Summary) -> Measured:
                     m["run_cpu_s_new"] / m["run_cpu_s_old"])
 
 
-COLLISION_SWEEP = Bench("collision_sweep.py", ("--copies", "1", "4", "--repeat", "3", "--runs", "2"), 240, (
+COLLISION_SWEEP = Bench("collision_sweep.py", ("--copies", "1", "2", "--repeat", "3", "--runs", "2"), 240, (
     Figure("collision sweep of the dry run, per motion (conservative advancement)", "<= 3 ms per motion, the same findings", _sweep,
            "collision-checks-conservative-advancement-against-fixed-samples-issues-15-and-22-item-2"),
     Figure("the simulator's collision checks at run time (`run` of the demonstrator, `--speed max --no-check`)", "<= 1/10 of every tick's",
@@ -181,10 +181,11 @@ PRIMITIVE = Bench("primitive_overhead.py", ("4000", "5"), 180, (
 
 def _dds_skill(s: Summary) -> Measured:
     wall, cpu = s["per_process_dds_skill_us"], s["cpu_per_process_dds_skill_us"]
-    ratio = s["ratio_skill_vs_raw_round_trip"]
-    return Measured(f"{n(wall)} us wall ({n(cpu)} us CPU of all 5 processes; CPU ratio {s['cpu_ratio_skill_vs_raw_round_trip']:.1f}x)",
+    ratio, cpu_ratio = s["ratio_skill_vs_raw_round_trip"], s["cpu_ratio_skill_vs_raw_round_trip"]
+    # met only if both hold, in wall and in CPU: on a shared host the load stretches the raw trip's wall time too
+    return Measured(f"{n(wall)} us wall ({n(cpu)} us CPU of all 5 processes; CPU ratio {cpu_ratio:.1f}x)",
                     f"raw cyclonedds round trip: {n(s['raw_cyclonedds_round_trip_us'])} us ({n(s['cpu_raw_cyclonedds_round_trip_us'])} us CPU)",
-                    ratio, at_most(wall, 1000) and at_most(ratio, 3.0))
+                    ratio, at_most(wall, 1000) and at_most(ratio, 3.0) and at_most(cpu_ratio, 3.0))
 
 
 def _dds_function(s: Summary) -> Measured:
@@ -197,7 +198,7 @@ def _joint_states(s: Summary) -> Measured:
 
 
 DDS = Bench("dds_primitive_overhead.py", ("1000", "3"), 240, (
-    Figure("DDS, per primitive within a skill, one process per node", "<= 1 ms and <= 3x raw", _dds_skill,
+    Figure("DDS, per primitive within a skill, one process per node", "<= 1 ms and <= 3x raw (wall and CPU)", _dds_skill,
            "issue-22-item-4-the-link-that-failed-and-the-per-primitive-figures-side-by-side-2026-11-27-1340-1351"),
     Figure("DDS, one primitive per function", "-", _dds_function,
            "issue-22-item-4-the-link-that-failed-and-the-per-primitive-figures-side-by-side-2026-11-27-1340-1351"),
@@ -359,6 +360,7 @@ def _ros(s: Summary) -> Measured:
                     s["ratio_skill_vs_raw_round_trip"], at_most(s["per_process_skill_us"], 1000))
 
 
+#: the others, cheapest and closest to issue 22 first: a spent budget cuts the tail
 OTHERS = (
     Bench("vision_accuracy.py", ("--trials", "60"), 90, (
         Figure("vision: hole centre error in the world frame", "p95 <= 0.05 mm", _vision_accuracy, "vision-hole-location-accuracy-and-detection-time-issue-10"),
@@ -369,6 +371,10 @@ OTHERS = (
     ), issue=False),
     Bench("async_cycle.py", (), 90, (
         Figure("asynchronous rivet demonstrator (`sync=\"flags\"`), cycle", "-", _async_cycle, "asynchronous-rivet-demonstrator-against-lock-step-issue-15"),
+    ), issue=False),
+    Bench("rsi_flood.py", ("--seconds", "5", "--floods", ",10:packet"), 120, (
+        Figure("RSI under a flood of forged packets (10x the cycle rate)", "no reply to the flood, RSI running", _flood,
+               "under-a-flood-from-the-controllers-host-the-hardening-issue-finding-4"),
     ), issue=False),
     Bench("paced_clock.py", ("--rounds", "1", "--burners", "0", "--iterations", "20000"), 150, (
         Figure("`run --speed 10`: cycle time against the dry run's", "within 1 %", _paced, "paced-clock-a-scaled-runs-cycle-time-on-a-busy-computer-issue-20-finding-6"),
@@ -381,11 +387,7 @@ OTHERS = (
         Figure("recording, demonstrator at `--speed 10`, CPU of the run's process", "<= 1.10x", _recording("10"), "recording-overhead-per-primitive-issue-11"),
         Figure("recording, demonstrator at `--speed max`", "<= 1.10x", _recording("max"), "recording-overhead-per-primitive-issue-11"),
     ), issue=False),
-    Bench("rsi_flood.py", ("--seconds", "5", "--floods", ",10:packet"), 120, (
-        Figure("RSI under a flood of forged packets (10x the cycle rate)", "no reply to the flood, RSI running", _flood,
-               "under-a-flood-from-the-controllers-host-the-hardening-issue-finding-4"),
-    ), issue=False),
-    Bench("studio_page.py", ("--repeat", "1", "--run-operations", "20"), 240, (
+    Bench("studio_page.py", ("--repeat", "3", "--run-operations", "20"), 240, (
         Figure("operator station page, 10,000 operations", "<= 2 s each", _studio, "operator-station-the-page-in-headless-chromium-issue-9"),
         Figure("operator station page during a `--speed max` run", "every record, identical", _studio_run, "operator-station-the-page-in-headless-chromium-issue-9"),
     ), needs="selenium", issue=False),

@@ -44,8 +44,9 @@ def rows_of(bench: object, outcome: object) -> list[object]:
 
 def test_figures_are_read_from_the_summary_and_met_follows_the_aim() -> None:
     function, skill = rows_of(FIGURES.PRIMITIVE, ALL.Outcome("primitive_overhead", 5.0, PRIMITIVE, exit=0))
-    assert function.met == "**no**" and function.ratio == "19.97x" and "161.9 us CPU" in function.figure and "8.05 us" in function.baseline
+    assert function.met == "**no**" and function.ratio == "20.0x" and "161.9 us CPU" in function.figure and "8.05 us" in function.baseline
     assert skill.met == "yes" and skill.ratio == "3.90x"
+    assert [ALL.ratio_text(r) for r in (0.1049, 1.359, 23.94)] == ["0.105x", "1.36x", "23.9x"]
     round_trip, joined = rows_of(FIGURES.VPLUS, ALL.Outcome("vplus_client", 4.0, VPLUS, exit=0))
     assert round_trip.met == "**no**" and round_trip.ratio == "1.36x"  # 1.359 against <= 1.3
     assert joined.met == "yes" and joined.figure == "46,304 acked messages/s"
@@ -134,7 +135,8 @@ def test_the_generated_section_goes_in_before_the_first_section_then_is_replaced
 
 def saved(tmp_path: Path) -> Path:
     meta = {"command": "nice .venv/bin/python bench/all.py --markdown docs/benchmarks.md", "date": "2026-11-27 16:55 UTC", "head": "abc1234",
-            "cpus": 2, "load_before": 3.2, "load_after": 4.1, "seconds": 512.0, "benches": ["vplus_client", "dds_primitive_overhead"]}
+            "cpus": 2, "load_before": 3.2, "load_after": 4.1, "seconds": 512.0, "benches": ["vplus_client", "dds_primitive_overhead"],
+            "commands": {"vplus_client": "bench/vplus_client.py --rounds 7"}}
     outcomes = [{"bench": "vplus_client", "seconds": 4.0, "summary": VPLUS, "reason": None, "exit": 0},
                 {"bench": "dds_primitive_overhead", "seconds": 240.0, "summary": None, "reason": "timed out after 240 s", "exit": None}]
     path = tmp_path / "summaries.json"
@@ -152,6 +154,8 @@ def test_the_document_is_regenerated_from_saved_summaries_once_however_often(tmp
     assert text.count(ALL.BEGIN) == 1 and text.count("| path | figure | baseline | ratio | aim | met |") == 1
     assert "Command: `nice .venv/bin/python bench/all.py --markdown docs/benchmarks.md`, 2026-11-27 16:55 UTC, HEAD abc1234" in text
     assert "load average 3.2 before and 4.1 after" in text
+    assert "| `bench/vplus_client.py --rounds 7` | 4 s | summary read |" in text  # the arguments it ran with, not today's
+    assert "| `bench/dds_primitive_overhead.py 1000 3` | 240 s | timed out after 240 s |" in text
     assert "| 1.36x | <= 1.3x the echo | **no** |" in text
     assert "DDS, per primitive within a skill, one process per node" in text and "not measured: timed out after 240 s" in text
     assert "Kept \\| as it is." not in text and "Kept | as it is." in text  # only the table's cells are escaped
@@ -171,3 +175,15 @@ def test_outputs_never_overwrite_each_other_or_the_input(tmp_path: Path) -> None
     with pytest.raises(SystemExit, match="not a file --save wrote"):
         ALL.main(["--from", str(bad), "--markdown", str(doc)])
     assert doc.read_text() == DOC
+
+
+def slug(heading: str) -> str:
+    """A heading's anchor as GitHub makes it: lower case, punctuation dropped, spaces to hyphens."""
+    return "".join(c for c in heading.strip().lower() if c.isalnum() or c in " -_").replace(" ", "-")
+
+
+def test_every_row_links_to_a_section_of_the_benchmarks_page() -> None:
+    text = (ROOT / "docs" / "benchmarks.md").read_text(encoding="utf-8")
+    anchors = {slug(line.lstrip("#")) for line in text.splitlines() if line.startswith("#")}
+    figures = [f for bench in FIGURES.ALL for f in bench.figures] + [FIGURES.SUITE]
+    assert [f.path for f in figures if f.section not in anchors] == []
