@@ -375,11 +375,22 @@ class FunctionSpec:
         return f"{self.name}({', '.join(parts)})"
 
     def bind(self, raw: Sequence[str], ctx: BindContext) -> list[Any]:
-        """Parse the raw param texts into typed arguments; raises ParamError on the first problem."""
-        problems = self.check(raw, ctx)
-        if problems:
-            raise problems[0]
-        return [p.parse(t, ctx) for p, t in zip(self.params, self._with_defaults(raw))]
+        """Parse the raw param texts into typed arguments; raises ParamError on the first problem
+        (the first :meth:`check` lists), each text parsed once: a machine binds every request."""
+        if ctx.robot.group(ctx.group).kind not in self.group_kinds or not (self.required_count <= len(raw) <= len(self.params)):
+            raise self.check(raw, ctx)[0]
+        args = []
+        for index, (spec, text) in enumerate(zip(self.params, self._with_defaults(raw))):
+            problem = None
+            try:
+                args.append(spec.parse(text, ctx))
+            except ValueError as error:
+                if index >= len(raw):  # a default text: not the caller's problem, raised as it is
+                    raise
+                problem = ParamError(index, f"param {index + 1} ({spec.name}) of {self.name}: {error}")
+            if problem is not None:  # the params before it parsed: check's first problem
+                raise problem
+        return args
 
     def check(self, raw: Sequence[str], ctx: BindContext) -> list[ParamError]:
         """Every problem with a call: count, group kind, each param's type and references."""

@@ -120,9 +120,13 @@ def subscribe(
     take: Callable[[W], None],
     refuse: Callable[[codec.WireError], None],
     qos: QoS = COMMANDS,
+    *,
+    hand_over: bool = False,
 ) -> Subscription[Any]:
     """Receive ``wire_cls`` on ``topic``: ``take`` gets each valid one, ``refuse`` the error of each
-    message out of contract (naming the topic, the ROS type and the field)."""
+    message out of contract (naming the topic, the ROS type and the field).  ``hand_over``: ``take``
+    and ``refuse`` only hand on to the node's own queue or futures, so on the local transport they
+    may run inside the sender's publish (:mod:`node_transport.local`); other transports ignore it."""
     source = node.resolve(topic)
     clock = node.clock
     msg_type = typed.msg_type(wire_cls)
@@ -138,6 +142,15 @@ def subscribe(
             return
         take(obj)
 
-    if isinstance(node, LocalNode) and wire_cls in RULES:
-        return node.create_subscription(msg_type, topic, receive, qos, objects=wire_cls)
+    if isinstance(node, LocalNode):
+        return node.create_subscription(msg_type, topic, receive, qos, objects=wire_cls if wire_cls in RULES else None, hand_over=hand_over)
     return node.create_subscription(msg_type, topic, receive, qos)
+
+
+def subscribe_message(
+    node: Node, msg_type: type, topic: str, callback: Callable[[Any], None], qos: QoS = COMMANDS, *, hand_over: bool = False
+) -> Subscription[Any]:
+    """A plain typed-message subscription, with ``hand_over`` as in :func:`subscribe`."""
+    if isinstance(node, LocalNode):
+        return node.create_subscription(msg_type, topic, callback, qos, hand_over=hand_over)
+    return node.create_subscription(msg_type, topic, callback, qos)

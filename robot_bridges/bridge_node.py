@@ -117,8 +117,8 @@ class BridgeNode:
         for group in self.backend.groups:
             subscribe(
                 self.node, BridgeCommand, bridge_topic(group, "command"), lambda command, g=group: self._on_command(g, command),
-                lambda error: self._report(f"rejected command: {error}"), COMMANDS,
-            )
+                lambda error: self._report(f"rejected command: {error}"), COMMANDS, hand_over=True,
+            )  # a hand-over (node_transport/local.py): a primitive starts inside the machine's publish, up to its first wait
         self._state_task = asyncio.get_running_loop().create_task(self._publish_state_loop(), name="bridge state")
 
     async def close(self) -> None:

@@ -29,7 +29,7 @@ from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from execution_engine.engine.commands import OperatorCommands
-from execution_engine.engine.dispatch import ApplicationAborted, Dispatch
+from execution_engine.engine.dispatch import ApplicationAborted, Dispatch, ResultWaiter
 from execution_engine.engine.faults import verdict
 from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard
 from execution_engine.engine.flags_mode import FlagsMode
@@ -122,6 +122,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self._alarm_skip = self._skippable = False  # an interrupted function's alarm can be answered with skip
         self._progress: dict[str, GroupProgress] = {}
         self._tasks: set[asyncio.Task[tuple[bool, str]]] = set()  # safety-stop pauses under way
+        self._results = ResultWaiter(self.clock)  # the operation loop's wait for a result: the links wake it
         self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)  # set_flag / wait_flag (engine/flags.py)
         self.zones = ZoneBoard(node, self.catalog, self._publish_flag)  # interference zones, both modes (engine/zones.py)
 
@@ -142,6 +143,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         for group in app.robot.group_names:
             if group not in self.links:
                 self.links[group] = GroupLink(self.node, group, self.service_timeout)
+                self.links[group].on_result = self._results.wake
             report.group_busy.setdefault(group, 0.0)
             report.group_functions.setdefault(group, 0)
         self._cell_name = ""
@@ -293,12 +295,13 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         for group, request in self._requests(operation, calls, attempt).items():
             if only is not None and group != only:
                 continue
-            if request.function in ENGINE_FUNCTIONS:  # flags are the engine's own
+            wakes = request.function not in ENGINE_FUNCTIONS
+            if not wakes:  # flags are the engine's own
                 assert self.app is not None
                 future = self.flags.result(request, group, self.catalog, self.app)
             else:
                 future = self.links[group].send(request)
-            sent[group] = Dispatch(calls[group], request, future, deadline)
+            sent[group] = Dispatch(calls[group], request, future, deadline, wakes)
             self.zones.register(request.id, operation.id, group)
             self._progress[group] = GroupProgress(self.links[group].state, operation.id, request.function)
         self._publish_status()
@@ -314,7 +317,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         while pending:
             futures = {d.future: g for g, d in pending.items()}
             horizon = min(d.deadline for d in pending.values()) - self.clock.now()
-            done, _ = await asyncio.wait(futures, timeout=self.clock.to_wall(max(0.0, horizon)), return_when=asyncio.FIRST_COMPLETED)
+            done = [d.future for d in await self._results.first(pending.values(), horizon)]
             if not done:
                 late = [g for g, d in pending.items() if d.deadline <= self.clock.now()]
                 for group in late:

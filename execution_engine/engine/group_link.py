@@ -14,10 +14,11 @@ from __future__ import annotations
 import asyncio
 import itertools
 import uuid
+from collections.abc import Callable
 from typing import Any
 
 from node_transport import codec, typed
-from node_transport.carriage import TypedPublisher, subscribe
+from node_transport.carriage import TypedPublisher, subscribe, subscribe_message
 from node_transport.clock import Clock
 from node_transport.msgs import Trigger
 from node_transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
@@ -39,13 +40,15 @@ class GroupLink:
         self._ids = itertools.count(1)
         self._session = uuid.uuid4().hex[:6]
         self._requests = TypedPublisher(node, SmRequest, sm_topic(group, "request"), COMMANDS)
-        self._results = subscribe(node, SmResult, sm_topic(group, "result"), self._on_result, self._reject, COMMANDS)
+        # results and states only resolve futures and set the state: taken as hand-overs (node_transport/local.py)
+        self._results = subscribe(node, SmResult, sm_topic(group, "result"), self._on_result, self._reject, COMMANDS, hand_over=True)
         self._state_source = node.resolve(sm_topic(group, "state"))
-        node.create_subscription(typed.MachineStateMsg, sm_topic(group, "state"), self._on_state, LATCHED)
+        subscribe_message(node, typed.MachineStateMsg, sm_topic(group, "state"), self._on_state, LATCHED, hand_over=True)
         self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
         self.rejected: list[str] = []
         self._watch: asyncio.Task[None] | None = None
         self.lost: str | None = None  # why the machine is gone, once it is
+        self.on_result: Callable[[], None] | None = None  # told when a result resolves a future (the engine's ResultWaiter)
 
     def new_id(self) -> str:
         return f"engine-{self._session}-{self.group}-{next(self._ids)}"
@@ -79,6 +82,8 @@ class GroupLink:
                     if not future.done():
                         future.set_result(SmResult(id=request_id, group=self.group, outcome="preempted", error=error, fault=FaultKind.CONNECTION))
                 self._pending.clear()
+                if self.on_result is not None:
+                    self.on_result()
                 return
             await self.clock.sleep(WATCH_PERIOD)
 
@@ -98,6 +103,8 @@ class GroupLink:
         future = self._pending.pop(result.id, None)
         if future is not None and not future.done():
             future.set_result(result)
+            if self.on_result is not None:
+                self.on_result()
 
     # ------------------------------------------------------------------------------ state
     def _on_state(self, msg: Any) -> None:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from core_functions.catalog import BindContext, Catalog, ParamError
+from core_functions.catalog import BindContext, Catalog, FunctionSpec, ParamError, ParamType
 from core_functions.cell_index import CellIndex
 from core_functions.functions import CoreFunctions
 from core_functions.primitives import Primitive
@@ -28,6 +28,16 @@ from node_transport import codec
 from node_transport.carriage import TypedPublisher
 from node_transport.port import Node, Publisher, Subscription, wait_until_matched
 from node_transport.wire import BridgeCommand, FaultKind, SmRequest, SmResult, SmStatus, SyncMessage
+
+
+_KEPT_BINDINGS = 256
+#: parameter types bound from their text and the robot alone (the others read the cell model)
+_CELL_FREE = frozenset({ParamType.NUMBER, ParamType.INTEGER, ParamType.BOOLEAN, ParamType.TEXT, ParamType.CHOICE, ParamType.NAME, ParamType.JOINTS})
+_SCALARS = (float, int, str, bool, type(None))
+
+
+def _immutable(value: Any) -> bool:
+    return type(value) in _SCALARS or (type(value) is tuple and all(type(v) in _SCALARS for v in value))
 
 
 @dataclass(frozen=True)
@@ -95,6 +105,7 @@ class MachineContext:
         self.cell_arrived = asyncio.Event()
         self.zones = ZoneGate(self)  # interference zones: ask before a motion enters one
         self.goals = RelativeGoals()  # the goals relative moves resolved to: a retry re-bases them (machine/rebase.py)
+        self._bound: dict[tuple[str, tuple[str, ...]], tuple[FunctionSpec, tuple[Any, ...]]] = {}  # requests' params, bound
 
     # --------------------------------------------------------------------------- identity
     def new_id(self) -> str:
@@ -193,12 +204,15 @@ class MachineContext:
         spec = self.catalog.get(request.function)
         if spec is None:
             return f"unknown function {request.function!r}{self.catalog.suggest(request.function)}"
-        try:
-            args = spec.bind(request.params, BindContext(self.robot, self.group, self.cell))
-        except ParamError as error:
-            return f"{request.function}: {error.message}"
-        except KeyError as error:  # a group unknown to the robot
-            return f"{request.function}: {error}"
+        args = self._bound_args(spec, request.params)
+        if args is None:
+            try:
+                args = spec.bind(request.params, BindContext(self.robot, self.group, self.cell))
+            except ParamError as error:
+                return f"{request.function}: {error.message}"
+            except KeyError as error:  # a group unknown to the robot
+                return f"{request.function}: {error}"
+            self._keep_bound(spec, request.params, args)
         method: Callable[..., Any] = getattr(self.functions, spec.method)
         self.goals.begin(request)
         run = FunctionRun(request, spec, method(*args), self.clock.now())
@@ -210,6 +224,20 @@ class MachineContext:
             self.finish_function("aborted", str(error), FaultKind.SKILL)
             return None
         return None
+
+    def _bound_args(self, spec: FunctionSpec, params: tuple[str, ...]) -> list[Any] | None:
+        """The arguments ``params`` bound to before for ``spec``, if kept: an application calls the
+        same function with the same texts again and again (set_speed 0.5, a gripper's open)."""
+        kept = self._bound.get((spec.name, params))
+        return list(kept[1]) if kept is not None and kept[0] is spec else None
+
+    def _keep_bound(self, spec: FunctionSpec, params: tuple[str, ...], args: list[Any]) -> None:
+        """Keep what binding gave when it read nothing but the texts and the robot (no cell model: its
+        frames can change) and nothing can change it (numbers, texts, tuples of them); 256 calls at most."""
+        if all(p.type in _CELL_FREE for p in spec.params) and all(_immutable(a) for a in args):
+            if len(self._bound) >= _KEPT_BINDINGS:
+                del self._bound[next(iter(self._bound))]
+            self._bound[(spec.name, params)] = (spec, tuple(args))
 
     def finish_function(self, outcome: str, error: str | None = None, fault: FaultKind | None = None) -> None:
         """Close the current function and send its result (with the fault's kind) to the engine."""

@@ -144,9 +144,10 @@ class GroupMachine:
             events=self.events,
             publishers=publishers,
             config=config,
-            feedback=subscribe(node, BridgeFeedback, bridge_topic(g, "feedback"), self._on_feedback, self._bad_feedback, COMMANDS),
+            feedback=subscribe(node, BridgeFeedback, bridge_topic(g, "feedback"), self._on_feedback, self._bad_feedback, COMMANDS, hand_over=True),
         )
-        subscribe(node, SmRequest, sm_topic(g, "request"), self._on_request, self._bad_request, COMMANDS)
+        # requests and feedback only go on the event queue: taken as hand-overs (node_transport/local.py)
+        subscribe(node, SmRequest, sm_topic(g, "request"), self._on_request, self._bad_request, COMMANDS, hand_over=True)
         subscribe(node, SyncMessage, SYNC_TOPIC, self._on_sync, self._bad_sync, COMMANDS)
         subscribe(node, CellSnapshot, ENGINE_CELL, self._on_cell, self._bad_cell, LATCHED)
         for command in MACHINE_SERVICES:

@@ -12,6 +12,7 @@ to the engine) and ``stop_reason`` (for ErrorHandling).
 """
 from __future__ import annotations
 
+import asyncio
 from collections.abc import MutableMapping
 from typing import Any
 
@@ -164,6 +165,7 @@ class ReadyState(MachineState):
 
     async def execute(self, userdata: MutableMapping[str, Any]) -> str:
         ctx = self.ctx
+        yielded = False
         while True:
             run = ctx.run
             if run is not None and run.finished:
@@ -171,6 +173,11 @@ class ReadyState(MachineState):
                 continue
             gated = False  # the next motion waits for a zone (machine/zone_gate.py)
             if run is not None and run.next_primitive is not None and not ctx.hold:
+                if run.started and not yielded:
+                    # a turn of the loop before each further primitive: a bridge may answer inside our own
+                    # publish (node_transport/local.py), and the other nodes and the operators get their turn
+                    yielded = True
+                    await asyncio.sleep(0)
                 step = ctx.goals.step(run.started, run.next_primitive)  # a retried relative move: its recorded goal
                 if ctx.zones.admits(step.send):
                     run.take()
