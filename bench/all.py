@@ -99,7 +99,10 @@ def run(name: str, argv: Sequence[str], timeout: float) -> Outcome:
             code: int | None = child.wait(timeout)
         except subprocess.TimeoutExpired:
             code = None
-            end_session(child)
+            end_session(child, GRACE)
+        except BaseException:  # interrupted (Ctrl-C, SIGTERM): its own session does not get the signal, so end it here
+            end_session(child, 1.0)
+            raise
         seconds = time.monotonic() - start
         out.seek(0)
         err.seek(0)
@@ -112,9 +115,9 @@ def run(name: str, argv: Sequence[str], timeout: float) -> Outcome:
     return Outcome(name, seconds, summary, exit=code)
 
 
-def end_session(child: subprocess.Popen[str]) -> None:
-    """Stop a bench that ran out of time and every process it started (its session), by its id."""
-    for sig, wait in ((signal.SIGTERM, GRACE), (signal.SIGKILL, GRACE)):
+def end_session(child: subprocess.Popen[str], grace: float) -> None:
+    """Stop a bench and every process it started (its session, by its id): SIGTERM, SIGKILL after ``grace`` s."""
+    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, grace)):
         try:
             os.killpg(child.pid, sig)
         except ProcessLookupError:
@@ -124,6 +127,10 @@ def end_session(child: subprocess.Popen[str]) -> None:
             return
         except subprocess.TimeoutExpired:
             continue
+
+
+def interrupted(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
 
 
 def missing(module: str | None) -> bool:
@@ -315,7 +322,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "cpus": os.cpu_count(), "load_before": os.getloadavg()[0], "benches": [b.name for b in benches],
                 "commands": {b.name: b.command() for b in benches}}
         started = time.monotonic()
-        outcomes = run_all(benches, args.budget)
+        signal.signal(signal.SIGTERM, interrupted)  # a stop ends the running bench's session too (see run)
+        try:
+            outcomes = run_all(benches, args.budget)
+        except KeyboardInterrupt:
+            print("bench/all.py: stopped; the running bench and what it started were ended", file=sys.stderr)
+            return 130
         meta.update(load_after=os.getloadavg()[0], seconds=time.monotonic() - started)
         if args.save is not None:
             args.save.write_text(json.dumps({"meta": meta, "outcomes": [asdict(o) for o in outcomes]}, indent=1) + "\n", encoding="utf-8")
