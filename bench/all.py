@@ -299,6 +299,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--save", type=Path, metavar="FILE", help="keep every bench's summary and the run's details (JSON)")
     parser.add_argument("--from", dest="source", type=Path, metavar="FILE", help="build the table from a --save file, running nothing")
     args = parser.parse_args(argv)
+    if not args.budget > 0:
+        raise SystemExit(f"bench/all.py: --budget {args.budget:g}: give the seconds the benches may take together (> 0)")
     if args.markdown is not None and not args.markdown.is_file():
         raise SystemExit(f"bench/all.py: --markdown {args.markdown}: no such file")
     outputs = [p.resolve() for p in (args.markdown, args.save) if p is not None]
