@@ -278,3 +278,9 @@ def test_what_a_called_file_says_that_does_not_apply_is_a_warning(tmp_path: Path
         at(path, text, 'name="slot"', "warning: blk.xml uses no variable {slot} (it uses: hole)"),
     ]
     assert [o.id for o in load_application(path, CATALOG).operations] == ["d_drill_1"]
+
+
+def test_a_variable_may_have_any_name_the_schema_allows(tmp_path: Path) -> None:
+    text = app('  <for_each var="hole.id-2" in="drill_1">\n' + op("d_{hole.id-2}", "left_arm", "debur_drilling", "{hole.id-2}") + "  </for_each>\n")
+    loaded = load_application(write(tmp_path, text), CATALOG)
+    assert [(o.id, o.calls["left_arm"].params[0]) for o in loaded.operations] == [("d_drill_1", "drill_1")]

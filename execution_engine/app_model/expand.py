@@ -41,7 +41,7 @@ MAX_TEXT = 64 * 1024 * 1024
 #: What a substituted text may hold at most, as application.xsd holds what is written.
 _LONGEST = {"id": 64, "name": 256, "value": 4096, "in": 65536}
 _KIND = "kind:"
-_VARIABLE = re.compile(r"\{\{|\}\}|\{([A-Za-z_][A-Za-z0-9_]*)\}")
+_VARIABLE = re.compile(r"\{\{|\}\}|\{([A-Za-z_][A-Za-z0-9_.\-]*)\}")  # a name as application.xsd's identifier
 _SEPARATORS = re.compile(r"[\s,]+")
 
 #: Reads a called application: (its path, how messages show it) -> its draft (None: unreadable,
