@@ -31,10 +31,12 @@ from core_functions.primitives import (
     MoveRelative,
     Primitive,
     RecordTrajectory,
+    SetOutput,
     SetSpeed,
     TrajectoryResult,
     Vision,
     VisionResult,
+    WaitInput,
 )
 from core_functions.robots import RobotModel
 from core_functions.trajectory_store import TrajectoryStore
@@ -50,6 +52,7 @@ _REACH_DISTANCE = ParamSpec(
 _INTERPOLATION = ParamSpec(
     "interpolation", ParamType.CHOICE, "ptp: joint-interpolated (fastest); linear: straight TCP line", default="ptp", choices=("ptp", "linear")
 )
+_SIGNAL_VALUE = ParamSpec("value", ParamType.NUMBER, "1 or 0 for a digital signal, a number for a numeric one", unit="", minimum=-1e9, maximum=1e9)
 _OVERWRITE = ParamSpec(
     "overwrite", ParamType.BOOLEAN, "true: replace a trajectory already recorded under this name (otherwise that is an error)", default="false"
 )
@@ -264,6 +267,27 @@ class CoreFunctions:
     def place(self, target: str | Pose, distance: float = 0.05) -> Skill:
         """Place the held part: approach along the target's z, go straight in, open the gripper, retreat straight out."""
         yield from self.reach_in(target, distance, "release", "gripper_open")
+
+    # ------------------------------------------------------------------------------ signals
+    @skill(
+        ParamSpec("name", ParamType.NAME, "the signal as the controller's configuration names it (KUKA RSI: GPIO.01, Tech.T21)"),
+        _SIGNAL_VALUE,
+        states=("EndEffector",),
+    )
+    def set_output(self, name: str, value: float) -> Skill:
+        """Set a signal the controller receives (a digital or numeric output of its RSI configuration); done once it has left."""
+        yield SetOutput(name, value)
+
+    @skill(
+        ParamSpec("name", ParamType.NAME, "the signal as the controller's configuration names it (KUKA RSI: GPIO.02, Tech.C11)"),
+        _SIGNAL_VALUE,
+        ParamSpec("timeout", ParamType.NUMBER, "longest wait before the function fails (fault: timeout)", unit="s", default="10", minimum=0.0, maximum=86400.0),
+        ParamSpec("tolerance", ParamType.NUMBER, "how far a numeric signal may lie from the value", unit="", default="0", minimum=0.0, maximum=1e9),
+        states=("EndEffector",),
+    )
+    def wait_input(self, name: str, value: float, timeout: float = 10.0, tolerance: float = 0.0) -> Skill:
+        """Hold still until a signal the controller sends reads the value (a sensor, a PLC's go), or fail after the timeout."""
+        yield WaitInput(name, value, timeout, tolerance)
 
     # ----------------------------------------------------------------------------- vision
     @skill(

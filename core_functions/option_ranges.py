@@ -159,6 +159,8 @@ SETTINGS: tuple[Setting, ...] = (
             "how far a reported axis set point may lie from the commanded one"),
     Setting("tolerance_mm", Range(0.001, 100.0, "mm"), "kuka-rsi option and parameter tolerance_mm",
             "how far the reported TCP may lie from the commanded one", "kuka-rsi"),
+    Setting("follow_time", Range(0.004, 1.0, "s"), "kuka-rsi option and parameter follow_time",
+            "how long the actual axes may trail the commanded set point where the controller reports none that follows"),
     Setting("sim_drop", CHANCE, "kuka-rsi option sim_drop, KR C4 simulator --drop", "probability the simulated controller discards a reply"),
     Setting("loss", CHANCE, "KR C4 simulator --loss", "probability a packet the simulated controller sends is lost"),
     Setting("garbage", CHANCE, "KR C4 simulator --garbage", "probability a packet the simulated controller sends is garbage"),

@@ -126,7 +126,16 @@ class TrajectoryResult:
     times: tuple[float, ...] = ()
 
 
-PrimitiveResult = Union[MotionResult, EndEffectorResult, VisionResult, TrajectoryResult]
+@dataclass(frozen=True)
+class IoResult:
+    """The signals an I/O primitive named, by name, as the controller had them when it ended (BOOL as 0/1)."""
+
+    KIND: ClassVar[str] = "io"
+
+    values: dict[str, float] = field(default_factory=dict)
+
+
+PrimitiveResult = Union[MotionResult, EndEffectorResult, VisionResult, TrajectoryResult, IoResult]
 
 
 def _finite(name: str, *values: float) -> None:
@@ -221,6 +230,40 @@ class EndEffector:
     STATE: ClassVar[WorkState] = WorkState.END_EFFECTOR
     RESULT: ClassVar[type] = EndEffectorResult
     action: EndEffectorAction
+
+
+@dataclass(frozen=True)
+class SetOutput:
+    """Set a signal the controller receives, by the name its configuration gives it (KUKA RSI: ``GPIO.01``,
+    ``Tech.T21``); done once the value has left for the controller.  BOOL signals take 0 or 1."""
+
+    KIND: ClassVar[str] = "set_output"
+    STATE: ClassVar[WorkState] = WorkState.END_EFFECTOR
+    RESULT: ClassVar[type] = IoResult
+    name: str
+    value: float
+
+    def __post_init__(self) -> None:
+        _finite(f"output {self.name}", self.value)
+
+
+@dataclass(frozen=True)
+class WaitInput:
+    """Hold still until a signal the controller sends reads ``value`` (within ``tolerance``), failing
+    with a timeout after ``timeout`` seconds of robot time."""
+
+    KIND: ClassVar[str] = "wait_input"
+    STATE: ClassVar[WorkState] = WorkState.END_EFFECTOR
+    RESULT: ClassVar[type] = IoResult
+    name: str
+    value: float
+    timeout: float = 10.0
+    tolerance: float = 0.0
+
+    def __post_init__(self) -> None:
+        _finite(f"input {self.name}", self.value, self.timeout, self.tolerance)
+        if self.timeout < 0 or self.tolerance < 0:
+            raise ValueError(f"input {self.name}: timeout and tolerance must be >= 0, got {self.timeout}, {self.tolerance}")
 
 
 @dataclass(frozen=True)
@@ -345,6 +388,8 @@ Primitive = Union[
     ExecuteTrajectory,
     FullBodyMove,
     MasterSlaveMove,
+    SetOutput,
+    WaitInput,
 ]
 
 
@@ -363,4 +408,6 @@ def describe(primitive: Any) -> str:
         return f"{kind}({primitive.fraction:g})"
     if isinstance(primitive, Dwell):
         return f"{kind}({primitive.seconds:g} s)"
+    if isinstance(primitive, (SetOutput, WaitInput)):
+        return f"{kind}({primitive.name} = {primitive.value:g})"
     return kind

@@ -39,12 +39,15 @@ PRIMITIVES = (
     prim.ExecuteTrajectory("path", ("j1",), ((0.0,), (0.5,)), (0.0, 1.0)),
     prim.FullBodyMove(("j1", "j2"), (0.0, 1.0)),
     prim.MasterSlaveMove("left_arm", "right_arm", (POSE,), POSE),
+    prim.SetOutput("GPIO.01", 1.0),
+    prim.WaitInput("Tech.C11", 2.5, timeout=3.0, tolerance=0.1),
 )
 RESULTS = (
     prim.MotionResult(("j1",), (0.3,), POSE),
     prim.EndEffectorResult({"valve": True}),
     prim.VisionResult(None, 0.002, 0.75),
     prim.TrajectoryResult(("j1",), ((0.0,), (0.1,)), (0.0, 0.5)),
+    prim.IoResult({"GPIO.01": 1.0, "Tech.C11": 2.5}),
 )
 EXAMPLES = (
     *MESSAGES,

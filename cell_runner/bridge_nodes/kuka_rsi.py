@@ -39,6 +39,7 @@ _NUMBER_OPTIONS = {
     "linear_accel": (2.0, "Cartesian acceleration at 100 % (m/s^2)"),
     "tolerance": (0.1, "deg, every axis: how far the controller's reported set point (ASPos) may lie from the commanded one before the robot is held"),
     "tolerance_mm": (1.0, "mm: the same for the reported TCP (RSol) under Cartesian corrections"),
+    "follow_time": (0.1, "s: where the controller reports no set point that follows the corrections (none, or frozen at the start), its actual axes must lie among the set points commanded this long before"),
 }
 
 

@@ -41,7 +41,9 @@ from core_functions.primitives import (
     Primitive,
     PrimitiveResult,
     RecordTrajectory,
+    SetOutput,
     SetSpeed,
+    WaitInput,
     describe,
 )
 from core_functions.robots import KUKA_KR, RobotModel
@@ -57,6 +59,7 @@ from robot_bridges.kuka_rsi.link import feedback_gaps, require_feedback
 from robot_bridges.kuka_rsi.loop_events import LoopEvents, say_once
 from robot_bridges.kuka_rsi.peer import resolve_ipv4
 from robot_bridges.kuka_rsi.realtime import SIMULATED_SILENCE, realtime_advice
+from robot_bridges.kuka_rsi.signals import Signals
 from robot_bridges.kuka_rsi.sim_controller import SimulatedController, SimulatorSpec
 from robot_bridges.kuka_rsi.sim_faults import Faults, Quirks
 from robot_bridges.kuka_rsi.sim_network import Endpoint, SimulatorThread
@@ -111,6 +114,7 @@ class KukaRsiBackend(RobotBackend):
         #: The simulated controller this back end starts (None: a real one is driven).
         self.simulator = None if simulator is None else SimulatedController(simulator, self.config, self.roles, self.link, self.events, self.name)
         self.commands = ArmCommands(self.events, self.link, self.spec, self.arm, limits, self.config, self.roles)
+        self.signals = Signals(self.events, self.config, self.roles, self.link.cycle_ms / 1000.0)
         self.summary: str | None = None  # the loop's end-of-run account, after close()
 
     @property
@@ -231,6 +235,11 @@ class KukaRsiBackend(RobotBackend):
             await commands.trajectory(primitive)
         elif isinstance(primitive, RecordTrajectory):
             return await commands.record(primitive)
+        elif isinstance(primitive, SetOutput):
+            return await self.signals.set_output(primitive)
+        elif isinstance(primitive, WaitInput):
+            assert commands.run is not None
+            return await self.signals.wait_input(primitive, commands.run)
         else:
             raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: a KUKA arm over RSI cannot do {describe(primitive)}")
         return self._motion_result()
@@ -302,7 +311,7 @@ class KukaRsiBackend(RobotBackend):
 _EXTRAS = (
     "runner", "simulator", "config", "mode", "cycle", "timeout", "axis_monitor", "silence", "connect_timeout", "feedback",
     "linear_speed", "linear_accel", "tolerance", "tolerance_mm", "sim_frozen_setpoint", "sim_drop", "sim_drift", "sim_root_attribute",
-    "sim_flood", "sim_peer",
+    "sim_flood", "sim_peer", "follow_time",
 )
 
 
@@ -328,6 +337,7 @@ class KukaSettings:
     quirks: Quirks
     flood: Flood
     peer: str = "kr-c4"  # sim_peer: the controller the simulated one behaves like
+    follow_time: float = 0.1  # s: how long the actual axes may trail the commanded set point (a frozen or absent report)
 
 
 def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
@@ -359,6 +369,7 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
     limits = MotionLimits(linear_speed=number("linear_speed", "1.0"), linear_accel=number("linear_accel", "2.0"))
     tolerance = number("tolerance", "0.1")
     tolerance_mm = number("tolerance_mm", "1.0")
+    follow_time = number("follow_time", "0.1")
     try:
         config = load_config(extra["config"]) if "config" in extra else None
         if config is not None:  # what it truly needs, refused here in one line, checked or not
@@ -384,7 +395,7 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> KukaSettings:
     if peer not in PEERS:
         raise ValueError(f"kuka-rsi: sim_peer must be {' or '.join(PEERS)}, got {peer!r}")
     return KukaSettings(runner, sim_runner, mode, cycle, timeout, monitor, silence, connect, limits, tolerance, tolerance_mm,
-                        config, listen, faults, quirks, flood, peer)
+                        config, listen, faults, quirks, flood, peer, follow_time)
 
 
 async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
@@ -415,7 +426,7 @@ async def create(clock: Clock, options: BackendOptions) -> KukaRsiBackend:
     would let the engine's timeouts run ahead of the robot.
     """
     s = parse_options(options, math.inf if clock.simulated else clock.speed)
-    trust = {"setpoint_tolerance_deg": (s.tolerance,) * 6, "tcp_tolerance_mm": s.tolerance_mm}
+    trust = {"setpoint_tolerance_deg": (s.tolerance,) * 6, "tcp_tolerance_mm": s.tolerance_mm, "follow_time": s.follow_time}
     common = {"limits": s.limits, "robot": options.robot, "feedback_file": options.extra.get("feedback")}
     if s.listen is not None:
         assert options.host is not None and options.rsi_listen is not None  # parse_options

@@ -23,6 +23,7 @@ from core_functions.geometry import quaternion_to_matrix
 from robot_bridges.kuka_rsi.codec import PacketCodec, Value
 from robot_bridges.kuka_rsi.convention import ReportCheck
 from robot_bridges.kuka_rsi.feedback import FeedbackLogger
+from robot_bridges.kuka_rsi.io_values import IoValues
 from robot_bridges.kuka_rsi.kinematics import abc_to_matrix, rotation_angle
 from robot_bridges.kuka_rsi.link import RobotLink, require_feedback
 from robot_bridges.kuka_rsi.motion import Motion
@@ -89,6 +90,7 @@ class Channel:
         self._i_rk = [self.sen.index[k] for k in roles.cart_correction] if cart else None
         self._i_correcting = ri[roles.correction_active] if roles.handshake(config) else None
         holdon = {f.key: f.holdon for f in self.sen.fields}
+        self.io = IoValues(self.rob.fields, self.sen.fields, (*roles.axis_correction, *roles.cart_correction))
         dt_ms = link.cycle_ms
         check = ReportCheck(
             np.radians(np.array(link.setpoint_tolerance_deg)), (link.tcp_tolerance_mm / 1000.0, math.radians(link.tcp_tolerance_deg)),
@@ -205,6 +207,11 @@ class Channel:
         self._warned[key] = n
         if n == 1 or n % 1000 == 0:
             self._emit(("warn", self.index, f"{self.link.name}: {text} ({n} so far)"))
+
+    def set_output(self, key: str, value: object) -> None:
+        """An application signal for the next reply; reported once a reply carries it (or why not)."""
+        problem = self.io.set(self.tx, key, value)
+        self._emit(("output", self.index, key, self.tx[self.sen.index[key]] if problem is None else None, problem or ""))
 
     def _note(self, level: int, text: str) -> None:
         """Something the application should know once (a ``logging`` level): the convention found."""
@@ -500,6 +507,9 @@ class Channel:
         if digouts != self._digouts:
             self._digouts = digouts
             self._emit(("io", self.index, digouts, self.cycles))
+        inputs = self.io.changed(rx)
+        if inputs is not None:
+            self._emit(("inputs", self.index, inputs, self.cycles))
         status = Status.CONNECTED
         motion = self.motion
         if self.correcting:

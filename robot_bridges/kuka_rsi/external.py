@@ -422,6 +422,9 @@ class RsiLoop:
         elif kind == "wake":
             _, robot, cycle = message
             self.channels[int(robot)].wake_at(int(cycle))  # type: ignore[call-overload]
+        elif kind == "output":
+            _, robot, key, value = message
+            self.channels[int(robot)].set_output(str(key), value)  # type: ignore[call-overload]
         elif kind == "withhold":
             _, robot, count = message
             self.channels[int(robot)].withhold = int(count)  # type: ignore[call-overload]

@@ -97,6 +97,9 @@ class LoopEvents:
         self.faults: list[tuple[int, str, str]] = []
         self.warnings: list[str] = []
         self.notes: list[str] = []  # what the loop found out once (the controller's set-point convention)
+        self.inputs: list[dict[str, Any]] = [{} for _ in range(robots)]  # numeric signals the robot sends, by name
+        self.inputs_cycle = [0] * robots  # the packet (loop count) they were last read from
+        self.outputs: list[dict[str, tuple[Any, str]]] = [{} for _ in range(robots)]  # set signals: value sent or None, why not
         self.done: dict[int, tuple[bool, str, str]] = {}  # command id -> ok, message, fault kind
         self.connected = [False] * robots
         self.feedback: list[str | None] = [None] * robots  # the file each robot's packets are saved to
@@ -117,6 +120,11 @@ class LoopEvents:
         elif kind == "warn":
             self.warnings.append(str(message[2]))
             del self.warnings[:-100]
+        elif kind == "inputs":
+            self.inputs[int(message[1])] = dict(message[2])
+            self.inputs_cycle[int(message[1])] = int(message[3])
+        elif kind == "output":
+            self.outputs[int(message[1])][str(message[2])] = (message[3], str(message[4]))
         elif kind == "note":
             self.notes.append(str(message[3]))
             del self.notes[:-100]
@@ -389,6 +397,13 @@ class RsiInterface:
 
     def flag(self, robot: int, tag: str) -> bool:
         return bool(self._flags[robot] >> self._flag_bits[robot][tag] & 1)
+
+    def set_output(self, robot: int, key: str, value: object) -> None:
+        """Set a numeric value of the ``<Sen>`` packet (a LONG, DOUBLE or STRING signal); ``events.outputs``
+        tells once the loop has put it in a reply, or why it could not.  BOOLs are flags (:meth:`set_flag`)."""
+        assert self._pipe is not None
+        self.events.outputs[robot].pop(key, None)
+        self._pipe.send(("output", robot, key, value))
 
     def set_feedback_output(self, robot: int, path: str | None) -> None:
         """ITRA's setRobFeedbackOutput: save every packet of ``robot`` to ``path`` (None: stop)."""

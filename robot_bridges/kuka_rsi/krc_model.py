@@ -165,6 +165,11 @@ class KrcModel:
         self.program = Program.IDLE if self._handshake else Program.MOVECORR
         self.outputs: dict[str, bool] = {}
         self._tools = roles.tools(config)
+        # A signal in both directions is an output the robot reads back (kroshu's GPIO.01): echoed, as a
+        # KRL program's $OUT read by DIGOUT would be; inputs the cell drives are set in ``inputs``.
+        self._echo = [(self.rob.index[k], self.sen.index[k]) for k in self.sen.index if k in self.rob.index and k not in self._tools]
+        #: Values of <Rob> the simulated cell drives (a sensor, a PLC), by key: tests set them.
+        self.inputs: dict[str, Value] = {}
         self._send_values: list[Value] = list(self.rob.defaults)
         self._cache_q: dict[str, tuple[bytes, tuple[float, ...]]] = {}
         #: When a list, the set point (rad) of every cycle is appended: what the robot was told to do.
@@ -198,6 +203,10 @@ class KrcModel:
             values[index[r.realtime_ended]] = p is Program.ENDED
         for tag in self._tools:
             values[index[tag]] = self.outputs.get(tag, False)
+        for sent, received in self._echo:
+            values[sent] = self._received[received]
+        for key, value in self.inputs.items():
+            values[index[key]] = value
         self.stats.packets += 1
         packet = self.rob.encode(values, self.ipoc)
         if self._root is None:
