@@ -27,12 +27,13 @@ from core_functions.geometry import Pose
 from core_functions.option_ranges import bounds
 from core_functions.primitives import MotionResult, Primitive, PrimitiveResult
 from core_functions.robots import RobotModel
+from node_transport.clock import Clock
 
 # FaultKind is defined with the wire messages: it travels in the bridge's error feedback and on
 # to the engine, which decides from it alone whether a second try can succeed.
 from node_transport.wire import FaultKind
 
-__all__ = ["BackendOptions", "BridgeError", "FaultKind", "RobotBackend"]
+__all__ = ["BackendOptions", "BridgeError", "FaultKind", "JointLimits", "RobotBackend"]
 
 if TYPE_CHECKING:  # the cell snapshot is only a parameter type here
     from node_transport.wire import CellSnapshot
@@ -47,6 +48,27 @@ class BridgeError(Exception):
         self.detail = message
 
 
+@dataclass(frozen=True)
+class JointLimits:
+    """What one group's joints may do, by the back end's own word (the limits its primitives are checked
+    against): positions (rad), speeds (rad/s) and accelerations (rad/s^2), in the group's joint order.
+    A FollowJointTrajectory goal (:mod:`robot_bridges.trajectory_goal`) is checked against them before
+    anything moves."""
+
+    joint_names: tuple[str, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    velocity: tuple[float, ...]
+    acceleration: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        count = len(self.joint_names)
+        if not count or any(len(v) != count for v in (self.lower, self.upper, self.velocity, self.acceleration)):
+            raise ValueError(f"joint limits need one value per joint of {list(self.joint_names)}")
+        if not all(lo <= hi for lo, hi in zip(self.lower, self.upper)) or min(*self.velocity, *self.acceleration) <= 0:
+            raise ValueError(f"joint limits of {list(self.joint_names)}: lower above upper, or a speed or acceleration not above 0")
+
+
 class RobotBackend(ABC):
     """One robot controller (real or simulated) serving one or more groups."""
 
@@ -54,6 +76,13 @@ class RobotBackend(ABC):
     name: str = "backend"
     #: The frame poses are expressed in (the robot base; ``WAIST`` on Nextage).
     world_frame: str = "world"
+    #: Whether ``pause`` and ``stop`` hold the arm inside a running motion and :meth:`joint_state` follows
+    #: the arm while it moves (the Nextage simulator, KUKA RSI).  False: both only between motions (V+
+    #: AdeptServer runs a motion it was sent to its end and reports the arm in its acknowledgement), so a
+    #: trajectory is sent in short legs there, each ending on a point of the path.
+    holds_within_motion: bool = True
+    #: The clock the robot's motions run on, when it is not the bridge node's (a simulator faster than real time).
+    clock: Clock | None = None
 
     @property
     @abstractmethod
@@ -101,6 +130,11 @@ class RobotBackend(ABC):
 
     def set_cell(self, cell: CellSnapshot) -> None:  # noqa: B027 - optional hook
         """Receive the application's cell model (simulators use it for simulated vision)."""
+
+    def joint_limits(self, group: str) -> JointLimits | None:
+        """The limits of ``group``'s joints, or None when the back end does not know them (then it
+        serves no FollowJointTrajectory action for the group: a goal could not be checked)."""
+        return None
 
     def robot_description(self) -> str | None:
         """The robot's URDF text, or None when no URDF is known.

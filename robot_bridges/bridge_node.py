@@ -44,6 +44,7 @@ from node_transport.wire import (
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 from robot_bridges.camera.ros_camera import attach_cameras
 from robot_bridges.robot_state import RobotStatePublisher
+from robot_bridges.trajectory_server import TrajectoryServers, declare_controllers
 from robot_bridges.turnaround import Turnaround
 
 log = logging.getLogger(__name__)
@@ -89,6 +90,8 @@ class BridgeNode:
         self.clock = node.clock
         self.state_period = float(declare_bounded(node, "state_period", 0.05, "joint_states / tcp_pose period (s)"))
         self.stop_timeout = float(declare_bounded(node, "stop_timeout", 5.0, "longest a stopped primitive may take to end (s)"))
+        self._controllers = declare_controllers(node, backend.groups)  # FollowJointTrajectory per group (trajectory_server.py)
+        self.trajectories: TrajectoryServers | None = None
         self._feedback: dict[str, TypedPublisher[BridgeFeedback]] = {}
         self._answered: OrderedDict[str, BridgeFeedback | None] = OrderedDict()  # command id -> latest feedback
         self._running: dict[str, asyncio.Task[None]] = {}
@@ -114,6 +117,7 @@ class BridgeNode:
         out), and a bridge that fails to start is never matched at all.
         """
         await self.backend.start()
+        self.trajectories = TrajectoryServers(self.node, self.backend, self._controllers, self.primitive_running, self.state_period)
         for group in self.backend.groups:
             subscribe(
                 self.node, BridgeCommand, bridge_topic(group, "command"), lambda command, g=group: self._on_command(g, command),
@@ -131,6 +135,8 @@ class BridgeNode:
         await asyncio.gather(*self._running.values(), *self._tasks, return_exceptions=True)
         if self._state_task:
             await asyncio.gather(self._state_task, return_exceptions=True)
+        if self.trajectories is not None:
+            await self.trajectories.close()
         await self.backend.close()
         self.node.destroy()
 
@@ -158,12 +164,21 @@ class BridgeNode:
         self._answered[command.id] = None
         if len(self._answered) > _REMEMBERED_IDS:
             self._answered.popitem(last=False)
+        held = self.trajectories.holder(group) if self.trajectories is not None and command.op in ("execute", "measure") else None
+        if held is not None:  # an action client moves the group: the engine's run and it never command it at once
+            self._send(group, command.id, "error", error=f"{FaultKind.BUSY.value}: {held}: {command.op} refused", fault=FaultKind.BUSY)
+            return
         if command.op == "execute":
             self._start_execute(command)
         elif command.op == "measure":
             self._spawn(self._measure(command))
         else:
             self._spawn(self._control(command))
+
+    def primitive_running(self, group: str) -> bool:
+        """Whether a machine's primitive runs on ``group`` now."""
+        busy = self._running.get(group)
+        return busy is not None and not busy.done()
 
     def _start_execute(self, command: BridgeCommand) -> None:
         group = command.group
@@ -262,6 +277,8 @@ class BridgeNode:
         self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(names), position=tuple(positions)))
         if self._robot_state is not None:
             self._robot_state.publish(names, positions, stamp)
+        if self.trajectories is not None:
+            self.trajectories.publish_state()
         for group, pub in self._tcp_pubs.items():
             pose = self.backend.tcp_pose(group)
             if pose is None:

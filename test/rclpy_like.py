@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from execution_engine.engine.run_action import ACTION_NAME, GetResult, RunApplication, SendGoal
+from execution_engine.engine.run_action import ACTION_NAME, RunApplication
 from node_transport.action import UUID, CancelGoal, CancelGoalRequest, GoalInfo, GoalStatus, GoalStatusArray, STATUS_QOS
 from node_transport.port import Node
 from node_transport.qos import COMMANDS
@@ -28,21 +28,33 @@ class Handle:
     feedback: list[Any] = field(default_factory=list)
 
 
+async def wait_done(clock: Any, future: Any, bound: float) -> Any:
+    """The result of an rclpy future (``send_goal_async``, ``get_result_async``), polled on the loop's clock within ``bound`` s."""
+    deadline = clock.now() + bound
+    while not future.done():
+        assert clock.now() < deadline, "no answer in time"
+        await clock.sleep(0.01)
+    return future.result()
+
+
 class RclpyLikeActionClient:
-    def __init__(self, node: Node, name: str = f"/{ACTION_NAME}") -> None:
+    """``action``: the mirror bundle of the action's type (node_transport.mirrors.action), RunApplication by default."""
+
+    def __init__(self, node: Node, name: str = f"/{ACTION_NAME}", action: Any = RunApplication) -> None:
         base = f"{name}/_action"
-        self.send = node.create_client(SendGoal, f"{base}/send_goal")
-        self.result_client = node.create_client(GetResult, f"{base}/get_result")
+        self.action = action
+        self.send = node.create_client(action.SendGoal, f"{base}/send_goal")
+        self.result_client = node.create_client(action.GetResult, f"{base}/get_result")
         self.cancel_client = node.create_client(CancelGoal, f"{base}/cancel_goal")
         self.handles: dict[tuple[int, ...], Handle] = {}
         self.dropped: list[tuple[tuple[int, ...], int]] = []  # status entries of goals it did not know yet
         self.feedback_dropped = 0
         node.create_subscription(GoalStatusArray, f"{base}/status", self._on_status, STATUS_QOS)
-        node.create_subscription(RunApplication.FeedbackMessage, f"{base}/feedback", self._on_feedback, COMMANDS)
+        node.create_subscription(action.FeedbackMessage, f"{base}/feedback", self._on_feedback, COMMANDS)
 
     async def send_goal(self, goal: Any, number: int, timeout: float = 10.0) -> Handle | None:
         goal_id = UUID(tuple([number] * 16))
-        response = await self.send.call(SendGoal.Request(goal_id, goal), timeout=timeout)
+        response = await self.send.call(self.action.SendGoal.Request(goal_id, goal), timeout=timeout)
         if not response.accepted:
             return None
         handle = self.handles[goal_id.uuid] = Handle(goal_id)  # known from its goal response on
@@ -75,4 +87,4 @@ class RclpyLikeActionClient:
         return await self.cancel_client.call(CancelGoalRequest(GoalInfo(handle.goal_id)), timeout=timeout)
 
     async def result(self, handle: Handle, timeout: float = 120.0) -> Any:
-        return await self.result_client.call(GetResult.Request(handle.goal_id), timeout=timeout)
+        return await self.result_client.call(self.action.GetResult.Request(handle.goal_id), timeout=timeout)

@@ -26,6 +26,7 @@ _DEFAULTS: dict[str, Callable[[], Any]] = {
     "int32": int,
     "uint32": int,
     "uint8": int,
+    "uint16": int,
     "int8": int,
     "uint8[16]": lambda: np.zeros(16, dtype=np.uint8),
     "sequence<double>": lambda: array.array("d"),
@@ -37,7 +38,7 @@ _DEFAULTS: dict[str, Callable[[], Any]] = {
     "double[9]": lambda: np.zeros(9),  # fixed-size arrays are numpy arrays in rosidl Python
     "double[12]": lambda: np.zeros(12),
 }
-_INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint8": (0, 255), "int8": (-128, 127)}
+_INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint16": (0, 65535), "uint8": (0, 255), "int8": (-128, 127)}
 
 
 class FakeMessage:
@@ -163,6 +164,7 @@ def message_class(name: str, fields: dict[str, str], nested: dict[str, type] | N
 
 
 Time = message_class("Time", {"sec": "int32", "nanosec": "uint32"})
+Duration = message_class("Duration", {"sec": "int32", "nanosec": "uint32"})
 ClockMessage = message_class("Clock", {"clock": "builtin_interfaces/Time"}, {"clock": Time})
 Header = message_class("Header", {"stamp": "builtin_interfaces/Time", "frame_id": "string"}, {"stamp": Time})
 String = message_class("String", {"data": "string"})
@@ -180,6 +182,7 @@ Vector3 = message_class("Vector3", {"x": "double", "y": "double", "z": "double"}
 Transform = message_class(
     "Transform", {"translation": "geometry_msgs/Vector3", "rotation": "geometry_msgs/Quaternion"}, {"translation": Vector3, "rotation": Quaternion}
 )
+Twist = message_class("Twist", {"linear": "geometry_msgs/Vector3", "angular": "geometry_msgs/Vector3"}, {"linear": Vector3, "angular": Vector3})
 TransformStamped = message_class(
     "TransformStamped",
     {"header": "std_msgs/Header", "child_frame_id": "string", "transform": "geometry_msgs/Transform"},
@@ -287,13 +290,13 @@ def _rosidl_package(package: str, known: dict[str, type]) -> dict[str, dict[str,
 
 
 INTERFACE_MODULES: dict[str, dict[str, Any]] = {
-    "builtin_interfaces.msg": {"Time": Time},
+    "builtin_interfaces.msg": {"Time": Time, "Duration": Duration},
     "rosgraph_msgs.msg": {"Clock": ClockMessage},
     "std_msgs.msg": {"Header": Header, "String": String, "Bool": Bool},
     "sensor_msgs.msg": {"JointState": JointState, "Image": Image, "CameraInfo": CameraInfo, "RegionOfInterest": RegionOfInterest},
     "geometry_msgs.msg": {
         "Point": Point, "Quaternion": Quaternion, "Pose": Pose, "PoseStamped": PoseStamped,
-        "Vector3": Vector3, "Transform": Transform, "TransformStamped": TransformStamped,
+        "Vector3": Vector3, "Transform": Transform, "TransformStamped": TransformStamped, "Twist": Twist,
     },
     "tf2_msgs.msg": {"TFMessage": TFMessage},
     "diagnostic_msgs.msg": {"KeyValue": KeyValue, "DiagnosticStatus": DiagnosticStatus, "DiagnosticArray": DiagnosticArray},
@@ -309,7 +312,17 @@ INTERFACE_MODULES.update(_rosidl_package("dual_arm_executive_interfaces", {
     "unique_identifier_msgs/msg/UUID": INTERFACE_MODULES["unique_identifier_msgs.msg"]["UUID"],
 }))
 
-for _action in INTERFACE_MODULES["dual_arm_executive_interfaces.action"].values():  # rosidl: rcl_action's own parts
+_STANDARD = {
+    "std_msgs/msg/Header": Header, "builtin_interfaces/msg/Time": Time, "builtin_interfaces/msg/Duration": Duration,
+    "geometry_msgs/msg/Transform": Transform, "geometry_msgs/msg/Twist": Twist,
+    "unique_identifier_msgs/msg/UUID": INTERFACE_MODULES["unique_identifier_msgs.msg"]["UUID"],
+}
+INTERFACE_MODULES.update(_rosidl_package("trajectory_msgs", _STANDARD))  # control_msgs' FollowJointTrajectory (the bridges)
+INTERFACE_MODULES.update(_rosidl_package("control_msgs", {
+    **_STANDARD, **{f"trajectory_msgs/msg/{n}": c for n, c in INTERFACE_MODULES["trajectory_msgs.msg"].items()},
+}))
+
+for _action in [*INTERFACE_MODULES["dual_arm_executive_interfaces.action"].values(), *INTERFACE_MODULES["control_msgs.action"].values()]:  # rosidl: rcl_action's own parts
     _action.Impl.CancelGoalService = INTERFACE_MODULES["action_msgs.srv"]["CancelGoal"]
     _action.Impl.GoalStatusMessage = INTERFACE_MODULES["action_msgs.msg"]["GoalStatusArray"]
 

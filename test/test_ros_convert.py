@@ -199,9 +199,9 @@ def test_importing_ros_types(monkeypatch: pytest.MonkeyPatch) -> None:
         import_ros_type("std_msgs.String")
     with pytest.raises(TransportError, match="has no Strin "):
         import_ros_type("std_msgs/msg/Strin")
-    monkeypatch.setitem(sys.modules, "trajectory_msgs", types.ModuleType("trajectory_msgs"))
-    with pytest.raises(TransportError, match="cannot import trajectory_msgs.msg.*sourced"):
-        import_ros_type("trajectory_msgs/msg/JointTrajectory")
+    monkeypatch.setitem(sys.modules, "moveit_msgs", types.ModuleType("moveit_msgs"))  # a package nothing here installs
+    with pytest.raises(TransportError, match="cannot import moveit_msgs.msg.*sourced"):
+        import_ros_type("moveit_msgs/msg/RobotTrajectory")
 
 
 # ------------------------------------------------------------------------------------ QoS

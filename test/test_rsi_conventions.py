@@ -189,6 +189,27 @@ def test_a_frozen_tcp_set_point_under_cartesian_corrections_checks_the_actual_tc
     assert len(r.iface.events.notes) == 1 and "set point (RSol) frozen at the start pose" in r.iface.events.notes[0]
 
 
+def test_a_correction_kept_from_an_earlier_connection_holds_the_robot_where_it_stands(rig: Callable[..., Rig]) -> None:
+    """ROS-I's simulator keeps its absolute correction between connections: ASPos at its start, the robot where the
+    last run left it.  A first reply without that correction would send it back in one cycle (its simulator has
+    no speed limit; ours stops RSI on it); the bridge takes it as in force, says so, and goes on from there."""
+    context, quirks = like_peer("ros-industrial", RsiContext(), Quirks())
+    r = rig(config=parse_config(peers.ROS_I_KR_C4, "kr_c4.xml"), context=context, quirks=quirks)
+    r.sim.model.carry_correction((10.0, 5.0, -5.0, 0.0, -60.0, 0.0))  # where the last run left it
+    r.start()
+    _wait_correcting(r)
+    target = np.radians([20, -70, 80, 10, 40, 10])
+    ok, message, _ = r.done(r.iface.set_axial_pos(0, target, 10.0, 60.0))
+    assert ok, message
+    assert r.sim.running and r.sim.stop_reason is None
+    trace = np.array(r.sim.model.trace)  # type: ignore[arg-type]
+    assert np.all(np.abs(np.diff(trace, axis=0)) <= np.array(r.iface.links[0].max_joint_speed) * DT + 1e-9)
+    assert np.allclose(trace[0], np.radians([10.0, -85.0, 85.0, 0.0, 30.0, 0.0]), atol=1e-9)  # the first cycle held it there
+    r.wait(lambda: len(r.iface.events.notes) == 2, "the two notes")
+    kept, frozen = r.iface.events.notes
+    assert "as RSI_MOVECORR begins A5 stands -60.000 deg from the reported set point (ASPos)" in kept and "frozen at the start" in frozen
+
+
 # ---------------------------------------------------------------------------- the command line
 @pytest.fixture
 def controllers(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[KrcModel]]:

@@ -11,6 +11,7 @@ from typing import Any
 import ros_fake_graph
 import ros_fake_msgs
 from crossing_cell import CROSSING, WAIT_OPERATION, CollisionWatch, start_nextage_cell
+from rclpy_like import wait_done
 from ros_fake_executor import FakeExecutor
 from ros_fake_node import FakeNode
 from ros_fake_qos import QoSProfile
@@ -99,13 +100,6 @@ def test_rclpy_sees_its_goal_run_cancels_it_and_the_next_goal_goes_back_safely_f
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))  # the machines' default trajectory database
     action_type = ros_fake_msgs.INTERFACE_MODULES["dual_arm_executive_interfaces.action"]["RunApplication"]
     ActionClient = __import__("rclpy.action", fromlist=["ActionClient"]).ActionClient
-
-    async def wait_done(clock: Any, future: Any, bound: float) -> Any:
-        deadline = clock.now() + bound
-        while not future.done():
-            assert clock.now() < deadline, "no answer in time"
-            await clock.sleep(0.01)
-        return future.result()
 
     async def body(transport: RosTransport) -> tuple[Any, ...]:
         clock = transport.clock

@@ -234,7 +234,9 @@ class Channel:
         """RSI_MOVECORR began: corrections are measured from the set point the controller reports
         now -- the one report taken as an input; from here on every report is checked."""
         setpoint = self._axes(self._i_aspos or self._i_aipos)  # at rest: where the axes stand
-        self.motion.begin(setpoint)
+        note = self.motion.begin_from(setpoint, self._axes(self._i_aipos), self._i_ak is not None)
+        if note is not None:
+            self._note(30, note)
         self.motion.check.begin(None if self._i_aspos is None else setpoint, self._reported_pose(False))
         self.account.reset(self.ipoc, self._delay())
         self._fresh = True

@@ -177,6 +177,13 @@ class KrcModel:
         self._accept_echo = accept_echo
         self._last_packet = b""
 
+    def carry_correction(self, axes_deg: Sequence[float]) -> None:
+        """Start with this axis correction in force and the robot standing where it puts it: a controller that
+        kept it from an earlier connection (ROS-I's simulator does; a KR C4 begins RSI_MOVECORR at zero)."""
+        self._ak_total = np.array(axes_deg, dtype=float)
+        self.q_cmd = self.q_ref + np.radians(self._ak_total)
+        self.q_act = self.q_cmd.copy()
+
     # ------------------------------------------------------------------------------ output
     def packet(self) -> bytes:
         """The ``<Rob>`` packet of the current cycle."""

@@ -107,20 +107,45 @@ class Motion:
         self.clamps: dict[str, int] = {}
 
     # ------------------------------------------------------------------ the commanded set point
-    def begin(self, q: Vector) -> None:
-        """RSI_MOVECORR began with the controller's set point at ``q``: corrections count from here."""
+    def begin(self, q: Vector, in_force: Vector | None = None) -> None:
+        """RSI_MOVECORR began with the controller's set point at ``q``: corrections count from here.
+
+        ``in_force`` (deg): an axis correction the controller still applies from before -- ROS-I's
+        simulator keeps its absolute correction between connections, its ASPos at the start and its
+        robot where the last one left it.  It is taken as the correction in force, so the first reply
+        holds the robot where it stands instead of sending it back to ``q``."""
         self.q_ref = q.copy()
         self.ak_model.reset()
         self.rk_model.reset()
         self.ak, self.rk = np.zeros(6), np.zeros(6)
+        if in_force is not None:
+            self.ak_model.start_from(in_force)
+            self.ak = in_force.copy()
+        here = q + self.ak * _DEG
         self.mode, self.cursor = "joint", None
-        self.joint.reset(q)
-        self._fold_point = q.copy()
-        self.track = deque([q.copy()] * self._depth, maxlen=self._depth)
-        self.window = deque([q.copy()], maxlen=self._span)
-        self.commanded = q.copy()
+        self.joint.reset(here)
+        self._fold_point = here.copy()
+        self.track = deque([here.copy()] * self._depth, maxlen=self._depth)
+        self.window = deque([here.copy()], maxlen=self._span)
+        self.commanded = here.copy()
         self._reply = (None, None, None)
         self.moved, self.quiet = True, 0
+
+    def begin_from(self, setpoint: Vector, actual: Vector, axis_corrections: bool) -> str | None:
+        """:meth:`begin` at the reported set point; when the axes stand beyond the tolerance from it (and
+        axis corrections are configured), with the correction that holds them where they stand -- the
+        controller still applies one from before -- and what to report of it."""
+        apart = np.abs(actual - setpoint)
+        if not axis_corrections or not (apart > self.check.tolerance).any():
+            self.begin(setpoint)
+            return None
+        self.begin(setpoint, (actual - setpoint) / _DEG)  # sending none would send the robot back to the set point in one cycle
+        i = int(np.argmax(apart))
+        return (
+            f"as RSI_MOVECORR begins A{i + 1} stands {math.degrees(float(actual[i] - setpoint[i])):.3f} deg from the reported set point (ASPos): "
+            "the controller keeps a correction from before (as ROS-Industrial's kuka_rsi_simulator does between connections); "
+            "corrections go on from it, holding the robot where it stands"
+        )
 
     def space(self) -> str:
         """The space the corrections move in: joint or cart."""

@@ -100,6 +100,13 @@ class CorrectionModel:
         self.total = self._compose(self.total, value) if self.relative else value
         self.history.append(self.total)
 
+    def start_from(self, total: Vector) -> None:
+        """The controller already holds ``total`` when the account begins (a correction from before);
+        absolute: its last received values were that total, relative: the increment repeated is unknown, none."""
+        self.total = np.array(total, dtype=float)
+        self.held = self.total.copy() if not self.relative else np.zeros(len(self.keep))
+        self.history = deque([self.total] * self._depth, maxlen=self._depth)
+
     @property
     def previous(self) -> Vector:
         """The total one cycle before the current one."""

@@ -51,7 +51,7 @@ from core_functions.primitives import (
 )
 from core_functions.robots import NEXTAGE_OPEN
 from node_transport.clock import Clock
-from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, JointLimits, RobotBackend
 from robot_bridges.camera.sources import RenderedCamera
 from robot_bridges.camera.spec import parse_mount
 from robot_bridges.camera.vision import CameraVision
@@ -197,6 +197,14 @@ class NextageSimBackend(RobotBackend):
 
     def robot_description(self) -> str | None:
         return self.model.urdf_path.read_text(encoding="utf-8")
+
+    def joint_limits(self, group: str) -> JointLimits:
+        """The URDF's position and speed limits and the arms' acceleration limit, as every motion is checked."""
+        self._check_group(group)
+        names = NEXTAGE_OPEN.group(group).joint_names
+        idx = self.model.indices(names)
+        m = self.model
+        return JointLimits(names, *(tuple(float(v) for v in a[idx]) for a in (m.lower, m.upper, m.velocity, m.acceleration)))
 
     # ----------------------------------------------------------------- simulator extras
     def set_tool(self, group: str, tool: Pose) -> None:

@@ -81,7 +81,7 @@ from core_functions.primitives import (
 )
 from core_functions.robots import ADEPT_VIPER_S850, RobotModel
 from node_transport.clock import Clock
-from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, RobotBackend
+from robot_bridges.backend import BackendOptions, BridgeError, FaultKind, JointLimits, RobotBackend
 from robot_bridges.vplus import codec
 from robot_bridges.vplus.client import (
     CommandTimeout,
@@ -106,7 +106,7 @@ from robot_bridges.vplus.job import Job
 from robot_bridges.vplus.measurement import MeasurementError, MeasurementPort, SimulatedFocusCamera
 from robot_bridges.vplus.options import parse_options
 from robot_bridges.vplus.simulator import DEFAULT_PORT, VPlusSimulator
-from robot_bridges.vplus.trajectory import TrajectoryPlanner, plan_replay
+from robot_bridges.vplus.trajectory import JOINT_RAMP, TrajectoryPlanner, plan_replay
 from robot_bridges.vplus.trust import PoseTolerance, agree, disagreement
 
 log = logging.getLogger(__name__)
@@ -175,6 +175,10 @@ class VPlusBackend(RobotBackend):
     def groups(self) -> tuple[str, ...]:
         return (GROUP,)
 
+    #: AdeptServer runs a motion it was sent to its end (break is its only motion control), and the
+    #: arm's joints are known from the acknowledgements.
+    holds_within_motion = False
+
     # ---------------------------------------------------------------------------- lifecycle
     async def start(self) -> None:
         await self._ensure_link()
@@ -196,6 +200,17 @@ class VPlusBackend(RobotBackend):
     def tcp_pose(self, group: str) -> Pose | None:
         self._check_group(group)
         return self._tcp
+
+    def joint_limits(self, group: str) -> JointLimits:
+        """The Viper's joint ranges and speeds; its accelerations as the speed reached within the ramp
+        (:data:`~robot_bridges.vplus.trajectory.JOINT_RAMP`) every motion estimate of this back end allows."""
+        self._check_group(group)
+        kin = self.kin
+        velocity = tuple(float(v) for v in kin.max_velocity)
+        return JointLimits(
+            tuple(self.joint_names), tuple(float(v) for v in kin.lower), tuple(float(v) for v in kin.upper),
+            velocity, tuple(v / JOINT_RAMP for v in velocity),
+        )
 
     def robot_description(self) -> str | None:
         """The Viper s850's URDF; None for an arm given other link lengths (the URDF would lie)."""

@@ -1,0 +1,89 @@
+"""FollowJointTrajectory under rclpy (issue 23, item 1): the Nextage simulator's bridge on the ros transport
+serves the action with control_msgs' classes (rosidl's ``FollowJointTrajectory.Impl.SendGoalService`` and
+the rest), and rclpy's own ActionClient -- what MoveIt 2's simple controller manager uses -- in a node and
+executor of its own moves the arm, is refused with the right error codes, and cancels.  On the fake rclpy,
+whose control_msgs and trajectory_msgs classes are built from the same interface files as rosidl's."""
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import ros_fake_graph
+import ros_fake_msgs
+from fjt_client import FJT, NEXTAGE, start_bridge
+from ros_fake_executor import FakeExecutor
+from ros_fake_node import FakeNode
+from ros_fake_qos import QoSProfile
+from rclpy_like import wait_done
+from ros_fakes import fake_rclpy  # noqa: F401 - fixture
+from test_ros_transport import run_real, with_transport
+
+from node_transport.action import GoalStatus
+from node_transport.ros import RosTransport
+from node_transport.ros_convert import import_ros_type
+
+BOUND = 20.0
+ACTION = "/left_arm_controller/follow_joint_trajectory"
+
+
+def test_rclpy_moves_the_arm_is_refused_with_error_codes_and_cancels(fake_rclpy: Any) -> None:
+    action_type = ros_fake_msgs.INTERFACE_MODULES["control_msgs.action"]["FollowJointTrajectory"]
+    trajectory_msgs = ros_fake_msgs.INTERFACE_MODULES["trajectory_msgs.msg"]
+    Duration = ros_fake_msgs.INTERFACE_MODULES["builtin_interfaces.msg"]["Duration"]
+    ActionClient = __import__("rclpy.action", fromlist=["ActionClient"]).ActionClient
+
+    def goal(names: list[str], points: list[tuple[float, list[float]]]) -> Any:
+        return action_type.Goal(trajectory=trajectory_msgs["JointTrajectory"](joint_names=names, points=[
+            trajectory_msgs["JointTrajectoryPoint"](positions=p, time_from_start=Duration(sec=int(t), nanosec=int(round(t % 1 * 1e9))))
+            for t, p in points
+        ]))
+
+    async def body(transport: RosTransport) -> tuple[Any, ...]:
+        clock = transport.clock
+        bridge = await start_bridge(NEXTAGE, transport.create_node("nextage_sim_bridge"), clock)
+        tool = FakeNode("moveit_simple_controller_manager")  # rclpy's side: its own node and executor
+        states: list[Any] = []
+        tool.create_subscription(ros_fake_msgs.JointState, "/joint_states", states.append, QoSProfile(depth=10))
+        client = ActionClient(tool, action_type, ACTION)
+        executor = FakeExecutor()
+        executor.add_node(tool)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+        try:
+            deadline = clock.now() + BOUND
+            while not client.server_is_ready() or not states:
+                assert clock.now() < deadline
+                await clock.sleep(0.02)
+            names = list(NEXTAGE.joints)
+            here = dict(zip(states[-1].name, states[-1].position))
+            start = [here[n] for n in names]
+            points = [(0.5 * (k + 1), [v + 0.05 * (k + 1) * (j == 0) for j, v in enumerate(start)]) for k in range(3)]
+            moved = await wait_done(clock, client.send_goal_async(goal(names, points)), BOUND)
+            done = await wait_done(clock, moved.get_result_async(), BOUND)
+            await clock.sleep(0.2)
+            reached = dict(zip(states[-1].name, states[-1].position))["LARM_JOINT0"]
+            unknown = await wait_done(clock, client.send_goal_async(goal([*names[:-1], "RARM_JOINT5"], points[:1])), BOUND)
+            refused = await wait_done(clock, unknown.get_result_async(), BOUND)
+            far = [(2.0, [v - 0.3 * (j == 0) for j, v in enumerate(start)])]
+            running = await wait_done(clock, client.send_goal_async(goal(names, far)), BOUND)
+            await clock.sleep(0.8)
+            cancelled = await wait_done(clock, running.cancel_goal_async(), BOUND)
+            ended = await wait_done(clock, running.get_result_async(), BOUND)
+            await clock.sleep(0.3)
+            stopped = dict(zip(states[-1].name, states[-1].position))["LARM_JOINT0"]
+            await clock.sleep(0.5)
+            still = dict(zip(states[-1].name, states[-1].position))["LARM_JOINT0"]
+            served = ros_fake_graph.GRAPH.services[f"{ACTION}/_action/send_goal"][0].srv_type
+            return start, points, done, reached, refused, cancelled, ended, (stopped, still), served
+        finally:
+            executor.shutdown()
+            await bridge.close()
+
+    start, points, done, reached, refused, cancelled, ended, (stopped, still), served = run_real(lambda clock: with_transport(clock, body))
+    assert served is import_ros_type("control_msgs/action/FollowJointTrajectory_SendGoal")
+    assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.error_code == 0
+    assert abs(reached - points[-1][1][0]) < 1e-3
+    assert refused.status == GoalStatus.STATUS_ABORTED and refused.result.error_code == FJT.Result.INVALID_JOINTS
+    assert "'RARM_JOINT5' is not one of the group's joints" in refused.result.error_string
+    assert cancelled.return_code == 0 and ended.status == GoalStatus.STATUS_CANCELED
+    assert start[0] - 0.3 + 0.02 < stopped < reached - 0.02 and abs(still - stopped) < 1e-6  # stopped on the way, and stays
