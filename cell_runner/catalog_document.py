@@ -18,7 +18,11 @@ left_arm, right_arm, torso_head; single-arm robots: arm) holds one <function nam
 <params><param value="..."/></params>. A group left out of an operation waits. Groups of one operation run at the
 same time; the next operation starts when all are done. Optional: <error_policy retries="1" action="abort|safe_pose|
 alarm" safe_pose="initial"/> before the operations. Numbers are SI (m, rad, s) unless a unit is written after them
-(mm, deg, ms, %). Check a file with: python -m execution_engine validate FILE"""
+(mm, deg, ms, %). Loops repeat operations: <for_each var="hole" in="drill_1 drill_2"> (or in="kind:hole", the cell's
+frames of that kind, or in="grid:tray_1 3x4 0.020 0.025", a pallet grid's frames) and <repeat count="3">, with {hole}
+and {index} (from 1) replaced in ids, names and param values; <call application="block.xml"><param name="hole"
+value="drill_3"/></call> brings in another application's operations. Check a file with: python -m execution_engine
+validate FILE"""
 
 PARAM_TYPE_HELP = {
     ParamType.NUMBER: "a number; a unit suffix of the param's unit family may follow (mm, cm, deg, ms, %)",
