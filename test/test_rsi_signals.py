@@ -19,7 +19,7 @@ import pytest
 
 import rsi_peer_configs as peers
 from cell_runner.cli import main as cli_main
-from core_functions.primitives import IoResult, SetOutput, WaitInput
+from core_functions.primitives import IoResult, MoveJoints, SetOutput, WaitInput
 from core_functions.robots import KUKA_KR
 from node_transport.clock import real_clock
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
@@ -122,6 +122,23 @@ def test_what_cannot_be_done_is_refused_naming_what_there_is(tmp_path: Path, pri
             assert b.iface is not None and 50 <= b.iface.state(0).cycles - start <= 50 + 30
 
     _with_backend(tmp_path, peers.GPIO, body)
+
+
+@pytest.mark.parametrize(("config", "words"), [(peers.KSS, "RSI stopped by the external system (Stop)"), (peers.ROS_I_KR_C4, None)])
+def test_closing_ends_rsi_with_stop_where_the_configuration_has_it_and_no_handshake(tmp_path: Path, config: str, words: str | None) -> None:
+    """kroshu's configurations have Stop and no handshake: the back end ends RSI with it, where silence would end
+    it in the controller's timeout error; ROS-I's has neither, and the controller is left to its timeout."""
+
+    async def body(b: KukaRsiBackend) -> Any:
+        await b.execute("arm", MoveJoints((0.1, -1.4, 1.5, 0.0, 0.5, 0.0)))
+        return b.sim_thread
+
+    sim = _with_backend(tmp_path, config, body)
+    assert sim is not None
+    if words is None:
+        assert sim.stop_reason is None  # ended by the test's close, not by RSI
+    else:
+        assert words in str(sim.stop_reason)
 
 
 # ---------------------------------------------------------------------------- the command line

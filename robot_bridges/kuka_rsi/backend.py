@@ -184,6 +184,12 @@ class KukaRsiBackend(RobotBackend):
                 tag = self.roles.allow_finish
                 iface.set_flag(0, tag, True)
                 await events.until(lambda: iface.flag_sent(0, tag), None, f"a reply carrying {tag}")  # then the KRL task ends RSI
+            elif iface is not None and events.fault is None and iface.has_flag(0, self.roles.stop):
+                # No handshake (kroshu's configurations): Stop ends RSI normally, where silence would end it
+                # in the controller's timeout error; its KRL program then goes on after RSI_MOVECORR.
+                tag = self.roles.stop
+                iface.set_flag(0, tag, True)
+                await events.until(lambda: iface.flag_sent(0, tag), None, f"a reply carrying {tag}")
         except BridgeError as error:
             log.warning("%s: could not end the KRL task cleanly: %s", self.name, error)
         finally:

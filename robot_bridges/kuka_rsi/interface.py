@@ -395,6 +395,10 @@ class RsiInterface:
         """Whether the latest reply that changed the flags carried ``tag`` set."""
         return bool(self.events.flags_sent[robot] >> self._flag_bits[robot][tag] & 1)
 
+    def has_flag(self, robot: int, tag: str) -> bool:
+        """Whether ``tag`` is a BOOL of the ``<Sen>`` packet (a flag :meth:`set_flag` can raise)."""
+        return tag in self._flag_bits[robot]
+
     def flag(self, robot: int, tag: str) -> bool:
         return bool(self._flags[robot] >> self._flag_bits[robot][tag] & 1)
 
