@@ -319,7 +319,13 @@ class TrajectoryServers:
             if limits is None:
                 node.logger.info("%s: no joint limits known for %s: no FollowJointTrajectory action for it", backend.name, group)
                 continue
-            self.groups[group] = GroupTrajectoryServer(node, backend, group, controller, limits, self.gate, primitive_running, clock, period)
+            try:
+                self.groups[group] = GroupTrajectoryServer(node, backend, group, controller, limits, self.gate, primitive_running, clock, period)
+            except TransportError as error:  # rclpy without control_msgs installed: the bridge still serves the engine
+                node.logger.warning(
+                    "%s: no FollowJointTrajectory action for %s: %s (install control_msgs and trajectory_msgs: rosdep install --from-paths src)",
+                    node.fully_qualified_name, group, error,
+                )
 
     def holder(self, group: str) -> str | None:
         server = self.groups.get(group)

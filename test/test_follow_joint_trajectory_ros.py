@@ -5,6 +5,7 @@ executor of its own moves the arm, is refused with the right error codes, and ca
 whose control_msgs and trajectory_msgs classes are built from the same interface files as rosidl's."""
 from __future__ import annotations
 
+import sys
 import threading
 from typing import Any
 
@@ -87,3 +88,22 @@ def test_rclpy_moves_the_arm_is_refused_with_error_codes_and_cancels(fake_rclpy:
     assert "'RARM_JOINT5' is not one of the group's joints" in refused.result.error_string
     assert cancelled.return_code == 0 and ended.status == GoalStatus.STATUS_CANCELED
     assert start[0] - 0.3 + 0.02 < stopped < reached - 0.02 and abs(still - stopped) < 1e-6  # stopped on the way, and stays
+
+
+def test_without_control_msgs_installed_the_bridge_serves_the_engine_and_says_why_not_the_action(fake_rclpy: Any, monkeypatch: Any, caplog: Any) -> None:
+    """A ROS install without control_msgs (ros-base): the bridge starts, takes the machines' commands, and warns
+    once per group, naming how to install the packages, instead of failing at its start."""
+    for name in [m for m in sys.modules if m == "control_msgs" or m.startswith("control_msgs.")]:
+        monkeypatch.delitem(sys.modules, name)
+
+    async def body(transport: RosTransport) -> tuple[Any, Any]:
+        bridge = await start_bridge(NEXTAGE, transport.create_node("nextage_sim_bridge"), transport.clock)
+        try:
+            return bridge.trajectories, ros_fake_graph.GRAPH.services.get(f"{ACTION}/_action/send_goal")
+        finally:
+            await bridge.close()
+
+    servers, served = run_real(lambda clock: with_transport(clock, body))
+    assert servers is not None and servers.groups == {} and not served
+    warned = [r.getMessage() for r in caplog.records if "no FollowJointTrajectory action for" in r.getMessage()]
+    assert len(warned) == 3 and all("cannot import control_msgs.action" in w and "rosdep install" in w for w in warned)
