@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ from core_functions.catalog import Catalog
 from core_functions.robots import find_robot
 from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
-from execution_engine.app_model.document import AppDocument, Placement, read_document, serialize
+from execution_engine.app_model.document import AppDocument, Placement, parse_document, read_document, serialize
 
 
 @dataclass(frozen=True)
@@ -89,11 +89,36 @@ def place(diagnostics: list[Diagnostic], placements: list[Placement], display: s
 
 
 def validate(document: AppDocument, path: Path, catalog: Catalog) -> tuple[Application | None, list[PlacedMessage], str]:
-    """Validate the document as the file at ``path``: the application (None with errors), the placed messages, the XML."""
+    """Validate the document as the file at ``path``: the application (None with errors), the placed messages, the XML.
+
+    A file of loops or calls (issue 24) is more than the document the page holds (its operations written at the
+    top): unchanged, the file itself is what is checked and run, loops and all; edited, it is refused rather than
+    checked or run without its loops."""
     text, placements = serialize(document)
     display = str(path)
+    on_disk = with_steps(path)
+    if on_disk is not None:
+        if replace(on_disk, steps=[]) == replace(document, steps=[]):
+            app, diagnostics = read_application(path, catalog)
+            return app, place(diagnostics, [], display), text
+        refusal = (f"{path} holds {', '.join(on_disk.steps)}, which the builder does not show: an edit of the rest cannot be "
+                   "checked, run or saved with them; edit the file as text")
+        return None, [PlacedMessage(refusal, "error", display, 1, 1, None, None, None, "application")], text
     app, diagnostics = read_application(path, catalog, data=text.encode("utf-8"))
     return app, place(diagnostics, placements, display), text
+
+
+def with_steps(path: Path) -> AppDocument | None:
+    """The document of the file at ``path`` when it has loops or calls, else None (looked for in the bytes first:
+    the page validates on every edit)."""
+    try:
+        data = path.read_bytes() if path.is_file() else b""
+    except OSError:
+        return None
+    if b"<for_each" not in data and b"<repeat" not in data and b"<call" not in data:
+        return None
+    document, _ = parse_document(data, path)
+    return document if document is not None and document.steps else None
 
 
 def open_document(path: Path) -> tuple[AppDocument | None, list[Diagnostic]]:
@@ -111,8 +136,8 @@ def save_document(document: AppDocument, path: Path, catalog: Catalog, outputs: 
     app, messages, text = validate(document, path, catalog)
     if app is None:
         return False, messages
-    on_disk, _ = read_document(path) if path.is_file() else (None, [])
-    if on_disk is not None and on_disk.steps:  # the builder holds no loops or calls: saving would drop them
+    on_disk = with_steps(path)
+    if on_disk is not None:  # the builder holds no loops or calls: saving would drop them
         refusal = (f"{path} holds {', '.join(on_disk.steps)}, which the builder does not show: saving would drop them; "
                    "edit the file as text, or save under another name")
         return False, [*messages, PlacedMessage(refusal, "error", str(path), 1, 1, None, None, None, "application")]

@@ -11,7 +11,7 @@ from app_functions.registry import full_catalog
 from execution_engine.app_model import ApplicationError, load_application, validate_application
 from execution_engine.app_model.document import read_document
 from execution_engine.app_model.expand import MAX_DEPTH, MAX_OPERATIONS
-from operator_station.builder import save_document
+from operator_station.builder import save_document, validate
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
@@ -228,6 +228,13 @@ def test_the_builder_does_not_save_over_loops_it_cannot_show(tmp_path: Path) -> 
     saved, messages = save_document(document, path, CATALOG)
     assert not saved and path.read_bytes() == before
     assert messages[-1].message == f"{path} holds <for_each> at line 18, which the builder does not show: saving would drop them; edit the file as text, or save under another name"
+    checked, _, _ = validate(document, path, CATALOG)  # what the studio's Start runs: the file, loops and all
+    assert checked is not None and len(checked.operations) == 10 and checked.operations[5].origin == "for_each hole=drill_3"
+    document.operations[0].name = "edited"
+    checked, refused, _ = validate(document, path, CATALOG)
+    assert checked is None and [m.message for m in refused] == [
+        f"{path} holds <for_each> at line 18, which the builder does not show: an edit of the rest cannot be checked, run or saved with them; edit the file as text"
+    ]
 
 
 @pytest.mark.parametrize("sync", ["operation", "flags"])
