@@ -176,8 +176,9 @@ class RunSession:
         deployment = await deploy_local(clock, app.robot, backend, machine_parameters=parameters, engine_parameters={"autostart": False})
         deployment.engine.hold_for_operators = True  # the operator is a person at a page: simulated time waits
         node = deployment.transport.create_node("operator_station")
-        writer = TraceWriter(trace) if trace is not None else None
-        page = TraceWriter(FeedStream(self.feed))  # the page gets the trace's records, written by the same code
+        iterations = app.iterations()  # the loop iteration or call of each expanded operation, on its records
+        writer = TraceWriter(trace, iterations) if trace is not None else None
+        page = TraceWriter(FeedStream(self.feed), iterations)  # the page gets the trace's records, written by the same code
         observe(node, app.robot, self.feed, [w for w in (writer, page) if w is not None])
         self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
         self._loop, self._deployment = asyncio.get_running_loop(), deployment
