@@ -13,9 +13,11 @@ from typing import Any
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from fjt_client import FJT, Duration, Header, Point, Time
+from fjt_client import JointTolerance as Tolerance
+from fjt_client import JointTrajectory as Trajectory
 from hypothesis import strategies as st
 
-from node_transport import mirrors
 from robot_bridges.backend import JointLimits
 from robot_bridges.trajectory_goal import (
     INVALID_GOAL,
@@ -25,14 +27,6 @@ from robot_bridges.trajectory_goal import (
     Refused,
     plan_goal,
 )
-
-FJT = mirrors.action("control_msgs/action/FollowJointTrajectory")
-Trajectory = mirrors.mirror("trajectory_msgs/msg/JointTrajectory")
-Point = mirrors.mirror("trajectory_msgs/msg/JointTrajectoryPoint")
-Duration = mirrors.mirror("builtin_interfaces/msg/Duration")
-Header = mirrors.mirror("std_msgs/msg/Header")
-Time = mirrors.mirror("builtin_interfaces/msg/Time")
-Tolerance = mirrors.mirror("control_msgs/msg/JointTolerance")
 
 NAMES = ("j1", "j2", "j3")
 LIMITS = JointLimits(NAMES, (-1.0, -2.0, 0.0), (1.0, 2.0, 3.0), (1.0, 0.5, 2.0), (2.0, 1.0, 4.0))
