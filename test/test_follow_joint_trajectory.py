@@ -15,9 +15,10 @@ from typing import Any
 import numpy as np
 import pytest
 from crossing_cell import CROSSING, start_nextage_cell
-from fjt_client import FJT, KINDS, NEXTAGE, Arm, ControllerState, JointTolerance, distance_to_path, duration, goal, start_bridge, three_points
+from fjt_client import FJT, KINDS, NEXTAGE, Arm, ControllerState, Header, JointTolerance, Kind, Time, distance_to_path, duration, goal, start_bridge, three_points
 
 from core_functions.primitives import MoveJoints
+from core_functions.robots import NEXTAGE_OPEN
 from node_transport.action import GoalStatus
 from node_transport.carriage import TypedPublisher, subscribe
 from node_transport.clock import Clock
@@ -261,9 +262,8 @@ def test_a_goal_whose_header_stamp_ended_in_the_past_is_old(run_sim: Any) -> Non
     async def main(clock: Clock) -> Any:
         bridge, arm = await cell(clock, "nextage")
         try:
-            stamp = arm.node.now_stamp()
-            past = FJT.Goal().trajectory.header.__class__(stamp=type(stamp)(stamp.sec - 10, 0))
-            return await arm.run(goal(arm.kind.joints, [(1.0, arm.joints())], header=past), BOUND)
+            now = arm.node.now_stamp()
+            return await arm.run(goal(arm.kind.joints, [(1.0, arm.joints())], header=Header(stamp=Time(now.sec - 10, 0))), BOUND)
         finally:
             await bridge.close()
 
@@ -318,3 +318,25 @@ def test_a_goal_while_the_engine_runs_the_cell_is_refused_naming_the_run(run_sim
     refused, seen = run_sim(main)
     assert refused.status == GoalStatus.STATUS_ABORTED and refused.result.error_code == R.INVALID_GOAL
     assert "the engine's run of application 'crossing' holds the group" in refused.result.error_string
+
+
+def test_the_groups_are_independent_two_clients_move_both_arms_at_once(run_sim: Any) -> None:
+    async def main(clock: Clock) -> tuple[Any, ...]:
+        bridge, left = await cell(clock, "nextage")
+        right = Arm(left.node, Kind("nextage", "right_arm_controller", NEXTAGE_OPEN.group("right_arm").joint_names), clock)
+        try:
+            await right.ready(BOUND)
+            targets = left.joints() + np.array((0.1, 0, 0, 0, 0.1, 0)), right.joints() + np.array((-0.1, 0, 0, 0, -0.1, 0))
+            began = clock.now()
+            done = await asyncio.gather(left.run(goal(left.kind.joints, [(2.0, targets[0])]), BOUND),
+                                        right.run(goal(right.kind.joints, [(2.0, targets[1])]), BOUND))
+            took = clock.now() - began
+            await clock.sleep(0.2)  # the next joint_states
+            return done, took, (left.joints(), right.joints()), targets
+        finally:
+            await bridge.close()
+
+    done, took, reached, targets = run_sim(main)
+    assert [d.status for d in done] == [GoalStatus.STATUS_SUCCEEDED] * 2 and took < 2.5  # together, not one after the other
+    np.testing.assert_allclose(reached[0], targets[0], atol=1e-3)
+    np.testing.assert_allclose(reached[1], targets[1], atol=1e-3)
