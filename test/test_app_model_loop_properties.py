@@ -112,3 +112,40 @@ def test_any_loop_list_grid_or_variable_gives_diagnostics_not_exceptions(tmp_pat
             load_application(path, CATALOG)
     else:
         assert load_application(path, CATALOG).operations[-1].id == "put_back"
+
+
+@SETTINGS
+@given(edges=st.lists(st.lists(st.integers(0, 3), max_size=2), min_size=4, max_size=4), own=st.lists(st.integers(0, 2), min_size=4, max_size=4))
+def test_any_call_graph_expands_or_names_its_cycle(tmp_path: Path, edges: list[list[int]], own: list[int]) -> None:
+    """Four files, each with some operations and calls of the others (cycles included): a graph without a
+    cycle from the first file expands to every operation of every path through it, in order; one with a
+    cycle is refused naming it, never a hang or a crash."""
+    folder = tmp_path / f"g{next(_counter)}"
+    folder.mkdir()
+    for index, (calls, operations) in enumerate(zip(edges, own)):
+        body = "".join(f'<operation id="f{index}_{k}_{{p}}"><left_arm><function name="gripper_open"/></left_arm></operation>\n' for k in range(operations))
+        body += "".join(f'<call application="f{callee}.xml"><param name="p" value="{{p}}.{index}-{j}"/></call>\n' for j, callee in enumerate(calls))
+        (folder / f"f{index}.xml").write_text(document(body or '<operation id="e{p}"><left_arm><function name="gripper_open"/></left_arm></operation>\n'))
+    main = folder / "main.xml"
+    main.write_text(document('<call application="f0.xml"><param name="p" value="m"/></call>\n'))
+
+    def ids(index: int, p: str, chain: tuple[int, ...]) -> list[str] | None:
+        if index in chain:
+            return None  # a cycle
+        out = [f"f{index}_{k}_{p}" for k in range(own[index])] or ([f"e{p}"] if not edges[index] else [])
+        for j, callee in enumerate(edges[index]):
+            inner = ids(callee, f"{p}.{index}-{j}", (*chain, index))
+            if inner is None:
+                return None
+            out += inner
+        return out
+
+    want = ids(0, "m", ())
+    found = validate_application(main, CATALOG)
+    if want is None:
+        assert any(d.message.startswith("call cycle: ") for d in found)
+    elif not want:
+        assert found  # nothing to run: the schema's at least one operation is not met somewhere, or an empty body
+    else:
+        application = load_application(main, CATALOG)
+        assert [o.id for o in application.operations] == want
