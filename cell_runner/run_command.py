@@ -190,7 +190,7 @@ def _run_recorded(
         err.write(f"error: the run of {file} failed: {type(error).__name__}: {error} (a defect of this program: please report it; -v shows the traceback)\n")
         explain(error, settings.verbose, err)
     if report is not None:
-        out.write("\n" + "\n".join(report.summary_lines()) + "\n")
+        out.write("\n" + "\n".join(report.summary_lines(app.iterations())) + "\n")
         outcome = report.outcome
         code = EXIT_OK if report.ok else EXIT_STOPPED if report.outcome == "stopped" else EXIT_INVALID
     code = EXIT_OUTPUT if lost and code == EXIT_OK else code

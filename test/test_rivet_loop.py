@@ -77,3 +77,11 @@ def test_a_collision_in_the_third_iteration_is_reported_before_anything_moves(tm
     assert lines[0].startswith(f"{app}:{left[0]}:") and "operation reach_3 (for_each t=0.0) left_arm move_to: collision: collision between" in lines[0]
     assert lines[1].startswith(f"{app}:{right[0]}:") and "operation reach_3 (for_each t=0.0) right_arm move_to: collision: " in lines[1]
     assert f"{app}: not run: 2 problem(s) found by the dry run; use --no-check to run anyway" in output
+
+
+def test_a_failure_in_a_loop_is_reported_with_its_iteration(tmp_path: Path) -> None:
+    code, output, events = run(APPS / "rivet_loop.xml", tmp_path, "--no-check", "--fault", "right_arm:unreachable@0.5")
+    assert code == 1 and "application rivet_loop: FAILED" in output
+    errors = [line.strip() for line in output.splitlines() if line.strip().startswith("error: right_arm")]
+    assert errors and errors[0].startswith("error: right_arm operation debur_drill_1 (for_each hole=drill_1) pick_rivet (attempt 1) at ")
+    assert [e["iteration"] for e in events if e["event"] == "function_end" and e["outcome"] == "aborted"] == ["for_each hole=drill_1"]

@@ -7,6 +7,7 @@ operator command is listed with its run time and its source.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -87,7 +88,10 @@ class RunReport:
         moved = {s.group for s in self.safe_pose_steps if s.step == "move" and s.outcome == "done"}
         return sorted({s.group for s in self.safe_pose_steps} - moved)
 
-    def summary_lines(self) -> list[str]:
+    def summary_lines(self, iterations: Mapping[str, str] | None = None) -> list[str]:
+        """The summary; ``iterations`` (``Application.iterations``) names the loop iteration or call of an
+        error's operation."""
+        iterations = iterations or {}
         lines = [
             f"application {self.app}: {self.outcome.upper()}" + (f" - {self.message}" if self.message else ""),
             f"  operations: {self.operations_done}/{self.operations_total}",
@@ -102,7 +106,8 @@ class RunReport:
             lines.append(f"  retries: {self.retries}")
         for err in self.errors:
             recovery = f" - {err.recovery}" if err.recovery else ""
-            lines.append(f"  error: {err.group} operation {err.operation} {err.function} (attempt {err.attempt}) at {err.t:.2f} s: {err.error}{recovery}")
+            made = f" ({iterations[err.operation]})" if err.operation in iterations else ""
+            lines.append(f"  error: {err.group} operation {err.operation}{made} {err.function} (attempt {err.attempt}) at {err.t:.2f} s: {err.error}{recovery}")
         lines += self._safe_pose_lines()
         for action in self.operator_actions:
             answer = "accepted" if action.accepted else "refused"
