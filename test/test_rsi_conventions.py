@@ -279,9 +279,31 @@ def test_an_application_runs_to_finished_never_beyond_the_axis_speeds(
     assert "FINISHED" in out.getvalue() and "operations: 6/6" in out.getvalue()
     assert err.getvalue().count(said) == 1  # stated once, though a checked run starts the back end twice
     assert "Traceback" not in err.getvalue() and "ERROR" not in err.getvalue()
-    moved = [np.array(m.trace) for m in controllers if m.trace and len(m.trace) > 100]
+    moved = [np.array(m.trace) for m in controllers if m.trace is not None and len(m.trace) > 100]
     assert moved, "the run's controller recorded its set points"
     vmax = np.array([j.max_velocity for j in KUKA_KR.group("arm").joints])  # the robot model's axis speeds (rad/s)
     for trace in moved:
         steps = np.abs(np.diff(trace, axis=0)) / DT
         assert np.all(steps <= vmax * (1 + 1e-9)), np.degrees(steps.max(axis=0))
+
+
+def test_ros_industrials_simulator_in_its_own_process_in_real_time(tmp_path: Path) -> None:
+    """The same application against ROS-I's simulator (``--peer ros-industrial``) as a process on the wall clock, as
+    the back end starts it without a real controller: FINISHED, the convention said once.  The simulated controller
+    stops RSI on any set point beyond an axis speed (KrcModel._check_motion), which would end the run in a fault."""
+    (tmp_path / "kr_c4.xml").write_text(peers.ROS_I_KR_C4)
+    app = tmp_path / "joint_only.xml"
+    app.write_text(peers.JOINT_ONLY_APP.format(cell=ROOT / "apps_xml" / "cells" / "kuka_rsi_cell.xml"))
+    out, err = io.StringIO(), io.StringIO()
+    feedback = tmp_path / "packets.txt"  # the real run's packets (the dry runs save none)
+    options = ["simulator=process", f"config={tmp_path / 'kr_c4.xml'}", "sim_peer=ros-industrial", f"feedback={feedback}"]
+    code = cli_main(["run", str(app), "--robot", "kuka-rsi", *(a for o in options for a in ("--backend-option", o))], out, err)
+    assert code == 0, err.getvalue()
+    assert "FINISHED" in out.getvalue() and "operations: 6/6" in out.getvalue()
+    assert err.getvalue().count("the controller reports its set point (ASPos) frozen at the start pose") == 1
+    # The process played ROS-I's simulator: IPOC counting packets from 0, RIst at zero.
+    rows = [line.split() for line in feedback.read_text().splitlines()[1:]]
+    ipocs = [int(row[1]) for row in rows]
+    steps = [b - a for a, b in zip(ipocs, ipocs[1:])]
+    assert len(rows) > 500 and ipocs[0] < 50 and min(steps) > 0 and sorted(steps)[len(steps) // 2] == 1  # a KR C4 counts 4 ms
+    assert all(float(v) == 0.0 for row in rows for v in row[3:9])
