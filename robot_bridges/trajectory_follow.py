@@ -9,7 +9,8 @@ The group's speed fraction is set to 1 first, so the path keeps the goal's own t
 A back end that holds an arm inside a running motion (:attr:`RobotBackend.holds_within_motion`) gets
 the whole path as one motion, and a stop lands on the path wherever the arm is.  One that runs a motion
 it was sent to its end (V+ AdeptServer) gets it in legs of at most :data:`LEG_TIME` ending on points
-of the path: a stop lets the leg under way end on its point and sends nothing more.  A leg, once sent,
+of the path (a segment longer than that is cut by points on it): a stop lets the leg under way end on
+its point and sends nothing more.  A leg, once sent,
 is never sent again: a failed one ends the goal.
 
 While the path plays, the follower samples the arm every ``period`` s: where the path says it should
@@ -24,7 +25,7 @@ from __future__ import annotations
 import asyncio
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,6 +61,18 @@ class Sample:
         return self.desired - self.actual
 
 
+def refined(plan: FollowPlan, step: float) -> FollowPlan:
+    """The same path with a point at least every ``step`` s: points on its straight segments, where a leg may end."""
+    times = [float(plan.times[0])]
+    for start, stop in zip(plan.times[:-1], plan.times[1:]):
+        pieces = max(1, math.ceil((stop - start) / step - 1e-9))
+        times.extend(float(start + (stop - start) * i / pieces) for i in range(1, pieces))
+        times.append(float(stop))
+    grid = np.array(times)
+    points = np.array([plan.at(t)[0] for t in grid[:-1]] + [plan.points[-1]])
+    return replace(plan, times=grid, points=points)
+
+
 def legs(plan: FollowPlan, whole: bool) -> list[tuple[int, int]]:
     """Index ranges ``(first, last)`` of the plan's points, one per motion sent (sharing their ends)."""
     count = len(plan.times)
@@ -81,7 +94,9 @@ class Follower:
         self, backend: RobotBackend, group: str, plan: FollowPlan, clock: Clock, period: float, name: str,
         observe: Callable[[Sample], None],
     ) -> None:
-        self.backend, self.group, self.plan, self.clock, self.period, self.name = backend, group, plan, clock, period, name
+        whole = backend.holds_within_motion
+        self.backend, self.group, self.clock, self.period, self.name = backend, group, clock, period, name
+        self.plan = plan if whole else refined(plan, LEG_TIME)  # a leg may end between two far-apart points
         self.observe = observe
         self.elapsed = 0.0  # s of path time played (stands still while held)
         self.held = False
@@ -163,6 +178,7 @@ class Follower:
         motion = asyncio.ensure_future(self.backend.execute(self.group, primitive))
         end = float(plan.times[last])
         live = self.backend.holds_within_motion
+        stopped = False
         try:
             while not motion.done():
                 before = self.clock.now()
@@ -177,7 +193,11 @@ class Follower:
                     violation = self._outside(sample, plan.path.position, "path")
                     if violation is not None:
                         self.end(PATH_TOLERANCE_VIOLATED, violation)
-                        await self.stop_backend()
+                if self._ending is not None and not stopped and not motion.done():
+                    # the goal ends while its motion runs: stop it here too -- a stop asked for in the instant
+                    # between sending the motion and the back end taking it up found nothing to stop
+                    stopped = True
+                    await self.stop_backend()
             motion.result()  # BridgeError: the caller decides what it means
         finally:
             if not motion.done():
