@@ -36,6 +36,9 @@ FORMAT = "%(levelname)s %(name)s: %(message)s"
 NODE_FORMAT = "[%(levelname)s] [%(name)s]: %(message)s"  # a node process's lines, as rcutils prints them
 WINDOW = 1.0  # s: at most one line per kind in this time
 MAX_KINDS = 1000  # kinds remembered at once; beyond it, records pass as they come (memory stays bounded)
+#: A record logged with ``extra={ONCE: True}`` states a fact (what an RSI configuration lacks): printed the first
+#: time its kind comes, never again in this console -- a checked run starts a back end more than once.
+ONCE = "console_once"
 
 _NUMBER = re.compile(r"\d+(?:[.,]\d+)*")
 
@@ -67,11 +70,17 @@ class AggregatingHandler(logging.Handler):
         self._kinds: dict[tuple[str, int, str], _Kind] = {}
         self._timer: WallTimer | None = None
         self.held_total = 0  # records not printed one by one (for tests and the curious)
+        self._once: set[tuple[str, int, str]] = set()  # the kinds of facts said already (ONCE)
 
     def emit(self, record: logging.LogRecord) -> None:
         now = self.wall_clock.now()
         self._flush(now, everything=False)
         key = kind_of(record)
+        if getattr(record, ONCE, False):  # a fact, not an event: said once in this console, never counted
+            if key not in self._once and len(self._once) < MAX_KINDS:
+                self._once.add(key)
+                self.target.handle(record)
+            return
         kind = self._kinds.get(key)
         if kind is None:
             if len(self._kinds) < MAX_KINDS:

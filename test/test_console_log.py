@@ -15,7 +15,7 @@ import pytest
 
 from cell_runner import cli
 from cell_runner.cli import main
-from node_transport.console_log import FORMAT, AggregatingHandler, ConsoleLog, kind_of
+from node_transport.console_log import FORMAT, ONCE, AggregatingHandler, ConsoleLog, kind_of
 from node_transport.wall_clock import ManualWallClock
 
 LATE = "%s: the controller counts %d late replies (IPOC %d)"
@@ -91,6 +91,21 @@ def test_different_warnings_are_never_merged_and_a_first_one_is_never_delayed() 
     logging.getLogger("test_console_log.other").handlers = []
     logger.info("RSI loop on %s:%d", "127.0.0.1", 49152)
     assert len(lines(stream)) == 4
+
+
+def test_a_fact_marked_once_is_said_once_in_a_console_and_never_counted() -> None:
+    wall = ManualWallClock()
+    logger, stream, handler = console(wall)
+    for _ in range(3):
+        logger.warning("kss.xml sends no ASPos", extra={ONCE: True})
+        wall.advance(5.0)
+    logger.warning("kss.xml sends no RSol", extra={ONCE: True})
+    handler.close()
+    assert lines(stream) == ["WARNING test_console_log.rsi: kss.xml sends no ASPos", "WARNING test_console_log.rsi: kss.xml sends no RSol"]
+    again, stream2, handler2 = console(ManualWallClock())  # another command's console says it again
+    again.warning("kss.xml sends no ASPos", extra={ONCE: True})
+    assert lines(stream2) == ["WARNING test_console_log.rsi: kss.xml sends no ASPos"]
+    handler2.close()
 
 
 def test_the_kind_masks_numbers_but_not_words() -> None:

@@ -161,7 +161,7 @@ class KukaRsiBackend(RobotBackend):
         log.info("%s: RSI loop on %s:%d (%s)", self.name, address[0], address[1], iface.events.tuning)
         gaps = feedback_gaps(self.config, self.roles)
         if gaps:  # said once, here: what the configuration does not send switches off what needs it
-            say_once(logging.WARNING, f"{self.name}: {self.config.source} sends {'; '.join(gaps)}")
+            say_once(logging.WARNING, f"{self.config.source} sends {'; '.join(gaps)}")  # the same words in the dry runs and the run
         advice = realtime_advice(iface.events.tuning)
         if advice is not None:
             log.warning("%s: %s", self.name, advice)

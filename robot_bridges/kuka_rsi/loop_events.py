@@ -13,6 +13,7 @@ import asyncio
 import logging
 from collections.abc import Callable
 
+from node_transport.console_log import ONCE
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface
 
@@ -20,19 +21,10 @@ from robot_bridges.kuka_rsi.interface import RobotState, RsiInterface
 log = logging.getLogger("robot_bridges.kuka_rsi.backend")
 
 
-#: What this process has said once already (:func:`say_once`); bounded, it only spares repeats.
-_SAID: set[str] = set()
-
-
 def say_once(level: int, text: str) -> None:
-    """Log ``text`` at ``level`` the first time this process says it, at DEBUG after: a checked run
-    starts the back end twice (once to see where the robot is), and a fact is stated once in the console."""
-    if text in _SAID:
-        log.debug("%s", text)
-        return
-    if len(_SAID) < 1000:
-        _SAID.add(text)
-    log.log(level, "%s", text)
+    """Log ``text`` as a fact the console says once (``console_log.ONCE``): a checked run starts the back end
+    more than once -- the dry runs on the simulated controller, the run itself -- and each finds it again."""
+    log.log(level, "%s", text, extra={ONCE: True})
 
 
 class LoopEvents:
@@ -88,7 +80,7 @@ class LoopEvents:
             elif message[0] == "warn":
                 log.warning("%s: %s", self.name, message[2])
             elif message[0] == "note":
-                say_once(int(message[2]), f"{self.name}: {message[3]}")
+                say_once(int(message[2]), str(message[3]))  # the robot's name, not the loop's address: the same in the dry runs and the run
             elif message[0] == "late":
                 log.warning("%s: the controller counts %d late replies (IPOC %d)", self.name, message[2], message[3])
             elif message[0] == "peer":
