@@ -56,7 +56,8 @@ def test_windowed_radiance_is_the_whole_image_computation(found: list[Surface], 
 def test_the_banded_defocus_is_the_stacked_blend(found: list[Surface], camera: np.ndarray, focus: float, aperture: float) -> None:
     scene = Scene(tuple(found), Lighting())
     bright, depth = radiance(scene, INTRINSICS, camera, windows=False)
-    sigma = Optics(focus, aperture=aperture).blur_sigma(INTRINSICS, depth)
+    # A camera almost touching a plate blurs by thousands of pixels: bounded, so that both sides' kernels stay quick.
+    sigma = np.minimum(Optics(focus, aperture=aperture).blur_sigma(INTRINSICS, depth), 40.0)
     assert np.array_equal(defocus(bright, sigma), stacked_defocus(bright, sigma))
 
 

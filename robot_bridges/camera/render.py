@@ -12,7 +12,7 @@ Gaussian whose sigma follows the thin-lens circle of confusion, ``aperture * f *
 per pixel (the image blurred at a few levels and blended by depth).
 
 Cost: every step is worked out pixel by pixel, so only the pixels a surface or a disc can reach
-are computed (their bounding boxes in the image, widened against rounding), and
+are computed, and each defocus level only on the rows whose pixels take something of it (their bounding boxes in the image, widened against rounding), and
 what depends only on the camera (each pixel's ray, the lighting field) is computed once per
 camera.  The image is the same to the bit as computing every surface and disc over the whole
 image (``windows=False``, which the tests compare against), and as the renderer before these
@@ -213,7 +213,7 @@ def radiance(scene: Scene, intrinsics: Intrinsics, camera_in_world: Array, windo
         if not visible.any():
             continue
         value = np.full(t.shape, surface.albedo)
-        pixel_m: Array | None = None
+        length = pixels.length[window]
         for disc in surface.discs:
             r = 0.5 * disc.diameter
             around = _within(_window(_moved(plane, disc.x, disc.y), (r + 0.01, r + 0.01), intrinsics) if windows else window, window)
@@ -225,50 +225,77 @@ def radiance(scene: Scene, intrinsics: Intrinsics, camera_in_world: Array, windo
             near &= dvisible
             if not near.any():
                 continue
-            if pixel_m is None:  # a pixel's size on the surface, across the view
-                cosine = np.abs(denom) / pixels.length[window]
-                pixel_m = footprint * t / np.maximum(cosine, 0.05)
+            cosine = np.abs(denom[around]) / length[around]
+            pixel_m = footprint * t[around] / np.maximum(cosine, 0.05)  # a pixel's size on the surface, across the view
             d = np.hypot(dx[near] - disc.x, dy[near] - disc.y) - r
-            ramp = np.maximum(disc.softness, pixel_m[around][near])
+            ramp = np.maximum(disc.softness, pixel_m[near])
             inside = np.clip(0.5 - d / ramp, 0.0, 1.0)
             part = value[around]
             part[near] = part[near] * (1.0 - inside) + disc.albedo * inside
-        bright[window][visible] = value[visible]
-        seen[visible] = t[visible]
-    depth[~np.isfinite(depth)] = 10.0
+        np.copyto(bright[window], value, where=visible)
+        np.copyto(seen, t, where=visible)
+    np.copyto(depth, 10.0, where=np.isinf(depth))
     return bright, depth
 
 
 def defocus(image: Array, sigma: Array, levels: int = 5) -> Array:
     """Blur each pixel by its own sigma: the image at a few blur levels, blended linearly by sigma.
 
-    Each band of pixels between two levels is blended from its two levels only (no stack of every
-    level indexed per pixel); each level is blurred whole: OpenCV's row filter takes another code
-    path near a row's end, so a part of the image blurred alone can differ in its last bit.
+    Each band of pixels between two levels is blended from those two levels only, and a level is
+    blurred only over the rows of the bands that take something of it (:func:`_blurred`): a band
+    whose pixels all sit on one of its levels (weight 0 or 1, such as the floor far below, all at
+    one depth) takes nothing of the other, whose product with its weight would be 0 anyway.  The
+    image is the same to the bit as blurring every level whole and blending per pixel.
     """
     top = float(sigma.max())
     if top < 0.3:
         return image
     steps = np.linspace(float(sigma.min()), top, levels) if top - float(sigma.min()) > 0.3 else np.array([float(np.median(sigma))])
     if len(steps) == 1:
-        return _blurred(image, float(steps[0]))
+        return _blurred(image, float(steps[0]), None)
     position = np.clip((sigma - steps[0]) / (steps[1] - steps[0]), 0.0, len(steps) - 1.0)
     lower = np.floor(position).astype(int)
     lower = np.minimum(lower, len(steps) - 2)
     weight = position - lower
-    out = np.empty_like(image)
-    below: Array | None = None  # level k blurred, from the band before
+    bands = []
+    rows_of: dict[int, Array] = {}  # level -> the rows where some pixel takes something of it
     for k in range(len(steps) - 1):
         mask = lower == k
         if not mask.any():
-            below = None
             continue
-        low = below if below is not None else _blurred(image, float(steps[k]))
-        high = _blurred(image, float(steps[k + 1]))
-        out[mask] = low[mask] * (1.0 - weight[mask]) + high[mask] * weight[mask]
-        below = high
+        w = weight[mask]
+        rows = mask.any(axis=1)
+        for level, used in ((k, bool((w < 1.0).any())), (k + 1, bool((w > 0.0).any()))):
+            if used:
+                rows_of[level] = rows_of[level] | rows if level in rows_of else rows
+        bands.append((k, mask, w))
+    blurred = {level: _blurred(image, float(steps[level]), rows) for level, rows in rows_of.items()}
+    out = np.empty_like(image)
+    for k, mask, w in bands:
+        low = blurred[k][mask] if k in blurred else np.zeros(len(w))  # weight 1 everywhere: times 0
+        high = blurred[k + 1][mask] if k + 1 in blurred else np.zeros(len(w))  # weight 0 everywhere
+        out[mask] = low * (1.0 - w) + high * w
     return out
 
 
-def _blurred(image: Array, sigma: float) -> Array:
-    return image if sigma < 0.3 else cv2.GaussianBlur(image, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+def _blurred(image: Array, sigma: float, rows: Array | None) -> Array:
+    """``image`` blurred with ``sigma`` on the ``rows`` asked for (None: all), 0 on the others.
+
+    OpenCV's Gaussian of sigma s on doubles has a kernel reaching ``round(8 s + 1) // 2`` pixels;
+    the rows asked for, widened by that reach (clamped to the image, whose replicated border is its
+    own), are blurred whole-width.  A pixel's value then comes from the same pixels by the same
+    arithmetic as in the whole image's blur: the row filter treats each row alike, the column
+    filter each column, and a row's reach never meets the cut.  (A window cut in columns too is
+    not: OpenCV's row filter takes another code path near a row's end, changing the last bit.)
+    """
+    if sigma < 0.3:
+        return image
+    h = image.shape[0]
+    where = np.flatnonzero(rows) if rows is not None else np.arange(0)
+    reach = (int(round(8.0 * sigma + 1.0)) | 1) // 2 + WINDOW_MARGIN
+    r0, r1 = (max(0, int(where[0]) - reach), min(h, int(where[-1]) + reach + 1)) if len(where) else (0, h)
+    if rows is None or (r0, r1) == (0, h):
+        return cv2.GaussianBlur(image, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+    out = np.zeros_like(image)
+    out[r0:r1] = cv2.GaussianBlur(np.ascontiguousarray(image[r0:r1]), (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+    return out
