@@ -59,7 +59,7 @@ def check_waits(draft: ApplicationDraft, checked: list[list[CheckedCall]], catal
             steps[call.site.group].append(_Step(index, operation.id, call, draft.source.at_offset(call.site.at).line, zones))
     if _unsatisfiable(steps, draft, log):
         return  # a flag nobody sets is the thing to fix; the deadlock it causes would only repeat it
-    stuck = _advance(steps, catalog, lock_step=not flags_mode)
+    stuck = _advance(steps, lock_step=not flags_mode)
     for group, position in stuck.items():
         step = steps[group][position]
         chain = "; ".join(_why(g, steps, stuck) for g in _rotated(stuck, group))
@@ -98,17 +98,27 @@ def _unsatisfiable(steps: dict[str, list[_Step]], draft: ApplicationDraft, log: 
     return found
 
 
-def _advance(steps: dict[str, list[_Step]], catalog: Catalog, lock_step: bool) -> dict[str, int]:
+def _advance(steps: dict[str, list[_Step]], lock_step: bool) -> dict[str, int]:
     """Run every group as far as the waits let it; the groups left short, at the call they wait in."""
     position = dict.fromkeys(steps, 0)
     flags: set[str] = set()
     order = _zone_order(steps)
+    heads = dict.fromkeys(order, 0)  # per zone: its first call not yet ended (positions only grow)
+    meets = _meetings(steps)
+
+    def zone_free(zone: str, step: _Step) -> bool:
+        entries, head = order[zone], heads[zone]
+        while head < len(entries) and position[entries[head][2]] > entries[head][3]:
+            head += 1
+        heads[zone] = head
+        _, _, group, k = entries[head]  # the step itself has not ended: head never runs past it
+        return steps[group][k] is step
 
     def blocked(group: str) -> bool:
         step = steps[group][position[group]]
         if lock_step and any(position[g] < len(steps[g]) and steps[g][position[g]].index < step.index for g in steps):
             return True  # the operation before is not over
-        if any(_before_in_zone(zone, step, order, steps, position) for zone in step.zones):
+        if not all(zone_free(zone, step) for zone in step.zones):
             return True  # an earlier call in the zone has not ended
         if step.call.site.function == WAIT and step.flag:
             return step.flag not in flags
@@ -120,7 +130,7 @@ def _advance(steps: dict[str, list[_Step]], catalog: Catalog, lock_step: bool) -
         for group in steps:
             while position[group] < len(steps[group]) and not blocked(group):
                 step = steps[group][position[group]]
-                partners = _partners(step, steps, catalog)
+                partners = _partners(step, meets)
                 if partners:
                     if not all(position[p] < len(steps[p]) and steps[p][position[p]].index == step.index for p in partners):
                         break
@@ -155,16 +165,26 @@ def _before_in_zone(zone: str, step: _Step, order: dict, steps: dict[str, list[_
     return None
 
 
-def _partners(step: _Step, steps: dict[str, list[_Step]], catalog: Catalog) -> list[str]:
+def _meetings(steps: dict[str, list[_Step]]) -> dict[tuple[int, object], list[str]]:
+    """For each operation and kind of synchronisation, the groups whose calls meet there (worked out once: a
+    scan of every group's calls per synchronised call made the check quadratic in the application's length)."""
+    meets: dict[tuple[int, object], list[str]] = {}
+    for group, sequence in steps.items():
+        for step in sequence:
+            spec = step.call.spec
+            if spec is not None and spec.sync:
+                groups = meets.setdefault((step.index, spec.sync), [])
+                if group not in groups:
+                    groups.append(group)
+    return meets
+
+
+def _partners(step: _Step, meets: dict[tuple[int, object], list[str]]) -> list[str]:
     """The other groups a synchronised call meets in its operation (none for any other call)."""
     spec = step.call.spec
     if spec is None or not spec.sync:
         return []
-    return [
-        g for g, sequence in steps.items()
-        if g != step.call.site.group
-        and any(s.index == step.index and s.call.spec is not None and s.call.spec.sync == spec.sync for s in sequence)
-    ]
+    return [g for g in meets[(step.index, spec.sync)] if g != step.call.site.group]
 
 
 def _rotated(stuck: dict[str, int], first: str) -> Iterator[str]:
