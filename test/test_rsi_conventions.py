@@ -28,6 +28,7 @@ from core_functions.robots import KUKA_KR
 from robot_bridges.kuka_rsi.config import parse_config
 from robot_bridges.kuka_rsi.convention import Convention, ReportCheck
 from robot_bridges.kuka_rsi.external import RobotLink
+from robot_bridges.kuka_rsi.guard import joint_outside_tube
 from robot_bridges.kuka_rsi.krc_model import KrcModel, RsiContext, like_peer
 from robot_bridges.kuka_rsi.otg import VectorOTG
 from robot_bridges.kuka_rsi.sim_faults import Quirks
@@ -157,6 +158,22 @@ def test_a_servo_trailing_any_commanded_motion_never_faults(targets: list[list[f
             q = otg.position.copy()
             assert c.step(q, START if frozen else None, actual) is None
             actual = actual + alpha * (q - actual)  # the controller applies it in the cycle after
+
+
+@given(
+    st.lists(st.lists(st.floats(-3.0, 3.0), min_size=6, max_size=6), min_size=1, max_size=30),
+    st.lists(st.floats(-3.5, 3.5), min_size=6, max_size=6),
+    st.floats(1e-4, 0.1),
+)
+def test_the_tube_is_the_box_of_every_set_point_of_the_window(window: list[list[float]], actual: list[float], tolerance: float) -> None:
+    """The check's shortcut (between the window's two ends) never decides otherwise than the whole window's box."""
+    span, here, tol = np.array(window), np.array(actual), np.full(6, tolerance)
+    inside = bool(((here >= span.min(axis=0) - tol) & (here <= span.max(axis=0) + tol)).all())
+    found = joint_outside_tube(here, [np.array(v) for v in window], tol)
+    assert (found is None) == inside
+    if found is not None:
+        axis, low, high = found
+        assert (low, high) == (span[:, axis].min(), span[:, axis].max()) and not low - tolerance <= here[axis] <= high + tolerance
 
 
 def test_an_infinite_tolerance_switches_the_check_off_whatever_is_reported() -> None:

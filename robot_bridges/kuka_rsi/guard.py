@@ -115,6 +115,9 @@ def joint_outside_tube(actual: Vector, window: Sequence[Vector], tolerance: Vect
     A servo's actual position trails its set point: whatever the lag, a following axis lies among the
     set points it was given lately (a first-order lag is a weighted mean of them), never outside.
     """
+    first, last = window[0], window[-1]
+    if (np.abs(actual - (first + last) * 0.5) <= np.abs(last - first) * 0.5 + tolerance).all():
+        return None  # between the window's ends (the common case, a monotonic move or rest): inside the whole span
     span = np.array(window)
     low, high = span.min(axis=0), span.max(axis=0)
     if ((actual >= low - tolerance) & (actual <= high + tolerance)).all():
