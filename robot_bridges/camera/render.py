@@ -105,11 +105,20 @@ def render(
 ) -> NDArray[np.uint8]:
     """The 8-bit mono image of ``scene`` from a camera whose optical frame is ``camera_in_world`` (4x4)."""
     bright, depth = radiance(scene, intrinsics, camera_in_world)
-    image = bright * _light(scene.lighting, intrinsics) * optics.gain
-    image = defocus(image, optics.blur_sigma(intrinsics, depth))
-    noise = np.sqrt(optics.read_noise**2 + optics.shot_noise**2 * np.clip(image, 0.0, None))
-    image = image + noise * rng.standard_normal(image.shape)
-    return np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
+    bright *= _light(scene.lighting, intrinsics)
+    bright *= optics.gain
+    image = defocus(bright, optics.blur_sigma(intrinsics, depth))
+    noise = np.clip(image, 0.0, None)  # the same operations as written out plainly, in place (no temporaries)
+    noise *= optics.shot_noise**2
+    noise += optics.read_noise**2
+    np.sqrt(noise, out=noise)
+    shot = rng.standard_normal(image.shape)
+    shot *= noise
+    shot += image
+    shot *= 255.0
+    np.rint(shot, out=shot)
+    np.clip(shot, 0, 255, out=shot)
+    return shot.astype(np.uint8)
 
 
 @dataclass(frozen=True)
