@@ -355,6 +355,20 @@ def _studio_run(s: Summary) -> Measured:
                     f"`run --speed max -q`: {r['cli_s']:.1f} s", r["run_s"] / r["cli_s"], bool(r["identical"]))
 
 
+def _loops(s: Summary) -> Measured:
+    r = max(s["results"], key=lambda row: row["operations"])
+    return Measured(f"{n(r['looped_cpu_s'] * 1000)} ms CPU per load of {r['operations']:,} operations written as loops",
+                    f"written out: {n(r['flat_cpu_s'] * 1000)} ms", r["ratio_median"])
+
+
+def _zones(s: Summary) -> Measured:
+    (figures,) = s["cpu_s"].values()  # one tree: this one
+    small, large = min(figures, key=int), max(figures, key=int)
+    per_op = (figures[large] / int(large)) / (figures[small] / int(small))
+    return Measured(f"{figures[large]:.2f} s CPU per load of {int(large):,} operations in the rivet cell's zones",
+                    f"{figures[small]:.2f} s at {int(small):,}", per_op, at_most(per_op, 1.5))
+
+
 def _ros(s: Summary) -> Measured:
     return Measured(f"{n(s['per_process_skill_us'])} us per primitive within a skill", f"raw rclpy round trip: {n(s['raw_rclpy_round_trip_us'])} us",
                     s["ratio_skill_vs_raw_round_trip"], at_most(s["per_process_skill_us"], 1000))
@@ -371,6 +385,13 @@ OTHERS = (
     ), issue=False),
     Bench("async_cycle.py", (), 90, (
         Figure("asynchronous rivet demonstrator (`sync=\"flags\"`), cycle", "-", _async_cycle, "asynchronous-rivet-demonstrator-against-lock-step-issue-15"),
+    ), issue=False),
+    Bench("zone_check.py", (), 120, (
+        Figure("deadlock check in a cell with zones: CPU per operation, 10,000 against 1,000", "linear (<= 1.5x per operation)", _zones,
+               "what-is-left-and-why"),
+    ), issue=False),
+    Bench("loop_expansion.py", ("--operations", "1000", "10000", "--repeat", "3"), 120, (
+        Figure("an application written as loops, load time", "-", _loops, "loops-at-load-time-issue-24"),
     ), issue=False),
     Bench("rsi_flood.py", ("--seconds", "5", "--floods", ",10:packet"), 120, (
         Figure("RSI under a flood of forged packets (10x the cycle rate)", "no reply to the flood, RSI running", _flood,

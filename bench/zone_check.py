@@ -13,7 +13,7 @@ import sys
 PROBE = """
 import sys, tempfile, time
 from pathlib import Path
-ROOT = sys.argv[1]; sys.path.insert(0, ROOT); sys.path.insert(0, ROOT + "/bench")
+ROOT = str(Path(sys.argv[1]).resolve()); sys.path.insert(0, ROOT); sys.path.insert(0, ROOT + "/bench")  # resolved: "." would link cells nowhere
 from studio_page import repeated_rivets
 from app_functions.registry import full_catalog
 from execution_engine.app_model import load_application

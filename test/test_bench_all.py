@@ -187,3 +187,8 @@ def test_every_row_links_to_a_section_of_the_benchmarks_page() -> None:
     anchors = {slug(line.lstrip("#")) for line in text.splitlines() if line.startswith("#")}
     figures = [f for bench in FIGURES.ALL for f in bench.figures] + [FIGURES.SUITE]
     assert [f.path for f in figures if f.section not in anchors] == []
+
+
+def test_every_bench_of_the_folder_is_run_by_all() -> None:
+    scripts = {path.name for path in (ROOT / "bench").glob("*.py")} - {"all.py", "figures.py"}
+    assert scripts == {bench.script for bench in FIGURES.ALL}
