@@ -105,9 +105,12 @@ class TypedPublisher(Publisher[W], Generic[W]):
         if local is not None:
             walk = carriable(obj)
             if walk is not None:
-                local.publish_object(obj, lambda: typed.to_msg(obj, self.clock), self._copy if walk.mutable else None)
+                local.publish_object(obj, self._to_msg, self._copy if walk.mutable else None)
                 return
         self.port.publish(typed.to_msg(obj, self.clock))
+
+    def _to_msg(self, obj: W) -> Any:
+        return typed.to_msg(obj, self.clock)
 
     def get_subscription_count(self) -> int:
         return self.port.get_subscription_count()
@@ -145,12 +148,3 @@ def subscribe(
     if isinstance(node, LocalNode):
         return node.create_subscription(msg_type, topic, receive, qos, objects=wire_cls if wire_cls in RULES else None, hand_over=hand_over)
     return node.create_subscription(msg_type, topic, receive, qos)
-
-
-def subscribe_message(
-    node: Node, msg_type: type, topic: str, callback: Callable[[Any], None], qos: QoS = COMMANDS, *, hand_over: bool = False
-) -> Subscription[Any]:
-    """A plain typed-message subscription, with ``hand_over`` as in :func:`subscribe`."""
-    if isinstance(node, LocalNode):
-        return node.create_subscription(msg_type, topic, callback, qos, hand_over=hand_over)
-    return node.create_subscription(msg_type, topic, callback, qos)

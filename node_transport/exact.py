@@ -372,7 +372,20 @@ def _dataclass_copier(cls: type) -> Callable[[Any], Any] | None:
     fields = [(p.name, c) for p in field_plan(cls) if (c := _copier(p.hint)) is not None]
     if not fields:
         return None
+    if "__slots__" in cls.__dict__:
+        def replace_dataclass(value: Any) -> Any:
+            return dataclasses.replace(value, **{name: c(v) for name, c in fields if (v := getattr(value, name)) is not None})
+        return replace_dataclass
 
     def copy_dataclass(value: Any) -> Any:
-        return dataclasses.replace(value, **{name: c(v) for name, c in fields if (v := getattr(value, name)) is not None})
+        """The same fields in a new object, its dicts and lists new: built as a copy, not through
+        ``__init__`` (``dataclasses.replace``), whose checks the value passed when it was made."""
+        new = object.__new__(cls)
+        attrs = new.__dict__
+        attrs.update(value.__dict__)
+        for name, c in fields:
+            v = attrs[name]
+            if v is not None:
+                attrs[name] = c(v)
+        return new
     return copy_dataclass

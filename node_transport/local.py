@@ -21,7 +21,9 @@ others, as usual).  What the receiving node does with the message still happens 
 own task, so no node runs inside another's code; each subscription still receives in publish
 order; and the order across topics is publish order, which is one of the orders DDS allows (it
 orders nothing across topics; the engine, the machines and the bridges are written for any).
-Per primitive that is six turns of the loop fewer.  A replay to a late subscriber is always
+Per primitive that is six turns of the loop fewer.  A callback whose effect others can observe
+at another moment (the engine's view of a machine's state, which its status reports at its own
+events) stays a plain subscription: there the turn keeps the order each topic's observers see.  A replay to a late subscriber is always
 queued, and hand-overs nest at most :data:`HAND_OVER_DEPTH` deep.
 """
 from __future__ import annotations
@@ -55,17 +57,23 @@ HAND_OVER_DEPTH = 4
 
 class Carried:
     """One :meth:`LocalPublisher.publish_object`: the object, how a receiver gets its own copy of
-    the object's dicts and lists (None: nothing in it can change), and its message when built."""
+    the object's dicts and lists (None: nothing in it can change), and its message, built from the
+    object the first time a subscription wants it (a latched topic's latecomer, perhaps never)."""
 
-    __slots__ = ("obj", "copy", "msg")
+    __slots__ = ("obj", "copy", "msg", "message", "publisher")
 
-    def __init__(self, obj: Any, copy: Callable[[Any], Any] | None, msg: Any) -> None:
-        self.obj, self.copy, self.msg = obj, copy, msg
+    def __init__(self, obj: Any, copy: Callable[[Any], Any] | None, message: Callable[[Any], Any], publisher: LocalPublisher[Any]) -> None:
+        self.obj, self.copy, self.message, self.publisher = obj, copy, message, publisher
+        self.msg: Any = None
 
     def item_for(self, objects: type | None) -> Any:
         """What a subscription that takes objects of class ``objects`` (None: messages) receives."""
         if objects is type(self.obj):
             return self.obj if self.copy is None else self.copy(self.obj)
+        if self.msg is None:
+            msg = self.message(self.obj)
+            self.publisher.check_message(msg)
+            self.msg = msg
         return self.msg
 
 
@@ -106,7 +114,7 @@ class LocalSubscription(Subscription[M], Generic[M]):
         """A publish's delivery: handed over at once when this subscription takes hand-overs and
         nothing is queued for it or running in it, else queued (:meth:`deliver`)."""
         bus = self.node.bus
-        if not self.hand_over or self._queue or self._busy or not self.alive or bus.hand_over_depth >= HAND_OVER_DEPTH:
+        if not self.hand_over or self._queue or self._busy or not self.alive or bus.hand_over_depth >= HAND_OVER_DEPTH or not bus.hand_overs:
             self.deliver(msg)
             return
         bus.hand_over_depth += 1
@@ -162,23 +170,25 @@ class LocalPublisher(Publisher[M], Generic[M]):
         for sub in self.node.bus.matching_subscriptions(self):
             sub.offer(msg)
 
-    def publish_object(self, obj: Any, message: Callable[[], M], copy: Callable[[Any], Any] | None) -> None:
-        """Hand ``obj`` (checked by the caller: exactly what decoding its ``message()`` would give)
-        to the subscriptions that take its class, and ``message()`` -- built once, here, only when
-        a subscription or the latched history wants it -- to the others."""
+    def publish_object(self, obj: Any, message: Callable[[Any], M], copy: Callable[[Any], Any] | None) -> None:
+        """Hand ``obj`` (checked by the caller: exactly what decoding its ``message(obj)`` would give)
+        to the subscriptions that take its class, and its message -- built once, and only when a
+        subscription wants it -- to the others.  The latched history keeps the object (its own copy
+        when it holds dicts or lists the sender may change later): a latecomer that takes messages
+        has the message built then, from what was published."""
         if not self.alive:
             raise TransportError(f"publisher on {self.topic} of {self.node.fully_qualified_name} was destroyed")
         subs = self.node.bus.matching_subscriptions(self)
         latched = self.qos.durability is Durability.TRANSIENT_LOCAL
-        cls = type(obj)
-        msg = message() if latched or any(sub.objects is not cls for sub in subs) else None
-        if msg is not None:
-            self._check(msg)
-        carried = Carried(obj, copy, msg)
+        carried = Carried(obj if copy is None or not latched else copy(obj), copy, message, self)
         if latched:
             self.history.append(carried)
         for sub in subs:
             sub.offer(carried.item_for(sub.objects))
+
+    def check_message(self, msg: M) -> None:
+        """That ``msg`` is of this publisher's type (a carried object's message, once built)."""
+        self._check(msg)
 
     def get_subscription_count(self) -> int:
         return len(self.node.bus.matching_subscriptions(self))
@@ -312,8 +322,10 @@ class LocalNode(Node):
 class LocalTransport(Transport):
     """All nodes of one process, on one asyncio loop."""
 
-    def __init__(self, clock: Clock) -> None:
+    def __init__(self, clock: Clock, *, hand_over: bool = True) -> None:
+        """``hand_over`` False: every delivery takes its turn of the loop (as a comparison for tests)."""
         super().__init__(clock)
+        self.hand_overs = hand_over
         self._publishers: dict[str, list[LocalPublisher[Any]]] = {}
         self._subscriptions: dict[str, list[LocalSubscription[Any]]] = {}
         # publisher -> the subscriptions it reaches: worked out once, not on every publish (a

@@ -40,6 +40,7 @@ from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from node_transport import typed
 from node_transport.bounded import declare_bounded
+from node_transport.carriage import TypedPublisher
 from node_transport.msgs import Bool, Trigger
 from node_transport.port import Node
 from node_transport.qos import EVENTS, LATCHED
@@ -97,8 +98,9 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self.startup_timeout = float(declare_bounded(node, "startup_timeout", 15.0, "how long to wait for the group machines (s)"))
         self.function_timeout = float(declare_bounded(node, "function_timeout", 3600.0, "longest a function may take (s)"))
         self.service_timeout = float(declare_bounded(node, "service_timeout", 5.0, "machine service call timeout (s)"))
-        self._status_pub = node.create_publisher(typed.EngineStatusMsg, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
-        self._events_pub = node.create_publisher(typed.EngineEventMsg, ENGINE_EVENTS, EVENTS)  # every state change and command, once
+        # in one process both cross as the objects themselves (node_transport/carriage.py)
+        self._status_pub = TypedPublisher(node, EngineStatus, ENGINE_STATUS, LATCHED)  # late joiners see where the run stands
+        self._events_pub = TypedPublisher(node, EngineEvent, ENGINE_EVENTS, EVENTS)  # every state change and command, once
         self._cell_pub = node.create_publisher(typed.CellSnapshotMsg, ENGINE_CELL, LATCHED)
         self._cell_frames = CellFramesBroadcaster(node)  # the cell's frames on tf_static, for RViz
         node.create_subscription(Bool, SAFETY_STOP, self._on_safety, LATCHED)
@@ -542,7 +544,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
 
     def _publish_event(self, event: EngineEvent) -> None:
         if self._events_pub.get_subscription_count() > 0:
-            self._events_pub.publish(typed.to_msg(event, self.clock))
+            self._events_pub.publish(event)
 
     def _publish_status(self) -> None:
         if self._status_pub.get_subscription_count() == 0:
@@ -565,4 +567,4 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
             groups=groups,
             message=self._message,
         )
-        self._status_pub.publish(typed.to_msg(status, self.clock))
+        self._status_pub.publish(status)

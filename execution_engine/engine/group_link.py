@@ -18,7 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 from node_transport import codec, typed
-from node_transport.carriage import TypedPublisher, subscribe, subscribe_message
+from node_transport.carriage import TypedPublisher, subscribe
 from node_transport.clock import Clock
 from node_transport.msgs import Trigger
 from node_transport.port import Node, ServiceUnavailable, TransportError, wait_until_matched
@@ -40,10 +40,11 @@ class GroupLink:
         self._ids = itertools.count(1)
         self._session = uuid.uuid4().hex[:6]
         self._requests = TypedPublisher(node, SmRequest, sm_topic(group, "request"), COMMANDS)
-        # results and states only resolve futures and set the state: taken as hand-overs (node_transport/local.py)
+        # a result only resolves a future: taken as a hand-over (node_transport/local.py); the state is not, so
+        # the groups of the engine's status, read at its own events, are the same as over any transport
         self._results = subscribe(node, SmResult, sm_topic(group, "result"), self._on_result, self._reject, COMMANDS, hand_over=True)
         self._state_source = node.resolve(sm_topic(group, "state"))
-        subscribe_message(node, typed.MachineStateMsg, sm_topic(group, "state"), self._on_state, LATCHED, hand_over=True)
+        node.create_subscription(typed.MachineStateMsg, sm_topic(group, "state"), self._on_state, LATCHED)
         self._clients = {c: node.create_client(Trigger, sm_service(group, c)) for c in ("pause", "resume", "stop", "reset")}
         self.rejected: list[str] = []
         self._watch: asyncio.Task[None] | None = None

@@ -88,6 +88,10 @@ class EventQueue:
                 return event
         return None
 
+    def pop(self) -> Event | None:
+        """The next event if one is queued, else None (without waiting)."""
+        return self._events.popleft() if self._events else None
+
     async def get(self, timeout: float | None = None) -> Event | None:
         """The next event, or None after ``timeout`` run seconds (None: wait without bound)."""
         if self._events:

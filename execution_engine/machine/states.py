@@ -288,9 +288,10 @@ class WorkingState(MachineState):
         ctx = self.ctx
         ctx.active_command = command_id
         primitive = userdata["primitive"]
-        accept_deadline = ctx.clock.now() + ctx.config.bridge_timeout
-        done_deadline = ctx.clock.now() + ctx.config.primitive_timeout
-        resend_at = ctx.clock.now() + ctx.config.resend_interval
+        now = ctx.clock.now()
+        accept_deadline = now + ctx.config.bridge_timeout
+        done_deadline = now + ctx.config.primitive_timeout
+        resend_at = now + ctx.config.resend_interval
         while True:
             now = ctx.clock.now()
             deadline = done_deadline if accepted else accept_deadline
@@ -305,8 +306,10 @@ class WorkingState(MachineState):
             if lost is not None:
                 ctx.active_command = None
                 return fail(userdata, FaultKind.CONNECTION, f"{describe(primitive)}: {lost}")
-            wake = min(deadline if accepted else min(deadline, resend_at), now + WATCH_PERIOD)
-            event = await ctx.events.get(max(0.0, wake - ctx.clock.now()))
+            event = ctx.events.pop()  # the answer is often here already: the bridge answered inside our publish
+            if event is None:
+                wake = min(deadline if accepted else min(deadline, resend_at), now + WATCH_PERIOD)
+                event = await ctx.events.get(max(0.0, wake - ctx.clock.now()))
             if event is None:
                 continue
             if isinstance(event, FeedbackEvent) and event.feedback.id == command_id:

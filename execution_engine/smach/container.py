@@ -159,13 +159,18 @@ class StateMachine(State):
         label: str = self._initial  # type: ignore[assignment]
         self._previous = None
         transitions = 0
+        views: dict[str, MutableMapping[str, Any]] = {}  # each state's window on ``data``, made once per run
+        observers = self._observers
         try:
             while True:
                 entry = self._states[label]
                 self._active = label
                 now = self.clock.now()
-                self._notify(lambda o: o.on_enter(self.name, label, now))
-                view = data.view(label, entry.state.input_keys, entry.state.output_keys)
+                for observer in observers:
+                    observer.on_enter(self.name, label, now)
+                view = views.get(label)
+                if view is None:
+                    view = views[label] = data.view(label, entry.state.input_keys, entry.state.output_keys)
                 outcome = await entry.state.execute(view)
                 if entry.state.preempt_requested:
                     entry.state.service_preempt()
@@ -179,7 +184,8 @@ class StateMachine(State):
                         raise RuntimeError(f"state {label!r} of {self.name!r} returned to history, but there is none")
                     target = self._previous
                 record = TransitionRecord(self.name, label, outcome, target, self.clock.now())
-                self._notify(lambda o: o.on_transition(record))
+                for observer in observers:
+                    observer.on_transition(record)
                 transitions += 1
                 if self.max_transitions is not None and transitions > self.max_transitions:
                     raise RuntimeError(f"state machine {self.name!r} exceeded {self.max_transitions} transitions")
