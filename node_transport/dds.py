@@ -4,7 +4,8 @@
 the wire is what ``rmw_cyclonedds_cpp`` of ROS 2 Jazzy puts there, so ``ros2 node list``,
 ``ros2 topic echo``, ``ros2 service call``, RViz and Foxglove see these nodes like any other:
 
-* types built from the ``.msg``/``.srv`` files (:mod:`~node_transport.idl`), plain CDR;
+* types built from the ``.msg``/``.srv`` files (:mod:`~node_transport.idl`), plain CDR, encoded and
+  decoded by code compiled once per type (:mod:`~node_transport.dds_cdr`: cyclonedds-python's bytes);
 * names, QoS, domain and discovery configuration, ``ros_discovery_info``:
   :mod:`~node_transport.dds_graph`;
 * services carry rmw_cyclonedds_cpp's request header (the client's 64-bit id and a sequence
@@ -42,7 +43,7 @@ from node_transport.clock import Clock
 from node_transport import dds_graph as graph
 from node_transport.dds_args import RosArguments, parse_ros_arguments, user_arguments
 from node_transport.dds_convert import DdsConverter
-from node_transport.dds_entities import Caller, Taker, delete, matched
+from node_transport.dds_entities import Caller, Taker, delete, matched, write
 from node_transport.dds_pulse import LiveCount, Pulse
 from node_transport.dds_waiter import DdsWaiter, Inbox
 from node_transport.idl import InterfaceError, InterfaceRegistry
@@ -118,7 +119,7 @@ class _DdsPublisher(Publisher[M], Generic[M]):
         if not self.alive:
             raise TransportError(f"publisher on {self.topic} of {self.node.fully_qualified_name} was destroyed")
         self._check(msg)
-        self.writer.write(self.node.transport.converter.to_wire(msg))
+        write(self.writer, self.node.transport.converter.to_wire(msg))
 
     def get_subscription_count(self) -> int:
         """Matched subscriptions: Cyclone's count, one call (a machine asks before every status event)."""
@@ -262,7 +263,7 @@ class _DdsService(ServiceServer):
             response, then = failure_response(self.srv_type.Response, f"{self.name}: {type(error).__name__}: {error}"), None
         await self._wait_for_client(client)
         if self.alive:
-            self.ends.writer.write(transport.converter.to_wire_service(self.ends.reply_type, response, guid, seq))
+            write(self.ends.writer, transport.converter.to_wire_service(self.ends.reply_type, response, guid, seq))
         if then is not None:  # written first: what follows the answer reaches the caller after it
             try:
                 then()
@@ -341,7 +342,7 @@ class _DdsClient(ServiceClient[Any, Any]):
         future: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
         self._pending[seq] = future
         converter = self.node.transport.converter
-        self.ends.writer.write(converter.to_wire_service(self.ends.request_type, request, self.guid, seq))
+        write(self.ends.writer, converter.to_wire_service(self.ends.request_type, request, self.guid, seq))
         try:
             return await clock.wait_for(future, max(0.0, timeout - (clock.now() - start)))
         finally:
@@ -532,7 +533,7 @@ class DdsTransport(Transport):
         if self._deleted:
             return
         nodes = {(n.namespace, n.name): (n.readers, n.writers) for n in self._nodes.values()}
-        self._discovery.write(graph.discovery_message(self.registry, self._guid, nodes))
+        write(self._discovery, graph.discovery_message(self.registry, self._guid, nodes))
 
     # ---------------------------------------------------------------------------- nodes
     def create_node(

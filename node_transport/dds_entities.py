@@ -1,6 +1,7 @@
 """Small helpers over cyclonedds entities for :mod:`node_transport.dds`.
 
-Taking samples in batches and decoding them one at a time (a bad one costs only itself), listing matched endpoints without
+Taking samples in batches and decoding them one at a time (a bad one costs only itself), writing a
+sample encoded by the compiled codec (:mod:`~node_transport.dds_cdr`), listing matched endpoints without
 cyclonedds-python's race, deleting an entity now, and telling who called a service.
 """
 from __future__ import annotations
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from node_transport import dds_graph as graph
+from node_transport.dds_cdr import codec
 from node_transport.port import TransportError
 
 TAKE_LIMIT = 10_000  # samples taken in one handler call; the rest wait for the next
@@ -48,7 +50,7 @@ class Taker:
 
         core = self.transport.dds.core
         mask = core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any
-        data_type = reader.topic.data_type
+        decode = codec(reader.topic.data_type).decode
         samples: list[Any] = []
         failures = taken = 0
         while taken < TAKE_LIMIT:
@@ -63,7 +65,7 @@ class Taker:
                 if not info.valid_data:
                     continue  # a writer gone or an instance disposed: no sample
                 try:
-                    sample = data_type.deserialize(data)
+                    sample = decode(data)
                 except Exception as error:  # noqa: BLE001 - undecodable CDR (taken, so gone): count it, keep going
                     self.transport.reject(self.topic, f"undecodable sample: {type(error).__name__}: {error}")
                     failures += 1
@@ -73,6 +75,18 @@ class Taker:
             if len(got) < BATCH or failures >= FAILURE_LIMIT:
                 break
         return samples
+
+
+def write(writer: Any, sample: Any) -> None:
+    """Write ``sample`` (an instance of the writer's wire type) with the compiled codec: the bytes
+    cyclonedds-python's ``DataWriter.write`` would write, in a fraction of its time."""
+    from cyclonedds._clayer import ddspy_write  # optional: pip extra 'dds'; only a DDS transport has writers
+
+    ret = ddspy_write(writer._ref, codec(type(sample)).encode(sample))
+    if ret < 0:
+        from cyclonedds.core import DDSException  # optional: pip extra 'dds'
+
+        raise DDSException(ret, f"Occurred while writing sample in {writer!r}")
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ import time
 from typing import Any, Protocol
 
 from node_transport import dds_graph as graph
-from node_transport.dds_entities import Taker, matched_handles
+from node_transport.dds_entities import Taker, matched_handles, write
 from node_transport.qos import Durability, History, QoS, Reliability
 
 TOPIC = "dual_arm_executive_liveliness"
@@ -75,7 +75,7 @@ class Pulse:
         now = time.monotonic()
         if now >= self._next:
             self._next = now + self.period
-            self.writer.write(self._sample)
+            write(self.writer, self._sample)
         return self._next - now
 
     def on_data(self) -> None:
