@@ -98,6 +98,8 @@ class LiveCount:
         self.reader = reader
         self.pulse = pulse
         self._writers: dict[int, tuple[bytes, float]] = {}  # publication handle -> (participant GUID, lease s)
+        self._matched: tuple[int, int] | None = None  # Cyclone's (total, current) match counts when _handles was listed
+        self._handles: list[int] = []
 
     def _writer(self, handle: int) -> tuple[bytes, float] | None:
         known = self._writers.get(handle)
@@ -110,11 +112,23 @@ class LiveCount:
                 self._writers = {handle: known}
         return known
 
+    def handles(self) -> list[int]:
+        """The matched publications, listed again only when Cyclone's match counts changed (a new
+        match raises the total, a lost one lowers the current count): asking the counts costs a
+        tenth of listing the handles, and a machine asks before every command."""
+        status = self.reader.get_subscription_matched_status()
+        matched = (int(status.total_count), int(status.current_count))
+        if matched != self._matched:
+            self._handles = matched_handles(self.reader, subscriptions=False)
+            self._matched = matched
+        return self._handles
+
     def count(self) -> int:
         now = time.monotonic()
         heard = self.pulse.heard
         live = others = 0
-        for handle in matched_handles(self.reader, subscriptions=False):
+        handles = self.handles()
+        for handle in handles:
             writer = self._writer(handle)
             if writer is None:
                 continue
@@ -124,6 +138,8 @@ class LiveCount:
                 others += 1
             elif now - last <= lease:
                 live += 1
+        if live == len(handles):  # every matched publisher pulses: Cyclone cannot count more alive
+            return live
         alive = int(self.reader.get_liveliness_changed_status().alive_count)
         if others:  # Cyclone cannot say which writers are alive, only how many: never more than are matched
             live += min(others, alive)
