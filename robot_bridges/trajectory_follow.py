@@ -32,17 +32,21 @@ from numpy.typing import NDArray
 
 from core_functions.primitives import ExecuteTrajectory, SetSpeed
 from node_transport.clock import Clock
-from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
+from robot_bridges.backend import BridgeError, FaultKind, JointLimits, RobotBackend
 from robot_bridges.trajectory_goal import (
     GOAL_TOLERANCE_VIOLATED,
     INVALID_GOAL,
     PATH_TOLERANCE_VIOLATED,
     SUCCESSFUL,
     FollowPlan,
+    Refused,
+    continued,
+    path_time_near,
 )
 
 #: s of path per motion sent to a back end that cannot hold an arm inside a motion.
 LEG_TIME = 1.0
+_HELD = object()  # a leg's outcome: the cell held the motion, and the arm stopped on its path
 _REFUSED_BY_BACKEND = (FaultKind.JOINT_LIMIT, FaultKind.UNSUPPORTED, FaultKind.UNREACHABLE, FaultKind.COLLISION)
 
 
@@ -91,11 +95,11 @@ class Follower:
     """Plays one plan on ``group``; :meth:`run` says how it ended as (error code, error string)."""
 
     def __init__(
-        self, backend: RobotBackend, group: str, plan: FollowPlan, clock: Clock, period: float, name: str,
+        self, backend: RobotBackend, group: str, plan: FollowPlan, limits: JointLimits, clock: Clock, period: float, name: str,
         observe: Callable[[Sample], None],
     ) -> None:
         whole = backend.holds_within_motion
-        self.backend, self.group, self.clock, self.period, self.name = backend, group, clock, period, name
+        self.backend, self.group, self.limits, self.clock, self.period, self.name = backend, group, limits, clock, period, name
         self.plan = plan if whole else refined(plan, LEG_TIME)  # a leg may end between two far-apart points
         self.observe = observe
         self.elapsed = 0.0  # s of path time played (stands still while held)
@@ -107,6 +111,9 @@ class Follower:
         self._released.set()
         self._index = [backend.joint_state()[0].index(n) for n in plan.joint_names]
         self._last: tuple[float, NDArray[np.float64]] | None = None
+        self._held_at = 0.0  # path time when the cell held the motion
+        self._leg_end = 0.0  # path time the leg under way ends at
+        self._stopped_for_hold = False  # the back end's stop was a hold's: the motion's STOPPED is the hold (however late)
 
     # ----------------------------------------------------------------------------- control
     def end(self, code: int, reason: str) -> None:
@@ -120,20 +127,21 @@ class Follower:
         await self.backend.stop(self.group)
 
     async def hold(self) -> None:
-        """The cell holds the motion (paused): the arm holds where it is, the path's time stands still."""
+        """The cell holds the motion (paused): the arm stops on its path (the back end's stop), the path's time
+        stands still; :meth:`release` goes on with the rest of the path from where the arm stands (:func:`continued`).
+        Stopping rather than pausing the back end's motion: a back end's resume may start its motion over."""
         if self.held or self._ending is not None:
             return
-        self.held = True
+        self.held = self._stopped_for_hold = True
+        self._held_at = self.elapsed
         self._released.clear()
-        await self.backend.pause(self.group)
+        await self.backend.stop(self.group)
 
     async def release(self) -> None:
         if not self.held:
             return
         self.held = False
         self._released.set()
-        if self._ending is None:
-            await self.backend.resume(self.group)
 
     # ------------------------------------------------------------------------------- run
     async def run(self) -> tuple[int, str]:
@@ -151,14 +159,22 @@ class Follower:
             return self._ended()
         try:
             await self.backend.execute(self.group, SetSpeed(1.0))
-            for first, last in legs(plan, self.backend.holds_within_motion):
-                while self.held and self._ending is None:
+            while True:
+                outcome = await self._legs()
+                if outcome is not _HELD:
+                    if outcome is not None:
+                        return outcome  # type: ignore[return-value]
+                    break
+                while self.held and self._ending is None:  # stopped on the path: the rest once the cell lets go
                     await self._released.wait()
                 if self._ending is not None:
                     return self._ended()
-                outcome = await self._leg(first, last)
-                if outcome is not None:
-                    return outcome
+                rest = await self._rest()
+                if rest is None:
+                    break
+                self.plan, self.elapsed = rest, 0.0
+        except Refused as refused:
+            return refused.code, str(refused)
         except BridgeError as error:
             if self._ending is not None and error.kind is FaultKind.STOPPED:
                 return self._ended()
@@ -168,15 +184,38 @@ class Follower:
             return self._ended()
         return await self._settle()
 
-    async def _leg(self, first: int, last: int) -> tuple[int, str] | None:
+    async def _legs(self) -> tuple[int, str] | object | None:
+        """Play the plan leg by leg: None when it has all been played, an outcome, or ``_HELD``."""
+        for first, last in legs(self.plan, self.backend.holds_within_motion):
+            while self.held and self._ending is None:
+                await self._released.wait()
+            if self._ending is not None:
+                return self._ended()
+            outcome = await self._leg(first, last)
+            if outcome is not None:
+                return outcome
+        return None
+
+    async def _rest(self) -> FollowPlan | None:
+        """The rest of the path after a hold, from where the arm stands by the robot's word."""
+        measured = await self.backend.measure(self.group)
+        where = dict(zip(measured.joint_names, measured.positions))
+        here = np.array([where[n] for n in self.plan.joint_names])
+        # near where the path's time stood: the arm stopped within a braking distance of it, or (V+) at the end of
+        # the leg under way; never further, so a path that comes back to this place later is not cut short
+        at = path_time_near(self.plan, here, max(0.0, self._held_at - 0.25), min(self._leg_end, self._held_at + LEG_TIME))
+        return continued(self.plan, at, here, self.limits)
+
+    async def _leg(self, first: int, last: int) -> tuple[int, str] | object | None:
         plan = self.plan
         start = float(plan.times[first])
         primitive = ExecuteTrajectory(
             self.name, plan.joint_names, tuple(tuple(float(v) for v in p) for p in plan.points[first:last + 1]),
             tuple(float(t - start) for t in plan.times[first:last + 1]),
         )
+        self._stopped_for_hold = False  # a hold's stop before this leg stopped nothing of it
         motion = asyncio.ensure_future(self.backend.execute(self.group, primitive))
-        end = float(plan.times[last])
+        end = self._leg_end = float(plan.times[last])
         live = self.backend.holds_within_motion
         stopped = False
         try:
@@ -184,8 +223,8 @@ class Follower:
                 before = self.clock.now()
                 try:
                     await self.clock.wait_for(asyncio.shield(motion), self.period)
-                except asyncio.TimeoutError:
-                    pass
+                except (asyncio.TimeoutError, BridgeError):
+                    pass  # a period passed, or the motion ended: below
                 if not self.held:
                     self.elapsed = min(end, self.elapsed + max(0.0, self.clock.now() - before))
                 sample = self.sample()
@@ -193,12 +232,19 @@ class Follower:
                     violation = self._outside(sample, plan.path.position, "path")
                     if violation is not None:
                         self.end(PATH_TOLERANCE_VIOLATED, violation)
-                if self._ending is not None and not stopped and not motion.done():
-                    # the goal ends while its motion runs: stop it here too -- a stop asked for in the instant
-                    # between sending the motion and the back end taking it up found nothing to stop
+                if (self._ending is not None or self.held) and not stopped and not motion.done():
+                    self._stopped_for_hold = self._ending is None
+                    # the goal ends or is held while its motion runs: stop it here too -- a stop asked for in the
+                    # instant between sending the motion and the back end taking it up found nothing to stop
                     stopped = True
                     await self.stop_backend()
-            motion.result()  # BridgeError: the caller decides what it means
+            try:
+                motion.result()
+            except BridgeError as error:  # a stop for a hold is the hold; anything else the caller decides on
+                if error.kind is FaultKind.STOPPED and self._stopped_for_hold and self._ending is None:
+                    self._stopped_for_hold = False
+                    return _HELD
+                raise
         finally:
             if not motion.done():
                 motion.cancel()

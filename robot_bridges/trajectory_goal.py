@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -297,3 +297,49 @@ def point_message(positions: Sequence[float], velocities: Sequence[float] = (), 
         positions=tuple(float(v) for v in positions), velocities=tuple(float(v) for v in velocities),
         time_from_start=Duration(int(whole), min(999_999_999, int(round((at - whole) * 1e9)))),
     )
+
+
+#: s added to the first segment of a path continued after a hold, tried in turn until the path keeps to the limits.
+RAMPS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
+
+
+def path_time_near(plan: FollowPlan, q: NDArray[np.float64], start: float, stop: float) -> float:
+    """The time in [start, stop] at which the path passes closest to ``q`` (where a held arm is on its path);
+    the earliest of equally close ones."""
+    best, best_t = math.inf, start
+    for k in range(len(plan.times) - 1):
+        t0, t1 = float(plan.times[k]), float(plan.times[k + 1])
+        if t1 < start or t0 > stop:
+            continue
+        a, b = plan.points[k], plan.points[k + 1]
+        span = b - a
+        length = float(span @ span)
+        s = 0.0 if length == 0.0 else min(1.0, max(0.0, float((q - a) @ span) / length))
+        t = min(stop, max(start, t0 + s * (t1 - t0)))
+        distance = float(np.linalg.norm(plan.at(t)[0] - q))
+        if distance < best:
+            best, best_t = distance, t
+    return best_t
+
+
+def continued(plan: FollowPlan, at: float, here: Sequence[float], limits: JointLimits) -> FollowPlan | None:
+    """The rest of ``plan`` after path time ``at``, from ``here`` (where the arm stands after a hold): its first
+    segment stretched by the shortest of :data:`RAMPS` that keeps the whole to the limits; None when nothing is
+    left.  :class:`Refused` when no ramp does (it cannot happen for a path that kept to them before)."""
+    later = np.nonzero(plan.times > at + _TIME_EPS)[0]
+    start = np.array(here, dtype=float)
+    if not len(later) or (len(later) == 1 and float(np.max(np.abs(plan.points[-1] - start))) <= 1e-9):
+        return None
+    rest_times, rest_points = plan.times[later] - at, plan.points[later]
+    last: Refused | None = None
+    for ramp in RAMPS:
+        times = np.concatenate([[0.0], rest_times + ramp])
+        points = np.vstack([start, rest_points])
+        try:
+            _check_path(plan.group, times, points, limits, 1)
+        except Refused as refused:
+            last = refused
+            continue
+        return replace(plan, times=times, points=points, start_delay=0.0)
+    assert last is not None
+    raise Refused(INVALID_GOAL, f"{plan.group}: the path cannot go on from where the arm was held: {last}")

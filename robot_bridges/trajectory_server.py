@@ -19,8 +19,9 @@ How goals are taken, as joint_trajectory_controller takes them where it can, and
   group in it), or whose bridge is executing a machine's primitive, is refused (INVALID_GOAL, naming
   the run); while a goal holds a group, the bridge refuses the machines' primitives for it (BUSY,
   naming the goal).  So the engine and an action client never command one group at once.
-* The cell's pause (the engine paused, by an operator or the safety stop) holds a running goal's
-  motion where it is and the path's time with it; the engine's resume continues it.  A ``true`` on
+* The cell's pause (the engine paused, by an operator or the safety stop) stops a running goal's
+  arm on its path and the path's time with it; the engine's resume goes on with the rest of the path
+  from where the arm stands (:func:`~robot_bridges.trajectory_goal.continued`).  A ``true`` on
   ``cell/safety_stop`` stops a running goal on its path and ends it (PATH_TOLERANCE_VIOLATED, saying
   so): clearing the stop restarts nothing; a new goal is needed.  New goals are refused while the
   cell is paused or the safety stop is on.
@@ -211,7 +212,7 @@ class GroupTrajectoryServer:
             if entry.ending is not None:
                 return entry.ending
             name = f"follow_joint_trajectory {bytes(handle.goal_id.uuid).hex()[:8]}"
-            follower = entry.follower = Follower(self.backend, self.group, plan, self.clock, self.period, name, lambda s: self._feedback(handle, s))
+            follower = entry.follower = Follower(self.backend, self.group, plan, self.limits, self.clock, self.period, name, lambda s: self._feedback(handle, s))
             if self.gate.paused:
                 await follower.hold()
             return await follower.run()

@@ -118,6 +118,18 @@ class Arm:
         where = self.states[-1][1]
         return np.array([where[n] for n in self.kind.joints])
 
+    async def at_rest(self, bound: float) -> np.ndarray:
+        """The group's joints once joint_states has stood still for 0.2 s (a braking KR C4 on a loaded machine takes
+        a while): polled, bounded by ``bound``."""
+        deadline = self.clock.now() + bound
+        while True:
+            before = self.joints()
+            await self.clock.sleep(0.2)
+            now = self.joints()
+            if float(np.max(np.abs(now - before))) <= 1e-7:
+                return now
+            assert self.clock.now() < deadline, "the arm never came to rest"
+
     def trail(self, since: float = -math.inf) -> np.ndarray:
         return np.array([[where[n] for n in self.kind.joints] for t, where in self.states if t >= since])
 
@@ -140,12 +152,34 @@ def three_points(start: np.ndarray, step: Sequence[float], spacing: float = 1.0)
     return [(spacing * (k + 1), start + delta * (k + 1)) for k in range(3)]
 
 
-def distance_to_path(q: np.ndarray, path: Sequence[np.ndarray]) -> float:
-    """How far ``q`` is from the polyline through ``path`` (rad, the largest joint's)."""
-    best = math.inf
-    for a, b in zip(path, path[1:]):
+def where_on_path(q: np.ndarray, path: Sequence[np.ndarray]) -> tuple[float, float]:
+    """How far ``q`` is from the polyline through ``path`` (rad, the largest joint's), and how far along it the
+    nearest place is (segment index + fraction)."""
+    best, along = math.inf, 0.0
+    for k, (a, b) in enumerate(zip(path, path[1:])):
         span = b - a
         length = float(span @ span)
         s = 0.0 if length == 0.0 else min(1.0, max(0.0, float((q - a) @ span) / length))
-        best = min(best, float(np.max(np.abs(q - (a + s * span)))))
-    return best
+        distance = float(np.max(np.abs(q - (a + s * span))))
+        if distance < best - 1e-12:
+            best, along = distance, k + s
+    return best, along
+
+
+def distance_to_path(q: np.ndarray, path: Sequence[np.ndarray]) -> float:
+    return where_on_path(q, path)[0]
+
+
+def follows(trail: np.ndarray, path: Sequence[np.ndarray], tolerance: float = 0.01) -> str | None:
+    """Whether joint_states ``trail`` followed ``path`` from its start to its end: every sample on it, never going
+    back along it, the last at its end; None, or what went wrong."""
+    placed = [where_on_path(q, path) for q in trail]
+    off = [d for d, _ in placed if d > tolerance]
+    if off:
+        return f"{len(off)} samples off the path, up to {max(off):.4f} rad"
+    along = [a for _, a in placed]
+    if any(b < a - 1e-3 for a, b in zip(along, along[1:])):
+        return "went back along the path"
+    if along[-1] < len(path) - 1 - 1e-3:
+        return f"ended {along[-1]:.3f} of {len(path) - 1} segments along"
+    return None

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from dds_domain import domain_env
-from fjt_client import FJT, KINDS, Arm, distance_to_path, goal, start_bridge, three_points
+from fjt_client import FJT, KINDS, Arm, distance_to_path, follows, goal, start_bridge, three_points
 
 from node_transport import mirrors
 from node_transport.action import GoalStatus
@@ -56,8 +56,7 @@ def test_a_dds_client_moves_each_bridge_and_is_refused_and_stopped(kind: str, en
             moved = await poll_until(clock, lambda: float(np.max(np.abs(arm.joints() - reached))) > 0.08, BOUND, 0.01)
             cancel = await arm.cancel(handle, BOUND)
             cancelled = await arm.client.result(handle, BOUND)
-            await clock.sleep(0.3)
-            stopped = arm.joints()
+            stopped = await arm.at_rest(BOUND)
             await clock.sleep(0.5)
             return dict(points=points, done=done, trail=trail, reached=reached, over_limit=over_limit, unknown=unknown, moved=moved,
                         far=[reached] + [p for _, p in far], cancel=cancel, cancelled=cancelled, stopped=stopped, still=arm.joints())
@@ -70,8 +69,7 @@ def test_a_dds_client_moves_each_bridge_and_is_refused_and_stopped(kind: str, en
     out = run_with_clock(main, real_clock())
     assert out["done"].status == GoalStatus.STATUS_SUCCEEDED, out["done"].result.error_string
     np.testing.assert_allclose(out["reached"], out["points"][-1][1], atol=1e-3)
-    trail = out["trail"]
-    assert all(float(np.min(np.max(np.abs(trail - p), axis=1))) < 0.02 for _, p in out["points"]), "joint_states pass every point"
+    assert follows(out["trail"], [out["trail"][0]] + [p for _, p in out["points"]]) is None, "joint_states follow the path"
     assert (out["over_limit"].status, out["over_limit"].result.error_code) == (GoalStatus.STATUS_ABORTED, R.INVALID_GOAL)
     assert f"{KINDS[kind].joints[1]} at 4.0000 rad is outside its limits" in out["over_limit"].result.error_string
     assert (out["unknown"].status, out["unknown"].result.error_code) == (GoalStatus.STATUS_ABORTED, R.INVALID_JOINTS)

@@ -74,8 +74,12 @@ def test_rclpy_moves_each_arm_is_refused_with_error_codes_and_cancels(name: str,
             await clock.sleep(0.8)
             cancelled = await wait_done(clock, running.cancel_goal_async(), BOUND)
             ended = await wait_done(clock, running.get_result_async(), BOUND)
-            await clock.sleep(0.3)
-            stopped = dict(zip(states[-1].name, states[-1].position))[names[0]]
+            deadline, stopped, still = clock.now() + BOUND, None, float(states[-1].position[list(states[-1].name).index(names[0])])
+            while stopped != still:  # joint_states standing still for 0.2 s (a braking KR C4 on a loaded machine takes a while)
+                assert clock.now() < deadline, "the arm never came to rest"
+                stopped = still
+                await clock.sleep(0.2)
+                still = float(states[-1].position[list(states[-1].name).index(names[0])])
             await clock.sleep(0.5)
             still = dict(zip(states[-1].name, states[-1].position))[names[0]]
             served = ros_fake_graph.GRAPH.services[f"{action}/_action/send_goal"][0].srv_type

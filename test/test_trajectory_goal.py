@@ -24,7 +24,10 @@ from robot_bridges.trajectory_goal import (
     INVALID_JOINTS,
     OLD_HEADER_TIMESTAMP,
     START_TOLERANCE,
+    FollowPlan,
     Refused,
+    continued,
+    path_time_near,
     plan_goal,
 )
 
@@ -65,16 +68,43 @@ def test_any_goal_is_refused_with_a_code_or_planned_within_the_limits(goal: Any)
     except Refused as refused:
         assert refused.code in (INVALID_GOAL, INVALID_JOINTS, OLD_HEADER_TIMESTAMP) and str(refused).startswith("arm: ")
         return
+    within_limits(plan, HERE)
+    assert 0.0 <= plan.start_delay <= 60.0
+
+
+@settings(max_examples=200)
+@given(st.lists(st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(0.5, 2.5)), min_size=1, max_size=4),
+       st.floats(0.0, 1.0), st.lists(st.floats(-0.003, 0.003), min_size=3, max_size=3))
+def test_a_held_path_goes_on_from_where_the_arm_stands_within_the_limits(
+    points: list[tuple[float, float, float]], fraction: float, off: list[float],
+) -> None:
+    """However a path was held (anywhere on it, the arm a few mrad off its line, as a braking axis leaves it),
+    its rest starts where the arm stands and keeps to every limit, or nothing is left."""
+    spaced = tuple(Point(positions=p, time_from_start=Duration(4 * (k + 1), 0)) for k, p in enumerate(points))
+    plan = plan_goal("arm", FJT.Goal(trajectory=Trajectory(joint_names=NAMES, points=spaced)), LIMITS, HERE, NOW)
+    at = fraction * plan.duration
+    here = np.clip(plan.at(at)[0] + np.array(off), LIMITS.lower, LIMITS.upper)
+    found = path_time_near(plan, here, max(0.0, at - 0.25), min(plan.duration, at + 1.0))
+    assert at - 0.25 - 1e-9 <= found <= at + 1.0 + 1e-9
+    assert np.linalg.norm(plan.at(found)[0] - here) <= np.linalg.norm(plan.at(at)[0] - here) + 1e-9  # the nearest
+    rest = continued(plan, found, tuple(here), LIMITS)
+    if rest is None:
+        assert found >= plan.times[-1] - 1e-6 or np.max(np.abs(plan.points[-1] - here)) <= 1e-9
+        return
+    within_limits(rest, tuple(here))
+    np.testing.assert_allclose(rest.points[-1], plan.points[-1])
+
+
+def within_limits(plan: FollowPlan, start: tuple[float, ...]) -> None:
     lower, upper = np.array(LIMITS.lower), np.array(LIMITS.upper)
     vmax, amax = np.array(LIMITS.velocity), np.array(LIMITS.acceleration)
     assert np.all(np.isfinite(plan.points)) and np.all(plan.points >= lower - 1e-9) and np.all(plan.points <= upper + 1e-9)
-    assert plan.times[0] == 0.0 and np.all(np.diff(plan.times) > 0) and np.allclose(plan.points[0], HERE, atol=START_TOLERANCE)
+    assert plan.times[0] == 0.0 and np.all(np.diff(plan.times) > 0) and np.allclose(plan.points[0], start, atol=START_TOLERANCE)
     rates = np.diff(plan.points, axis=0) / np.diff(plan.times)[:, None]
     assert np.all(np.abs(rates) <= vmax * (1 + 1e-6))
     speeds = np.vstack([np.zeros((1, 3)), rates, np.zeros((1, 3))])
     spans = np.concatenate([[0.0], np.diff(plan.times), [0.0]])
     assert np.all(np.abs(np.diff(speeds, axis=0)) <= amax * (1 + 1e-6) * ((spans[:-1] + spans[1:]) / 2)[:, None] + 1e-12)
-    assert 0.0 <= plan.start_delay <= 60.0
 
 
 def test_a_good_goal_plans_from_where_the_arm_is_and_leaves_out_joints_where_they_are() -> None:
