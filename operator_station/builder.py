@@ -1,6 +1,8 @@
 """The builder's server side (paper Figure 7): the catalog, the cell's names, validation placed at cells, open and save.
 
-The page edits an :class:`~execution_engine.app_model.document.AppDocument`; every check is the
+The page edits a :class:`~operator_station.blocks.BlockDocument` (operations, and the loops and
+calls around them; a flat one is an :class:`~execution_engine.app_model.document.AppDocument`,
+written in the paper's Figure 6 layout, a tree is written through lxml); every check is the
 project's own validator (:func:`execution_engine.app_model.read_application`) run on the XML
 the document would be saved as, read as if it were the file at its path (so the cell file is
 found beside it).  Each message is then placed at the operation, group and param of the line it
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -21,7 +24,9 @@ from core_functions.catalog import Catalog
 from core_functions.robots import find_robot
 from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
-from execution_engine.app_model.document import AppDocument, Placement, parse_document, read_document, serialize
+from execution_engine.app_model.document import AppDocument, OperationEntry, Placement, parse_document, serialize
+from operator_station.blocks import BlockDocument, walk
+from operator_station.blocks_xml import Where, parse_blocks, read_blocks, write_blocks
 
 
 @dataclass(frozen=True)
@@ -33,10 +38,12 @@ class PlacedMessage:
     file: str
     line: int
     col: int
-    operation: int | None  # index into the document's operations; None: the application or its cell file
+    operation: int | None  # index into the document's operations (all of them, in document order); None: the application or its cell file
     group: str | None
     param: int | None
     part: str
+    step: list[int] | None = None  # the step's path in the tree of blocks (a flat document: [operation]); None as operation
+
 
     def to_json(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -84,18 +91,57 @@ def place(diagnostics: list[Diagnostic], placements: list[Placement], display: s
     out = []
     for d in diagnostics:
         where = placements[d.line - 1] if d.file == display and 0 < d.line <= len(placements) else Placement()
-        out.append(PlacedMessage(d.message, d.severity, d.file, d.line, d.col, where.operation, where.group, where.param, where.part))
+        step = None if where.operation is None else [where.operation]
+        out.append(PlacedMessage(d.message, d.severity, d.file, d.line, d.col, where.operation, where.group, where.param, where.part, step))
     return out
 
 
-def validate(document: AppDocument, path: Path, catalog: Catalog) -> tuple[Application | None, list[PlacedMessage], str]:
+def place_steps(diagnostics: list[Diagnostic], lines: list[Where], document: BlockDocument, display: str) -> list[PlacedMessage]:
+    """Each diagnostic at the step of its line; one of a called file (``... called from FILE:LINE:COL``) at that call."""
+    leaves: dict[tuple[int, ...], int] = {}
+    walk(document.body, lambda step, path: leaves.setdefault(path, len(leaves)) if isinstance(step, OperationEntry) else None)
+    called_from = re.compile(rf"called from {re.escape(display)}:(\d+):")
+    out = []
+    for d in diagnostics:
+        line = d.line if d.file == display else None
+        if line is None and (match := called_from.search(d.message)):
+            line = int(match.group(1))
+        where = lines[line - 1] if line is not None and 0 < line <= len(lines) else Where()
+        if d.file != display:
+            where = Where(where.step, part=where.part)  # the call's row, not a cell of its own file's
+        operation = leaves.get(where.step) if where.step is not None else None
+        out.append(PlacedMessage(d.message, d.severity, d.file, d.line, d.col, operation, where.group, where.param, where.part,
+                                 None if where.step is None else list(where.step)))
+    return out
+
+
+def _application_message(text: str, path: Path) -> PlacedMessage:
+    return PlacedMessage(text, "error", str(path), 1, 1, None, None, None, "application")
+
+
+def validate(document: AppDocument | BlockDocument, path: Path, catalog: Catalog) -> tuple[Application | None, list[PlacedMessage], str]:
     """Validate the document as the file at ``path``: the application (None with errors), the placed messages, the XML.
 
-    A file of loops or calls (issue 24) is more than the document the page holds (its operations written at the
-    top): unchanged, the file itself is what is checked and run, loops and all; edited, it is refused rather than
-    checked or run without its loops."""
-    text, placements = serialize(document)
+    A BlockDocument holds the loops and calls of its file: it is checked as written, expanded.  What
+    a file holds that the builder does not (:attr:`BlockDocument.unheld`: an ``<if>``, a comment inside
+    an operation) is never dropped: unchanged, the file itself is checked and run; edited, it is
+    refused naming what it would lose.  An AppDocument (the flat document of ``read_document``) of a
+    file of loops holds only its top-level operations, and is refused the same way when edited.
+    DocumentError: the document holds what XML cannot carry (a group that is not a name)."""
     display = str(path)
+    if isinstance(document, BlockDocument):
+        kept = held_back(path)
+        if kept is not None:
+            if _same(kept, document):
+                app, diagnostics = read_application(path, catalog)
+                return app, place(diagnostics, [], display), write_blocks(kept)[0]
+            return None, [_application_message(_unheld(path, kept, "an edit cannot be checked, run or saved without them; edit the file as text"), path)], ""
+        if not document.is_flat():
+            text, lines = write_blocks(document)
+            app, diagnostics = read_application(path, catalog, data=text.encode("utf-8"))
+            return app, place_steps(diagnostics, lines, document, display), text
+        document = document.flat()
+    text, placements = serialize(document)
     on_disk = with_steps(path)
     if on_disk is not None:
         if replace(on_disk, steps=[]) == replace(document, steps=[]):
@@ -106,6 +152,26 @@ def validate(document: AppDocument, path: Path, catalog: Catalog) -> tuple[Appli
         return None, [PlacedMessage(refusal, "error", display, 1, 1, None, None, None, "application")], text
     app, diagnostics = read_application(path, catalog, data=text.encode("utf-8"))
     return app, place(diagnostics, placements, display), text
+
+
+def _same(kept: BlockDocument, document: BlockDocument) -> bool:
+    return replace(kept, unheld=[]) == replace(document, unheld=[])
+
+
+def _unheld(path: Path, kept: BlockDocument, consequence: str) -> str:
+    return f"{path} holds {', '.join(kept.unheld)}, which the builder does not hold: {consequence}"
+
+
+def held_back(path: Path) -> BlockDocument | None:
+    """The block document of the file at ``path`` when it holds something the builder does not, else None."""
+    try:
+        data = path.read_bytes() if path.is_file() else b""
+    except OSError:
+        return None
+    if not data:
+        return None
+    document, _ = parse_blocks(data, path)
+    return document if document is not None and document.unheld else None
 
 
 def with_steps(path: Path) -> AppDocument | None:
@@ -121,11 +187,12 @@ def with_steps(path: Path) -> AppDocument | None:
     return document if document is not None and document.steps else None
 
 
-def open_document(path: Path) -> tuple[AppDocument | None, list[Diagnostic]]:
-    return read_document(path)
+def open_document(path: Path) -> tuple[BlockDocument | None, list[Diagnostic]]:
+    """The file as the builder shows it: its operations, loops and calls as blocks."""
+    return read_blocks(path)
 
 
-def save_document(document: AppDocument, path: Path, catalog: Catalog, outputs: Sequence[Output] = ()) -> tuple[bool, list[PlacedMessage]]:
+def save_document(document: AppDocument | BlockDocument, path: Path, catalog: Catalog, outputs: Sequence[Output] = ()) -> tuple[bool, list[PlacedMessage]]:
     """Write the document to ``path`` only if it validates there; the messages either way.
 
     ``path`` may be the application itself (that is saving), never its cell nor one of
@@ -136,8 +203,11 @@ def save_document(document: AppDocument, path: Path, catalog: Catalog, outputs: 
     app, messages, text = validate(document, path, catalog)
     if app is None:
         return False, messages
-    on_disk = with_steps(path)
-    if on_disk is not None:  # the builder holds no loops or calls: saving would drop them
+    kept = held_back(path)
+    if isinstance(document, BlockDocument) and kept is not None:  # unchanged, it validated as the file: saving would drop the rest
+        return False, [*messages, _application_message(_unheld(path, kept, "saving would drop them; edit the file as text, or save under another name"), path)]
+    on_disk = with_steps(path) if isinstance(document, AppDocument) else None
+    if on_disk is not None:  # an AppDocument holds no loops or calls: saving would drop them
         refusal = (f"{path} holds {', '.join(on_disk.steps)}, which the builder does not show: saving would drop them; "
                    "edit the file as text, or save under another name")
         return False, [*messages, PlacedMessage(refusal, "error", str(path), 1, 1, None, None, None, "application")]

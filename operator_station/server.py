@@ -44,7 +44,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from core_functions.catalog import Catalog
-from execution_engine.app_model.document import AppDocument, DocumentError, read_document
+from execution_engine.app_model.document import DocumentError
 from node_transport.wire import ENGINE_SERVICES
 from operator_station import builder
 from operator_station.access import Access
@@ -52,6 +52,7 @@ from operator_station.feed import Feed
 from operator_station.folders import Folders
 from operator_station.guard import WHO, BodyTooLarge, Guard, page
 from operator_station.attach import AttachedSession
+from operator_station.blocks import BlockDocument
 from operator_station.session import RunSession
 from operator_station.timeline_view import TimelineView
 
@@ -120,7 +121,7 @@ class Station:
         except OSError:
             key = (0.0, -1)
         if self._opened is None or self._opened[0] != key:
-            doc, problems = read_document(path)
+            doc, problems = builder.open_document(path)
             shown = _shown(self, path)
             answer = ({"ok": True, "path": shown, "document": doc.to_json(), "replay": self.replay} if doc is not None
                       else {"ok": False, "path": shown, "error": "; ".join(map(str, problems)), "replay": self.replay})
@@ -169,17 +170,21 @@ async def _run_field(station: Station, request: Request, name: str) -> tuple[Any
         return None, _error(str(error))
 
 
-def _with_document(station: Station, handler: Callable[[Path, AppDocument], Awaitable[Response]]) -> Callable[[Request], Awaitable[Response]]:
-    """A POST route taking ``{path, document}``: bad input is one clear line and a 400, nothing else happens."""
+def _with_document(station: Station, handler: Callable[[Path, BlockDocument], Awaitable[Response]]) -> Callable[[Request], Awaitable[Response]]:
+    """A POST route taking ``{path, document}`` (a flat one's ``operations`` or a tree's ``body``): bad input
+    is one clear line and a 400, nothing else happens -- what XML cannot carry is found before anything is written."""
 
     async def route(request: Request) -> Response:
         try:
             body = await _body(request)
             path = station.resolve(body.get("path"))
-            document = AppDocument.from_json(body.get("document"))
+            document = BlockDocument.from_json(body.get("document"))
         except (ValueError, DocumentError) as error:  # JSONDecodeError is a ValueError
             return _error(str(error))
-        return await handler(path, document)
+        try:
+            return await handler(path, document)
+        except DocumentError as error:
+            return _error(str(error))
 
     return route
 
@@ -199,19 +204,19 @@ def create_app(station: Station) -> Starlette:
             path = station.resolve((await _body(request)).get("path"))
         except ValueError as error:
             return _error(str(error))
-        doc, problems = read_document(path)
+        doc, problems = await asyncio.to_thread(builder.open_document, path)
         if doc is None:
             return _error("; ".join(map(str, problems)))
         return FastJSON({"ok": True, "path": _shown(station, path), "document": doc.to_json()})
 
-    async def cell(path: Path, doc: AppDocument) -> Response:
-        return FastJSON({"ok": True, **builder.cell_names(doc, path)})
+    async def cell(path: Path, doc: BlockDocument) -> Response:
+        return FastJSON({"ok": True, **builder.cell_names(doc.head, path)})
 
-    async def validate(path: Path, doc: AppDocument) -> Response:
+    async def validate(path: Path, doc: BlockDocument) -> Response:
         app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
         return FastJSON({"ok": app is not None, "messages": [m.to_json() for m in messages]})
 
-    async def save(path: Path, doc: AppDocument) -> Response:
+    async def save(path: Path, doc: BlockDocument) -> Response:
         try:
             outputs = station.session.outputs() if isinstance(station.session, RunSession) else []  # never over a run's files
             saved, messages = await asyncio.to_thread(builder.save_document, doc, path, station.catalog, outputs)
@@ -219,7 +224,7 @@ def create_app(station: Station) -> Starlette:
             return _error(f"{station.folders.shown(path)}: cannot write: {error.strerror or error}")
         return FastJSON({"ok": saved, "path": _shown(station, path), "messages": [m.to_json() for m in messages]})
 
-    async def run(path: Path, doc: AppDocument) -> Response:
+    async def run(path: Path, doc: BlockDocument) -> Response:
         if station.session is None:
             return _error("this station replays a trace; it runs nothing", 409)
         if isinstance(station.session, AttachedSession):  # the cell runs elsewhere: its engine's start service
@@ -228,7 +233,7 @@ def create_app(station: Station) -> Starlette:
         app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
         if app is None:
             return FastJSON({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
-        operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}} for op in app.operations]
+        operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin} for op in app.operations]
         ok, answer = station.session.start(app, operations)
         return FastJSON({"ok": ok, "answer": answer, "messages": [m.to_json() for m in messages]}, status_code=200 if ok else 409)
 

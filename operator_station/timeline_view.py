@@ -31,7 +31,8 @@ def timeline_json(timeline: Timeline, groups: Sequence[str], records: int, total
         "start": timeline.t_start,
         "end": timeline.t_end,
         "total_end": max(total_end, timeline.t_end),
-        "operations": [{"id": op.id, "start": op.t_start, "end": op.t_end if op.t_end is not None else timeline.t_end} for op in timeline.operations],
+        "operations": [{"id": op.id, "start": op.t_start, "end": op.t_end if op.t_end is not None else timeline.t_end, "iteration": op.iteration}
+                       for op in timeline.operations],
         "lanes": lanes,
         "idle": {g: timeline.idle_total(g) if g in timeline.lanes else timeline.t_end - timeline.t_start for g in order},
         "busy": {g: timeline.lanes[g].busy if g in timeline.lanes else 0.0 for g in order},

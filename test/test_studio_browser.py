@@ -29,9 +29,11 @@ from selenium.common.exceptions import (  # noqa: E402
     TimeoutException,
 )
 from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.common.keys import Keys  # noqa: E402
 from selenium.webdriver.support.ui import Select, WebDriverWait  # noqa: E402
 
 from app_functions.registry import full_catalog  # noqa: E402
+from execution_engine.app_model import load_application  # noqa: E402
 from execution_engine.timeline import build_timeline  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.program import main as cli_main  # noqa: E402
@@ -243,3 +245,41 @@ def test_the_safety_stop_is_cleared_only_through_the_confirm_dialog_and_resume_n
         assert not [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
     finally:
         served.close()  # stops the run through the engine
+
+
+def test_a_for_each_block_added_in_the_page_is_saved_as_a_loop_of_its_iterations(driver: Any, folder: Path) -> None:
+    """The studio's blocks (issue 24): a loop added around a new operation, its fields typed, saved as a file that expands."""
+    def block_field(css: str, value: str) -> None:
+        def typed(d: Any) -> bool:
+            field = d.find_element(By.CSS_SELECTOR, f'.blk-row[data-block="for_each"] {css}')
+            if field.get_attribute("value") != value:
+                field.send_keys(Keys.CONTROL, "a", Keys.NULL, value, Keys.TAB)  # a change is taken when the field is left
+            return bool(d.find_element(By.CSS_SELECTOR, f'.blk-row[data-block="for_each"] {css}').get_attribute("value") == value)
+        until(driver, typed)
+
+    served = open_station(driver, folder, file="rivet_installation.xml")
+    try:
+        until(driver, lambda d: validated(d) == "valid")
+        until(driver, lambda d: cell(d, 0, "torso_head").click() or True)  # after the first operation
+        press(driver, "add-for-each")
+        until(driver, lambda d: Select(d.find_element(By.CSS_SELECTOR, ".blk-row .blk-mode")).select_by_value("list") or True)
+        block_field(".blk-list", "drill_1 drill_2")
+        block_field(".blk-var", "h")
+        until(driver, lambda d: "→ 2 iteration(s)" in d.find_element(By.CSS_SELECTOR, ".blk-row").text)
+        type_into(driver, "doc-path", "looped.xml")
+        def renamed(d: Any) -> bool:  # the operation inside the loop: one id per iteration
+            field = d.find_element(By.CSS_SELECTOR, '.ops-row[data-op="1"] .op-id')
+            if field.get_attribute("value") != "look_{h}":
+                field.send_keys(Keys.CONTROL, "a", Keys.NULL, "look_{h}", Keys.TAB)
+            return bool(d.find_element(By.CSS_SELECTOR, '.ops-row[data-op="1"] .op-id').get_attribute("value") == "look_{h}")
+        until(driver, renamed)
+        choose(driver, 1, "torso_head", "move_to_joint_pose", "look_at_part")
+        until(driver, lambda d: validated(d) == "valid")
+        press(driver, "save-btn")
+        until(driver, lambda d: text(d, "validation-summary") == "saved looped.xml")
+        app = load_application(folder / "looped.xml", full_catalog())
+        assert [(op.id, op.origin) for op in app.operations][:4] == [
+            ("1", ""), ("look_drill_1", "for_each h=drill_1"), ("look_drill_2", "for_each h=drill_2"), ("2", "")]
+        assert len(app.operations) == 12 and not [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        served.close()

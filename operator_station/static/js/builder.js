@@ -1,11 +1,13 @@
 // The application builder (paper Figure 7): the catalog on the left, the application as a table of
-// operations x groups, the selected cell's function and typed params on the right.  Every edit is
-// validated by the project's own validator on the server; each message is shown at its cell.
+// operations x groups, the selected cell's function and typed params on the right.  Loops and calls are
+// blocks of rows around the operations they hold (blocks.js).  Every edit is validated by the project's
+// own validator on the server; each message is shown at its cell, or at its block's row.
 "use strict";
 
 const Builder = (() => {
   const ROW_H = 30;
-  const b = {doc: null, path: "", messages: [], byCell: new Map(), selected: null, cellNames: null, valid: null, validating: 0};
+  const b = {doc: null, path: "", messages: [], byCell: new Map(), selected: null, cellNames: null, valid: null, validating: 0,
+             view: {rows: [], leaves: [], byKey: new Map()}};
   const $ = (id) => document.getElementById(id);
   const el = (tag, attrs, ...children) => {
     const node = document.createElement(tag);
@@ -54,8 +56,18 @@ const Builder = (() => {
   }
 
   // ------------------------------------------------------------------------------ the document
+  // The page holds every document as a tree (`body`); a flat one arrives as `operations`.  `doc.operations`
+  // stays readable (every operation, in document order) but is not sent: the server takes the body.
+  function normalize(doc) {
+    if (!Array.isArray(doc.body)) doc.body = (doc.operations || []).map((op) => ({type: "operation", ...op}));
+    delete doc.operations;
+    delete doc.steps;
+    Object.defineProperty(doc, "operations", {get: () => b.view.leaves.map((r) => r.step), enumerable: false, configurable: true});
+    return doc;
+  }
   function setDocument(doc, path) {
-    b.doc = doc;
+    b.doc = normalize(doc);
+    b.view = Blocks.flatten(b.doc.body);
     b.path = path || "";
     b.selected = null;
     $("doc-path").value = b.path;
@@ -101,15 +113,17 @@ const Builder = (() => {
   }
 
   // ------------------------------------------------------------------------------ the table (virtual rows)
-  const cellKey = (op, group) => `${op}|${group || ""}`;
+  const cellKey = (key, group) => `${key}|${group || ""}`;
+  const rowOf = (key) => b.view.byKey.get(key);
   function renderTable() {
     const gs = groups();
-    const columns = `40px 70px 140px repeat(${Math.max(gs.length, 1)}, minmax(180px, 1fr)) 80px`;
+    const columns = `40px 70px 140px repeat(${Math.max(gs.length, 1)}, minmax(180px, 1fr)) 96px`;
     $("ops-header").style.gridTemplateColumns = columns;
     $("ops-header").replaceChildren(el("div", {text: "#"}), el("div", {text: "id"}), el("div", {text: "name"}),
       ...gs.map((g) => el("div", {text: g, class: "group-head"})), el("div", {text: ""}));
-    $("ops-spacer").style.height = `${b.doc.operations.length * ROW_H}px`;
-    $("op-count").textContent = `${b.doc.operations.length} operation(s)`;
+    $("ops-spacer").style.height = `${b.view.rows.length * ROW_H}px`;
+    const blocks = b.view.rows.filter((r) => r.kind === "block").length;
+    $("op-count").textContent = `${b.view.leaves.length} operation(s)${blocks ? `, ${blocks} block(s)` : ""}`;
     b.columns = columns;
     renderRows();
   }
@@ -120,76 +134,139 @@ const Builder = (() => {
     const count = Math.min(Math.ceil((scroll.clientHeight || 600) / ROW_H) + 10, 200);  // never the whole table
     const rows = [];
     const gs = groups();
-    for (let i = first; i < Math.min(b.doc.operations.length, first + count); i++) rows.push(renderRow(i, gs));
+    for (let i = first; i < Math.min(b.view.rows.length, first + count); i++) rows.push(renderRow(b.view.rows[i], gs));
     $("ops-rows").style.transform = `translateY(${first * ROW_H}px)`;
     $("ops-rows").replaceChildren(...rows);
   }
-  function renderRow(i, gs) {
-    const op = b.doc.operations[i];
-    const opMessages = b.byCell.get(cellKey(i, null)) || [];
-    const id = el("input", {class: "op-id", value: op.id, "data-op": i});
+  function tools(row) {
+    const button = (cls, title, text, act) => el("button", {class: cls, title, text, onclick: () => { if (act()) changed(); }});
+    return el("div", {class: "row-tools"},
+      button("op-up", "move up", "▲", () => Blocks.move(row, -1)),
+      button("op-down", "move down", "▼", () => Blocks.move(row, 1)),
+      button("op-in", "into the block above", "⇥", () => Blocks.indent(row)),
+      button("op-out", "out of its block", "⇤", () => Blocks.outdent(row, b.view.rows)),
+      button("op-del", row.kind === "block" ? "remove the block and what it holds" : "remove", "✕", () => remove(row)));
+  }
+  function renderRow(row, gs) {
+    const depth = row.depth ? {style: `border-left: ${row.depth * 8}px solid #dbe8f6`} : {};
+    if (row.kind === "end") {
+      const end = el("div", {class: "ops-row blk-end", "data-step": row.key, ...depth}, el("div", {}),
+        el("div", {class: "blk-end-label"}, `end ${Blocks.KINDS[row.step.type].label} `,
+          el("button", {class: "blk-add-inside", text: "+ operation inside", onclick: () => addStep("operation", {list: row.step.body, at: row.step.body.length})})),
+        el("div", {}));
+      end.style.gridTemplateColumns = b.columns;
+      end.lastChild.style.gridColumn = "-2 / -1";
+      end.children[1].style.gridColumn = "2 / -2";
+      return end;
+    }
+    if (row.kind === "block") {
+      const messages = b.byCell.get(cellKey(row.key, null)) || [];
+      const selected = b.selected && b.selected.key === row.key;
+      const errors = messages.some((m) => m.severity === "error");
+      const fields = el("div", {class: `blk-fields${errors ? " has-error" : messages.length ? " has-warning" : ""}`, title: messages.map((m) => m.message).join("\n")},
+        ...Blocks.renderBlock(el, row, {cellNames: b.cellNames, messages, edited, changed, redraw: renderRows}));
+      fields.style.gridColumn = "2 / -2";
+      const line = el("div", {class: `ops-row blk-row blk-${row.step.type}${selected ? " selected" : ""}`, "data-step": row.key, "data-block": row.step.type, ...depth},
+        el("div", {class: "op-index blk-select", text: "▸", title: "select the block", onclick: () => selectKey(row.key, null)}), fields, tools(row));
+      line.style.gridTemplateColumns = b.columns;
+      return line;
+    }
+    const op = row.step;
+    const opMessages = b.byCell.get(cellKey(row.key, null)) || [];
+    const id = el("input", {class: "op-id", value: op.id, "data-op": row.leaf});
     id.addEventListener("change", () => { op.id = id.value; edited(); });
-    const name = el("input", {class: "op-name", value: op.name || "", "data-op": i});
+    const name = el("input", {class: "op-name", value: op.name || "", "data-op": row.leaf});
     name.addEventListener("change", () => { op.name = name.value === "" ? null : name.value; edited(); });
     const idCell = el("div", {class: `op-idcell${opMessages.length ? " has-error" : ""}`, title: opMessages.map((m) => m.message).join("\n")}, id,
       opMessages.length ? el("div", {class: "cell-msg", text: opMessages[0].message}) : null);
-    const row = el("div", {class: "ops-row", "data-op": i}, el("div", {class: "op-index", text: String(i + 1)}), idCell, name);
-    row.style.gridTemplateColumns = b.columns;
-    for (const g of gs) row.append(renderCell(i, g, op));
-    row.append(el("div", {class: "row-tools"},
-      el("button", {class: "op-up", title: "move up", text: "▲", onclick: () => move(i, -1)}),
-      el("button", {class: "op-down", title: "move down", text: "▼", onclick: () => move(i, 1)}),
-      el("button", {class: "op-del", title: "remove", text: "✕", onclick: () => remove(i)})));
-    return row;
+    const line = el("div", {class: "ops-row", "data-op": row.leaf, "data-step": row.key, ...depth}, el("div", {class: "op-index", text: String(row.leaf + 1)}), idCell, name);
+    line.style.gridTemplateColumns = b.columns;
+    for (const g of gs) line.append(renderCell(row, g));
+    line.append(tools(row));
+    return line;
   }
-  function renderCell(i, g, op) {
+  function renderCell(row, g) {
+    const op = row.step;
     const call = op.calls.find((c) => c.group === g);
-    const messages = b.byCell.get(cellKey(i, g)) || [];
+    const messages = b.byCell.get(cellKey(row.key, g)) || [];
     const text = call ? `${call.function}(${call.params.map((p) => p.value).join(", ")})` : "— waits";
-    const selected = b.selected && b.selected.op === i && b.selected.group === g;
+    const selected = b.selected && b.selected.key === row.key && b.selected.group === g;
     const errors = messages.filter((m) => m.severity === "error");
     const cell = el("div", {class: `op-cell${call ? "" : " empty"}${selected ? " selected" : ""}${errors.length ? " has-error" : messages.length ? " has-warning" : ""}`,
-      "data-op": i, "data-group": g, title: [text, ...messages.map((m) => m.message)].join("\n"), onclick: () => select(i, g)},
+      "data-op": row.leaf, "data-step": row.key, "data-group": g, title: [text, ...messages.map((m) => m.message)].join("\n"), onclick: () => selectKey(row.key, g)},
       el("span", {class: "cell-call", text}), messages.length ? el("div", {class: "cell-msg", text: messages[0].message}) : null);
     return cell;
   }
-  function move(i, delta) {
-    const j = i + delta;
-    if (j < 0 || j >= b.doc.operations.length) return;
-    const ops = b.doc.operations;
-    [ops[i], ops[j]] = [ops[j], ops[i]];
-    if (b.selected && b.selected.op === i) b.selected.op = j;
-    edited();
-  }
-  function remove(i) {
-    b.doc.operations.splice(i, 1);
-    if (b.selected && b.selected.op === i) b.selected = null;
+  // After a change of the tree's shape: the rows again, the selection kept on its step where it still is.
+  function changed() {
+    const step = b.selected && rowOf(b.selected.key) ? rowOf(b.selected.key).step : null;
+    b.view = Blocks.flatten(b.doc.body);
+    if (step) {
+      const row = b.view.rows.find((r) => r.step === step && r.kind !== "end");
+      b.selected = row ? {key: row.key, group: b.selected.group} : null;
+    }
+    b.byCell = new Map();  // the messages' places are those of the old tree: the next validation places them again
     renderTable();
+    renderInspector();
     edited();
   }
-  function addOperation() {
-    const ids = new Set(b.doc.operations.map((o) => o.id));
-    let n = b.doc.operations.length + 1;
-    while (ids.has(String(n))) n++;
-    b.doc.operations.push({id: String(n), name: null, calls: [], comments: []});
-    renderTable();
-    select(b.doc.operations.length - 1, groups()[0]);
-    $("ops-scroll").scrollTop = $("ops-scroll").scrollHeight;
-    edited();
+  function remove(row) {
+    row.list.splice(row.index, 1);
+    if (b.selected && (b.selected.key === row.key || b.selected.key.startsWith(`${row.key}.`))) b.selected = null;
+    return true;
   }
-  function select(op, group) {
-    b.selected = {op, group};
+  function freshId() {
+    const ids = new Set(b.view.leaves.map((r) => r.step.id));
+    let n = b.view.leaves.length + 1;
+    while (ids.has(String(n)) || [...ids].some((id) => id.startsWith(`${n}_`))) n++;
+    return String(n);
+  }
+  // Where a new step goes: inside the selected block (at its end), else just after the selected step, else at the end.
+  function insertionPoint() {
+    const row = b.selected && rowOf(b.selected.key);
+    if (!row) return {list: b.doc.body, at: b.doc.body.length};
+    if (row.kind === "block" && Blocks.KINDS[row.step.type] && Blocks.KINDS[row.step.type].body) return {list: row.step.body, at: row.step.body.length};
+    return {list: row.list, at: row.index + 1};
+  }
+  function addStep(type, where) {
+    const {list, at} = where || insertionPoint();
+    const fresh = freshId();
+    const step = type === "operation" ? {type, id: fresh, name: null, calls: [], comments: []} : Blocks.newBlock(type, fresh, b.cellNames);
+    if (type === "operation") {  // inside a loop, the id takes the loop's variable: one id per iteration
+      const inside = b.view.rows.find((r) => r.kind === "block" && r.step.body === list);
+      const vars = inside ? Blocks.scope([...inside.parents, inside.step]) : [];
+      if (vars.length) step.id = `${fresh}_{${vars[vars.length - 1]}}`;
+    }
+    list.splice(at, 0, step);
+    b.view = Blocks.flatten(b.doc.body);
+    const row = b.view.rows.find((r) => r.step === step);
+    b.selected = {key: row.key, group: type === "operation" ? groups()[0] : null};
+    changed();
+    scrollTo(row.key);
+  }
+  function addOperation() { addStep("operation"); }
+  function select(op, group) {  // op: an operation's place among all of them (as data-op), or a row's key
+    const key = typeof op === "number" ? (b.view.leaves[op] || {}).key : op;
+    if (key !== undefined) selectKey(key, group);
+  }
+  function selectKey(key, group) {
+    b.selected = {key, group};
     renderRows();
     renderInspector();
   }
-  function scrollTo(op) {
-    $("ops-scroll").scrollTop = Math.max(0, op * ROW_H - 60);
+  function scrollTo(key) {
+    const at = b.view.rows.findIndex((r) => r.key === (typeof key === "number" ? (b.view.leaves[key] || {}).key : key));
+    $("ops-scroll").scrollTop = Math.max(0, at * ROW_H - 60);
     renderRows();
   }
 
   // ------------------------------------------------------------------------------ the inspector: typed params
-  function namesFor(param) {
+  function namesFor(param, scope) {
     const c = b.cellNames || {};
+    const variables = scope.map((v) => `{${v}}`);  // inside a loop or a block: its variables first
+    return [...variables, ...namesOfCell(param, c)];
+  }
+  function namesOfCell(param, c) {
     const kinds = param.kinds || [];
     const ofKind = (items) => items.filter((x) => kinds.length === 0 || kinds.includes(x.kind)).map((x) => x.name);
     switch (param.type) {
@@ -231,26 +308,37 @@ const Builder = (() => {
   }
   function renderInspector() {
     const box = $("inspector");
-    if (!b.doc || !b.selected || !b.doc.operations[b.selected.op]) {
-      box.replaceChildren(el("p", {class: "hint", text: "Select a cell of the table (an operation and a group), then pick a function from the catalog or the list here."}));
+    const row = b.doc && b.selected ? rowOf(b.selected.key) : null;
+    if (!row) {
+      box.replaceChildren(el("p", {class: "hint", text: "Select a cell of the table (an operation and a group), then pick a function from the catalog or the list here. " +
+        "+ for_each, + repeat and + call add a block after the selected row (inside a selected block)."}));
       return;
     }
-    const {op, group} = b.selected;
-    const operation = b.doc.operations[op];
+    const scope = Blocks.scope(row.parents);
+    const inScope = scope.length ? el("p", {class: "blk-scope", text: `inside ${row.parents.map((p) => Blocks.KINDS[p.type].label).join(" › ")}: ${scope.map((v) => `{${v}}`).join(" ")} may be used in ids, names and values`}) : null;
+    if (row.kind === "block") {
+      const kind = Blocks.KINDS[row.step.type];
+      box.replaceChildren(el("h3", {text: kind.label}), el("p", {class: "fn-doc", text: kind.help}), inScope, el("div", {id: "inspector-messages", class: "messages"}));
+      renderInspectorMessages();
+      return;
+    }
+    const {group} = b.selected;
+    if (!group) { box.replaceChildren(el("h3", {text: `operation ${row.step.id}`}), inScope); return; }
+    const operation = row.step;
     const call = operation.calls.find((c) => c.group === group);
     const select = el("select", {id: "fn-select"}, el("option", {value: "", text: "(none: the group waits)"}));
     for (const f of Store.catalog.functions) if (fits(f, group)) select.append(el("option", {value: f.name, text: f.name}));
     if (call && !fnSpec(call.function)) select.append(el("option", {value: call.function, text: `${call.function} (not in the catalog)`}));
     select.value = call ? call.function : "";
     select.addEventListener("change", () => assignFunction(select.value));
-    const parts = [el("h3", {text: `operation ${operation.id} · ${group}`}), el("label", {}, "function ", select)];
+    const parts = [el("h3", {text: `operation ${operation.id} · ${group}`}), inScope, el("label", {}, "function ", select)];
     const spec = call && fnSpec(call.function);
     if (spec) {
       parts.push(el("p", {class: "fn-doc", text: spec.doc}));
       const values = paramValues(call, spec);
       spec.params.forEach((param, i) => {
         const listId = `param-list-${i}`;
-        const options = param.type === "choice" ? param.choices : param.type === "boolean" ? ["true", "false"] : namesFor(param);
+        const options = param.type === "choice" ? param.choices : param.type === "boolean" ? ["true", "false"] : namesFor(param, scope);
         let input;
         if (param.type === "choice" || param.type === "boolean" || param.type === "group") {
           input = el("select", {id: `param-${i}`, class: "param-input", "data-param": i},
@@ -285,13 +373,14 @@ const Builder = (() => {
   function renderInspectorMessages() {
     const box = $("inspector-messages");
     if (!box || !b.selected) return;
-    const messages = b.byCell.get(cellKey(b.selected.op, b.selected.group)) || [];
+    const messages = b.byCell.get(cellKey(b.selected.key, b.selected.group)) || [];
     box.replaceChildren(...messages.map((m) => el("div", {class: `msg ${m.severity}`, text: `line ${m.line}: ${m.message}`})));
   }
   function assignFunction(name) {
-    if (!b.selected) return;
-    const {op, group} = b.selected;
-    const operation = b.doc.operations[op];
+    const row = b.selected && rowOf(b.selected.key);
+    if (!row || row.kind !== "op" || !b.selected.group) return;
+    const {group} = b.selected;
+    const operation = row.step;
     const index = operation.calls.findIndex((c) => c.group === group);
     if (!name) { if (index >= 0) operation.calls.splice(index, 1); }
     else {
@@ -332,19 +421,23 @@ const Builder = (() => {
     b.messages = messages;
     b.valid = ok;
     b.byCell = new Map();
+    const keyOf = (m) => Array.isArray(m.step) ? m.step.join(".") : (m.operation !== null && m.operation !== undefined && b.view.leaves[m.operation] ? b.view.leaves[m.operation].key : null);
     for (const m of messages) {
-      if (m.operation === null || m.operation === undefined) continue;
-      const key = cellKey(m.operation, m.group);
+      const at = keyOf(m);
+      if (at === null) continue;
+      const key = cellKey(at, m.group);
       if (!b.byCell.has(key)) b.byCell.set(key, []);
       b.byCell.get(key).push(m);
     }
     const errors = messages.filter((m) => m.severity === "error").length;
+    const unheld = (b.doc && b.doc.unheld) || [];  // what the file holds that the builder does not: the server refuses edits
     const summary = $("validation-summary");
     summary.textContent = ok ? (messages.length ? `valid (${messages.length} warning(s))` : "valid") : `${errors} error(s)`;
     summary.className = `summary ${ok ? "ok" : "bad"}`;
-    $("app-messages").replaceChildren(...messages.map((m) => {
-      const where = m.operation !== null && m.operation !== undefined ? `operation ${b.doc.operations[m.operation] ? b.doc.operations[m.operation].id : m.operation + 1}${m.group ? ` · ${m.group}` : ""}` : m.file;
-      return el("div", {class: `msg ${m.severity}`, onclick: () => { if (m.operation !== null && m.operation !== undefined) { scrollTo(m.operation); if (m.group) select(m.operation, m.group); } }},
+    $("app-messages").replaceChildren(...(unheld.length ? [el("div", {class: "msg warning unheld", text: `this file holds ${unheld.join(", ")}, which the builder does not hold: it is shown without them, and checked, run and saved only unchanged; edit it as text`})] : []), ...messages.map((m) => {
+      const at = keyOf(m), row = at !== null ? rowOf(at) : null;
+      const where = row ? (row.kind === "op" ? `operation ${row.step.id}${m.group ? ` · ${m.group}` : ""}` : `${Blocks.KINDS[row.step.type].label} (step ${at})`) : m.file;
+      return el("div", {class: `msg ${m.severity}`, onclick: () => { if (row) { scrollTo(at); selectKey(at, m.group); } }},
         `${where} (line ${m.line}): ${m.message}`);
     }));
     renderRows();
@@ -356,7 +449,7 @@ const Builder = (() => {
   async function loadCellNames() {
     if (!b.doc) return;
     const {path, document: doc} = current();  // the cell's names need the robot and the cell only, not the operations
-    const answer = await Store.post("/api/cell", {path, document: {...doc, operations: []}});
+    const answer = await Store.post("/api/cell", {path, document: {...doc, body: []}});
     b.cellNames = answer.ok ? answer : null;
     if (!$("inspector").contains(document.activeElement)) renderInspector();  // never under the user's typing
   }
@@ -376,7 +469,7 @@ const Builder = (() => {
   function fresh() {
     const robot = b.doc ? b.doc.robot : Object.keys(Store.catalog.robots)[0];
     setDocument({name: "new_application", robot, cell: b.doc ? b.doc.cell : null, version: null, description: null, error_policy: null,
-                 operations: [{id: "1", name: null, calls: [], comments: []}], header: [], trailer: []}, $("doc-path").value);
+                 body: [{type: "operation", id: "1", name: null, calls: [], comments: []}], header: [], trailer: []}, $("doc-path").value);
   }
 
   Store.on("catalog", async () => {
@@ -384,6 +477,9 @@ const Builder = (() => {
     bindAppFields();
     $("ops-scroll").addEventListener("scroll", renderRows);
     $("add-op").addEventListener("click", addOperation);
+    $("add-for-each").addEventListener("click", () => addStep("for_each"));
+    $("add-repeat").addEventListener("click", () => addStep("repeat"));
+    $("add-call").addEventListener("click", () => addStep("call"));
     $("open-btn").addEventListener("click", open);
     $("save-btn").addEventListener("click", save);
     $("new-btn").addEventListener("click", fresh);

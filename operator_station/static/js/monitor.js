@@ -66,7 +66,7 @@ const Monitor = (() => {
         card.className = "group-card";
         card.dataset.group = group;
         card.innerHTML = `<h3>${group}</h3><div class="group-now"><span>state <b class="g-state"></b></span>
-          <span>operation <b class="g-op"></b></span><span>function <b class="g-function"></b></span>
+          <span>operation <b class="g-op"></b> <span class="g-iteration"></span></span><span>function <b class="g-function"></b></span>
           <span>primitive <b class="g-primitive"></b></span></div><div class="graph-box"></div><div class="g-error"></div>`;
         box.append(card);
       }
@@ -85,6 +85,7 @@ const Monitor = (() => {
       if (!card) continue;
       card.querySelector(".g-state").textContent = view.state;
       card.querySelector(".g-op").textContent = view.operation || "–";
+      card.querySelector(".g-iteration").textContent = view.iteration ? `(${view.iteration})` : "";  // the loop iteration or call it was made for
       card.querySelector(".g-function").textContent = view.function || "–";
       card.querySelector(".g-primitive").textContent = view.primitive || "–";
       card.querySelector(".g-error").textContent = view.error ? `error: ${view.error}` : "";
@@ -103,7 +104,8 @@ const Monitor = (() => {
     const now = Store.now();
     $("engine-state").textContent = engine.state || "idle";
     document.body.dataset.engineState = engine.state || "idle";
-    $("engine-op").textContent = engine.operation_count ? `${engine.operation_index}/${engine.operation_count}${engine.operation_id ? ` (id ${engine.operation_id})` : ""}` : "–";
+    const made = engine.operation_id ? ((snap.operations || []).find((o) => o.id === engine.operation_id) || {}).iteration : "";
+    $("engine-op").textContent = engine.operation_count ? `${engine.operation_index}/${engine.operation_count}${engine.operation_id ? ` (id ${engine.operation_id}${made ? `, ${made}` : ""})` : ""}` : "–";
     $("engine-elapsed").textContent = fmt(now);
     // ETA: the planned (dry run) durations of the operations still to run, the current one counted from its start.
     const plan = snap.plan || [];

@@ -35,9 +35,12 @@ const Timeline = (() => {
     const height = TOP + model.groups.length * LANE + 20;
     const root = svg("svg", {id: "timeline-svg", width: Math.max(width, px(end) + 20), height, "data-end": end});
     // Operation boundaries first, under the bars.
+    const iterations = Object.fromEntries(model.operations.map((op) => [op.id, op.iteration]));
     for (const op of model.operations) {
       root.append(svg("line", {x1: px(op.start), x2: px(op.start), y1: 12, y2: height - 10, class: "op-boundary", "data-operation": op.id}));
-      root.append(svg("text", {x: px(op.start) + 2, y: 20, class: "op-label"}, op.id));
+      const label = svg("text", {x: px(op.start) + 2, y: 20, class: "op-label", "data-iteration": op.iteration || ""}, op.id);
+      if (op.iteration) label.append(svg("title", {}, `${op.id}: ${op.iteration}`));  // the loop iteration or call it was made for
+      root.append(label);
     }
     model.groups.forEach((group, lane) => {
       const y = TOP + lane * LANE;
@@ -48,8 +51,8 @@ const Timeline = (() => {
       for (const bar of model.lanes[group] || []) {
         const x = px(bar.start), w = Math.max(1, (bar.end - bar.start) * scale);
         const g = svg("g", {class: `bar state-${bar.state}${bar.outcome && bar.outcome !== "succeeded" ? " failed" : ""}${bar.open ? " open" : ""}`,
-          "data-group": group, "data-operation": bar.operation, "data-function": bar.function});
-        g.append(svg("title", {}, `${group} · operation ${bar.operation} · ${bar.function} (${bar.state})\n${bar.start.toFixed(3)} – ${bar.end.toFixed(3)} s${bar.outcome ? ` · ${bar.outcome}` : ""}`));
+          "data-group": group, "data-operation": bar.operation, "data-function": bar.function, "data-iteration": iterations[bar.operation] || ""});
+        g.append(svg("title", {}, `${group} · operation ${bar.operation}${iterations[bar.operation] ? ` (${iterations[bar.operation]})` : ""} · ${bar.function} (${bar.state})\n${bar.start.toFixed(3)} – ${bar.end.toFixed(3)} s${bar.outcome ? ` · ${bar.outcome}` : ""}`));
         g.append(svg("rect", {x, y: y + 6, width: w, height: LANE - 12, rx: 3, style: `fill:${bar.colour};stroke:${bar.edge}`}));
         if (scale >= PRIMITIVES_FROM) {
           for (const p of bar.primitives || []) {
