@@ -15,6 +15,7 @@ BACKENDS: dict[str, str] = {
     "nextage-sim": "robot_bridges.nextage_sim.backend:create",
     "vplus": "robot_bridges.vplus.backend:create",
     "kuka-rsi": "robot_bridges.kuka_rsi.backend:create",
+    "ros2-control": "robot_bridges.ros2_control.factory:create",  # any robot whose driver serves FollowJointTrajectory
 }
 
 BackendFactory = Callable[[Clock, BackendOptions], Awaitable[RobotBackend]]

@@ -34,6 +34,7 @@ class DryRunSetup:
     options: BackendOptions
     simulated_clock: bool = True  # False: a simulator keeping its own time, run beside the real clock
     robot_seconds: Callable[[RobotBackend], Callable[[], float]] | None = None
+    unkept: str = ""  # why no verdict of it may be kept (the robot's model comes from outside the files the key reads)
 
 
 def _kuka_seconds(backend: RobotBackend) -> Callable[[], float]:
@@ -62,4 +63,8 @@ def setup_for(backend: str, options: BackendOptions) -> DryRunSetup:
     if backend == "kuka-rsi":
         accelerated = {**extra, "simulator": "accelerated", "runner": "thread"}
         return DryRunSetup(backend, replace(offline, extra=accelerated), simulated_clock=False, robot_seconds=_kuka_seconds)
+    if backend == "ros2-control" and extra.get("transport", "dds") in ("dds", "ros"):  # the URDF model is the robot; its URDF read where the run reads it
+        modelled = {**extra, "transport": "model", "description": extra.get("transport", "dds")}
+        unkept = "" if extra.get("urdf") else "the robot's URDF is read from /robot_description on the ROS graph"
+        return DryRunSetup(backend, replace(offline, extra=modelled), unkept=unkept)
     return DryRunSetup(backend, offline)

@@ -36,7 +36,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from cell_runner.dry_run.app_digest import app_digest
+from cell_runner.dry_run.app_digest import NotDigestible, app_digest
 from cell_runner.dry_run.report import CollisionCheck, DryRunReport, GroupTime, JointPositions, Span
 from cell_runner.dry_run.simulators import DryRunSetup
 from cell_runner.output_files import same_file
@@ -124,6 +124,8 @@ def verdict_key(app: Application, setup: DryRunSetup, trajectory_db: str | None)
     """The key of a dry run of ``app`` on ``setup`` from the simulator's start, reading ``trajectory_db``
     (the run's; None: the application's own, as the dry run reads it).  ``app`` itself is in it
     (:mod:`.app_digest`), not only its file: :class:`~.app_digest.NotDigestible` when it cannot be."""
+    if setup.unkept:
+        raise NotDigestible(setup.unkept)
     digest = hashlib.sha256()
     _feed(digest, "format", str(FORMAT).encode())
     _feed(digest, "program", program_digest().encode())

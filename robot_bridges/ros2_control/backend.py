@@ -1,0 +1,385 @@
+"""The ``ros2-control`` back end: any robot whose ROS 2 driver offers FollowJointTrajectory.
+
+ros2_control's joint_trajectory_controller (and every driver built like it: UR, KUKA's kuka_drivers,
+ABB, Motoman, Franka, the simulators) takes a timed joint trajectory and plays it.  This back end
+turns the engine's primitives into such trajectories on the robot's own URDF (``/robot_description``,
+or a file): joint moves, Cartesian moves through inverse kinematics on that model (point to point,
+or a straight line of closely spaced poses), relative moves, replays of recorded trajectories, all
+timed within the URDF's speed limits at the set speed fraction (:mod:`.planning`).  Where the arm
+is comes only from ``/joint_states``, checked sample by sample (:mod:`.feed`).
+
+Pause cancels the running trajectory -- the controller holds the arm where it is -- and resume
+plans what is left of the path again from where the arm really stopped, never sending the old
+trajectory a second time; stop cancels and abandons.  Grippers are driven through
+control_msgs/action/GripperCommand where a group names one; other end effectors, vision and I/O
+are not available on such a robot and say so (in the dry run: at the call's line, before a run).
+"""
+from __future__ import annotations
+
+import asyncio
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core_functions.geometry import Pose
+from core_functions.primitives import (
+    Dwell,
+    EndEffector,
+    EndEffectorResult,
+    ExecuteTrajectory,
+    MotionResult,
+    MoveCartesian,
+    MoveJoints,
+    MoveRelative,
+    Primitive,
+    PrimitiveResult,
+    RecordTrajectory,
+    SetSpeed,
+    TrajectoryResult,
+    describe,
+)
+from core_functions.robots import RobotModel
+from node_transport.clock import Clock
+from robot_bridges.backend import BridgeError, FaultKind, JointLimits, RobotBackend
+from robot_bridges.ros2_control.feed import JointFeed
+from robot_bridges.ros2_control.link import CANCELED, ControllerLink
+from robot_bridges.ros2_control.model import Chain, UrdfError, UrdfModel
+from robot_bridges.ros2_control.options import GroupSettings, Ros2ControlSettings
+from robot_bridges.ros2_control.planning import Limits, line_path, line_poses, remainder, retime, time_path
+
+#: s: how long the arm must keep still (within STILL rad) after a cancel before a resume plans from it.
+SETTLE_TIME = 0.1
+STILL = 1e-4
+GRIPPER_ACTIONS = {"gripper_open": "gripper_open", "gripper_close": "gripper_closed"}
+
+
+@dataclass
+class _GroupRun:
+    """One group's motion state: speed fraction, and the pause/stop of its running primitive."""
+
+    speed: float = 1.0
+    busy: bool = False
+    paused: bool = False
+    stopping: bool = False
+    wake: asyncio.Event = field(default_factory=asyncio.Event)
+
+
+class Ros2ControlBackend(RobotBackend):
+    """The robot behind ``link`` (a ROS graph's controllers, or the URDF model for the dry run)."""
+
+    holds_within_motion = True
+
+    def __init__(self, clock: Clock, robot: RobotModel, settings: Ros2ControlSettings, link: ControllerLink) -> None:
+        self.clock, self.robot, self.settings, self.link = clock, robot, settings, link
+        self.name = "ros2_control" if settings.transport != "model" else "ros2_control_model"
+        self.model: UrdfModel | None = None
+        self.chains: dict[str, Chain] = {}
+        self.limits: dict[str, Limits] = {}
+        self.runs = {g.group: _GroupRun() for g in settings.groups}
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        return tuple(g.group for g in self.settings.groups)
+
+    async def start(self) -> None:
+        urdf = await self.link.description()
+        try:
+            self.model, self.chains = model, _ = group_chains(urdf, self.settings)
+        except UrdfError as error:
+            raise BridgeError(FaultKind.CONNECTION, str(error)) from None
+        self.world_frame = model.root
+        for group in self.settings.groups:
+            velocity = np.array([model.ranges[j].velocity for j in group.joints])
+            chain = self.chains[group.group]
+            self.limits[group.group] = Limits(group.joints, chain.lower, chain.upper, velocity, velocity / self.settings.acceleration_time)
+        speeds = {j: model.ranges[j].velocity for g in self.settings.groups for j in g.joints}
+        await self.link.start(JointFeed(self.clock, speeds))
+
+    async def close(self) -> None:
+        await self.link.close()
+
+    # ------------------------------------------------------------------ where the robot is
+    def _positions(self) -> dict[str, float]:
+        problem = self.link.trouble()
+        if problem is not None:
+            raise BridgeError(FaultKind.CONTROLLER, problem)
+        latest = self.link.feed.latest
+        assert latest is not None
+        return latest.positions
+
+    def _q(self) -> np.ndarray:
+        """The whole model's joints: measured where the feed has them, the URDF's zero elsewhere (no group moves them)."""
+        assert self.model is not None
+        where = self._positions()
+        return np.array([where.get(name, 0.0) for name in self.model.joint_names])
+
+    def _group_q(self, group: GroupSettings) -> np.ndarray:
+        where = self._positions()
+        return np.array([where[j] for j in group.joints])
+
+    def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
+        latest = self.link.feed.latest if hasattr(self.link, "feed") else None
+        if latest is None:
+            return (), ()
+        names: list[str] = []
+        values: list[float] = []
+        for group in self.settings.groups:
+            names += group.app_joints
+            values += [latest.positions[j] for j in group.joints]
+        return tuple(names), tuple(values)
+
+    def tcp_pose(self, group: str) -> Pose | None:
+        if self.model is None or group not in self.chains:
+            return None
+        return self.chains[group].tip_pose(self._q())
+
+    async def measure(self, group: str) -> MotionResult:
+        settings = self.settings.group(group)
+        q = self._group_q(settings)
+        return MotionResult(settings.app_joints, tuple(float(v) for v in q), self.tcp_pose(group))
+
+    def joint_limits(self, group: str) -> JointLimits | None:
+        limits = self.limits.get(group)
+        if limits is None:
+            return None
+        names = self.settings.group(group).app_joints
+        return JointLimits(names, tuple(limits.lower), tuple(limits.upper), tuple(limits.velocity), tuple(limits.acceleration))
+
+    # ------------------------------------------------------------------------- commands
+    async def pause(self, group: str) -> None:
+        run = self.runs[group]
+        if run.busy and not run.paused:
+            run.paused = True
+            run.wake.clear()
+            await self.link.cancel(self.settings.group(group))
+
+    async def resume(self, group: str) -> None:
+        run = self.runs[group]
+        run.paused = False
+        run.wake.set()
+
+    async def stop(self, group: str) -> None:
+        run = self.runs[group]
+        if run.busy:
+            run.stopping = True
+            run.wake.set()
+            await self.link.cancel(self.settings.group(group))
+
+    async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
+        if group not in self.runs:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name} drives {', '.join(self.groups)}, not {group}")
+        run = self.runs[group]
+        if run.busy:
+            raise BridgeError(FaultKind.BUSY, f"{group} is running a primitive")
+        run.busy, run.paused, run.stopping = True, False, False
+        try:
+            return await self._execute(self.settings.group(group), run, primitive)
+        finally:
+            run.busy = False
+
+    async def _execute(self, group: GroupSettings, run: _GroupRun, primitive: Primitive) -> PrimitiveResult:
+        what = describe(primitive)
+        if isinstance(primitive, SetSpeed):
+            run.speed = primitive.fraction
+            return await self.measure(group.group)
+        if isinstance(primitive, MoveJoints):
+            target = self._joint_target(group, primitive)
+            return await self._move(group, run, np.vstack((self._group_q(group), target)), what)
+        if isinstance(primitive, (MoveCartesian, MoveRelative)):
+            start = self.tcp_pose(group.group)
+            assert start is not None
+            target = primitive.target if isinstance(primitive, MoveCartesian) else primitive.goal(start)
+            return await self._move(group, run, self._cartesian_path(group, start, target, primitive.interpolation), what)
+        if isinstance(primitive, ExecuteTrajectory):
+            return await self._replay(group, run, primitive, what)
+        if isinstance(primitive, RecordTrajectory):
+            return await self._record(group, run, primitive)
+        if isinstance(primitive, Dwell):
+            await self._hold(run, primitive.seconds)
+            return await self.measure(group.group)
+        if isinstance(primitive, EndEffector):
+            return await self._end_effector(group, primitive)
+        raise BridgeError(FaultKind.UNSUPPORTED, f"{what} is not available on this robot: the ros2-control back end drives joints "
+                          "through FollowJointTrajectory and grippers through GripperCommand")
+
+    def _joint_target(self, group: GroupSettings, primitive: MoveJoints) -> np.ndarray:
+        values = np.array(primitive.positions, dtype=float)
+        if primitive.joint_names and tuple(primitive.joint_names) != group.app_joints:
+            order = {name: k for k, name in enumerate(primitive.joint_names)}
+            missing = [n for n in group.app_joints if n not in order]
+            if missing:
+                raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: a joint move without {', '.join(missing)}")
+            values = np.array([primitive.positions[order[n]] for n in group.app_joints])
+        if len(values) != len(group.joints):
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: {len(values)} joint values for {len(group.joints)} joints")
+        return self._group_q(group) + values if primitive.relative else values
+
+    def _cartesian_path(self, group: GroupSettings, start: Pose, target: Pose, interpolation: str) -> np.ndarray:
+        chain, q = self.chains[group.group], self._q()
+        here = q[chain.indices]
+        if interpolation != "linear":
+            return np.vstack((here, chain.solve(target, q)))
+
+        def solve(pose: Pose, seed: np.ndarray) -> np.ndarray:
+            return chain.solve(pose, chain.with_joints(q, seed))
+
+        return line_path(group.group, here, line_poses(start, target), solve, group.joints)
+
+    async def _move(self, group: GroupSettings, run: _GroupRun, path: np.ndarray, what: str) -> MotionResult:
+        """Play ``path`` (its first point: where the arm is); a pause cancels, a resume re-plans from where it stopped."""
+        limits = self.limits[group.group]
+        limits.check_positions(group.group, path[1:], what)
+        plan, progress = path, 0
+        while True:
+            await self._wait_while_paused(group, run)
+            timed = time_path(plan, limits, run.speed)
+            outcome = await self.link.follow(group, timed)
+            if outcome != CANCELED:
+                break
+            if run.stopping:
+                raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped during {what}")
+            await self._settle(group)
+            plan, progress = remainder(path, self._group_q(group), progress)
+        await self._arrive(group, path[-1], what)
+        return await self.measure(group.group)
+
+    async def _wait_while_paused(self, group: GroupSettings, run: _GroupRun) -> None:
+        while run.paused and not run.stopping:
+            await run.wake.wait()
+        if run.stopping:
+            raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped")
+
+    async def _settle(self, group: GroupSettings) -> None:
+        """Wait (within result_timeout) until the arm stands still after a cancel: the resume plans from there."""
+        deadline = self.clock.now() + self.settings.result_timeout
+        before = self._group_q(group)
+        still_since = self.clock.now()
+        while self.clock.now() - still_since < SETTLE_TIME:
+            if self.clock.now() > deadline:
+                raise BridgeError(FaultKind.CONTROLLER, f"{group.group}: the arm did not come to rest within {self.settings.result_timeout:g} s of the cancel")
+            await self.clock.sleep(SETTLE_TIME / 4)
+            now = self._group_q(group)
+            if float(np.max(np.abs(now - before))) > STILL:
+                still_since = self.clock.now()
+            before = now
+
+    async def _arrive(self, group: GroupSettings, target: np.ndarray, what: str) -> None:
+        """The controller said done: the joint states must say so too (within goal_tolerance, in result_timeout)."""
+        deadline = self.clock.now() + self.settings.result_timeout
+        while True:
+            off = np.abs(self._group_q(group) - target)
+            if float(np.max(off)) <= self.settings.goal_tolerance:
+                return
+            if self.clock.now() > deadline:
+                j = int(np.argmax(off))
+                raise BridgeError(FaultKind.CONTROLLER, f"{group.group}: {what} ended with {group.joints[j]} {off[j]:.4f} rad from its target "
+                                  f"(goal_tolerance {self.settings.goal_tolerance:g} rad)")
+            await self.clock.sleep(0.02)
+
+    async def _replay(self, group: GroupSettings, run: _GroupRun, primitive: ExecuteTrajectory, what: str) -> MotionResult:
+        order = {name: k for k, name in enumerate(primitive.joint_names)}
+        missing = [n for n in group.app_joints if n not in order]
+        if missing:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: trajectory {primitive.name!r} has no {', '.join(missing)}")
+        points = np.array([[p[order[n]] for n in group.app_joints] for p in primitive.points], dtype=float)
+        limits = self.limits[group.group]
+        limits.check_positions(group.group, points, what)
+        here = self._group_q(group)
+        if float(np.max(np.abs(points[0] - here))) > self.settings.goal_tolerance:
+            await self._move(group, run, np.vstack((here, points[0])), f"{what}: to its first point")
+        timed = retime(primitive.times, points, limits, run.speed)
+        if math.isclose(timed.duration, 0.0):
+            return await self.measure(group.group)
+        # played as a path: a pause re-plans the rest from where the arm stopped, at the same speed limits
+        first = await self.link.follow(group, timed) if not run.paused else CANCELED
+        if first == CANCELED:
+            if run.stopping:
+                raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped during {what}")
+            await self._settle(group)
+            rest, _ = remainder(points, self._group_q(group))
+            return await self._move(group, run, rest, what)
+        await self._arrive(group, points[-1], what)
+        return await self.measure(group.group)
+
+    async def _record(self, group: GroupSettings, run: _GroupRun, primitive: RecordTrajectory) -> TrajectoryResult:
+        chain, limits = self.chains[group.group], self.limits[group.group]
+        if primitive.mode == "teach":
+            return await self._teach(group, run, primitive)
+        q = self._q()
+        current, pose = q[chain.indices], chain.tip_pose(q)
+        times, points = [0.0], [current]
+        for waypoint in primitive.waypoints:
+            if primitive.interpolation == "linear":
+                leg = line_path(group.group, current, line_poses(pose, waypoint), lambda p, s: chain.solve(p, chain.with_joints(q, s)), group.joints)
+            else:
+                leg = np.vstack((current, chain.solve(waypoint, chain.with_joints(q, current))))
+            limits.check_positions(group.group, leg, describe(primitive))
+            timed = time_path(leg, limits, 1.0, period=primitive.sample_period)  # each leg from rest to rest: no corner at a waypoint
+            times += [times[-1] + float(t) for t in timed.times[1:]]
+            points += list(timed.points[1:])
+            current, pose = leg[-1], waypoint
+        return TrajectoryResult(group.app_joints, tuple(tuple(float(v) for v in p) for p in points), tuple(times))
+
+    async def _teach(self, group: GroupSettings, run: _GroupRun, primitive: RecordTrajectory) -> TrajectoryResult:
+        """The arm guided by hand (or by its teach pendant): its joint states sampled every sample_period."""
+        begin = self.clock.now()
+        times: list[float] = []
+        points: list[tuple[float, ...]] = []
+        count = max(1, math.ceil(primitive.duration / primitive.sample_period - 1e-9))
+        for k in range(count + 1):
+            at = min(k * primitive.sample_period, primitive.duration)
+            await self.clock.sleep_until(begin + at)
+            if run.stopping:
+                raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped while teaching {primitive.name!r}")
+            times.append(at)
+            points.append(tuple(float(v) for v in self._group_q(group)))
+        return TrajectoryResult(group.app_joints, tuple(points), tuple(times))
+
+    async def _hold(self, run: _GroupRun, seconds: float) -> None:
+        """A dwell: robot time passes only while not paused; a stop ends it."""
+        left = seconds
+        while left > 0:
+            if run.stopping:
+                raise BridgeError(FaultKind.STOPPED, "stopped during a dwell")
+            if run.paused:
+                await run.wake.wait()
+                continue
+            step = min(left, 0.05)
+            await self.clock.sleep(step)
+            left -= step
+
+    async def _end_effector(self, group: GroupSettings, primitive: EndEffector) -> EndEffectorResult:
+        option = GRIPPER_ACTIONS.get(primitive.action)
+        if option is None:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: end effector action {primitive.action} is not available on this robot "
+                              "(the ros2-control back end drives grippers only: gripper_open, gripper_close)")
+        if group.gripper is None:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: {primitive.action} is not available on this robot: no gripper is configured "
+                              f"(give its control_msgs/action/GripperCommand action with --backend-option {group.group}.gripper=NAME)")
+        await self.link.grip(group, getattr(group, option))
+        return EndEffectorResult()
+
+
+def group_chains(urdf: str, settings: Ros2ControlSettings) -> tuple[UrdfModel, dict[str, Chain]]:
+    """The URDF's model and each group's chain on it; UrdfError naming the URDF and the option otherwise."""
+    where = f"urdf={settings.urdf}" if settings.urdf else "/robot_description"
+    try:
+        model = UrdfModel(urdf)
+        chains = {}
+        for group in settings.groups:
+            chains[group.group] = Chain(model, group.group, group.joints, group.tip or default_tip(model, group.joints[-1]), group.tool)
+    except UrdfError as error:
+        raise UrdfError(f"ros2-control: {where}: {error} (options GROUP.joints, GROUP.tip)") from None
+    return model, chains
+
+
+def default_tip(model: UrdfModel, last_joint: str) -> str:
+    """``tool0`` (the ROS-Industrial convention) when the URDF has it, else the link the group's last joint moves."""
+    if model.has_frame("tool0"):
+        return "tool0"
+    jid = model.model.getJointId(last_joint)
+    for frame in model.model.frames:
+        if frame.parentJoint == jid and frame.name != last_joint:
+            return str(frame.name)
+    raise UrdfError(f"no link after joint {last_joint!r} to use as the tip")

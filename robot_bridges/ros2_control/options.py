@@ -1,0 +1,150 @@
+"""The ``ros2-control`` back end's options, parsed and checked before anything connects, starts or runs.
+
+Written ``--backend-option KEY=VALUE``; per group ``GROUP.KEY=VALUE`` (``arm.controller=...``), so a
+dual-arm cell names a controller, joints and gripper for each arm.  ``run`` checks them before its
+dry run (``robot_bridges.registry.check_options``) and the factory builds from what this returns,
+so both refuse a value in the same one line naming the option.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from core_functions.geometry import Pose
+from core_functions.robots import RobotModel
+from robot_bridges.backend import BackendOptions
+
+BACKEND = "ros2-control"
+TRANSPORTS = ("dds", "ros", "model")  # model: no controller, the URDF model follows the trajectories (the dry run)
+#: name: (default, lower, upper, unit, what it is)
+NUMBERS: dict[str, tuple[float, float, float, str, str]] = {
+    "acceleration_time": (0.5, 0.05, 60.0, "s", "how long a joint takes to reach its URDF speed limit (sets the accelerations; URDF has none)"),
+    "state_timeout": (0.5, 0.01, 60.0, "s", "joint_states older than this while the robot moves is a fault"),
+    "start_timeout": (10.0, 0.1, 600.0, "s", "wait for robot_description, joint_states and the controllers' actions at start"),
+    "goal_tolerance": (0.01, 1e-5, 0.5, "rad", "how far from its target a joint may end a motion"),
+    "result_timeout": (5.0, 0.1, 600.0, "s", "how long after a trajectory's end the controller may take to report its result"),
+}
+GLOBAL_TEXTS = ("transport", "urdf", "description")
+GROUP_TEXTS = ("controller", "joints", "tip", "tool", "gripper")
+GROUP_NUMBERS: dict[str, tuple[float, float, float, str]] = {
+    "gripper_open": (0.08, -10.0, 10.0, "m"),
+    "gripper_closed": (0.0, -10.0, 10.0, "m"),
+    "gripper_effort": (0.0, 0.0, 1e5, "N"),
+}
+
+
+@dataclass(frozen=True)
+class GroupSettings:
+    """One group: its FollowJointTrajectory action, its joints as the controller names them (in the
+    application robot's order for that group), the tip frame of its IK and its gripper, if any."""
+
+    group: str
+    controller: str
+    joints: tuple[str, ...]
+    app_joints: tuple[str, ...]
+    tip: str | None
+    tool: Pose  # the TCP in the tip frame
+    gripper: str | None
+    gripper_open: float
+    gripper_closed: float
+    gripper_effort: float
+
+
+@dataclass(frozen=True)
+class Ros2ControlSettings:
+    transport: str
+    urdf: str | None  # a URDF file; None: /robot_description
+    description: str  # where a model link reads /robot_description without a urdf file: dds or ros
+    groups: tuple[GroupSettings, ...]
+    acceleration_time: float
+    state_timeout: float
+    start_timeout: float
+    goal_tolerance: float
+    result_timeout: float
+
+    def group(self, name: str) -> GroupSettings:
+        for settings in self.groups:
+            if settings.group == name:
+                return settings
+        raise KeyError(name)
+
+
+def known_options(robot: RobotModel) -> list[str]:
+    names = [*GLOBAL_TEXTS, *NUMBERS]
+    for group in robot.group_names:
+        names += [f"{group}.{key}" for key in (*GROUP_TEXTS, *GROUP_NUMBERS)]
+    return names
+
+
+def _number(extra: dict[str, str], key: str, default: float, lower: float, upper: float, unit: str) -> float:
+    text = extra.get(key)
+    if text is None:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and lower <= value <= upper):
+        raise ValueError(f"{BACKEND}: {key}={text!r} must be a number in [{lower:g}, {upper:g}] {unit}".rstrip())
+    return value
+
+
+def parse_options(options: BackendOptions, speed: float = 1.0) -> Ros2ControlSettings:
+    """The options checked (ValueError naming the option); ``speed`` is the run's clock factor
+    (``math.inf``: simulated time), which only the model link may take: a controller runs in real time."""
+    robot = options.robot
+    extra = dict(options.extra)
+    unknown = sorted(set(extra) - set(known_options(robot)))
+    if unknown:
+        groups = ", ".join(robot.group_names)
+        raise ValueError(f"{BACKEND}: unknown option(s) {', '.join(unknown)} (known: {', '.join((*GLOBAL_TEXTS, *NUMBERS))}, "
+                         f"and per group ({groups}) GROUP.{', GROUP.'.join((*GROUP_TEXTS, *GROUP_NUMBERS))})")
+    for what, given in (("--host", options.host), ("--port", options.port), ("--rsi-listen", options.rsi_listen)):
+        if given is not None:
+            raise ValueError(f"{BACKEND}: takes no {what}: it reaches the robot through the ROS graph (transport=dds or ros, ROS_DOMAIN_ID)")
+    if options.faults:
+        raise ValueError(f"{BACKEND}: takes no --fault (it drives a real controller)")
+    transport = extra.get("transport", "dds")
+    if transport not in TRANSPORTS:
+        raise ValueError(f"{BACKEND}: transport={transport!r} must be one of {', '.join(TRANSPORTS)}")
+    if transport != "model" and speed != 1.0:
+        raise ValueError(f"{BACKEND}: the controller runs in real time: run with --speed 1 (the default), not {'max' if math.isinf(speed) else f'{speed:g}'}")
+    description = extra.get("description", "dds")
+    if description not in ("dds", "ros"):
+        raise ValueError(f"{BACKEND}: description={description!r} must be dds or ros (the transport /robot_description is read on)")
+    urdf = extra.get("urdf") or None
+    if urdf is not None:
+        try:
+            with open(urdf, encoding="utf-8"):
+                pass
+        except OSError as error:
+            raise ValueError(f"{BACKEND}: urdf={urdf}: {error.strerror or error}") from None
+    numbers = {key: _number(extra, key, *spec[:4]) for key, spec in NUMBERS.items()}
+    groups = tuple(_group(robot, name, extra) for name in robot.group_names)
+    return Ros2ControlSettings(transport, urdf, description, groups, **numbers)
+
+
+def _group(robot: RobotModel, group: str, extra: dict[str, str]) -> GroupSettings:
+    app_joints = robot.group(group).joint_names
+    controller = extra.get(f"{group}.controller", f"/{group}_controller/follow_joint_trajectory")
+    if not controller or any(c.isspace() for c in controller) or controller.endswith("/"):
+        raise ValueError(f"{BACKEND}: {group}.controller={controller!r} is not an action name (e.g. /joint_trajectory_controller/follow_joint_trajectory)")
+    joints = tuple(j.strip() for j in extra.get(f"{group}.joints", ",".join(app_joints)).split(",") if j.strip())
+    if len(joints) != len(app_joints) or len(set(joints)) != len(joints):
+        raise ValueError(f"{BACKEND}: {group}.joints must name {len(app_joints)} different joints, the controller's names of "
+                         f"{', '.join(app_joints)} in that order; got {len(joints)}")
+    gripper = extra.get(f"{group}.gripper") or None
+    numbers = {key: _number(extra, f"{group}.{key}", *spec) for key, spec in GROUP_NUMBERS.items()}
+    tool = _tool(group, extra.get(f"{group}.tool", "0 0 0 0 0 0"))
+    return GroupSettings(group, controller, joints, app_joints, extra.get(f"{group}.tip") or None, tool, gripper, **numbers)
+
+
+def _tool(group: str, text: str) -> Pose:
+    """``x y z roll pitch yaw`` (m, rad), the TCP in the tip frame."""
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) and abs(v) <= 10.0 for v in values):
+        raise ValueError(f"{BACKEND}: {group}.tool must be six numbers x y z roll pitch yaw (m, rad; each within 10), the TCP in the tip frame, got {text!r}")
+    return Pose.from_xyz_rpy(*values)
