@@ -222,16 +222,27 @@ def _dict(hint: Any) -> Exact:
 
 
 def _dataclass(cls: type) -> Exact:
-    """The check of a message dataclass, compiled on first use (dataclasses may refer to each other):
-    it runs once per message on the hot path, so its scalar fields are checked inline, without a call
-    per field, as dataclasses' own generated __init__ does."""
-    compiled: list[Exact] = []
+    """The check of a message dataclass, compiled here: it runs once per message on the hot path, so
+    its scalar fields are checked inline, without a call per field, as dataclasses' own generated
+    __init__ does, and a nested dataclass's compiled check is called directly.  A dataclass that
+    refers to itself (while its check is being compiled) is checked through a wrapper compiled on
+    first use."""
+    if cls in _COMPILING:
+        compiled: list[Exact] = []
 
-    def exact_dataclass(value: Any, walk: Walk) -> bool:
-        if not compiled:
-            compiled.append(_compile(cls))
-        return compiled[0](value, walk)
-    return exact_dataclass
+        def exact_dataclass(value: Any, walk: Walk) -> bool:
+            if not compiled:
+                compiled.append(checker(cls))
+            return compiled[0](value, walk)
+        return exact_dataclass
+    _COMPILING.add(cls)
+    try:
+        return _compile(cls)
+    finally:
+        _COMPILING.discard(cls)
+
+
+_COMPILING: set[type] = set()  # the dataclasses whose checks are being compiled now
 
 
 class _Source:
@@ -285,6 +296,24 @@ class _Source:
             inner = self.scalar(item, args[0], pad + "    ")
             if inner is not None:
                 return [f"{pad}if type({x}) is not tuple: return False", f"{pad}size += 2", f"{pad}for {item} in {x}:", *inner]
+        if origin in (Union, types.UnionType) and is_tagged_union(hint):  # as _union's exact_tagged, without its call
+            by_type = self.name({a: checker(a) for a in members})
+            none = [f"{pad}    size += 5"] if type(None) in args else [f"{pad}    return False"]
+            return [
+                f"{pad}if {x} is None:", *none, f"{pad}else:",
+                f"{pad}    c = {by_type}.get(type({x}))",
+                f"{pad}    if c is None or not c({x}, walk): return False",
+            ]
+        if origin is dict and len(args) == 2 and args[0] is str:  # as _dict's check, without a call per item
+            self.depth += 1
+            key, item = f"k{self.depth}", f"i{self.depth}"
+            inner = self.scalar(item, args[1], pad + "    ") or [f"{pad}    if not {self.name(checker(args[1]))}({item}, walk): return False"]
+            return [
+                f"{pad}if type({x}) is not dict: return False", f"{pad}walk.mutable = True", f"{pad}size += 2",
+                f"{pad}for {key}, {item} in {x}.items():",
+                *self.scalar(key, str, pad + "    "),  # type: ignore[misc]
+                *inner,
+            ]
         return [f"{pad}if not {self.name(checker(hint))}({x}, walk): return False"]
 
 
