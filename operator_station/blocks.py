@@ -15,6 +15,7 @@ listed in :attr:`BlockDocument.unheld`: the builder shows the rest and refuses t
 """
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, Union
@@ -42,6 +43,8 @@ BLOCK_KINDS: dict[str, BlockKind] = {
 }
 #: Blocks inside each other the page may send (the validator refuses past its own limit, 8, at the line).
 MAX_NESTING = 16
+#: AppDocument's message about one operation of the list it was given.
+_NUMBERED = re.compile(r"operation (\d+): (.*)\Z", re.S)
 #: Steps (operations and blocks) a document may hold: the validator's limit on what a file expands to.
 MAX_STEPS = 100_000
 
@@ -145,31 +148,33 @@ def _texts(value: Any, where: str) -> list[str]:
 def _steps(data: list[Any], where: str, depth: int, counter: list[int]) -> list[Step]:
     if depth > MAX_NESTING:
         raise DocumentError(f"{where}: blocks nested more than {MAX_NESTING} deep")
-    out: list[Step] = []
-    for index, item in enumerate(data, start=1):
-        counter[0] += 1
-        if counter[0] > MAX_STEPS:
-            raise DocumentError(f"the application holds more than {MAX_STEPS:,} steps")
-        here = f"{where} {index}" if depth == 1 else f"{where}.{index}"
+    counter[0] += len(data)
+    if counter[0] > MAX_STEPS:
+        raise DocumentError(f"the application holds more than {MAX_STEPS:,} steps")
+    label = (lambda index: f"{where} {index}") if depth == 1 else (lambda index: f"{where}.{index}")
+    out: list[Step | None] = [None] * len(data)
+    operations: list[int] = []  # the places of the operations: checked together, as AppDocument checks a list
+    for index, item in enumerate(data):
         kind = item.get("type") if isinstance(item, dict) else None
+        kind = kind if isinstance(kind, str) else None  # a list or a dict is no kind (nor a key to look one up with)
         if kind == "operation":
-            out.append(_operation(item, here))
+            operations.append(index)
         elif kind in BLOCK_KINDS:
-            out.append(_block(item, BLOCK_KINDS[kind], here, depth, counter))
+            out[index] = _block(item, BLOCK_KINDS[kind], label(index + 1), depth, counter)
         else:
-            raise DocumentError(f"{here}: type must be operation or one of {', '.join(BLOCK_KINDS)}")
-    return out
-
-
-def _operation(item: dict[str, Any], where: str) -> OperationEntry:
-    """An operation of the tree, checked as AppDocument checks one of its list (the message names the step)."""
+            raise DocumentError(f"{label(index + 1)}: type must be operation or one of {', '.join(BLOCK_KINDS)}")
     try:
-        entry = AppDocument.from_json({"name": "", "robot": "", "operations": [item]}).operations[0]
+        entries = AppDocument.from_json({"name": "", "robot": "", "operations": [data[i] for i in operations]}).operations
     except DocumentError as error:
-        raise DocumentError(f"{where}: {str(error).split(': ', 1)[-1]}") from None
-    if len({c.group for c in entry.calls}) != len(entry.calls):
-        raise DocumentError(f"{where}: a group is given twice")
-    return entry
+        found = _NUMBERED.match(str(error))
+        if found is None:
+            raise
+        raise DocumentError(f"{label(operations[int(found.group(1)) - 1] + 1)}: {found.group(2)}") from None
+    for index, entry in zip(operations, entries):
+        if len({c.group for c in entry.calls}) != len(entry.calls):
+            raise DocumentError(f"{label(index + 1)}: a group is given twice")
+        out[index] = entry
+    return [step for step in out if step is not None]
 
 
 def _block(item: dict[str, Any], kind: BlockKind, where: str, depth: int, counter: list[int]) -> Block:

@@ -144,9 +144,13 @@ def _block(element: etree._Element, comments: list[str], unheld: list[str]) -> B
 
 
 # ------------------------------------------------------------------------------ writing
-def _comment(text: str) -> etree._Comment:
-    safe = text.replace("--", "- -")  # a comment cannot hold "--" nor end with "-"
-    return etree.Comment(safe[:-1] + "- " if safe.endswith("-") else safe)
+def _comment(text: str, where: str) -> etree._Comment:
+    # a comment cannot hold "--" nor end with "-", and keeps no carriage return (XML reads line ends as "\n")
+    safe = text.replace("\r\n", "\n").replace("\r", "\n").replace("--", "- -")
+    try:
+        return etree.Comment(safe[:-1] + "- " if safe.endswith("-") else safe)
+    except ValueError:
+        raise DocumentError(f"{where}: a comment holds a character XML cannot carry") from None
 
 
 def _set(element: etree._Element, name: str, value: str | None, where: str) -> None:
@@ -182,9 +186,9 @@ def write_blocks(document: BlockDocument) -> tuple[str, list[Where]]:
         placed[policy] = Where(part="error_policy")
     _write_body(root, document.body, (), placed)
     for text in head.trailer:
-        root.append(_comment(text))
+        root.append(_comment(text, "application"))
     etree.indent(root, space="  ")
-    above = b"".join(etree.tostring(_comment(text), encoding="UTF-8") + b"\n" for text in head.header)  # each on its own lines
+    above = b"".join(etree.tostring(_comment(text, "application"), encoding="UTF-8") + b"\n" for text in head.header)  # each on its own lines
     data = DECLARATION + above + etree.tostring(root, encoding="UTF-8") + b"\n"
     return data.decode("utf-8"), _line_map(root, data, placed)
 
@@ -194,7 +198,7 @@ def _write_body(parent: etree._Element, body: list[Step], path: tuple[int, ...],
         here = (*path, index)
         where = f"step {'.'.join(str(i + 1) for i in here)}"
         for text in step.comments:
-            parent.append(_comment(text))
+            parent.append(_comment(text, where))
         if isinstance(step, OperationEntry):
             _write_operation(parent, step, here, where, placed)
             continue
@@ -209,7 +213,7 @@ def _write_body(parent: etree._Element, body: list[Step], path: tuple[int, ...],
             placed[holder] = Where(here, None, i, "param")
         _write_body(element, step.body, here, placed)
         for text in step.trailer:
-            element.append(_comment(text))
+            element.append(_comment(text, where))
 
 
 def _write_operation(parent: etree._Element, operation: OperationEntry, here: tuple[int, ...], where: str, placed: dict[etree._Element, Where]) -> None:
