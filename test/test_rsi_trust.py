@@ -148,10 +148,12 @@ def test_relative_corrections_with_dropped_replies_still_end_on_every_target(rig
     r.correcting()
     here = r.iface.state(0).tcp()
     goal = here.translated(0.05, 0.1, -0.05)
-    assert r.done(r.iface.set_cart_pos(0, goal, 0.3, 2.0))[0]
+    ok, message, _ = r.done(r.iface.set_cart_pos(0, goal, 0.3, 2.0))
+    assert ok, message
     assert np.linalg.norm(ARM.fk(r.sim.model.trace[-1])[:3, 3] - goal.position) < 1e-9  # type: ignore[index]
     target = np.radians([20, -70, 80, 10, 40, 10])
-    assert r.done(r.iface.set_axial_pos(0, target, 1.0, 5.0))[0]
+    ok, message, _ = r.done(r.iface.set_axial_pos(0, target, 1.0, 5.0))
+    assert ok, message
     assert np.allclose(r.sim.model.trace[-1], target, atol=1e-9)  # type: ignore[index]
     assert r.sim.model.stats.dropped > 0 and r.sim.model.stats.late > 0 and r.sim.running
     loop = r.iface.loop

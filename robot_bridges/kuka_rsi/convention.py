@@ -15,7 +15,7 @@ real KR C4 follows is not settled; the external system must be safe with each:
 * **absent**: the actual values are checked the same way.
 
 The convention is decided in the first cycles in which the commanded set point has left the start by more
-than the tolerance -- before that both fit, and the actual values are checked as for a frozen report -- and
+than twice the tolerance -- before that a report may fit both, and the actual values are checked as for a frozen report -- and
 reported once.  A report that fits neither is a fault,
 as is a frozen report that moves later, or an actual position off the commanded path: the controller does
 something it was not told, or says something untrue.
@@ -55,7 +55,6 @@ class ReportCheck:
         self.tcp_tolerance = tcp_tolerance  # m, rad
         self.window_ms = window_ms
         self._note = note
-        self._has_setpoint = has_setpoint
         self.convention = Convention.UNDECIDED if has_setpoint else Convention.ABSENT
         self.start_axes: Vector | None = None
         self.start_pose: Matrix | None = None
@@ -102,7 +101,8 @@ class ReportCheck:
         tol = self.tolerance
         follows = joint_disagreement(setpoint, recent, tol) is None
         frozen = bool((np.abs(setpoint - self.start_axes) <= tol).all())
-        decidable = joint_disagreement(self.start_axes, recent, tol) is not None  # the commanded set point has left the start
+        # The commanded set point has left the start by twice the tolerance: no report can fit both.
+        decidable = joint_disagreement(self.start_axes, recent, 2.0 * tol) is not None
         if decidable and follows:
             self._decide(Convention.FOLLOWS, "ASPos")
         elif decidable and frozen:
@@ -128,7 +128,7 @@ class ReportCheck:
                 return None if follows is None else _tcp_fault(recent[-1], setpoint, follows, tol_m, tol_rad)
             assert self.start_pose is not None
             frozen = pose_disagreement(setpoint, [self.start_pose], tol_m, tol_rad) is None
-            decidable = pose_disagreement(self.start_pose, recent, tol_m, tol_rad) is not None
+            decidable = pose_disagreement(self.start_pose, recent, 2.0 * tol_m, 2.0 * tol_rad) is not None
             if decidable and follows is None:
                 self._decide(Convention.FOLLOWS, "RSol")
                 return None
