@@ -90,6 +90,16 @@ def test_a_set_point_frozen_at_the_start_is_found_and_the_actual_axes_are_checke
     assert level == logging.WARNING and "frozen at the start pose" in text and "the cross-check compares the actual axes (AIPos" in text
 
 
+def test_a_frozen_report_with_a_little_noise_is_not_taken_for_a_following_one() -> None:
+    """Slow first steps (0.06 deg a cycle) and a frozen report 0.05 deg off the start: one tolerance from the
+    start, the report would still fit the commanded set point; the decision waits for two."""
+    c = Cycles()
+    noisy = START + np.radians([0, 0, 0, 0, 0.05, 0])
+    for q in _ramp(30, rate_deg=0.06):
+        assert c.step(q, noisy, q) is None
+    assert c.check.convention is Convention.FROZEN
+
+
 def test_a_frozen_report_that_starts_moving_is_a_fault() -> None:
     c = Cycles()
     path = _ramp(10)
