@@ -5,7 +5,8 @@ Usage: python -m operator_station.screenshots [docs/img]
 Serves a station on the rivet demonstrator (a copy, in a temporary folder) at 4x, shows the
 builder with a cell selected and a bad edit, runs the application and shoots the monitor while
 both arms work, the timeline when it has finished, then replays the trace and shoots the monitor
-and the timeline with the time slider put back to the middle of the run.
+and the timeline with the time slider put back to the middle of the run; last, the builder on the
+pallet-grid example (a loop as a block).
 """
 from __future__ import annotations
 
@@ -97,7 +98,28 @@ def shoot(out: Path) -> list[Path]:
         finally:
             replay.close()
             driver.quit()
+    shots.append(shoot_loops(out))
     return shots
+
+
+def shoot_loops(out: Path) -> Path:
+    """The builder on the pallet-grid example: a for_each over a grid as a block, an operation inside it selected."""
+    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
+        folder = Path(name)
+        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
+        shutil.copytree(ROOT / "apps_xml" / "examples", folder / "examples")
+        driver = browser.chromium(1600, 700)
+        served = serve(build_station(_args(file="examples/pallet_grid.xml"), full_catalog(), folder))
+        try:
+            driver.get(served.url)
+            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true && Builder.state.cellNames")
+            driver.execute_script("Builder.select(1, 'right_arm')")
+            _until(driver, "document.getElementById('fn-select') !== null")
+            driver.save_screenshot(str(out / "studio_builder_loops.png"))
+        finally:
+            served.close()
+            driver.quit()
+    return out / "studio_builder_loops.png"
 
 
 def main() -> int:

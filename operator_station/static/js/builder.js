@@ -117,7 +117,7 @@ const Builder = (() => {
   const rowOf = (key) => b.view.byKey.get(key);
   function renderTable() {
     const gs = groups();
-    const columns = `40px 70px 140px repeat(${Math.max(gs.length, 1)}, minmax(180px, 1fr)) 96px`;
+    const columns = `40px 70px 140px repeat(${Math.max(gs.length, 1)}, minmax(180px, 1fr)) 112px`;
     $("ops-header").style.gridTemplateColumns = columns;
     $("ops-header").replaceChildren(el("div", {text: "#"}), el("div", {text: "id"}), el("div", {text: "name"}),
       ...gs.map((g) => el("div", {text: g, class: "group-head"})), el("div", {text: ""}));
