@@ -19,6 +19,19 @@ BATCH = 64  # samples taken per call into Cyclone
 FAILURE_LIMIT = 1000  # undecodable samples in a row before a handler call gives up until the next
 
 
+_LOADED: list[tuple[Any, int]] = []
+
+
+def _clayer() -> tuple[Any, int]:
+    """cyclonedds-python's C layer and the mask of every sample a reader holds, looked up once (an
+    import statement in a function costs 2 us a call, the mask's three flags another few)."""
+    if not _LOADED:
+        from cyclonedds import _clayer as clayer, core  # optional: pip extra 'dds'; only a DDS transport reads or writes
+
+        _LOADED.append((clayer, int(core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any)))
+    return _LOADED[0]
+
+
 def delete(entity: Any) -> None:
     """Delete a Cyclone entity now (a take under way on another thread finishes first)."""
     try:
@@ -46,10 +59,8 @@ class Taker:
         self.topic = topic
 
     def take(self, reader: Any) -> list[Any]:
-        from cyclonedds._clayer import ddspy_take  # optional: pip extra 'dds'; only a DDS transport has readers
-
-        core = self.transport.dds.core
-        mask = core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any
+        clayer, mask = _clayer()
+        ddspy_take = clayer.ddspy_take
         decode = codec(reader.topic.data_type).decode
         samples: list[Any] = []
         failures = taken = 0
@@ -80,9 +91,7 @@ class Taker:
 def write(writer: Any, sample: Any) -> None:
     """Write ``sample`` (an instance of the writer's wire type) with the compiled codec: the bytes
     cyclonedds-python's ``DataWriter.write`` would write, in a fraction of its time."""
-    from cyclonedds._clayer import ddspy_write  # optional: pip extra 'dds'; only a DDS transport has writers
-
-    ret = ddspy_write(writer._ref, codec(type(sample)).encode(sample))
+    ret = _clayer()[0].ddspy_write(writer._ref, codec(type(sample)).encode(sample))
     if ret < 0:
         from cyclonedds.core import DDSException  # optional: pip extra 'dds'
 
