@@ -19,7 +19,7 @@ How goals are taken, as joint_trajectory_controller takes them where it can, and
   group in it), or whose bridge is executing a machine's primitive, is refused (INVALID_GOAL, naming
   the run); while a goal holds a group, the bridge refuses the machines' primitives for it (BUSY,
   naming the goal).  So the engine and an action client never command one group at once.
-* The cell's pause (the engine paused, by an operator or the safety stop) stops a running goal's
+* The cell's pause (the engine paused by an operator) stops a running goal's
   arm on its path and the path's time with it; the engine's resume goes on with the rest of the path
   from where the arm stands (:func:`~robot_bridges.trajectory_goal.continued`).  A ``true`` on
   ``cell/safety_stop`` stops a running goal on its path and ends it (PATH_TOLERANCE_VIOLATED, saying
