@@ -4,13 +4,13 @@
 of ``<for_each>``, ``<repeat>`` and ``<call>`` is a tree, which the page shows as nested blocks.
 A :class:`BlockDocument` is that tree as written -- each block's attributes as text (``in`` as
 written, never expanded: the page edits the file, not its iterations), a call's params, the
-comments above each step and at the end of each body -- so opening and saving a looped file
+comments above each step, above each group's call and at the end of each body -- so opening and saving a looped file
 gives the same XML (equal in canonical form, :mod:`operator_station.blocks_xml`).
 
 The kinds of block are data (:data:`BLOCK_KINDS`): a branch (``<if>``/``<else>``) is one more
 kind with its attributes and a second body, not a new code path through the page and the server.
 
-What the model does not hold (an element it does not know, a comment inside an operation) is
+What the model does not hold (an element it does not know, a comment inside a call's params) is
 listed in :attr:`BlockDocument.unheld`: the builder shows the rest and refuses to write over it.
 """
 from __future__ import annotations
@@ -59,6 +59,14 @@ class Block:
     trailer: list[str] = field(default_factory=list)  # the comments after the last step of its body
 
 
+@dataclass(slots=True)
+class OperationStep(OperationEntry):
+    """An operation with the comments written inside it: above each group's call, by group (``""``: after the
+    last call) -- AppDocument's writer has no place for them, so an operation holding any is written through lxml."""
+
+    inner: dict[str, list[str]] = field(default_factory=dict)
+
+
 Step = Union[OperationEntry, Block]
 
 
@@ -75,7 +83,7 @@ class BlockDocument:
 
     def is_flat(self) -> bool:
         """Operations only, as AppDocument holds them: written in the paper's Figure 6 layout."""
-        return self.sync is None and not self.unheld and all(isinstance(step, OperationEntry) for step in self.body)
+        return self.sync is None and not self.unheld and all(isinstance(step, OperationEntry) and not getattr(step, "inner", None) for step in self.body)
 
     def flat(self) -> AppDocument:
         head = self.head
@@ -130,9 +138,13 @@ def walk(body: list[Step], visit: Callable[[Step, tuple[int, ...]], object], pat
 
 def _step_json(step: Step) -> dict[str, Any]:
     if isinstance(step, OperationEntry):
-        return {"type": "operation", "id": step.id, "name": step.name, "comments": list(step.comments),
-                "calls": [{"group": c.group, "function": c.function, "params": [{"value": p.value, "name": p.name} for p in c.params]}
-                          for c in step.calls]}
+        out = {"type": "operation", "id": step.id, "name": step.name, "comments": list(step.comments),
+               "calls": [{"group": c.group, "function": c.function, "params": [{"value": p.value, "name": p.name} for p in c.params]}
+                         for c in step.calls]}
+        inner = getattr(step, "inner", None)
+        if inner:
+            out["inner"] = {group: list(texts) for group, texts in inner.items()}
+        return out
     return {"type": step.kind, "attributes": dict(step.attributes), "params": [{"name": p.name, "value": p.value} for p in step.params],
             "body": [_step_json(s) for s in step.body], "comments": list(step.comments), "trailer": list(step.trailer)}
 
@@ -173,8 +185,21 @@ def _steps(data: list[Any], where: str, depth: int, counter: list[int]) -> list[
     for index, entry in zip(operations, entries):
         if len({c.group for c in entry.calls}) != len(entry.calls):
             raise DocumentError(f"{label(index + 1)}: a group is given twice")
-        out[index] = entry
+        out[index] = OperationStep(entry.id, entry.name, entry.calls, entry.comments, _inner(data[index].get("inner"), entry, label(index + 1)))
     return [step for step in out if step is not None]
+
+
+def _inner(value: Any, entry: OperationEntry, where: str) -> dict[str, list[str]]:
+    """An operation's inner comments; those of a group it no longer calls go after its last call."""
+    if value is None:
+        return {}
+    if not (isinstance(value, dict) and all(isinstance(k, str) for k in value)):
+        raise DocumentError(f"{where}: inner must map groups to comments")
+    groups = {c.group for c in entry.calls}
+    out: dict[str, list[str]] = {}
+    for group, texts in value.items():
+        out.setdefault(group if group in groups else "", []).extend(_texts(texts, where))
+    return {group: texts for group, texts in out.items() if texts}
 
 
 def _block(item: dict[str, Any], kind: BlockKind, where: str, depth: int, counter: list[int]) -> Block:
@@ -191,7 +216,7 @@ def _block(item: dict[str, Any], kind: BlockKind, where: str, depth: int, counte
             raise DocumentError(f"{where}: " + ("each param of a call needs a text name and value" if kind.params else f"<{kind.tag}> has no params"))
         params.append(ParamEntry(value, name))
     body = item.get("body") or []
-    if not isinstance(body, list) or (body and not kind.body):
+    if not isinstance(body, list) or ((body or item.get("trailer")) and not kind.body):  # a trailer closes a body
         raise DocumentError(f"{where}: " + ("body must be a list of steps" if kind.body else f"<{kind.tag}> has no body"))
     ordered = {name: attributes[name] for name in kind.attributes if name in attributes}
     return Block(kind.tag, ordered, _steps(body, where, depth + 1, counter), params,

@@ -21,7 +21,7 @@ from lxml import etree
 from execution_engine.app_model.diagnostics import Diagnostic
 from execution_engine.app_model.document import POLICY_ATTRIBUTES, CallEntry, DocumentError, OperationEntry, ParamEntry, parse_document
 from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES
-from operator_station.blocks import BLOCK_KINDS, Block, BlockDocument, Step
+from operator_station.blocks import BLOCK_KINDS, Block, BlockDocument, OperationStep, Step
 
 #: The root's attributes the document holds, in the order written.
 ROOT_ATTRIBUTES = ("name", "robot", "cell", "version", "sync")
@@ -106,10 +106,18 @@ def _children(element: etree._Element, unheld: list[str]) -> list[etree._Element
     return out
 
 
-def _operation(element: etree._Element, comments: list[str], unheld: list[str]) -> OperationEntry:
+def _operation(element: etree._Element, comments: list[str], unheld: list[str]) -> OperationStep:
     _attributes(element, ("id", "name"), unheld)
-    operation = OperationEntry(element.get("id", ""), element.get("name"), comments=list(comments))
-    for group in _children(element, unheld):
+    operation = OperationStep(element.get("id", ""), element.get("name"), comments=list(comments))
+    pending: list[str] = []
+    for group in element:
+        if group.tag is etree.Comment:  # above a group's call, or after the last one
+            pending.append(str(group.text or ""))
+            continue
+        if not isinstance(group.tag, str):
+            continue
+        if pending:
+            operation.inner[group.tag], pending = pending, []
         functions = _children(group, unheld)
         if len(functions) != 1 or functions[0].tag != "function":
             unheld.append(f"<{group.tag}> at line {group.sourceline} without one <function>")
@@ -124,6 +132,8 @@ def _operation(element: etree._Element, comments: list[str], unheld: list[str]) 
             _attributes(param, ("value", "name"), unheld)
             params.append(ParamEntry(param.get("value", ""), param.get("name")))
         operation.calls.append(CallEntry(group.tag, function.get("name", ""), params))
+    if pending:
+        operation.inner[""] = pending
     return operation
 
 
@@ -221,9 +231,12 @@ def _write_operation(parent: etree._Element, operation: OperationEntry, here: tu
     _set(element, "id", operation.id, where)
     _set(element, "name", operation.name, where)
     placed[element] = Where(here, part="operation")
+    inner: dict[str, list[str]] = getattr(operation, "inner", {})
     for call in operation.calls:
         if not _NAME.match(call.group):
             raise DocumentError(f"{where}: group {call.group!r} is not a name")
+        for text in inner.get(call.group, ()):
+            element.append(_comment(text, where))
         group = etree.SubElement(element, call.group)
         function = etree.SubElement(group, "function")
         _set(function, "name", call.function, where)
@@ -237,6 +250,11 @@ def _write_operation(parent: etree._Element, operation: OperationEntry, here: tu
                 _set(item, "name", param.name, where)
                 _set(item, "value", param.value, where)
                 placed[item] = Where(here, call.group, i, "param")
+    called = {call.group for call in operation.calls}
+    for group, texts in inner.items():  # after the last call, and those of a group no longer called
+        if group not in called:
+            for text in texts:
+                element.append(_comment(text, where))
 
 
 def _line_map(root: etree._Element, data: bytes, placed: dict[etree._Element, Where]) -> list[Where]:

@@ -146,22 +146,37 @@ def test_a_flat_file_with_flags_sync_keeps_it(apps: Path) -> None:
 
 
 def test_what_the_builder_does_not_hold_is_never_written_over_and_an_unchanged_file_is_checked_as_itself(apps: Path) -> None:
-    text = (apps / "rivet_loop.xml").read_text(encoding="utf-8").replace("<torso_head><function name=\"wait\"/></torso_head>",
-                                                                        "<!-- the head waits --><torso_head><function name=\"wait\"/></torso_head>", 1)
+    text = (apps / "rivet_loop.xml").read_text(encoding="utf-8").replace('<params><param value="rivet_{index}"/>',
+                                                                        '<params><!-- the slot of the same place --><param value="rivet_{index}"/>', 1)
     (apps / "noted.xml").write_bytes(text.encode("utf-8"))
     client = client_for(build_station(station_args(), CATALOG, apps))
     document = client.post("/api/open", json={"path": "noted.xml"}).json()["document"]
-    assert document["unheld"] == ["a comment inside <operation> at line 21"]
+    assert document["unheld"] == ["a comment inside <params> at line 22"]
     unchanged = post(client, "validate", "noted.xml", document).json()
     assert unchanged["ok"], unchanged  # the file itself, loops and comment
     saved = post(client, "save", "noted.xml", document).json()
     assert not saved["ok"] and saved["messages"][-1]["message"].endswith(
-        "holds a comment inside <operation> at line 21, which the builder does not hold: saving would drop them; edit the file as text, or save under another name")
+        "holds a comment inside <params> at line 22, which the builder does not hold: saving would drop them; edit the file as text, or save under another name")
     document["body"][0]["name"] = "edited"
     refused = post(client, "validate", "noted.xml", document).json()
     assert not refused["ok"] and "an edit cannot be checked, run or saved without them" in refused["messages"][0]["message"]
     assert post(client, "run", "noted.xml", document).json()["ok"] is False
     assert (apps / "noted.xml").read_bytes() == text.encode("utf-8")
+
+
+def test_comments_inside_an_operation_are_kept_where_they_were_written(apps: Path) -> None:
+    """The bin-transfer example explains a move inside its operation: an edit elsewhere keeps the comment above that call."""
+    shutil.copy(ROOT / "apps_xml" / "examples" / "bin_transfer.xml", apps / "examples" / "bin_transfer.xml")
+    client = client_for(build_station(station_args(), CATALOG, apps))
+    document = client.post("/api/open", json={"path": "examples/bin_transfer.xml"}).json()["document"]
+    assert document["unheld"] == [] and document["body"][6]["inner"] == {"right_arm": [" tool z points out of the hand (down here): -60 mm in tool z lifts the part "]}
+    document["body"][0]["name"] = "edited"
+    assert post(client, "save", "examples/bin_transfer.xml", document).json()["ok"]
+    written = (apps / "examples" / "bin_transfer.xml").read_text(encoding="utf-8")
+    assert '<operation id="7" name="lift part 1">\n    <!-- tool z points out of the hand (down here): -60 mm in tool z lifts the part -->\n    <right_arm>' in written
+    assert client.post("/api/open", json={"path": "examples/bin_transfer.xml"}).json()["document"] == document
+    original = expanded(ROOT / "apps_xml" / "examples" / "bin_transfer.xml")
+    assert expanded(apps / "examples" / "bin_transfer.xml") == [(original[0][0], "edited", *original[0][2:]), *original[1:]]
 
 
 def step(**changes: Any) -> dict[str, Any]:

@@ -20,7 +20,8 @@ GROUP = st.sampled_from(["left_arm", "right_arm", "torso_head"]) | TEXT
 PARAM = st.fixed_dictionaries({"value": TEXT, "name": st.none() | TEXT})
 CALL = st.fixed_dictionaries({"group": GROUP, "function": TEXT, "params": st.lists(PARAM, max_size=2)})
 OPERATION = st.fixed_dictionaries({"type": st.just("operation"), "id": TEXT, "name": st.none() | TEXT, "comments": st.lists(COMMENT, max_size=1),
-                                   "calls": st.lists(CALL, max_size=2, unique_by=lambda c: c["group"])})
+                                   "calls": st.lists(CALL, max_size=2, unique_by=lambda c: c["group"])},
+                                  optional={"inner": st.dictionaries(st.sampled_from(["", "left_arm", "right_arm"]), st.lists(COMMENT, min_size=1, max_size=2), max_size=2)})
 
 
 def block(inner: Any) -> Any:
