@@ -67,6 +67,8 @@ _ROS_I_RECEIVE = [f"AK.{a} DOUBLE {i + 1} 1" for i, a in enumerate(_AXES)]
 ROS_I_KR_C4 = _config("ImFree", 49152, _ROS_I_SEND, _ROS_I_RECEIVE)
 #: ROS-Industrial's KR C2 configuration: a PROTOCOL in CONFIG and a UNIT on every element, which RSI reads and we need not.
 ROS_I_KR_C2 = _config("ImFree", 49152, _ROS_I_SEND, _ROS_I_RECEIVE, "    <PROTOCOL>UDP</PROTOCOL>", ' UNIT="0"')
+#: kroshu's configuration for one external axis: its correction EK.E1 after the robot's.
+EXTERNAL_AXIS = _config("KROSHU", 59152, _KROSHU_SEND, [*_KROSHU_RECEIVE, "EK.E1 DOUBLE 8 1"])
 #: The technology parameters ROS-I's KR C4 file names in its comments: generator 1 (advance run) in
 #: SEND, generator 2 (main run) in RECEIVE, with the KSS GPIO elements beside them.
 TECH = _config(
@@ -75,7 +77,10 @@ TECH = _config(
 )
 
 #: Every layout by name.
-ALL = {"kss": KSS, "iiqka": IIQKA, "kss_earlier": KSS_EARLIER, "gpio": GPIO, "ros_i_kr_c4": ROS_I_KR_C4, "ros_i_kr_c2": ROS_I_KR_C2, "tech": TECH}
+ALL = {
+    "kss": KSS, "iiqka": IIQKA, "kss_earlier": KSS_EARLIER, "gpio": GPIO, "external_axis": EXTERNAL_AXIS, "ros_i_kr_c4": ROS_I_KR_C4,
+    "ros_i_kr_c2": ROS_I_KR_C2, "tech": TECH,
+}
 
 #: An application a configuration without Cartesian corrections or tool outputs can run: joint moves,
 #: point-to-point moves to cell frames, a recorded sweep streamed point by point, a dwell, home.

@@ -56,6 +56,7 @@ def test_numeric_signals_are_set_by_name_and_inputs_reported_when_they_change(ri
     r.iface.set_output(0, "AK.A1", 1.0)  # the bridge's own correction: not the application's
     r.wait(lambda: "AK.A1" in r.iface.events.outputs[0], "the refusal")
     assert r.iface.events.outputs[0]["AK.A1"] == (None, "AK.A1 is not a numeric value the configuration sends to the robot")
+    assert r.sim.model._received[r.sim.model.sen.index["AK.A1"]] == 0.0
 
 
 # ----------------------------------------------------------------------------- the back end
@@ -90,6 +91,17 @@ def test_set_output_and_wait_input_by_name(tmp_path: Path) -> None:
         assert await waiting == IoResult({"GPIO.02": 1.0})
 
     _with_backend(tmp_path, peers.GPIO, body)
+
+
+def test_an_external_axis_correction_is_no_signal(tmp_path: Path) -> None:
+    """kroshu's external-axis configuration receives EK.E1: a correction no limiter would hold, not the application's."""
+
+    async def body(b: KukaRsiBackend) -> None:
+        with pytest.raises(BridgeError) as caught:
+            await b.execute("arm", SetOutput("EK.E1", 5.0))
+        assert caught.value.kind is FaultKind.UNSUPPORTED and "has no output 'EK.E1' (its outputs: none)" in caught.value.detail
+
+    _with_backend(tmp_path, peers.EXTERNAL_AXIS, body)
 
 
 def test_a_numeric_signal_within_its_tolerance(tmp_path: Path) -> None:

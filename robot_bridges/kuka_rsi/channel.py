@@ -90,7 +90,8 @@ class Channel:
         self._i_rk = [self.sen.index[k] for k in roles.cart_correction] if cart else None
         self._i_correcting = ri[roles.correction_active] if roles.handshake(config) else None
         holdon = {f.key: f.holdon for f in self.sen.fields}
-        self.io = IoValues(self.rob.fields, self.sen.fields, (*roles.axis_correction, *roles.cart_correction))
+        external = tuple(f.key for f in self.sen.fields if f.element == "EK")  # an external axis: a correction too
+        self.io = IoValues(self.rob.fields, self.sen.fields, (*roles.axis_correction, *roles.cart_correction, *external))
         dt_ms = link.cycle_ms
         check = ReportCheck(
             np.radians(np.array(link.setpoint_tolerance_deg)), (link.tcp_tolerance_mm / 1000.0, math.radians(link.tcp_tolerance_deg)),

@@ -4,7 +4,8 @@ Whatever the RSI configuration carries besides motion is the application's: kros
 in ``<Sen>``, read back in ``<Rob>``) and ``GPIO.02`` (an input), the technology parameters ``Tech.C11`` ..
 (inputs) and ``Tech.T21`` .. (outputs), any element a context wires to an ETHERNET channel.  Outputs the
 bridge drives itself -- the corrections, ``Stop``, the handshake flags, the tool outputs (``end_effector``)
--- are not the application's to set.  A BOOL travels as a flag bit, anything else through the loop's
+-- and an external axis's correction (kroshu's ``EK.E1``), which no limiter would hold, are not the
+application's to set.  A BOOL travels as a flag bit, anything else through the loop's
 control messages (:mod:`.io_values`); every wait is bounded in robot cycles, as the rest of the back end's.
 """
 from __future__ import annotations
@@ -30,7 +31,10 @@ class Signals:
             *roles.axis_correction, *roles.cart_correction, roles.stop, roles.allow_start, roles.allow_move, roles.allow_finish,
             roles.request_end, *roles.tools(config),
         }
-        self.outputs: dict[str, Field] = {f.key: f for f in config.receive_fields if f.key not in driven}
+        # Corrections move axes: never a signal, whether the bridge drives them (AK, RKorr) or not (kroshu's EK.E1,
+        # an external axis the bridge does not drive and no limiter would hold).
+        motion = {field.split(".", 1)[0] for field in (*roles.axis_correction, *roles.cart_correction)} | {"EK"}
+        self.outputs: dict[str, Field] = {f.key: f for f in config.receive_fields if f.key not in driven and f.element not in motion}
         self.inputs: dict[str, Field] = {f.key: f for f in config.send_fields if f.element not in FEEDBACK_ELEMENTS}
 
     def _unknown(self, kind: str, name: str, known: dict[str, Field]) -> BridgeError:
