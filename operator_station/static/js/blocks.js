@@ -110,7 +110,7 @@ const Blocks = (() => {
     input.addEventListener("change", () => apply(input.value));
     return input;
   }
-  function inFields(el, step, cellNames, edited, redraw) {
+  function inFields(el, step, cellNames, edited, redraw, where) {
     const spec = parseIn(step.attributes.in);
     const set = (changes) => { Object.assign(spec, changes); step.attributes.in = composeIn(spec); edited(); };
     const mode = el("select", {class: "blk-field blk-mode", title: "the values"},
@@ -126,11 +126,11 @@ const Blocks = (() => {
     const kinds = [...new Set(((cellNames && cellNames.frames) || []).map((f) => f.kind))];
     const parts = [mode];
     if (spec.mode === "list") parts.push(field(el, "blk-list", spec.list, "values, e.g. drill_1 drill_2", (v) => set({list: v}), {size: 28}));
-    else if (spec.mode === "kind") parts.push(field(el, "blk-kind", spec.kind, "a kind of frame", (v) => set({kind: v}), {list: "blk-kinds", size: 10}),
-      el("datalist", {id: "blk-kinds"}, ...kinds.map((k) => el("option", {value: k}))));
+    else if (spec.mode === "kind") parts.push(field(el, "blk-kind", spec.kind, "a kind of frame", (v) => set({kind: v}), {list: `blk-kinds-${where}`, size: 10}),
+      el("datalist", {id: `blk-kinds-${where}`}, ...kinds.map((k) => el("option", {value: k}))));
     else if (spec.mode === "grid") parts.push(
-      field(el, "blk-origin", spec.origin, "origin frame", (v) => set({origin: v}), {list: "blk-frames", size: 10}),
-      el("datalist", {id: "blk-frames"}, ...frames.map((f) => el("option", {value: f}))),
+      field(el, "blk-origin", spec.origin, "origin frame", (v) => set({origin: v}), {list: `blk-frames-${where}`, size: 10}),
+      el("datalist", {id: `blk-frames-${where}`}, ...frames.map((f) => el("option", {value: f}))),
       field(el, "blk-size", spec.size, "rows x columns, e.g. 3x4", (v) => set({size: v}), {size: 4}),
       field(el, "blk-px", spec.px, "pitch along x [m]", (v) => set({px: v}), {size: 5}),
       field(el, "blk-py", spec.py, "pitch along y [m]", (v) => set({py: v}), {size: 5}));
@@ -143,16 +143,16 @@ const Blocks = (() => {
     const parts = [el("span", {class: `blk-kind blk-${step.type}`, text: (KINDS[step.type] || {label: step.type}).label, title: (KINDS[step.type] || {}).help || ""})];
     if (step.type === "for_each") {
       parts.push(field(el, "blk-var", step.attributes.var, "variable", attr("var"), {size: 7}), el("span", {text: "in"}),
-        ...inFields(el, step, ctx.cellNames, ctx.edited, ctx.redraw),
+        ...inFields(el, step, ctx.cellNames, ctx.edited, ctx.redraw, ctx.where),
         field(el, "blk-index", step.attributes.index, "index", attr("index"), {size: 6}));
     } else if (step.type === "repeat") {
       parts.push(field(el, "blk-count", step.attributes.count, "count", attr("count"), {size: 4}), el("span", {text: "times, counting"}),
         field(el, "blk-var", step.attributes.var, "index", attr("var"), {size: 7}));
     } else if (step.type === "call") {
-      parts.push(field(el, "blk-application", step.attributes.application, "application file, e.g. blocks/rivet_block.xml", attr("application"), {size: 26}));
+      parts.push(field(el, "blk-application", step.attributes.application, "application file, e.g. blocks/rivet_block.xml", attr("application"), {size: 22}));
       step.params.forEach((p, i) => parts.push(el("span", {class: "blk-param"},
-        field(el, "blk-param-name", p.name, "name", (v) => { p.name = v; ctx.edited(); }, {size: 6}), "=",
-        field(el, "blk-param-value", p.value, "value", (v) => { p.value = v; ctx.edited(); }, {size: 10}),
+        field(el, "blk-param-name", p.name, "name", (v) => { p.name = v; ctx.edited(); }, {size: 5}), "=",
+        field(el, "blk-param-value", p.value, "value", (v) => { p.value = v; ctx.edited(); }, {size: 9}),
         el("button", {class: "blk-param-del", title: "remove the param", text: "✕", onclick: () => { step.params.splice(i, 1); ctx.changed(); }}))));
       parts.push(el("button", {class: "blk-param-add", text: "+ param", onclick: () => { step.params.push({name: "", value: ""}); ctx.changed(); }}));
     }

@@ -164,7 +164,8 @@ const Builder = (() => {
       const selected = b.selected && b.selected.key === row.key;
       const errors = messages.some((m) => m.severity === "error");
       const fields = el("div", {class: `blk-fields${errors ? " has-error" : messages.length ? " has-warning" : ""}`, title: messages.map((m) => m.message).join("\n")},
-        ...Blocks.renderBlock(el, row, {cellNames: b.cellNames, messages, edited, changed, redraw: renderRows}));
+        ...Blocks.renderBlock(el, row, {cellNames: b.cellNames, messages, changed, redraw: renderRows, where: "row",
+                                        edited: () => { edited(); if (selected) renderInspector(); }}));
       fields.style.gridColumn = "2 / -2";
       const line = el("div", {class: `ops-row blk-row blk-${row.step.type}${selected ? " selected" : ""}`, "data-step": row.key, "data-block": row.step.type, ...depth},
         el("div", {class: "op-index blk-select", text: "▸", title: "select the block", onclick: () => selectKey(row.key, null)}), fields, tools(row));
@@ -316,9 +317,11 @@ const Builder = (() => {
     }
     const scope = Blocks.scope(row.parents);
     const inScope = scope.length ? el("p", {class: "blk-scope", text: `inside ${row.parents.map((p) => Blocks.KINDS[p.type].label).join(" › ")}: ${scope.map((v) => `{${v}}`).join(" ")} may be used in ids, names and values`}) : null;
-    if (row.kind === "block") {
+    if (row.kind === "block") {  // its fields again, with room for a call's many params
       const kind = Blocks.KINDS[row.step.type];
-      box.replaceChildren(el("h3", {text: kind.label}), el("p", {class: "fn-doc", text: kind.help}), inScope, el("div", {id: "inspector-messages", class: "messages"}));
+      const fields = el("div", {class: "blk-fields blk-inspector"}, ...Blocks.renderBlock(el, row, {cellNames: b.cellNames, messages: [], where: "inspector",
+        edited, changed, redraw: renderInspector}));
+      box.replaceChildren(el("h3", {text: kind.label}), fields, el("p", {class: "fn-doc", text: kind.help}), inScope, el("div", {id: "inspector-messages", class: "messages"}));
       renderInspectorMessages();
       return;
     }
@@ -436,7 +439,7 @@ const Builder = (() => {
     summary.className = `summary ${ok ? "ok" : "bad"}`;
     $("app-messages").replaceChildren(...(unheld.length ? [el("div", {class: "msg warning unheld", text: `this file holds ${unheld.join(", ")}, which the builder does not hold: it is shown without them, and checked, run and saved only unchanged; edit it as text`})] : []), ...messages.map((m) => {
       const at = keyOf(m), row = at !== null ? rowOf(at) : null;
-      const where = row ? (row.kind === "op" ? `operation ${row.step.id}${m.group ? ` · ${m.group}` : ""}` : `${Blocks.KINDS[row.step.type].label} (step ${at})`) : m.file;
+      const where = row ? (row.kind === "op" ? `operation ${row.step.id}${m.group ? ` · ${m.group}` : ""}` : `${Blocks.KINDS[row.step.type].label} (step ${at.split(".").map((i) => Number(i) + 1).join(".")})`) : m.file;
       return el("div", {class: `msg ${m.severity}`, onclick: () => { if (row) { scrollTo(at); selectKey(at, m.group); } }},
         `${where} (line ${m.line}): ${m.message}`);
     }));

@@ -85,7 +85,9 @@ const Monitor = (() => {
       if (!card) continue;
       card.querySelector(".g-state").textContent = view.state;
       card.querySelector(".g-op").textContent = view.operation || "–";
-      card.querySelector(".g-iteration").textContent = view.iteration ? `(${view.iteration})` : "";  // the loop iteration or call it was made for
+      const iteration = card.querySelector(".g-iteration");  // the loop iteration or call it was made for; where the call is written on hover
+      iteration.textContent = view.iteration ? `(${view.iteration.replace(/ at \S+:\d+/g, "")})` : "";
+      iteration.title = view.iteration || "";
       card.querySelector(".g-function").textContent = view.function || "–";
       card.querySelector(".g-primitive").textContent = view.primitive || "–";
       card.querySelector(".g-error").textContent = view.error ? `error: ${view.error}` : "";
@@ -104,7 +106,7 @@ const Monitor = (() => {
     const now = Store.now();
     $("engine-state").textContent = engine.state || "idle";
     document.body.dataset.engineState = engine.state || "idle";
-    const made = engine.operation_id ? ((snap.operations || []).find((o) => o.id === engine.operation_id) || {}).iteration : "";
+    const made = ((engine.operation_id ? ((snap.operations || []).find((o) => o.id === engine.operation_id) || {}).iteration : "") || "").replace(/ at \S+:\d+/g, "");
     $("engine-op").textContent = engine.operation_count ? `${engine.operation_index}/${engine.operation_count}${engine.operation_id ? ` (id ${engine.operation_id}${made ? `, ${made}` : ""})` : ""}` : "–";
     $("engine-elapsed").textContent = fmt(now);
     // ETA: the planned (dry run) durations of the operations still to run, the current one counted from its start.
