@@ -9,18 +9,15 @@ mirror (as rosidl holds it).
 """
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from typing import Any, TypeVar
 
+from node_transport.dds_plans import PLAIN, Slow, Step, compile_inbound, compile_outbound, is_mirror
 from node_transport.idl import InterfaceError, InterfaceRegistry
 from node_transport.port import TransportError
 from node_transport.ros_convert import MessageConverter, mirror_fields, sequence_item
 
 M = TypeVar("M")
-#: a field's conversion: (value, path of the message) -> converted value
-Step = Callable[[Any, str], Any]
-_PLAIN = (str, float, int, bool)  # field types whose values pass unchanged when they have exactly that type
 
 
 class DdsConverter(MessageConverter):
@@ -76,12 +73,22 @@ class DdsConverter(MessageConverter):
             steps = [(name, self._step_out(hint)) for name, hint in mirror_fields(mirror)]
             ros_type = mirror.ROS_TYPE  # type: ignore[attr-defined]
 
-            def plan(msg: Any, path: str) -> Any:
+            def general(msg: Any, path: str) -> Any:
                 kwargs = {name: step(getattr(msg, name), f"{path}.{name}" if path else name) for name, step in steps}
                 try:
                     return cls(**kwargs)
                 except (AssertionError, TypeError, ValueError, AttributeError) as error:
                     raise TransportError(f"cannot build {ros_type} from {mirror.__name__}: {error or type(error).__name__}") from None
+
+            fast = _compiled(lambda: compile_outbound(mirror, self.ros_class, self._step_out))
+
+            def plan(msg: Any, path: str) -> Any:
+                if fast is not None and not path:  # a whole message: the compiled path, unless a value needs the general one
+                    try:
+                        return fast(msg)
+                    except (Slow, AssertionError, TypeError, ValueError, AttributeError):
+                        pass
+                return general(msg, path)
 
             self._outbound[mirror] = plan
         return plan
@@ -96,7 +103,7 @@ class DdsConverter(MessageConverter):
             steps = [(name, self._step_in(hint)) for name, hint in mirror_fields(mirror)]
             ros_type = mirror.ROS_TYPE  # type: ignore[attr-defined]
 
-            def plan(sample: Any, path: str) -> Any:
+            def general(sample: Any, path: str) -> Any:
                 kwargs = {}
                 for name, step in steps:
                     where = f"{path}.{name}" if path else name
@@ -106,6 +113,16 @@ class DdsConverter(MessageConverter):
                         raise TransportError(f"{ros_type}: received message has no field {where!r}") from None
                     kwargs[name] = step(raw, where)
                 return mirror(**kwargs)
+
+            fast = _compiled(lambda: compile_inbound(mirror, self._step_in))
+
+            def plan(sample: Any, path: str) -> Any:
+                if fast is not None and not path:  # a whole message: the compiled path, unless a value needs the general one
+                    try:
+                        return fast(sample)
+                    except (Slow, AttributeError):
+                        pass
+                return general(sample, path)
 
             self._inbound[mirror] = plan
         return plan
@@ -131,20 +148,25 @@ class DdsConverter(MessageConverter):
         return super()._value_from_ros(hint, value, path)
 
 
+def _compiled(compile_plan: Callable[[], Callable[[Any], Any]]) -> Callable[[Any], Any] | None:
+    """The compiled path of a mirror, or None when it cannot be compiled (a nested mirror that does
+    not match its interface file: the general plan says so when such a message is sent)."""
+    try:
+        return compile_plan()
+    except Exception:  # noqa: BLE001 - the general plan reports it, naming the field
+        return None
+
+
 def _step(hint: Any, general: Callable[[Any, Any, str], Any], nested: Step, arrives: type, leaves: Callable[[Any], Any]) -> Step:
     """One field's conversion: ``nested`` for a mirror, a plain value or a sequence of plain
     values (``arrives`` as a tuple or list) of exactly its type as it is, the rest by ``general``."""
-    if hint in _PLAIN:
+    if hint in PLAIN:
         return lambda value, path: value if type(value) is hint else general(hint, value, path)
-    if _is_mirror(hint):
+    if is_mirror(hint):
         return nested
     item = sequence_item(hint) if hint is not bytes else None
-    if item in _PLAIN:
+    if item in PLAIN:
         return lambda value, path: (
             leaves(value) if type(value) is arrives and all(type(v) is item for v in value) else general(hint, value, path)
         )
     return lambda value, path: general(hint, value, path)
-
-
-def _is_mirror(hint: Any) -> bool:
-    return isinstance(hint, type) and dataclasses.is_dataclass(hint)

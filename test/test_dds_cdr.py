@@ -56,7 +56,7 @@ def _primitive(code: str) -> st.SearchStrategy[Any]:
     return st.integers(low, high)
 
 
-def _values(machine: Any) -> st.SearchStrategy[Any]:
+def values(machine: Any) -> st.SearchStrategy[Any]:
     """Samples of the type a cyclonedds machine reads and writes (small sequences and strings)."""
     kind = type(machine).__name__
     if kind == "PrimitiveMachine":
@@ -70,19 +70,19 @@ def _values(machine: Any) -> st.SearchStrategy[Any]:
     if kind == "PlainCdrV2SequenceOfPrimitiveMachine":
         return st.lists(_primitive(machine.code), max_size=min(machine.max_length or 5, 5))
     if kind == "SequenceMachine":
-        return st.lists(_values(machine.submachine), max_size=min(machine.maxlen or 3, 3))
+        return st.lists(values(machine.submachine), max_size=min(machine.maxlen or 3, 3))
     if kind == "ArrayMachine":
-        return st.lists(_values(machine.submachine), min_size=machine.size, max_size=machine.size)
+        return st.lists(values(machine.submachine), min_size=machine.size, max_size=machine.size)
     if kind == "InstanceMachine":
-        return _samples(machine.type)
+        return samples(machine.type)
     raise AssertionError(f"a machine the interface files do not make: {kind}")
 
 
-def _samples(cls: type) -> st.SearchStrategy[Any]:
+def samples(cls: type) -> st.SearchStrategy[Any]:
     idl = cls.__idl__  # type: ignore[attr-defined]
     idl.populate()
     members = idl.v1_machine.members_machines
-    return st.builds(cls, **{name: st.deferred(lambda m=m: _values(m)) for name, m in members.items()})
+    return st.builds(cls, **{name: st.deferred(lambda m=m: values(m)) for name, m in members.items()})
 
 
 def _theirs(sample: Any) -> bytes:
@@ -97,14 +97,14 @@ def test_every_interface_type_is_compiled() -> None:
 
 
 @settings(max_examples=300)
-@given(st.sampled_from(WIRE_TYPES).flatmap(_samples))
+@given(st.sampled_from(WIRE_TYPES).flatmap(samples))
 def test_bytes_are_cyclonedds_bytes(sample: Any) -> None:
     ours = codec(type(sample)).encode(sample)
     assert ours == _theirs(sample)
     assert codec(type(sample)).decode(ours) == type(sample).deserialize(ours) == sample
 
 
-@given(st.sampled_from(WIRE_TYPES).flatmap(_samples), st.data())
+@given(st.sampled_from(WIRE_TYPES).flatmap(samples), st.data())
 def test_cut_or_damaged_samples_are_refused_or_read_as_cyclonedds_reads_them(sample: Any, data: st.DataObject) -> None:
     """A sample cut short raises; flipped bytes either raise or decode as cyclonedds decodes them
     (Cyclone's C layer checks a received sample's lengths before Python sees it; this is the rest)."""
@@ -125,7 +125,7 @@ def test_cut_or_damaged_samples_are_refused_or_read_as_cyclonedds_reads_them(sam
             ours = codec(type(sample)).decode(bytes(flipped))
         except Exception:  # noqa: BLE001
             return
-        assert ours == type(sample).deserialize(bytes(flipped))
+        assert repr(ours) == repr(type(sample).deserialize(bytes(flipped)))  # repr: a flipped byte may make a NaN
 
 
 def test_a_value_the_type_cannot_carry_is_refused_naming_the_field() -> None:
