@@ -37,6 +37,11 @@ PEER_ADVICE = (
     "check that the controller is on, reachable from this machine and serving on that address and port "
     "(--host/--port, --rsi-listen) and that no other client holds it, then run again"
 )
+#: The same for a robot reached through the ROS graph (the ros2-control back end).
+GRAPH_ADVICE = (
+    "check that the robot's driver runs in this ROS_DOMAIN_ID (ros2 control list_controllers, ros2 action list -t) "
+    "and that the back-end options name its controllers, then run again"
+)
 
 
 async def _run(
@@ -173,7 +178,8 @@ def _run_recorded(
         report = run_with_clock(lambda c: _run(app, settings, c, out, writer, lost, checked), settings.clock())
     except BridgeError as error:  # the controller refused or never answered, before the first primitive
         code = EXIT_PEER
-        err.write(f"error: cannot run {file}: {error}; {PEER_ADVICE}\n")
+        advice = GRAPH_ADVICE if settings.backend.backend_for(app) == "ros2-control" else PEER_ADVICE
+        err.write(f"error: cannot run {file}: {error}; {advice}\n")
         explain(error, settings.verbose, err)
     except StartRefused as refusal:  # the dry run from where the robot is found problems: nothing moved
         code, outcome = EXIT_INVALID, "refused"

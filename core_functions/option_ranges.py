@@ -169,6 +169,16 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("ipoc_step", Range(1, 1000, integer=True), "KR C4 simulator --ipoc-step", "the IPOC time stamp's step per cycle"),
     Setting("reply_grace", Range(0.0, 60.0, "s"), "KR C4 simulator --reply-grace", "accelerated mode: wall time a reply is waited for (0: none)"),
     Setting("rt_priority", Range(0, 99, integer=True), "KR C4 simulator --rt-priority", "SCHED_FIFO priority asked for (0: none)"),
+    # -- ros2-control (any robot whose driver serves FollowJointTrajectory)
+    Setting("acceleration_time", Range(0.05, 60.0, "s"), "ros2-control option acceleration_time",
+            "how long a joint takes to reach its URDF speed limit (sets the accelerations: URDF gives none)"),
+    Setting("state_timeout", Range(0.01, 60.0, "s"), "ros2-control option state_timeout", "joint_states older than this while the robot is used is a fault"),
+    Setting("start_timeout", ANSWER, "ros2-control option start_timeout", "wait for robot_description, joint_states and the controllers' actions at start"),
+    Setting("goal_tolerance", Range(1e-5, 0.5, "rad"), "ros2-control option goal_tolerance", "how far from its target a joint may end a motion"),
+    Setting("result_timeout", ANSWER, "ros2-control option result_timeout", "wait for a result after a trajectory's end, and for a stopped arm"),
+    Setting("gripper_position", Range(-10.0, 10.0, "m"), "ros2-control options GROUP.gripper_open and GROUP.gripper_closed",
+            "the GripperCommand position of an open and of a closed gripper"),
+    Setting("gripper_effort", Range(0.0, 1e5, "N"), "ros2-control option GROUP.gripper_effort", "the GripperCommand max_effort (0: the controller's default)"),
     # -- vision detect
     Setting("focal_length", Range(0.1, 1e6, "px"), "vision detect --fx, --fy", "the camera's focal length"),
     Setting("principal_point", Range(-1e6, 1e6, "px"), "vision detect --cx, --cy", "the camera's principal point"),

@@ -210,7 +210,7 @@ def test_end_effectors_without_a_gripper_are_not_available_and_the_dry_run_says_
 @pytest.mark.parametrize(("extra", "message"), [
     ({"arm.controler": "x"}, "ros2-control: unknown option(s) arm.controler"),
     ({"transport": "zenoh"}, "ros2-control: transport='zenoh' must be one of dds, ros, model"),
-    ({"state_timeout": "inf"}, "ros2-control: state_timeout='inf' must be a number in [0.01, 60] s"),
+    ({"state_timeout": "inf"}, "ros2-control: state_timeout must be a number in [0.01, 60] s, got 'inf'"),
     ({"arm.joints": "A1,A2,A3"}, "ros2-control: arm.joints must name 6 different joints"),
     ({"urdf": "/nonexistent/robot.urdf"}, "ros2-control: urdf=/nonexistent/robot.urdf: No such file or directory"),
 ])

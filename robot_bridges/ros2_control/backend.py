@@ -370,7 +370,7 @@ def group_chains(urdf: str, settings: Ros2ControlSettings) -> tuple[UrdfModel, d
         for group in settings.groups:
             chains[group.group] = Chain(model, group.group, group.joints, group.tip or default_tip(model, group.joints[-1]), group.tool)
     except UrdfError as error:
-        raise UrdfError(f"ros2-control: {where}: {error} (options GROUP.joints, GROUP.tip)") from None
+        raise UrdfError(f"ros2-control: {where}: {error}") from None
     return model, chains
 
 
@@ -382,4 +382,4 @@ def default_tip(model: UrdfModel, last_joint: str) -> str:
     for frame in model.model.frames:
         if frame.parentJoint == jid and frame.name != last_joint:
             return str(frame.name)
-    raise UrdfError(f"no link after joint {last_joint!r} to use as the tip")
+    raise UrdfError(f"no link after joint {last_joint!r} to use as the tip: name one (option GROUP.tip)")

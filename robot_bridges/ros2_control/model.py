@@ -100,9 +100,12 @@ class Chain:
 
     def __post_init__(self) -> None:
         for joint in self.joints:
-            self.model.index(joint)
+            try:
+                self.model.index(joint)
+            except UrdfError as error:
+                raise UrdfError(f"{error} (option {self.group}.joints)") from None
         if not self.model.has_frame(self.tip):
-            raise UrdfError(f"group {self.group}: the tip frame {self.tip!r} is not a link of the URDF")
+            raise UrdfError(f"the tip frame {self.tip!r} of {self.group} is not a link of the URDF (option {self.group}.tip)")
 
     @property
     def indices(self) -> list[int]:

@@ -10,26 +10,22 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from core_functions import option_ranges
 from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
 from robot_bridges.backend import BackendOptions
 
 BACKEND = "ros2-control"
 TRANSPORTS = ("dds", "ros", "model")  # model: no controller, the URDF model follows the trajectories (the dry run)
-#: name: (default, lower, upper, unit, what it is)
-NUMBERS: dict[str, tuple[float, float, float, str, str]] = {
-    "acceleration_time": (0.5, 0.05, 60.0, "s", "how long a joint takes to reach its URDF speed limit (sets the accelerations; URDF has none)"),
-    "state_timeout": (0.5, 0.01, 60.0, "s", "joint_states older than this while the robot moves is a fault"),
-    "start_timeout": (10.0, 0.1, 600.0, "s", "wait for robot_description, joint_states and the controllers' actions at start"),
-    "goal_tolerance": (0.01, 1e-5, 0.5, "rad", "how far from its target a joint may end a motion"),
-    "result_timeout": (5.0, 0.1, 600.0, "s", "how long after a trajectory's end the controller may take to report its result"),
-}
+#: name: default (the range is core_functions.option_ranges')
+NUMBERS: dict[str, float] = {"acceleration_time": 0.5, "state_timeout": 0.5, "start_timeout": 10.0, "goal_tolerance": 0.01, "result_timeout": 5.0}
 GLOBAL_TEXTS = ("transport", "urdf", "description")
 GROUP_TEXTS = ("controller", "joints", "tip", "tool", "gripper")
-GROUP_NUMBERS: dict[str, tuple[float, float, float, str]] = {
-    "gripper_open": (0.08, -10.0, 10.0, "m"),
-    "gripper_closed": (0.0, -10.0, 10.0, "m"),
-    "gripper_effort": (0.0, 0.0, 1e5, "N"),
+#: per group: name -> (default, the option_ranges setting it is checked against)
+GROUP_NUMBERS: dict[str, tuple[float, str]] = {
+    "gripper_open": (0.08, "gripper_position"),
+    "gripper_closed": (0.0, "gripper_position"),
+    "gripper_effort": (0.0, "gripper_effort"),
 }
 
 
@@ -76,17 +72,9 @@ def known_options(robot: RobotModel) -> list[str]:
     return names
 
 
-def _number(extra: dict[str, str], key: str, default: float, lower: float, upper: float, unit: str) -> float:
+def _number(extra: dict[str, str], key: str, default: float, setting: str) -> float:
     text = extra.get(key)
-    if text is None:
-        return default
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and lower <= value <= upper):
-        raise ValueError(f"{BACKEND}: {key}={text!r} must be a number in [{lower:g}, {upper:g}] {unit}".rstrip())
-    return value
+    return default if text is None else option_ranges.check(setting, text, label=f"{BACKEND}: {key}")
 
 
 def parse_options(options: BackendOptions, speed: float = 1.0) -> Ros2ControlSettings:
@@ -119,7 +107,7 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> Ros2ControlSet
                 pass
         except OSError as error:
             raise ValueError(f"{BACKEND}: urdf={urdf}: {error.strerror or error}") from None
-    numbers = {key: _number(extra, key, *spec[:4]) for key, spec in NUMBERS.items()}
+    numbers = {key: _number(extra, key, default, key) for key, default in NUMBERS.items()}
     groups = tuple(_group(robot, name, extra) for name in robot.group_names)
     return Ros2ControlSettings(transport, urdf, description, groups, **numbers)
 
@@ -134,7 +122,7 @@ def _group(robot: RobotModel, group: str, extra: dict[str, str]) -> GroupSetting
         raise ValueError(f"{BACKEND}: {group}.joints must name {len(app_joints)} different joints, the controller's names of "
                          f"{', '.join(app_joints)} in that order; got {len(joints)}")
     gripper = extra.get(f"{group}.gripper") or None
-    numbers = {key: _number(extra, f"{group}.{key}", *spec) for key, spec in GROUP_NUMBERS.items()}
+    numbers = {key: _number(extra, f"{group}.{key}", default, setting) for key, (default, setting) in GROUP_NUMBERS.items()}
     tool = _tool(group, extra.get(f"{group}.tool", "0 0 0 0 0 0"))
     return GroupSettings(group, controller, joints, app_joints, extra.get(f"{group}.tip") or None, tool, gripper, **numbers)
 
