@@ -212,3 +212,25 @@ def test_nesting_and_size_are_bounded_before_anything_is_built() -> None:
     many = [{"type": "operation", "id": str(i), "calls": []} for i in range(100_001)]
     with pytest.raises(ValueError, match="more than 100,000 steps"):
         BlockDocument.from_json({"name": "a", "robot": "nextage", "body": many})
+
+
+def test_a_branch_is_one_more_kind_of_block(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Outcome branches do not exist yet: declared as kinds (their attributes, a body each), the builder's model reads,
+    takes from the page and writes them with no other change -- the else inside its if or beside it."""
+    from operator_station import blocks
+
+    monkeypatch.setitem(blocks.BLOCK_KINDS, "if", blocks.BlockKind("if", ("operation", "group", "outcome"), ("operation", "outcome")))
+    monkeypatch.setitem(blocks.BLOCK_KINDS, "else", blocks.BlockKind("else", (), ()))
+    text = (ROOT / "apps_xml" / "rivet_loop.xml").read_bytes().replace(b"""    <operation id="insert_{hole}" name="insert {index}">""", b"""    <if operation="debur_{hole}" group="left_arm" outcome="found">
+      <else><!-- not found: the rivet goes back --></else>
+    </if>
+    <else/>
+    <operation id="insert_{hole}" name="insert {index}">""")
+    document, _ = parse_blocks(text, "branch.xml")
+    assert document is not None and document.unheld == []
+    branch = document.body[1].body[1]
+    assert (branch.kind, branch.attributes, branch.body[0].kind, branch.body[0].trailer) == (
+        "if", {"operation": "debur_{hole}", "group": "left_arm", "outcome": "found"}, "else", [" not found: the rivet goes back "])
+    assert BlockDocument.from_json(document.to_json()) == document
+    written, _ = write_blocks(document)
+    assert canonical(written.encode("utf-8")) == canonical(text)

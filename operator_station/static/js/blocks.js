@@ -1,7 +1,8 @@
 // The application as a tree of steps (issue 24): operations, and the loops and calls around them, shown as
 // blocks in the builder's table.  The tree is the document's `body`; the table draws it flattened into rows
 // (a block's head, its steps indented, its end), so a 10,000-operation file still draws only the visible rows.
-// The kinds of block are data (KINDS, as operator_station/blocks.py's BLOCK_KINDS): a branch is one more kind.
+// The kinds of block are data (KINDS, as operator_station/blocks.py's BLOCK_KINDS): a branch is one more kind, its
+// attributes shown as plain fields until it is given fields of its own in renderBlock.
 "use strict";
 
 const Blocks = (() => {
@@ -12,6 +13,8 @@ const Blocks = (() => {
     call: {label: "call", body: false, help: "The operations of another application file (a library block, its path relative to this file), with each param bound to its {NAME}."},
   };
   const isBlock = (step) => step.type !== "operation";
+  // A kind the page does not know yet (the server's model has more): shown by its name, its body drawn, its attributes as fields.
+  const kind = (type) => KINDS[type] || {label: type, body: true, help: ""};
 
   // Rows of the table: {kind: "op"|"block"|"end", step, list (the body holding it), index, key ("0.2.1"), depth,
   // leaf (an operation's place among all of them), parents (the blocks around it, outermost first)}.
@@ -23,7 +26,7 @@ const Blocks = (() => {
       rows.push(row);
       byKey.set(key, row);
       if (!isBlock(step)) { leaves.push(row); return; }
-      if (KINDS[step.type] && KINDS[step.type].body) {
+      if (kind(step.type).body && Array.isArray(step.body)) {
         visit(step.body, path, [...parents, step]);
         rows.push({kind: "end", step, list, index, key: `${key}.end`, depth: parents.length, parents});
       }
@@ -90,7 +93,7 @@ const Blocks = (() => {
   }
   function indent(row) {  // into the block just above it, at its end
     const above = row.list[row.index - 1];
-    if (!above || !isBlock(above) || !KINDS[above.type] || !KINDS[above.type].body) return false;
+    if (!above || !isBlock(above) || !kind(above.type).body || !Array.isArray(above.body)) return false;
     row.list.splice(row.index, 1);
     above.body.push(row.step);
     return true;
@@ -140,7 +143,7 @@ const Blocks = (() => {
   function renderBlock(el, row, ctx) {
     const {step} = row;
     const attr = (name) => (v) => { if (v === "" && !["var", "in", "count", "application"].includes(name)) delete step.attributes[name]; else step.attributes[name] = v; ctx.edited(); };
-    const parts = [el("span", {class: `blk-kind blk-${step.type}`, text: (KINDS[step.type] || {label: step.type}).label, title: (KINDS[step.type] || {}).help || ""})];
+    const parts = [el("span", {class: `blk-kind blk-${step.type}`, text: kind(step.type).label, title: kind(step.type).help})];
     if (step.type === "for_each") {
       parts.push(field(el, "blk-var", step.attributes.var, "variable", attr("var"), {size: 7}), el("span", {text: "in"}),
         ...inFields(el, step, ctx.cellNames, ctx.edited, ctx.redraw, ctx.where),
@@ -155,6 +158,10 @@ const Blocks = (() => {
         field(el, "blk-param-value", p.value, "value", (v) => { p.value = v; ctx.edited(); }, {size: 9}),
         el("button", {class: "blk-param-del", title: "remove the param", text: "✕", onclick: () => { step.params.splice(i, 1); ctx.changed(); }}))));
       parts.push(el("button", {class: "blk-param-add", text: "+ param", onclick: () => { step.params.push({name: "", value: ""}); ctx.changed(); }}));
+    } else {  // a kind without fields of its own: each attribute it has, as written
+      for (const name of (KINDS[step.type] || {}).attributes || Object.keys(step.attributes)) {
+        parts.push(field(el, `blk-attr-${name}`, step.attributes[name], name, attr(name), {size: 10}));
+      }
     }
     const count = iterations(step, ctx.cellNames);
     if (count !== null) parts.push(el("span", {class: "blk-count-shown", text: `→ ${count} iteration(s)`}));
@@ -162,5 +169,5 @@ const Blocks = (() => {
     return parts;
   }
 
-  return {KINDS, isBlock, flatten, scope, parseIn, composeIn, iterations, newBlock, move, indent, outdent, renderBlock};
+  return {KINDS, kind, isBlock, flatten, scope, parseIn, composeIn, iterations, newBlock, move, indent, outdent, renderBlock};
 })();

@@ -151,7 +151,7 @@ const Builder = (() => {
     const depth = row.depth ? {style: `border-left: ${row.depth * 8}px solid #dbe8f6`} : {};
     if (row.kind === "end") {
       const end = el("div", {class: "ops-row blk-end", "data-step": row.key, ...depth}, el("div", {}),
-        el("div", {class: "blk-end-label"}, `end ${Blocks.KINDS[row.step.type].label} `,
+        el("div", {class: "blk-end-label"}, `end ${Blocks.kind(row.step.type).label} `,
           el("button", {class: "blk-add-inside", text: "+ operation inside", onclick: () => addStep("operation", {list: row.step.body, at: row.step.body.length})})),
         el("div", {}));
       end.style.gridTemplateColumns = b.columns;
@@ -226,7 +226,7 @@ const Builder = (() => {
   function insertionPoint() {
     const row = b.selected && rowOf(b.selected.key);
     if (!row) return {list: b.doc.body, at: b.doc.body.length};
-    if (row.kind === "block" && Blocks.KINDS[row.step.type] && Blocks.KINDS[row.step.type].body) return {list: row.step.body, at: row.step.body.length};
+    if (row.kind === "block" && Blocks.kind(row.step.type).body && Array.isArray(row.step.body)) return {list: row.step.body, at: row.step.body.length};
     return {list: row.list, at: row.index + 1};
   }
   function addStep(type, where) {
@@ -316,9 +316,9 @@ const Builder = (() => {
       return;
     }
     const scope = Blocks.scope(row.parents);
-    const inScope = scope.length ? el("p", {class: "blk-scope", text: `inside ${row.parents.map((p) => Blocks.KINDS[p.type].label).join(" › ")}: ${scope.map((v) => `{${v}}`).join(" ")} may be used in ids, names and values`}) : null;
+    const inScope = scope.length ? el("p", {class: "blk-scope", text: `inside ${row.parents.map((p) => Blocks.kind(p.type).label).join(" › ")}: ${scope.map((v) => `{${v}}`).join(" ")} may be used in ids, names and values`}) : null;
     if (row.kind === "block") {  // its fields again, with room for a call's many params
-      const kind = Blocks.KINDS[row.step.type];
+      const kind = Blocks.kind(row.step.type);
       const fields = el("div", {class: "blk-fields blk-inspector"}, ...Blocks.renderBlock(el, row, {cellNames: b.cellNames, messages: [], where: "inspector",
         edited, changed, redraw: renderInspector}));
       box.replaceChildren(el("h3", {text: kind.label}), fields, el("p", {class: "fn-doc", text: kind.help}), inScope, el("div", {id: "inspector-messages", class: "messages"}));
@@ -439,7 +439,7 @@ const Builder = (() => {
     summary.className = `summary ${ok ? "ok" : "bad"}`;
     $("app-messages").replaceChildren(...(unheld.length ? [el("div", {class: "msg warning unheld", text: `this file holds ${unheld.join(", ")}, which the builder does not hold: it is shown without them, and checked, run and saved only unchanged; edit it as text`})] : []), ...messages.map((m) => {
       const at = keyOf(m), row = at !== null ? rowOf(at) : null;
-      const where = row ? (row.kind === "op" ? `operation ${row.step.id}${m.group ? ` · ${m.group}` : ""}` : `${Blocks.KINDS[row.step.type].label} (step ${at.split(".").map((i) => Number(i) + 1).join(".")})`) : m.file;
+      const where = row ? (row.kind === "op" ? `operation ${row.step.id}${m.group ? ` · ${m.group}` : ""}` : `${Blocks.kind(row.step.type).label} (step ${at.split(".").map((i) => Number(i) + 1).join(".")})`) : m.file;
       return el("div", {class: `msg ${m.severity}`, onclick: () => { if (row) { scrollTo(at); selectKey(at, m.group); } }},
         `${where} (line ${m.line}): ${m.message}`);
     }));
