@@ -25,8 +25,8 @@ from cell_runner.dry_run.app_digest import NotDigestible
 from cell_runner.dry_run.runner import dry_run
 from cell_runner.dry_run.simulators import setup_for
 from cell_runner.dry_run.verdict_cache import verdict_key
-from core_functions.primitives import EndEffector, MoveCartesian, MoveJoints
-from core_functions.robots import KUKA_KR
+from core_functions.primitives import EndEffector, FullBodyMove, MoveCartesian, MoveJoints
+from core_functions.robots import KUKA_KR, NEXTAGE_OPEN
 from execution_engine.app_model import load_application
 from node_transport.clock import Clock
 from node_transport import typed
@@ -237,3 +237,49 @@ def test_a_dry_run_verdict_is_kept_only_for_a_urdf_file_and_follows_its_bytes(tm
     before = verdict_key(app, keyed, None)
     copy.write_text(URDF.replace('velocity="2.722713633111154"', 'velocity="1.0"', 1))
     assert verdict_key(app, keyed, None) != before, "another URDF, another verdict"
+
+
+NEXTAGE_URDF = (ROOT / "robot_bridges" / "nextage_sim" / "urdf" / "nextage_open.urdf").read_text()
+
+
+def test_a_full_body_move_drives_three_controllers_on_one_time_line_and_pauses_them_together(run_sim: Run) -> None:
+    async def main(clock: Clock) -> dict[str, Any]:
+        graph = LocalTransport(clock)
+        controllers = {f"/{g.name}_controller/follow_joint_trajectory": g.joint_names for g in NEXTAGE_OPEN.groups}
+        driver = FakeDriver(graph.create_node("controller_manager"), clock, NEXTAGE_URDF, controllers, NEXTAGE_OPEN.poses["initial"])
+        settings = parse_options(BackendOptions(robot=NEXTAGE_OPEN))
+        backend = Ros2ControlBackend(clock, NEXTAGE_OPEN, settings, GraphLink(graph.create_node("ros2_control_client"), settings))
+        await backend.start()
+        names = NEXTAGE_OPEN.joint_names
+        goal = tuple(v + (0.3 if not n.startswith("HEAD") else 0.1) for n, v in zip(names, (NEXTAGE_OPEN.poses["initial"][n] for n in names)))
+        try:
+            motion = clock.loop.create_task(backend.execute("left_arm", FullBodyMove(names, goal)))
+            await clock.sleep(0.3)
+            busy = [await _refused(backend, g) for g in ("right_arm", "torso_head")]
+            await backend.pause("right_arm")  # a partner's pause holds the whole move
+            await clock.sleep(1.0)
+            held = dict(driver.positions)
+            await backend.resume("left_arm")
+            result = await motion
+            return dict(driver=driver, held=held, result=result, goal=goal, busy=busy)
+        finally:
+            await driver.close()
+            await graph.shutdown()
+
+    out = run_sim(main)
+    goals = out["driver"].goals
+    assert sorted(g.outcome for g in goals) == ["canceled"] * 3 + ["succeeded"] * 3
+    first, second = goals[:3], goals[3:]
+    assert {g.joints[0][:4] for g in first} == {"LARM", "RARM", "CHES"}
+    assert all(g.times == first[0].times for g in first) and all(g.times == second[0].times for g in second), "one time line"
+    for played in second:
+        np.testing.assert_allclose(played.points[0], [out["held"][j] for j in played.joints], atol=1e-9)
+    final = dict(zip(out["result"].joint_names, out["result"].positions))
+    np.testing.assert_allclose([final[n] for n in NEXTAGE_OPEN.joint_names], out["goal"], atol=0.01)
+    assert all("is running a primitive" in message for message in out["busy"])
+
+
+async def _refused(backend: Ros2ControlBackend, group: str) -> str:
+    with pytest.raises(BridgeError) as caught:
+        await backend.execute(group, MoveJoints(tuple(0.0 for _ in NEXTAGE_OPEN.group(group).joint_names)))
+    return str(caught.value)

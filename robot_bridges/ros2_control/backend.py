@@ -28,6 +28,7 @@ from core_functions.primitives import (
     EndEffector,
     EndEffectorResult,
     ExecuteTrajectory,
+    FullBodyMove,
     MotionResult,
     MoveCartesian,
     MoveJoints,
@@ -43,10 +44,10 @@ from core_functions.robots import RobotModel
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind, JointLimits, RobotBackend
 from robot_bridges.ros2_control.feed import JointFeed
-from robot_bridges.ros2_control.link import CANCELED, ControllerLink
+from robot_bridges.ros2_control.link import CANCELED, SUCCEEDED, ControllerLink
 from robot_bridges.ros2_control.model import Chain, UrdfError, UrdfModel
 from robot_bridges.ros2_control.options import GroupSettings, Ros2ControlSettings
-from robot_bridges.ros2_control.planning import Limits, line_path, line_poses, remainder, retime, time_path
+from robot_bridges.ros2_control.planning import Limits, Timed, line_path, line_poses, remainder, retime, time_path
 
 #: s: how long the arm must keep still (within STILL rad) after a cancel before a resume plans from it.
 SETTLE_TIME = 0.1
@@ -63,6 +64,7 @@ class _GroupRun:
     paused: bool = False
     stopping: bool = False
     wake: asyncio.Event = field(default_factory=asyncio.Event)
+    team: tuple[str, ...] = ()  # the groups a full-body move of this group's drives with it (itself included)
 
 
 class Ros2ControlBackend(RobotBackend):
@@ -77,6 +79,7 @@ class Ros2ControlBackend(RobotBackend):
         self.chains: dict[str, Chain] = {}
         self.limits: dict[str, Limits] = {}
         self.runs = {g.group: _GroupRun() for g in settings.groups}
+        self.holder: dict[str, str] = {}  # a group moved by another's full-body move -> that group
 
     @property
     def groups(self) -> tuple[str, ...]:
@@ -147,36 +150,70 @@ class Ros2ControlBackend(RobotBackend):
         return JointLimits(names, tuple(limits.lower), tuple(limits.upper), tuple(limits.velocity), tuple(limits.acceleration))
 
     # ------------------------------------------------------------------------- commands
+    def _run_of(self, group: str) -> tuple[_GroupRun, tuple[str, ...]]:
+        """The run that moves ``group`` (its own, or the full-body move holding it) and every group it moves."""
+        leader = self.holder.get(group, group)
+        run = self.runs[leader]
+        return run, run.team or (leader,)
+
     async def pause(self, group: str) -> None:
-        run = self.runs[group]
+        run, team = self._run_of(group)
         if run.busy and not run.paused:
             run.paused = True
             run.wake.clear()
-            await self.link.cancel(self.settings.group(group))
+            for member in team:
+                await self.link.cancel(self.settings.group(member))
 
     async def resume(self, group: str) -> None:
-        run = self.runs[group]
+        run, _ = self._run_of(group)
         run.paused = False
         run.wake.set()
 
     async def stop(self, group: str) -> None:
-        run = self.runs[group]
+        run, team = self._run_of(group)
         if run.busy:
             run.stopping = True
             run.wake.set()
-            await self.link.cancel(self.settings.group(group))
+            for member in team:
+                await self.link.cancel(self.settings.group(member))
 
     async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
         if group not in self.runs:
             raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name} drives {', '.join(self.groups)}, not {group}")
+        team = self._team(group, primitive) if isinstance(primitive, FullBodyMove) else (group,)
+        busy = [g for g in team if self.runs[g].busy or g in self.holder]
+        if busy:
+            raise BridgeError(FaultKind.BUSY, f"{busy[0]} is running a primitive")
         run = self.runs[group]
-        if run.busy:
-            raise BridgeError(FaultKind.BUSY, f"{group} is running a primitive")
-        run.busy, run.paused, run.stopping = True, False, False
+        run.busy, run.paused, run.stopping, run.team = True, False, False, team
+        self.holder.update({g: group for g in team if g != group})
         try:
+            if isinstance(primitive, FullBodyMove):
+                return await self._full_body(tuple(self.settings.group(g) for g in team), run, primitive)
             return await self._execute(self.settings.group(group), run, primitive)
         finally:
-            run.busy = False
+            run.busy, run.team = False, ()
+            for g in team:
+                self.holder.pop(g, None)
+
+    def _team(self, group: str, primitive: FullBodyMove) -> tuple[str, ...]:
+        """The groups whose joints a full-body move names (the leader first); UNSUPPORTED naming a joint no group has."""
+        owner = {name: g.group for g in self.settings.groups for name in g.app_joints}
+        strangers = [n for n in primitive.joint_names if n not in owner]
+        if strangers:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{group}: full_body_move names {strangers[0]}, a joint of no configured group")
+        named = {owner[n] for n in primitive.joint_names}
+        return (group, *(g for g in self.groups if g in named and g != group))
+
+    async def _full_body(self, team: tuple[GroupSettings, ...], run: _GroupRun, primitive: FullBodyMove) -> MotionResult:
+        """One move of several groups' joints, on one time line: each group's controller gets its columns of it."""
+        target = dict(zip(primitive.joint_names, primitive.positions))
+        here = self._team_q(team)
+        app = [n for g in team for n in g.app_joints]
+        goal = np.array([target.get(n, q) for n, q in zip(app, here)])
+        await self._move(team, run, np.vstack((here, goal)), describe(primitive))
+        names, positions = self.joint_state()
+        return MotionResult(names, positions, self.tcp_pose(team[0].group))
 
     async def _execute(self, group: GroupSettings, run: _GroupRun, primitive: Primitive) -> PrimitiveResult:
         what = describe(primitive)
@@ -185,12 +222,12 @@ class Ros2ControlBackend(RobotBackend):
             return await self.measure(group.group)
         if isinstance(primitive, MoveJoints):
             target = self._joint_target(group, primitive)
-            return await self._move(group, run, np.vstack((self._group_q(group), target)), what)
+            return await self._move((group,), run, np.vstack((self._group_q(group), target)), what)
         if isinstance(primitive, (MoveCartesian, MoveRelative)):
             start = self.tcp_pose(group.group)
             assert start is not None
             target = primitive.target if isinstance(primitive, MoveCartesian) else primitive.goal(start)
-            return await self._move(group, run, self._cartesian_path(group, start, target, primitive.interpolation), what)
+            return await self._move((group,), run, self._cartesian_path(group, start, target, primitive.interpolation), what)
         if isinstance(primitive, ExecuteTrajectory):
             return await self._replay(group, run, primitive, what)
         if isinstance(primitive, RecordTrajectory):
@@ -226,23 +263,54 @@ class Ros2ControlBackend(RobotBackend):
 
         return line_path(group.group, here, line_poses(start, target), solve, group.joints)
 
-    async def _move(self, group: GroupSettings, run: _GroupRun, path: np.ndarray, what: str) -> MotionResult:
-        """Play ``path`` (its first point: where the arm is); a pause cancels, a resume re-plans from where it stopped."""
-        limits = self.limits[group.group]
-        limits.check_positions(group.group, path[1:], what)
+    def _team_q(self, team: tuple[GroupSettings, ...]) -> np.ndarray:
+        return np.concatenate([self._group_q(g) for g in team])
+
+    def _team_limits(self, team: tuple[GroupSettings, ...]) -> Limits:
+        if len(team) == 1:
+            return self.limits[team[0].group]
+        parts = [self.limits[g.group] for g in team]
+        return Limits(tuple(n for p in parts for n in p.names), *(np.concatenate([getattr(p, a) for p in parts]) for a in ("lower", "upper", "velocity", "acceleration")))
+
+    async def _move(self, team: tuple[GroupSettings, ...], run: _GroupRun, path: np.ndarray, what: str) -> MotionResult:
+        """Play ``path`` (its first point: where the arm is; the team's joints side by side); a pause cancels,
+        a resume re-plans from where the arms stopped."""
+        limits = self._team_limits(team)
+        limits.check_positions(team[0].group, path[1:], what)
         plan, progress = path, 0
         while True:
-            await self._wait_while_paused(group, run)
+            await self._wait_while_paused(team[0], run)
             timed = time_path(plan, limits, run.speed)
-            outcome = await self.link.follow(group, timed)
+            outcome = await self._follow(team, timed)
             if outcome != CANCELED:
                 break
             if run.stopping:
-                raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped during {what}")
-            await self._settle(group)
-            plan, progress = remainder(path, self._group_q(group), progress)
-        await self._arrive(group, path[-1], what)
-        return await self.measure(group.group)
+                raise BridgeError(FaultKind.STOPPED, f"{team[0].group}: stopped during {what}")
+            await self._settle(team)
+            plan, progress = remainder(path, self._team_q(team), progress)
+        await self._arrive(team, path[-1], what)
+        return await self.measure(team[0].group)
+
+    async def _follow(self, team: tuple[GroupSettings, ...], timed: Timed) -> str:
+        """``timed`` on every group of ``team`` at once, each its own columns; the first failure cancels the others."""
+        if len(team) == 1:
+            return await self.link.follow(team[0], timed)
+        tasks: list[asyncio.Future[str]] = []
+        start = 0
+        for group in team:
+            end = start + len(group.joints)
+            part = Timed(timed.times, timed.points[:, start:end], timed.velocities[:, start:end])
+            tasks.append(asyncio.ensure_future(self.link.follow(group, part)))
+            start = end
+        _, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
+        for group, task in zip(team, tasks):
+            if task in pending:
+                await self.link.cancel(group)
+        outcomes = await asyncio.gather(*tasks, return_exceptions=True)
+        failure = next((o for o in outcomes if isinstance(o, BaseException)), None)
+        if failure is not None:
+            raise failure
+        return CANCELED if CANCELED in outcomes else SUCCEEDED
 
     async def _wait_while_paused(self, group: GroupSettings, run: _GroupRun) -> None:
         while run.paused and not run.stopping:
@@ -250,30 +318,31 @@ class Ros2ControlBackend(RobotBackend):
         if run.stopping:
             raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped")
 
-    async def _settle(self, group: GroupSettings) -> None:
-        """Wait (within result_timeout) until the arm stands still after a cancel: the resume plans from there."""
+    async def _settle(self, team: tuple[GroupSettings, ...]) -> None:
+        """Wait (within result_timeout) until the arms stand still after a cancel: the resume plans from there."""
         deadline = self.clock.now() + self.settings.result_timeout
-        before = self._group_q(group)
+        before = self._team_q(team)
         still_since = self.clock.now()
         while self.clock.now() - still_since < SETTLE_TIME:
             if self.clock.now() > deadline:
-                raise BridgeError(FaultKind.CONTROLLER, f"{group.group}: the arm did not come to rest within {self.settings.result_timeout:g} s of the cancel")
+                raise BridgeError(FaultKind.CONTROLLER, f"{team[0].group}: the arm did not come to rest within {self.settings.result_timeout:g} s of the cancel")
             await self.clock.sleep(SETTLE_TIME / 4)
-            now = self._group_q(group)
+            now = self._team_q(team)
             if float(np.max(np.abs(now - before))) > STILL:
                 still_since = self.clock.now()
             before = now
 
-    async def _arrive(self, group: GroupSettings, target: np.ndarray, what: str) -> None:
+    async def _arrive(self, team: tuple[GroupSettings, ...], target: np.ndarray, what: str) -> None:
         """The controller said done: the joint states must say so too (within goal_tolerance, in result_timeout)."""
         deadline = self.clock.now() + self.settings.result_timeout
+        joints = [j for g in team for j in g.joints]
         while True:
-            off = np.abs(self._group_q(group) - target)
+            off = np.abs(self._team_q(team) - target)
             if float(np.max(off)) <= self.settings.goal_tolerance:
                 return
             if self.clock.now() > deadline:
                 j = int(np.argmax(off))
-                raise BridgeError(FaultKind.CONTROLLER, f"{group.group}: {what} ended with {group.joints[j]} {off[j]:.4f} rad from its target "
+                raise BridgeError(FaultKind.CONTROLLER, f"{team[0].group}: {what} ended with {joints[j]} {off[j]:.4f} rad from its target "
                                   f"(goal_tolerance {self.settings.goal_tolerance:g} rad)")
             await self.clock.sleep(0.02)
 
@@ -287,19 +356,19 @@ class Ros2ControlBackend(RobotBackend):
         limits.check_positions(group.group, points, what)
         here = self._group_q(group)
         if float(np.max(np.abs(points[0] - here))) > self.settings.goal_tolerance:
-            await self._move(group, run, np.vstack((here, points[0])), f"{what}: to its first point")
+            await self._move((group,), run, np.vstack((here, points[0])), f"{what}: to its first point")
         timed = retime(primitive.times, points, limits, run.speed)
         if math.isclose(timed.duration, 0.0):
             return await self.measure(group.group)
         # played as a path: a pause re-plans the rest from where the arm stopped, at the same speed limits
-        first = await self.link.follow(group, timed) if not run.paused else CANCELED
+        first = await self._follow((group,), timed) if not run.paused else CANCELED
         if first == CANCELED:
             if run.stopping:
                 raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped during {what}")
-            await self._settle(group)
+            await self._settle((group,))
             rest, _ = remainder(points, self._group_q(group))
-            return await self._move(group, run, rest, what)
-        await self._arrive(group, points[-1], what)
+            return await self._move((group,), run, rest, what)
+        await self._arrive((group,), points[-1], what)
         return await self.measure(group.group)
 
     async def _record(self, group: GroupSettings, run: _GroupRun, primitive: RecordTrajectory) -> TrajectoryResult:
