@@ -283,3 +283,36 @@ async def _refused(backend: Ros2ControlBackend, group: str) -> str:
     with pytest.raises(BridgeError) as caught:
         await backend.execute(group, MoveJoints(tuple(0.0 for _ in NEXTAGE_OPEN.group(group).joint_names)))
     return str(caught.value)
+
+
+def test_stop_cancels_the_goal_and_holds_the_arm_and_a_pause_racing_the_goal_still_cancels_it(run_sim: Run) -> None:
+    async def main(clock: Clock) -> dict[str, Any]:
+        graph, driver, backend = await robot(clock)
+        far = tuple(math.radians(v) for v in (90, -60, 60, 0, 30, 0))
+        try:
+            motion = clock.loop.create_task(backend.execute("arm", MoveJoints(far)))
+            await clock.sleep(0.3)
+            await backend.stop("arm")
+            with pytest.raises(BridgeError) as stopped:
+                await motion
+            await clock.sleep(0.1)
+            held = dict(driver.positions)
+            await clock.sleep(1.0)
+            still = dict(driver.positions)
+            raced = clock.loop.create_task(backend.execute("arm", MoveJoints(tuple(math.radians(v) for v in (0, -90, 90, 0, 0, 0)))))
+            await clock.sleep(0)  # the goal is on its way, not yet accepted
+            await backend.pause("arm")
+            await clock.sleep(1.0)
+            paused_outcome, paused_goals = driver.goals[-1].outcome, len(driver.goals)
+            await backend.resume("arm")
+            result = await raced
+            return dict(stopped=stopped.value, held=held, still=still, driver=driver, paused_outcome=paused_outcome, paused_goals=paused_goals, result=result)
+        finally:
+            await driver.close()
+            await graph.shutdown()
+
+    out = run_sim(main)
+    assert out["stopped"].kind is FaultKind.STOPPED and out["driver"].goals[0].outcome == "canceled"
+    assert out["held"] == out["still"], "stopped: the arm holds"
+    assert out["paused_outcome"] == "canceled" and out["paused_goals"] == 2, "a pause while the goal was on its way cancels it once accepted"
+    np.testing.assert_allclose(out["result"].positions, [math.radians(v) for v in (0, -90, 90, 0, 0, 0)], atol=0.01)

@@ -42,7 +42,7 @@ from core_functions.primitives import (
 )
 from core_functions.robots import RobotModel
 from node_transport.clock import Clock
-from robot_bridges.backend import BridgeError, FaultKind, JointLimits, RobotBackend
+from robot_bridges.backend import BridgeError, FaultKind, JointLimits, RobotBackend  # JointLimits: the port's signature
 from robot_bridges.ros2_control.feed import JointFeed
 from robot_bridges.ros2_control.link import CANCELED, SUCCEEDED, ControllerLink
 from robot_bridges.ros2_control.model import Chain, UrdfError, UrdfModel
@@ -143,11 +143,9 @@ class Ros2ControlBackend(RobotBackend):
         return MotionResult(settings.app_joints, tuple(float(v) for v in q), self.tcp_pose(group))
 
     def joint_limits(self, group: str) -> JointLimits | None:
-        limits = self.limits.get(group)
-        if limits is None:
-            return None
-        names = self.settings.group(group).app_joints
-        return JointLimits(names, tuple(limits.lower), tuple(limits.upper), tuple(limits.velocity), tuple(limits.acceleration))
+        """None: the robot's driver serves its own FollowJointTrajectory, under the names this back end is
+        configured with; the bridge serving a second one (a proxy of the same action) would only clash with it."""
+        return None
 
     # ------------------------------------------------------------------------- commands
     def _run_of(self, group: str) -> tuple[_GroupRun, tuple[str, ...]]:
