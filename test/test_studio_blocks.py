@@ -18,7 +18,7 @@ pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) i
 
 from app_functions.registry import full_catalog  # noqa: E402
 from execution_engine.app_model import load_application  # noqa: E402
-from operator_station.blocks import BlockDocument  # noqa: E402
+from operator_station.blocks import BLOCK_KINDS, BlockDocument, BlockKind  # noqa: E402
 from operator_station.blocks_xml import canonical, parse_blocks, read_blocks, write_blocks  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from test_studio_server import ROOT, client_for, station_args  # noqa: E402
@@ -217,10 +217,8 @@ def test_nesting_and_size_are_bounded_before_anything_is_built() -> None:
 def test_a_branch_is_one_more_kind_of_block(monkeypatch: pytest.MonkeyPatch) -> None:
     """Outcome branches do not exist yet: declared as kinds (their attributes, a body each), the builder's model reads,
     takes from the page and writes them with no other change -- the else inside its if or beside it."""
-    from operator_station import blocks
-
-    monkeypatch.setitem(blocks.BLOCK_KINDS, "if", blocks.BlockKind("if", ("operation", "group", "outcome"), ("operation", "outcome")))
-    monkeypatch.setitem(blocks.BLOCK_KINDS, "else", blocks.BlockKind("else", (), ()))
+    monkeypatch.setitem(BLOCK_KINDS, "if", BlockKind("if", ("operation", "group", "outcome"), ("operation", "outcome")))
+    monkeypatch.setitem(BLOCK_KINDS, "else", BlockKind("else", (), ()))
     text = (ROOT / "apps_xml" / "rivet_loop.xml").read_bytes().replace(b"""    <operation id="insert_{hole}" name="insert {index}">""", b"""    <if operation="debur_{hole}" group="left_arm" outcome="found">
       <else><!-- not found: the rivet goes back --></else>
     </if>
