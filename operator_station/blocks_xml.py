@@ -1,11 +1,13 @@
 """A :class:`~operator_station.blocks.BlockDocument` read from an application file and written back, through lxml.
 
-Reading goes first through :func:`execution_engine.app_model.document.parse_document` (the
-hardened parser: size and element limits, no entities, DTDs or network), then walks the same
-bytes again keeping comments.  Writing builds the element tree with lxml and indents it two
-spaces a level: what comes out is equal to what was read in canonical XML (C14N 2.0, whitespace
-between elements set aside: :func:`canonical`), never byte for byte (quotes, empty elements and
-line breaks are lxml's), and it expands to the same operations.
+Reading goes first through :func:`execution_engine.app_model.safe_xml.parse_bytes` (the hardened
+parser: size and element limits, no entities, DTDs or network), then walks the same bytes again
+keeping comments, as :func:`execution_engine.app_model.document.parse_document` does.
+
+Writing builds the element tree with lxml and indents it two spaces a level: what comes out is
+equal to what was read in canonical XML (C14N 2.0, whitespace between elements set aside:
+:func:`canonical`), never byte for byte (quotes, empty elements and line breaks are lxml's), and
+it expands to the same operations.
 
 Each written line is mapped to the step (its path in the tree), group and param it belongs to
 (:class:`Where`), so a validator message at ``FILE:LINE:COL`` is shown at its row and cell.
@@ -19,8 +21,8 @@ from typing import NamedTuple
 from lxml import etree
 
 from execution_engine.app_model.diagnostics import Diagnostic
-from execution_engine.app_model.document import POLICY_ATTRIBUTES, CallEntry, DocumentError, OperationEntry, ParamEntry, parse_document
-from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES
+from execution_engine.app_model.document import POLICY_ATTRIBUTES, AppDocument, CallEntry, DocumentError, OperationEntry, ParamEntry
+from execution_engine.app_model.safe_xml import DEFAULT_MAX_BYTES, parse_bytes
 from operator_station.blocks import BLOCK_KINDS, Block, BlockDocument, OperationStep, Step
 
 #: The root's attributes the document holds, in the order written.
@@ -44,15 +46,29 @@ class Where(NamedTuple):
 
 # ------------------------------------------------------------------------------ reading
 def parse_blocks(data: bytes, path: Path | str, *, max_bytes: int = DEFAULT_MAX_BYTES) -> tuple[BlockDocument | None, list[Diagnostic]]:
-    """The block document of an application file's bytes, or None and why it cannot be read."""
-    head, problems = parse_document(data, path, max_bytes=max_bytes)
-    if head is None:
+    """The block document of an application file's bytes, or None and why it cannot be read.
+
+    Lenient beyond the XML itself, as ``parse_document``: what the schema would refuse is kept or
+    skipped so the builder can show the file and the validator say what is wrong."""
+    path = Path(path)
+    if len(data) > max_bytes:
+        return None, [Diagnostic(str(path), 1, 1, f"the file is {len(data)} bytes, over the limit of {max_bytes} bytes")]
+    checked, problems = parse_bytes(data, path=path, display=str(path))  # the limits, refusals and syntax errors
+    if checked is None:
         return None, problems
-    root = etree.fromstring(data, _PARSER)
+    root = etree.fromstring(data, _PARSER)  # the same document again, with its comments
+    if root.tag != "application":
+        return None, [Diagnostic(str(path), 1, 1, f"the root element is <{root.tag}>, not <application>")]
     unheld: list[str] = []
     _attributes(root, (*ROOT_ATTRIBUTES, "{http://www.w3.org/2001/XMLSchema-instance}noNamespaceSchemaLocation"), unheld)
-    body, trailer = _body(root, unheld, top=True)
-    head.operations, head.steps, head.trailer = [], [], trailer
+    head = AppDocument(root.get("name", ""), root.get("robot", ""), root.get("cell"), root.get("version"),
+                       header=[str(c.text or "") for c in root.itersiblings(preceding=True) if c.tag is etree.Comment][::-1])
+    description, policy = root.find("description"), root.find("error_policy")
+    if description is not None:
+        head.description = description.text or ""
+    if policy is not None:
+        head.error_policy = {str(k): str(v) for k, v in policy.attrib.items()}
+    body, head.trailer = _body(root, unheld, top=True)
     return BlockDocument(head, body, root.get("sync"), unheld), []
 
 

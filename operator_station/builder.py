@@ -27,7 +27,7 @@ from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
 from execution_engine.app_model.document import AppDocument, OperationEntry, Placement, parse_document, serialize
 from operator_station.blocks import BlockDocument, walk
-from operator_station.blocks_xml import Where, parse_blocks, read_blocks, write_blocks
+from operator_station.blocks_xml import Where, read_blocks, write_blocks
 
 
 @dataclass(frozen=True)
@@ -164,23 +164,24 @@ def _unheld(path: Path, kept: BlockDocument, consequence: str) -> str:
 
 
 def held_back(path: Path) -> BlockDocument | None:
-    """The block document of the file at ``path`` when it holds something the builder does not, else None
-    (read once per change of the file: the page validates on every edit, and a 10,000-operation file takes a second)."""
+    """The block document of the file at ``path`` when it holds something the builder does not, else None."""
+    document, _ = _opened(path)
+    return document if document is not None and document.unheld else None
+
+
+def _opened(path: Path) -> tuple[BlockDocument | None, list[Diagnostic]]:
+    """The file's block document, read once per change of the file (by its mtime and size): the page opens it, then
+    validates on every edit, and a 10,000-operation file takes a second to read.  Shared: never changed in place."""
     try:
         info = path.stat()
-    except OSError:
-        return None
-    return _held_back(path, info.st_mtime_ns, info.st_size) if info.st_size else None
+    except OSError as error:
+        return None, [Diagnostic(str(path), 1, 1, f"cannot read the file: {error.strerror or error}")]
+    return _read_once(path, info.st_mtime_ns, info.st_size)
 
 
-@lru_cache(maxsize=16)
-def _held_back(path: Path, mtime_ns: int, size: int) -> BlockDocument | None:
-    try:
-        data = path.read_bytes()
-    except OSError:
-        return None
-    document, _ = parse_blocks(data, path)
-    return document if document is not None and document.unheld else None
+@lru_cache(maxsize=4)
+def _read_once(path: Path, mtime_ns: int, size: int) -> tuple[BlockDocument | None, list[Diagnostic]]:
+    return read_blocks(path)
 
 
 def with_steps(path: Path) -> AppDocument | None:
@@ -198,7 +199,7 @@ def with_steps(path: Path) -> AppDocument | None:
 
 def open_document(path: Path) -> tuple[BlockDocument | None, list[Diagnostic]]:
     """The file as the builder shows it: its operations, loops and calls as blocks."""
-    return read_blocks(path)
+    return _opened(path)
 
 
 def save_document(document: AppDocument | BlockDocument, path: Path, catalog: Catalog, outputs: Sequence[Output] = ()) -> tuple[bool, list[PlacedMessage]]:
