@@ -8,10 +8,13 @@
   any length, NaN and infinities, jumps -- it never raises, never holds a value that is not finite,
   and never moves a joint farther between two accepted samples than its speed allows.
 * :func:`remainder` (a resume) starts where the arm stands and ends at the path's end.
+* A robot description from the graph, mangled anyhow, builds a model whose every joint has finite limits,
+  or is refused in one line (:class:`UrdfError`); a DTD, an entity or 16 MiB are refused before parsing.
 """
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from hypothesis import given, settings
@@ -20,6 +23,7 @@ from hypothesis import strategies as st
 from node_transport.clock import Clock
 from node_transport.msgs import Header, JointState, Time
 from robot_bridges.ros2_control.feed import JUMP_FACTOR, JUMP_SLACK, MAX_JITTER, JointFeed
+from robot_bridges.ros2_control.model import MAX_URDF_CHARS, UrdfError, UrdfModel
 from robot_bridges.ros2_control.planning import ACCELERATION_WINDOW, Limits, remainder, retime, time_path
 
 NAMES = ("j1", "j2", "j3")
@@ -104,3 +108,32 @@ def test_the_feed_never_raises_never_holds_a_non_number_and_never_accepts_a_jump
                 if before is not None:  # a move since the value was first accepted: within the joint's speed
                     assert abs(value - before[0]) <= speed * JUMP_FACTOR * (clock.t - before[1] + MAX_JITTER) + JUMP_SLACK + 1e-9
                 since[name] = (value, clock.t)
+
+
+KR6 = (Path(__file__).resolve().parents[1] / "robot_bridges" / "kuka_rsi" / "urdf" / "kuka_kr6_r900.urdf").read_text()
+edits = st.lists(st.tuples(st.integers(0, len(KR6)), st.integers(0, 40), st.text(alphabet='<>/="\' abcdefgijklmnoprstuvwxyz0123456789.-e&;!\x00', max_size=12)), max_size=4)
+
+
+@settings(max_examples=80, deadline=None)
+@given(edits)
+def test_a_mangled_robot_description_builds_a_model_with_finite_limits_or_is_refused_in_one_line(changes: list) -> None:  # noqa: ANN001
+    text = KR6
+    for at, cut, insert in changes:
+        text = text[:at] + insert + text[at + cut:]
+    try:
+        model = UrdfModel(text)
+    except UrdfError as error:
+        assert "\n" not in str(error)
+        return
+    for limits in model.ranges.values():
+        assert math.isfinite(limits.lower) and math.isfinite(limits.upper) and limits.lower <= limits.upper and 0 < limits.velocity < math.inf
+
+
+def test_a_description_with_a_doctype_or_beyond_the_size_limit_is_refused() -> None:
+    for text, words in ((KR6.replace("<robot", "<!DOCTYPE r [<!ENTITY a 'b'>]><robot", 1), "<!DOCTYPE>"), (KR6 + " " * MAX_URDF_CHARS, "over the limit")):
+        try:
+            UrdfModel(text)
+        except UrdfError as error:
+            assert words in str(error)
+        else:
+            raise AssertionError("taken")

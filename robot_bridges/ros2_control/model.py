@@ -27,6 +27,8 @@ IK_ANGLE_TOLERANCE = 1e-4
 IK_DAMPING = 1e-6
 IK_ITERATIONS = 200
 IK_RESTARTS = 8
+#: The longest robot description taken (a description with meshes inline is a few MB; more is not a URDF).
+MAX_URDF_CHARS = 16 * 1024 * 1024
 
 
 class UrdfError(ValueError):
@@ -45,6 +47,10 @@ class UrdfModel:
     """The URDF's kinematic model: ``q`` vectors hold every movable joint in :attr:`joint_names` order."""
 
     def __init__(self, urdf: str) -> None:
+        if len(urdf) > MAX_URDF_CHARS:
+            raise UrdfError(f"the robot description is {len(urdf):,} characters, over the limit of {MAX_URDF_CHARS:,}")
+        if "<!DOCTYPE" in urdf or "<!ENTITY" in urdf or "\x00" in urdf:
+            raise UrdfError("the robot description declares a <!DOCTYPE> or an entity, or holds a NUL: refused (a URDF needs neither)")
         if "<robot" not in urdf:
             raise UrdfError("the robot description is not a URDF (no <robot> element)")
         try:
