@@ -125,7 +125,7 @@ def validate(document: AppDocument | BlockDocument, path: Path, catalog: Catalog
 
     A BlockDocument holds the loops and calls of its file: it is checked as written, expanded.  What
     a file holds that the builder does not (:attr:`BlockDocument.unheld`: an ``<if>``, a comment inside
-    an operation) is never dropped: unchanged, the file itself is checked and run; edited, it is
+    a call's params) is never dropped: unchanged, the file itself is checked and run; edited, it is
     refused naming what it would lose.  An AppDocument (the flat document of ``read_document``) of a
     file of loops holds only its top-level operations, and is refused the same way when edited.
     DocumentError: the document holds what XML cannot carry (a group that is not a name)."""

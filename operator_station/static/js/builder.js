@@ -462,6 +462,8 @@ const Builder = (() => {
     setDocument(answer.document, answer.path);
   }
   async function save() {
+    clearTimeout(timer);  // the save's answer carries the validation: an edit's validation still to come would overwrite "saved"
+    b.validating++;
     const answer = await Store.post("/api/save", current());
     if (answer.error) { $("validation-summary").textContent = answer.error; $("validation-summary").className = "summary bad"; return; }
     showMessages(answer.messages || [], answer.ok);
