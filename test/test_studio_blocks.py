@@ -232,3 +232,18 @@ def test_a_branch_is_one_more_kind_of_block(monkeypatch: pytest.MonkeyPatch) -> 
     assert BlockDocument.from_json(document.to_json()) == document
     written, _ = write_blocks(document)
     assert canonical(written.encode("utf-8")) == canonical(text)
+
+
+def test_an_operation_moved_into_a_loop_is_checked_there(apps: Path) -> None:
+    """Moved into the loop (⇥ in the page), `home` would come out once per hole with the same id: refused at its cell."""
+    client = client_for(build_station(station_args(), CATALOG, apps))
+    document = client.post("/api/open", json={"path": "rivet_loop.xml"}).json()["document"]
+    home = document["body"].pop()
+    document["body"][1]["body"].append(home)
+    answer = post(client, "validate", "rivet_loop.xml", document).json()
+    assert not answer["ok"]
+    errors = [m for m in answer["messages"] if m["severity"] == "error"]
+    assert [(m["step"], m["operation"]) for m in errors] == [([1, 2], 3)] and "operation id 'home' comes out the same" in errors[0]["message"]
+    home["id"] = "home_{hole}"
+    assert post(client, "save", "rivet_loop.xml", document).json()["ok"]
+    assert [op_id for op_id, *_ in expanded(apps / "rivet_loop.xml")][-3:] == ["debur_drill_4", "insert_drill_4", "home_drill_4"]
