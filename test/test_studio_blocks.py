@@ -247,3 +247,16 @@ def test_an_operation_moved_into_a_loop_is_checked_there(apps: Path) -> None:
     home["id"] = "home_{hole}"
     assert post(client, "save", "rivet_loop.xml", document).json()["ok"]
     assert [op_id for op_id, *_ in expanded(apps / "rivet_loop.xml")][-3:] == ["debur_drill_4", "insert_drill_4", "home_drill_4"]
+
+
+def test_a_call_reads_only_files_in_the_station_folders(apps: Path, tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Validating a call reads the called file: the page may name only files it could open."""
+    outside = tmp_path_factory.mktemp("outside") / "secret.xml"
+    outside.write_text("<config/>", encoding="utf-8")
+    client = client_for(build_station(station_args(), CATALOG, apps))
+    document = client.post("/api/open", json={"path": "rivet_blocks.xml"}).json()["document"]
+    document["body"][1]["body"][0]["attributes"]["application"] = str(outside)
+    for route in ("validate", "save", "run"):
+        answer = post(client, route, "rivet_blocks.xml", document)
+        assert answer.status_code == 400 and answer.json()["error"].startswith(f"step 2.1: call of {outside}: outside the station's folders")
+    assert (apps / "rivet_blocks.xml").read_bytes() == (ROOT / "apps_xml" / "rivet_blocks.xml").read_bytes()
