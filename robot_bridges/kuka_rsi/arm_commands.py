@@ -5,8 +5,9 @@ A joint move and a point-to-point Cartesian move (inverse kinematics once, here)
 straight legs within its tolerance (:mod:`.recording`); a recorded trajectory is replayed on the chords between
 its samples at the RSI cycle (:mod:`.replay`) and streamed point by point; a dwell counts robot cycles (IPOC), not
 wall time; a hand action sets a tool output of the ``<Sen>`` packet and waits until the robot echoes it.  A
-command ends when the loop reports it done or failed; after a pause it is sent again towards the same target, a
-stop abandons it.  Every plan starts from the set point the loop commands, never from what the controller reports.
+command ends when the loop reports it done or failed; after a pause a move is sent again towards the same target
+and a trajectory streams its rest from where the arm stopped; a stop abandons it.  Every plan starts from the set
+point the loop commands, never from what the controller reports.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from robot_bridges.kuka_rsi.external import RobotLink
 from robot_bridges.kuka_rsi.kinematics import KukaArm
 from robot_bridges.kuka_rsi.loop_events import LoopEvents
 from robot_bridges.kuka_rsi.recording import RecordingPlanner
-from robot_bridges.kuka_rsi.replay import resample
+from robot_bridges.kuka_rsi.replay import remainder, resample_along, samples_passed
 from robot_bridges.kuka_rsi.streaming import ToolPath, ToolPathError
 from robot_bridges.kuka_rsi.target_checks import check_line, reach
 
@@ -61,6 +62,7 @@ class Run:
     paused: bool = False
     stopped: bool = False
     resumed: asyncio.Event = field(default_factory=asyncio.Event)
+    halt: int = 0  # the pause's halt command while it has not ended (0: none)
 
 
 def fault_kind(kind: str) -> FaultKind:
@@ -182,17 +184,59 @@ class ArmCommands:
         times = np.array(primitive.times, dtype=float) / self.speed
         await self.move_joints(points[0])
         if len(points) > 1 and times[-1] > times[0]:
+            await self._replay(primitive.name, times, points)
+
+    async def _replay(self, name: str, times: np.ndarray, points: np.ndarray) -> None:
+        """Stream the samples resampled at the RSI cycle.  A pause halts the stream wherever braking ends; the
+        resume streams what is left from where the arm stands (:func:`.replay.remainder`), from rest: never the
+        stream again from its first point (a jump the loop refuses, and motion made twice)."""
+        iface, events = self.events.iface, self.events
+        assert iface is not None and self.run is not None
+        run = self.run
+        while True:
+            await self._unpaused(run)
+            if len(points) < 2:  # paused at the end: the last sample is all that is left
+                await self.move_joints(points[-1])
+                return
             try:
-                sampled = resample(times, points, self._dt, np.array(self.link.max_joint_speed), np.array(self.link.max_joint_accel))
-            except ValueError as error:
-                raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: trajectory {primitive.name!r}: {error}") from None
-            path = ToolPath("joint", sampled, f"trajectory {primitive.name}")
-            iface = self.events.iface
-            assert iface is not None
-            try:
-                await self.command(lambda: iface.set_tool_path(0, path))
+                sampled, along = resample_along(times, points, self._dt, np.array(self.link.max_joint_speed), np.array(self.link.max_joint_accel))
+                cmd = iface.set_tool_path(0, ToolPath("joint", sampled, f"trajectory {name}"))
             except ToolPathError as error:
                 raise BridgeError(FaultKind.JOINT_LIMIT, f"{self.name}: {error}") from None
+            except ValueError as error:
+                raise BridgeError(FaultKind.UNSUPPORTED, f"{self.name}: trajectory {name!r}: {error}") from None
+            done = iface.events.done
+            await events.until(lambda: cmd in done, None, "end of the trajectory")
+            ok, message, kind = done.pop(cmd)
+            reached = iface.events.progress.pop(cmd, 0.0)
+            if ok:
+                return
+            if not (run.stopped or run.paused):
+                if events.fault is not None:
+                    raise events.fault
+                raise BridgeError(fault_kind(kind), f"{self.name}: {message}")
+            await self._unpaused(run)
+            times, points = remainder(times, points, self.commanded(), samples_passed(points, along, reached))
+
+    async def _unpaused(self, run: Run) -> None:
+        """Return once the primitive may move: not paused, and the arm at rest after a pause's halt (so the
+        plan starts where it really stands); STOPPED when it was stopped."""
+        iface, events = self.events.iface, self.events
+        assert iface is not None
+        while True:
+            if run.stopped:
+                raise BridgeError(FaultKind.STOPPED, f"{self.name}: stopped")
+            if not run.paused:
+                break
+            await events.until(lambda: run.resumed.is_set() or run.stopped, None, "resume")
+        halt, done = run.halt, iface.events.done
+        if halt:
+            await events.until(lambda: halt in done or run.stopped or run.paused, None, "the arm to stop")
+            if halt in done:
+                done.pop(halt)
+                run.halt = 0
+            else:  # stopped or paused again meanwhile
+                await self._unpaused(run)
 
     async def record(self, primitive: RecordTrajectory) -> TrajectoryResult:
         """Plan through waypoints with the robot's own generators at full speed (replaying scales

@@ -12,8 +12,8 @@ if packets stop coming the loop reports the silence.  An RSI stop, a timeout or 
 simulator becomes :class:`BridgeError` (``CONTROLLER`` or ``TIMEOUT``) for the running and every
 later primitive: RSI must be restarted on the controller before the robot moves again.
 
-``pause`` brakes the robot at the generator's limits; ``resume`` aims again at the same target;
-``stop`` brakes and abandons the primitive.
+``pause`` brakes the robot at the generator's limits; ``resume`` aims again at the same target, or
+streams the rest of a trajectory from where the arm stopped; ``stop`` brakes and abandons the primitive.
 
 This module is the back end's face: its start and end, the port, and the registry's ``create``.  The
 motion is :mod:`.arm_commands`, the checks of a target before anything is sent :mod:`.target_checks`,
@@ -271,7 +271,7 @@ class KukaRsiBackend(RobotBackend):
             return
         run.paused = True
         run.resumed.clear()
-        self.iface.halt(0)
+        run.halt = self.iface.halt(0)
 
     async def resume(self, group: str) -> None:
         self._check_group(group)

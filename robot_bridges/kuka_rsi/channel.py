@@ -323,6 +323,8 @@ class Channel:
                 self._report_failure(cmd_id, "the robot does not follow corrections (RSI_MOVECORR not active: allow the move first)")
             return
         if self.active_id:
+            if self._active_kind == CommandKind.STREAM:  # how far it got: a resume goes on from there, never from its start
+                self._emit(("progress", self.index, self.active_id, self.motion.stream_progress()))
             self._finish(False, f"superseded by command {cmd_id}", "stopped")
         if self._pending is not None:
             self._fail_pending(f"superseded by command {cmd_id}", "stopped")

@@ -101,6 +101,7 @@ class LoopEvents:
         self.inputs_cycle = [0] * robots  # the packet (loop count) they were last read from
         self.outputs: list[dict[str, tuple[Any, str]]] = [{} for _ in range(robots)]  # set signals: value sent or None, why not
         self.done: dict[int, tuple[bool, str, str]] = {}  # command id -> ok, message, fault kind
+        self.progress: dict[int, float] = {}  # stream command id -> the path index it had reached when superseded
         self.connected = [False] * robots
         self.feedback: list[str | None] = [None] * robots  # the file each robot's packets are saved to
         self.flags_sent: list[int] = [0] * robots  # the <Sen> BOOLs of the latest reply that changed them
@@ -133,6 +134,11 @@ class LoopEvents:
             if len(self.done) > 10_000:
                 for key in list(self.done)[:5000]:
                     del self.done[key]
+        elif kind == "progress":
+            self.progress[int(message[2])] = float(message[3])
+            if len(self.progress) > 1000:
+                for key in list(self.progress)[:500]:
+                    del self.progress[key]
         elif kind == "flags":
             self.flags_sent[int(message[1])] = int(message[2])
         elif kind == "feedback":

@@ -431,6 +431,15 @@ class Motion:
         self._applied_cursor = (0.0, 0.0)
         return None
 
+    def stream_progress(self) -> float:
+        """How far along its path the latest stream has commanded the set point: a point index from 0,
+        fractional; its last point once all are sent.  What a resume after a halt goes on from."""
+        if self.path is None:
+            return 0.0
+        if self.mode == "stream" and self.cursor is not None:
+            return max(0.0, self.cursor.position - 1.0)  # the cursor's row 0 is where the robot stood
+        return float(len(self.path) - 1)
+
     def halt(self) -> None:
         """Brake to rest at the current limits; a stream hands its speed to the generator first."""
         if self.mode == "stream" and self.cursor is not None:

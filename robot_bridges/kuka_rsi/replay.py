@@ -46,6 +46,12 @@ def resample(times: Vector, points: Points, dt: float, max_speed: Vector, max_ac
     per axis (the points' unit per s and per s^2).  The first row is ``points[0]``, the last
     ``points[-1]``; each sample is passed at its recorded time unless a bend or a speed needs more.
     """
+    return resample_along(times, points, dt, max_speed, max_accel)[0]
+
+
+def resample_along(times: Vector, points: Points, dt: float, max_speed: Vector, max_accel: Vector) -> tuple[Points, Vector]:
+    """:func:`resample`, and how far along the samples' polygon (its arc length) each set point lies:
+    what tells, after a pause, which samples the stream had passed (:func:`samples_passed`)."""
     t = np.asarray(times, dtype=float)
     p = np.asarray(points, dtype=float)
     if len(t) != len(p) or len(t) < 2 or not np.all(np.diff(t) > 0):
@@ -54,14 +60,37 @@ def resample(times: Vector, points: Points, dt: float, max_speed: Vector, max_ac
     arc = _recorded_arc(t, polygon.arc, _grid(t[0], t[-1], dt))
     budget = np.asarray(max_accel, dtype=float) * dt * dt
     reach = np.asarray(max_speed, dtype=float) * dt
-    planned = polygon.at(arc)
+    along = arc
+    planned = polygon.at(along)
     share = BEND_SHARE
     for _ in range(_RETRIES):
         if _within(planned, reach, budget):
-            return planned
-        planned = polygon.at(_slowed(arc, polygon, reach, budget, share))
+            return planned, along
+        along = _slowed(arc, polygon, reach, budget, share)
+        planned = polygon.at(along)
         share /= 2.0
-    return planned  # still over: the path check refuses it, naming the point
+    return planned, along  # still over: the path check refuses it, naming the point
+
+
+def samples_passed(points: Points, along: Vector, reached: float) -> int:
+    """The last sample of ``points`` a replay planned by :func:`resample_along` (``along``: its set points'
+    arc lengths) had passed when its set point ``reached`` (an index, fractional) was commanded."""
+    arc = _Polygon(np.asarray(points, dtype=float)).arc
+    at = float(np.interp(reached, np.arange(len(along), dtype=float), along))
+    return int(np.clip(np.searchsorted(arc, at * (1 + 1e-12) + _TINY, side="right") - 1, 0, len(arc) - 1))
+
+
+def remainder(times: Vector, points: Points, here: Vector, after: int) -> tuple[Vector, Points]:
+    """What is left of a timed trajectory for an arm standing at ``here`` (after a pause): ``here`` in
+    place of the sample nearest to it, searched from sample ``after`` on (what was passed is never
+    played again, even where the trajectory comes back over it), then every later sample at its
+    recorded time.  Only the last sample when nothing follows the nearest."""
+    times, points = np.asarray(times, dtype=float), np.asarray(points, dtype=float)
+    after = min(max(0, after), len(points) - 1)
+    nearest = after + int(np.argmin(np.max(np.abs(points[after:] - here), axis=1)))
+    if nearest + 1 >= len(points):
+        return times[-1:], points[-1:]
+    return times[nearest:], np.vstack((np.asarray(here, dtype=float)[None, :], points[nearest + 1:]))
 
 
 class _Polygon:
