@@ -36,6 +36,10 @@ log = logging.getLogger(__name__)
 
 #: Seconds an ended goal (its status and result) is kept, rcl_action's default ``result_timeout``.
 RESULT_TIMEOUT = 900.0
+#: Seconds :meth:`ActionServer.close` gives goals still running to end as their owner told them to, before cancelling them.
+CLOSE_GRACE = 0.5
+#: Seconds :meth:`ActionServer.close` takes at most, whatever goals it has served: a node stops on SIGTERM within 2 s.
+CLOSE_TIMEOUT = 1.0
 #: rcl_action_qos_profile_status_default
 STATUS_QOS = QoS(Reliability.RELIABLE, Durability.TRANSIENT_LOCAL, History.KEEP_LAST, 1)
 
@@ -88,7 +92,10 @@ class ActionServer:
         self._execute, self._accept, self._cancel = execute, accept, cancel
         self.goals: dict[tuple[int, ...], GoalHandle] = {}
         self._tasks: set[asyncio.Task[None]] = set()
-        self._expiries: list[asyncio.TimerHandle] = []
+        self._expiries: dict[tuple[int, ...], asyncio.TimerHandle] = {}  # ended goals, until forgotten
+        self._results_asked = 0  # get_result requests waiting for a goal's end
+        self._results_answered = asyncio.Event()  # set whenever none waits
+        self._results_answered.set()
         base = f"{self.name}/_action"
         node.create_service(action.SendGoal, f"{base}/send_goal", self._on_send_goal)
         get_result = self._on_get_result
@@ -132,16 +139,25 @@ class ActionServer:
                 handle.status = GoalStatus.STATUS_CANCELED
             else:
                 handle.status = GoalStatus.STATUS_ABORTED if handle.aborted else GoalStatus.STATUS_SUCCEEDED
+        except asyncio.CancelledError:  # the server closes: the goal ends here, and whoever waits for its result hears so
+            self._ended(handle, self.action.Result(), GoalStatus.STATUS_CANCELED if handle.cancel_requested else GoalStatus.STATUS_ABORTED)
+            raise
         except Exception as error:  # noqa: BLE001 - the goal ends aborted; the node hears why
             self.node.report_fault(f"action {self.name}", error)
             handle.result = self.action.Result()
             handle.status = GoalStatus.STATUS_ABORTED
+        self._ended(handle, handle.result, handle.status)
+        uuid = handle.goal_id.uuid
+        self._expiries[uuid] = self.node.clock.call_later(RESULT_TIMEOUT, self._expire, uuid)
+
+    def _ended(self, handle: GoalHandle, result: Any, status: int) -> None:
+        handle.result, handle.status = result, status
         handle.done.set()
         self._publish_status()
-        self._expiries.append(self.node.clock.call_later(RESULT_TIMEOUT, self._expire, handle.goal_id.uuid))
 
     def _expire(self, uuid: tuple[int, ...]) -> None:
         """rcl_action forgets an ended goal after its result timeout: the status array stays bounded."""
+        self._expiries.pop(uuid, None)
         if self.goals.pop(uuid, None) is not None:
             self._publish_status()
 
@@ -149,7 +165,14 @@ class ActionServer:
         handle = self.goals.get(request.goal_id.uuid)
         if handle is None:
             return self.action.GetResult.Response(GoalStatus.STATUS_UNKNOWN, self.action.Result())
-        await handle.done.wait()
+        self._results_asked += 1
+        self._results_answered.clear()
+        try:
+            await handle.done.wait()
+        finally:
+            self._results_asked -= 1
+            if not self._results_asked:
+                self._results_answered.set()
         return self.action.GetResult.Response(handle.status, handle.result)
 
     _on_get_result.long_running = True  # type: ignore[attr-defined]
@@ -178,8 +201,27 @@ class ActionServer:
         self._status.publish(GoalStatusArray(tuple(GoalStatus(h.info, h.status) for h in self.goals.values())))
 
     async def close(self) -> None:
-        for timer in self._expiries:
+        """Stop within :data:`CLOSE_TIMEOUT` of the node's clock, whatever goals were served: the ended goals'
+        timers go; a goal still running gets :data:`CLOSE_GRACE` to end as its owner told it to (its own
+        result), then is cancelled and ends ABORTED; every get_result waiting for a goal is answered before
+        the node's services go.  Only a goal that ignores its cancellation is left, and said so."""
+        for timer in self._expiries.values():
             timer.cancel()
-        for task in list(self._tasks):
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._expiries.clear()
+        clock = self.node.clock
+        deadline = clock.now() + CLOSE_TIMEOUT
+        if self._tasks:
+            running = asyncio.gather(*self._tasks, return_exceptions=True)
+            try:
+                await clock.wait_for(asyncio.shield(running), CLOSE_GRACE)
+            except asyncio.TimeoutError:
+                for task in list(self._tasks):
+                    task.cancel()
+                try:
+                    await clock.wait_for(asyncio.shield(running), max(0.0, deadline - clock.now()))
+                except asyncio.TimeoutError:
+                    log.warning("%s: %d goal(s) did not end within %g s of the server's close", self.name, len(self._tasks), CLOSE_TIMEOUT)
+        try:  # answered as soon as the goals have ended: a turn of the loop, bounded all the same
+            await clock.wait_for(self._results_answered.wait(), max(0.0, deadline - clock.now()))
+        except asyncio.TimeoutError:
+            log.warning("%s: %d result request(s) unanswered at the server's close", self.name, self._results_asked)

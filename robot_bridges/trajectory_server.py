@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from node_transport import mirrors
-from node_transport.action import ActionServer, GoalHandle
+from node_transport.action import CLOSE_GRACE, ActionServer, GoalHandle
 from node_transport.carriage import subscribe
 from node_transport.clock import Clock
 from node_transport.msgs import Bool, Header
@@ -299,12 +299,23 @@ class GroupTrajectoryServer:
             self.node.report_fault(task.get_name(), error)
 
     async def close(self) -> None:
+        """Every goal ends ("the bridge is shutting down"), the arm stopped on its path; bounded by the action
+        server's close and :data:`CLOSE_GRACE` for the stops under way: a node stops on SIGTERM within 2 s."""
         for entry in list(self._goals.values()):
             self._end(entry, INVALID_GOAL, f"{self.group}: the bridge is shutting down")
         await self.server.close()
-        for task in list(self._tasks):
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if not self._tasks:
+            return
+        stops = asyncio.gather(*self._tasks, return_exceptions=True)
+        try:  # the stops asked for end on their own (the arm held on its path), or are cancelled
+            await self.node.clock.wait_for(asyncio.shield(stops), CLOSE_GRACE)
+        except asyncio.TimeoutError:
+            for task in list(self._tasks):
+                task.cancel()
+            try:
+                await self.node.clock.wait_for(asyncio.shield(stops), CLOSE_GRACE)
+            except asyncio.TimeoutError:
+                self.node.logger.warning("%s: %d task(s) did not end at the bridge's close", self.action_name, len(self._tasks))
 
 
 class TrajectoryServers:
