@@ -11,9 +11,10 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from fjt_client import NEXTAGE, Arm, goal, start_bridge, three_points
+from fjt_client import FJT, NEXTAGE, Arm, goal, start_bridge, three_points
+from rclpy_like import RclpyLikeActionClient
 
-from node_transport.action import CLOSE_TIMEOUT, GoalStatus
+from node_transport.action import CLOSE_TIMEOUT, ActionServer, GoalHandle, GoalStatus
 from node_transport.clock import Clock
 from node_transport.local import LocalTransport
 
@@ -63,3 +64,33 @@ def test_the_bridge_stops_promptly_after_goals_of_every_ending(run_sim: Any) -> 
     assert out["running"] is not None, "the running goal's result was never answered"
     assert out["running"].status == GoalStatus.STATUS_ABORTED  # the client hears the goal's end, not silence
     assert "shutting down" in out["running"].result.error_string
+
+
+def test_a_goal_that_does_not_end_when_told_is_cancelled_and_its_client_answered(run_sim: Any) -> None:
+    """An owner whose goal goes on past the close's grace (a back end that does not stop): cancelled, ABORTED, answered."""
+    async def main(clock: Clock) -> tuple[float, Any, int]:
+        bus = LocalTransport(clock)
+        forever = asyncio.Event()
+
+        async def execute(handle: GoalHandle) -> Any:
+            await forever.wait()  # never set: only a cancellation ends it
+            return FJT.Result()
+
+        server = ActionServer(bus.create_node("server"), FJT, "/arm_controller/follow_joint_trajectory", execute=execute,
+                              accept=lambda goal: None, cancel=lambda handle: None)
+        client = RclpyLikeActionClient(bus.create_node("client"), "/arm_controller/follow_joint_trajectory", FJT)
+        handle = await client.send_goal(goal(("a",), [(1.0, (0.0,))]), 1, timeout=BOUND)
+        assert handle is not None
+        result = asyncio.ensure_future(client.result(handle, BOUND))
+        await clock.sleep(0.1)
+        began = clock.now()
+        await clock.wait_for(server.close(), CLOSE_TIMEOUT + 1.0)
+        took = clock.now() - began
+        answer = await clock.wait_for(result, 1.0)
+        left = [t for t in asyncio.all_tasks() if t is not asyncio.current_task() and not t.done()]
+        return took, answer, len(left)
+
+    took, answer, left = run_sim(main)
+    assert took <= CLOSE_TIMEOUT
+    assert answer.status == GoalStatus.STATUS_ABORTED
+    assert left == 0
