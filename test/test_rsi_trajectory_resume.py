@@ -15,9 +15,15 @@ from typing import Any
 
 import numpy as np
 import pytest
+from app_builder import make_app
 
-from core_functions.primitives import ExecuteTrajectory, SetSpeed
+from cell_runner.deployment import deploy_local
+from core_functions.primitives import ExecuteTrajectory, SetSpeed, TrajectoryResult
+from core_functions.robots import KUKA_KR
+from core_functions.trajectory_store import TrajectoryStore
 from node_transport.clock import Clock
+from node_transport.msgs import Trigger
+from node_transport.wire import engine_service
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend
 from robot_bridges.kuka_rsi.external import LoopSettings, RobotLink
 from robot_bridges.kuka_rsi.krc_model import RsiContext
@@ -110,3 +116,40 @@ def test_the_rest_of_a_trajectory_is_searched_on_from_what_was_passed() -> None:
     assert np.allclose(rest[1:], points[3:]) and np.allclose(rest_times, times[2:])
     rest_times, rest = remainder(times, points, points[-1], 8)  # at the end: nothing left but the end
     assert len(rest) == 1 and np.allclose(rest[0], points[-1])
+
+
+def test_the_operator_pauses_an_application_mid_trajectory_and_it_finishes_after_resume(run_sim: Run, tmp_path: Any) -> None:
+    """The engine's own path: an application replays the trajectory on the KUKA RSI back end; the operator's
+    pause (the engine's pause service) holds it mid-way, the resume lets it finish, nothing made twice."""
+    store = TrajectoryStore(tmp_path / "trajectories.db")
+    store.save("arm", "out_and_back", TrajectoryResult(NAMES, POINTS, TIMES), "plan", 0.0)
+    store.close()
+
+    async def main(clock: Clock) -> tuple[Any, list[tuple[int, np.ndarray]], KukaRsiBackend]:
+        b = _backend()
+        deployment = await deploy_local(clock, KUKA_KR, b, machine_parameters={"trajectory_db": str(tmp_path / "trajectories.db")})
+        node = deployment.transport.create_node("test_operator")
+        pause, resume = (node.create_client(Trigger, engine_service(c)) for c in ("pause", "resume"))
+        run = asyncio.get_running_loop().create_task(deployment.engine.run(make_app([{"arm": ("execute_trajectory", "out_and_back")}], robot=KUKA_KR)))
+        record: list[tuple[int, np.ndarray]] = []
+        try:
+            assert b.iface is not None
+            for _ in range(5000):  # cycles: until the arm is a third of the way out
+                if b.iface.state(0).commanded_joints[0] - READY[0] >= 0.2 or run.done():
+                    break
+                await b.wait_cycles(1)
+            watcher = asyncio.get_running_loop().create_task(_watch(b, run, record))
+            assert (await pause.call(Trigger.Request(), timeout=5.0)).success
+            await b.wait_cycles(150)
+            assert not run.done()
+            assert (await resume.call(Trigger.Request(), timeout=5.0)).success
+            report = await run
+            await watcher
+        finally:
+            await deployment.close()
+        return report, record, b
+
+    report, record, b = run_sim(main)
+    assert report.outcome == "finished", report.message
+    a1 = np.array([q[0] for _, q in record])
+    assert abs(float(np.sum(np.abs(np.diff(a1)))) - (0.6 - (a1[0] - READY[0]) + 0.6)) < 2e-3  # the rest of the way, nothing twice
