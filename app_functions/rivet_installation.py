@@ -13,7 +13,7 @@ and ``grip_depth`` (how far below the head top the fingers close), in metres.
 """
 from __future__ import annotations
 
-from core_functions.catalog import Hold, ParamSpec, ParamType, skill
+from core_functions.catalog import VISION_OUTCOMES, Hold, ParamSpec, ParamType, skill
 from core_functions.functions import CoreFunctions, Skill, SkillContext
 from core_functions.geometry import Pose
 from core_functions.primitives import Dwell, EndEffector, MoveCartesian, SetSpeed
@@ -62,6 +62,7 @@ class RivetInstallation(CoreFunctions):
     @skill(
         ParamSpec("hole", ParamType.FRAME, "the drilled hole to debur", kinds=("hole",)),
         states=("Motion", "Vision", "EndEffector"),
+        outcomes=VISION_OUTCOMES,
     )
     def debur_drilling(self, hole: str) -> Skill:
         """Detect a drilled hole with the wrist camera and debur its edge with the deburring tool."""
@@ -101,6 +102,7 @@ class RivetInstallation(CoreFunctions):
         states=("Motion", "Vision", "EndEffector"),
         requires=Hold.PART,
         leaves=Hold.NOTHING,
+        outcomes=VISION_OUTCOMES,
     )
     def insert_rivet(self, hole: str) -> Skill:
         """Insert the held rivet into a hole: vision-corrected approach, slow insertion, release, retract."""

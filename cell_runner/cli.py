@@ -138,6 +138,8 @@ def cmd_functions(catalog: Catalog, as_json: bool, out: IO[str]) -> int:
             out.write(f"      the hand must hold: {spec.requires.value}\n")
         if spec.leaves is not None:
             out.write(f"      afterwards the hand holds: {spec.leaves.value}\n")
+        for outcome in spec.outcomes:  # what an <if outcome=...> may test
+            out.write(f"      outcome {outcome.name}: {outcome.doc}\n")
     out.write("\nParameter types:\n")
     for t, text in PARAM_TYPE_HELP.items():
         out.write(f"  {t.value:<11} {text}\n")

@@ -350,6 +350,27 @@ _PARSERS: dict[ParamType, Callable[[ParamSpec, str, BindContext], Any]] = {
 }
 
 
+# --------------------------------------------------------------------------- outcomes
+@dataclass(frozen=True)
+class Outcome:
+    """A named way a function can end that an application may branch on (``<if outcome=...>``).
+
+    ``fault``: the fault kind (``node_transport.wire.FaultKind`` value) that ends the function with
+    this outcome instead of an error -- but only where an ``<if>`` tests it: an application that does
+    not say what to do when a hole is not found keeps today's error and policy.  None: the outcome
+    of a function that ends normally (a function has at most one such)."""
+
+    name: str
+    doc: str
+    fault: str | None = None
+
+
+#: The outcomes of a function that finds something with a camera.
+FOUND = Outcome("found", "the camera found the feature within its search radius; later moves use the measured pose")
+NOT_FOUND = Outcome("not_found", "the camera did not find it (a vision fault: a hole not drilled, covered, or out of place)", "vision")
+VISION_OUTCOMES = (FOUND, NOT_FOUND)
+
+
 # --------------------------------------------------------------------------- functions
 @dataclass(frozen=True)
 class FunctionSpec:
@@ -365,6 +386,18 @@ class FunctionSpec:
     requires: Hold | None = None  # what the hand must hold before (plausibility check)
     leaves: Hold | None = None  # what the hand holds after (None: unchanged)
     method: str = ""  # the Python method implementing it
+    outcomes: tuple[Outcome, ...] = ()  # the named endings an <if> may test (none: it only succeeds or fails)
+
+    def outcome(self, name: str) -> Outcome | None:
+        return next((o for o in self.outcomes if o.name == name), None)
+
+    def outcome_of(self, succeeded: bool, fault: str | None) -> str | None:
+        """The named outcome of an ending: success -> the outcome without a fault; a failure whose
+        fault kind an outcome names -> that outcome; anything else (or no outcomes) -> None."""
+        for outcome in self.outcomes:
+            if (outcome.fault is None) if succeeded else (fault is not None and outcome.fault == fault):
+                return outcome.name
+        return None
 
     @property
     def required_count(self) -> int:
@@ -429,6 +462,10 @@ class FunctionSpec:
             out["requires_holding"] = self.requires.value
         if self.leaves is not None:
             out["leaves_holding"] = self.leaves.value
+        if self.outcomes:
+            out["outcomes"] = [
+                {"name": o.name, "doc": o.doc, **({"on_fault": o.fault} if o.fault else {})} for o in self.outcomes
+            ]
         return out
 
 
@@ -444,6 +481,7 @@ class _SkillMark:
     requires: Hold | None
     leaves: Hold | None
     name: str | None
+    outcomes: tuple[Outcome, ...] = ()
 
 
 def skill(
@@ -454,6 +492,7 @@ def skill(
     requires: Hold | None = None,
     leaves: Hold | None = None,
     name: str | None = None,
+    outcomes: Sequence[Outcome] = (),
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Mark a method as a catalog function; its docstring becomes the catalog doc."""
 
@@ -462,7 +501,9 @@ def skill(
         arg_names = [p for p in signature.parameters if p != "self"]
         if arg_names != [p.name for p in params]:
             raise TypeError(f"{method.__qualname__}: params {[p.name for p in params]} do not match arguments {arg_names}")
-        setattr(method, _SKILL_ATTR, _SkillMark(tuple(params), tuple(groups), tuple(states), sync, requires, leaves, name))
+        if sum(1 for o in outcomes if o.fault is None) > 1 or len({o.name for o in outcomes}) != len(outcomes):
+            raise TypeError(f"{method.__qualname__}: outcomes need distinct names and at most one without a fault")
+        setattr(method, _SKILL_ATTR, _SkillMark(tuple(params), tuple(groups), tuple(states), sync, requires, leaves, name, tuple(outcomes)))
         return method
 
     return mark
@@ -504,6 +545,7 @@ class Catalog:
                     requires=mark.requires,
                     leaves=mark.leaves,
                     method=attr,
+                    outcomes=mark.outcomes,
                 )
         return catalog
 

@@ -15,7 +15,7 @@ from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from typing import Any
 
-from core_functions.catalog import Hold, ParamSpec, ParamType, skill
+from core_functions.catalog import VISION_OUTCOMES, Hold, ParamSpec, ParamType, skill
 from core_functions.cell_index import CellIndex
 from core_functions.geometry import Pose
 from core_functions.primitives import (
@@ -295,6 +295,7 @@ class CoreFunctions:
         ParamSpec("camera", ParamType.CAMERA, "a camera of the robot, or auto for the group's own camera", default="auto"),
         groups=ANY_GROUP,
         states=("Vision",),
+        outcomes=VISION_OUTCOMES,
     )
     def locate(self, target: str, camera: str = "auto") -> Skill:
         """Find a frame with a camera; this group's later moves to it, and to every frame below it in the cell, use the measured pose."""

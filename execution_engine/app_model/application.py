@@ -14,6 +14,7 @@ from types import MappingProxyType
 from core_functions.catalog import Catalog
 from execution_engine.app_model import wire_fit
 from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell_log
+from execution_engine.app_model.branches import check_branches
 from execution_engine.app_model.expand import Expander, merge_iterations
 from execution_engine.app_model.expanded_source import ExpandedSource
 from execution_engine.app_model.flag_check import check_waits
@@ -80,6 +81,7 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
     _check_requests(draft, checked, catalog, cell, policy, log)
     check_waits(draft, checked, catalog, log, cell)
     if expander is not None:
+        check_branches(expander.branches, draft, catalog, log)
         merge_iterations(log, expander.source.contexts, expander.unsubstituted)
     if log.has_errors:
         return None, capped(log)
@@ -169,7 +171,7 @@ def _freeze(draft: ApplicationDraft, checked: list[list[CheckedCall]]) -> tuple[
             call_line, call_col = next(places)
             call_site = call.site
             frozen[call_site.group] = Call(call_site.group, call_site.function, call.params or (), call_site.implicit, file, call_line, call_col)
-        operations.append(Operation(site.id, site.name, line, col, MappingProxyType(frozen)))
+        operations.append(Operation(site.id, site.name, line, col, MappingProxyType(frozen), when=site.when))
     return tuple(operations)
 
 
@@ -184,7 +186,7 @@ def _freeze_expanded(draft: ApplicationDraft, checked: list[list[CheckedCall]], 
             call_site = call.site
             at = source.at_offset(call_site.at)
             frozen[call_site.group] = Call(call_site.group, call_site.function, call.params or (), call_site.implicit, at.file, at.line, at.col)
-        operations.append(Operation(site.id, site.name, where.line, where.col, MappingProxyType(frozen), where.context))
+        operations.append(Operation(site.id, site.name, where.line, where.col, MappingProxyType(frozen), where.context, site.when))
     return tuple(operations)
 
 

@@ -28,7 +28,8 @@ from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, in
 from execution_engine.app_model.expanded_source import ExpandedSource
 from execution_engine.app_model.grid import PREFIX as GRID, GridError, grid_frames, parse_grid
 from execution_engine.app_model.positions import SourceMap
-from execution_engine.app_model.reader import INDEX, ApplicationDraft, CallBlockSite, CallSite, LoopSite, OperationSite, Step
+from execution_engine.app_model.model import Condition
+from execution_engine.app_model.reader import INDEX, ApplicationDraft, CallBlockSite, CallSite, IfSite, LoopSite, OperationSite, Step
 
 #: Operations an application may expand to: ten times the largest application measured
 #: (docs/benchmarks.md), and a hundred thousand lines of a run report.
@@ -113,6 +114,11 @@ class Expander:
         #: would only repeat the problem (merge_iterations drops it).
         self.unsubstituted: set[tuple[str, int, int]] = set()
         self.made_text = 0  # characters substitution made so far (MAX_TEXT)
+        #: The <if>/<else> around the operations being expanded, outermost first.
+        self.when: tuple[Condition, ...] = ()
+        #: Every <if> expanded: (its offset, its condition, the operation it tests) -- the catalog's
+        #: check of the outcome (app_model.branches) comes after the functions are checked.
+        self.branches: list[tuple[int, Condition, OperationSite]] = []
 
     # ------------------------------------------------------------------ reporting
     def error(self, offset: int, message: str, severity: str = "error") -> None:
@@ -146,6 +152,8 @@ class Expander:
                 self.operation(step, env, base, path)
             elif isinstance(step, LoopSite):
                 self.loop(step, env, unit, path, depth + 1, chain, named, base)
+            elif isinstance(step, IfSite):
+                self.branch(step, env, unit, path, depth, chain, named, base)
             else:
                 self.call(step, env, unit, path, depth + 1, chain, base)
 
@@ -163,7 +171,7 @@ class Expander:
                 for i, (value, at) in enumerate(zip(call.values, call.param_at))
             )
             calls[group] = CallSite(call.group, call.function, values, tuple(base + at for at in call.param_at), base + call.at, call.names, call.implicit)
-        made = OperationSite(op_id, name, base + site.at, calls)
+        made = OperationSite(op_id, name, base + site.at, calls, self.when)
         first = self.ids.get(op_id)
         if first is None:
             self.ids[op_id] = made
@@ -217,6 +225,46 @@ class Expander:
             f"operation id {made.id!r} comes out the same in {first_context} ({first_where.file}:{first_where.line}) and in {here}: "
             "put a loop variable in the id (id=\"insert_{hole}\") so every iteration has its own"
         ))
+
+    # ------------------------------------------------------------------ branches
+    def branch(
+        self, site: IfSite, env: Mapping[str, str], unit: _Unit, path: tuple[str, ...], depth: int, chain: tuple[Path, ...],
+        named: tuple[tuple[str, int], ...], base: int,
+    ) -> None:
+        """The <if>'s operations under its condition, the <else>'s under the opposite one.  The
+        operation it tests must come before it (in this iteration or an earlier one) and give
+        the group a function: an outcome is known only once that function has ended."""
+        at = base + site.at
+        tested_id = self.text(site.operation, env, at, "operation", "the <if>'s operation")
+        tested = self.ids.get(tested_id)
+        if tested is None:
+            before = [op.id for op in self.operations[-5:]]
+            self.error(self.attribute(at, "operation"), (
+                f"<if> tests operation {tested_id!r}, which does not come before it: an outcome is known only once its "
+                f"operation has run (the last ones before here: {', '.join(before) or 'none'})"
+            ))
+        elif self.draft.robot is not None and site.group not in self.draft.robot.group_names:
+            self.error(self.attribute(at, "group"), f"<if> names group {site.group!r}, which {self.draft.robot.name} does not have "
+                       f"(its groups: {', '.join(self.draft.robot.group_names)})")
+            tested = None
+        elif site.group not in tested.calls or tested.calls[site.group].implicit or tested.calls[site.group].function == "wait":
+            self.error(self.attribute(at, "group"), (
+                f"<if> tests {site.group} in operation {tested_id!r}, where {site.group} runs no function "
+                f"(only waits): name the group whose function's outcome chooses"
+            ))
+            tested = None
+        condition = Condition(tested_id, site.group, site.outcome)
+        if tested is not None:
+            self.branches.append((at, condition, tested))
+        outer = self.when
+        try:
+            self.when = (*outer, condition)
+            self.steps(site.body, env, unit, path, depth, chain, named)
+            if site.else_at is not None:
+                self.when = (*outer, Condition(tested_id, site.group, site.outcome, holds=False))
+                self.steps(site.orelse, env, unit, path, depth, chain, named)
+        finally:
+            self.when = outer
 
     # ------------------------------------------------------------------ loops
     def loop(
@@ -308,6 +356,8 @@ class Expander:
         for step in steps:
             if isinstance(step, OperationSite):
                 total += 1
+            elif isinstance(step, IfSite):
+                total += self.size(step.body, env, unit, chain, depth) + self.size(step.orelse, env, unit, chain, depth)
             elif depth >= MAX_DEPTH:
                 continue
             elif isinstance(step, LoopSite):
@@ -431,6 +481,8 @@ def _step_variables(step: Step) -> list[str]:
     if isinstance(step, OperationSite):
         texts = [step.id, step.name or ""] + [v for call in step.calls.values() for v in call.values]
         return [name for text in texts for name in variables(text)]
+    if isinstance(step, IfSite):
+        return variables(step.operation) + [name for s in (*step.body, *step.orelse) for name in _step_variables(s)]
     if isinstance(step, LoopSite):
         inner = [name for s in step.body for name in _step_variables(s)]
         return variables(step.values) + [n for n in inner if n not in step.named and n not in (step.var, step.index)]

@@ -53,6 +53,23 @@ class Call:
 
 
 @dataclass(frozen=True, slots=True)
+class Condition:
+    """An ``<if>`` an operation is inside: ``group``'s function in operation ``operation`` ended
+    with ``outcome`` (``holds``) or with any other (``not holds``: the ``<else>``)."""
+
+    operation: str
+    group: str
+    outcome: str
+    holds: bool = True
+
+    def met(self, outcome: str | None) -> bool:
+        return (outcome == self.outcome) == self.holds
+
+    def describe(self) -> str:
+        return f"{self.group} {self.operation} {'==' if self.holds else '!='} {self.outcome}"
+
+
+@dataclass(frozen=True, slots=True)
 class Operation:
     """One step: every group of the robot has a call (in the robot's group order).
 
@@ -66,6 +83,8 @@ class Operation:
     col: int
     calls: Mapping[str, Call]
     origin: str = ""
+    #: The <if>/<else> it is inside, outermost first: it runs only when every one is met.
+    when: tuple[Condition, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -86,6 +105,10 @@ class Application:
     #: The applications its ``<call>`` elements include (resolved paths, each once): a resume
     #: checks them as it checks the application itself.
     includes: tuple[Path, ...] = ()
+
+    def tested(self) -> frozenset[tuple[str, str]]:
+        """(operation, group) of every function an <if> tests: its outcome faults end it with that outcome."""
+        return frozenset((c.operation, c.group) for operation in self.operations for c in operation.when)
 
     def iterations(self) -> dict[str, str]:
         """The origin of every operation made by a loop or a call, by operation id."""

@@ -20,15 +20,18 @@ from lxml import etree
 
 from core_functions import limits
 from core_functions.printable import printable, unsafe_character
+from core_functions.cell_robots import CELL_ROBOT, cell_robot_model
 from core_functions.robots import RobotModel, find_robot
+from execution_engine.app_model.cell import read_cell_log
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Location
 from execution_engine.app_model.expanded_source import ExpandedSource
+from execution_engine.app_model.model import Condition
 from execution_engine.app_model.positions import DocumentWalk, SourceMap
 from execution_engine.app_model.safe_xml import XmlDocument
 
 GROUP_TAGS = frozenset({"left_arm", "right_arm", "torso_head", "arm"})  # as in application.xsd
 #: The elements that hold or bring in operations (as in application.xsd), expanded by app_model.expand.
-STEP_TAGS = frozenset({"for_each", "repeat", "call"})
+STEP_TAGS = frozenset({"for_each", "repeat", "call", "if", "else"})
 #: The variable a loop counts its iterations in (from 1) when it does not name one.
 INDEX = "index"
 
@@ -56,6 +59,7 @@ class OperationSite:
     name: str | None
     at: int
     calls: dict[str, CallSite] = field(default_factory=dict)
+    when: tuple[Condition, ...] = ()  # the <if>/<else> around it, once expanded (app_model.expand)
 
 
 @dataclass(slots=True)
@@ -84,8 +88,31 @@ class CallBlockSite:
     params: list[tuple[str, str, int]] = field(default_factory=list)
 
 
-#: One step of an application's body, in document order: loops and calls are expanded later.
-Step = Union[OperationSite, LoopSite, CallBlockSite]
+@dataclass(slots=True)
+class IfSite:
+    """An ``<if group operation outcome>`` and the ``<else>`` right after it (``else_at``: None when
+    there is none): the steps of ``body`` run when ``group``'s function in ``operation`` (its id as
+    written, loop variables not yet substituted) ended with ``outcome``, those of ``orelse`` otherwise."""
+
+    at: int
+    group: str
+    operation: str
+    outcome: str
+    body: list[Step] = field(default_factory=list)
+    else_at: int | None = None
+    orelse: list[Step] = field(default_factory=list)
+
+
+@dataclass(slots=True)
+class ElseSite:
+    """An ``<else>`` as read, before it is joined to the ``<if>`` it follows."""
+
+    at: int
+    body: list[Step] = field(default_factory=list)
+
+
+#: One step of an application's body, in document order: loops, calls and branches are expanded later.
+Step = Union[OperationSite, LoopSite, CallBlockSite, IfSite]
 
 
 @dataclass(slots=True)
@@ -168,7 +195,7 @@ class ApplicationReader:
             if child.tag in STEP_TAGS:
                 step = self.read_step(child, at, draft.robot)
                 if step is not None:
-                    draft.body.append(step)
+                    self.add_step(draft.body, step)
                     draft.has_steps = True
                 continue
             if child.tag == "description":
@@ -178,7 +205,21 @@ class ApplicationReader:
             self.walk.skip(child)
         return draft
 
-    def read_step(self, element: etree._Element, at: int, robot: RobotModel | None) -> LoopSite | CallBlockSite | None:
+    def add_step(self, body: list[Step], step: Step | ElseSite) -> None:
+        """Append a step read; an ``<else>`` joins the ``<if>`` right before it (anywhere else it is
+        refused at its line: what it would be the other side of is not written)."""
+        if not isinstance(step, ElseSite):
+            body.append(step)
+            return
+        last = body[-1] if body else None
+        if isinstance(last, IfSite) and last.else_at is None:
+            last.else_at, last.orelse = step.at, step.body
+        elif isinstance(last, IfSite):
+            self.error(step.at, "a second <else> for the same <if>: one <else> holds everything run otherwise")
+        else:
+            self.error(step.at, "<else> must come right after an <if> (the operations run when the <if>'s outcome is not met)")
+
+    def read_step(self, element: etree._Element, at: int, robot: RobotModel | None) -> LoopSite | CallBlockSite | IfSite | ElseSite | None:
         """A loop with the steps inside it, or a call with its params (None: the schema says what
         is wrong with it).  Every element below is visited, in document order."""
         if element.tag == "call":
@@ -192,23 +233,31 @@ class ApplicationReader:
                 if child.tag == "param" and name is not None and value is not None:
                     call.params.append((name.strip(), value, child_at))
             return call if call.application else None
-        loop = self.read_loop_head(element, at)
+        block: LoopSite | IfSite | ElseSite | None
+        if element.tag == "if":
+            group, operation, outcome = ((element.get(a) or "").strip() for a in ("group", "operation", "outcome"))
+            block = IfSite(at, group, operation, outcome) if group and operation and outcome else None
+        elif element.tag == "else":
+            block = ElseSite(at)
+        else:
+            block = self.read_loop_head(element, at)
+        body: list[Step] = block.body if block is not None else []
         read_operation = self.read_valid_operation if self.doc.valid_against is not None else self.read_operation
         for child in element:
             if not isinstance(child.tag, str):
                 continue
             child_at = self.walk.visit(child)
             if child.tag == "operation":
-                operation = read_operation(child, child_at, robot)
-                if operation is not None and loop is not None:
-                    loop.body.append(operation)
+                operation_site = read_operation(child, child_at, robot)
+                if operation_site is not None:
+                    body.append(operation_site)
             elif child.tag in STEP_TAGS:
                 step = self.read_step(child, child_at, robot)
-                if step is not None and loop is not None:
-                    loop.body.append(step)
+                if step is not None:
+                    self.add_step(body, step)
             else:
                 self.walk.skip(child)  # the schema reports it
-        return loop
+        return block
 
     @staticmethod
     def read_loop_head(element: etree._Element, at: int) -> LoopSite | None:
@@ -228,11 +277,28 @@ class ApplicationReader:
         name = root.get("robot")
         if not name:
             return None  # the schema reports it
+        if name == CELL_ROBOT:
+            return self.read_cell_robots(root, at)
         try:
             return find_robot(name)
         except KeyError as error:
             self.error(self.source.attribute_offset(at, "robot"), str(error.args[0]))
             return None
+
+    def read_cell_robots(self, root: etree._Element, at: int) -> RobotModel | None:
+        """``robot="cell"``: every robot the cell file lists (core_functions/cell_robots.py); the cell's own
+        problems are reported where the application reads its cell."""
+        cell_name = root.get("cell")
+        if not cell_name or not cell_name.strip():
+            self.error(self.source.attribute_offset(at, "robot"), 'robot="cell" runs on the robots its cell lists: give the cell file (cell=...)')
+            return None
+        cell, _ = read_cell_log(self.doc.path.parent / cell_name, fits=False)
+        if cell is None:
+            return None
+        if not cell.robots:
+            self.error(self.source.attribute_offset(at, "robot"), f'robot="cell": cell {cell_name} lists no <robot>; list its robots there or name the robot here')
+            return None
+        return cell_robot_model(cell.name, cell.robots)
 
     def read_cell_reference(self, root: etree._Element, at: int, draft: ApplicationDraft) -> None:
         cell = root.get("cell")

@@ -276,7 +276,17 @@ class ApplicationChecker:
     def check_holds(self, operations: Sequence[OperationSite], checked: Sequence[Sequence[CheckedCall]]) -> None:
         """Track what each hand holds from operation to operation (Verl et al. 2008, section 6.2)."""
         state = {g: _HoldState(Hold.NOTHING) for g in self.robot.group_names}
+        entered: dict[tuple[str, str, str, tuple[object, ...]], dict[str, _HoldState]] = {}  # what the hands held where an <if> began
+        in_else: set[tuple[str, str, str, tuple[object, ...]]] = set()
         for operation, calls in zip(operations, checked):
+            if operation.when:  # the <else> starts from what the hands held before the <if>, not after it
+                last = operation.when[-1]
+                key = (last.operation, last.group, last.outcome, operation.when[:-1])
+                if last.holds:
+                    entered.setdefault(key, dict(state))
+                elif key not in in_else:
+                    in_else.add(key)
+                    state = dict(entered.get(key, state))
             for call in calls:
                 group = call.site.group
                 spec = call.spec

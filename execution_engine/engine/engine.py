@@ -27,6 +27,7 @@ from typing import Protocol
 
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.engine.branches import branch_taken, ended_with_outcome
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from execution_engine.engine.commands import OperatorCommands
 from execution_engine.engine.dispatch import ApplicationAborted, Dispatch, ResultWaiter
@@ -113,6 +114,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self.state = "idle"
         self._op_index = 0
         self._operation: Operation | None = None
+        self.tested: frozenset[tuple[str, str]] = frozenset()  # the functions an <if> tests (their outcomes are kept)
         self._message = ""
         self._paused = False
         self._stepping = False
@@ -137,6 +139,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         run as ``resume.first_operation`` makes it, which first asks about interrupted groups."""
         self._reset_run_state()
         self.app = app
+        self.tested = app.tested()
         report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
         self.report = report
         self.zones.start(app, self.flags.waits, resume.index if resume is not None else 0)
@@ -171,6 +174,11 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
                     operation = await resume.first_operation(self, operation)
                 if not await self._gate():
                     break
+                if not branch_taken(self, operation, report):
+                    for group in operation.calls:  # left out: it holds no zone
+                        self.zones.ended(operation.id, group)
+                    report.operations_done = index + 1
+                    continue
                 self._op_index, self._operation = index, operation
                 self._set_state("stepping" if self._stepping else "running")
                 await self._run_operation(operation)
@@ -331,7 +339,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
                 result = future.result()
                 report.group_busy[group] += max(0.0, result.t_end - result.t_start)
                 report.group_functions[group] += 1
-                if result.outcome == "succeeded":
+                if await ended_with_outcome(self, operation, group, result, self._stop_reason is not None) or result.outcome == "succeeded":
                     del pending[group]
                     self.zones.ended(operation.id, group)
                 else:

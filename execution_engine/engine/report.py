@@ -72,6 +72,11 @@ class RunReport:
     operator_actions: list[OperatorAction] = field(default_factory=list)
     finished_cleanly: bool = False  # every group reached Finish
     flag_waits: list[FlagWait] = field(default_factory=list)  # every wait for a flag or a zone (engine/flags.py)
+    #: The named outcome of every function an <if> tests, by "operation/group" (a vision fault so
+    #: ended is an outcome, not an error: a hole not found, reported here).
+    outcomes: dict[str, str] = field(default_factory=dict)
+    #: Operations an <if>/<else> left out, with the condition that was not met.
+    skipped: list[tuple[str, str]] = field(default_factory=list)
 
     @property
     def total(self) -> float:

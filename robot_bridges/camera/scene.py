@@ -48,6 +48,8 @@ def build_scene(frames: tuple[CellFrame, ...], elements: dict[str, dict[str, str
         inverse = np.linalg.inv(base.matrix())
         discs, extent = [], np.zeros(2)
         for frame, model in members:
+            if frame.attributes.get("drilled") == "false":  # a hole the CAD has and the part lacks: plain surface (the locate fails)
+                continue
             where = true_pose(by_name, truth, frame.name) or frame.pose
             local = inverse @ where.matrix()
             x, y = float(local[0, 3]), float(local[1, 3])
