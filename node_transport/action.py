@@ -96,6 +96,7 @@ class ActionServer:
         self._results_asked = 0  # get_result requests waiting for a goal's end
         self._results_answered = asyncio.Event()  # set whenever none waits
         self._results_answered.set()
+        self._closed = False
         base = f"{self.name}/_action"
         node.create_service(action.SendGoal, f"{base}/send_goal", self._on_send_goal)
         get_result = self._on_get_result
@@ -114,7 +115,7 @@ class ActionServer:
         Ctrl-C would not cancel.  rcl_action's order, kept here: response, then ACCEPTED and
         EXECUTING, then the terminal status, then the result."""
         stamp = self.node.now_stamp()
-        reason = "its id is in use" if request.goal_id.uuid in self.goals else self._accept(request.goal)
+        reason = "the server is shutting down" if self._closed else "its id is in use" if request.goal_id.uuid in self.goals else self._accept(request.goal)
         if reason is not None:
             self.node.logger.warning("%s: goal refused: %s", self.name, reason)
             return self.action.SendGoal.Response(False, stamp)
@@ -125,6 +126,9 @@ class ActionServer:
     def _start(self, handle: GoalHandle) -> None:
         """The goal response is on its way: announce the goal, then execute it."""
         self._publish_status()  # ACCEPTED
+        if self._closed:  # accepted as the server closed: it ends here, and whoever asks for its result hears so
+            self._ended(handle, self.action.Result(), GoalStatus.STATUS_ABORTED)
+            return
         task = asyncio.get_running_loop().create_task(self._run(handle), name=f"{self.name} goal")
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
@@ -205,6 +209,7 @@ class ActionServer:
         timers go; a goal still running gets :data:`CLOSE_GRACE` to end as its owner told it to (its own
         result), then is cancelled and ends ABORTED; every get_result waiting for a goal is answered before
         the node's services go.  Only a goal that ignores its cancellation is left, and said so."""
+        self._closed = True
         for timer in self._expiries.values():
             timer.cancel()
         self._expiries.clear()
@@ -221,6 +226,9 @@ class ActionServer:
                     await clock.wait_for(asyncio.shield(running), max(0.0, deadline - clock.now()))
                 except asyncio.TimeoutError:
                     log.warning("%s: %d goal(s) did not end within %g s of the server's close", self.name, len(self._tasks), CLOSE_TIMEOUT)
+        for handle in self.goals.values():
+            if not handle.done.is_set():  # cancelled before it ran, or deaf to its cancellation: its client hears it end
+                self._ended(handle, self.action.Result(), GoalStatus.STATUS_ABORTED)
         try:  # answered as soon as the goals have ended: a turn of the loop, bounded all the same
             await clock.wait_for(self._results_answered.wait(), max(0.0, deadline - clock.now()))
         except asyncio.TimeoutError:

@@ -88,9 +88,11 @@ def test_a_goal_that_does_not_end_when_told_is_cancelled_and_its_client_answered
         took = clock.now() - began
         answer = await clock.wait_for(result, 1.0)
         left = [t for t in asyncio.all_tasks() if t is not asyncio.current_task() and not t.done()]
-        return took, answer, len(left)
+        late = await client.send_goal(goal(("a",), [(1.0, (0.0,))]), 2, timeout=BOUND)  # once closed, nothing new starts
+        return took, answer, len(left), late
 
-    took, answer, left = run_sim(main)
+    took, answer, left, late = run_sim(main)
     assert took <= CLOSE_TIMEOUT
     assert answer.status == GoalStatus.STATUS_ABORTED
     assert left == 0
+    assert late is None
