@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from cell_runner.libraries import APPLICATION_FUNCTIONS
+from core_functions.cell_robots import CellRobotModel
 from core_functions.robots import RobotModel
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.function_library import FunctionLibrary
@@ -22,6 +23,7 @@ from node_transport.local import LocalTransport
 from node_transport.port import ParameterValue, Transport
 from robot_bridges.backend import RobotBackend
 from robot_bridges.bridge_node import BridgeNode
+from robot_bridges.cell_backend import CellBackend
 
 log = logging.getLogger(__name__)
 
@@ -33,12 +35,15 @@ class Deployment:
     machines: dict[str, GroupMachine]
     bridge: BridgeNode
     tasks: list[asyncio.Task[None]] = field(default_factory=list)
+    #: Every bridge: one per robot of a mixed cell (``bridge`` is the first), else ``[bridge]``.
+    bridges: list[BridgeNode] = field(default_factory=list)
 
     async def close(self) -> None:
         for task in self.tasks:
             task.cancel()
         await asyncio.gather(*self.tasks, return_exceptions=True)
-        await self.bridge.close()
+        for bridge in reversed(self.bridges or [self.bridge]):
+            await bridge.close()
         for machine in self.machines.values():
             machine.close()
         await self.transport.shutdown()
@@ -64,21 +69,40 @@ async def deploy_local(
     the functions applications may call (default: every library this program ships).
     """
     transport = transport or LocalTransport(clock)
-    node_name = re.sub(r"\W+", "_", backend.name).strip("_") or "robot"
-    bridge = BridgeNode(transport.create_node(f"{node_name}_bridge", parameters=bridge_parameters), backend)
-    await bridge.start()
+    bridges: list[BridgeNode] = []
+    try:
+        for node_name, part in bridge_parts(backend):
+            bridges.append(BridgeNode(transport.create_node(f"{node_name}_bridge", parameters=bridge_parameters), part))
+            await bridges[-1].start()
+    except BaseException:
+        for started in reversed(bridges):
+            await started.close()
+        raise
     machines: dict[str, GroupMachine] = {}
     for group in robot.group_names:
-        params = {"group": group, "robot": robot.name, **(machine_parameters or {})}
+        # a machine drives its group with its own robot's model (in a mixed cell: that robot's, not the cell's)
+        model = robot.member_of(group).model if isinstance(robot, CellRobotModel) else robot
+        params = {"group": group, "robot": model.name, **(machine_parameters or {})}
         machines[group] = GroupMachine(transport.create_node(f"{group}_machine", parameters=params), library)
     engine = ExecutionEngine(
         transport.create_node("execution_engine", parameters=engine_parameters), library.catalog(None), operators=operators, hold_for_operators=hold_for_operators,
     )
-    deployment = Deployment(transport, engine, machines, bridge)
+    deployment = Deployment(transport, engine, machines, bridges[0], bridges=bridges)
     loop = asyncio.get_running_loop()
     for group, machine in machines.items():
         deployment.tasks.append(loop.create_task(_supervise(machine, group), name=f"{group} machine"))
     return deployment
+
+
+def bridge_parts(backend: RobotBackend) -> list[tuple[str, RobotBackend]]:
+    """Each bridge's node name and back end: one per robot of a mixed cell (named after the robot), else one."""
+    if isinstance(backend, CellBackend):
+        return [(_node_name(part.robot.name), part.backend) for part in backend.parts]
+    return [(_node_name(backend.name), backend)]
+
+
+def _node_name(name: str) -> str:
+    return re.sub(r"\W+", "_", name).strip("_") or "robot"
 
 
 async def _supervise(machine: GroupMachine, group: str) -> None:

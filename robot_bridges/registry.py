@@ -8,6 +8,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Awaitable, Callable
 
+from core_functions.cell_robots import BACKEND_NAMES, CELL_BACKEND
 from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions, RobotBackend
 
@@ -16,7 +17,10 @@ BACKENDS: dict[str, str] = {
     "vplus": "robot_bridges.vplus.backend:create",
     "kuka-rsi": "robot_bridges.kuka_rsi.backend:create",
     "ros2-control": "robot_bridges.ros2_control.factory:create",  # any robot whose driver serves FollowJointTrajectory
+    CELL_BACKEND: "robot_bridges.cell_backend:create",  # the robots of a mixed cell, each on its own back end
 }
+if set(BACKENDS) != {*BACKEND_NAMES, CELL_BACKEND}:  # what a cell's <robot backend=...> may name
+    raise ImportError("robot_bridges.registry: BACKENDS and core_functions.cell_robots.BACKEND_NAMES differ")
 
 BackendFactory = Callable[[Clock, BackendOptions], Awaitable[RobotBackend]]
 

@@ -197,7 +197,7 @@ def test_schema_errors_in_the_cell(tmp_path: Path) -> None:
         at(path, text, "rpy=", "attribute rpy='a b c' of <frame>: expected three numbers separated by spaces"),
         at(path, text, "joints=", "attribute joints='1 x' of <joint_pose>: expected one or more numbers separated by spaces"),
         at(path, text, 'unit="grad"', "attribute unit='grad' of <joint_pose>: expected rad or deg"),
-        at(path, text, "<fixture", "<fixture> is not allowed here inside <cell>; expected <frame>, <element>, <zone> or <joint_pose>"),
+        at(path, text, "<fixture", "<fixture> is not allowed here inside <cell>; expected <frame>, <element>, <zone>, <joint_pose> or <robot>"),
     ]
 
 

@@ -252,7 +252,7 @@ def test_a_flood_of_unknown_elements_costs_one_pass(tmp_path: Path, libxml2: dic
     path = tmp_path / "flood.xml"
     path.write_text('<cell name="c">' + "<x/>" * n + "</cell>")
     found = validate_cell(path)
-    assert found[0].message == "<x> is not allowed here inside <cell>; expected <frame>, <element>, <zone> or <joint_pose>"
+    assert found[0].message == "<x> is not allowed here inside <cell>; expected <frame>, <element>, <zone>, <joint_pose> or <robot>"
     assert count_problems(found) == (n, 0)
     assert libxml2["cell"].elements <= 3 * n
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+from core_functions.cell_robots import CELL_BACKEND, CellRobot, CellRobotModel
 from robot_bridges.backend import BackendOptions, RobotBackend
 
 #: Nextage simulator control period in the dry run (0.01 s in a run).  A planned motion stays within
@@ -53,6 +54,8 @@ def _kuka_seconds(backend: RobotBackend) -> Callable[[], float]:
 
 def setup_for(backend: str, options: BackendOptions) -> DryRunSetup:
     """The dry run's simulator for ``backend`` configured by ``options`` (the ones of the real run)."""
+    if backend == CELL_BACKEND and isinstance(options.robot, CellRobotModel):
+        return _cell_setup(options.robot, options)
     extra = {k: v for k, v in options.extra.items() if k not in _LINK_ONLY.get(backend, ())}
     offline = replace(options, host=None, port=None, rsi_listen=None, faults=(), extra=extra)
     if backend == "nextage-sim":
@@ -68,3 +71,22 @@ def setup_for(backend: str, options: BackendOptions) -> DryRunSetup:
         unkept = "" if extra.get("urdf") else "the robot's URDF is read from /robot_description on the ROS graph"
         return DryRunSetup(backend, replace(offline, extra=modelled), unkept=unkept)
     return DryRunSetup(backend, offline)
+
+
+def _cell_setup(robot: CellRobotModel, options: BackendOptions) -> DryRunSetup:
+    """A mixed cell's dry run: each robot on the simulator its own back end's dry run uses, all at once on one
+    clock -- the real one as soon as one of them keeps its own time (a KUKA's RSI controller, then in real
+    time rather than accelerated, so that every robot's motions stand on the same time line)."""
+    members: list[CellRobot] = []
+    setups: list[DryRunSetup] = []
+    for member in robot.members:
+        setup = setup_for(member.backend, replace(options, robot=member.model, extra=dict(member.options)))
+        extra = setup.options.extra
+        if setup.robot_seconds is not None:  # its own accelerated time would not line up with the others' motions:
+            extra = {**extra, "simulator": "process", "runner": "process"}  # as a run; the collision sweep needs one time line, the wall clock's
+        setups.append(setup)
+        members.append(replace(member, options=tuple(extra.items())))
+    simulated = replace(robot, members=tuple(members))
+    unkept = "; ".join(s.unkept for s in setups if s.unkept)
+    offline = replace(options, robot=simulated, host=None, port=None, rsi_listen=None, faults=(), extra={})
+    return DryRunSetup(CELL_BACKEND, offline, simulated_clock=all(s.simulated_clock for s in setups), unkept=unkept)

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from core_functions.cell_index import CellFrame, FrameLookup
+from core_functions.cell_robots import CellRobot
 from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
 from core_functions.suggest import NameIndex
@@ -75,6 +76,7 @@ class Cell(FrameLookup):
     path: Path | None = None
     zones: Mapping[str, Zone] = field(default_factory=dict)  # interference zones (app_model/zones.py)
     robot: RobotModel | None = None
+    robots: tuple[CellRobot, ...] = ()  # <robot> elements: the robots of a mixed cell (core_functions/cell_robots.py)
     # Caches, filled on demand: world poses cost a matrix product each, and a cell too large to
     # run is refused having composed only the frames that fit in a message (app_model.wire_fit).
     _world: dict[str, Pose] = field(default_factory=dict, init=False, repr=False, compare=False)

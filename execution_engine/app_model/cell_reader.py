@@ -23,7 +23,9 @@ from lxml import etree
 from core_functions import limits
 from core_functions.geometry import Pose
 from core_functions.suggest import NameIndex, did_you_mean
+from core_functions.cell_robots import CellRobot
 from execution_engine.app_model.cell_model import Cell, Element, Frame, JointPose
+from execution_engine.app_model.cell_robot_reader import read_robot
 from execution_engine.app_model.diagnostics import Diagnostic, DiagnosticLog, Severity
 from execution_engine.app_model.frame_tree import WORLD, order_frames
 from execution_engine.app_model.positions import DocumentWalk
@@ -179,6 +181,8 @@ class CellReader:
         elements: dict[str, Element] = {}
         joint_poses: dict[str, JointPose] = {}
         zones: dict[str, Zone] = {}
+        robots: list[CellRobot] = []
+        robot_lines: dict[str, int] = {}
         for child, at in self.children(root):
             if child.tag == "frame":
                 self.read_frame(child, at, None, drafts)
@@ -189,6 +193,8 @@ class CellReader:
                 self.read_joint_pose(child, at, joint_poses)
             elif child.tag == "zone":
                 self.read_zone(child, at, zones)
+            elif child.tag == "robot":
+                read_robot(self, child, at, robots, robot_lines, self.source.at_offset(at).line)
             self.walk.skip(child)
         frames = self.check_tree(drafts)
         self.check_element_references(drafts, elements)
@@ -200,7 +206,7 @@ class CellReader:
         if self.log.has_errors or frames is None or not structure_ok:
             return None
         try:
-            return Cell(name=root.get("name", ""), frames=frames, elements=elements, joint_poses=joint_poses, path=self.doc.path, zones=zones)
+            return Cell(name=root.get("name", ""), frames=frames, elements=elements, joint_poses=joint_poses, path=self.doc.path, zones=zones, robots=tuple(robots))
         except ValueError as error:  # the checks above should make this unreachable
             self.report(root_at, None, str(error))
             return None

@@ -1,0 +1,134 @@
+"""The ``cell`` back end: every robot of a mixed cell, each on its own back end, as one.
+
+A cell file's ``<robot>`` elements (core_functions/cell_robots.py) name each robot's model, base
+pose and back end; this builds each robot's back end from its own options, placed in the cell's
+world frame (:mod:`robot_bridges.placed`).  The deployment gives each robot a bridge of its own
+(:attr:`CellBackend.parts`); the checks before and around a run (measuring where every group
+stands, the dry run) see the whole cell through the one object, group by group.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from core_functions.cell_robots import BACKEND_NAMES, CellRobot, CellRobotModel
+from core_functions.geometry import Pose
+from core_functions.primitives import MotionResult, Primitive, PrimitiveResult
+from node_transport.clock import Clock
+from node_transport.wire import CellSnapshot
+from robot_bridges.backend import BackendOptions, JointLimits, RobotBackend
+from robot_bridges.placed import PlacedBackend
+from robot_bridges.registry import check_options, create_backend
+
+
+@dataclass(frozen=True)
+class Part:
+    """One robot of the cell and the back end that drives it (placed in the cell's world frame)."""
+
+    robot: CellRobot
+    backend: RobotBackend
+
+
+def member_options(options: BackendOptions, member: CellRobot) -> BackendOptions:
+    """What ``member``'s own back end is built from: its model and the options the cell gives it
+    (a run's --seed carries over; addresses and injected faults are per robot, in the cell)."""
+    return BackendOptions(robot=member.model, seed=options.seed, extra=dict(member.options))
+
+
+def cell_members(options: BackendOptions) -> tuple[CellRobot, ...]:
+    robot = options.robot
+    if not isinstance(robot, CellRobotModel) or not robot.members:
+        raise ValueError(f"the cell back end drives the robots a cell lists (robot=\"cell\"), not {robot.name}")
+    return robot.members
+
+
+def parse_options(options: BackendOptions, speed: float = 1.0) -> None:
+    """Each robot's options as its own back end checks them; ValueError naming the robot and the option."""
+    if options.extra or options.host or options.rsi_listen or options.faults:
+        raise ValueError("the cell back end takes its robots' options from the cell's <robot> elements (<option name= value=/>), not from the command line")
+    for member in cell_members(options):
+        if member.backend not in BACKEND_NAMES:
+            raise ValueError(f"robot {member.name!r}: unknown back end {member.backend!r}")
+        try:
+            check_options(member.backend, member_options(options, member), speed)
+        except (KeyError, ValueError) as error:
+            raise ValueError(f"robot {member.name!r} ({member.backend}): {error}") from None
+
+
+class CellBackend(RobotBackend):
+    """Every robot's back end; a group's calls go to the robot it belongs to."""
+
+    def __init__(self, parts: tuple[Part, ...]) -> None:
+        self.parts = parts
+        self.name = "cell (" + ", ".join(p.backend.name for p in parts) + ")"
+        self.world_frame = "world"
+        self.holds_within_motion = all(p.backend.holds_within_motion for p in parts)
+        self._by_group = {g: p.backend for p in parts for g in p.backend.groups}
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        return tuple(self._by_group)
+
+    def of(self, group: str) -> RobotBackend:
+        return self._by_group[group]
+
+    async def start(self) -> None:
+        for part in self.parts:
+            await part.backend.start()
+
+    async def close(self) -> None:
+        for part in reversed(self.parts):
+            await part.backend.close()
+
+    async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
+        result = await self.of(group).execute(group, primitive)
+        return self._whole(result) if isinstance(result, MotionResult) else result
+
+    def _whole(self, result: MotionResult) -> MotionResult:
+        names, positions = self.joint_state()
+        return replace(result, joint_names=names, positions=positions)
+
+    async def pause(self, group: str) -> None:
+        await self.of(group).pause(group)
+
+    async def resume(self, group: str) -> None:
+        await self.of(group).resume(group)
+
+    async def stop(self, group: str) -> None:
+        await self.of(group).stop(group)
+
+    async def measure(self, group: str) -> MotionResult:
+        return self._whole(await self.of(group).measure(group))
+
+    def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
+        names: list[str] = []
+        positions: list[float] = []
+        for part in self.parts:
+            n, p = part.backend.joint_state()
+            names.extend(n)
+            positions.extend(p)
+        return tuple(names), tuple(positions)
+
+    def tcp_pose(self, group: str) -> Pose | None:
+        return self.of(group).tcp_pose(group)
+
+    def set_cell(self, cell: CellSnapshot) -> None:
+        for part in self.parts:
+            part.backend.set_cell(cell)
+
+    def joint_limits(self, group: str) -> JointLimits | None:
+        return self.of(group).joint_limits(group)
+
+
+async def create(clock: Clock, options: BackendOptions) -> CellBackend:
+    """Registry factory (``cell``): each robot's back end, built as its own factory builds it, placed."""
+    parts: list[Part] = []
+    try:
+        for member in cell_members(options):
+            inner = await create_backend(member.backend, clock, member_options(options, member))
+            placed = inner if member.base == Pose() else PlacedBackend(inner, member.base, member.name)
+            parts.append(Part(member, placed))
+    except BaseException:
+        for part in reversed(parts):
+            await part.backend.close()
+        raise
+    return CellBackend(tuple(parts))
