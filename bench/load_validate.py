@@ -326,7 +326,10 @@ print(json.dumps({"before_mb": before, "peak_mb": mb("VmHWM:")}))
 def _peak(kind: str, path: Path) -> dict[str, float]:
     root = str(Path(__file__).resolve().parent.parent)
     command = [sys.executable, "-c", _BARE_PARSE if kind == "parse" else _LOAD, str(path), root]
-    child = subprocess.run(command, capture_output=True, text=True, check=True)
+    child = subprocess.run(command, capture_output=True, text=True, check=False)
+    if child.returncode != 0:  # its own words, not the command line of a CalledProcessError
+        words = [line for line in child.stderr.splitlines() if line.strip()] or ["nothing on stderr"]
+        raise SystemExit(f"the {kind} side's peak-memory process of {path.name} failed (exit {child.returncode}): {words[-1]}")
     return json.loads(child.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
