@@ -58,6 +58,7 @@ class RunSummary:
                 parts = ", ".join(f"waiting for {what} {d:.3f} s" for what, d in sorted(waited.items(), key=lambda kv: -kv[1]))
                 out.append(f"  {'':<12} idle: {parts}, the rest {max(0.0, rest):.3f} s")
         out.append(f"  retries: {t.retries}")
+        out.extend(f"  {m.kind}: {m.text}" for m in t.marks if m.kind in ("outcome", "branch"))  # which branch each <if> took
         out.extend(self.extra)
         out.extend(vision_lines(t))
         return [printable(line) for line in out]  # every name and text in them came from the file

@@ -38,6 +38,7 @@ M = TypeVar("M")
 
 TRACE_EVENTS = (
     "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag", "run_end",
+    "outcome", "branch",
 )
 
 
@@ -74,6 +75,10 @@ def engine_record(event: EngineEvent) -> dict[str, Any]:
         record.update({"event": "engine_state", "from": event.from_state, "to": event.state, "message": event.message})
     elif event.event == "flag":  # a flag set, or a group's wait for one starting (waiting) or ending: on the group's lane
         record.update({"event": "flag", "group": event.source, "flag": event.command, "kind": event.answer or "flag", "state": event.state, "message": event.message})
+    elif event.event == "outcome":  # a tested function's named outcome: on the group's lane
+        record.update({"event": "outcome", "group": event.source, "function": event.command, "outcome": event.answer, "message": event.message})
+    elif event.event == "branch":  # an operation its <if>/<else> left out
+        record.update({"event": "branch", "tested": event.source, "outcome": event.answer, "message": event.message})
     else:
         record.update({
             "event": "operator", "command": event.command, "source": event.source,

@@ -123,7 +123,7 @@ class Mark:
     """A point in time worth a marker: an error, an operator action, an engine state change."""
 
     t: float
-    kind: str  # error / operator / engine_state / flag
+    kind: str  # error / operator / engine_state / flag / outcome (a tested function's) / branch (an operation left out)
     group: str
     text: str
 
@@ -184,6 +184,8 @@ class TimelineBuilder:
             if bar is not None and bar.primitives and bar.primitives[-1].t_end is None:
                 primitive = bar.primitives[-1]
                 primitive.t_end, primitive.outcome, primitive.result = t, record.get("outcome"), record.get("result")
+        elif event == "outcome":  # on the lane of the group whose function an <if> tests
+            self.marks.append(Mark(t, "outcome", group, str(record.get("message") or f"{record.get('function')} ended {record.get('outcome')}")))
         elif event == "error":
             text = str(record.get("error", ""))
             self.marks.append(Mark(t, "error", group, text))
@@ -238,6 +240,8 @@ class TimelineBuilder:
             self.marks.append(Mark(t, "operator", "engine", f"{record.get('command')} from {record.get('source')}: {answer}"))
         elif event == "error":
             self.marks.append(Mark(t, "error", "engine", str(record.get("error", ""))))
+        elif event == "branch":
+            self.marks.append(Mark(t, "branch", "engine", str(record.get("message") or f"{record.get('operation')} left out")))
         elif event == "engine_state":
             self.marks.append(Mark(t, "engine_state", "engine", f"{record.get('from')} -> {record.get('to')}"))
 

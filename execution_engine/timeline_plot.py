@@ -111,13 +111,14 @@ def _operations(axes: Axes, timeline: Timeline, rows: int, span: float) -> None:
 
 
 def _marks(axes: Axes, timeline: Timeline, groups: list[str]) -> None:
-    """Errors (x) and operator actions (v), one collection each."""
+    """Errors (x), operator actions (v) and tested functions' outcomes (o), one collection each."""
     rows = {group: len(groups) - 1 - row for row, group in enumerate(groups)}
-    points: dict[str, tuple[list[float], list[float]]] = {"error": ([], []), "operator": ([], [])}
+    points: dict[str, tuple[list[float], list[float]]] = {"error": ([], []), "operator": ([], []), "outcome": ([], [])}
     for mark in timeline.marks:
         if mark.kind in points:
             points[mark.kind][0].append(mark.t)
             points[mark.kind][1].append(rows.get(mark.group, len(groups) - 0.5))
     for kind, (xs, ys) in points.items():
         if xs:
-            axes.plot(xs, ys, linestyle="none", marker="x" if kind == "error" else "v", color="#d62728" if kind == "error" else "#000000", markersize=7)
+            marker = {"error": "x", "operator": "v"}.get(kind, "o")
+            axes.plot(xs, ys, linestyle="none", marker=marker, color="#d62728" if kind == "error" else "#000000", markersize=7, fillstyle="none")

@@ -199,7 +199,9 @@ class EngineEvent:
     Not latched, unlike :class:`EngineStatus`: these are events for traces and logs, each once.
     """
 
-    event: Literal["state", "operator", "flag"]  # flag: ``source`` the group, ``command`` the flag or zone, ``answer`` which (flag/zone), ``state`` set/waiting/passed/timeout/stopped
+    event: Literal["state", "operator", "flag", "outcome", "branch"]  # flag: ``source`` the group, ``command`` the flag or zone, ``answer`` which (flag/zone), ``state`` set/waiting/passed/timeout/stopped
+    # outcome: the named outcome (``answer``) a function (``command``) of ``source`` ended ``operation`` with, an <if> testing it;
+    # branch: ``operation`` left out by its <if>/<else> (``source`` the tested group, ``answer`` the outcome it ended with)
     t: float
     state: str  # the engine's state after a state change; the state a command arrived in
     operation: str | None = None

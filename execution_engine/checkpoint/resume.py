@@ -92,6 +92,8 @@ class ResumePlan:
     answer: str  # ask / redo / skip
     checkpoint: str
     continues: str  # the trace / recording this run continues
+    #: The named outcome of each tested function done before, by "operation/group": the branches taken again.
+    outcomes: dict[str, str] = field(default_factory=dict)
     on_skip: Callable[[int, Operation, str], None] = field(default=lambda index, op, group: None)
 
     def message(self, engine: ExecutionEngine, operation: Operation, group: str) -> str:
@@ -130,7 +132,7 @@ class ResumePlan:
         return replace(operation, calls=calls)
 
 
-def reconcile(store: CheckpointStore, app: Application, *, write: bool = True) -> set[tuple[int, str]]:
+def reconcile(store: CheckpointStore, app: Application, *, write: bool = True, outcomes: dict[str, str] | None = None) -> set[tuple[int, str]]:
     """Take over results that reached an earlier run's trace but not the checkpoint.
 
     The trace is written first, the checkpoint right after (a kill can land between the two); a
@@ -139,9 +141,19 @@ def reconcile(store: CheckpointStore, app: Application, *, write: bool = True) -
     read-only, to check a ``--resume`` before anything is written)."""
     index = {op.id: i for i, op in enumerate(app.operations)}
     done = store.done()
+    found = outcomes if outcomes is not None else {}
+    found.update({f"{operation}/{group}": outcome for _, operation, group, outcome in store.outcomes()})
 
     def take(record: dict[str, object], run: int) -> None:
         operation, group = str(record.get("operation")), str(record.get("group"))
+        if record.get("event") == "outcome" and operation in index and record.get("outcome"):
+            outcome = str(record.get("outcome"))  # a tested function's outcome, in the trace and not yet the checkpoint
+            if f"{operation}/{group}" not in found:
+                found[f"{operation}/{group}"] = outcome
+                done.add((index[operation], group))
+                if write:
+                    store.outcome(index[operation], operation, group, outcome)
+            return
         if record.get("event") == "function_end" and record.get("outcome") == SUCCEEDED and operation in index:
             if (index[operation], group) not in done:
                 done.add((index[operation], group))
@@ -158,17 +170,21 @@ def plan_resume(store: CheckpointStore, app: Application, catalog: Catalog, answ
     """Where to start: the first operation with a group whose function has not completed (``write``:
     see :func:`reconcile`)."""
     check_same(store, app)
-    done = reconcile(store, app, write=write)
+    outcomes: dict[str, str] = {}
+    done = reconcile(store, app, write=write, outcomes=outcomes)
     touched = {r.op_index for r in store.functions()}
     runs = store.runs()
     continues = ", ".join(p for _, trace, record in runs[-1:] for p in (trace, record) if p)
     for index, operation in enumerate(app.operations):
+        if not all(c.met(outcomes.get(f"{c.operation}/{c.group}")) for c in operation.when):
+            if all(f"{c.operation}/{c.group}" in outcomes for c in operation.when):
+                continue  # its branch was not taken before the crash: left out again
         needed = {g for g, call in operation.calls.items() if not sits_out(app, catalog, call)}
         finished = {g for g in needed if (index, g) in done}
         if needed - finished:
             interrupted = {g: operation.calls[g] for g in needed - finished} if index in touched else {}
-            return ResumePlan(index, frozenset(finished), interrupted, answer, str(store.path), continues)
-    return ResumePlan(len(app.operations), frozenset(), {}, answer, str(store.path), continues)
+            return ResumePlan(index, frozenset(finished), interrupted, answer, str(store.path), continues, outcomes)
+    return ResumePlan(len(app.operations), frozenset(), {}, answer, str(store.path), continues, outcomes)
 
 
 def next_name(path: str, run: int) -> str:

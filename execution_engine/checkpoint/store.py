@@ -8,7 +8,9 @@ same file, so a second crash resumes from where the second run got to.
 What it holds: the application and cell (paths and sha256 digests: a changed file refuses the
 resume), each function start and result by operation and group (a function with a start and no
 result was in flight), what each hand holds after its last completed function, the trajectories
-recorded so far, the error-policy counters, and each run with its trace and recording files.
+recorded so far, the error-policy counters, each run with its trace and recording files, and the named
+outcome of every function an ``<if>`` tests (a resume takes the same branches; a function that ended
+with an outcome -- a hole not found -- is done, not failed).
 """
 from __future__ import annotations
 
@@ -29,6 +31,8 @@ CREATE TABLE IF NOT EXISTS functions(
 CREATE TABLE IF NOT EXISTS hands(grp TEXT PRIMARY KEY, holds TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS trajectories(name TEXT NOT NULL, grp TEXT NOT NULL, operation TEXT NOT NULL, PRIMARY KEY(name, grp));
 CREATE TABLE IF NOT EXISTS counters(key TEXT PRIMARY KEY, value INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS outcomes(op_index INTEGER NOT NULL, operation TEXT NOT NULL, grp TEXT NOT NULL, outcome TEXT NOT NULL,
+    PRIMARY KEY(op_index, grp));
 """
 STARTED, SUCCEEDED, SKIPPED = "started", "succeeded", "skipped"
 DONE = (SUCCEEDED, SKIPPED)
@@ -133,6 +137,11 @@ class CheckpointStore:
                 db.execute("INSERT OR REPLACE INTO trajectories(name, grp, operation) VALUES (?, ?, ?)", (trajectory, group, operation))
             _add(db, counters)
 
+    def outcome(self, op_index: int, operation: str, group: str, outcome: str) -> None:
+        """The named outcome a tested function ended with: it chooses the branch, and the function is done."""
+        with self._change() as db:
+            db.execute("INSERT OR REPLACE INTO outcomes VALUES (?, ?, ?, ?)", (op_index, operation, group, outcome))
+
     def count(self, counters: dict[str, int]) -> None:
         """Add to the error-policy counters (an operator command, say)."""
         with self._change() as db:
@@ -149,8 +158,17 @@ class CheckpointStore:
         return [FunctionRow(*row) for row in rows]
 
     def done(self) -> set[tuple[int, str]]:
-        """(operation index, group) of every function completed (or skipped by an operator) in any run."""
-        return {(r.op_index, r.group) for r in self.functions() if r.outcome in DONE}
+        """(operation index, group) of every function completed (or skipped by an operator, or ended with a
+        named outcome) in any run."""
+        return {(r.op_index, r.group) for r in self.functions() if r.outcome in DONE} | {(i, g) for i, _, g, _ in self.outcomes()}
+
+    def outcomes(self) -> list[tuple[int, str, str, str]]:
+        """(operation index, operation, group, outcome) of every tested function (none in a checkpoint older than branches)."""
+        try:
+            rows = self._db.execute("SELECT op_index, operation, grp, outcome FROM outcomes ORDER BY op_index").fetchall()
+        except sqlite3.OperationalError:  # written before the table existed, opened read-only
+            return []
+        return [(int(r[0]), str(r[1]), str(r[2]), str(r[3])) for r in rows]
 
     def hands(self) -> dict[str, str]:
         return dict(self._db.execute("SELECT grp, holds FROM hands").fetchall())

@@ -68,6 +68,9 @@ class CheckpointWriter:
     def on_event(self, event: EngineEvent) -> None:
         if event.event == "operator" and event.accepted:
             self._guard(lambda: self.store.count({"operator_actions": 1}))
+        elif event.event == "outcome" and event.operation in self._index and event.source and event.answer:
+            index, group, outcome = self._index[event.operation], event.source, event.answer
+            self._guard(lambda: self.store.outcome(index, event.operation or "", group, outcome))
 
     def _guard(self, change: object) -> None:
         if self.error:

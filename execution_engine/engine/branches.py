@@ -29,7 +29,7 @@ class BranchEngine(Protocol):
     tested: frozenset[tuple[str, str]]
     service_timeout: float
 
-    def announce(self, message: str) -> None: ...
+    def note_branch(self, event: str, operation: str, group: str, function: str | None, outcome: str, message: str) -> None: ...
 
 
 def branch_taken(engine: BranchEngine, operation: Operation, report: RunReport) -> bool:
@@ -40,7 +40,8 @@ def branch_taken(engine: BranchEngine, operation: Operation, report: RunReport) 
     why = unmet[0]
     outcome = report.outcomes.get(f"{why.operation}/{why.group}", "none")
     report.skipped.append((operation.id, f"{why.group} {why.operation} ended {outcome}"))
-    engine.announce(f"branch: {operation.id} left out ({why.group} {why.operation} ended {outcome}; it runs when {why.describe()})")
+    engine.note_branch("branch", operation.id, why.group, None, outcome,
+                       f"{operation.id} left out: {why.group} {why.operation} ended {outcome}; it runs when {why.describe()}")
     return False
 
 
@@ -58,7 +59,8 @@ async def ended_with_outcome(engine: BranchEngine, operation: Operation, group: 
     if named is None or result.outcome == "preempted" or stopping:
         return False
     report.outcomes[f"{operation.id}/{group}"] = named
-    engine.announce(f"outcome: {group} {operation.id} {function} ended {named}" + ("" if succeeded else f" ({result.error})"))
+    engine.note_branch("outcome", operation.id, group, function, named,
+                       f"{group} {function} ended {named}" + ("" if succeeded else f": {result.error}"))
     if not succeeded:
         link = engine.links[group]
         if link.state == ERROR_HANDLING:

@@ -66,6 +66,7 @@ class ResumePoint(Protocol):
     """Where a resumed run starts (:class:`execution_engine.checkpoint.resume.ResumePlan`)."""
 
     index: int
+    outcomes: dict[str, str]  # the tested functions' outcomes before the crash: the same branches again
 
     async def first_operation(self, engine: ExecutionEngine, operation: Operation) -> Operation: ...
 
@@ -141,6 +142,8 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self.app = app
         self.tested = app.tested()
         report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
+        if resume is not None:
+            report.outcomes.update(resume.outcomes)
         self.report = report
         self.zones.start(app, self.flags.waits, resume.index if resume is not None else 0)
         self.flags.zones = self.zones
@@ -446,6 +449,11 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
                 raise ApplicationAborted(f"{group} could not be reset for a retry (it is in {link.state})")
         resent = self._dispatch(operation, {g: d.call for g, d in failed.items()}, attempt)
         pending.update(resent)
+
+    def note_branch(self, event: str, operation: str, group: str, function: str | None, outcome: str, message: str) -> None:
+        """An outcome a tested function ended with, or an operation its branch left out: an event for the
+        trace, the timeline, the run report and the checkpoint (a resume takes the same branches)."""
+        self._publish_event(EngineEvent(event, self.clock.now(), self.state, operation, message=message, command=function, source=group, answer=outcome))  # type: ignore[arg-type]
 
     def announce(self, message: str) -> None:
         """Say something about the run in the engine's status and events (and so in the trace).

@@ -113,6 +113,7 @@ class RunReport:
             recovery = f" - {err.recovery}" if err.recovery else ""
             made = f" ({iterations[err.operation]})" if err.operation in iterations else ""
             lines.append(f"  error: {err.group} operation {err.operation}{made} {err.function} (attempt {err.attempt}) at {err.t:.2f} s: {err.error}{recovery}")
+        lines += self.branch_lines(iterations)
         lines += self._safe_pose_lines()
         for action in self.operator_actions:
             answer = "accepted" if action.accepted else "refused"
@@ -120,6 +121,17 @@ class RunReport:
         if not self.finished_cleanly:
             lines.append("  not every group reached Finish")
         return [printable(line) for line in lines]  # ids, names and peers' texts: no control or bidi character reaches the console
+
+    def branch_lines(self, iterations: Mapping[str, str]) -> list[str]:
+        """What each tested function ended with (a hole not found is named here) and what its branch left out."""
+        lines = []
+        for key, outcome in self.outcomes.items():
+            operation, _, group = key.rpartition("/")
+            made = f" ({iterations[operation]})" if operation in iterations else ""
+            lines.append(f"  outcome: {group} operation {operation}{made}: {outcome}")
+        if self.skipped:
+            lines.append(f"  left out by their branch: {len(self.skipped)} operation(s): " + ", ".join(op for op, _ in self.skipped))
+        return lines
 
     def wait_lines(self) -> list[str]:
         """Each group's idle time split into its waits for flags and zones and the rest; the costliest waits."""

@@ -1,0 +1,94 @@
+"""Outcome branches at run time (issue 24 item 2): a hole vision does not find takes the not_found
+branch -- left out, reported, its rivet put back -- and the run ends FINISHED; kill -9 in the second
+iteration, then --resume: every function done once, the branches taken before the crash taken again."""
+from __future__ import annotations
+
+import io
+import re
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from app_functions.registry import full_catalog
+from cell_runner.cli import main
+from execution_engine.app_model import load_application
+from execution_engine.checkpoint.resume import sits_out
+from test_resume_loops import records, start_and_kill  # the kill -9 in the second iteration, as there
+
+ROOT = Path(__file__).resolve().parent.parent
+BRANCH = ROOT / "apps_xml" / "rivet_loop_branch.xml"
+MISSING = ROOT / "apps_xml" / "examples" / "cells" / "rivet_cell_hole_missing.xml"
+
+
+def application_in(folder: Path, missing: str) -> Path:
+    """The branch demonstrator on the test cell, with ``missing`` the hole that is not drilled."""
+    cell = MISSING.read_text().replace('diameter="0.0048" drilled="false">', 'diameter="0.0048">')
+    cell = cell.replace(f'<frame name="{missing}" xyz=', f'<frame name="{missing}" drilled="false" xyz=')
+    assert len(re.findall(r'<frame [^>]*drilled="false"', cell)) == 1
+    (folder / "cell.xml").write_text(cell)
+    app = folder / "app.xml"
+    app.write_text(BRANCH.read_text().replace('cell="cells/rivet_cell.xml"', 'cell="cell.xml"'))
+    return app
+
+
+def done_functions(trace: list[dict[str, Any]]) -> Counter[tuple[str, str]]:
+    """(operation, group) of every function that completed: succeeded, or ended with a named outcome."""
+    done = Counter((r["operation"], r["group"]) for r in trace if r["event"] == "function_end" and r["outcome"] == "succeeded")
+    done.update((r["operation"], r["group"]) for r in trace if r["event"] == "outcome" and r["outcome"] != "found")
+    return done
+
+
+def test_a_hole_vision_does_not_find_takes_the_not_found_branch_and_the_run_finishes_reporting_it(tmp_path: Path) -> None:
+    app = BRANCH.parent / "rivet_loop_branch.xml"
+    run_app = tmp_path / "app.xml"
+    run_app.write_text(app.read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{MISSING}"'))
+    out, err = io.StringIO(), io.StringIO()
+    trace = tmp_path / "run.jsonl"
+    code = main(["run", str(run_app), "--speed", "max", "--no-check", "--trace", str(trace)], out, err)
+    assert code == 0, err.getvalue()
+    text = out.getvalue()
+    assert "application rivet_loop_branch: FINISHED" in text
+    assert "  outcome: left_arm operation look_drill_3 (for_each hole=drill_3): not_found" in text
+    assert "  outcome: left_arm operation look_drill_1 (for_each hole=drill_1): found" in text
+    assert "left out by their branch: 5 operation(s): put_back_drill_1, put_back_drill_2, debur_drill_3, insert_drill_3, put_back_drill_4" in text
+    lines = records(trace)
+    ended = {(r["operation"], r["function"]) for r in lines if r["event"] == "function_end" and r["outcome"] == "succeeded"}
+    assert ("put_back_drill_3", "place") in ended and ("insert_drill_3", "insert_rivet") not in {(o, f) for o, f in ended}
+    assert {r["operation"] for r in lines if r["event"] == "function_end" and r.get("function") == "insert_rivet"} == {
+        "insert_drill_1", "insert_drill_2", "insert_drill_4"}
+    outcomes = [(r["operation"], r["outcome"]) for r in lines if r["event"] == "outcome"]
+    assert outcomes == [("look_drill_1", "found"), ("look_drill_2", "found"), ("look_drill_3", "not_found"), ("look_drill_4", "found")]
+    assert "no hole of 4.80 mm" in next(r["message"] for r in lines if r["event"] == "outcome" and r["outcome"] == "not_found")
+    # the report of the trace says the same
+    out = io.StringIO()
+    assert main(["report", str(trace)], out, io.StringIO()) == 0
+    assert "  outcome: left_arm locate ended not_found: " in out.getvalue()
+    assert "  branch: debur_drill_3 left out: left_arm look_drill_3 ended not_found; it runs when left_arm look_drill_3 == found" in out.getvalue()
+
+
+def test_where_no_if_tests_it_a_hole_not_found_stays_an_error_under_the_policy(tmp_path: Path) -> None:
+    run_app = tmp_path / "app.xml"
+    run_app.write_text((ROOT / "apps_xml" / "rivet_loop.xml").read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{MISSING}"'))
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["run", str(run_app), "--speed", "max", "--no-check"], out, err) != 0
+    assert "FAILED - left_arm: debur_drilling failed: vision(locate drill_3)" in out.getvalue()
+
+
+def test_kill_in_the_second_iteration_then_resume_takes_the_same_branches_and_does_every_function_once(tmp_path: Path) -> None:
+    app = application_in(tmp_path, "drill_1")  # not found in the first iteration, before the kill
+    catalog = full_catalog()
+    application = load_application(app, catalog)
+    first = records(start_and_kill(app, tmp_path, 2))
+    assert ("look_drill_1", "not_found") in {(r["operation"], r["outcome"]) for r in first if r["event"] == "outcome"}
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(app), "--speed", "max", "--no-check", "--resume", str(tmp_path / "run.sqlite"),
+                 "--on-interrupted", "redo", "--trace", str(tmp_path / "resumed.jsonl")], out, err)
+    assert code == 0, err.getvalue()
+    assert "outcome: left_arm operation look_drill_1 (for_each hole=drill_1): not_found" in out.getvalue()  # kept from before the crash
+    second = records(tmp_path / "resumed.jsonl")
+    assert second[-1]["event"] == "run_end" and second[-1]["outcome"] == "finished"
+    assert not [r for r in second if r.get("iteration", "").startswith("for_each hole=drill_1")], "nothing of the first iteration again"
+    done = done_functions(first + second)
+    taken = {(op.id, g) for op in application.operations for g, call in op.calls.items() if not sits_out(application, catalog, call)}
+    expected = {(o, g) for o, g in taken if o not in ("debur_drill_1", "insert_drill_1", "put_back_drill_2", "put_back_drill_3", "put_back_drill_4")}
+    assert set(done) == expected and set(done.values()) == {1}, "every function of the branches taken done exactly once across the two runs"
