@@ -59,7 +59,7 @@ def cell_robot_model(cell_name: str, members: tuple[CellRobot, ...]) -> CellRobo
             poses.setdefault(pose_name, {}).update(values)
     described = ", ".join(f"{m.name}: {m.model.name} on {m.backend}" for m in members)
     return CellRobotModel(
-        name=cell_name or CELL_ROBOT,
+        name=f"cell {cell_name}" if cell_name else CELL_ROBOT,
         description=f"the robots of cell {cell_name} ({described})",
         groups=tuple(groups),
         poses=poses,

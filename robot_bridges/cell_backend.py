@@ -124,7 +124,10 @@ async def create(clock: Clock, options: BackendOptions) -> CellBackend:
     parts: list[Part] = []
     try:
         for member in cell_members(options):
-            inner = await create_backend(member.backend, clock, member_options(options, member))
+            try:
+                inner = await create_backend(member.backend, clock, member_options(options, member))
+            except (KeyError, ValueError) as error:  # one line naming the robot of the cell whose options they are
+                raise ValueError(f"robot {member.name!r} ({member.backend}): {error.args[0] if error.args else error}") from None
             placed = inner if member.base == Pose() else PlacedBackend(inner, member.base, member.name)
             parts.append(Part(member, placed))
     except BaseException:

@@ -40,6 +40,8 @@ class PlacedBackend(RobotBackend):
         self.clock = inner.clock
 
     def __getattr__(self, name: str) -> Any:  # what a bridge or a dry run asks of a simulator beyond the interface
+        if name == "inner":  # not set yet (or never): no recursion through this method
+            raise AttributeError(name)
         return getattr(self.inner, name)
 
     @property
@@ -58,6 +60,10 @@ class PlacedBackend(RobotBackend):
 
     def _out(self, pose: Pose | None) -> Pose | None:
         return None if pose is None else self.base.compose(pose)
+
+    def tcp_out(self, pose: Pose) -> Pose:
+        """A pose the robot reports in its base frame, in the cell's world frame."""
+        return self.base.compose(pose)
 
     def inward(self, primitive: Primitive) -> Primitive:
         """``primitive`` with its poses in the robot's base frame."""

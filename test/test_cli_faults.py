@@ -28,6 +28,7 @@ from pathlib import Path
 import pytest
 import zstandard
 from dds_domain import domain_env, stop_group
+from mixed_cell_files import MIXED_FILES
 
 from execution_engine.trace_report import read_trace
 from operator_station.program import main
@@ -140,6 +141,7 @@ FILES: dict[str, str | bytes] = {
 }
 #: The mode each file is written with, whatever the umask the tests run under (a row about who may read
 #: a file must not hold only under the usual 022); every other file: its owner's only.
+FILES.update(MIXED_FILES)  # rows 250-259: mixed cells, each row naming the cell and the application
 MODES: dict[str, int] = {"shared_token": 0o644}
 
 

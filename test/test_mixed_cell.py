@@ -1,0 +1,110 @@
+"""A cell of two robots on two back ends (issue 23 item 4): apps_xml/examples/mixed_cell.xml, a KUKA KR 6 over RSI
+(its simulated KR C4 on the wall clock) feeding a part to the Nextage's right arm (its kinematic simulator).
+
+The run goes through the same checks as any other: the dry run of the whole cell (every robot's base placed in the
+cell's world frame, one collision model of both robots), then the run, one bridge per robot.  The placement's
+arithmetic is checked apart, without robots: what a back end does in its base frame is what the application
+asked in the cell's world frame.
+"""
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+
+from hypothesis import given, strategies as st
+
+from cell_runner.cli import main
+from core_functions.geometry import Pose
+from core_functions.primitives import MoveCartesian, MoveRelative
+from robot_bridges.placed import PlacedBackend
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "apps_xml" / "examples" / "mixed_cell.xml"
+CELL = ROOT / "apps_xml" / "examples" / "cells" / "mixed_cell.xml"
+
+
+def _records(trace: Path) -> list[dict[str, object]]:
+    return [json.loads(line) for line in trace.read_text(encoding="utf-8").splitlines() if line.strip()]
+
+
+def _when(records: list[dict[str, object]], event: str, group: str, operation: str) -> float:
+    return next(float(r["t"]) for r in records if r.get("event") == event and r.get("group") == group and r.get("operation") == operation)  # type: ignore[arg-type]
+
+
+def test_the_mixed_cell_runs_to_finished_and_its_flag_orders_the_hand_over_across_the_robots(tmp_path: Path) -> None:
+    """Checked first (the dry run of both robots), then run: FINISHED; the Nextage's right arm takes the part from the
+    buffer only after the KUKA has left it there and set part_ready, though each group goes at its own pace."""
+    trace = tmp_path / "trace.jsonl"
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(EXAMPLE), "-q", "--trace", str(trace), "--trajectory-db", str(tmp_path / "t.sqlite")], out, err)
+    assert code == 0, out.getvalue() + err.getvalue()
+    assert "application mixed_cell: FINISHED" in out.getvalue()
+    records = _records(trace)
+
+    def flag(group: str, name: str, state: str) -> float:
+        return next(float(r["t"]) for r in records if r.get("event") == "flag" and r.get("group") == group  # type: ignore[arg-type]
+                    and r.get("flag") == name and r.get("state") == state)
+
+    placed = _when(records, "function_end", "arm", "4")  # the KUKA's place on the buffer
+    assert placed <= flag("arm", "part_ready", "set") <= flag("right_arm", "part_ready", "passed") <= _when(records, "function_start", "right_arm", "7")
+    assert flag("right_arm", "part_ready", "waiting") < placed  # the right arm was there first, waiting for the other robot
+    assert flag("arm", "handover", "left") <= flag("right_arm", "handover", "passed")  # one hand at a time above the buffer
+
+
+def test_a_collision_between_the_kuka_and_a_nextage_arm_is_found_by_the_dry_run_before_anything_moves(tmp_path: Path) -> None:
+    """Without its move out of the way, the Nextage's right hand stays where the KUKA reaches in to leave the part: the
+    dry run of the whole cell finds the KUKA's forearm on the Nextage's hand, and the run is refused, nothing started."""
+    cells = tmp_path / "cells"
+    cells.mkdir()
+    (cells / "mixed_cell.xml").write_text(CELL.read_text(encoding="utf-8"), encoding="utf-8")
+    text = EXAMPLE.read_text(encoding="utf-8")
+    start = text.index('  <operation id="2" name="out of the way">')
+    end = text.index("</operation>", start) + len("</operation>\n")
+    app = tmp_path / "mixed_cell.xml"
+    app.write_text(text[:start] + text[end:], encoding="utf-8")
+    trace = tmp_path / "trace.jsonl"
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(app), "-q", "--trace", str(trace), "--trajectory-db", str(tmp_path / "t.sqlite")], out, err)
+    assert code == 1, out.getvalue() + err.getvalue()
+    lines = err.getvalue().splitlines()
+    assert any("collision between right_arm hand (assembler/RARM_JOINT5_Link) and arm feeder/link_" in line for line in lines), err.getvalue()
+    assert lines[-1].startswith(f"{app}: not run: ") and lines[-1].endswith("problem(s) found by the dry run; use --no-check to run anyway")
+    assert not trace.exists() or not any(r.get("event") == "function_start" for r in _records(trace))
+
+
+class _Recorder(PlacedBackend):
+    """Only the placement's conversions; no back end behind them."""
+
+    def __init__(self, base: Pose) -> None:  # noqa: D107 - PlacedBackend's state without an inner back end
+        self.base, self.to_base = base, base.inverse()
+
+
+_coordinate = st.floats(-2.0, 2.0)
+_angle = st.floats(-math.pi, math.pi)
+_poses = st.builds(Pose.from_xyz_rpy, _coordinate, _coordinate, _coordinate, _angle, _angle, _angle)
+
+
+def _close(a: Pose, b: Pose) -> bool:
+    return a.distance_to(b) < 1e-9 and a.angle_to(b) < 1e-7
+
+
+@given(base=_poses, target=_poses)
+def test_a_cartesian_target_reaches_the_robot_in_its_own_base_frame_and_comes_back_in_the_cells(base: Pose, target: Pose) -> None:
+    placed = _Recorder(base)
+    inward = placed.inward(MoveCartesian(target))
+    assert isinstance(inward, MoveCartesian)
+    assert _close(base.compose(inward.target), target)
+    assert _close(placed.tcp_out(inward.target), target)
+
+
+@given(base=_poses, start=_poses, delta=_poses)
+def test_a_relative_move_in_the_cells_axes_ends_where_it_would_in_the_robots(base: Pose, start: Pose, delta: Pose) -> None:
+    """A world-axes move_relative, turned into the robot's base axes, ends at the same place of the cell."""
+    placed = _Recorder(base)
+    world = MoveRelative(delta, reference="world")
+    inward = placed.inward(world)
+    assert isinstance(inward, MoveRelative)
+    in_base = inward.goal(base.inverse().compose(start))
+    assert _close(base.compose(in_base), world.goal(start))
