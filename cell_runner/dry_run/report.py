@@ -7,8 +7,8 @@ application's time) is what a collision check between asynchronous arms needs.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import dataclass, replace
+from typing import Literal, Protocol
 
 from execution_engine.app_model.diagnostics import Diagnostic, capped
 from execution_engine.engine.waits import FlagWait, costliest, wait_totals
@@ -44,6 +44,7 @@ class Finding:
     t: float  # when, on the report's time base
     count: int = 1
     origin: str = ""  # the iteration of a loop or call the operation was made for (Operation.origin)
+    assumed: str = ""  # the outcomes the dry run assumed where it met it (an application with <if>s)
 
     def diagnostic(self) -> Diagnostic:
         """The finding in the form validation prints: ``FILE:LINE:COL: operation 8 right_arm f: kind: ... (at 63.20 s)``;
@@ -51,7 +52,8 @@ class Finding:
         where = f"{self.primitive}: " if self.primitive else ""
         when = f"{self.count} times in this call, first at {self.t:.2f} s" if self.count > 1 else f"at {self.t:.2f} s"
         made = f" ({self.origin})" if self.origin else ""
-        text = f"operation {self.operation}{made} {self.group} {self.function}: {self.kind}: {where}{self.message} ({when})"
+        assumed = f"; assuming {self.assumed}" if self.assumed else ""
+        text = f"operation {self.operation}{made} {self.group} {self.function}: {self.kind}: {where}{self.message} ({when}{assumed})"
         return Diagnostic(self.file, self.line, self.col, text)
 
 
@@ -125,6 +127,8 @@ class DryRunReport:
     #: measured state it was put in -- and where the application left them.
     start: JointPositions | None = None
     end: JointPositions | None = None
+    #: The outcomes each pass assumed (an application with <if>s): every side of every <if> run in one.
+    branches: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -151,6 +155,7 @@ class DryRunReport:
         else:
             lines.append("  collisions not checked: the robot has no collision model")
         lines += [f"  not checked: {note}" for note in self.notes]
+        lines += [f"  branches, pass {i}{' (the prediction)' if i == 1 else ''}: assumed {text}" for i, text in enumerate(self.branches, start=1)]
         return lines
 
 
@@ -179,3 +184,30 @@ def group_times(groups: tuple[str, ...], timeline: tuple[Span, ...], cycle_time:
                 busy[group] += span.duration
                 count[group] += 1
     return {g: GroupTime(busy[g], max(0.0, cycle_time - busy[g]), count[g]) for g in groups}
+
+
+class _Sized(Protocol):
+    name: str
+    operations: tuple[object, ...]
+
+
+def merged(app: _Sized, passes: list[tuple[str, DryRunReport, tuple[str, ...]]]) -> DryRunReport:
+    """The passes of an application with <if>s (each: the outcomes assumed, its report, the ids of the
+    operations it ran) as one report: the first pass's prediction (timeline, cycle time), every
+    pass's findings (each naming the outcomes it assumed; one met in several passes said once), the
+    motions every pass swept for collisions, what each left unchecked, every operation checked in one."""
+    base = passes[0][1]
+    findings: dict[tuple[str, str, str, str, str, str], Finding] = {}
+    for assumed, report, _ in passes:
+        for finding in report.findings:
+            key = (finding.kind, finding.group, finding.operation, finding.function, finding.primitive, finding.message)
+            findings.setdefault(key, replace(finding, assumed=assumed))
+    notes = tuple(dict.fromkeys(f"{note} (assuming {assumed})" for assumed, report, _ in passes for note in report.notes))
+    checked = {op for _, report, ids in passes for op in ids[:report.operations_checked]}
+    swept = [r.collisions for _, r, _ in passes if r.collisions is not None]
+    collisions = CollisionCheck(sum(c.motions for c in swept), sum(c.samples for c in swept), swept[0].margin) if len(swept) == len(passes) else None
+    return replace(
+        base, app=app.name, findings=tuple(findings.values()), notes=notes, complete=all(r.complete for _, r, _ in passes),
+        operations_total=len(app.operations), operations_checked=len(checked), collisions=collisions,
+        branches=tuple(assumed for assumed, _, _ in passes),
+    )

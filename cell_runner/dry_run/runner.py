@@ -26,10 +26,11 @@ from typing import Any
 from app_functions.registry import full_catalog
 from cell_runner.deployment import Deployment, deploy_local
 from cell_runner.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
+from cell_runner.dry_run.branches import assumptions, describe, has_branches, resolved
 from cell_runner.dry_run.collisions import scene_of, sweep
 from cell_runner.dry_run.placement import place
 from cell_runner.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
-from cell_runner.dry_run.report import CollisionCheck, DryRunReport, Finding, JointPositions, group_times
+from cell_runner.dry_run.report import CollisionCheck, DryRunReport, Finding, JointPositions, group_times, merged
 from cell_runner.dry_run.simulators import DryRunSetup, setup_for
 from core_functions.catalog import Catalog
 from core_functions.trajectory_store import application_store
@@ -79,7 +80,21 @@ def dry_run_setup(app: Application, setup: DryRunSetup, trajectory_db: str | Non
 async def run_dry(
     app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None, start: JointPositions | None = None
 ) -> DryRunReport:
-    """The dry run on ``clock`` (the caller's loop); see :func:`dry_run` (and the module, for sync="flags")."""
+    """The dry run on ``clock`` (the caller's loop); see :func:`dry_run` (and the module, for sync="flags");
+    an application with outcome branches once per set of outcomes assumed (:mod:`.branches`)."""
+    if not has_branches(app):
+        return await _run_plain(app, setup, clock, trajectory_db, start)
+    passes = []
+    for assumed in assumptions(app, full_catalog()):
+        branch = resolved(app, assumed)
+        report = await _run_plain(branch, setup, clock, trajectory_db, start)
+        passes.append((describe(assumed), report, tuple(op.id for op in branch.operations)))
+    return merged(app, passes)
+
+
+async def _run_plain(
+    app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None, start: JointPositions | None = None
+) -> DryRunReport:
     left_out: dict[str, set[str]] = {}  # operation id -> groups whose failed call is left out
     earlier: list[Finding] = []  # the failures of the runs before
     for _ in range(MAX_RERUNS):

@@ -1,0 +1,95 @@
+"""Every side of every ``<if>`` dry-run: the outcomes the dry run assumes, one pass per set of them.
+
+The simulator decides an outcome one way (its cameras find every hole of a nominal cell), so a
+dry run that only followed the simulator would never check the ``not_found`` side -- and a
+collision or an unreachable target there would first be met by the robot.  So the dry run
+*assumes* the outcomes instead: each pass fixes an outcome for every function an ``<if>`` tests,
+keeps the operations whose conditions those outcomes meet (and drops their conditions, so the
+engine runs exactly them), and runs as any dry run does.  The passes are chosen so that every
+distinct set of conditions some operation is under is met in at least one pass: greedily, each
+pass taking every side not yet covered that agrees with what the pass already assumes; a tested
+function's first outcome (the one it ends with when it succeeds) where nothing else is needed.
+The first pass is the one the simulator would take by itself, all successes; it gives the
+prediction (cycle time, timeline).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+from core_functions.catalog import Catalog
+from execution_engine.app_model.model import Application, Condition
+
+#: The outcome assumed for each tested function, by (operation, group).
+Assumption = dict[tuple[str, str], str]
+
+
+def has_branches(app: Application) -> bool:
+    return any(operation.when for operation in app.operations)
+
+
+def _outcomes(app: Application, catalog: Catalog, key: tuple[str, str]) -> tuple[str, ...]:
+    operation, group = key
+    spec = catalog.get(app.operation(operation).calls[group].function)
+    return tuple(o.name for o in spec.outcomes) if spec is not None else ()
+
+
+def _fits(assumed: Assumption, conditions: tuple[Condition, ...], app: Application, catalog: Catalog) -> Assumption | None:
+    """``assumed`` with what ``conditions`` need added, or None when they contradict it."""
+    out = dict(assumed)
+    for condition in conditions:
+        key = (condition.operation, condition.group)
+        if key in out:
+            if not condition.met(out[key]):
+                return None
+            continue
+        choices = [o for o in _outcomes(app, catalog, key) if condition.met(o)]
+        if not choices:
+            return None  # the validation refuses such a condition; nothing to run under it
+        out[key] = choices[0]
+    return out
+
+
+def assumptions(app: Application, catalog: Catalog) -> list[Assumption]:
+    """The passes: each an outcome for every tested function; together they meet every operation's conditions."""
+    tested = sorted(app.tested())
+    sides = list(dict.fromkeys(operation.when for operation in app.operations if operation.when))
+    passes: list[Assumption] = []
+    uncovered = sides
+    first = True
+    while uncovered:
+        assumed: Assumption = {}
+        left = []
+        for side in uncovered:
+            if first and any(not c.holds for c in side):
+                left.append(side)  # the first pass: the successes alone
+                continue
+            fitted = _fits(assumed, side, app, catalog)
+            if fitted is None:
+                left.append(side)
+            else:
+                assumed = fitted
+        if len(left) == len(uncovered) and not first:
+            break  # nothing could be met (only a condition the validation refuses)
+        for key in tested:
+            if key not in assumed:
+                names = _outcomes(app, catalog, key)
+                if names:
+                    assumed[key] = names[0]
+        passes.append(assumed)
+        uncovered, first = left, False
+    return passes or [{}]
+
+
+def resolved(app: Application, assumed: Assumption) -> Application:
+    """``app`` as it runs when the tested functions end as ``assumed``: the operations whose
+    conditions that meets, without their conditions."""
+    operations = tuple(
+        replace(operation, when=()) for operation in app.operations
+        if all(c.met(assumed.get((c.operation, c.group))) for c in operation.when)
+    )
+    return replace(app, operations=operations)
+
+
+def describe(assumed: Assumption) -> str:
+    """``look_drill_1 left_arm found, look_drill_2 left_arm not_found``: the words of the report."""
+    return ", ".join(f"{operation} {group} {outcome}" for (operation, group), outcome in assumed.items()) or "nothing"

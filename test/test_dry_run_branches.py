@@ -1,0 +1,48 @@
+"""The dry run checks every side of every <if> (issue 24 item 2): it says which outcomes each pass
+assumed, and a collision on the side the simulator would not take is found before anything moves."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from test_dry_run import cli, findings
+
+ROOT = Path(__file__).resolve().parent.parent
+BRANCH = ROOT / "apps_xml" / "rivet_loop_branch.xml"
+CELL = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
+PUT_BACK = '<right_arm><function name="place"><params><param value="rivet_{index}"/></params></function></right_arm>'
+#: Where the right arm would put the rivet back: right beside the left arm, which stands above the hole it did not find.
+INTO_THE_LEFT_ARM = '<right_arm><function name="place"><params><param value="0.34,-0.02,-0.004,3.14159265,0,0"/></params></function></right_arm>'
+PASS_1 = "  branches, pass 1 (the prediction): assumed " + ", ".join(f"look_drill_{n} left_arm found" for n in range(1, 5))
+PASS_2 = "  branches, pass 2: assumed " + ", ".join(f"look_drill_{n} left_arm not_found" for n in range(1, 5))
+
+
+def branch_app(folder: Path, put_back: str = PUT_BACK) -> Path:
+    text = BRANCH.read_text()
+    assert text.count(PUT_BACK) == 1
+    app = folder / "app.xml"
+    app.write_text(text.replace(PUT_BACK, put_back).replace('cell="cells/rivet_cell.xml"', f'cell="{CELL}"'))
+    return app
+
+
+def test_the_branch_demonstrator_is_dry_run_on_both_sides_of_its_if(tmp_path: Path) -> None:
+    code, out, err = cli("validate", "--simulate", str(branch_app(tmp_path)), "--trajectory-db", str(tmp_path / "t.sqlite"))
+    assert code == 0, out + err
+    assert "no problems found; operations checked 22/22" in out  # the found side's 18 and the put-backs: every operation
+    assert PASS_1 in out.splitlines() and PASS_2 in out.splitlines()
+
+
+def test_a_collision_on_the_side_the_simulator_would_not_take_is_found_before_anything_moves(tmp_path: Path) -> None:
+    app = branch_app(tmp_path, INTO_THE_LEFT_ARM)
+    line = next(n for n, text in enumerate(app.read_text().splitlines(), start=1) if INTO_THE_LEFT_ARM in text)
+    db = str(tmp_path / "t.sqlite")
+    code, out, err = cli("validate", "--simulate", str(app), "--trajectory-db", db)
+    assert code == 1, out + err
+    found = findings(err)
+    at_place = [f for f in found if f.startswith(f"{app}:{line}:") and " right_arm place: collision: " in f]
+    assert {f.split(" operation ")[1].split(" ")[0] for f in at_place} >= {f"put_back_drill_{n}" for n in range(2, 5)}, err
+    assert all(f.endswith(f"; assuming {PASS_2.split('assumed ')[1]})") for f in found), "only the not_found side meets it"
+    assert PASS_1 in out.splitlines() and PASS_2 in out.splitlines()
+    code, out, err = cli("run", str(app), "--speed", "max", "-q", "--trajectory-db", db)
+    assert code == 1
+    assert f"{app}: not run: {len(found)} problem(s) found by the dry run; use --no-check to run anyway" in err
+    assert "application rivet_loop_branch" not in out  # nothing was started
