@@ -37,6 +37,8 @@ from typing import IO
 
 from app_functions.registry import full_catalog
 from cell_runner.settings import LaunchSettings
+from core_functions.cell_robots import CellRobotModel
+from core_functions.geometry import Pose
 from core_functions.option_ranges import argument_type
 from core_functions.resources import share_path
 from execution_engine.app_model import ApplicationError, load_application
@@ -83,11 +85,39 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
     """The cell of ``app_file``'s robot, bridge first and engine last (the order they start in);
     ``check``: the engine dry-runs the application from the robot's measured joints before it starts."""
     app = load_application(app_file, full_catalog())
-    backend = app.robot.default_backend
+    robot = app.robot
+    if isinstance(robot, CellRobotModel):  # a mixed cell: one bridge node per robot, each with its cell's options and base
+        if speed != 1.0:
+            raise ValueError(f"--speed {speed:g}: a cell of several robots runs in real time (each robot's bridge keeps its own clock)")
+        specs = [_bridge_spec(m.backend, transport, speed, m.name, m.options, m.base) for m in robot.members]
+    else:
+        specs = [_bridge_spec(robot.default_backend, transport, speed)]
+    # A simulator at another speed than real time is the cell's clock (it publishes /clock): every
+    # other node measures its waits, timeouts and the report in the robot's time, as with use_sim_time:=true.
+    followers = () if speed == 1.0 else ("-p", "use_sim_time:=true")
+    for group in robot.group_names:
+        name = machine_node_name(group)
+        member = robot.member_of(group) if isinstance(robot, CellRobotModel) else None
+        model, backend = (member.model, member.backend) if member is not None else (robot, robot.default_backend)
+        specs.append(NodeSpec(name, (
+            *_python(*_ENTRY["machine"]), *_common(transport, backend), "-r", f"__node:={name}", "-p", f"group:={group}", "-p", f"robot:={model.name}",
+            *followers,
+        )))
+    common = _common(transport, robot.members[0].backend if isinstance(robot, CellRobotModel) else robot.default_backend)
+    specs.append(NodeSpec(ENGINE_NODE, (
+        *_python(*_ENTRY["engine"]), *common, "-p", f"application:={app_file.resolve()}", "-p", "exit_when_done:=true",
+        *(() if check else ("-p", "check:=false")), *followers,
+    )))
+    return specs
+
+
+def _bridge_spec(
+    backend: str, transport: str, speed: float, robot: str = "", options: tuple[tuple[str, str], ...] = (), base: Pose | None = None,
+) -> NodeSpec:
+    """The bridge node of ``backend``; for a robot of a mixed cell named ``<robot>_bridge``, with the cell's options
+    for it as parameters and its base pose."""
     module = backend.replace("-", "_")
-    config = str(share_path("config", f"{module}.yaml"))
-    common = ("--transport", transport, "--ros-args", "--params-file", config)
-    bridge = [*common]
+    bridge = list(_common(transport, backend))
     if speed != 1.0:
         parameter = _SPEED_PARAMETER.get(backend)
         if parameter is None:
@@ -96,21 +126,20 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
                 f"only {', '.join(sorted(_SPEED_PARAMETER))} runs at another speed"
             )
         bridge += ["-p", f"{parameter}:={speed!r}"]
-    # A simulator at another speed than real time is the cell's clock (it publishes /clock): every
-    # other node measures its waits, timeouts and the report in the robot's time, as with use_sim_time:=true.
-    followers = () if speed == 1.0 else ("-p", "use_sim_time:=true")
-    specs = [NodeSpec(bridge_node_name(backend), (*_python(f"cell_runner.bridge_nodes.{module}", "main"), *bridge))]
-    for group in app.robot.group_names:
-        name = machine_node_name(group)
-        specs.append(NodeSpec(name, (
-            *_python(*_ENTRY["machine"]), *common, "-r", f"__node:={name}", "-p", f"group:={group}", "-p", f"robot:={app.robot.name}",
-            *followers,
-        )))
-    specs.append(NodeSpec(ENGINE_NODE, (
-        *_python(*_ENTRY["engine"]), *common, "-p", f"application:={app_file.resolve()}", "-p", "exit_when_done:=true",
-        *(() if check else ("-p", "check:=false")), *followers,
-    )))
-    return specs
+    name = bridge_node_name(backend)
+    if robot:
+        name = f"{robot}_bridge"
+        bridge += ["-r", f"__node:={name}"]
+        if base is not None and base != Pose():
+            bridge += ["-p", "base_pose:=" + " ".join(repr(v) for v in (*base.position, *base.rpy()))]
+        for key, value in options:
+            bridge += ["-p", f"{key}:={value}"]
+    return NodeSpec(name, (*_python(f"cell_runner.bridge_nodes.{module}", "main"), *bridge))
+
+
+def _common(transport: str, backend: str) -> tuple[str, ...]:
+    """A node's transport and the params file of ``backend``'s cell (config/<back end>.yaml: a section per node)."""
+    return ("--transport", transport, "--ros-args", "--params-file", str(share_path("config", f"{backend.replace('-', '_')}.yaml")))
 
 
 def _python(module: str, function: str) -> tuple[str, ...]:

@@ -11,8 +11,12 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
+from dds_domain import stop_group
 from hypothesis import given, strategies as st
 
 from cell_runner.cli import main
@@ -72,6 +76,24 @@ def test_a_collision_between_the_kuka_and_a_nextage_arm_is_found_by_the_dry_run_
     assert any("collision between right_arm hand (assembler/RARM_JOINT5_Link) and arm feeder/link_" in line for line in lines), err.getvalue()
     assert lines[-1].startswith(f"{app}: not run: ") and lines[-1].endswith("problem(s) found by the dry run; use --no-check to run anyway")
     assert not trace.exists() or not any(r.get("event") == "function_start" for r in _records(trace))
+
+
+def test_launch_starts_one_bridge_node_per_robot_and_the_mixed_cell_runs_to_finished_over_dds(tmp_path: Path, dds_env: dict[str, str]) -> None:
+    """launch: a bridge process per robot (feeder_bridge on RSI, assembler_bridge on the Nextage simulator, each with
+    its base pose from the cell), a machine per group, the engine checking the whole cell first: FINISHED."""
+    env = {**os.environ, **dds_env, "XDG_DATA_HOME": str(tmp_path / "data")}
+    process = subprocess.Popen(
+        [sys.executable, "-m", "execution_engine", "launch", str(EXAMPLE), "--transport", "dds"],
+        cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True,
+    )
+    try:
+        out, _ = process.communicate(timeout=240)
+    finally:
+        stop_group(process)
+    assert process.returncode == 0, out
+    assert "[execution_engine] application mixed_cell: FINISHED" in out
+    for node in ("feeder_bridge", "assembler_bridge", "arm_machine", "right_arm_machine"):
+        assert f"[launch] {node} stopped (exit code 0)" in out, out
 
 
 class _Recorder(PlacedBackend):

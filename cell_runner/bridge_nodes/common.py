@@ -14,6 +14,7 @@ process start-up, signals and exit codes are :mod:`cell_runner.ros_main`'s.
 from __future__ import annotations
 
 import asyncio
+import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ from cell_runner.ros_main import (
     startup_errors,
     warn_undeclared,
 )
+from core_functions.geometry import Pose
 from node_transport.clock import Clock, FollowingClock, scaled_clock
 from node_transport.msgs import ClockMessage, Time
 from node_transport.port import Node
@@ -35,9 +37,12 @@ from node_transport.qos import CLOCK
 from node_transport.wire import CLOCK_TOPIC, bridge_node_name
 from robot_bridges.backend import BackendOptions, BridgeError
 from robot_bridges.bridge_node import BridgeNode
+from robot_bridges.placed import PlacedBackend
 from robot_bridges.registry import create_backend
 
 
+#: The largest coordinate or angle of a base pose (m, rad): a cell is a room, not a city.
+BASE_BOUND = 100.0
 CLOCK_PERIOD = 0.01  # wall seconds between /clock messages of a simulator faster than real time
 
 
@@ -80,12 +85,32 @@ async def publish_clock(node: Node, clock: Clock, period: float) -> None:
         await clock.sleep(period)
 
 
+def declare_base_pose(node: Node) -> Pose | None:
+    """``base_pose``: where the robot's base stands in a mixed cell's world frame (``launch`` sets it from the
+    cell's ``<robot xyz rpy>``); None when the robot's base is the world, as in a cell of one robot."""
+    text = str(node.declare_parameter(
+        "base_pose", "", "x y z roll pitch yaw (m, rad): the robot's base in the cell's world frame, for a robot of a mixed cell ('' = the base is the world)",
+    ))
+    if not text.strip():
+        return None
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) and abs(v) <= BASE_BOUND for v in values):
+        raise StartupError(f"{node.fully_qualified_name}: parameter base_pose must be six numbers x y z roll pitch yaw (m, rad; each within {BASE_BOUND:g}), got {text!r}")
+    return Pose.from_xyz_rpy(*values)
+
+
 async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: Outcome) -> None:
     """Build the back end and its bridge node, then serve; the back end is closed on the way out."""
     with startup_errors():
         setup = declare(node)
+        base = declare_base_pose(node)
         clock = backend_clock(node, setup.speed)
         robot_backend = await create_backend(backend, clock, setup.options)
+        if base is not None:  # a robot of a mixed cell: poses in and out in the cell's world frame
+            robot_backend = PlacedBackend(robot_backend, base, node.name.removesuffix("_bridge"))
     try:
         with startup_errors():
             bridge = BridgeNode(node, robot_backend)
