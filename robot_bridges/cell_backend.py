@@ -28,10 +28,22 @@ class Part:
     backend: RobotBackend
 
 
+#: The options of a cell's robot that are a back end's connection settings rather than its extras.
+LINK_OPTIONS = ("host", "port", "rsi_listen")
+
+
 def member_options(options: BackendOptions, member: CellRobot) -> BackendOptions:
-    """What ``member``'s own back end is built from: its model and the options the cell gives it
-    (a run's --seed carries over; addresses and injected faults are per robot, in the cell)."""
-    return BackendOptions(robot=member.model, seed=options.seed, extra=dict(member.options))
+    """What ``member``'s own back end is built from: its model and the options the cell gives it, ``host``,
+    ``port`` and ``rsi_listen`` among them as for a robot of its own (a run's --seed carries over)."""
+    extra = dict(member.options)
+    link = {key: extra.pop(key) for key in LINK_OPTIONS if key in extra}
+    port: int | None = None
+    if "port" in link:
+        try:
+            port = int(link["port"])
+        except ValueError:
+            raise ValueError(f"robot {member.name!r}: option port must be a whole number, got {link['port']!r}") from None
+    return BackendOptions(robot=member.model, host=link.get("host"), port=port, rsi_listen=link.get("rsi_listen"), seed=options.seed, extra=extra)
 
 
 def cell_members(options: BackendOptions) -> tuple[CellRobot, ...]:

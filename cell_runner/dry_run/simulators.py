@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 
 from core_functions.cell_robots import CELL_BACKEND, CellRobot, CellRobotModel
 from robot_bridges.backend import BackendOptions, RobotBackend
+from robot_bridges.cell_backend import member_options
 
 #: Nextage simulator control period in the dry run (0.01 s in a run).  A planned motion stays within
 #: the joint limits between its checked samples (the limits are a box, the samples are interpolated
@@ -80,7 +81,7 @@ def _cell_setup(robot: CellRobotModel, options: BackendOptions) -> DryRunSetup:
     members: list[CellRobot] = []
     setups: list[DryRunSetup] = []
     for member in robot.members:
-        setup = setup_for(member.backend, replace(options, robot=member.model, extra=dict(member.options)))
+        setup = setup_for(member.backend, member_options(options, member))
         extra = setup.options.extra
         if setup.robot_seconds is not None:  # its own accelerated time would not line up with the others' motions:
             extra = {**extra, "simulator": "process", "runner": "process"}  # as a run; the collision sweep needs one time line, the wall clock's
