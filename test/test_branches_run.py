@@ -66,6 +66,21 @@ def test_a_hole_vision_does_not_find_takes_the_not_found_branch_and_the_run_fini
     assert "  branch: debur_drill_3 left out: left_arm look_drill_3 ended not_found; it runs when left_arm look_drill_3 == found" in out.getvalue()
 
 
+def test_in_flags_mode_too_the_not_found_branch_is_taken_and_the_run_finishes(tmp_path: Path) -> None:
+    run_app = tmp_path / "app.xml"
+    run_app.write_text(BRANCH.read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{MISSING}" sync="flags"'))
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(run_app), "--speed", "max", "--no-check", "--trace", str(tmp_path / "run.jsonl")], out, err)
+    assert code == 0, err.getvalue()
+    text = out.getvalue()
+    assert "application rivet_loop_branch: FINISHED" in text and "zone 'hands_left'" in text  # each group on its own, meeting at zones
+    assert "  outcome: left_arm operation look_drill_3 (for_each hole=drill_3): not_found" in text
+    assert "left out by their branch: 5 operation(s): put_back_drill_1, put_back_drill_2, debur_drill_3, insert_drill_3, put_back_drill_4" in text
+    lines = records(tmp_path / "run.jsonl")
+    placed = [r["operation"] for r in lines if r["event"] == "function_end" and r.get("function") == "place" and r["outcome"] == "succeeded"]
+    assert placed == ["put_back_drill_3"]  # the right arm waited for the left arm's look before choosing
+
+
 def test_where_no_if_tests_it_a_hole_not_found_stays_an_error_under_the_policy(tmp_path: Path) -> None:
     run_app = tmp_path / "app.xml"
     run_app.write_text((ROOT / "apps_xml" / "rivet_loop.xml").read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{MISSING}"'))

@@ -141,6 +141,9 @@ class DryRunBackend(RobotBackend):
             if error.kind is FaultKind.TIMEOUT and isinstance(primitive, WaitInput):
                 self.recorder.span(group, held, what, start, timing.now())
                 return self.as_if_done(group, primitive)
+            if self.recorder.is_outcome(group, error.kind.value):  # the pass assumed this function's outcome
+                self.recorder.span(group, held, what, start, timing.now())
+                return self.as_if_done(group, primitive)
             self._note_controller(group, error)
             if self.stuck is None:
                 span = self.recorder.span(group, held, what, start, timing.now(), error.kind.value)

@@ -5,7 +5,8 @@ dry run that only followed the simulator would never check the ``not_found`` sid
 collision or an unreachable target there would first be met by the robot.  So the dry run
 *assumes* the outcomes instead: each pass fixes an outcome for every function an ``<if>`` tests,
 keeps the operations whose conditions those outcomes meet (and drops their conditions, so the
-engine runs exactly them), and runs as any dry run does.  The passes are chosen so that every
+engine runs exactly them), and runs as any dry run does -- a tested function whose simulated
+camera does not find its feature ends with its outcome there too, not with a finding.  The passes are chosen so that every
 distinct set of conditions some operation is under is met in at least one pass: greedily, each
 pass taking every side not yet covered that agrees with what the pass already assumes; a tested
 function's first outcome (the one it ends with when it succeeds) where nothing else is needed.
@@ -29,7 +30,7 @@ def has_branches(app: Application) -> bool:
 
 def _outcomes(app: Application, catalog: Catalog, key: tuple[str, str]) -> tuple[str, ...]:
     operation, group = key
-    spec = catalog.get(app.operation(operation).calls[group].function)
+    spec = catalog.get(app.operation(operation).calls[group].function)  # a tested operation: validated to exist
     return tuple(o.name for o in spec.outcomes) if spec is not None else ()
 
 
@@ -87,7 +88,21 @@ def resolved(app: Application, assumed: Assumption) -> Application:
         replace(operation, when=()) for operation in app.operations
         if all(c.met(assumed.get((c.operation, c.group))) for c in operation.when)
     )
-    return replace(app, operations=operations)
+    return replace(app, operations=operations, resolved_tests=app.tested())
+
+
+def outcome_faults(app: Application, catalog: Catalog) -> dict[tuple[str, str], frozenset[str]]:
+    """The fault kinds that end each tested function with an outcome (vision: not_found), by (operation, group)."""
+    out: dict[tuple[str, str], frozenset[str]] = {}
+    by_id = {operation.id: operation for operation in app.operations}
+    for operation, group in app.tested():
+        if operation not in by_id or group not in by_id[operation].calls:
+            continue  # left out by this pass
+        spec = catalog.get(by_id[operation].calls[group].function)
+        kinds = frozenset(o.fault for o in spec.outcomes if o.fault) if spec is not None else frozenset()
+        if kinds:
+            out[(operation, group)] = kinds
+    return out
 
 
 def describe(assumed: Assumption) -> str:

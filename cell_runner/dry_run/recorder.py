@@ -102,6 +102,14 @@ class Recorder:
         self.spans: list[Span] = []
         self.waits: list[FlagWait] = []  # the engine's waits for flags and zones (sync="flags")
         self.notes: list[str] = []  # what could not be checked
+        #: The fault kinds that end a tested function with an outcome, by (operation, group): the
+        #: pass assumed that outcome (dry_run/branches.py), so meeting one is no finding.
+        self.outcome_faults: dict[tuple[str, str], frozenset[str]] = {}
+
+    def is_outcome(self, group: str, kind: str) -> bool:
+        """Whether ``kind`` of a fault of the call ``group`` runs now is one of its tested outcomes."""
+        where = self.locate(group)
+        return where is not None and kind in self.outcome_faults.get((where[0], group), frozenset())
 
     # ---------------------------------------------------------------------------- findings
     def finding(self, group: str, kind: str, primitive: str, message: str, t: float | None = None) -> None:

@@ -26,7 +26,7 @@ from typing import Any
 from app_functions.registry import full_catalog
 from cell_runner.deployment import Deployment, deploy_local
 from cell_runner.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
-from cell_runner.dry_run.branches import assumptions, describe, has_branches, resolved
+from cell_runner.dry_run.branches import assumptions, describe, has_branches, outcome_faults, resolved
 from cell_runner.dry_run.collisions import scene_of, sweep
 from cell_runner.dry_run.placement import place
 from cell_runner.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
@@ -137,6 +137,7 @@ async def _run_once(
     inner = await create_backend(setup.backend, clock, setup.options)
     timing: Timing = ClockTiming(clock) if setup.robot_seconds is None else CycleTiming(setup.robot_seconds(inner))
     recorder = Recorder(app, timing)
+    recorder.outcome_faults = outcome_faults(app, full_catalog())
     backend = DryRunBackend(inner, recorder)
     with tempfile.TemporaryDirectory(prefix="dry_run_") as folder:
         db = _copy_store(trajectory_db or str(application_store(app.path)), Path(folder) / "trajectories.sqlite")

@@ -105,10 +105,13 @@ class Application:
     #: The applications its ``<call>`` elements include (resolved paths, each once): a resume
     #: checks them as it checks the application itself.
     includes: tuple[Path, ...] = ()
+    #: Functions an <if> tested before its branches were resolved (a dry run's pass): their outcome
+    #: faults stay outcomes, not findings, though no operation carries the condition any more.
+    resolved_tests: frozenset[tuple[str, str]] = frozenset()
 
     def tested(self) -> frozenset[tuple[str, str]]:
         """(operation, group) of every function an <if> tests: its outcome faults end it with that outcome."""
-        return frozenset((c.operation, c.group) for operation in self.operations for c in operation.when)
+        return self.resolved_tests | frozenset((c.operation, c.group) for operation in self.operations for c in operation.when)
 
     def iterations(self) -> dict[str, str]:
         """The origin of every operation made by a loop or a call, by operation id."""

@@ -9,6 +9,8 @@ events, so the trace, the timeline and the run report show the branch taken.
 """
 from __future__ import annotations
 
+import asyncio
+from collections.abc import Iterable
 from typing import Protocol
 
 from core_functions.catalog import Catalog
@@ -28,8 +30,36 @@ class BranchEngine(Protocol):
     report: RunReport | None
     tested: frozenset[tuple[str, str]]
     service_timeout: float
+    outcome_board: OutcomeBoard
 
     def note_branch(self, event: str, operation: str, group: str, function: str | None, outcome: str, message: str) -> None: ...
+
+
+class OutcomeBoard:
+    """Which tested functions' outcomes are decided (sync="flags": a group whose next operation is
+    under an <if> on another group's function waits until that function has ended -- or was itself
+    left out by a branch, which decides it too: no outcome)."""
+
+    def __init__(self) -> None:
+        self._decided: dict[tuple[str, str], asyncio.Event] = {}
+        self.left_out: set[str] = set()  # operations a branch left out and said so (once, whichever group saw it first)
+
+    def start(self) -> None:
+        self._decided.clear()
+        self.left_out.clear()
+
+    def _event(self, key: tuple[str, str]) -> asyncio.Event:
+        return self._decided.setdefault(key, asyncio.Event())
+
+    def decided(self, operation: Operation, groups: Iterable[str]) -> None:
+        for group in groups:
+            self._event((operation.id, group)).set()
+
+    async def wait(self, operation: Operation, report: RunReport) -> None:
+        """Until every outcome ``operation``'s conditions test is decided."""
+        for condition in operation.when:
+            if f"{condition.operation}/{condition.group}" not in report.outcomes:
+                await self._event((condition.operation, condition.group)).wait()
 
 
 def branch_taken(engine: BranchEngine, operation: Operation, report: RunReport) -> bool:
@@ -37,6 +67,11 @@ def branch_taken(engine: BranchEngine, operation: Operation, report: RunReport) 
     unmet = [c for c in operation.when if not c.met(report.outcomes.get(f"{c.operation}/{c.group}"))]
     if not unmet:
         return True
+    board = engine.outcome_board
+    board.decided(operation, operation.calls)  # what it would have decided is decided: nothing
+    if operation.id in board.left_out:
+        return False
+    board.left_out.add(operation.id)
     why = unmet[0]
     outcome = report.outcomes.get(f"{why.operation}/{why.group}", "none")
     report.skipped.append((operation.id, f"{why.group} {why.operation} ended {outcome}"))
@@ -59,6 +94,7 @@ async def ended_with_outcome(engine: BranchEngine, operation: Operation, group: 
     if named is None or result.outcome == "preempted" or stopping:
         return False
     report.outcomes[f"{operation.id}/{group}"] = named
+    engine.outcome_board.decided(operation, (group,))
     engine.note_branch("outcome", operation.id, group, function, named,
                        f"{group} {function} ended {named}" + ("" if succeeded else f": {result.error}"))
     if not succeeded:

@@ -27,7 +27,7 @@ from typing import Protocol
 
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
-from execution_engine.engine.branches import branch_taken, ended_with_outcome
+from execution_engine.engine.branches import OutcomeBoard, branch_taken, ended_with_outcome
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
 from execution_engine.engine.commands import OperatorCommands
 from execution_engine.engine.dispatch import ApplicationAborted, Dispatch, ResultWaiter
@@ -116,6 +116,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self._op_index = 0
         self._operation: Operation | None = None
         self.tested: frozenset[tuple[str, str]] = frozenset()  # the functions an <if> tests (their outcomes are kept)
+        self.outcome_board = OutcomeBoard()  # sync="flags": which tested functions have ended
         self._message = ""
         self._paused = False
         self._stepping = False
@@ -141,6 +142,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self._reset_run_state()
         self.app = app
         self.tested = app.tested()
+        self.outcome_board.start()
         report = RunReport(app=app.name, operations_total=len(app.operations), t_start=self.clock.now())
         if resume is not None:
             report.outcomes.update(resume.outcomes)

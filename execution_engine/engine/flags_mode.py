@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.engine.branches import OutcomeBoard, branch_taken, ended_with_outcome
 from execution_engine.engine.dispatch import ApplicationAborted
 from execution_engine.engine.flags import ENGINE_FUNCTIONS
 from execution_engine.engine.report import GroupError
@@ -54,11 +55,14 @@ class FlagsMode:
         zones: ZoneBoard
         function_timeout: float
         service_timeout: float
+        tested: frozenset[tuple[str, str]]
+        outcome_board: OutcomeBoard
         _operation: Operation | None
         _op_index: int
         _stop_reason: str | None
 
         def _sits_out(self, call: Call) -> bool: ...
+        def note_branch(self, event: str, operation: str, group: str, function: str | None, outcome: str, message: str) -> None: ...
         async def _gate(self) -> bool: ...
         def _dispatch(self, operation: Operation, calls: dict[str, Call], attempt: int, only: str | None = None) -> dict[str, Dispatch]: ...
         async def _abandon(self, pending: dict[str, Dispatch], group: str, why: str) -> None: ...
@@ -95,6 +99,11 @@ class FlagsMode:
         for operation, call in steps:
             if not await self._gate():
                 raise ApplicationAborted(self._stop_reason or "stopped")
+            if operation.when:  # under an <if>: once the outcome it tests is decided, whichever group decides it
+                await self.outcome_board.wait(operation, report)
+                if not branch_taken(self, operation, report):
+                    self.zones.ended(operation.id, group)
+                    continue
             self._operation = operation
             index = self.app.operations.index(operation) if self.app is not None else 0
             self._op_index = index
@@ -109,7 +118,7 @@ class FlagsMode:
                     raise  # unreachable: _abandon raises ApplicationAborted
                 report.group_busy[group] += max(0.0, result.t_end - result.t_start)
                 report.group_functions[group] += 1
-                if result.outcome == "succeeded":
+                if await ended_with_outcome(self, operation, group, result, self._stop_reason is not None) or result.outcome == "succeeded":
                     if call.function not in ENGINE_FUNCTIONS:
                         await self._await_ready((group,))
                     self.zones.ended(operation.id, group)
