@@ -9,6 +9,7 @@ stands, the dry run) see the whole cell through the one object, group by group.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 from core_functions.cell_robots import BACKEND_NAMES, CellRobot, CellRobotModel
 from core_functions.geometry import Pose
@@ -79,6 +80,35 @@ class CellBackend(RobotBackend):
     @property
     def groups(self) -> tuple[str, ...]:
         return tuple(self._by_group)
+
+    def _simulators_with(self, attribute: str) -> list[RobotBackend]:
+        """The robots' own back ends (a placed one's inner) that have ``attribute``: what a dry run hooks into."""
+        inner = [part.backend.inner if isinstance(part.backend, PlacedBackend) else part.backend for part in self.parts]
+        return [backend for backend in inner if attribute in vars(backend)]
+
+    @property
+    def motion_observer(self) -> Any:
+        """The dry run's observer of planned motions, handed to every simulator that shows them (joint names
+        are the robots' own, which the cell's collision model keeps)."""
+        observers = [getattr(b, "motion_observer") for b in self._simulators_with("motion_observer")]
+        return observers[0] if observers else None
+
+    @motion_observer.setter
+    def motion_observer(self, observer: Any) -> None:
+        for backend in self._simulators_with("motion_observer"):
+            setattr(backend, "motion_observer", observer)
+
+    @property
+    def collisions(self) -> Any:
+        """A simulator's own collision check (its robot alone); the dry run switches them off (None) and sweeps
+        the whole cell's model instead."""
+        checks = [getattr(b, "collisions") for b in self._simulators_with("collisions")]
+        return next((c for c in checks if c is not None), None)
+
+    @collisions.setter
+    def collisions(self, scene: Any) -> None:
+        for backend in self._simulators_with("collisions"):
+            setattr(backend, "collisions", scene)
 
     def of(self, group: str) -> RobotBackend:
         return self._by_group[group]

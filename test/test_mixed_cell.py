@@ -16,12 +16,17 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from dds_domain import stop_group
 from hypothesis import given, strategies as st
 
 from cell_runner.cli import main
+from core_functions.cell_robots import CellRobot
 from core_functions.geometry import Pose
 from core_functions.primitives import MoveCartesian, MoveRelative
+from core_functions.robots import KUKA_KR
+from robot_bridges.backend import BackendOptions
+from robot_bridges.cell_backend import member_options
 from robot_bridges.placed import PlacedBackend
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -130,3 +135,13 @@ def test_a_relative_move_in_the_cells_axes_ends_where_it_would_in_the_robots(bas
     assert isinstance(inward, MoveRelative)
     in_base = inward.goal(base.inverse().compose(start))
     assert _close(base.compose(in_base), world.goal(start))
+
+
+def test_a_cell_robot_s_connection_options_are_its_back_end_s_address_and_the_rest_its_extras() -> None:
+    """<option name="rsi_listen"/"host"/"port"> reach a KUKA of the cell as --rsi-listen, --host and --port reach a
+    KUKA of its own; a port that is not a number is refused naming the robot."""
+    feeder = CellRobot("feeder", KUKA_KR, Pose(), "kuka-rsi", (("rsi_listen", "0.0.0.0:49152"), ("host", "192.168.1.20"), ("port", "49153"), ("cycle", "12")))
+    options = member_options(BackendOptions(robot=KUKA_KR, seed=7), feeder)
+    assert (options.rsi_listen, options.host, options.port, options.extra, options.seed) == ("0.0.0.0:49152", "192.168.1.20", 49153, {"cycle": "12"}, 7)
+    with pytest.raises(ValueError, match=r"^robot 'feeder': option port must be a whole number, got 'x'$"):
+        member_options(BackendOptions(robot=KUKA_KR), CellRobot("feeder", KUKA_KR, Pose(), "kuka-rsi", (("port", "x"),)))
