@@ -28,6 +28,8 @@ class ClockTiming:
     def __init__(self, clock: Clock) -> None:
         self.clock = clock
         self.origin = 0.0
+        if not clock.simulated:  # a mixed cell's dry run with a robot in real time (dry_run/simulators.py)
+            self.base = "wall clock"
 
     def start(self) -> None:
         self.origin = self.clock.now()

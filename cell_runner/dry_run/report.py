@@ -15,8 +15,9 @@ from execution_engine.engine.waits import FlagWait, costliest, wait_totals
 
 #: How the timeline's seconds were measured: the application's simulated clock (a simulator that
 #: runs on it: every wait of the engine and the machines is in it too), or the robot's own cycles
-#: (a controller simulator that keeps its own time, such as RSI's IPOC; primitives back to back).
-TimeBase = Literal["simulated clock", "robot cycles"]
+#: (a controller simulator that keeps its own time, such as RSI's IPOC; primitives back to back), or the
+#: wall clock (a cell of several robots one of which keeps its own time: every robot in real time).
+TimeBase = Literal["simulated clock", "robot cycles", "wall clock"]
 #: Joint names and positions (rad), as a back end's ``joint_state()`` gives them.
 JointPositions = tuple[tuple[str, ...], tuple[float, ...]]
 

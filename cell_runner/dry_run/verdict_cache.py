@@ -240,7 +240,7 @@ def report_of(value: Any) -> DryRunReport:
              "operations_checked", "complete", "notes", "collisions", "waits", "start", "end")
     f = _fields(value, "report", names)
     _need(f["findings"] == [] and f["notes"] == [] and f["complete"] is True, "report: not a passed verdict")
-    _need(f["time_base"] in ("simulated clock", "robot cycles"), "report: unknown time base")
+    _need(f["time_base"] in ("simulated clock", "robot cycles", "wall clock"), "report: unknown time base")
     groups_in = _fields(f["groups"], "groups", ())
     _need(len(groups_in) <= MAX_ITEMS, "groups: too many")
     groups = {}
