@@ -7,8 +7,8 @@ written, never expanded: the page edits the file, not its iterations), a call's 
 comments above each step, above each group's call and at the end of each body -- so opening and saving a looped file
 gives the same XML (equal in canonical form, :mod:`operator_station.blocks_xml`).
 
-The kinds of block are data (:data:`BLOCK_KINDS`): a branch (``<if>``/``<else>``) is one more
-kind with its attributes and a second body, not a new code path through the page and the server.
+The kinds of block are data (:data:`BLOCK_KINDS`): a branch (``<if>``, and the ``<else>`` after
+it) is one more kind with its attributes and a body, not a new code path through the page and the server.
 
 What the model does not hold (an element it does not know, a comment inside a call's params) is
 listed in :attr:`BlockDocument.unheld`: the builder shows the rest and refuses to write over it.
@@ -40,6 +40,10 @@ BLOCK_KINDS: dict[str, BlockKind] = {
     "for_each": BlockKind("for_each", ("var", "in", "index"), ("var", "in")),
     "repeat": BlockKind("repeat", ("count", "var"), ("count",)),
     "call": BlockKind("call", ("application",), ("application",), params=True, body=False),
+    # an outcome branch: its steps run when the group's function in that operation ended with the outcome;
+    # the <else> right after it holds the steps run otherwise (docs/application_xml.md, "Outcome branches")
+    "if": BlockKind("if", ("group", "operation", "outcome"), ("group", "operation", "outcome")),
+    "else": BlockKind("else", (), ()),
 }
 #: Blocks inside each other the page may send (the validator refuses past its own limit, 8, at the line).
 MAX_NESTING = 16

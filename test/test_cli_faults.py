@@ -27,6 +27,7 @@ from pathlib import Path
 
 import pytest
 import zstandard
+from branch_files import BRANCH_FILES
 from dds_domain import domain_env, stop_group
 from mixed_cell_files import MIXED_FILES
 
@@ -142,6 +143,7 @@ FILES: dict[str, str | bytes] = {
 #: The mode each file is written with, whatever the umask the tests run under (a row about who may read
 #: a file must not hold only under the usual 022); every other file: its owner's only.
 FILES.update(MIXED_FILES)  # rows 250-259: mixed cells, each row naming the cell and the application
+FILES.update(BRANCH_FILES)  # rows 240-249: outcome branches
 MODES: dict[str, int] = {"shared_token": 0o644}
 
 

@@ -25,7 +25,7 @@ from test_studio_server import ROOT, client_for, station_args  # noqa: E402
 
 CATALOG = full_catalog()
 #: The shipped applications with loops or calls, as the builder opens them (relative to apps_xml).
-LOOPED = ["rivet_loop.xml", "rivet_blocks.xml", "examples/pallet_grid.xml"]
+LOOPED = ["rivet_loop.xml", "rivet_blocks.xml", "examples/pallet_grid.xml", "rivet_loop_branch.xml"]
 
 
 @pytest.fixture
@@ -33,7 +33,7 @@ def apps(tmp_path: Path) -> Path:
     """A copy of apps_xml: the looped applications, their library block and their cell."""
     for folder in ("cells", "blocks", "examples"):
         shutil.copytree(ROOT / "apps_xml" / folder, tmp_path / folder)
-    for name in ("rivet_loop.xml", "rivet_blocks.xml", "rivet_installation.xml"):
+    for name in ("rivet_loop.xml", "rivet_blocks.xml", "rivet_installation.xml", "rivet_loop_branch.xml"):
         shutil.copy(ROOT / "apps_xml" / name, tmp_path / name)
     return tmp_path
 
@@ -65,6 +65,30 @@ def test_a_shipped_looped_application_opens_as_blocks_and_saves_back_canonically
     again = client.post("/api/open", json={"path": name}).json()["document"]
     assert again == opened["document"]  # saving what was saved changes nothing
     assert post(client, "save", name, again).json()["ok"] and (apps / name).read_bytes() == (apps / name).read_bytes()
+
+
+def test_the_branch_demonstrator_opens_with_its_if_and_else_as_blocks_and_saves_its_branches_back(apps: Path) -> None:
+    """if and else are kinds of block: the page gets their attributes and bodies, and a save keeps every
+    operation under the same conditions (an edit of the if's outcome is one more condition changed, no more)."""
+    client = client_for(build_station(station_args(), CATALOG, apps))
+    name = "rivet_loop_branch.xml"
+    before = [(op.id, op.when) for op in load_application(apps / name, CATALOG).operations]
+    document = client.post("/api/open", json={"path": name}).json()["document"]
+    loop = document["body"][1]
+    assert [step["type"] for step in loop["body"]] == ["operation", "operation", "if", "else"]
+    branch, otherwise = loop["body"][2], loop["body"][3]
+    assert branch["attributes"] == {"group": "left_arm", "operation": "look_{hole}", "outcome": "found"} and otherwise["attributes"] == {}
+    assert [op["id"] for op in branch["body"]] == ["debur_{hole}", "insert_{hole}"] and [op["id"] for op in otherwise["body"]] == ["put_back_{hole}"]
+    assert post(client, "save", name, document).json()["ok"]
+    assert [(op.id, op.when) for op in load_application(apps / name, CATALOG).operations] == before
+    branch["attributes"]["outcome"] = "not_found"
+    assert post(client, "save", name, document).json()["ok"]
+    after = dict((op.id, op.when) for op in load_application(apps / name, CATALOG).operations)
+    assert [c.outcome for c in after["debur_drill_2"]] == ["not_found"] and [c.holds for c in after["put_back_drill_2"]] == [False]
+    branch["attributes"]["outcome"] = "in_range"
+    answer = post(client, "validate", name, document).json()
+    errors = [m for m in answer["messages"] if m["severity"] == "error"]
+    assert len(errors) == 1 and errors[0]["step"] == [1, 2] and "which locate does not have: its outcomes: found, not_found" in errors[0]["message"]
 
 
 def test_the_library_block_reads_and_writes_back_canonically_equal() -> None:
@@ -185,7 +209,8 @@ def step(**changes: Any) -> dict[str, Any]:
 
 @pytest.mark.parametrize(("body", "error"), [
     ("no", "body: a list of steps is needed"),
-    ([{"type": "if"}], "step 1: type must be operation or one of for_each, repeat, call"),
+    ([{"type": "while"}], "step 1: type must be operation or one of for_each, repeat, call, if, else"),
+    ([{"type": "if", "attributes": {"group": "left_arm", "operation": "look"}, "body": []}], "step 1: <if> needs outcome"),
     ([step(attributes={"var": "h", "in": "a", "onload": "x"})], "step 1: <for_each> takes the attributes var, in, index, with text values"),
     ([step(attributes={"var": "h"})], "step 1: <for_each> needs in"),
     ([{"type": "call", "attributes": {"application": "b.xml"}, "body": [step()]}], "step 1: <call> has no body"),
@@ -215,8 +240,9 @@ def test_nesting_and_size_are_bounded_before_anything_is_built() -> None:
 
 
 def test_a_branch_is_one_more_kind_of_block(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Outcome branches do not exist yet: declared as kinds (their attributes, a body each), the builder's model reads,
-    takes from the page and writes them with no other change -- the else inside its if or beside it."""
+    """Declared as kinds (their attributes, a body each), the builder's model reads, takes from the page and writes
+    branches with no other change -- the else inside its if or beside it (the model holds what is written; the
+    validator says where an else may stand)."""
     monkeypatch.setitem(BLOCK_KINDS, "if", BlockKind("if", ("operation", "group", "outcome"), ("operation", "outcome")))
     monkeypatch.setitem(BLOCK_KINDS, "else", BlockKind("else", (), ()))
     text = (ROOT / "apps_xml" / "rivet_loop.xml").read_bytes().replace(b"""    <operation id="insert_{hole}" name="insert {index}">""", b"""    <if operation="debur_{hole}" group="left_arm" outcome="found">

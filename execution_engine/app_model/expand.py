@@ -249,7 +249,7 @@ class Expander:
             tested = None
         elif site.group not in tested.calls or tested.calls[site.group].implicit or tested.calls[site.group].function == "wait":
             self.error(self.attribute(at, "group"), (
-                f"<if> tests {site.group} in operation {tested_id!r}, where {site.group} runs no function "
+                f"<if> tests {site.group} in operation {site.operation!r}, where {site.group} runs no function "
                 f"(only waits): name the group whose function's outcome chooses"
             ))
             tested = None

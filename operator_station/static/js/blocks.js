@@ -11,6 +11,9 @@ const Blocks = (() => {
       "Values: a list (drill_1 drill_2), every frame of a kind of the cell (kind:hole), or a pallet grid made under a frame (grid:ORIGIN RxC PITCH_X PITCH_Y, pitches in metres)."},
     repeat: {label: "repeat", body: true, help: "The steps inside run COUNT times: {VAR} (index unless named) counts from 1."},
     call: {label: "call", body: false, help: "The operations of another application file (a library block, its path relative to this file), with each param bound to its {NAME}."},
+    if: {label: "if", body: true, attributes: ["group", "operation", "outcome"], help: "The steps inside run only when GROUP's function in OPERATION " +
+      "(one before this block; {VAR} of the loops around it allowed) ended with OUTCOME (the outcomes of each function: `functions`, e.g. locate: found / not_found)."},
+    else: {label: "else", body: true, attributes: [], help: "Right after an if: the steps run when the if's outcome was not met."},
   };
   const isBlock = (step) => step.type !== "operation";
   // A kind the page does not know yet (the server's model has more): shown by its name, its body drawn, its attributes as fields.
@@ -76,6 +79,10 @@ const Blocks = (() => {
   // A new block: a loop holds one operation (its id made unique per iteration by the loop's variable).
   function newBlock(type, fresh, cellNames) {
     if (type === "call") return {type, attributes: {application: ""}, params: [], body: [], comments: [], trailer: []};
+    if (type === "if" || type === "else") {  // a branch: its group, the operation before it and the outcome are filled in by hand
+      const attributes = type === "if" ? {group: "", operation: "", outcome: "found"} : {};
+      return {type, attributes, params: [], body: [{type: "operation", id: `${fresh}_${type}`, name: null, calls: [], comments: []}], comments: [], trailer: []};
+    }
     const counts = new Map();  // the cell's most frequent kind of frame (holes, pockets): the likeliest to loop over
     for (const f of (cellNames && cellNames.frames) || []) counts.set(f.kind, (counts.get(f.kind) || 0) + 1);
     const kind = [...counts.entries()].sort((a, b) => b[1] - a[1])[0];

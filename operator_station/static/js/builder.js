@@ -312,7 +312,7 @@ const Builder = (() => {
     const row = b.doc && b.selected ? rowOf(b.selected.key) : null;
     if (!row) {
       box.replaceChildren(el("p", {class: "hint", text: "Select a cell of the table (an operation and a group), then pick a function from the catalog or the list here. " +
-        "+ for_each, + repeat and + call add a block after the selected row (inside a selected block)."}));
+        "+ for_each, + repeat, + call, + if and + else add a block after the selected row (inside a selected block)."}));
       return;
     }
     const scope = Blocks.scope(row.parents);
@@ -485,6 +485,8 @@ const Builder = (() => {
     $("add-for-each").addEventListener("click", () => addStep("for_each"));
     $("add-repeat").addEventListener("click", () => addStep("repeat"));
     $("add-call").addEventListener("click", () => addStep("call"));
+    $("add-if").addEventListener("click", () => addStep("if"));
+    $("add-else").addEventListener("click", () => addStep("else"));
     $("open-btn").addEventListener("click", open);
     $("save-btn").addEventListener("click", save);
     $("new-btn").addEventListener("click", fresh);
