@@ -56,7 +56,8 @@ def read_robot(site: RobotSite, element: etree._Element, at: int, robots: list[C
         if taken is not None:
             site.report(at, "model", (
                 f"robot {label}: group {group!r} of {model.name} is already a group of the robot on line {taken}; "
-                f"a cell's robots need groups of their own names (the application names groups)"
+                f"a cell's robots need groups of their own names (the application names groups), so robots whose models share a "
+                f"group name (two KUKAs, a KUKA and a Viper: each 'arm') cannot share one cell"
             ))
             return
     options: dict[str, str] = {}
