@@ -22,6 +22,7 @@ from typing import Any
 from cell_runner.catalog_document import catalog_document
 from cell_runner.output_files import FilePlan, Output, Refused
 from core_functions.catalog import Catalog
+from core_functions.cell_robots import CELL_ROBOT, cell_robot_model
 from core_functions.robots import find_robot
 from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
@@ -81,6 +82,9 @@ def cell_names(document: AppDocument, path: Path) -> dict[str, Any]:
     if cell is None:
         out["problem"] = str(problems[0]) if problems else f"cannot read {document.cell}"
         return out
+    if document.robot == CELL_ROBOT and cell.robots:  # a mixed cell: its robots' groups, poses and cameras
+        robot = cell_robot_model(cell.name, cell.robots)
+        out.update(groups=list(robot.group_names), robot_poses=sorted(robot.poses), cameras=list(robot.cameras))
     out["frames"] = [{"name": f.name, "kind": f.kind} for f in cell.frames.values()]
     out["elements"] = [{"name": e.name, "kind": e.kind} for e in cell.elements.values()]
     out["joint_poses"] = [{"name": p.name, "group": p.group} for p in cell.joint_poses.values()]

@@ -24,6 +24,8 @@ from cell_runner.cli import main
 from core_functions.cell_robots import CellRobot
 from core_functions.geometry import Pose
 from core_functions.primitives import MoveCartesian, MoveRelative
+from execution_engine.app_model.document import parse_document
+from operator_station.builder import cell_names
 from core_functions.robots import KUKA_KR
 from robot_bridges.backend import BackendOptions
 from robot_bridges.cell_backend import member_options
@@ -145,3 +147,12 @@ def test_a_cell_robot_s_connection_options_are_its_back_end_s_address_and_the_re
     assert (options.rsi_listen, options.host, options.port, options.extra, options.seed) == ("0.0.0.0:49152", "192.168.1.20", 49153, {"cycle": "12"}, 7)
     with pytest.raises(ValueError, match=r"^robot 'feeder': option port must be a whole number, got 'x'$"):
         member_options(BackendOptions(robot=KUKA_KR), CellRobot("feeder", KUKA_KR, Pose(), "kuka-rsi", (("port", "x"),)))
+
+
+def test_the_studio_offers_the_groups_poses_and_cameras_of_every_robot_of_the_cell() -> None:
+    """The operator station's builder: an application on robot="cell" is given its cell's robots' groups to fill."""
+    document, problems = parse_document(EXAMPLE.read_bytes(), EXAMPLE)
+    assert document is not None and not problems
+    offered = cell_names(document, EXAMPLE)
+    assert offered["groups"] == ["arm", "left_arm", "right_arm", "torso_head"] and offered["problem"] is None
+    assert {"home", "initial"} <= set(offered["robot_poses"]) and "left_hand_camera" in offered["cameras"]
