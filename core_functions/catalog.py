@@ -369,6 +369,10 @@ class Outcome:
 FOUND = Outcome("found", "the camera found the feature within its search radius; later moves use the measured pose")
 NOT_FOUND = Outcome("not_found", "the camera did not find it (a vision fault: a hole not drilled, covered, or out of place)", "vision")
 VISION_OUTCOMES = (FOUND, NOT_FOUND)
+#: The outcomes of a function that measures a value and checks it against a range.
+IN_RANGE = Outcome("in_range", "the measured value lies within the range given")
+OUT_OF_RANGE = Outcome("out_of_range", "the measured value lies outside the range given (the run report says what was measured)", "out_of_range")
+MEASURE_OUTCOMES = (IN_RANGE, OUT_OF_RANGE, NOT_FOUND)
 
 
 # --------------------------------------------------------------------------- functions

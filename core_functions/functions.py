@@ -15,7 +15,7 @@ from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from typing import Any
 
-from core_functions.catalog import VISION_OUTCOMES, Hold, ParamSpec, ParamType, skill
+from core_functions.catalog import MEASURE_OUTCOMES, VISION_OUTCOMES, Hold, ParamSpec, ParamType, skill
 from core_functions.cell_index import CellIndex
 from core_functions.geometry import Pose
 from core_functions.primitives import (
@@ -56,6 +56,11 @@ _SIGNAL_VALUE = ParamSpec("value", ParamType.NUMBER, "1 or 0 for a digital signa
 _OVERWRITE = ParamSpec(
     "overwrite", ParamType.BOOLEAN, "true: replace a trajectory already recorded under this name (otherwise that is an error)", default="false"
 )
+
+
+class OutOfRange(ValueError):
+    """A value a function measured lies outside the range it checks: the function ends with the outcome
+    ``out_of_range`` (an error where no ``<if>`` tests it), the message saying what was measured."""
 
 
 @dataclass
@@ -300,6 +305,30 @@ class CoreFunctions:
     def locate(self, target: str, camera: str = "auto") -> Skill:
         """Find a frame with a camera; this group's later moves to it, and to every frame below it in the cell, use the measured pose."""
         yield from self.locate_frame(target, "" if camera == "auto" else camera)
+
+    @skill(
+        ParamSpec("target", ParamType.FRAME, "the round feature to measure (a hole: a frame with a diameter in the cell)"),
+        ParamSpec("minimum", ParamType.NUMBER, "the smallest diameter accepted", unit="m", minimum=1e-5, maximum=1.0),
+        ParamSpec("maximum", ParamType.NUMBER, "the largest diameter accepted", unit="m", minimum=1e-5, maximum=1.0),
+        ParamSpec("camera", ParamType.CAMERA, "a camera of the robot, or auto for the group's own camera", default="auto"),
+        groups=ANY_GROUP,
+        states=("Vision",),
+        outcomes=MEASURE_OUTCOMES,
+    )
+    def check_diameter(self, target: str, minimum: float, maximum: float, camera: str = "auto") -> Skill:
+        """Find a round feature with a camera and check its measured diameter against a range; later moves to it use the measured pose."""
+        if minimum > maximum:
+            raise ValueError(f"minimum {minimum * 1000:g} mm is above maximum {maximum * 1000:g} mm")
+        result: VisionResult = yield Vision("locate", target=target, nominal=self.cell.nominal(target), camera=self.camera() if camera == "auto" else camera)
+        if result.pose is None:
+            raise LookupError(f"vision found no pose for {target!r}")
+        self.cell.correct(target, result.pose)
+        diameter = result.report.diameter if result.report is not None else 0.0
+        if not diameter > 0.0:
+            raise LookupError(f"the camera measured no diameter of {target!r} (a camera that only locates: it cannot check a size)")
+        self.ctx.measurements[f"{target}.diameter"] = diameter
+        if not minimum <= diameter <= maximum:
+            raise OutOfRange(f"{target}: diameter {diameter * 1000:.3f} mm, outside {minimum * 1000:g} to {maximum * 1000:g} mm")
 
     # ------------------------------------------------------------------------ trajectories
     @skill(

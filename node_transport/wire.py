@@ -47,6 +47,7 @@ class FaultKind(Enum):
     BUSY = "busy"  # a primitive is already running for this group / the machine is not Ready
     INTERNAL = "internal"  # a defect in the bridge or the machine itself
     SKILL = "skill"  # the skill's own code raised (a frame it cannot find, a rivet that does not fit)
+    OUT_OF_RANGE = "out_of_range"  # a value a function measured lies outside the range it checks (core_functions.functions.OutOfRange)
 
 
 # --------------------------------------------------------------------- engine <-> machine

@@ -4,6 +4,7 @@ iteration, then --resume: every function done once, the branches taken before th
 from __future__ import annotations
 
 import io
+import json
 import re
 from collections import Counter
 from pathlib import Path
@@ -107,3 +108,49 @@ def test_kill_in_the_second_iteration_then_resume_takes_the_same_branches_and_do
     taken = {(op.id, g) for op in application.operations for g, call in op.calls.items() if not sits_out(application, catalog, call)}
     expected = {(o, g) for o, g in taken if o not in ("debur_drill_1", "insert_drill_1", "put_back_drill_2", "put_back_drill_3", "put_back_drill_4")}
     assert set(done) == expected and set(done.values()) == {1}, "every function of the branches taken done exactly once across the two runs"
+
+
+def test_the_catalog_lists_each_functions_outcomes() -> None:
+    out = io.StringIO()
+    assert main(["functions", "--json"], out, io.StringIO()) == 0
+    functions = {f["name"]: f for f in json.loads(out.getvalue())["functions"]}
+    names = {name: [o["name"] for o in f.get("outcomes", [])] for name, f in functions.items()}
+    assert names["locate"] == names["debur_drilling"] == names["insert_rivet"] == ["found", "not_found"]
+    assert names["check_diameter"] == ["in_range", "out_of_range", "not_found"] and names["move_to"] == []
+    assert [o.get("on_fault") for o in functions["check_diameter"]["outcomes"]] == [None, "out_of_range", "vision"]
+    out = io.StringIO()
+    assert main(["functions"], out, io.StringIO()) == 0
+    assert "      outcome out_of_range: the measured value lies outside the range given" in out.getvalue()
+
+
+MEASURE = """<?xml version="1.0"?>
+<application name="measure" robot="nextage" cell="{cell}">
+  <operation id="over"><left_arm><function name="approach"><params><param value="drill_1"/><param value="0.05"/></params></function></left_arm></operation>
+  <operation id="size_{n}"><left_arm><function name="check_diameter"><params><param value="drill_1"/><param value="{low}"/><param value="{high}"/></params></function></left_arm></operation>
+  <if group="left_arm" operation="size_{n}" outcome="out_of_range">
+    <operation id="reject"><right_arm><function name="gripper_open"/></right_arm></operation>
+  </if>
+  <else>
+    <operation id="accept"><right_arm><function name="gripper_close"/></right_arm></operation>
+  </else>
+</application>
+"""
+
+
+def test_a_measured_diameter_chooses_between_in_range_and_out_of_range(tmp_path: Path) -> None:
+    """drill_1 is drilled 4.8 mm: within 4.6-5.0 mm it is in_range, against 5.0-5.2 mm out_of_range, with what was measured."""
+    for n, (low, high, taken, left) in enumerate((("0.0046", "0.0050", "accept", "reject"), ("0.0050", "0.0052", "reject", "accept"))):
+        app = tmp_path / f"measure_{n}.xml"
+        app.write_text(MEASURE.format(cell=ROOT / "apps_xml" / "cells" / "rivet_cell.xml", n=n, low=low, high=high))
+        out, err = io.StringIO(), io.StringIO()
+        assert main(["run", str(app), "--speed", "max", "--no-check", "--trace", str(tmp_path / f"m{n}.jsonl")], out, err) == 0, err.getvalue()
+        assert "application measure: FINISHED" in out.getvalue() and f"left out by their branch: 1 operation(s): {left}" in out.getvalue()
+        lines = records(tmp_path / f"m{n}.jsonl")
+        assert taken in {r["operation"] for r in lines if r["event"] == "function_end" and r["outcome"] == "succeeded"}
+        outcome = next(r for r in lines if r["event"] == "outcome")
+        if n == 0:
+            assert outcome["outcome"] == "in_range"
+        else:
+            assert outcome["outcome"] == "out_of_range"
+            measured = re.search(r"drill_1: diameter (\d\.\d{3}) mm, outside 5 to 5\.2 mm", out.getvalue())
+            assert measured is not None and 4.6 < float(measured.group(1)) < 5.0, out.getvalue()

@@ -94,6 +94,8 @@ async def ended_with_outcome(engine: BranchEngine, operation: Operation, group: 
     if named is None or result.outcome == "preempted" or stopping:
         return False
     report.outcomes[f"{operation.id}/{group}"] = named
+    if not succeeded and result.error:
+        report.outcome_details[f"{operation.id}/{group}"] = result.error
     engine.outcome_board.decided(operation, (group,))
     engine.note_branch("outcome", operation.id, group, function, named,
                        f"{group} {function} ended {named}" + ("" if succeeded else f": {result.error}"))

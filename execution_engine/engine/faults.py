@@ -36,6 +36,7 @@ RETRY_TABLE: dict[FaultKind, Retry] = {
     FaultKind.COLLISION: Retry(False, f"{DETERMINISTIC} (and needs an operator to look at the cell)"),
     FaultKind.UNSUPPORTED: Retry(False, DETERMINISTIC),
     FaultKind.SKILL: Retry(False, f"{DETERMINISTIC} (the skill's own code raised)"),
+    FaultKind.OUT_OF_RANGE: Retry(False, "is what the part measures: a second look measures the same"),
     FaultKind.PROTOCOL: Retry(False, "is a mismatch with the controller or bridge, not a passing fault"),
     FaultKind.CONTROLLER: Retry(False, "must be cleared on the controller by an operator"),
     FaultKind.STOPPED: Retry(False, "was a stop: stops are obeyed, not retried"),

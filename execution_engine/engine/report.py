@@ -75,6 +75,8 @@ class RunReport:
     #: The named outcome of every function an <if> tests, by "operation/group" (a vision fault so
     #: ended is an outcome, not an error: a hole not found, reported here).
     outcomes: dict[str, str] = field(default_factory=dict)
+    #: What a fault outcome said, by the same key: why the hole was not found, what was measured.
+    outcome_details: dict[str, str] = field(default_factory=dict)
     #: Operations an <if>/<else> left out, with the condition that was not met.
     skipped: list[tuple[str, str]] = field(default_factory=list)
 
@@ -128,7 +130,8 @@ class RunReport:
         for key, outcome in self.outcomes.items():
             operation, _, group = key.rpartition("/")
             made = f" ({iterations[operation]})" if operation in iterations else ""
-            lines.append(f"  outcome: {group} operation {operation}{made}: {outcome}")
+            detail = self.outcome_details.get(key)
+            lines.append(f"  outcome: {group} operation {operation}{made}: {outcome}" + (f" - {detail}" if detail else ""))
         if self.skipped:
             lines.append(f"  left out by their branch: {len(self.skipped)} operation(s): " + ", ".join(op for op, _ in self.skipped))
         return lines

@@ -221,7 +221,7 @@ class MachineContext:
         try:
             run.start()
         except SkillError as error:
-            self.finish_function("aborted", str(error), FaultKind.SKILL)
+            self.finish_function("aborted", str(error), error.fault)
             return None
         return None
 

@@ -10,13 +10,18 @@ from __future__ import annotations
 from typing import Any
 
 from core_functions.catalog import FunctionSpec
-from core_functions.functions import Skill
+from core_functions.functions import OutOfRange, Skill
 from core_functions.primitives import Primitive
-from node_transport.wire import SmRequest
+from node_transport.wire import FaultKind, SmRequest
 
 
 class SkillError(RuntimeError):
-    """The skill's own code failed; the message names the function."""
+    """The skill's own code failed; the message names the function.  ``fault``: SKILL, or OUT_OF_RANGE
+    for a measured value outside the range the function checks (an outcome an ``<if>`` may test)."""
+
+    def __init__(self, message: str, fault: FaultKind = FaultKind.SKILL) -> None:
+        super().__init__(message)
+        self.fault = fault
 
 
 class FunctionRun:
@@ -62,6 +67,9 @@ class FunctionRun:
         except StopIteration:
             self.next_primitive = None
             self.finished = True
+        except OutOfRange as error:  # what the part measures: a named outcome where an <if> tests it
+            self.next_primitive = None
+            raise SkillError(f"{self.label}: {error}", FaultKind.OUT_OF_RANGE) from error
         except Exception as error:  # noqa: BLE001 - the skill's fault becomes the function's error
             self.next_primitive = None
             raise SkillError(f"{self.label}: {type(error).__name__}: {error}") from error

@@ -361,7 +361,7 @@ class WorkingState(MachineState):
         try:
             ctx.run.advance(result)
         except SkillError as error:
-            return fail(userdata, FaultKind.SKILL, str(error))
+            return fail(userdata, error.fault, str(error))
         return OK
 
 
@@ -450,7 +450,7 @@ class SyncState(WorkingState):
                 try:
                     ctx.run.advance(userdata["primitive"].RESULT())
                 except SkillError as error:
-                    return fail(userdata, FaultKind.SKILL, str(error))
+                    return fail(userdata, error.fault, str(error))
                 return OK
             event = await ctx.events.get(max(0.0, deadline - ctx.clock.now()))
             if event is None:
