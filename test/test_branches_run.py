@@ -14,6 +14,7 @@ from app_functions.registry import full_catalog
 from cell_runner.cli import main
 from execution_engine.app_model import load_application
 from execution_engine.checkpoint.resume import sits_out
+from execution_engine.timeline import build_timeline
 from test_resume_loops import records, start_and_kill  # the kill -9 in the second iteration, as there
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -30,6 +31,12 @@ def application_in(folder: Path, missing: str) -> Path:
     app = folder / "app.xml"
     app.write_text(BRANCH.read_text().replace('cell="cells/rivet_cell.xml"', 'cell="cell.xml"'))
     return app
+
+
+def outcomes_error(lines: list[dict[str, Any]]) -> str:
+    """The error a not_found outcome ended its function with, as the trace has it."""
+    message = next(r["message"] for r in lines if r["event"] == "outcome" and r["outcome"] == "not_found")
+    return str(message).split(": ", 1)[1]
 
 
 def done_functions(trace: list[dict[str, Any]]) -> Counter[tuple[str, str]]:
@@ -60,6 +67,10 @@ def test_a_hole_vision_does_not_find_takes_the_not_found_branch_and_the_run_fini
     outcomes = [(r["operation"], r["outcome"]) for r in lines if r["event"] == "outcome"]
     assert outcomes == [("look_drill_1", "found"), ("look_drill_2", "found"), ("look_drill_3", "not_found"), ("look_drill_4", "found")]
     assert "no hole of 4.80 mm" in next(r["message"] for r in lines if r["event"] == "outcome" and r["outcome"] == "not_found")
+    marks = [(m.kind, m.group, m.text) for m in build_timeline(lines).marks if m.kind in ("outcome", "branch")]
+    assert ("outcome", "left_arm", f"left_arm locate ended not_found: {outcomes_error(lines)}") in marks  # on the left arm's row
+    assert [m for m in marks if m[0] == "branch"][2] == (
+        "branch", "engine", "debur_drill_3 left out: left_arm look_drill_3 ended not_found; it runs when left_arm look_drill_3 == found")
     # the report of the trace says the same
     out = io.StringIO()
     assert main(["report", str(trace)], out, io.StringIO()) == 0
