@@ -165,3 +165,20 @@ def test_a_measured_diameter_chooses_between_in_range_and_out_of_range(tmp_path:
             assert outcome["outcome"] == "out_of_range"
             measured = re.search(r"drill_1: diameter (\d\.\d{3}) mm, outside 5 to 5\.2 mm", out.getvalue())
             assert measured is not None and 4.6 < float(measured.group(1)) < 5.0, out.getvalue()
+
+
+def test_a_hand_left_full_on_one_side_of_an_if_is_refused_where_it_must_be_empty(tmp_path: Path) -> None:
+    """The hand-holding check follows both sides of every <if>: a not_found side that keeps the rivet (a move
+    instead of the put-back) leaves the right hand full for the next hole's pick -- refused there, naming the side."""
+    put_back = '<right_arm><function name="place"><params><param value="rivet_{index}"/></params></function></right_arm>'
+    app = tmp_path / "keep.xml"
+    app.write_text(BRANCH.read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{ROOT / "apps_xml" / "cells" / "rivet_cell.xml"}"')
+                   .replace(put_back, put_back.replace('"place"', '"move_to"')))
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["validate", str(app)], out, err) == 1
+    lines = [line for line in out.getvalue().splitlines() + err.getvalue().splitlines() if "pick_rivet needs" in line]
+    assert len(lines) == 3 and lines[0].startswith(f"{app}:29:18: pick_rivet needs the right_arm's hand to be empty, but it still holds what "
+                                                   "pick_rivet took in operation over_drill_1 (line 29) (on the side of the <if> where "
+                                                   "left_arm look_drill_1 != found) (in for_each hole=drill_2)"), err.getvalue()
+    out = io.StringIO()
+    assert main(["validate", str(BRANCH)], out, io.StringIO()) == 0, out.getvalue()  # both sides leave the hand empty

@@ -9,7 +9,7 @@ before it left there.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from core_functions.catalog import BindContext, Catalog, FunctionSpec, Hold, ParamError, ParamType
 from core_functions.robots import RobotModel
@@ -41,6 +41,8 @@ class _HoldState:
     function: str = ""
     operation: str = ""
     at: int = 0  # offset of the function that set the hold
+    #: After an <if> whose sides leave the hand differently: what each side left, with the side's condition.
+    sides: tuple[tuple[str, _HoldState], ...] = ()
 
 
 class ApplicationChecker:
@@ -274,32 +276,54 @@ class ApplicationChecker:
 
     # ------------------------------------------------------------------ plausibility
     def check_holds(self, operations: Sequence[OperationSite], checked: Sequence[Sequence[CheckedCall]]) -> None:
-        """Track what each hand holds from operation to operation (Verl et al. 2008, section 6.2)."""
-        state = {g: _HoldState(Hold.NOTHING) for g in self.robot.group_names}
-        entered: dict[tuple[str, str, str, tuple[object, ...]], dict[str, _HoldState]] = {}  # what the hands held where an <if> began
-        in_else: set[tuple[str, str, str, tuple[object, ...]]] = set()
-        for operation, calls in zip(operations, checked):
-            if operation.when:  # the <else> starts from what the hands held before the <if>, not after it
-                last = operation.when[-1]
-                key = (last.operation, last.group, last.outcome, operation.when[:-1])
-                if last.holds:
-                    entered.setdefault(key, dict(state))
-                elif key not in in_else:
-                    in_else.add(key)
-                    state = dict(entered.get(key, state))
-            for call in calls:
-                group = call.site.group
-                spec = call.spec
-                if spec is None:
-                    if call.site.function != WAIT:
-                        state[group] = _HoldState(Hold.UNKNOWN)  # unknown function: anything may have happened
-                    continue
-                current = state[group]
-                if spec.requires is not None and current.hold is not Hold.UNKNOWN and spec.requires is not current.hold:
-                    line = self.draft.source.at_offset(current.at).line
-                    self.error_at(call.site.at, self.hold_message(spec, group, current, line))
-                if spec.leaves is not None:
-                    state[group] = _HoldState(spec.leaves, spec.name, operation.id, call.site.at)
+        """Track what each hand holds from operation to operation (Verl et al. 2008, section 6.2).  Both
+        sides of an <if> start from what the hands held before it; after it, a hand that holds one thing
+        after one side and another after the other is not known (what follows is not checked against it)."""
+        self._holds(list(zip(operations, checked)), 0, {g: _HoldState(Hold.NOTHING) for g in self.robot.group_names})
+
+    def _holds(self, pairs: list[tuple[OperationSite, Sequence[CheckedCall]]], depth: int, state: dict[str, _HoldState]) -> dict[str, _HoldState]:
+        """The hands after ``pairs`` (each under ``depth`` conditions already taken), from ``state``."""
+        i = 0
+        while i < len(pairs):
+            operation, calls = pairs[i]
+            if len(operation.when) <= depth:
+                self._hold_calls(operation, calls, state)
+                i += 1
+                continue
+            head = operation.when[depth]
+            taken: list[tuple[OperationSite, Sequence[CheckedCall]]] = []
+            other: list[tuple[OperationSite, Sequence[CheckedCall]]] = []
+            while i < len(pairs):  # the <if>'s operations, then its <else>'s
+                when = pairs[i][0].when
+                if len(when) <= depth or (when[depth].operation, when[depth].group, when[depth].outcome) != (head.operation, head.group, head.outcome):
+                    break
+                if when[depth].holds and other:
+                    break  # another <if> on the same outcome, right after this one's <else>
+                (taken if when[depth].holds else other).append(pairs[i])
+                i += 1
+            after = self._holds(taken, depth + 1, dict(state))
+            otherwise = self._holds(other, depth + 1, dict(state))
+            negated = replace(head, holds=not head.holds)
+            state = {g: after[g] if after[g] == otherwise[g] else _joined(((head.describe(), after[g]), (negated.describe(), otherwise[g])))
+                     for g in state}
+        return state
+
+    def _hold_calls(self, operation: OperationSite, calls: Sequence[CheckedCall], state: dict[str, _HoldState]) -> None:
+        for call in calls:
+            group = call.site.group
+            spec = call.spec
+            if spec is None:
+                if call.site.function != WAIT:
+                    state[group] = _HoldState(Hold.UNKNOWN)  # unknown function: anything may have happened
+                continue
+            current = state[group]
+            for side, held in current.sides or (("", current),):  # after an <if>: what each of its sides left
+                if spec.requires is not None and held.hold is not Hold.UNKNOWN and spec.requires is not held.hold:
+                    line = self.draft.source.at_offset(held.at).line
+                    self.error_at(call.site.at, self.hold_message(spec, group, held, line) + (f" (on the side of the <if> where {side})" if side else ""))
+                    break
+            if spec.leaves is not None:
+                state[group] = _HoldState(spec.leaves, spec.name, operation.id, call.site.at)
 
     @staticmethod
     def hold_message(spec: FunctionSpec, group: str, current: _HoldState, line: int) -> str:
@@ -337,3 +361,9 @@ class ApplicationChecker:
             safe_speed=ErrorPolicy.safe_speed if policy.safe_speed is None else policy.safe_speed,
             retreat=ErrorPolicy.retreat if policy.retreat is None else policy.retreat,
         )
+
+
+def _joined(sides: tuple[tuple[str, _HoldState], ...]) -> _HoldState:
+    """A hand after an <if> whose sides left it differently: each side kept (nested sides flattened)."""
+    flat = tuple((f"{label} and {inner}" if inner else label, held) for label, state in sides for inner, held in (state.sides or (("", state),)))
+    return _HoldState(Hold.UNKNOWN, sides=flat)
