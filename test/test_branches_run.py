@@ -47,14 +47,21 @@ def done_functions(trace: list[dict[str, Any]]) -> Counter[tuple[str, str]]:
 
 
 def test_a_hole_vision_does_not_find_takes_the_not_found_branch_and_the_run_finishes_reporting_it(tmp_path: Path) -> None:
+    """As a user runs it: checked first by the default dry run, whose pass assuming drill_3 found meets the cell
+    without it (a note, not a finding), then run to FINISHED on the not_found side."""
     app = BRANCH.parent / "rivet_loop_branch.xml"
     run_app = tmp_path / "app.xml"
     run_app.write_text(app.read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{MISSING}"'))
     out, err = io.StringIO(), io.StringIO()
     trace = tmp_path / "run.jsonl"
-    code = main(["run", str(run_app), "--speed", "max", "--no-check", "--trace", str(trace)], out, err)
+    code = main(["run", str(run_app), "--speed", "max", "--trace", str(trace)], out, err)
     assert code == 0, err.getvalue()
     text = out.getvalue()
+    assert "dry run of rivet_loop_branch on nextage-sim: no problems found; operations checked 22/22" in text
+    assert ("  assumed against the simulated cell: look_drill_3 left_arm assumed found where the simulated cell ended it not_found (drill_3: no hole"
+            in text), text
+    assert ("on that side, the vision of drill_3 by debur_drill_3 left_arm debur_drilling, insert_drill_3 right_arm insert_rivet not checked, "
+            "their motions checked at drill_3's nominal pose") in text
     assert "application rivet_loop_branch: FINISHED" in text
     assert "  outcome: left_arm operation look_drill_3 (for_each hole=drill_3): not_found" in text
     assert "  outcome: left_arm operation look_drill_1 (for_each hole=drill_1): found" in text
@@ -82,9 +89,10 @@ def test_in_flags_mode_too_the_not_found_branch_is_taken_and_the_run_finishes(tm
     run_app = tmp_path / "app.xml"
     run_app.write_text(BRANCH.read_text().replace('cell="cells/rivet_cell.xml"', f'cell="{MISSING}" sync="flags"'))
     out, err = io.StringIO(), io.StringIO()
-    code = main(["run", str(run_app), "--speed", "max", "--no-check", "--trace", str(tmp_path / "run.jsonl")], out, err)
+    code = main(["run", str(run_app), "--speed", "max", "--trace", str(tmp_path / "run.jsonl")], out, err)  # checked first, as a user runs it
     assert code == 0, err.getvalue()
     text = out.getvalue()
+    assert "dry run of rivet_loop_branch on nextage-sim: no problems found; operations checked 22/22" in text
     assert "application rivet_loop_branch: FINISHED" in text and "zone 'hands_left'" in text  # each group on its own, meeting at zones
     assert "  outcome: left_arm operation look_drill_3 (for_each hole=drill_3): not_found" in text
     assert "left out by their branch: 5 operation(s): put_back_drill_1, put_back_drill_2, debur_drill_3, insert_drill_3, put_back_drill_4" in text

@@ -12,6 +12,12 @@ pass taking every side not yet covered that agrees with what the pass already as
 function's first outcome (the one it ends with when it succeeds) where nothing else is needed.
 The first pass is the one the simulator would take by itself, all successes; it gives the
 prediction (cycle time, timeline).
+
+A pass can assume what the simulated cell contradicts (``found`` for a hole the cell does not
+have): the operations of that side, which locate the hole again, then meet the same vision fault.
+That fault follows from the assumption, so the recorder holds it back (:meth:`Recorder.defer`) and
+excuses it -- same kind, same target, in an operation whose conditions name that function -- with a
+note; the vision answers the nominal pose and every motion of the side is checked from there.
 """
 from __future__ import annotations
 
@@ -103,6 +109,26 @@ def outcome_faults(app: Application, catalog: Catalog) -> dict[tuple[str, str], 
         if kinds:
             out[(operation, group)] = kinds
     return out
+
+
+def fault_outcomes(app: Application, catalog: Catalog) -> dict[tuple[str, str], dict[str, str]]:
+    """The outcome each of a tested function's outcome faults stands for (vision: not_found), by (operation, group):
+    how a pass tells that the simulated cell ended the function otherwise than the pass assumed."""
+    out: dict[tuple[str, str], dict[str, str]] = {}
+    by_id = {operation.id: operation for operation in app.operations}
+    for operation, group in app.tested():
+        if operation in by_id and group in by_id[operation].calls:
+            spec = catalog.get(by_id[operation].calls[group].function)
+            if spec is not None:
+                out[(operation, group)] = {o.fault: o.name for o in spec.outcomes if o.fault}
+    return out
+
+
+def sides(app: Application) -> dict[str, frozenset[tuple[str, str]]]:
+    """The tested functions (operation, group) whose outcome each operation's ``<if>``/``<else>`` sides depend on, by
+    operation id (of ``app`` before :func:`resolved` drops the conditions): the operations a pass runs *because*
+    of what it assumed of that function."""
+    return {operation.id: frozenset((c.operation, c.group) for c in operation.when) for operation in app.operations if operation.when}
 
 
 def describe(assumed: Assumption) -> str:

@@ -8,7 +8,7 @@ reported at the line of the ``<function>`` that asked for it.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 from cell_runner.dry_run.report import Finding, Span, TimeBase
 from core_functions.robots import RobotModel
@@ -86,6 +86,33 @@ class CycleTiming:
 Timing = ClockTiming | CycleTiming
 
 
+@dataclass(frozen=True)
+class Contradiction:
+    """A tested function the pass assumed ended ``assumed``, which the simulated cell ended ``outcome`` (with
+    ``kind`` on ``target``: vision not finding drill_3)."""
+
+    assumed: str
+    outcome: str
+    kind: str
+    target: str
+    message: str
+
+
+@dataclass(frozen=True)
+class Deferred:
+    """A fault met on a side of an ``<if>`` of the kind its tested function ends with, held back (:meth:`Recorder.defer`)."""
+
+    group: str
+    operation: str
+    function: str
+    kind: str
+    primitive: str
+    target: str
+    message: str
+    t: float
+    tested: tuple[tuple[str, str], ...]
+
+
 class Recorder:
     """Findings (one per call and kind, counted) and spans, as the dry run goes."""
 
@@ -107,11 +134,69 @@ class Recorder:
         #: The fault kinds that end a tested function with an outcome, by (operation, group): the
         #: pass assumed that outcome (dry_run/branches.py), so meeting one is no finding.
         self.outcome_faults: dict[tuple[str, str], frozenset[str]] = {}
+        #: The pass's assumption (dry_run/branches.py): the outcome assumed of each tested function, the outcome
+        #: each of its faults stands for, and the tested functions each operation's side depends on.
+        self.assumed: dict[tuple[str, str], str] = {}
+        self.fault_outcomes: dict[tuple[str, str], dict[str, str]] = {}
+        self.sides: dict[str, frozenset[tuple[str, str]]] = {}
+        self._contradicted: dict[tuple[str, str], Contradiction] = {}
+        self._deferred: list[Deferred] = []
+        self._excused: dict[tuple[str, str], list[Deferred]] = {}
 
     def is_outcome(self, group: str, kind: str) -> bool:
         """Whether ``kind`` of a fault of the call ``group`` runs now is one of its tested outcomes."""
         where = self.locate(group)
         return where is not None and kind in self.outcome_faults.get((where[0], group), frozenset())
+
+    # ------------------------------------------------------------------ assumed outcomes
+    def outcome_met(self, group: str, kind: str, target: str, message: str) -> None:
+        """The call ``group`` runs now, a tested one, ended with its outcome fault ``kind`` on ``target``: when the
+        pass assumed another outcome (found, where the simulated cell has no hole), the cell contradicts it."""
+        where = self.locate(group)
+        if where is None:
+            return
+        key = (where[0], group)
+        outcome, assumed = self.fault_outcomes.get(key, {}).get(kind), self.assumed.get(key)
+        if outcome is not None and assumed is not None and outcome != assumed and key not in self._contradicted:
+            self._contradicted[key] = Contradiction(assumed, outcome, kind, target, message)
+
+    def defer(self, group: str, kind: str, primitive: str, target: str, message: str, t: float) -> bool:
+        """Hold back a fault met on a side of an ``<if>`` until the run ends (:meth:`findings`): it is no finding when
+        it is the one the function the side tests met on the same target, the pass having assumed otherwise --
+        the consequence of the assumption, not of the application.  False: not such a fault, report it now."""
+        where = self.locate(group)
+        if where is None or not target:
+            return False
+        tested = [key for key in self.sides.get(where[0], ()) if kind in self.fault_outcomes.get(key, {})]
+        if not tested:
+            return False
+        self._deferred.append(Deferred(group, where[0], where[1], kind, primitive, target, message, t, tuple(tested)))
+        return True
+
+    def _settle(self) -> None:
+        """Each held-back fault: excused by the contradicted assumption it follows from, or a finding after all."""
+        for held in self._deferred:
+            cause = next((key for key in held.tested if (c := self._contradicted.get(key)) is not None
+                          and (c.kind, c.target) == (held.kind, held.target)), None)
+            if cause is None:
+                self.add(held.group, held.operation, held.function, held.kind, held.primitive, held.message, held.t)
+            else:
+                self._excused.setdefault(cause, []).append(held)
+        self._deferred.clear()
+
+    def assumption_notes(self) -> list[str]:
+        """What each contradicted assumption left unchecked on its side, and what was checked instead."""
+        self._settle()
+        out = []
+        for (operation, group), c in self._contradicted.items():
+            calls = list(dict.fromkeys(f"{h.operation} {h.group} {h.function}" for h in self._excused.get((operation, group), [])))
+            said = f"{operation} {group} assumed {c.assumed} where the simulated cell ended it {c.outcome} ({c.message})"
+            if calls:
+                out.append(f"{said}: on that side, the {c.kind} of {c.target} by {', '.join(calls)} not checked, "
+                           f"their motions checked at {c.target}'s nominal pose")
+            else:
+                out.append(f"{said}: nothing on that side looked at {c.target} again")
+        return out
 
     # ---------------------------------------------------------------------------- findings
     def finding(self, group: str, kind: str, primitive: str, message: str, t: float | None = None) -> None:
@@ -134,6 +219,7 @@ class Recorder:
 
     def findings(self) -> tuple[Finding, ...]:
         """Every finding, in the order found, with how often it came up in its call."""
+        self._settle()
         return tuple(replace(finding, count=self._counts[key]) for key, finding in self._findings.items())
 
     # ---------------------------------------------------------------------------- timeline

@@ -130,6 +130,9 @@ class DryRunReport:
     end: JointPositions | None = None
     #: The outcomes each pass assumed (an application with <if>s): every side of every <if> run in one.
     branches: tuple[str, ...] = ()
+    #: Where the simulated cell contradicted an outcome a pass assumed (its camera did not find a hole the pass
+    #: assumed found): what on that side was therefore not checked and what was checked instead -- no finding.
+    assumptions: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -157,6 +160,7 @@ class DryRunReport:
             lines.append("  collisions not checked: the robot has no collision model")
         lines += [f"  not checked: {note}" for note in self.notes]
         lines += [f"  branches, pass {i}{' (the prediction)' if i == 1 else ''}: assumed {text}" for i, text in enumerate(self.branches, start=1)]
+        lines += [f"  assumed against the simulated cell: {note}" for note in self.assumptions]
         return lines
 
 
@@ -204,11 +208,12 @@ def merged(app: _Sized, passes: list[tuple[str, DryRunReport, tuple[str, ...]]])
             key = (finding.kind, finding.group, finding.operation, finding.function, finding.primitive, finding.message)
             findings.setdefault(key, replace(finding, assumed=assumed))
     notes = tuple(dict.fromkeys(f"{note} (assuming {assumed})" for assumed, report, _ in passes for note in report.notes))
+    against = tuple(dict.fromkeys(f"{note} (assuming {assumed})" for assumed, report, _ in passes for note in report.assumptions))
     checked = {op for _, report, ids in passes for op in ids[:report.operations_checked]}
     swept = [r.collisions for _, r, _ in passes if r.collisions is not None]
     collisions = CollisionCheck(sum(c.motions for c in swept), sum(c.samples for c in swept), swept[0].margin) if len(swept) == len(passes) else None
     return replace(
         base, app=app.name, findings=tuple(findings.values()), notes=notes, complete=all(r.complete for _, r, _ in passes),
         operations_total=len(app.operations), operations_checked=len(checked), collisions=collisions,
-        branches=tuple(assumed for assumed, _, _ in passes),
+        branches=tuple(assumed for assumed, _, _ in passes), assumptions=against,
     )

@@ -19,14 +19,14 @@ import logging
 import sqlite3
 import tempfile
 from contextlib import closing
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from app_functions.registry import full_catalog
 from cell_runner.deployment import Deployment, deploy_local
 from cell_runner.dry_run.backend import DryRunBackend, DryRunTrajectoryStore
-from cell_runner.dry_run.branches import assumptions, describe, has_branches, outcome_faults, resolved
+from cell_runner.dry_run.branches import Assumption, assumptions, describe, fault_outcomes, has_branches, outcome_faults, resolved, sides
 from cell_runner.dry_run.collisions import scene_of, sweep
 from cell_runner.dry_run.placement import place
 from cell_runner.dry_run.recorder import ClockTiming, CycleTiming, Recorder, Timing
@@ -85,20 +85,33 @@ async def run_dry(
     if not has_branches(app):
         return await _run_plain(app, setup, clock, trajectory_db, start)
     passes = []
-    for assumed in assumptions(app, full_catalog()):
+    catalog = full_catalog()
+    view = PassView(sides=sides(app), fault_outcomes=fault_outcomes(app, catalog))
+    for assumed in assumptions(app, catalog):
         branch = resolved(app, assumed)
-        report = await _run_plain(branch, setup, clock, trajectory_db, start)
+        report = await _run_plain(branch, setup, clock, trajectory_db, start, replace(view, assumed=assumed))
         passes.append((describe(assumed), report, tuple(op.id for op in branch.operations)))
     return merged(app, passes)
 
 
+@dataclass(frozen=True)
+class PassView:
+    """What a pass over assumed outcomes tells its recorder (:meth:`Recorder.defer`): the outcomes assumed, the
+    outcome each tested function's faults stand for, the tested functions each side's operations depend on."""
+
+    sides: dict[str, frozenset[tuple[str, str]]] = field(default_factory=dict)
+    fault_outcomes: dict[tuple[str, str], dict[str, str]] = field(default_factory=dict)
+    assumed: Assumption = field(default_factory=dict)
+
+
 async def _run_plain(
-    app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None, start: JointPositions | None = None
+    app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None = None, start: JointPositions | None = None,
+    view: PassView | None = None,
 ) -> DryRunReport:
     left_out: dict[str, set[str]] = {}  # operation id -> groups whose failed call is left out
     earlier: list[Finding] = []  # the failures of the runs before
     for _ in range(MAX_RERUNS):
-        report, failed = await _run_once(_leave_out(app, left_out), setup, clock, trajectory_db, start)
+        report, failed = await _run_once(_leave_out(app, left_out), setup, clock, trajectory_db, start, view)
         fresh = {(f.operation, f.group) for f in failed} - {(op, g) for op, groups in left_out.items() for g in groups}
         if not fresh:
             break
@@ -131,13 +144,15 @@ def _leave_out(app: Application, left_out: dict[str, set[str]]) -> Application:
 
 
 async def _run_once(
-    app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None, start: JointPositions | None
+    app: Application, setup: DryRunSetup, clock: Clock, trajectory_db: str | None, start: JointPositions | None, view: PassView | None = None
 ) -> tuple[DryRunReport, list[Finding]]:
     """One dry run; with sync="flags" also the findings of the calls that failed (then not swept: it runs again)."""
     inner = await create_backend(setup.backend, clock, setup.options)
     timing: Timing = ClockTiming(clock) if setup.robot_seconds is None else CycleTiming(setup.robot_seconds(inner))
     recorder = Recorder(app, timing)
     recorder.outcome_faults = outcome_faults(app, full_catalog())
+    if view is not None:
+        recorder.sides, recorder.fault_outcomes, recorder.assumed = view.sides, view.fault_outcomes, view.assumed
     backend = DryRunBackend(inner, recorder)
     with tempfile.TemporaryDirectory(prefix="dry_run_") as folder:
         db = _copy_store(trajectory_db or str(application_store(app.path)), Path(folder) / "trajectories.sqlite")
@@ -167,6 +182,7 @@ async def _run_once(
     cycle_time = total if isinstance(timing, ClockTiming) else timing.elapsed()
     timeline = tuple(recorder.spans)
     found = recorder.findings()
+    assumed_notes = tuple(recorder.assumption_notes())
     return DryRunReport(
         app=app.name,
         file=str(app.path),
@@ -180,6 +196,7 @@ async def _run_once(
         operations_checked=checked,
         complete=not notes,
         notes=tuple(notes),
+        assumptions=assumed_notes,
         waits=tuple(recorder.waits),
         collisions=None if stats is None else CollisionCheck(stats.motions, stats.samples, scene.margin if scene else 0.0),
         start=initial,
