@@ -86,3 +86,16 @@ def test_a_look_at_the_missing_hole_outside_the_side_that_assumed_it_found_is_st
     found = findings(err)
     assert found and all(f.startswith(f"{app}:{line}:") and " left_arm debur_drilling: vision: " in f and "drill_3: no hole" in f for f in found), err
     assert "by debur_drill_3 left_arm debur_drilling, insert_drill_3 right_arm insert_rivet not checked" in out  # the side itself, as before
+
+
+def test_a_side_whose_assumption_the_cell_agrees_with_still_has_its_vision_checked(tmp_path: Path) -> None:
+    """The not_found side inserting its rivet into the hole it did not find: on the cell without drill_3 the pass
+    assuming not_found agrees with the cell, so the side's vision of drill_3 failing is a finding, as in the real run."""
+    into_the_hole = '<right_arm><function name="insert_rivet"><params><param value="{hole}"/></params></function></right_arm>'
+    app = branch_app(tmp_path, into_the_hole, cell=MISSING)
+    line = [n for n, text in enumerate(app.read_text().splitlines(), start=1) if into_the_hole in text][-1]  # the <else>'s, after the found side's
+    code, out, err = cli("validate", "--simulate", str(app), "--trajectory-db", str(tmp_path / "t.sqlite"))
+    assert code == 1, out + err
+    vision = [f for f in findings(err) if ": vision: " in f]  # (the left arm, still over the hole, is in the way too)
+    assert len(vision) == 1 and vision[0].startswith(f"{app}:{line}:20: operation put_back_drill_3 (for_each hole=drill_3) right_arm insert_rivet: vision: "), err
+    assert vision[0].endswith(f"; assuming {PASS_2.split('assumed ')[1]})") and "drill_3: no hole" in vision[0]

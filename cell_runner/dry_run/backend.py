@@ -146,10 +146,8 @@ class DryRunBackend(RobotBackend):
                 self.recorder.outcome_met(group, error.kind.value, target, error.detail)
                 self.recorder.span(group, held, what, start, timing.now())
                 return self.as_if_done(group, primitive)
-            if self.recorder.defer(group, error.kind.value, what, target, error.detail, timing.now()):
-                # on a side of an <if>: maybe the consequence of the outcome assumed; the nominal pose, as if found
-                self.recorder.span(group, held, what, start, timing.now())
-                return self.as_if_done(group, primitive)
+            if self.recorder.defer(group, held, error.kind.value, what, target, error.detail, start, timing.now()):
+                return self.as_if_done(group, primitive)  # on a side of an <if>, maybe the assumption's doing: the nominal pose
             self._note_controller(group, error)
             if self.stuck is None:
                 span = self.recorder.span(group, held, what, start, timing.now(), error.kind.value)

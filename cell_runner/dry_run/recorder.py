@@ -111,6 +111,7 @@ class Deferred:
     message: str
     t: float
     tested: tuple[tuple[str, str], ...]
+    span: int  # its place in Recorder.spans
 
 
 class Recorder:
@@ -160,17 +161,20 @@ class Recorder:
         if outcome is not None and assumed is not None and outcome != assumed and key not in self._contradicted:
             self._contradicted[key] = Contradiction(assumed, outcome, kind, target, message)
 
-    def defer(self, group: str, kind: str, primitive: str, target: str, message: str, t: float) -> bool:
+    def defer(self, group: str, held: tuple[str, ...], kind: str, primitive: str, target: str, message: str, start: float, end: float) -> bool:
         """Hold back a fault met on a side of an ``<if>`` until the run ends (:meth:`findings`): it is no finding when
         it is the one the function the side tests met on the same target, the pass having assumed otherwise --
-        the consequence of the assumption, not of the application.  False: not such a fault, report it now."""
+        the consequence of the assumption, not of the application.  Its span goes on the timeline now, marked
+        with the fault if it turns out a finding.  False: not such a fault, report it now."""
         where = self.locate(group)
         if where is None or not target:
             return False
         tested = [key for key in self.sides.get(where[0], ()) if kind in self.fault_outcomes.get(key, {})]
         if not tested:
             return False
-        self._deferred.append(Deferred(group, where[0], where[1], kind, primitive, target, message, t, tuple(tested)))
+        span = self.span(group, held, primitive, start, end)
+        held_back = Deferred(group, where[0], where[1], kind, primitive, target, message, span.end, tuple(tested), len(self.spans) - 1)
+        self._deferred.append(held_back)
         return True
 
     def _settle(self) -> None:
@@ -179,6 +183,7 @@ class Recorder:
             cause = next((key for key in held.tested if (c := self._contradicted.get(key)) is not None
                           and (c.kind, c.target) == (held.kind, held.target)), None)
             if cause is None:
+                self.spans[held.span] = replace(self.spans[held.span], finding=held.kind)
                 self.add(held.group, held.operation, held.function, held.kind, held.primitive, held.message, held.t)
             else:
                 self._excused.setdefault(cause, []).append(held)
