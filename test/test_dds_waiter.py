@@ -38,7 +38,10 @@ def test_a_waiter_that_stops_by_itself_closes_the_transport_with_its_error(dds_e
             healthy = transport.spin_error
             transport.waiter._waitset = BrokenWaitSet()  # noqa: SLF001 - the thread takes it at its next wait
             await asyncio.wait_for(transport.wait_closed(), BOUND)
-            return healthy, transport.spin_error, transport.waiter._thread.is_alive()  # noqa: SLF001
+            thread = transport.waiter._thread  # noqa: SLF001
+            # it reports before it returns: the transport may learn of the stop a moment before the thread has ended
+            await asyncio.to_thread(thread.join, BOUND)
+            return healthy, transport.spin_error, thread.is_alive()
         finally:
             await transport.shutdown()
 
