@@ -3,13 +3,7 @@ from __future__ import annotations
 
 import asyncio
 import io
-import json
-import os
-import signal
 import sqlite3
-import subprocess
-import sys
-import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -17,6 +11,7 @@ from typing import Any
 import pytest
 
 from app_builder import Cell, make_app
+from killed_runs import records, run_and_kill
 from app_functions.registry import full_catalog
 from cell_runner.cli import main
 from core_functions.primitives import TrajectoryResult
@@ -34,16 +29,6 @@ ROOT = Path(__file__).resolve().parent.parent
 TRACE_LINES = 480  # about what a whole rivet run writes
 
 
-def records(path: Path) -> list[dict[str, Any]]:
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:  # the line the kill cut
-            continue
-    return out
-
-
 def required() -> set[tuple[str, str]]:
     catalog = full_catalog()
     app = load_application(RIVET, catalog)
@@ -52,24 +37,7 @@ def required() -> set[tuple[str, str]]:
 
 def start_and_kill(folder: Path, after_lines: int) -> Path:
     """Start a run in its own process and kill -9 it once its trace holds ``after_lines`` lines."""
-    trace = folder / "run.jsonl"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "execution_engine", "run", RIVET, "--speed", "max", "-q", "--no-check",
-         "--trace", str(trace), "--checkpoint", str(folder / "run.sqlite")],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-    )
-    deadline = time.monotonic() + 120
-    while process.poll() is None and time.monotonic() < deadline:
-        try:
-            if trace.read_bytes().count(b"\n") >= after_lines:
-                break
-        except FileNotFoundError:  # not created yet
-            pass
-        time.sleep(0.002)  # polling the file the run writes, not waiting for a guess
-    assert process.poll() is None, f"the run ended before the kill: {process.stderr.read().decode() if process.stderr else ''}"
-    os.kill(process.pid, signal.SIGKILL)
-    process.wait(30)
-    return trace
+    return run_and_kill(RIVET, folder, lambda trace: trace.count(b"\n") >= after_lines)
 
 
 @pytest.mark.parametrize("moment", range(20))

@@ -4,16 +4,9 @@ library block refuses the resume like a changed application."""
 from __future__ import annotations
 
 import io
-import json
-import os
 import shutil
-import signal
-import subprocess
-import sys
-import time
 from collections import Counter
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -22,19 +15,10 @@ from cell_runner.cli import main
 from execution_engine.app_model import load_application
 from execution_engine.checkpoint.resume import sits_out
 from execution_engine.recorder.reading import Recording, iter_messages
+from killed_runs import records, run_and_kill
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCKS = ROOT / "apps_xml" / "rivet_blocks.xml"
-
-
-def records(path: Path) -> list[dict[str, Any]]:
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:  # the line the kill cut
-            continue
-    return out
 
 
 def copy_application(folder: Path) -> Path:
@@ -50,26 +34,9 @@ def copy_application(folder: Path) -> Path:
 
 def start_and_kill(app: Path, folder: Path, starts: int) -> Path:
     """Run in a process of its own; kill -9 once the trace shows ``starts`` function starts of the second iteration."""
-    trace = folder / "run.jsonl"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "execution_engine", "run", str(app), "--speed", "max", "-q", "--no-check",
-         "--trace", str(trace), "--checkpoint", str(folder / "run.sqlite")],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-    )
-    deadline = time.monotonic() + 120
     mark = b'"iteration":"for_each hole=drill_2'
-    while process.poll() is None and time.monotonic() < deadline:
-        try:
-            lines = trace.read_bytes().splitlines()
-        except FileNotFoundError:  # not created yet
-            lines = []
-        if sum(1 for line in lines if mark in line and b'"event":"function_start"' in line) >= starts:
-            break
-        time.sleep(0.002)  # polling the file the run writes
-    assert process.poll() is None, f"the run ended before the kill: {process.stderr.read().decode() if process.stderr else ''}"
-    os.kill(process.pid, signal.SIGKILL)
-    process.wait(30)
-    return trace
+    return run_and_kill(app, folder, lambda trace: sum(
+        1 for line in trace.splitlines() if mark in line and b'"event":"function_start"' in line) >= starts)
 
 
 @pytest.mark.parametrize("starts", [1, 2, 3])
