@@ -27,8 +27,10 @@ import socket
 import stat
 import threading
 from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 #: Names that always mean "this computer" and cannot be a rebinding attacker's domain.
 LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
@@ -40,6 +42,14 @@ TOKEN_BYTES = 32
 MAX_SESSIONS = 256
 #: How a host name given with ``--allowed-host`` may look (a DNS name or an address).
 HOST_NAME = re.compile(r"[a-z0-9]([a-z0-9-]{0,61}[a-z0-9])?(\.[a-z0-9]([a-z0-9-]{0,61}[a-z0-9])?)*\.?")
+#: The scope key the guard leaves the requester (:class:`Who`) in, for the routes' role checks and audit.
+WHO = "studio.who"
+#: May run, pause, resume, step, stop, reset, change the speed, continue at breakpoints, raise and clear the safety stop.
+OPERATOR = "operator"
+#: Everything an operator may, and edit, save, teach, jog, set breakpoints in the file, edit a paused run.
+ENGINEER = "engineer"
+#: The roles, least first: a role may do what every role before it may.
+ROLES = (OPERATOR, ENGINEER)
 
 
 class AccessError(Exception):
@@ -136,33 +146,64 @@ def host_names(bound: str, extra: tuple[str, ...] = ()) -> frozenset[str]:
     return frozenset(names)
 
 
+def role_allows(role: str, needed: str) -> bool:
+    """Whether ``role`` may do what ``needed`` may (an unknown role may do nothing)."""
+    return role in ROLES and needed in ROLES and ROLES.index(role) >= ROLES.index(needed)
+
+
 @dataclass(frozen=True)
 class Who:
-    """Who made a request, for the log: a session's short id or the token, and the client's address."""
+    """Who made a request, for the log: a session's short id or the token, and the client's address; the user's
+    name and role (a station without users: the token's holder and loopback pages are engineers, as before roles)."""
 
     kind: str  # "session" or "token"
     ident: str
     address: str
+    name: str = ""  # a user of --users, "token", "operator token", "loopback"
+    role: str = ENGINEER
 
     def __str__(self) -> str:
         return f"{self.kind} {self.ident} from {self.address}" if self.ident else f"{self.kind} from {self.address}"
+
+
+@dataclass(frozen=True)
+class Session:
+    """A page's session: its short id (the log's name for it), whose it is and the role it acts in."""
+
+    ident: str
+    name: str
+    role: str
+
+
+class Credential(Protocol):
+    """A user of ``--users`` (:class:`operator_station.users.User`) as the gate sees one."""
+
+    name: str
+    role: str
+
+    def checks(self, password: str) -> bool: ...
 
 
 @dataclass
 class Access:
     """The station's token, its sessions and the host names it answers to."""
 
-    token: str
+    token: str  # the station's own: the engineer role
     token_needed: bool  # False: bound to loopback, a page loaded from loopback gets a session without it
     hosts: frozenset[str]
-    _sessions: OrderedDict[str, str] = field(default_factory=OrderedDict)  # sha256(cookie) -> short id
+    operator_token: str | None = None  # --operator-token-file: the operator role
+    users: Mapping[str, Credential] = field(default_factory=dict)  # --users: a page must log in (loopback too)
+    _sessions: OrderedDict[str, Session] = field(default_factory=OrderedDict)  # sha256(cookie) -> the session
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     @classmethod
-    def for_address(cls, bound: str, token: str | None = None, extra_hosts: tuple[str, ...] = ()) -> Access:
-        """Loopback without a token file: sessions for loopback page loads.  Anything else: the token."""
-        needed = token is not None or not is_loopback(bound)
-        return cls(token or new_token(), needed, host_names(bound, extra_hosts))
+    def for_address(cls, bound: str, token: str | None = None, extra_hosts: tuple[str, ...] = (), operator_token: str | None = None,
+                    users: Mapping[str, Credential] | None = None) -> Access:
+        """Loopback without a token file or users: sessions for loopback page loads.  Anything else: a token or a login."""
+        if token is not None and operator_token is not None and secrets.compare_digest(token.encode(), operator_token.encode()):
+            raise AccessError("--operator-token-file holds the station's own token (--token-file): give the operators a token of their own")
+        needed = token is not None or operator_token is not None or bool(users) or not is_loopback(bound)
+        return cls(token or new_token(), needed, host_names(bound, extra_hosts), operator_token, dict(users or {}))
 
     def shown_hosts(self, port: int | None = None) -> str:
         """The names as a page writes them in an address (IPv6 in brackets), with ``port`` if given."""
@@ -170,22 +211,55 @@ class Access:
         return ", ".join(f"{n}:{port}" if port is not None else n for n in names)
 
     def token_matches(self, given: str | None) -> bool:
-        return given is not None and secrets.compare_digest(given.encode("utf-8", "replace"), self.token.encode())
+        """Whether ``given`` is one of the station's tokens (either role)."""
+        return self.token_role(given) is not None
 
-    def new_session(self) -> tuple[str, str]:
-        """A new session: the cookie value (secret) and its short id (for the log)."""
+    def token_role(self, given: str | None) -> str | None:
+        """The role of the token ``given`` (engineer: the station's own, operator: the operators'), None if neither;
+        both are compared, in constant time, whatever matches."""
+        if given is None:
+            return None
+        raw = given.encode("utf-8", "replace")
+        station = secrets.compare_digest(raw, self.token.encode())
+        operator = self.operator_token is not None and secrets.compare_digest(raw, self.operator_token.encode())
+        return ENGINEER if station else OPERATOR if operator else None
+
+    def login(self, name: str, password: str) -> Credential | None:
+        """The user of ``name`` if ``password`` is theirs (a missing name costs a check too: no hint it is missing)."""
+        user = self.users.get(name)
+        if user is None:
+            if self.users:
+                next(iter(self.users.values())).checks(password)  # the same work as a wrong password
+            return None
+        return user if user.checks(password) else None
+
+    def new_session(self, name: str = "loopback", role: str = ENGINEER) -> tuple[str, str]:
+        """A new session of ``name`` in ``role``: the cookie value (secret) and its short id (for the log)."""
         cookie = secrets.token_urlsafe(TOKEN_BYTES)
         digest = hashlib.sha256(cookie.encode()).hexdigest()
         with self._lock:
-            self._sessions[digest] = digest[:8]
+            self._sessions[digest] = Session(digest[:8], name, role)
             while len(self._sessions) > MAX_SESSIONS:
                 self._sessions.popitem(last=False)
         return cookie, digest[:8]
 
     def session(self, cookie: str | None) -> str | None:
         """The short id of the session of ``cookie``, None if it is not one of ours."""
+        found = self.session_of(cookie)
+        return found.ident if found else None
+
+    def session_of(self, cookie: str | None) -> Session | None:
+        """The session of ``cookie`` (its id, user and role), None if it is not one of ours."""
         if not cookie:
             return None
         digest = hashlib.sha256(cookie.encode("utf-8", "replace")).hexdigest()
         with self._lock:
             return self._sessions.get(digest)
+
+    def end_session(self, cookie: str | None) -> Session | None:
+        """Forget the session of ``cookie`` (logging out); the session it was, if any."""
+        if not cookie:
+            return None
+        digest = hashlib.sha256(cookie.encode("utf-8", "replace")).hexdigest()
+        with self._lock:
+            return self._sessions.pop(digest, None)

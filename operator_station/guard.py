@@ -11,7 +11,10 @@ So, in this order:
 2. ``Origin``, when the browser sends one, must be the station's own origin (``http://`` + that
    ``Host``), and ``Sec-Fetch-Site``, when sent to the API or the feed, ``same-origin`` or
    ``none``;
-3. the API and the live feed need a session cookie or the token (:mod:`operator_station.access`);
+3. the API and the live feed need a session cookie or a token (:mod:`operator_station.access`); the
+   requester (:class:`~operator_station.access.Who`, with the user's name and role) and the station's
+   audit log are left in the scope for the routes, which check the role they need
+   (:mod:`operator_station.roles`) and record what they do (:mod:`operator_station.audit`);
 4. a request that may change state (any method but GET and HEAD) must be JSON
    (``Content-Type: application/json``): no ``text/plain``, no form types;
 5. a body is bounded while it streams: a ``Content-Length`` over the limit is refused before a
@@ -36,7 +39,8 @@ from starlette.requests import HTTPConnection, Request
 from starlette.responses import FileResponse, JSONResponse, PlainTextResponse, RedirectResponse, Response
 from starlette.websockets import WebSocketClose
 
-from operator_station.access import Access, Who, is_loopback, normal_host
+from operator_station.access import ENGINEER, WHO, Access, Who, is_loopback, normal_host
+from operator_station.audit import AUDIT, AuditLog, log_of
 
 log = logging.getLogger(__name__)
 
@@ -52,8 +56,8 @@ SAFE_METHODS = ("GET", "HEAD")
 PROTECTED = ("/api/", "/ws")
 #: A Host header: a name or an IPv4 address, or an IPv6 address in brackets, and maybe a port (RFC 9110 7.2).
 HOST_HEADER = re.compile(r"(?P<name>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(?P<port>[0-9]{1,5}))?")
-#: The scope key the guard leaves the requester in, for the routes' log lines.
-WHO = "studio.who"
+#: The station's login form, served instead of the page to a browser without a session when users are configured.
+LOGIN_PAGE = "login.html"
 #: Headers on every HTTP answer: no framing by other sites, no sniffing, no referrer (the token is in a URL once).
 SECURITY_HEADERS = (
     (b"x-frame-options", b"DENY"),
@@ -119,19 +123,21 @@ def requester(connection: HTTPConnection, access: Access) -> Who | None:
     client = connection.client
     address = f"{client.host}:{client.port}" if client else "unknown"
     kind, _, credential = connection.headers.get("authorization", "").partition(" ")
-    if kind.lower() == "bearer" and access.token_matches(credential.strip()):
-        return Who("token", "", address)
-    ident = access.session(connection.cookies.get(cookie_name(connection.scope)))
-    return Who("session", ident, address) if ident else None
+    role = access.token_role(credential.strip()) if kind.lower() == "bearer" else None
+    if role is not None:
+        return Who("token", "", address, "token" if role == ENGINEER else "operator token", role)
+    found = access.session_of(connection.cookies.get(cookie_name(connection.scope)))
+    return Who("session", found.ident, address, found.name, found.role) if found else None
 
 
 class Guard:
     """Pure ASGI middleware in front of the whole station (routes, static files, the feed)."""
 
-    def __init__(self, app: ASGIApp, access: Access, max_body: int) -> None:
+    def __init__(self, app: ASGIApp, access: Access, max_body: int, audit: AuditLog | None = None) -> None:
         self.app = app
         self.access = access
         self.max_body = max_body
+        self.audit = audit or AuditLog()
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] not in ("http", "websocket"):
@@ -154,6 +160,7 @@ class Guard:
             await self._refuse(scope, receive, send, status, problem)
             return
         scope[WHO] = who
+        scope[AUDIT] = self.audit
         if scope["type"] == "websocket":
             await self.app(scope, receive, send)
             return
@@ -216,19 +223,28 @@ def _with_headers(send: Send, hang_up: Callable[[], bool]) -> Send:
 
 def page(request: Request, access: Access, index: Path) -> Response:
     """The station's page, and with it the session: for a page loaded from loopback when the station serves
-    loopback only, or for a load carrying the token (then sent on to ``/`` so the token leaves the address bar)."""
+    loopback only, or for a load carrying a token (then sent on to ``/`` so the token leaves the address bar),
+    in that token's role.  With users (``--users``) a browser without a session gets the login form instead."""
     name = cookie_name(request.scope)
     if access.session(request.cookies.get(name)):
         return FileResponse(index, headers={"Cache-Control": "no-store"})
     token = request.query_params.get("token")
     client = request.client.host if request.client else ""
-    if token is not None and not access.token_matches(token):
+    role = access.token_role(token)
+    if token is not None and role is None:
         log.warning("studio: a page load from %s with a wrong token", client)
         return PlainTextResponse("wrong token: open the address the station printed when it started\n", status_code=401)
+    if token is None and access.users:
+        return FileResponse(index.parent / LOGIN_PAGE, headers={"Cache-Control": "no-store"})
     if token is None and (access.token_needed or not is_loopback(client)):
         return PlainTextResponse("this station needs its token: open the address it printed when it started (http://HOST:PORT/?token=...)\n", status_code=401)
-    cookie, ident = access.new_session()
-    log.info("studio: session %s for a page loaded from %s", ident, client)
+    who = "loopback" if token is None else "token" if role == ENGINEER else "operator token"
+    cookie, ident = access.new_session(who, role or ENGINEER)
+    log.info("studio: session %s (%s, %s) for a page loaded from %s", ident, who, role or ENGINEER, client)
+    address = f"{client}:{request.client.port}" if request.client else "unknown"
+    audit = log_of(request)
+    if audit is not None:
+        audit.append(Who("session", ident, address, who, role or ENGINEER), "login", answer=f"a page loaded {'with a token' if token is not None else 'from loopback'}")
     response: Response = (RedirectResponse("/", status_code=303) if token is not None
                           else FileResponse(index, headers={"Cache-Control": "no-store"}))
     response.set_cookie(name, cookie, httponly=True, samesite="strict", path="/")
