@@ -1,5 +1,5 @@
 // The live monitor: each group machine's state graph (from the structure it published, laid out by
-// dagre, the active state highlighted), its current function and primitive, the engine's status
+// ELK through graph_layout.js, the active state and the last transition highlighted), its current function and primitive, the engine's status
 // with an ETA from the dry run's planned durations, errors and alarms with the operator actions
 // that resolve them, and the joint positions as plots (uPlot).  Everything is derived from the
 // feed at the store's cursor, so the time slider puts this view back at any instant too.
@@ -15,45 +15,93 @@ const Monitor = (() => {
 
   const fmt = (s) => (s === null || s === undefined || !isFinite(s)) ? "–" : s < 60 ? `${s.toFixed(1)} s` : `${Math.floor(s / 60)} min ${(s % 60).toFixed(0)} s`;
 
-  function layout(structure) {
-    const g = new dagre.graphlib.Graph({multigraph: true});
-    g.setGraph({rankdir: "LR", nodesep: 10, ranksep: 70, marginx: 8, marginy: 8});
-    g.setDefaultEdgeLabel(() => ({}));
-    for (const s of structure.states) g.setNode(s, {label: s, width: Math.max(60, s.length * 7.5 + 16), height: 26});
-    structure.transitions.forEach((t, i) => {
-      const target = structure.states.includes(t.to) ? t.to : null;  // HISTORY: back to the paused state
-      if (target) g.setEdge(t.from, target, {label: t.signal}, `${t.from}-${t.signal}-${i}`);
-    });
-    dagre.layout(g);
-    return g;
+  // The graph is laid out by ELK (graph_layout.js: Ready at the centre of the working states, the exceptional
+  // states in a band apart, the transitions every working state has into them bundled) and drawn 1:1, so its
+  // labels keep their size (GraphLayout.FONT) whatever the card's width: a wide graph scrolls, it never shrinks.
+  let elk = null;
+  function drawGraph(group, structure, box) {
+    const key = JSON.stringify(structure);
+    graphs[group] = {structure: key, pending: true, nodes: {}, edges: {}};
+    elk = elk || new ELK();
+    GraphLayout.layout(structure, elk).then((geometry) => {
+      if (!graphs[group] || graphs[group].structure !== key) return;  // a newer structure (or run) came meanwhile
+      graphs[group] = {structure: key, ...paint(group, geometry, box), geometry};
+      soon();
+    }).catch((error) => { box.textContent = `the state graph could not be laid out: ${error}`; console.error(error); });
   }
 
-  function drawGraph(group, structure, box) {
-    const g = layout(structure);
-    const info = g.graph();
-    const root = svg("svg", {class: "state-graph", viewBox: `0 0 ${info.width} ${info.height}`, preserveAspectRatio: "xMidYMin meet", "data-group": group});
+  function paint(group, geometry, box) {
+    const w = Math.ceil(geometry.width), h = Math.ceil(geometry.height);
+    const root = svg("svg", {class: "state-graph", width: w, height: h, viewBox: `0 0 ${w} ${h}`, "data-group": group});
     const defs = svg("defs");
-    const marker = svg("marker", {id: `arrow-${group}`, markerWidth: 8, markerHeight: 8, refX: 7, refY: 3, orient: "auto"});
-    marker.append(svg("path", {d: "M0,0 L7,3 L0,6 z", class: "arrow"}));
-    defs.append(marker);
-    root.append(defs);
-    for (const e of g.edges()) {
-      const edge = g.edge(e);
-      const d = edge.points.map((p, i) => `${i ? "L" : "M"}${p.x.toFixed(1)},${p.y.toFixed(1)}`).join(" ");
-      root.append(svg("path", {d, class: "edge", "marker-end": `url(#arrow-${group})`}));
+    for (const [id, cls] of [[`arrow-${group}`, "arrow"], [`arrow-last-${group}`, "arrow last"]]) {
+      const marker = svg("marker", {id, markerWidth: 8, markerHeight: 8, refX: 7, refY: 3, orient: "auto-start-reverse", markerUnits: "userSpaceOnUse"});
+      marker.append(svg("path", {d: "M0,0 L7,3 L0,6 z", class: cls}));
+      defs.append(marker);
     }
+    root.append(defs);
+    for (const [id, c] of Object.entries(geometry.clusters)) {
+      root.append(svg("rect", {x: c.x, y: c.y, width: c.width, height: c.height, rx: 8, class: `cluster cluster-${id}`}));
+    }
+    const edges = {};
+    for (const e of geometry.edges) {
+      const d = e.points.map((p, i) => `${i ? "L" : "M"}${p.x.toFixed(1)},${p.y.toFixed(1)}`).join(" ");
+      const path = svg("path", {d, class: `edge edge-${e.kind}`, "data-edge": e.id, "marker-end": `url(#arrow-${group})`});
+      if (e.kind === "spoke") path.setAttribute("marker-start", `url(#arrow-${group})`);  // request out, ok back
+      const title = svg("title");
+      title.textContent = e.title;
+      path.append(title);
+      root.append(path);
+      let text = null;
+      if (e.label) {
+        text = svg("text", {x: e.label.x, y: e.label.y + GraphLayout.FONT * 0.35, class: "edge-label", "data-edge": e.id});
+        text.textContent = e.label.text;
+        root.append(text);
+      }
+      edges[e.id] = {path, text, edge: e};
+    }
+    // The last transition's trigger, placed on its edge when it is drawn (a spoke has no label of its own).
+    const trigger = svg("text", {class: "edge-label trigger", "data-trigger": group});
     const nodes = {};
-    for (const name of g.nodes()) {
-      const n = g.node(name);
-      const rect = svg("rect", {x: n.x - n.width / 2, y: n.y - n.height / 2, width: n.width, height: n.height, rx: 5, class: "state", "data-state": name});
-      const text = svg("text", {x: n.x, y: n.y + 4, class: "state-label"});
+    for (const [name, n] of Object.entries(geometry.nodes)) {
+      const rect = svg("rect", {x: n.x, y: n.y, width: n.width, height: n.height, rx: 5, class: `state state-${n.kind}`, "data-state": name});
+      const text = svg("text", {x: n.x + n.width / 2, y: n.y + n.height / 2 + GraphLayout.FONT * 0.35, class: "state-label", "data-state": name});
       text.textContent = name;
       root.append(rect, text);
       nodes[name] = rect;
     }
+    root.append(trigger);
     box.replaceChildren(root);
-    graphs[group] = {svg: root, nodes, structure: JSON.stringify(structure)};
+    return {svg: root, nodes, edges, trigger};
   }
+
+  // The current state, and the last transition (at the cursor) as a coloured edge with its trigger, from ``view``.
+  function highlight(graph, view) {
+    for (const [name, rect] of Object.entries(graph.nodes)) {
+      rect.classList.toggle("active", name === view.state);
+      rect.classList.toggle("left", !!view.last && name === view.last.from && name !== view.state);
+    }
+    const last = view.last ? GraphLayout.edgeOf(graph.geometry, view.last.from, view.last.signal, view.last.to) : null;
+    for (const [id, each] of Object.entries(graph.edges)) {
+      const on = !!last && id === last.id;
+      each.path.classList.toggle("last", on);
+      each.path.setAttribute("marker-end", `url(#arrow-${on ? "last-" : ""}${graph.svg.dataset.group})`);
+      if (each.edge.kind === "spoke") each.path.setAttribute("marker-start", `url(#arrow-${on ? "last-" : ""}${graph.svg.dataset.group})`);
+      if (each.text) each.text.classList.toggle("last", on);
+    }
+    const trigger = graph.trigger;
+    if (!last) { trigger.textContent = ""; trigger.removeAttribute("data-edge"); return; }
+    // The trigger (the signal) beside the middle of its edge, on the side away from the edge's run.
+    trigger.textContent = view.last.signal;
+    trigger.dataset.edge = last.id;
+    const [a, b] = midSegment(last.points);
+    const mx = (a.x + b.x) / 2, my = (a.y + b.y) / 2, vertical = Math.abs(b.y - a.y) > Math.abs(b.x - a.x);
+    trigger.setAttribute("x", (mx + (vertical ? 6 : 0)).toFixed(1));
+    trigger.setAttribute("y", (my + (vertical ? 4 : -5)).toFixed(1));
+    trigger.setAttribute("text-anchor", vertical ? "start" : "middle");
+    graph.svg.append(trigger);  // on top
+  }
+  const midSegment = (points) => { const i = Math.max(0, Math.floor((points.length - 1) / 2)); return [points[i], points[Math.min(points.length - 1, i + 1)]]; };
 
   function ensureGroups() {
     const snap = Store.snapshot;
@@ -67,7 +115,7 @@ const Monitor = (() => {
         card.dataset.group = group;
         card.innerHTML = `<h3>${group}</h3><div class="group-now"><span>state <b class="g-state"></b></span>
           <span>operation <b class="g-op"></b> <span class="g-iteration"></span></span><span>function <b class="g-function"></b></span>
-          <span>primitive <b class="g-primitive"></b></span></div><div class="graph-box"></div><div class="g-error"></div>`;
+          <span>primitive <b class="g-primitive"></b></span><span class="g-last"></span></div><div class="graph-box"></div><div class="g-error"></div>`;
         box.append(card);
       }
       const structure = snap.structures && snap.structures[group];
@@ -90,10 +138,11 @@ const Monitor = (() => {
       iteration.title = view.iteration || "";
       card.querySelector(".g-function").textContent = view.function || "–";
       card.querySelector(".g-primitive").textContent = view.primitive || "–";
+      card.querySelector(".g-last").textContent = view.last ? `last ${view.last.from} —${view.last.signal}→ ${view.last.to === GraphLayout.HISTORY ? "back" : view.last.to} at ${fmt(view.last.t)}` : "";
       card.querySelector(".g-error").textContent = view.error ? `error: ${view.error}` : "";
       card.dataset.state = view.state;
       const graph = graphs[group];
-      if (graph) for (const [name, rect] of Object.entries(graph.nodes)) rect.classList.toggle("active", name === view.state);
+      if (graph && graph.geometry) highlight(graph, view);
     }
     renderEngine();
     renderAlarms(views);

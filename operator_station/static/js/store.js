@@ -46,11 +46,11 @@ const Store = (() => {
   // Each group's state, function and primitive at the cursor, derived from the records alone.
   store.groupView = () => {
     const out = {};
-    for (const g of (store.snapshot && store.snapshot.groups) || []) out[g] = {state: "Ready", function: null, operation: null, iteration: null, primitive: null, error: null};
+    for (const g of (store.snapshot && store.snapshot.groups) || []) out[g] = {state: "Ready", function: null, operation: null, iteration: null, primitive: null, error: null, last: null};
     for (const r of store.visible()) {
       const g = out[r.group];
       if (!g) continue;
-      if (r.event === "transition") g.state = r.to;
+      if (r.event === "transition") { g.state = r.to; g.last = {from: r.from, signal: r.signal, to: r.to, t: r.t}; }  // the last transition, drawn on the graph
       else if (r.event === "function_start") { g.function = r.function; g.operation = r.operation; g.iteration = r.iteration || null; g.primitive = null; g.error = null; }
       else if (r.event === "function_end") { g.function = null; g.primitive = null; }
       else if (r.event === "primitive_start") g.primitive = r.primitive;
