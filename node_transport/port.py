@@ -31,6 +31,15 @@ Resp = TypeVar("Resp")
 
 FaultHandler = Callable[[str, BaseException], None]
 
+
+@dataclass(frozen=True)
+class ParameterChange:
+    """How a parameter that may change while the node runs takes a new value: ``check`` says why a
+    value is refused ("" when it is not; any thread, no side effect), ``apply`` takes it (on the node's loop)."""
+
+    check: Callable[[ParameterValue], str]
+    apply: Callable[[ParameterValue], None]
+
 _TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
 _ABSOLUTE_NAME = re.compile(rf"^(/{_TOKEN})+$")
 _NODE_NAME = re.compile(rf"^{_TOKEN}$")
@@ -238,6 +247,7 @@ class Node(ABC):
         self._overrides: dict[str, ParameterValue] = dict(parameter_overrides or {})
         self._override_texts: dict[str, str] = dict(override_texts or {})  # as the user wrote them
         self._parameters: dict[str, ParameterValue] = {}
+        self._changeable: dict[str, ParameterChange] = {}  # parameters that may change while the node runs
         self.fault_handler: FaultHandler = self._log_fault
 
     @property
@@ -274,6 +284,41 @@ class Node(ABC):
             return self._parameters[name]
         except KeyError:
             raise TransportError(f"{self.fully_qualified_name}: parameter {name!r} was never declared") from None
+
+    def changeable_parameter(self, name: str, change: ParameterChange) -> None:
+        """Let the declared parameter ``name`` change while the node runs (``ros2 param set``; in
+        process :meth:`set_parameter`); every other parameter is read once, at start-up."""
+        self.get_parameter(name)
+        self._changeable[name] = change
+
+    def check_parameter(self, name: str, value: ParameterValue) -> tuple[ParameterValue | None, str]:
+        """A changeable parameter's new value in its declared type, or (None, why it is refused)."""
+        change = self._changeable.get(name)
+        if change is None:
+            return None, f"{name} read at start-up; restart {self.fully_qualified_name} to change"
+        try:
+            value = coerce_parameter(self.fully_qualified_name, name, self._parameters[name], value)
+        except ParameterTypeError as error:
+            return None, str(error)
+        refusal = change.check(value)
+        return (None, refusal) if refusal else (value, "")
+
+    def apply_parameter(self, name: str, value: ParameterValue) -> None:
+        """Take a value :meth:`check_parameter` accepted (on the node's loop)."""
+        self._parameters[name] = value
+        self._changeable[name].apply(value)
+
+    def show_parameter(self, name: str, value: ParameterValue) -> None:
+        """A changeable parameter's value changed another way (an operator's command): show it (``ros2 param get``)."""
+        self._parameters[name] = value
+
+    def set_parameter(self, name: str, value: ParameterValue) -> str:
+        """Change a changeable parameter from this process: "" when taken, else why not (nothing changes)."""
+        checked, refusal = self.check_parameter(name, value)
+        if checked is None:
+            return refusal
+        self.apply_parameter(name, checked)
+        return ""
 
     def declared_parameters(self) -> dict[str, ParameterValue]:
         """Every declared parameter with its value, as ``ros2 param dump`` shows them."""

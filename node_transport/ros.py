@@ -260,15 +260,34 @@ class RosNode(EndpointNode):
         return value
 
     def _on_set_parameters(self, parameters: list[Any]) -> Any:
-        """rclpy callback (any thread): refuse changes to parameters our code has already read."""
-        frozen = [p.name for p in parameters if p.name in self._read_at_start]
+        """rclpy callback (any thread): refuse changes to parameters our code has already read, and
+        a changeable one's value its check refuses; a changeable one taken is applied on the loop."""
+        frozen = [p.name for p in parameters if p.name in self._read_at_start and p.name not in self._changeable]
         result = self.transport.api.set_parameters_result
         if frozen:
             return result(
                 successful=False,
                 reason=f"{', '.join(frozen)} read at start-up; restart {self.fully_qualified_name} to change",
             )
+        taken = []
+        for parameter in (p for p in parameters if p.name in self._changeable):
+            value, refusal = self.check_parameter(parameter.name, parameter.value)
+            if value is None:
+                return result(successful=False, reason=refusal)
+            taken.append((parameter.name, value))
+        for name, value in taken:
+            self.transport.loop.call_soon_threadsafe(self._apply_reported, name, value)
         return result(successful=True)
+
+    def show_parameter(self, name: str, value: ParameterValue) -> None:
+        super().show_parameter(name, value)
+        self.ros_node.set_parameters([self.transport.api.parameter(name, value=value)])  # its echo finds the value taken
+
+    def _apply_reported(self, name: str, value: ParameterValue) -> None:
+        try:
+            self.apply_parameter(name, value)
+        except Exception as error:  # noqa: BLE001 - a change that failed is a fault of the node, not a silent loss
+            self.report_fault(f"parameter {name}", error)
 
     def topic_names_and_types(self) -> list[TopicInfo]:
         """The graph's topics of our types, with each publisher's offered QoS (``ros2 bag record -a``'s discovery)."""

@@ -192,7 +192,7 @@ def _engine_status_msg(s: EngineStatus, clock: Clock) -> Any:
             GroupProgressMsg(group=g, state=p.state, operation=_text(p.operation), function=_text(p.function))
             for g, p in s.groups.items()
         ),
-        message=s.message,
+        message=s.message, speed_override=float(s.speed_override),
     )
 
 
@@ -413,7 +413,15 @@ def _engine_status_raw(m: Any, clock: Epoch) -> dict[str, Any]:
         "app": _str(m, "app"), "state": _str(m, "state"), "operation_index": _int(m, "operation_index"),
         "operation_count": _int(m, "operation_count"), "t": _stamp(m, clock),
         "operation_id": _opt(_str(m, "operation_id")), "groups": by_group, "message": _str(m, "message"),
+        "speed_override": _override(m),
     }
+
+
+def _override(m: Any) -> float:
+    value = _number(getattr(m, "speed_override", None), "speed_override")
+    if not 0.0 <= value <= 100.0:  # NaN too: a share of the planned speed no back end may take
+        raise _Bad(f"expected a percentage in [0, 100], got {value!r}", "speed_override")
+    return value
 
 
 def _engine_event_raw(m: Any, clock: Epoch) -> dict[str, Any]:

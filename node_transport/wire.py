@@ -189,6 +189,7 @@ class EngineStatus:
     operation_id: str | None = None
     groups: dict[str, GroupProgress] = field(default_factory=dict)
     message: str = ""
+    speed_override: float = 100.0  # percent, 0..100: every back end plays its motions at this share of their planned speed
     v: int = PROTOCOL_VERSION
 
 

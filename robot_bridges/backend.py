@@ -11,6 +11,9 @@ Contract, which the bridge node and the tests rely on:
   :class:`BridgeError` with a :class:`FaultKind`; it never returns half-done.
 * ``pause`` holds the group where it is; ``resume`` completes the *same* primitive to the same
   target; ``stop`` abandons it, and the pending ``execute`` raises ``BridgeError(STOPPED)``.
+* ``set_speed_override`` plays every running and later motion at a rate in [0, 1] of its planned
+  speed, on its planned path (robot_bridges/path_rate.py): 0 holds the group on the path, a rate
+  above 0 again continues from there; never faster than planned.
 * ``measure`` says where an idle group is now, by the robot's word: the pose a relative move
   starts from, which the group machine fixes before sending one, so that a retry is re-based on
   it and never repeats the move (docs/architecture.md, "Motions are never repeated blindly").
@@ -83,6 +86,8 @@ class RobotBackend(ABC):
     holds_within_motion: bool = True
     #: The clock the robot's motions run on, when it is not the bridge node's (a simulator faster than real time).
     clock: Clock | None = None
+    #: The operator's speed override as a rate in [0, 1] (1: as the application wrote it).
+    speed_override: float = 1.0
 
     @property
     @abstractmethod
@@ -110,6 +115,16 @@ class RobotBackend(ABC):
     @abstractmethod
     async def stop(self, group: str) -> None:
         """Abandon the group's current primitive and hold position."""
+
+    def set_speed_override(self, rate: float) -> None:
+        """Scale the running motion (and every later one) to ``rate`` of its planned speed on its path.
+
+        A back end that plays its own trajectories changes the rate within the joints' limits; one that
+        hands them to a controller asks the controller to.  The base class only keeps the value: a back
+        end that does nothing more says so by overriding this (the bridge reports what it raised)."""
+        if not 0.0 <= rate <= 1.0:
+            raise ValueError(f"a speed override rate lies in [0, 1], got {rate!r}")
+        self.speed_override = rate
 
     async def measure(self, group: str) -> MotionResult:
         """Where ``group`` is now: every joint of :meth:`joint_state` and the group's TCP.

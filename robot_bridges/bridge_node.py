@@ -34,10 +34,12 @@ from node_transport.qos import COMMANDS, LATCHED, SENSOR
 from node_transport.qos import JOINT_STATES as JOINT_STATES_QOS
 from node_transport.wire import (
     ENGINE_CELL,
+    ENGINE_STATUS,
     JOINT_STATES,
     BridgeCommand,
     BridgeFeedback,
     CellSnapshot,
+    EngineStatus,
     bridge_topic,
     tcp_pose_topic,
 )
@@ -102,6 +104,8 @@ class BridgeNode:
         for group in backend.groups:
             self._feedback[group] = TypedPublisher(node, BridgeFeedback, bridge_topic(group, "feedback"), COMMANDS)
         subscribe(node, CellSnapshot, ENGINE_CELL, self.backend.set_cell, lambda error: self._report(f"ignored cell model: {error}"), LATCHED)
+        # the operator's speed override travels in the engine's status: every motion on its path at that share
+        subscribe(node, EngineStatus, ENGINE_STATUS, self._on_engine, lambda error: self._report(f"ignored engine status: {error}"), LATCHED)
         self._camera = attach_cameras(node, backend)  # camera parameters: publish_images, camera_source (ROS image topics)
         self._state_task: asyncio.Task[None] | None = None
         self.errors: list[str] = []
@@ -174,6 +178,16 @@ class BridgeNode:
             self._spawn(self._measure(command))
         else:
             self._spawn(self._control(command))
+
+    def _on_engine(self, status: EngineStatus) -> None:
+        """A new speed override scales the running motion (and every later one) on its path: robot_bridges/path_rate.py."""
+        rate = status.speed_override / 100.0
+        if rate == self.backend.speed_override:
+            return
+        try:
+            self.backend.set_speed_override(rate)
+        except Exception as error:  # noqa: BLE001 - a back end that cannot take it is a fault, reported
+            self.node.report_fault(f"speed override {status.speed_override:g} %", error)
 
     def primitive_running(self, group: str) -> bool:
         """Whether a machine's primitive runs on ``group`` now."""

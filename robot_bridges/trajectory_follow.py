@@ -4,7 +4,9 @@ The plan (:mod:`robot_bridges.trajectory_goal`) becomes the back end's own
 :class:`~core_functions.primitives.ExecuteTrajectory`, which every back end checks against its limits
 again and plays with its own interpolation and supervision (the Nextage simulator's limit and collision
 checks every period, the V+ acknowledgements, the KUKA RSI loop's generators and set-point check).
-The group's speed fraction is set to 1 first, so the path keeps the goal's own timing.
+The group's speed fraction is set to 1 first, so the path keeps the goal's own timing -- unless the
+operator's speed override scales it down on its path (robot_bridges/path_rate.py), as it does every
+motion: the follower's time is then where the arm is on the path, never ahead of the clock.
 
 A back end that holds an arm inside a running motion (:attr:`RobotBackend.holds_within_motion`) gets
 the whole path as one motion, and a stop lands on the path wherever the arm is.  One that runs a motion
@@ -114,6 +116,7 @@ class Follower:
         self._held_at = 0.0  # path time when the cell held the motion
         self._leg_end = 0.0  # path time the leg under way ends at
         self._stopped_for_hold = False  # the back end's stop was a hold's: the motion's STOPPED is the hold (however late)
+        self.scaled = False  # the speed override has played this goal slower than written: its time is the arm's
 
     # ----------------------------------------------------------------------------- control
     def end(self, code: int, reason: str) -> None:
@@ -226,7 +229,7 @@ class Follower:
                 except (asyncio.TimeoutError, BridgeError):
                     pass  # a period passed, or the motion ended: below
                 if not self.held:
-                    self.elapsed = min(end, self.elapsed + max(0.0, self.clock.now() - before))
+                    self._advance(end, max(0.0, self.clock.now() - before))
                 sample = self.sample()
                 if live and not self.held and self._ending is None and not motion.done():
                     violation = self._outside(sample, plan.path.position, "path")
@@ -257,6 +260,17 @@ class Follower:
         if violation is not None:
             return PATH_TOLERANCE_VIOLATED, violation
         return None
+
+    def _advance(self, end: float, step: float) -> None:
+        """The path's time after ``step`` s of the clock: the clock's own, or, once the speed override has played
+        this goal slower than written, where the arm is on the path (it never runs ahead of the clock)."""
+        self.scaled = self.scaled or self.backend.speed_override < 1.0
+        if not self.scaled or not self.backend.holds_within_motion:
+            self.elapsed = min(end, self.elapsed + step * (self.backend.speed_override if self.scaled else 1.0))
+            return
+        positions = self.backend.joint_state()[1]
+        here = np.array([positions[i] for i in self._index], dtype=float)
+        self.elapsed = path_time_near(self.plan, here, self.elapsed, min(end, self.elapsed + step))
 
     async def _settle(self) -> tuple[int, str]:
         """The path has ended: the goal tolerances, met at once or within the goal time tolerance."""

@@ -37,6 +37,7 @@ from execution_engine.engine.flags_mode import FlagsMode
 from execution_engine.engine.group_link import GroupLink
 from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
+from execution_engine.engine.speed import SpeedOverride
 from execution_engine.engine.zones import ZoneBoard
 from execution_engine.machine.table import ERROR_HANDLING, FINISH, PAUSE, READY, WORKING_STATES
 from node_transport import typed
@@ -131,6 +132,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self._results = ResultWaiter(self.clock)  # the operation loop's wait for a result: the links wake it
         self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)  # set_flag / wait_flag (engine/flags.py)
         self.zones = ZoneBoard(node, self.catalog, self._publish_flag)  # interference zones, both modes (engine/zones.py)
+        self.speed = SpeedOverride(node, self._record, self._publish_status, lambda: self.state)  # on the path, every back end (engine/speed.py)
 
     # ============================================================================ running
     async def run(self, app: Application, resume: ResumePoint | None = None) -> RunReport:
@@ -583,6 +585,6 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
             t=self.clock.now(),
             operation_id=self._operation.id if self._operation else None,
             groups=groups,
-            message=self._message,
+            message=self.speed.status_message(self._message), speed_override=self.speed.percent,
         )
         self._status_pub.publish(status)

@@ -10,8 +10,9 @@ time, 10x, or in virtual time purely by the choice of clock.
 A running primitive is a *job* holding one group, or several (FullBodyMove: all three;
 MasterSlaveMove: both arms).  ``pause`` freezes the job's own clock (the arm holds where it is),
 ``resume`` continues the very same planned motion to its original target, ``stop`` abandons it
-and its ``execute`` raises ``BridgeError(STOPPED)``.  Faults can be injected per group
-(:mod:`robot_bridges.nextage_sim.faults`) to exercise error handling.
+and its ``execute`` raises ``BridgeError(STOPPED)``.  The speed override plays the jobs' own time at its
+rate (:mod:`robot_bridges.path_rate`: on the path, within the joints' limits; 0 holds on the path).  Faults
+can be injected per group (:mod:`robot_bridges.nextage_sim.faults`) to exercise error handling.
 
 This module is the back end's face: the port, the simulator's extras and what each primitive does.  The
 jobs and the loop that plays them are :mod:`~robot_bridges.nextage_sim.jobs`, the Cartesian plans
@@ -63,6 +64,7 @@ from robot_bridges.nextage_sim.hands import HandIO
 from robot_bridges.nextage_sim.jobs import DONE, Job, JobBoard, Tick
 from robot_bridges.nextage_sim.model import WORLD_FRAME, ArmKinematics, NextageModel
 from robot_bridges.nextage_sim.trajectory import CartesianLimits, Motion, plan_joint_move, plan_replay, sample
+from robot_bridges.path_rate import sampled_shape
 
 if TYPE_CHECKING:
     from node_transport.wire import CellSnapshot
@@ -121,16 +123,9 @@ class NextageSimBackend(RobotBackend):
         for group, tool in (tools or {}).items():
             self.set_tool(group, tool)
         self._handlers: dict[type, Callable[[str, Any], Any]] = {
-            MoveJoints: self._move_joints,
-            MoveCartesian: self._move_cartesian,
-            MoveRelative: self._move_relative,
-            SetSpeed: self._set_speed,
-            Dwell: self._dwell,
-            EndEffector: self._end_effector,
-            Vision: self._look,
-            RecordTrajectory: self._record,
-            ExecuteTrajectory: self._execute_trajectory,
-            FullBodyMove: self._full_body,
+            MoveJoints: self._move_joints, MoveCartesian: self._move_cartesian, MoveRelative: self._move_relative,
+            SetSpeed: self._set_speed, Dwell: self._dwell, EndEffector: self._end_effector, Vision: self._look,
+            RecordTrajectory: self._record, ExecuteTrajectory: self._execute_trajectory, FullBodyMove: self._full_body,
             MasterSlaveMove: self._master_slave,
         }
 
@@ -169,6 +164,11 @@ class NextageSimBackend(RobotBackend):
         self._check_group(group)
         self._replan()
         await self._jobs.stop(group)
+
+    def set_speed_override(self, rate: float) -> None:
+        super().set_speed_override(rate)  # every job's own time runs at the rate, reached within the joints' limits
+        self._jobs.set_override(rate)
+        self._replan()
 
     def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
         names = NEXTAGE_OPEN.joint_names
@@ -430,6 +430,7 @@ class NextageSimBackend(RobotBackend):
             self.motion_observer(job.groups, tuple(self.model.joint_names[int(i)] for i in motion.indices), motion, motion.duration)
 
         checks.note_work(self.model, self._q, self._work, job.groups, motion)
+        job.shape, job.limits = sampled_shape(motion.at, motion.duration), self.model.acceleration[motion.indices]
         self._moving[job] = motion
         self._replan()
 

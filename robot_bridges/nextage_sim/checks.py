@@ -63,7 +63,7 @@ def check_collisions(guard: CollisionGuard, now: float, q: np.ndarray, moving: M
     touch = guard.check(now, job, t, q, moving, work)
     if touch is None:
         return
-    back = min(max(0.0, t - (now - touch.at)), t)
+    back = min(max(0.0, t - (now - touch.at) * job.rate.rate), t)
     q[motion.indices] = motion.at(back)
     raise BridgeError(
         FaultKind.COLLISION,

@@ -10,7 +10,10 @@ finds the first instant two bodies would touch.  Each tick only compares the clo
 instant; the tick that reaches it puts the moving joints back where they touched and the motion
 fails with a ``collision`` fault.  Every motion is checked this way, vision-corrected or not, with
 the sweep's proof between its checks; a tick that finds a job behind or ahead of the plan (it
-cannot, but the check costs nothing) sweeps again from where everything is.
+cannot, but the check costs nothing) sweeps again from where everything is.  Under a speed
+override (robot_bridges/path_rate.py) a job's time runs at its rate: the sweep plays its motion at
+that rate from where it is, and while a rate is still changing every tick sweeps again, so the
+arms' timing against each other is the one they really have.
 
 What is proven: no two bodies overlap by more than :data:`RESOLUTION` at any instant of a motion
 that is not stopped (a touching pair is found at its first check closer than 0, and a pair found
@@ -50,7 +53,7 @@ class CollisionGuard:
     def __init__(self, scene: CollisionScene) -> None:
         self.scene = scene
         self.sweeps = 0  # how many times the running motions were swept (one per change of plan)
-        self._plan: dict[Job, float] | None = None  # job -> clock time its motion's t = 0 falls on
+        self._plan: dict[Job, tuple[float, float, float]] | None = None  # job -> (clock, its time then, its rate) at the sweep
         self._touch: Touch | None = None
 
     def invalidate(self) -> None:
@@ -63,32 +66,52 @@ class CollisionGuard:
         ``q`` is the simulator's joint vector (the model's order, the scene's), ``moving`` every job
         playing a motion and its motion, ``work`` where each arm's current motion starts and ends.
         """
-        if self._plan is None or job not in self._plan or abs(now - self._plan[job] - t) > 1e-6 and not job.paused:
+        if self._plan is None or job not in self._plan or not all(j.rate.settled for j in moving) or self._off_plan(job, now, t):
             self._sweep(now, q, moving, work)
         touch = self._touch
         if touch is None or now < touch.at - _TIME:
             return None
         return touch
 
+    def _off_plan(self, job: Job, now: float, t: float) -> bool:
+        if job.paused or self._plan is None:
+            return False
+        at, progress, rate = self._plan[job]
+        return abs(progress + (now - at) * rate - t) > 1e-6
+
     def _sweep(self, now: float, q: np.ndarray, moving: Mapping[Job, Motion], work: Mapping[str, Sequence[Pose]]) -> None:
         self.sweeps += 1
         q = np.array(q, dtype=float)
-        plan: dict[Job, float] = {}
-        tracks: list[tuple[Motion, float]] = []
+        plan: dict[Job, tuple[float, float, float]] = {}
+        tracks: list[Track] = []
         for job, motion in moving.items():
             progress = job.progress_at(now)
             q[motion.indices] = motion.at(progress)
-            plan[job] = now - progress
-            if not job.paused and progress < motion.duration - _TIME:
-                tracks.append((motion, now - progress))
+            rate = job.rate.rate
+            plan[job] = (now, progress, rate)
+            if not job.paused and rate > 0.0 and progress < motion.duration - _TIME:
+                tracks.append(track(motion, now, progress, rate))
         self._plan = plan
         self._touch = first_touch(self.scene, q, tracks, work, now)
 
 
-def first_touch(scene: CollisionScene, q: np.ndarray, tracks: Sequence[tuple[Motion, float]], work: Mapping[str, Sequence[Pose]], now: float) -> Touch | None:
+def track(motion: Motion, now: float, progress: float, rate: float) -> Track:
+    """``motion`` as the sweep sees it: from clock ``now``, where it is (``progress``), at ``rate``."""
+    if rate == 1.0:  # as planned: its own time is the clock's
+        return Track(motion.indices, now - progress, motion.duration, motion.at, motion.speed_bound)
+
+    def at(u: float) -> np.ndarray:
+        return motion.at(progress + u * rate)
+
+    def speed_bound(start: float = 0.0, end: float = float("inf")) -> np.ndarray:
+        return motion.speed_bound(progress + start * rate, progress + end * rate) * rate
+
+    return Track(motion.indices, now, (motion.duration - progress) / rate, at, speed_bound)
+
+
+def first_touch(scene: CollisionScene, q: np.ndarray, tracks: Sequence[Track], work: Mapping[str, Sequence[Pose]], now: float) -> Touch | None:
     """The first instant from ``now`` at which two bodies touch, each motion started at its clock time."""
-    timed = [Track(m.indices, start, m.duration, m.at, m.speed_bound) for m, start in tracks]
-    for t, contacts in sweep_tracks(scene, q, timed, TOUCHING, RESOLUTION, work, now):
+    for t, contacts in sweep_tracks(scene, q, tracks, TOUCHING, RESOLUTION, work, now):
         if contacts:
             return Touch(t, min(contacts, key=lambda c: c.distance))
     return None

@@ -16,6 +16,7 @@ from core_functions.primitives import Primitive, describe
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.nextage_sim.faults import FaultSpec
+from robot_bridges.path_rate import PathRate, Shape, Vector
 
 DONE = 1e-9  # s: a motion this close to a mark has reached it
 
@@ -26,7 +27,7 @@ Tick = Callable[[float], None]
 class Job:
     """One primitive in execution and the groups it holds; pause/resume/stop act on it."""
 
-    def __init__(self, groups: frozenset[str], primitive: Primitive, loop: asyncio.AbstractEventLoop) -> None:
+    def __init__(self, groups: frozenset[str], primitive: Primitive, loop: asyncio.AbstractEventLoop, override: float = 1.0) -> None:
         self.groups = groups
         self.primitive = primitive
         self.paused_by: set[str] = set()
@@ -39,6 +40,11 @@ class Job:
         self.duration = 0.0
         self.tick: Tick = lambda t: None
         self.teaching = False
+        #: the speed override on the path (robot_bridges/path_rate.py): the job's own time runs at its rate;
+        #: a motion starts at rest, so it starts at the override itself
+        self.rate = PathRate(target=override, rate=override)
+        self.shape: Shape | None = None  # the motion's derivatives, which bound how fast the rate may change
+        self.limits: Vector | None = None  # the moving joints' acceleration limits (rad/s^2)
         self._last = 0.0
 
     @property
@@ -53,12 +59,13 @@ class Job:
         """Where the job's own time will be at clock ``now`` if nothing changes (held while paused)."""
         if self.paused:
             return self.progress
-        return min(self.progress + max(now - self._last, 0.0), self.duration)
+        return min(self.progress + max(now - self._last, 0.0) * self.rate.rate, self.duration)
 
     def advance(self, now: float) -> None:
-        """Count the time since the last call unless paused, never past the horizon."""
+        """Count the time since the last call at the override's rate unless paused, never past the horizon."""
         if not self.paused:
-            self.progress = min(self.progress + (now - self._last), self.horizon)
+            covered = self.rate.advance(now - self._last, self.progress, self.shape, self.limits)
+            self.progress = min(self.progress + covered, self.horizon)
         self._last = now
 
 
@@ -69,6 +76,17 @@ class JobBoard:
         self.clock = clock
         self.control_period = control_period
         self._held: dict[str, Job] = {}
+        self.override = 1.0  # the operator's speed override as a rate in [0, 1]
+
+    def set_override(self, rate: float) -> None:
+        """Every running job (and every later one) plays at ``rate`` of its planned speed, reached
+        within the joints' acceleration limits from where each job is now."""
+        self.override = rate
+        now = self.clock.now()
+        for job in {id(j): j for j in self._held.values()}.values():
+            job.advance(now)  # the time so far at the rate it had
+            job.rate.aim(rate)
+            job.wake.set()
 
     def of(self, group: str) -> Job | None:
         """The job holding ``group``, if any."""
@@ -113,7 +131,7 @@ class JobBoard:
         if busy:
             running = self._held[busy[0]].primitive
             raise BridgeError(FaultKind.BUSY, f"{', '.join(busy)} already executing {describe(running)}")
-        job = Job(groups, primitive, asyncio.get_running_loop())
+        job = Job(groups, primitive, asyncio.get_running_loop(), self.override)
         for g in groups:
             self._held[g] = job
         try:
@@ -182,11 +200,13 @@ class JobBoard:
                     return
                 job.horizon = next(s for s in stops if s > job.horizon + DONE)
                 continue
-            if job.paused:
+            if job.paused or job.rate.holding:  # paused, or held on the path by a 0 % override
                 job.wake.clear()
                 await job.wake.wait()
                 job.advance(clock.now())
                 continue
             tick(job.progress)
-            await clock.sleep(min(self.control_period, job.horizon - job.progress))
+            rate = job.rate.rate
+            ahead = (job.horizon - job.progress) / rate if rate > 0.0 else self.control_period
+            await clock.sleep(min(self.control_period, ahead))
             job.advance(clock.now())
