@@ -171,7 +171,7 @@ def _freeze(draft: ApplicationDraft, checked: list[list[CheckedCall]]) -> tuple[
             call_line, call_col = next(places)
             call_site = call.site
             frozen[call_site.group] = Call(call_site.group, call_site.function, call.params or (), call_site.implicit, file, call_line, call_col)
-        operations.append(Operation(site.id, site.name, line, col, MappingProxyType(frozen), when=site.when))
+        operations.append(Operation(site.id, site.name, line, col, MappingProxyType(frozen), when=site.when, breakpoint=site.breakpoint))
     return tuple(operations)
 
 
@@ -186,7 +186,7 @@ def _freeze_expanded(draft: ApplicationDraft, checked: list[list[CheckedCall]], 
             call_site = call.site
             at = source.at_offset(call_site.at)
             frozen[call_site.group] = Call(call_site.group, call_site.function, call.params or (), call_site.implicit, at.file, at.line, at.col)
-        operations.append(Operation(site.id, site.name, where.line, where.col, MappingProxyType(frozen), where.context, site.when))
+        operations.append(Operation(site.id, site.name, where.line, where.col, MappingProxyType(frozen), where.context, site.when, site.breakpoint))
     return tuple(operations)
 
 

@@ -171,7 +171,7 @@ class Expander:
                 for i, (value, at) in enumerate(zip(call.values, call.param_at))
             )
             calls[group] = CallSite(call.group, call.function, values, tuple(base + at for at in call.param_at), base + call.at, call.names, call.implicit)
-        made = OperationSite(op_id, name, base + site.at, calls, self.when)
+        made = OperationSite(op_id, name, base + site.at, calls, self.when, site.breakpoint)
         first = self.ids.get(op_id)
         if first is None:
             self.ids[op_id] = made

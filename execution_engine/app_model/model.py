@@ -85,6 +85,9 @@ class Operation:
     origin: str = ""
     #: The <if>/<else> it is inside, outermost first: it runs only when every one is met.
     when: tuple[Condition, ...] = ()
+    #: ``break="true"``: the run pauses before it (execution_engine/engine/breakpoints.py); an operation a
+    #: loop makes from it breaks in every iteration.
+    breakpoint: bool = False
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from execution_engine.app_model.safe_xml import XmlDocument
 GROUP_TAGS = frozenset({"left_arm", "right_arm", "torso_head", "arm"})  # as in application.xsd
 #: The elements that hold or bring in operations (as in application.xsd), expanded by app_model.expand.
 STEP_TAGS = frozenset({"for_each", "repeat", "call", "if", "else"})
+BREAK_TRUE = ("true",)  # break="true"; the schema takes only true or false
 #: The variable a loop counts its iterations in (from 1) when it does not name one.
 INDEX = "index"
 
@@ -60,6 +61,7 @@ class OperationSite:
     at: int
     calls: dict[str, CallSite] = field(default_factory=dict)
     when: tuple[Condition, ...] = ()  # the <if>/<else> around it, once expanded (app_model.expand)
+    breakpoint: bool = False  # break="true": the run pauses before it (engine/breakpoints.py)
 
 
 @dataclass(slots=True)
@@ -333,7 +335,7 @@ class ApplicationReader:
 
     def read_operation(self, element: etree._Element, at: int, robot: RobotModel | None) -> OperationSite | None:
         op_id = element.get("id")
-        operation = OperationSite(id=(op_id or "").strip(), name=element.get("name"), at=at)
+        operation = OperationSite(id=(op_id or "").strip(), name=element.get("name"), at=at, breakpoint=element.get("break") in BREAK_TRUE)
         unsafe = None if operation.id.isascii() and operation.id.isprintable() else unsafe_character(operation.id)
         if unsafe is not None:  # consoles, traces and the page show ids: none may reorder or hide what follows it
             self.error(self.source.attribute_offset(at, "id"), f"operation id '{printable(operation.id)}' holds {unsafe}, which makes "
@@ -368,7 +370,7 @@ class ApplicationReader:
         below the group and nothing is skipped; each offset is still checked against the text
         (:meth:`DocumentWalk.at` when it disagrees), as in the general reader."""
         op_id = element.get("id") or ""
-        operation = OperationSite(id=op_id.strip(), name=element.get("name"), at=at)
+        operation = OperationSite(id=op_id.strip(), name=element.get("name"), at=at, breakpoint=element.get("break") in BREAK_TRUE)
         unsafe = None if operation.id.isascii() and operation.id.isprintable() else unsafe_character(operation.id)
         if unsafe is not None:
             self.error(self.source.attribute_offset(at, "id"), f"operation id '{printable(operation.id)}' holds {unsafe}, which makes "

@@ -157,6 +157,8 @@ class Rewriter:
             allowed = sorted(self.info.attributes.get(element, {}))
             close = difflib.get_close_matches(attribute, allowed, n=1)
             hint = f" (did you mean {close[0]}?)" if close else ""
+            if attribute == "break" and element != "operation":  # a breakpoint holds before one operation, not a block of them
+                hint = " (a breakpoint goes on an <operation>: break=\"true\" on the first operation inside)"
             return f"<{element}> has no attribute {attribute}{hint}; it takes: {', '.join(allowed)}"
         value = node.get(attribute) if node is not None else None
         shown = f"={value!r}" if value is not None else ""
