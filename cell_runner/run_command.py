@@ -76,6 +76,8 @@ async def _run(
     elif operators:  # quiet hides progress, never a question the run waits on
         observer.engine_sinks.append(QuestionPrinter(out).on_engine)
     recorder = await start_recording(settings, app, deployment.transport, name, observer)  # checkpoints after the trace
+    if recorder.writer is not None:  # an edit of the paused run: the checkpoint goes on with the new application
+        deployment.engine.remainder.hooks.append(recorder.writer.swapped)
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command)
     loop = asyncio.get_running_loop()
     interactive = console.attach_stdin(loop) if operators else False

@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import IO, Any, TypeVar
 
 from core_functions.printable import printable
+from execution_engine.engine.remainder_swap import decode_answer
 from node_transport import codec, typed
 from node_transport.port import Node
 from node_transport.qos import EVENTS
@@ -38,7 +39,7 @@ M = TypeVar("M")
 
 TRACE_EVENTS = (
     "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag", "run_end",
-    "outcome", "branch",
+    "outcome", "branch", "swap",
 )
 
 
@@ -79,6 +80,10 @@ def engine_record(event: EngineEvent) -> dict[str, Any]:
         record.update({"event": "outcome", "group": event.source, "function": event.command, "outcome": event.answer, "message": event.message})
     elif event.event == "branch":  # an operation its <if>/<else> left out
         record.update({"event": "branch", "tested": event.source, "outcome": event.answer, "message": event.message})
+    elif event.event == "swap":  # a paused run's remainder edited: both applications' digests, from which operation on
+        old, new, frontier = decode_answer(event.answer) or ("", "", -1)
+        record.update({"event": "swap", "from_digest": old, "to_digest": new, "from_operation": frontier + 1,
+                       "file": event.command, "source": event.source, "message": event.message})
     else:
         record.update({
             "event": "operator", "command": event.command, "source": event.source,

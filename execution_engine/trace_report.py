@@ -139,6 +139,9 @@ def _take(summary: TraceSummary, number: int, raw: bytes) -> None:
     elif record["event"] == "operator":
         answer = "accepted" if record.get("accepted") else "refused"
         summary.operator.append(f"{record['t']:.3f} s {record.get('command')} from {record.get('source')}: {answer}")
+    elif record["event"] == "swap":  # a paused run's remainder edited (engine/remainder_swap.py)
+        summary.operator.append(f"{record['t']:.3f} s edit from {record.get('source')}: operations from {record.get('from_operation')} on "
+                                f"swapped for {record.get('file')}'s, application {str(record.get('from_digest'))[:12]} -> {str(record.get('to_digest'))[:12]}")
 
 
 def _problem(summary: TraceSummary, text: str) -> None:

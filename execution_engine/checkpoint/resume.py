@@ -68,6 +68,11 @@ def check_same(store: CheckpointStore, app: Application) -> None:
     if then.get("cell_sha256") != now["cell_sha256"]:
         changed.append(f"the cell model {now['cell_path'] or '(none)'} (was {then.get('cell_path') or '(none)'}, sha256 "
                        f"{then.get('cell_sha256', '?')[:12] or '-'}… then, {now['cell_sha256'][:12] or '-'}… now)")
+    edits = store.swaps()
+    if changed and edits and then.get("application_sha256") != now["application_sha256"]:
+        _, frontier, operation, _, _, path = edits[-1]
+        changed[0] += (f"; the run was edited while paused (after operation {operation or '-'}): it goes on with {path}, "
+                       f"operations from {frontier + 1} on as that file has them -- resume with that file")
     if changed:
         raise CheckpointError(
             f"{store.path}: cannot resume: {' and '.join(changed)} changed since the checkpoint; resuming would skip or repeat "

@@ -8,9 +8,10 @@ same file, so a second crash resumes from where the second run got to.
 What it holds: the application and cell (paths and sha256 digests: a changed file refuses the
 resume), each function start and result by operation and group (a function with a start and no
 result was in flight), what each hand holds after its last completed function, the trajectories
-recorded so far, the error-policy counters, each run with its trace and recording files, and the named
+recorded so far, the error-policy counters, each run with its trace and recording files, the named
 outcome of every function an ``<if>`` tests (a resume takes the same branches; a function that ended
-with an outcome -- a hole not found -- is done, not failed).
+with an outcome -- a hole not found -- is done, not failed), and every edit of a paused run (both
+applications' digests, where it happened; the meta then names the edited application, which a resume needs).
 """
 from __future__ import annotations
 
@@ -33,6 +34,8 @@ CREATE TABLE IF NOT EXISTS trajectories(name TEXT NOT NULL, grp TEXT NOT NULL, o
 CREATE TABLE IF NOT EXISTS counters(key TEXT PRIMARY KEY, value INTEGER NOT NULL);
 CREATE TABLE IF NOT EXISTS outcomes(op_index INTEGER NOT NULL, operation TEXT NOT NULL, grp TEXT NOT NULL, outcome TEXT NOT NULL,
     PRIMARY KEY(op_index, grp));
+CREATE TABLE IF NOT EXISTS swaps(run INTEGER NOT NULL, t REAL NOT NULL, frontier INTEGER NOT NULL, operation TEXT,
+    old_digest TEXT NOT NULL, new_digest TEXT NOT NULL, path TEXT NOT NULL, sha256 TEXT NOT NULL, wall REAL NOT NULL);
 """
 STARTED, SUCCEEDED, SKIPPED = "started", "succeeded", "skipped"
 DONE = (SUCCEEDED, SKIPPED)
@@ -142,6 +145,16 @@ class CheckpointStore:
         with self._change() as db:
             db.execute("INSERT OR REPLACE INTO outcomes VALUES (?, ?, ?, ?)", (op_index, operation, group, outcome))
 
+    def swap(self, t: float, frontier: int, operation: str | None, old_digest: str, new_digest: str, meta: dict[str, str]) -> None:
+        """A paused run's remainder was edited: the row, and the application this checkpoint now belongs to (``meta``,
+        :func:`~execution_engine.checkpoint.resume.app_meta` of the new one): a resume goes on with it, never the old."""
+        with self._change() as db:
+            db.execute("INSERT INTO swaps VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (
+                self.run, t, frontier, operation, old_digest, new_digest, meta["application_path"], meta["application_sha256"], time.time()))
+            db.execute("DELETE FROM meta WHERE key = 'includes_sha256'")
+            for key, value in meta.items():
+                db.execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, value))
+
     def count(self, counters: dict[str, int]) -> None:
         """Add to the error-policy counters (an operator command, say)."""
         with self._change() as db:
@@ -169,6 +182,14 @@ class CheckpointStore:
         except sqlite3.OperationalError:  # written before the table existed, opened read-only
             return []
         return [(int(r[0]), str(r[1]), str(r[2]), str(r[3])) for r in rows]
+
+    def swaps(self) -> list[tuple[int, int, str, str, str, str]]:
+        """(run, frontier, operation, old digest, new digest, application path) of every edit of a paused run, oldest first."""
+        try:
+            rows = self._db.execute("SELECT run, frontier, operation, old_digest, new_digest, path FROM swaps ORDER BY wall").fetchall()
+        except sqlite3.OperationalError:  # written before the table existed, opened read-only
+            return []
+        return [(int(r[0]), int(r[1]), str(r[2] or ""), str(r[3]), str(r[4]), str(r[5])) for r in rows]
 
     def hands(self) -> dict[str, str]:
         return dict(self._db.execute("SELECT grp, holds FROM hands").fetchall())

@@ -14,7 +14,9 @@ import sqlite3
 
 from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application, Call
+from execution_engine.checkpoint.resume import app_meta
 from execution_engine.checkpoint.store import STARTED, CheckpointStore
+from execution_engine.engine.remainder_swap import Swap
 from node_transport.wire import EngineEvent, SmStatus
 
 log = logging.getLogger(__name__)
@@ -64,6 +66,13 @@ class CheckpointWriter:
         self._guard(lambda: self.store.function_result(
             index, status.operation or "", status.group, function, attempt, outcome, status.t, holds, trajectory, counters
         ))
+
+    def swapped(self, app: Application, swap: Swap) -> None:
+        """A paused run's remainder was edited (the engine's hook, engine/remainder_swap.py): the checkpoint now belongs
+        to the new application, by its file and digest, and indexes the functions by its operations."""
+        self.app = app
+        self._index = {op.id: i for i, op in enumerate(app.operations)}
+        self._guard(lambda: self.store.swap(swap.t, swap.frontier, swap.operation, swap.old_digest, swap.new_digest, app_meta(app)))
 
     def on_event(self, event: EngineEvent) -> None:
         if event.event == "operator" and event.accepted:

@@ -22,6 +22,7 @@ from __future__ import annotations
 from typing import Any
 
 from core_functions.cell_index import CellIndex
+from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
 from node_transport import codec, typed
 from node_transport.msgs import TFMessage, Time, TransformStamped
@@ -63,6 +64,10 @@ class CellFramesBroadcaster:
         self._cell, self._root = snapshot, robot.world_frame
         self._located.clear()
         self._publish()
+
+    def located(self) -> dict[str, Pose]:
+        """Every frame vision located in this run so far, its measured world pose (a later report wins)."""
+        return {name: pose for located in self._located.values() for name, pose in located.frames.items()}
 
     def _on_located(self, group: str, msg: Any) -> None:
         topic = self.node.resolve(sm_topic(group, "located"))

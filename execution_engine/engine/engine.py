@@ -35,6 +35,7 @@ from execution_engine.engine.faults import verdict
 from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard
 from execution_engine.engine.flags_mode import FlagsMode
 from execution_engine.engine.group_link import GroupLink
+from execution_engine.engine.remainder_swap import Remainder
 from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
 from execution_engine.engine.speed import SpeedOverride
@@ -132,6 +133,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self._results = ResultWaiter(self.clock)  # the operation loop's wait for a result: the links wake it
         self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)  # set_flag / wait_flag (engine/flags.py)
         self.zones = ZoneBoard(node, self.catalog, self._publish_flag)  # interference zones, both modes (engine/zones.py)
+        self.remainder = Remainder(self._publish_event, self._cell_frames.located)  # a paused run's edit (engine/remainder_swap.py)
         self.speed = SpeedOverride(node, self._record, self._publish_status, lambda: self.state)  # on the path, every back end (engine/speed.py)
 
     # ============================================================================ running
@@ -173,7 +175,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
             if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags_mode.py)
                 await self._run_groups(app)
                 report.operations_done = len(app.operations)
-            for index, operation in enumerate(app.operations if app.sync != "flags" else ()):
+            for index, operation in self.remainder.operations(self, resume.index + 1 if resume is not None else 0) if app.sync != "flags" else ():
                 if resume is not None and index < resume.index:
                     report.operations_done = index + 1  # done before the crash
                     continue
@@ -181,6 +183,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
                     operation = await resume.first_operation(self, operation)
                 if not await self._gate():
                     break
+                operation = self.remainder.take(self, index, operation)  # an edit while paused before it may have changed it
                 if not branch_taken(self, operation, report):
                     for group in operation.calls:  # left out: it holds no zone
                         self.zones.ended(operation.id, group)

@@ -58,6 +58,10 @@ class FlagBoard:
     def is_set(self, name: str) -> bool:
         return self._event(name).is_set()
 
+    def names_set(self) -> tuple[str, ...]:
+        """Every flag set so far in this run (an edited remainder is checked with them set)."""
+        return tuple(sorted(name for name, event in self._set.items() if event.is_set()))
+
     def set(self, group: str, name: str, operation: str) -> None:
         self._event(name).set()
         self.publish(group, name, "set", operation)

@@ -79,6 +79,7 @@ class RunReport:
     outcome_details: dict[str, str] = field(default_factory=dict)
     #: Operations an <if>/<else> left out, with the condition that was not met.
     skipped: list[tuple[str, str]] = field(default_factory=list)
+    edits: list[str] = field(default_factory=list)  # each swap of a paused run's remainder (engine/remainder_swap.py), its line
 
     @property
     def total(self) -> float:
@@ -116,6 +117,7 @@ class RunReport:
             made = f" ({iterations[err.operation]})" if err.operation in iterations else ""
             lines.append(f"  error: {err.group} operation {err.operation}{made} {err.function} (attempt {err.attempt}) at {err.t:.2f} s: {err.error}{recovery}")
         lines += self.branch_lines(iterations)
+        lines += [f"  {edit}" for edit in self.edits]
         lines += self._safe_pose_lines()
         for action in self.operator_actions:
             answer = "accepted" if action.accepted else "refused"

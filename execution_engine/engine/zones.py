@@ -95,6 +95,13 @@ class ZoneBoard:
         earlier = {op.id for op in app.operations[:done_before]}
         self._done = {zone: {c for c in calls if c[0] in earlier} for zone, calls in self.order.items()}
 
+    def swap(self, app: Application) -> None:
+        """A paused run's remainder was edited (engine/remainder_swap.py): the new order, the calls done and held kept."""
+        self.order = zone_order(app, self.catalog)
+        self._operations = {op.id for op in app.operations}
+        for zone in self.order:
+            self._done.setdefault(zone, set())
+
     def register(self, request_id: str, operation: str, group: str) -> None:
         """The engine sent request ``request_id`` for call (``operation``, ``group``) of the application
         (the safe pose's stages are not: their motions are let in at once)."""
