@@ -13,8 +13,10 @@ quaternion, a vision measurement).
 
 The engine's lines have ``group`` "engine": ``engine_state`` (``from``, ``to``, ``message``) on
 every change of the engine's state, ``operator`` (``command``, ``source``, ``state`` -- the
-engine state it came in, "alarm" for an answer to an alarm --, ``accepted``, ``answer``) on
-every operator command, and ``error`` (the message of a failed run or an alarm).  The last line
+engine state it came in, "alarm" for an answer to an alarm --, ``accepted``, ``answer``; ``target``,
+the operation a breakpoint or run-to command names) on every operator command, ``breakpoint``
+(``kind`` break / run_to / step, ``groups`` held, ``held``, ``message``; on the held group's lane in
+``sync="flags"``) when the run pauses before an operation, and ``error`` (the message of a failed run or an alarm).  The last line
 of a complete trace is ``run_end`` (``outcome``, ``exit_code``, ``operations_done``,
 ``operations_total``, ``records``); see :class:`TraceWriter` for what survives a crash.  A record of an
 operation a loop or a call made carries ``iteration`` (``for_each hole=drill_3``).
@@ -39,7 +41,7 @@ M = TypeVar("M")
 
 TRACE_EVENTS = (
     "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag", "run_end",
-    "outcome", "branch", "swap",
+    "outcome", "branch", "swap", "breakpoint",
 )
 
 
@@ -84,11 +86,17 @@ def engine_record(event: EngineEvent) -> dict[str, Any]:
         old, new, frontier = decode_answer(event.answer) or ("", "", -1)
         record.update({"event": "swap", "from_digest": old, "to_digest": new, "from_operation": frontier + 1,
                        "file": event.command, "source": event.source, "message": event.message})
+    elif event.event == "breakpoint":  # the run paused before an operation (sync="flags": on the held group's lane)
+        groups = (event.source or "").split()
+        record.update({"event": "breakpoint", "group": groups[0] if len(groups) == 1 else "engine", "kind": event.command,
+                       "groups": groups, "held": event.answer != "passed", "message": event.message})
     else:
         record.update({
             "event": "operator", "command": event.command, "source": event.source,
             "state": event.state, "accepted": event.accepted, "answer": event.answer,
         })
+        if event.message:  # a breakpoint or run-to command: the operation it names
+            record["target"] = event.message
     return record
 
 
@@ -258,6 +266,8 @@ class LivePrinter:
             self._print(event.t, "engine", f"operator {event.command} from {event.source}: {answer} - {event.answer}")
         elif event.event == "flag" and event.source:
             self._print(event.t, event.source, event.message)
+        elif event.event == "breakpoint" and event.source:  # sync="flags": a second group may join a pause already said
+            self._print(event.t, event.source, event.message)
 
     def _print(self, t: float, who: str, text: str) -> None:
         """One line; names and texts from the application and the peers with control and bidi characters escaped."""
@@ -278,7 +288,7 @@ class QuestionPrinter:
         self._asked = ""
 
     def on_engine(self, status: EngineStatus) -> None:
-        if status.state != "alarm":
+        if status.state != "alarm" and not (status.state == "paused" and " before operation " in status.message):  # a breakpoint waits too
             self._asked = ""
             return
         if status.message and status.message != self._asked:

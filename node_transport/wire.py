@@ -201,11 +201,14 @@ class EngineEvent:
     Not latched, unlike :class:`EngineStatus`: these are events for traces and logs, each once.
     """
 
-    event: Literal["state", "operator", "flag", "outcome", "branch", "swap"]  # flag: ``source`` the group, ``command`` the flag or zone, ``answer`` which (flag/zone), ``state`` set/waiting/passed/timeout/stopped
+    event: Literal["state", "operator", "flag", "outcome", "branch", "swap", "breakpoint"]  # flag: ``source`` the group, ``command`` the flag or zone, ``answer`` which (flag/zone), ``state`` set/waiting/passed/timeout/stopped
     # outcome: the named outcome (``answer``) a function (``command``) of ``source`` ended ``operation`` with, an <if> testing it;
     # branch: ``operation`` left out by its <if>/<else> (``source`` the tested group, ``answer`` the outcome it ended with)
     # swap: a paused run's remainder edited (``operation`` the last started, ``command`` the new application's file,
     # ``source`` who, ``answer`` "OLD_DIGEST NEW_DIGEST FRONTIER", engine/remainder_swap.py)
+    # breakpoint: the run paused before ``operation`` (``command`` why: break, run_to or step; ``source`` the groups held
+    # in sync="flags", none in lock-step: all; ``answer`` held, or passed: nobody could continue it); operator commands on
+    # breakpoints (break, unbreak, unbreak_all, run_to) carry the operation they name in ``message`` (engine/breakpoints.py)
     t: float
     state: str  # the engine's state after a state change; the state a command arrived in
     operation: str | None = None

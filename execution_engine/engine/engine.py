@@ -29,7 +29,7 @@ from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.branches import OutcomeBoard, branch_taken, ended_with_outcome
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
-from execution_engine.engine.commands import OperatorCommands
+from execution_engine.engine.breakpoints import BreakpointControl
 from execution_engine.engine.dispatch import ApplicationAborted, Dispatch, ResultWaiter
 from execution_engine.engine.faults import verdict
 from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard
@@ -73,7 +73,7 @@ class ResumePoint(Protocol):
     async def first_operation(self, engine: ExecutionEngine, operation: Operation) -> Operation: ...
 
 
-class ExecutionEngine(OperatorCommands, FlagsMode):
+class ExecutionEngine(BreakpointControl, FlagsMode):  # BreakpointControl extends OperatorCommands
     """One engine node; runs one application at a time."""
 
     def __init__(
@@ -133,8 +133,9 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
         self._results = ResultWaiter(self.clock)  # the operation loop's wait for a result: the links wake it
         self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)  # set_flag / wait_flag (engine/flags.py)
         self.zones = ZoneBoard(node, self.catalog, self._publish_flag)  # interference zones, both modes (engine/zones.py)
-        self.remainder = Remainder(self._publish_event, self._cell_frames.located)  # a paused run's edit (engine/remainder_swap.py)
+        self.breakpoints = self._serve_breakpoints()  # break="true" and the run-time ones (engine/breakpoints.py)
         self.speed = SpeedOverride(node, self._record, self._publish_status, lambda: self.state)  # on the path, every back end (engine/speed.py)
+        self.remainder = Remainder(self._publish_event, self._cell_frames.located)  # a paused run's edit (engine/remainder_swap.py)
 
     # ============================================================================ running
     async def run(self, app: Application, resume: ResumePoint | None = None) -> RunReport:
@@ -181,7 +182,7 @@ class ExecutionEngine(OperatorCommands, FlagsMode):
                     continue
                 if resume is not None and index == resume.index:
                     operation = await resume.first_operation(self, operation)
-                if not await self._gate():
+                if not await self._gate_at(index, operation):  # paused there at a breakpoint (engine/breakpoints.py)
                     break
                 operation = self.remainder.take(self, index, operation)  # an edit while paused before it may have changed it
                 if not branch_taken(self, operation, report):

@@ -47,6 +47,7 @@ class FlagBoard:
         self.waits: list[FlagWait] = []
         self.waiting: dict[str, str] = {}  # group -> "flag X" it waits for now
         self.zones: ZoneWaits | None = None  # the run's zones (their waits are kept in ``waits`` too)
+        self.held: Callable[[], float] = lambda: 0.0  # run time some group was held at a breakpoint (engine/breakpoints.py)
 
     def waiting_for(self, group: str) -> str | None:
         """What ``group`` waits for now: "flag X", "zone Z" or None."""
@@ -77,7 +78,8 @@ class FlagBoard:
         self.publish(group, name, "waiting", operation)
         outcome = "stopped"
         try:
-            outcome = await until(self.clock, event, start + timeout, self.stopped)
+            held = self.held()  # a group held at a breakpoint meanwhile: the operator's time, not the wait's
+            outcome = await until(self.clock, event, lambda: start + timeout + self.held() - held, self.stopped)
             return outcome
         finally:
             self.waiting.pop(group, None)
@@ -131,12 +133,13 @@ STOP_POLL = 0.5
 _EPSILON = 1e-9
 
 
-async def until(clock: Clock, event: asyncio.Event, deadline: float, stopped: Callable[[], bool]) -> str:
-    """Wait for ``event``: "passed", "timeout" at ``deadline`` (run time) or "stopped" when ``stopped()``."""
+async def until(clock: Clock, event: asyncio.Event, deadline: Callable[[], float], stopped: Callable[[], bool]) -> str:
+    """Wait for ``event``: "passed", "timeout" at ``deadline()`` (run time, looked at again on every poll) or
+    "stopped" when ``stopped()``."""
     while not event.is_set():
         if stopped():
             return "stopped"
-        left = deadline - clock.now()
+        left = deadline() - clock.now()
         if left <= _EPSILON:  # float sums never land on a deadline exactly: closer than this is reached
             return "timeout"
         try:

@@ -42,6 +42,19 @@ class OperatorAction:
     state: str  # the engine state the command arrived in ("alarm": an answer to the alarm)
     accepted: bool
     answer: str
+    target: str = ""  # a breakpoint or run-to command: the operation it names (its id)
+
+
+@dataclass(frozen=True)
+class BreakpointHit:
+    """The run paused before an operation (engine/breakpoints.py): a breakpoint, the run-to target or a step's end."""
+
+    t: float
+    operation: str
+    kind: str  # break, run_to, step
+    groups: tuple[str, ...]  # the groups that held there (every group in lock-step)
+    message: str
+    held: bool = True  # False: passed, no operator could have continued the run
 
 
 @dataclass(frozen=True)
@@ -79,6 +92,8 @@ class RunReport:
     outcome_details: dict[str, str] = field(default_factory=dict)
     #: Operations an <if>/<else> left out, with the condition that was not met.
     skipped: list[tuple[str, str]] = field(default_factory=list)
+    #: Every pause before an operation at a breakpoint, a run-to target or a step (engine/breakpoints.py).
+    breakpoints: list[BreakpointHit] = field(default_factory=list)
     edits: list[str] = field(default_factory=list)  # each swap of a paused run's remainder (engine/remainder_swap.py), its line
 
     @property
@@ -119,9 +134,12 @@ class RunReport:
         lines += self.branch_lines(iterations)
         lines += [f"  {edit}" for edit in self.edits]
         lines += self._safe_pose_lines()
+        for hit in self.breakpoints:
+            lines.append(f"  breakpoint at {hit.t:.2f} s: {hit.message}")
         for action in self.operator_actions:
             answer = "accepted" if action.accepted else "refused"
-            lines.append(f"  operator: {action.command} at {action.t:.2f} s from {action.source} (in {action.state}): {answer} - {action.answer}")
+            target = f" {action.target}" if action.target else ""
+            lines.append(f"  operator: {action.command}{target} at {action.t:.2f} s from {action.source} (in {action.state}): {answer} - {action.answer}")
         if not self.finished_cleanly:
             lines.append("  not every group reached Finish")
         return [printable(line) for line in lines]  # ids, names and peers' texts: no control or bidi character reaches the console
