@@ -87,9 +87,9 @@ def new_token() -> str:
     return secrets.token_urlsafe(TOKEN_BYTES)
 
 
-def read_token_file(path: Path) -> str:
+def read_token_file(path: Path, option: str = "--token-file") -> str:
     """The token kept in ``path``: one line of at least 32 URL-safe characters, readable by its owner only."""
-    shown = f"--token-file {path}"
+    shown = f"{option} {path}"
     try:
         info = path.stat()
         if not stat.S_ISREG(info.st_mode):

@@ -147,8 +147,8 @@ class AuditLog:
                 self._file = None
 
     def append(self, who: Who | None, what: str, *, ok: bool = True, answer: str = "", before: str | None = None,
-               after: str | None = None, details: Mapping[str, Any] | None = None) -> dict[str, Any]:
-        """Record one action; returns the entry as written."""
+               after: str | None = None, details: Mapping[str, Any] | None = None, quiet: bool = False) -> dict[str, Any]:
+        """Record one action; returns the entry as written.  ``quiet``: the caller logs it on stderr itself."""
         requester = who or Who("unknown", "", "unknown")
         entry: dict[str, Any] = {
             "when": utc(self.wall()), "who": requester.name or str(requester), "role": requester.role, "kind": requester.kind,
@@ -166,7 +166,8 @@ class AuditLog:
             self.entries.append(entry)
             self._write(entry)
         level = logging.INFO if ok else logging.WARNING
-        log.log(level, "studio audit: %s by %s (%s) at %s%s", what, entry["who"], requester.role, entry["when"], f": {answer}" if answer else "")
+        if not quiet:
+            log.log(level, "studio audit: %s by %s (%s) at %s%s", what, entry["who"], requester.role, entry["when"], f": {answer}" if answer else "")
         return entry
 
     def _write(self, entry: dict[str, Any]) -> None:

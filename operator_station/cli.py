@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 from typing import IO, Any
 
-from cell_runner.output_files import FilePlan, Refused
+from cell_runner.output_files import FilePlan, Output, Refused
 from cell_runner.run_checks import run_files
 from cell_runner.settings import BackendSettings, Outputs, RunSettings
 from core_functions.catalog import Catalog
@@ -30,9 +30,11 @@ from execution_engine.app_model.document import read_document
 from execution_engine.record_reader import NotARecording, OverLimit
 from operator_station.access import Access, AccessError, is_loopback, is_wildcard, read_token_file
 from operator_station.attach import AttachedSession, ros_connect
+from operator_station.audit import DEFAULT_NAME, AuditError, AuditLog, check_audit_file
 from operator_station.feed import Feed
 from operator_station.replay import load_replay
 from operator_station.session import RunSession
+from operator_station.users import read_users_file
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +76,23 @@ def studio_files(args: argparse.Namespace) -> FilePlan:
     return run_files(inputs, trace=args.trace, trajectory_db=args.trajectory_db, extra=dict(args.backend_option or ()), command="studio")
 
 
+def audit_output(args: argparse.Namespace) -> Output:
+    """The audit file: ``--audit``, else ``studio.audit.jsonl`` beside ``--trace`` or in the folder the station starts in."""
+    if getattr(args, "audit", None):
+        return Output("--audit", str(args.audit), "the audit log", DEFAULT_NAME)
+    folder = Path(args.trace).parent if getattr(args, "trace", None) else Path(".")
+    where = "beside --trace" if getattr(args, "trace", None) else "in the station's folder"
+    return Output("--audit", str(folder / DEFAULT_NAME), "the audit log", DEFAULT_NAME, default=where)
+
+
+def read_access(args: argparse.Namespace) -> Access:
+    """Who may use the station: its token (engineer), the operators' token, the users file (AccessError, one line)."""
+    token = read_token_file(Path(args.token_file)) if getattr(args, "token_file", None) else None
+    operator = read_token_file(Path(args.operator_token_file), "--operator-token-file") if getattr(args, "operator_token_file", None) else None
+    users = read_users_file(Path(args.users)) if getattr(args, "users", None) else None
+    return Access.for_address(args.host, token, tuple(getattr(args, "allowed_host", None) or ()), operator, users)
+
+
 class StudioError(Exception):
     """A setting the station cannot work with: one line for the operator."""
 
@@ -112,12 +131,13 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     if args.replay and not Path(args.replay).is_file():
         err.write(f"error: {args.replay}: no such trace file\n")
         return 1
-    if not args.replay:
-        try:  # every run's files, by run's rule: the page's application is checked again at each start
-            studio_files(args).check()
-        except Refused as refusal:
-            err.write(f"error: {refusal}\n")
-            return 2
+    audit_file = audit_output(args)
+    try:  # every run's files, by run's rule (the page's application is checked again at each start), and the audit's
+        plan = studio_files(args) if not args.replay else FilePlan("studio").read(f"the replay {args.replay}", args.replay)
+        plan.write(audit_file).check()
+    except Refused as refusal:
+        err.write(f"error: {refusal}\n")
+        return 2
     if not is_loopback(args.host):
         err.write(f"warning: serving on {args.host}: reachable from the network; every page and script must present the token\n")
     try:  # after the warning: whoever asked for the network learns it even from a typo in the port
@@ -127,9 +147,9 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
         return 2
 
     try:
-        token = read_token_file(Path(args.token_file)) if getattr(args, "token_file", None) else None
-        access = Access.for_address(args.host, token, tuple(getattr(args, "allowed_host", None) or ()))
-    except AccessError as error:
+        access = read_access(args)
+        check_audit_file(Path(audit_file.path), f"--audit {audit_file.path}")  # appended to only if it is one
+    except (AccessError, AuditError) as error:
         err.write(f"error: {error}\n")
         return 2
     try:
@@ -143,6 +163,11 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     except OSError as error:
         err.write(f"error: {error}\n")
         return 1
+    try:  # last: a refused start leaves no file behind
+        station.audit_log = AuditLog.open(Path(audit_file.path), f"--audit {audit_file.path}", station.wall)  # every action, appended
+    except AuditError as error:
+        err.write(f"error: {error}\n")
+        return 2
     from operator_station.server import create_app  # optional: starlette, pip extra 'studio'
     from operator_station.serving import StationServer, server_config  # optional: uvicorn, pip extra 'studio'
 
@@ -152,11 +177,16 @@ def cmd_studio(args: argparse.Namespace, catalog: Catalog, out: IO[str] = sys.st
     out.write(f"operator station on {_url(args.host, args.port)} ({what}); Ctrl-C ends it\n")
     if access.token_needed:
         page = _url(socket.gethostname() if is_wildcard(args.host) else args.host, args.port)
-        if token is None:
-            out.write(f"open {page}?token={access.token} (a token made for this start; keep one with --token-file)\n")
+        if access.users:
+            out.write(f"open {page} and log in ({len(access.users)} user(s) of {args.users}); scripts send a token\n")
+        elif not getattr(args, "token_file", None):
+            out.write(f"open {page}?token={access.token} (a token made for this start, the engineer's; keep one with --token-file)\n")
         else:
-            out.write(f"open {page}?token=TOKEN with the token of {args.token_file}\n")
+            out.write(f"open {page}?token=TOKEN with the token of {args.token_file} (engineer)\n")
+        if getattr(args, "operator_token_file", None):
+            out.write(f"operators open {page}?token=TOKEN with the token of {args.operator_token_file}\n")
         out.write(f"pages may reach it as: {access.shown_hosts()} (others with --allowed-host NAME)\n")
+    out.write(f"audit log: {audit_file.path} (appended)\n")
     out.flush()
     try:
         asyncio.run(_serve(server, station))

@@ -68,6 +68,16 @@ def requires(role: str, action: str) -> Callable[[Endpoint], Endpoint]:
     return declare
 
 
+def public(action: str) -> Callable[[Endpoint], Endpoint]:
+    """Declare a route open to anyone the guard let through, with no role (logging in: there is no session yet)."""
+
+    def declare(endpoint: Endpoint) -> Endpoint:
+        setattr(endpoint, DECLARED, ("anyone", action))
+        return endpoint
+
+    return declare
+
+
 def declared(endpoint: Any) -> tuple[str, str] | None:
     """The (role, action) an endpoint declares, None if it declares none."""
     found = getattr(endpoint, DECLARED, None)

@@ -22,6 +22,12 @@ def add_parser(sub: Any) -> None:
     studio.add_argument("--host", default="127.0.0.1", help="address to serve on (default loopback; anything else is reachable from the network and needs the token)")
     studio.add_argument("--token-file", dest="token_file", metavar="FILE",
                         help="the token pages must present, kept in FILE (one line, mode 600); default: made at start and printed when not on loopback")
+    studio.add_argument("--operator-token-file", dest="operator_token_file", metavar="FILE",
+                        help="a second token, of the operator role (run, pause, step, speed, alarms; no edit, save or teach), kept in FILE (one line, mode 600)")
+    studio.add_argument("--users", metavar="FILE",
+                        help="users who log in on the page: lines name:role:hash, role operator or engineer (make one: python -m operator_station.users NAME ROLE); mode 600")
+    studio.add_argument("--audit", metavar="FILE",
+                        help="the audit log, appended to (JSON lines: who, role, when, what, digests); default studio.audit.jsonl beside --trace or in the current folder")
     studio.add_argument("--allowed-host", dest="allowed_host", action="append", default=[], metavar="NAME",
                         help="a host name pages reach the station by, besides its address, this computer's name and localhost (repeatable)")
     studio.add_argument("--replay", metavar="RUN.mcap|TRACE.jsonl",
