@@ -40,6 +40,8 @@ from node_transport.qos import LATCHED, SENSOR
 from node_transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
 from operator_station.feed import Feed
+from operator_station.scene3d import begin_run
+from operator_station.scene3d_live import observe as observe_scene
 from robot_bridges import registry
 from robot_bridges.backend import BackendOptions
 
@@ -86,6 +88,7 @@ class RunSession:
         self._ready.clear()
         self.report = None
         self.feed.begin("live", app.name, list(app.robot.group_names), operations=operations)
+        begin_run(self.feed, app)  # the 3D view shows its robot and cell, also if the dry run refuses it
         self._thread = threading.Thread(target=self._main, args=(app,), name="studio run", daemon=True)
         self._thread.start()
         return True, "starting"
@@ -247,6 +250,7 @@ def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter
     """Subscribe ``node`` to what the page shows of a cell: every record through ``writers`` (the trace file
     first, as run does, then the page's feed), the engine's status, each machine's structure, joint positions."""
     observer = RunObserver(node, robot.group_names)
+    observe_scene(node, robot, feed)  # the 3D view: goals, located frames, the cell
     for writer in writers:
         observer.sinks.append(writer.on_status)
         observer.engine_sinks.append(writer.on_engine)

@@ -1,0 +1,344 @@
+// The 3D view: the robot from the URDF its bridge publishes, moving with the joint states, the cell from the
+// cell model, frames on demand, each group's current goal and path, the frames vision located beside the
+// nominal ones, and the dry run's findings placed on the robot (a collision's two bodies highlighted, an
+// unreachable target marked).  Everything is drawn at the store's cursor (Store.now()) from the store's joint
+// samples and records and the scene's goals (GET /api/scene3d/events), so the time slider of a replay moves it
+// as it moves the other views.  The scene is kept light: one geometry and material per kind of thing, shared;
+// objects made once and moved; rendering only when something changed, in requestAnimationFrame.
+"use strict";
+
+const View3D = (() => {
+  const {THREE} = Vendor3D;
+  const Geo = View3DGeometry;
+  const $ = (id) => document.getElementById(id);
+  const state = {
+    scene: null, run: -1, robots: [], cell: null, events: [], eventRun: -1, fetching: false, fetchAgain: false,
+    findings: [], highlighted: [], showFrames: false, tcpFrames: [], dirty: true, visible: false, ready: false,
+    ends: {}, recorded: null, recordedRun: -1, tcpCache: new Map(), frames: [], renderMs: [], intervals: [], lastFrame: null, frameCount: 0, error: null,
+  };
+  let renderer = null, camera = null, controls = null, world = null, robotsRoot = null, cellRoot = null, marks = null, frameRoot = null;
+
+  // ------------------------------------------------------------------ set-up
+  function init() {
+    const box = $("view3d-canvas");
+    try {
+      renderer = new THREE.WebGLRenderer({antialias: true, preserveDrawingBuffer: true});
+    } catch (error) {
+      state.error = `the 3D view needs WebGL: ${error.message}`;
+      box.textContent = state.error;
+      return;
+    }
+    renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    box.append(renderer.domElement);
+    world = new THREE.Scene();
+    world.background = new THREE.Color(0xf4f5f7);
+    camera = new THREE.PerspectiveCamera(45, 1, 0.01, 50);
+    camera.up.set(0, 0, 1);  // the cell's world: z up (REP 103)
+    camera.position.set(1.7, -1.3, 1.1);
+    controls = new Vendor3D.OrbitControls(camera, renderer.domElement);
+    controls.target.set(0.3, 0, 0.1);
+    controls.addEventListener("change", () => { state.dirty = true; });
+    world.add(new THREE.HemisphereLight(0xffffff, 0x8d8d99, 2.2));
+    const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+    sun.position.set(1, -2, 3);
+    world.add(sun);
+    const grid = new THREE.GridHelper(3, 30, 0xb0b4bb, 0xd5d8dd);
+    grid.rotation.x = Math.PI / 2;
+    grid.name = "floor grid";
+    world.add(grid);
+    robotsRoot = new THREE.Group(); cellRoot = new THREE.Group(); marks = new THREE.Group(); frameRoot = new THREE.Group();
+    frameRoot.visible = false;
+    world.add(robotsRoot, cellRoot, marks, frameRoot);
+    Geo.init(marks);
+    new ResizeObserver(resize).observe(box);
+    $("view3d-frames").addEventListener("change", (e) => {
+      state.showFrames = frameRoot.visible = e.target.checked;
+      for (const f of state.tcpFrames) f.visible = state.showFrames;
+      state.dirty = true;
+    });
+    $("view3d-fit").addEventListener("click", fit);
+    $("view3d-slider").addEventListener("input", (e) => Store.setCursor(Number(e.target.value)));
+    $("view3d-live").addEventListener("click", () => Store.setCursor(null));
+    requestAnimationFrame(tick);
+  }
+
+  function resize() {
+    const box = $("view3d-canvas");
+    const w = box.clientWidth, h = box.clientHeight;
+    if (!renderer || !w || !h) return;
+    renderer.setSize(w, h, false);
+    renderer.domElement.style.width = "100%";
+    renderer.domElement.style.height = "100%";
+    camera.aspect = w / h;
+    camera.updateProjectionMatrix();
+    state.dirty = true;
+  }
+
+  // Frame the robots and the cell: the camera in front of the robot, to its right and above, looking at the
+  // middle between the robot and the cell's things (where the work is).
+  function fit() {
+    const robots = new THREE.Box3().setFromObject(robotsRoot), cell = new THREE.Box3().setFromObject(cellRoot);
+    const bounds = robots.clone().union(cell);
+    if (bounds.isEmpty()) return;
+    const centre = bounds.getCenter(new THREE.Vector3());
+    if (!cell.isEmpty()) centre.lerp(cell.getCenter(new THREE.Vector3()), 0.6);
+    const size = Math.max(0.4, bounds.getSize(new THREE.Vector3()).length());
+    controls.target.copy(centre);
+    camera.position.copy(centre).add(new THREE.Vector3(0.95, -0.62, 0.62).normalize().multiplyScalar(0.8 * size));
+    controls.update();
+    const floor = world.getObjectByName("floor grid");
+    floor.position.set(centre.x, centre.y, bounds.min.z);  // the floor under the lowest solid, not through the cell
+    state.dirty = true;
+  }
+
+  // ------------------------------------------------------------------ the scene of the run
+  async function loadScene() {
+    let answer;
+    try { answer = await Store.get("/api/scene3d"); } catch (e) { return; }
+    if (!answer || !answer.ok) return;
+    state.scene = answer;
+    if (answer.run !== state.run) {
+      state.run = answer.run;
+      buildRobots(answer.robots);
+      state.cell = answer.cell;
+      buildCell(answer.cell);
+      state.events = []; state.eventRun = answer.run; state.tcpCache.clear();
+      fit();
+    } else if (answer.cell && (!state.cell || JSON.stringify(answer.cell) !== JSON.stringify(state.cell))) {
+      state.cell = answer.cell;
+      buildCell(answer.cell);
+    }
+    if (answer.recorded_joints && (!state.recorded || state.recordedRun !== answer.run)) await loadJoints(answer.run);
+    else if (!answer.recorded_joints) state.recorded = null;
+    state.findings = answer.findings || [];
+    $("view3d-notes").textContent = (answer.notes || []).join(" · ");
+    state.ready = true;
+    await loadEvents();
+    update();
+  }
+
+  async function loadJoints(run) {
+    const recorded = {names: [], samples: []};
+    for (let guard = 0; guard < 10000; guard++) {
+      const answer = await Store.get(`/api/scene3d/joints?from=${recorded.samples.length}`);
+      if (!answer || !answer.ok || answer.run !== run) return;
+      recorded.names = answer.names;
+      for (const row of answer.samples) recorded.samples.push(row);
+      if (recorded.samples.length >= answer.total || !answer.samples.length) break;
+    }
+    state.recorded = recorded; state.recordedRun = run;
+  }
+
+  async function loadEvents() {
+    if (state.fetching) { state.fetchAgain = true; return; }
+    state.fetching = true;
+    try {
+      for (let guard = 0; guard < 1000; guard++) {  // a batch at a time, until the page has them all
+        const answer = await Store.get(`/api/scene3d/events?from=${state.events.length}`);
+        if (!answer || !answer.ok) break;
+        if (answer.run !== state.eventRun) { state.events = []; state.eventRun = answer.run; state.tcpCache.clear(); if (answer.from !== 0) continue; }
+        for (const e of answer.events) state.events.push(e);
+        if (state.events.length >= answer.total || !answer.events.length) break;
+      }
+    } finally {
+      state.fetching = false;
+    }
+    if (state.fetchAgain) { state.fetchAgain = false; await loadEvents(); }
+  }
+
+  function buildRobots(robots) {
+    for (const r of state.robots) robotsRoot.remove(r.holder);
+    state.robots = [];
+    const loader = new Vendor3D.URDFLoader();
+    loader.parseCollision = false;
+    for (const info of robots || []) {
+      const model = loader.parse(info.urdf);
+      const holder = new THREE.Group();
+      Geo.place(holder, info.base);
+      holder.add(model);
+      holder.name = `robot ${info.name}`;
+      robotsRoot.add(holder);
+      const materials = new Map();
+      model.traverse((node) => {
+        if (!node.isMesh) return;
+        const colour = node.material && node.material.color ? node.material.color.getHex() : 0xbfc4cc;
+        if (!materials.has(colour)) materials.set(colour, new THREE.MeshStandardMaterial({color: colour, roughness: 0.6, metalness: 0.1}));
+        if (node.material) node.material.dispose();
+        node.material = materials.get(colour);  // one material per colour, shared by every link of that colour
+        node.userData.own = node.material;
+      });
+      state.robots.push({info, model, holder});
+    }
+    state.tcpFrames = Geo.robotFrames(frameRoot, state.robots);
+    state.dirty = true;
+  }
+
+  function buildCell(cell) {
+    Geo.buildCell(cellRoot, frameRoot, cell, state.robots);
+    state.dirty = true;
+  }
+
+  // ------------------------------------------------------------------ at the cursor
+  // The joints at ``t``: a replayed recording's joint states (every one it has), else the feed's samples.
+  const joints = () => state.recorded || Store.joints;
+  function sampleAt(t) {
+    const samples = joints().samples;
+    if (!samples.length) return null;
+    if (Store.cursor === null && !state.recorded) return samples[samples.length - 1];
+    let lo = 0, hi = samples.length - 1;
+    if (samples[0][0] > t) return null;
+    while (lo < hi) { const mid = (lo + hi + 1) >> 1; if (samples[mid][0] <= t) lo = mid; else hi = mid - 1; }
+    return samples[lo];
+  }
+
+  // The joints the records report (a replayed trace has no joint states: the motions' results).
+  function setJoints(names, values) {
+    for (const r of state.robots) {
+      const joints = r.model.joints;
+      for (let i = 0; i < names.length; i++) {
+        const joint = joints[names[i]];
+        const value = values[i];
+        if (joint && typeof value === "number" && value === value && joint.jointType !== "fixed") joint.setJointValue(value);
+      }
+    }
+  }
+
+  function noteEnds(records) {
+    for (const r of records) if (r.event === "primitive_end" && typeof r.group === "string") (state.ends[r.group] = state.ends[r.group] || []).push(r.t);
+  }
+
+  // Each group's goal at ``t``: its latest goal sent by then whose primitive has not ended by then.
+  function goalsAt(t) {
+    const latest = {};
+    for (let i = 0; i < state.events.length; i++) {
+      const e = state.events[i];
+      if (e.t > t) break;
+      if (e.event === "goal") latest[e.group] = i;
+    }
+    const out = [];
+    for (const [group, i] of Object.entries(latest)) {
+      const goal = state.events[i];
+      // the primitive before it may end at the very instant the goal is sent: only a later end ends this one
+      if (!(state.ends[group] || []).some((x) => x > goal.t && x <= t)) out.push([i, goal]);
+    }
+    return out;
+  }
+
+  function locatedAt(t) {
+    const byGroup = {};
+    for (const e of state.events) { if (e.t > t) break; if (e.event === "located") byGroup[e.group] = e.frames; }
+    const out = {};
+    for (const frames of Object.values(byGroup)) Object.assign(out, frames);
+    return out;
+  }
+
+  function activeFindings(t) {
+    return state.findings.filter((f) => f.source === "dry run" || (f.t !== null && f.t <= t));
+  }
+
+  function update() {
+    if (!world || !state.ready) return;
+    const t = Store.now();
+    const sample = sampleAt(t);
+    if (sample) setJoints(joints().names, sample.slice(1));
+    for (const r of state.robots) r.holder.updateMatrixWorld(true);
+    const goals = goalsAt(t).map(([i, goal]) => [goal, Geo.goalPath(i, goal, state, sampleAt(goal.t))]);
+    Geo.drawGoals(goals, state);
+    Geo.drawLocated(locatedAt(t), state.cell);
+    const found = activeFindings(t);
+    state.highlighted = Geo.highlight(found, state.robots, cellRoot);
+    Geo.drawFindings(found);
+    $("view3d-findings").replaceChildren(...found.map((f) => Object.assign(document.createElement("div"), {className: "finding", textContent: `${f.source === "dry run" ? "dry run" : "run"}${f.t !== null ? ` at ${f.t.toFixed(2)} s` : ""}: ${f.kind}: ${f.group} ${f.function}${f.bodies ? ` -- ${f.bodies.map((b) => b.label).join(" and ")}` : f.label ? ` -- ${f.label}` : ""}`})));
+    const slider = $("view3d-slider");
+    const samples = joints().samples;
+    const end = Math.max(Store.records.length ? Store.records[Store.records.length - 1].t : 0, samples.length ? samples[samples.length - 1][0] : 0);
+    slider.max = String(end);
+    if (Store.cursor !== null) slider.value = String(Store.cursor); else slider.value = String(end);
+    $("view3d-time").textContent = `${Store.cursor === null ? "live" : "replay"} ${t.toFixed(2)} s`;
+    state.dirty = true;
+  }
+
+  // ------------------------------------------------------------------ the frame loop
+  function tick(now) {
+    requestAnimationFrame(tick);
+    if (!state.visible || !renderer) { state.lastFrame = null; return; }
+    if (state.lastFrame !== null) { state.intervals.push(now - state.lastFrame); if (state.intervals.length > 240) state.intervals.shift(); }
+    state.lastFrame = now;
+    if (!state.dirty) return;
+    state.dirty = false;
+    const start = performance.now();
+    renderer.render(world, camera);
+    state.renderMs.push(performance.now() - start);
+    if (state.renderMs.length > 240) state.renderMs.shift();
+    state.frameCount++;
+    if (state.frameCount % 30 === 0) { const s = stats(); $("view3d-fps").textContent = `${s.render_ms_mean.toFixed(1)} ms/frame`; }
+  }
+
+  function stats() {
+    const mean = (xs) => xs.length ? xs.reduce((a, x) => a + x, 0) / xs.length : 0;
+    const max = (xs) => xs.length ? Math.max(...xs) : 0;
+    return {frames: state.frameCount, render_ms_mean: mean(state.renderMs), render_ms_max: max(state.renderMs),
+            interval_ms_mean: mean(state.intervals), fps: state.intervals.length ? 1000 / mean(state.intervals) : 0};
+  }
+
+  // Render ``n`` frames back to back (every frame redrawn, the camera turning) and measure them: what the bench reads.
+  function measure(n) {
+    return new Promise((resolve) => {
+      state.renderMs = []; state.intervals = [];
+      let left = n;
+      const angle = 2 * Math.PI / Math.max(1, n);
+      const step = () => {
+        camera.position.applyAxisAngle(new THREE.Vector3(0, 0, 1), angle);
+        camera.lookAt(controls.target);
+        state.dirty = true;
+        if (--left > 0) requestAnimationFrame(step); else requestAnimationFrame(() => resolve(stats()));
+      };
+      requestAnimationFrame(step);
+    });
+  }
+
+  // ------------------------------------------------------------------ wiring
+  let pending = null;
+  const soon = () => { if (pending === null) pending = requestAnimationFrame(() => { pending = null; update(); }); };
+  let reload = null;
+  const reloadSoon = () => { if (reload === null) reload = setTimeout(() => { reload = null; loadScene(); }, 200); };
+  let lastMessages = "";
+  Store.on("snapshot", () => { state.ends = {}; state.run = -1; reloadSoon(); });
+  Store.on("records", (records) => {
+    noteEnds(records);
+    if (records.some((r) => r.event === "error")) reloadSoon();
+    loadEvents().then(soon);
+  });
+  Store.on("state", (snap) => {
+    const messages = JSON.stringify((snap && snap.messages) || []);
+    if (messages !== lastMessages) { lastMessages = messages; reloadSoon(); }
+  });
+  Store.on("joints", soon);
+  Store.on("cursor", soon);
+  Store.on("view", (view) => { state.visible = view === "view3d"; if (state.visible) { resize(); state.dirty = true; } });
+  document.addEventListener("DOMContentLoaded", () => { init(); reloadSoon(); });
+
+  // What the tests and the benchmark read of the view.
+  const api = {
+    ready: () => state.ready && state.robots.length > 0,
+    run: () => state.run,
+    jointValues: () => {
+      const out = {};
+      for (const r of state.robots) for (const [name, joint] of Object.entries(r.model.joints)) if (joint.jointType !== "fixed") out[name] = joint.angle;
+      return out;
+    },
+    linkPosition: (name) => Geo.linkPosition(state.robots, name),
+    tcp: (group) => Geo.tcpPose(state.robots, group),
+    highlighted: () => state.highlighted.slice(),
+    findings: () => activeFindings(Store.now()).map((f) => ({kind: f.kind, source: f.source, t: f.t, bodies: (f.bodies || []).map((b) => b.name), target: f.target || null})),
+    goals: () => goalsAt(Store.now()).map(([, g]) => ({group: g.group, kind: g.kind, label: g.label || "", t: g.t})),
+    located: () => Object.keys(locatedAt(Store.now())),
+    cellObjects: () => Geo.cellNames(),
+    frameStats: stats,
+    measure,
+    error: () => state.error,
+    update,
+  };
+  window.view3d = api;
+  return api;
+})();

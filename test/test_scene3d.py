@@ -1,0 +1,290 @@
+"""The 3D view's scene, without a browser: the robots (the URDFs the bridges publish, placed as the cell says), the
+cell's frames in the world, the goals of the primitives the machines send, the dry run's and a run's findings placed
+(the two bodies of a collision, an unreachable target), the scene a recording holds, and the routes that serve them.
+
+The browser half (the page draws this and moves it with the joint states and the slider) is test_studio_3d.py.
+"""
+from __future__ import annotations
+
+import io
+import json
+import math
+import re
+import shutil
+from pathlib import Path
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from lxml import etree
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
+
+from app_functions.registry import full_catalog  # noqa: E402
+from cell_runner.cli import main  # noqa: E402
+from core_functions.cell_robots import cell_robot_model  # noqa: E402
+from core_functions.geometry import Pose  # noqa: E402
+from core_functions.primitives import EndEffector, ExecuteTrajectory, MoveCartesian, MoveJoints  # noqa: E402
+from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
+from execution_engine.app_model import load_cell  # noqa: E402
+from execution_engine.record_reader import NotARecording  # noqa: E402
+from operator_station.cli import build_station  # noqa: E402
+from operator_station.scene3d import goal_json, head_scene, robot_views, scene_log  # noqa: E402
+from operator_station.scene3d_findings import collision_bodies, dry_run_finding, run_finding  # noqa: E402
+from operator_station.scene3d_recording import read_scene  # noqa: E402
+from robot_bridges.kuka_rsi.backend import URDF_PATH as KUKA_URDF  # noqa: E402
+from robot_bridges.nextage_sim.model import URDF_PATH as NEXTAGE_URDF  # noqa: E402
+from test_studio_server import client_for, station_args  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+APPS = ROOT / "apps_xml"
+LOCATION = re.compile(r"^(?P<file>.+):(?P<line>\d+):\d+: operation ")
+
+
+# ------------------------------------------------------------------ the applications the 3D tests use
+def cli(*args: str) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    code = main(list(args), out, err)
+    return code, out.getvalue(), err.getvalue()
+
+
+def demonstrator(folder: Path, name: str, operations: int, edit: dict[str, str] | None = None) -> Path:
+    """The rivet demonstrator (its cell beside it) cut to its first ``operations`` operations, with ``edit``'s
+    texts replaced: a working folder as an integrator's."""
+    if not (folder / "cells").exists():
+        shutil.copytree(APPS / "cells", folder / "cells")
+    text = (APPS / "rivet_installation.xml").read_text(encoding="utf-8")
+    for old, new in (edit or {}).items():
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    root = etree.fromstring(text.encode())
+    for extra in root.findall("operation")[operations:]:
+        root.remove(extra)
+    root.set("name", name)
+    path = folder / f"{name}.xml"
+    path.write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8"))
+    return path
+
+
+#: The demonstrator's third operation with the left arm sent to the hole the right arm inserts its rivet in: the dry
+#: run finds the two hands meet there (the zone lets the right arm in once the left arm's call has ended, the left
+#: arm still at the hole).
+ARMS_MEET = {"""  <operation id='3' name='insert 1'>
+    <left_arm>
+      <function name='wait'></function>
+    </left_arm>""": """  <operation id='3' name='insert 1'>
+    <left_arm>
+      <function name='approach'>
+        <params>
+          <param value='drill_1'></param>
+        </params>
+      </function>
+    </left_arm>"""}
+
+
+def arms_meet(folder: Path) -> Path:
+    return demonstrator(folder, "rivet_arms_meet", 3, ARMS_MEET)
+
+
+def record(folder: Path, app: Path) -> Path:
+    """``run --speed max --record`` of ``app``: the recording."""
+    recording = folder / f"{app.stem}.mcap"
+    code, _, err = cli("run", str(app), "--speed", "max", "--record", str(recording), "-q")
+    assert code == 0, err
+    return recording
+
+
+# ------------------------------------------------------------------ robots and cell
+def urdf_joints(text: str) -> set[str]:
+    return {j.get("name") for j in etree.fromstring(text.encode()).iter("joint") if j.get("type") != "fixed"}
+
+
+def test_the_robot_is_the_urdf_its_bridge_publishes() -> None:
+    views, notes = robot_views(NEXTAGE_OPEN)
+    assert notes == [] and len(views) == 1
+    view = views[0]
+    assert view.urdf == NEXTAGE_URDF.read_text(encoding="utf-8") and view.base == Pose() and view.prefix == ""
+    assert set(view.joints) == urdf_joints(view.urdf)  # the joint states name the URDF's joints: the view sets them by name
+    assert view.tcps["left_arm"][0] == "LARM_JOINT5_Link" and view.tcps["right_arm"][0] == "RARM_JOINT5_Link"
+
+
+def test_a_mixed_cell_places_each_robot_where_its_robot_element_says() -> None:
+    cell = load_cell(APPS / "examples" / "cells" / "mixed_cell.xml")
+    views, notes = robot_views(cell_robot_model(cell.name, cell.robots))
+    assert notes == [] and [v.name for v in views] == ["feeder", "assembler"]
+    feeder, assembler = views
+    assert feeder.urdf == KUKA_URDF.read_text(encoding="utf-8") and feeder.prefix == "feeder/"
+    assert feeder.base.position == pytest.approx((0.35, -0.90, -0.10)) and feeder.base.rpy() == pytest.approx((0, 0, 1.5707963))
+    assert assembler.base == Pose() and assembler.urdf == NEXTAGE_URDF.read_text(encoding="utf-8")
+    for view in views:
+        assert set(view.joints) == urdf_joints(view.urdf)
+
+
+def test_the_cell_is_drawn_in_the_world_frame() -> None:
+    path = APPS / "cells" / "rivet_cell.xml"
+    robot, cell, notes = head_scene("nextage", path)
+    model = load_cell(path)
+    assert notes == [] and robot is NEXTAGE_OPEN and cell is not None
+    frames = {f["name"]: f for f in cell["frames"]}
+    assert set(frames) == set(model.frames) | set(model.zones)
+    for name in model.frames:
+        world = model.pose(name)
+        assert frames[name]["pose"] == pytest.approx([world.x, world.y, world.z, world.qx, world.qy, world.qz, world.qw])
+        assert frames[name]["kind"] == model.frame(name).kind
+    assert [float(x) for x in frames["part"]["attributes"]["box"].split()] == [0.12, 0.20, 0.01] and frames["drill_1"]["attributes"]["diameter"] == "0.0048"
+    assert frames["hands_left"]["kind"] == "zone" and [float(x) for x in frames["hands_left"]["attributes"]["size"].split()] == [0.16, 0.12, 0.14]
+    assert frames["hands_left"]["pose"][:3] == pytest.approx([0.34, 0.02, 0.05])  # the zone's centre, in the part
+
+
+def test_a_cell_that_cannot_be_read_is_said_in_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad_cell.xml"
+    bad.write_text("<cell name='x'><frame name='a' parent='nowhere'/></cell>", encoding="utf-8")
+    robot, cell, notes = head_scene("nextage", bad)
+    assert robot is NEXTAGE_OPEN and cell is None and len(notes) == 1 and "\n" not in notes[0] and "bad_cell.xml" in notes[0]
+
+
+# ------------------------------------------------------------------ goals
+def test_each_moving_primitive_says_its_goal() -> None:
+    target = Pose.from_xyz_rpy(0.3, 0.1, 0.05, math.pi, 0, 0)
+    assert goal_json(MoveCartesian(target, "linear", "drill_1 clearance")) == {
+        "kind": "pose", "target": [target.x, target.y, target.z, target.qx, target.qy, target.qz, target.qw], "label": "drill_1 clearance", "interpolation": "linear"}
+    assert goal_json(MoveJoints((0.1, 0.2), ("A", "B"), relative=True)) == {"kind": "joints", "names": ["A", "B"], "positions": [0.1, 0.2], "relative": True}
+    points = tuple((k * 0.001, -k * 0.001) for k in range(1000))
+    goal = goal_json(ExecuteTrajectory("wave", ("A", "B"), points, tuple(k * 0.01 for k in range(1000))))
+    assert goal is not None and len(goal["points"]) == 200 and goal["points"][0] == [0.0, 0.0] and goal["points"][-1] == list(points[-1])
+    assert goal_json(EndEffector("gripper_open")) is None  # a hand opening moves no arm
+
+
+# ------------------------------------------------------------------ findings
+def test_the_dry_runs_collision_of_two_arms_names_both_hands(tmp_path: Path) -> None:
+    code, _, err = cli("validate", "--simulate", str(arms_meet(tmp_path)))
+    lines = [line for line in err.splitlines() if LOCATION.match(line)]
+    assert code == 1 and len(lines) == 2, err
+    for line in lines:
+        finding = dry_run_finding(line)
+        assert finding is not None and finding["kind"] == "collision" and finding["source"] == "dry run"
+        assert [b["name"] for b in finding["bodies"]] == ["LARM_JOINT5_Link", "RARM_JOINT5_Link"]
+        assert [b["owner"] for b in finding["bodies"]] == ["left_arm", "right_arm"]
+        assert finding["operation"] == "3" and finding["line"] == int(LOCATION.match(line).group("line"))  # type: ignore[union-attr]
+        assert finding["t"] == pytest.approx(float(re.search(r"\(at (\d+\.\d+) s\)$", line).group(1)))  # type: ignore[union-attr]
+
+
+def test_an_unreachable_target_is_placed_where_the_dry_run_says(tmp_path: Path) -> None:
+    shutil.copytree(APPS / "cells", tmp_path / "cells")
+    cell = tmp_path / "cells" / "rivet_cell.xml"
+    cell.write_text(cell.read_text(encoding="utf-8").replace('name="drill_4" xyz="0.0 -0.06 0.0"', 'name="drill_4" xyz="0.0 0.5 0.0"'), encoding="utf-8")
+    app = tmp_path / "far.xml"
+    app.write_text("<application name='far' robot='nextage' cell='cells/rivet_cell.xml'><operation id='1'><right_arm>"
+                   "<function name='approach'><params><param value='drill_4'/></params></function></right_arm></operation></application>", encoding="utf-8")
+    code, _, err = cli("validate", "--simulate", str(app))
+    found = [f for line in err.splitlines() if (f := dry_run_finding(line)) is not None]
+    assert code == 1 and found and found[0]["kind"] == "unreachable", err
+    hole = load_cell(cell).pose("drill_4")
+    assert found[0]["target"][:2] == pytest.approx([hole.x, hole.y], abs=1e-3) and found[0]["target"][2] > hole.z  # above the hole it approaches
+
+
+def test_a_runs_collision_fault_is_placed_at_its_time(tmp_path: Path) -> None:
+    """Without the dry run the simulator's own check stops the arm: the error record names both hands, at its time."""
+    shutil.copytree(APPS / "cells", tmp_path / "cells")
+    app = tmp_path / "meet.xml"
+    app.write_text("<application name='meet' robot='nextage' cell='cells/rivet_cell.xml'><operation id='1'>"
+                   "<left_arm><function name='approach'><params><param value='drill_2'/></params></function></left_arm>"
+                   "<right_arm><function name='approach'><params><param value='drill_2'/></params></function></right_arm>"
+                   "</operation></application>", encoding="utf-8")
+    trace = tmp_path / "meet.jsonl"
+    code, _, _ = cli("run", str(app), "--no-check", "--speed", "max", "--trace", str(trace), "-q")
+    errors = [r for line in trace.read_text(encoding="utf-8").splitlines() if (r := json.loads(line))["event"] == "error"]
+    placed = [f for r in errors if (f := run_finding(r)) is not None]
+    assert code == 1 and placed, errors
+    assert {b["name"] for b in placed[0]["bodies"]} == {"LARM_JOINT5_Link", "RARM_JOINT5_Link"} and placed[0]["t"] == errors[0]["t"]
+
+
+LINK = st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,20}(/[A-Za-z0-9_]{1,20})?", fullmatch=True)
+
+
+@given(st.sampled_from(["left_arm", "right_arm", "arm"]), LINK, st.sampled_from(["right_arm", "cell", "robot"]), LINK, st.booleans())
+def test_collision_labels_give_back_their_bodies(owner_a: str, link_a: str, owner_b: str, link_b: str, hand: bool) -> None:
+    label_a = f"{owner_a} hand ({link_a})" if hand else f"{owner_a} {link_a}"
+    text = f"collision between {label_a} and {owner_b} {link_b}, against right_arm approach of operation 2 (line 6)"
+    bodies = collision_bodies(text)
+    assert bodies is not None and (bodies[0].owner, bodies[0].name, bodies[1].owner, bodies[1].name) == (owner_a, link_a, owner_b, link_b)
+
+
+@given(st.text(max_size=300))
+def test_any_text_is_a_placed_finding_or_none(text: str) -> None:
+    for found in (dry_run_finding(text), run_finding({"event": "error", "t": 1.0, "error": text})):
+        assert found is None or (found["kind"] in ("collision", "unreachable", "joint_limit", "singularity") and ("bodies" in found or "target" in found))
+
+
+# ------------------------------------------------------------------ routes
+def test_the_routes_serve_the_start_files_scene_and_refuse_bad_input(tmp_path: Path) -> None:
+    app = arms_meet(tmp_path)
+    client = client_for(build_station(station_args(file=app.name), full_catalog(), tmp_path))
+    scene = client.get("/api/scene3d").json()
+    assert scene["ok"] and scene["mode"] == "idle" and [r["model"] for r in scene["robots"]] == ["nextage_open"] and scene["findings"] == []
+    assert {f["name"] for f in scene["cell"]["frames"]} >= {"part", "drill_1", "rivet_tray", "hands_left"}
+    events = client.get("/api/scene3d/events").json()
+    assert events == {"ok": True, "run": scene["run"], "from": 0, "events": [], "total": 0}
+    for bad, said in (("x1", "from must be a whole number of events, got 'x1'"), ("-3", "from must be in [0, 1099511627776], got -3")):
+        answer = client.get(f"/api/scene3d/events?from={bad}")
+        assert answer.status_code == 400 and answer.json() == {"ok": False, "error": said}
+
+
+# ------------------------------------------------------------------ recordings
+def recorded_joint_states(path: Path) -> list[tuple[int, dict[str, float]]]:
+    """Every JointState of a recording, read with the MCAP libraries directly: (header stamp ns, name -> position)."""
+    out = []
+    with open(path, "rb") as stream:
+        for _, channel, _, msg in make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/joint_states"]):
+            out.append((msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec, dict(zip(msg.name, msg.position))))
+    return out
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("recorded")
+    return record(folder, demonstrator(folder, "rivet_first_three", 3))
+
+
+def test_a_recordings_scene_is_its_messages(recording: Path) -> None:
+    scene = read_scene(recording)
+    states = recorded_joint_states(recording)
+    assert scene.notes == [] and scene.robot is NEXTAGE_OPEN and scene.cell is not None and scene.cell["name"] == "rivet_cell"
+    assert len(scene.samples) == len(states) > 50
+    first = states[0][0]
+    for row, (stamp, values) in zip(scene.samples, states):
+        assert row[0] == pytest.approx((stamp - first) * 1e-9, abs=1e-6)  # run time: the first state is at run time 0
+        assert dict(zip(scene.joint_names, row[1:])) == values
+    goals = [e for e in scene.events if e["event"] == "goal"]
+    assert {g["group"] for g in goals} == {"left_arm", "right_arm", "torso_head"}
+    assert [g["label"] for g in goals if g["group"] == "left_arm" and g["kind"] == "pose"][0] == "drill_1 clearance"
+    located = [e for e in scene.events if e["event"] == "located" and e["frames"]]
+    assert located and set(located[-1]["frames"]) == {"drill_1"}  # what the left arm's camera found, measured
+
+
+def test_a_replay_serves_the_recordings_joint_states_and_scene(recording: Path, tmp_path: Path) -> None:
+    station = build_station(station_args(replay=str(recording)), full_catalog(), tmp_path)
+    scene = read_scene(recording)
+    log = scene_log(station.feed)
+    assert log.run == station.feed.snapshot.run and log.events == scene.events and log.robots[0]["model"] == "nextage_open"
+    client = client_for(station)
+    served = client.get("/api/scene3d").json()
+    assert served["mode"] == "replay" and served["recorded_joints"] == len(scene.samples) and served["cell"] == scene.cell
+    joints = client.get("/api/scene3d/joints?from=10").json()
+    assert joints["names"] == scene.joint_names and joints["total"] == len(scene.samples) and joints["samples"] == scene.samples[10:]
+    assert client.get("/api/scene3d/events").json()["events"] == scene.events
+
+
+def test_a_cut_recording_gives_what_came_before_the_cut(recording: Path, tmp_path: Path) -> None:
+    cut = tmp_path / "cut.mcap"
+    data = recording.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    scene = read_scene(cut)
+    whole = read_scene(recording)
+    assert 0 < len(scene.samples) < len(whole.samples) and scene.samples == whole.samples[: len(scene.samples)]
+    text = tmp_path / "notes.mcap"
+    text.write_text("not a recording\n", encoding="utf-8")
+    with pytest.raises(NotARecording) as refused:
+        read_scene(text)
+    assert "notes.mcap" in str(refused.value) and "\n" not in str(refused.value)
