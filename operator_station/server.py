@@ -47,12 +47,17 @@ from core_functions.catalog import Catalog
 from execution_engine.app_model.document import DocumentError
 from node_transport.wire import ENGINE_SERVICES
 from operator_station import builder
-from operator_station.access import Access
+from operator_station import accounts
+from operator_station.access import ENGINEER, OPERATOR, Access, role_allows
+from operator_station.audit import AuditLog, digest, file_digest, record
 from operator_station.feed import Feed
 from operator_station.folders import Folders
 from operator_station.guard import WHO, BodyTooLarge, Guard, page
 from operator_station.attach import AttachedSession
 from operator_station.blocks import Block, BlockDocument, walk
+from operator_station.roles import requires, secure
+from operator_station.run_audit import watch_run
+from operator_station.edit_routes import routes as edit_routes
 from operator_station.scene3d_routes import routes as scene3d_routes
 from operator_station.session import RunSession
 from operator_station.timeline_view import TimelineView
@@ -79,7 +84,7 @@ class Station:
 
     def __init__(
         self, catalog: Catalog, feed: Feed, session: RunSession | AttachedSession | None, root: Path, app_path: Path | None, replay: bool = False,
-        access: Access | None = None, wall: Callable[[], float] = time.time,
+        access: Access | None = None, wall: Callable[[], float] = time.time, audit_log: AuditLog | None = None,
     ) -> None:
         self.catalog = catalog
         self.catalog_json = builder.catalog_view(catalog)
@@ -94,7 +99,8 @@ class Station:
         self.timeline = TimelineView(feed)
         self.stopped = False  # set when the server ends: every page's feed loop stops
         self.pages = 0  # live feeds open now
-        self.audit: deque[dict[str, str]] = deque(maxlen=MAX_AUDIT)
+        self.audit: deque[dict[str, str]] = deque(maxlen=MAX_AUDIT)  # the safety stop's actions (all actions: audit_log)
+        self.audit_log = audit_log or AuditLog(wall=lambda: self.wall())  # operator_station/audit.py: every action, --audit FILE
         self._opened: tuple[tuple[float, int], bytes] | None = None  # the start file's answer, by (mtime, size)
 
     def stop(self) -> None:
@@ -108,6 +114,7 @@ class Station:
         entry = {"when": when, "who": str(who or "unknown"), "action": action, "answer": answer}
         self.audit.append(entry)
         audit_log.warning("studio: %s by %s at %s: %s", action, entry["who"], when, answer)
+        self.audit_log.append(who, action, ok="refused" not in action, answer=answer, quiet=True)
         return entry
 
     def opened(self) -> bytes:
@@ -171,9 +178,10 @@ async def _run_field(station: Station, request: Request, name: str) -> tuple[Any
         return None, _error(str(error))
 
 
-def _with_document(station: Station, handler: Callable[[Path, BlockDocument], Awaitable[Response]]) -> Callable[[Request], Awaitable[Response]]:
+def _with_document(station: Station, handler: Callable[..., Awaitable[Response]], with_request: bool = False) -> Callable[[Request], Awaitable[Response]]:
     """A POST route taking ``{path, document}`` (a flat one's ``operations`` or a tree's ``body``): bad input
-    is one clear line and a 400, nothing else happens -- what XML cannot carry is found before anything is written."""
+    is one clear line and a 400, nothing else happens -- what XML cannot carry is found before anything is written.
+    ``with_request``: the handler takes the request first (to audit who did it)."""
 
     async def route(request: Request) -> Response:
         try:
@@ -184,7 +192,7 @@ def _with_document(station: Station, handler: Callable[[Path, BlockDocument], Aw
         except (ValueError, DocumentError) as error:  # JSONDecodeError is a ValueError
             return _error(str(error))
         try:
-            return await handler(path, document)
+            return await (handler(request, path, document) if with_request else handler(path, document))
         except DocumentError as error:
             return _error(str(error))
 
@@ -233,25 +241,39 @@ def create_app(station: Station) -> Starlette:
         app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
         return FastJSON({"ok": app is not None, "messages": [m.to_json() for m in messages]})
 
-    async def save(path: Path, doc: BlockDocument) -> Response:
+    async def save(request: Request, path: Path, doc: BlockDocument) -> Response:
+        before = await asyncio.to_thread(file_digest, path)
         try:
             outputs = station.session.outputs() if isinstance(station.session, RunSession) else []  # never over a run's files
             saved, messages = await asyncio.to_thread(builder.save_document, doc, path, station.catalog, outputs)
         except OSError as error:
+            record(request, "save", ok=False, answer=f"cannot write: {error.strerror or error}", path=_shown(station, path))
             return _error(f"{station.folders.shown(path)}: cannot write: {error.strerror or error}")
+        errors = [m.message for m in messages if m.severity == "error"][:3]
+        record(request, "save", ok=saved, answer="saved" if saved else "not saved: " + "; ".join(errors), path=_shown(station, path),
+               before=before, after=await asyncio.to_thread(file_digest, path))
         return FastJSON({"ok": saved, "path": _shown(station, path), "messages": [m.to_json() for m in messages]})
 
-    async def run(path: Path, doc: BlockDocument) -> Response:
+    async def run(request: Request, path: Path, doc: BlockDocument) -> Response:
         if station.session is None:
             return _error("this station replays a trace; it runs nothing", 409)
+        edited = await asyncio.to_thread(_edited_for, request, path, doc)
+        if edited:  # an operator runs the applications as engineers saved them
+            record(request, "run start", ok=False, answer=edited, path=_shown(station, path))
+            return FastJSON({"ok": False, "error": edited, "messages": []}, status_code=403)
         if isinstance(station.session, AttachedSession):  # the cell runs elsewhere: its engine's start service
             ok, answer = await station.session.command("start")
+            record(request, "run start", ok=ok, answer=answer, path=_shown(station, path), application=await asyncio.to_thread(file_digest, path))
             return FastJSON({"ok": ok, "answer": answer, "messages": []}, status_code=200 if ok else 409)
-        app, messages, _ = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
+        app, messages, text = await asyncio.to_thread(builder.validate, doc, path, station.catalog)
         if app is None:
+            record(request, "run start", ok=False, answer="not run: the application has errors", path=_shown(station, path), application=digest(text))
             return FastJSON({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
         operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin} for op in app.operations]
         ok, answer = station.session.start(app, operations)
+        entry = record(request, "run start", ok=ok, answer=answer, path=_shown(station, path), application=digest(text))
+        if ok:
+            watch_run(station, request, entry)
         return FastJSON({"ok": ok, "answer": answer, "messages": [m.to_json() for m in messages]}, status_code=200 if ok else 409)
 
     async def operator(request: Request) -> Response:
@@ -261,6 +283,7 @@ def create_app(station: Station) -> Starlette:
         if station.session is None:
             return _error("this station replays a trace; there is no run to command", 409)
         ok, answer = await station.session.command(command)
+        record(request, command if command != "start" else "run start", ok=ok, answer=answer)
         return FastJSON({"ok": ok, "answer": answer})
 
     async def safety(request: Request) -> Response:
@@ -338,24 +361,26 @@ def create_app(station: Station) -> Starlette:
         assert isinstance(error, HTTPException)
         return _error(str(error.detail), error.status_code)
 
-    return Starlette(middleware=[Middleware(Guard, access=station.access, max_body=MAX_BODY)], exception_handlers={HTTPException: refused}, routes=[
+    return Starlette(middleware=[Middleware(Guard, access=station.access, max_body=MAX_BODY, audit=station.audit_log)], exception_handlers={HTTPException: refused}, routes=secure([
         Route("/", index),
         Route("/favicon.ico", lambda request: Response(status_code=204)),  # no icon: say so, not 404 in the console
         Route("/api/catalog", catalog),
         Route("/api/document", document),
-        Route("/api/open", open_, methods=["POST"]),
-        Route("/api/cell", _with_document(station, cell), methods=["POST"]),
-        Route("/api/validate", _with_document(station, validate), methods=["POST"]),
-        Route("/api/save", _with_document(station, save), methods=["POST"]),
-        Route("/api/run", _with_document(station, run), methods=["POST"]),
-        Route("/api/operator/{command}", operator, methods=["POST"]),
-        Route("/api/safety", safety, methods=["POST"]),
-        Route("/api/safety/clear", safety_clear, methods=["POST"]),
+        Route("/api/open", requires(OPERATOR, "open")(open_), methods=["POST"]),
+        Route("/api/cell", requires(OPERATOR, "cell")(_with_document(station, cell)), methods=["POST"]),
+        Route("/api/validate", requires(OPERATOR, "validate")(_with_document(station, validate)), methods=["POST"]),
+        Route("/api/save", requires(ENGINEER, "save")(_with_document(station, save, with_request=True)), methods=["POST"]),
+        Route("/api/run", requires(OPERATOR, "run")(_with_document(station, run, with_request=True)), methods=["POST"]),
+        Route("/api/operator/{command}", requires(OPERATOR, "operator command")(operator), methods=["POST"]),
+        Route("/api/safety", requires(OPERATOR, "safety stop")(safety), methods=["POST"]),
+        Route("/api/safety/clear", requires(OPERATOR, "safety stop clear")(safety_clear), methods=["POST"]),
+        *accounts.routes(station.access, lambda: station.wall()),
         Route("/api/timeline", timeline),
         *scene3d_routes(station),  # the 3D view (operator_station/scene3d_routes.py)
+        *edit_routes(station),  # edit the paused run (operator_station/edit_routes.py)
         WebSocketRoute("/ws", feed),
         Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
-    ])
+    ]))
 
 
 async def _until_gone(socket: WebSocket, waiter: asyncio.Event) -> None:
@@ -373,6 +398,20 @@ def _live_state(snapshot: Any) -> dict[str, Any]:
     """What changes during a run (the rest of the snapshot is sent once per run)."""
     return {"status": snapshot.status, "messages": snapshot.messages, "ended": snapshot.ended, "structures": snapshot.structures,
             "joint_names": snapshot.joint_names, "plan": snapshot.plan}
+
+
+def _edited_for(request: Request, path: Path, doc: BlockDocument) -> str | None:
+    """Why the requester may not run ``doc`` (None if they may): an operator runs an application only as it is
+    saved at ``path`` -- running the page's edits would be editing by another name."""
+    who = request.scope.get(WHO)
+    if who is None or role_allows(who.role, ENGINEER):
+        return None
+    saved, _ = builder.open_document(path)
+    if saved is not None and saved.to_json() == doc.to_json():
+        return None
+    holder = "session" if who.kind == "session" else "token"
+    return (f"run: the builder's application differs from {path.name} as saved; running an edited application needs the engineer role; "
+            f"this {holder} is {who.role} {who.name or who.ident!r} (open the saved file again to run it)")
 
 
 def _shown(station: Station, path: Path) -> str:
