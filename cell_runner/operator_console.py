@@ -1,4 +1,4 @@
-"""The operator's keyboard during ``run``: start, pause, resume, step, stop, reset.
+"""The operator's keyboard during ``run``: start, pause, resume, step, stop, reset; breakpoints and run to here.
 
 Run in the engine's own process (``run --interactive``), the console hands each command to
 :meth:`ExecutionEngine.operator_command` naming itself as the source -- "terminal console (key
@@ -14,6 +14,11 @@ must not also have to find Enter.  The terminal is put in cbreak mode (keys one 
 echoed; Ctrl-C still interrupts) for as long as the console reads it, and put back as it was when
 the console lets go -- at the end of the run, on Ctrl-C, on an exception, and at exit.  Anything
 else (a pipe, a file) is read line by line.  The prompt says which of the two it is.
+
+Breakpoints (engine/breakpoints.py): ``b`` toggles one on the next operation to start, ``g`` asks
+which operation to run to (its number as the status counts them, or its id, then Enter: the one
+question the console asks, read as a line even at a terminal) and ``c`` clears them all; in line
+mode ``b 5`` and ``g 7`` name the operation at once.  Continue is ``r``, step ``t``.
 """
 from __future__ import annotations
 
@@ -26,6 +31,7 @@ import sys
 from collections.abc import Awaitable, Callable, Coroutine
 from typing import IO, Any
 
+from execution_engine.engine.breakpoints import BREAKPOINT_SERVICE, RUN_TO_SERVICE, BreakpointService, RunToService
 from execution_engine.engine.operator import CONSOLE_KEYS, console_source
 from node_transport.msgs import Trigger
 from node_transport.port import Node, TransportError
@@ -40,8 +46,14 @@ except ImportError:  # pragma: no cover - not on the platforms this runs on
 
 #: ``(command, source) -> (accepted, answer)``: the engine's own entry for operator commands.
 Commander = Callable[[str, str], Awaitable[tuple[bool, str]]]
+#: ``(action, operation, source) -> (accepted, answer)``: the engine's entry for breakpoints (engine/breakpoints.py).
+BreakCommander = Callable[[str, str, str], Awaitable[tuple[bool, str]]]
+#: Breakpoint keys: b toggles a breakpoint on the next operation (``b N`` on operation N), g asks for an
+#: operation and runs to it (``g N`` at once), c clears every breakpoint; continue and step are r and t.
+BREAK_KEYS = {"b": "toggle", "g": "run_to", "c": "clear_all"}
 
-KEY_LIST = " ".join(f"{key} ({command})" for command, key in CONSOLE_KEYS.items()) + " h (help)"
+KEY_LIST = (" ".join(f"{key} ({command})" for command, key in CONSOLE_KEYS.items())
+            + " b (breakpoint on the next operation) g (run to an operation) c (clear breakpoints) h (help)")
 HELP = "operator commands: " + KEY_LIST
 PROMPT_KEYS = f"operator keys, no Enter needed: {KEY_LIST}"
 PROMPT_LINES = f"operator commands, type a key (or the command's name) and Enter: {KEY_LIST}"
@@ -60,8 +72,11 @@ class KeyDecoder:
     unknown command), so nothing typed can grow memory or be taken for another key.
     """
 
-    def __init__(self, keys: bool) -> None:
+    def __init__(self, keys: bool, line_after: frozenset[str] = frozenset()) -> None:
+        """``line_after``: keys after which one line is read (up to Enter) before keys again: an answer to a question."""
         self.keys = keys
+        self.line_after = line_after
+        self._in_line = False
         self._decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
         self._line: list[str] = []
         self._overlong = False
@@ -72,10 +87,13 @@ class KeyDecoder:
         for char in self._decoder.decode(data):
             if self._skip_escape(char):
                 continue
-            if self.keys:
+            if self.keys and not self._in_line:
                 if char.isprintable() and not char.isspace():
                     words.append(char)
+                    self._in_line = char in self.line_after
                 continue
+            if self._in_line and char in "\r\n":
+                self._in_line = False
             self._take_line_char(char, words)
         return words
 
@@ -106,11 +124,14 @@ class KeyDecoder:
 
 
 class OperatorConsole:
-    def __init__(self, node: Node, out: IO[str] = sys.stdout, commander: Commander | None = None) -> None:
+    def __init__(self, node: Node, out: IO[str] = sys.stdout, commander: Commander | None = None, breaks: BreakCommander | None = None) -> None:
         self.node = node
         self.out = out
         self.commander = commander
+        self.breaks = breaks
         self._clients = {c: node.create_client(Trigger, engine_service(c)) for c in ENGINE_SERVICES}
+        self._break_clients = (node.create_client(BreakpointService, BREAKPOINT_SERVICE), node.create_client(RunToService, RUN_TO_SERVICE))
+        self._asking: str | None = None  # after g: the next word names the operation to run to
         self._tasks: set[asyncio.Task[Any]] = set()
         self._fd: int | None = None
         self._saved: tuple[int, list[Any]] | None = None  # the terminal's settings to put back
@@ -130,9 +151,43 @@ class OperatorConsole:
             ok, message = response.success, response.message
         return f"{name}: {'ok' if ok else 'refused'} - {message}"
 
+    async def breakpoint(self, action: str, operation: str, key: str) -> str:
+        """A breakpoint command (:data:`BREAK_KEYS`); the answer for the console."""
+        if self.breaks is not None:
+            ok, message = await self.breaks(action, operation, console_source(key))
+        else:
+            breaks, run_to = self._break_clients
+            try:
+                if action == "run_to":
+                    response = await run_to.call(RunToService.Request(operation=operation), timeout=10.0)
+                else:
+                    response = await breaks.call(BreakpointService.Request(operation=operation, action=action), timeout=10.0)
+            except (TransportError, asyncio.TimeoutError) as error:
+                return f"{action}: {error}"
+            ok, message = response.success, response.message
+        return f"{action}: {'ok' if ok else 'refused'} - {message}"
+
     async def handle_line(self, line: str) -> None:
-        word = line.strip().lower()
+        typed = line.strip()
+        word = typed.lower()
         if not word:
+            return
+        if self._asking is not None:  # the answer to "run to which operation?" (a lone key other than a digit: not an answer)
+            self._asking = None
+            if len(word) > 1 or word.isdigit():
+                self.out.write(await self.breakpoint("run_to", typed, "g") + "\n")
+                self.out.flush()
+                return
+        head, _, argument = typed.partition(" ")
+        if head.lower() in BREAK_KEYS:
+            action = BREAK_KEYS[head.lower()]
+            if action == "run_to" and not argument.strip():
+                self._asking = "run_to"
+                self.out.write("run to which operation? its number (or id), then Enter\n")
+                self.out.flush()
+                return
+            self.out.write(await self.breakpoint(action, argument.strip(), head.lower()) + "\n")
+            self.out.flush()
             return
         if word in ("h", "help", "?"):
             self.out.write(HELP + "\n")
@@ -168,7 +223,7 @@ class OperatorConsole:
         except (AttributeError, ValueError, OSError):
             return False
         keys = self._cbreak(fd)
-        decoder = KeyDecoder(keys)
+        decoder = KeyDecoder(keys, frozenset({"g"}))  # g asks for an operation: its number is typed with Enter
 
         def readable() -> None:
             try:

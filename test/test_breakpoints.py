@@ -13,9 +13,11 @@ import io
 import json
 from typing import Any
 
+import pytest
 from app_builder import Cell, make_app
 
 from execution_engine.app_model.model import Application
+from execution_engine.engine.breakpoint_set import BreakpointSet
 from execution_engine.observers import RunObserver, TraceWriter
 from node_transport.clock import Clock
 
@@ -76,7 +78,7 @@ def test_lock_step_pauses_every_group_at_the_barrier_before_the_operation_and_sa
 
     (t, state, message, left, right, machines), still, report, trace, statuses = run_sim(main)
     assert state == "paused" and message == "paused at breakpoint before operation 3 '3' (line 3)"
-    assert t == __import__("pytest").approx(4.0, abs=0.1)  # operations 1 and 2, 2 s each
+    assert t == pytest.approx(4.0, abs=0.1)  # operations 1 and 2, 2 s each
     assert left == right == ["1", "2"]  # both at the barrier: neither started operation 3
     assert set(machines.values()) == {"Ready"}
     assert still == (["1", "2"], ["1", "2"])
@@ -108,7 +110,7 @@ def test_flags_mode_holds_only_the_group_that_reaches_it(run_sim: Any) -> None:
         return held_at, message, during, report, trace
 
     held_at, message, (left, right), report, trace = run_sim(main)
-    assert held_at == __import__("pytest").approx(2.0, abs=0.1)
+    assert held_at == pytest.approx(2.0, abs=0.1)
     assert message == ("paused at breakpoint before operation 2 '2' (line 2); left_arm holds there, "
                        "the other groups go on until they need it")
     assert left == ["1"] and right == ["3", "4", "5"]
@@ -231,3 +233,17 @@ def test_a_flag_wait_does_not_time_out_while_its_setter_is_held(run_sim: Any) ->
     report = run_sim(main)
     assert report.ok and not report.errors
     assert [w.outcome for w in report.flag_waits] == ["passed"]
+
+
+def test_an_edited_remainder_takes_its_files_breakpoints_and_keeps_those_set_at_run_time() -> None:
+    old = with_breaks(make_app(OPS), 2)
+    run = object()
+    bp = BreakpointSet()
+    bp.ensure(old, run)
+    bp.active.add("4")  # set at run time
+    bp.target = "3"
+    new = with_breaks(make_app(OPS), 5)
+    edited = dataclasses.replace(new, operations=new.operations[:2] + new.operations[3:])
+    bp.ensure(old, run)  # the same run: nothing starts over
+    bp.adopt(edited)
+    assert bp.ids() == ["4", "5"] and bp.target is None  # 2's breakpoint was the old file's; operation 3 is gone

@@ -63,6 +63,7 @@ class BreakpointSet:
     stepping: set[str] = field(default_factory=set)  # sync="flags": groups to hold before their next operation
     taken: set[str] = field(default_factory=set)  # operations a hold before was continued: passed from now on
     run: object | None = None  # the report of the run these belong to
+    app: Application | None = None  # the application they were read from (an edit of a paused run swaps it)
     first: int = 0
     _held_total: float = 0.0
     _held_since: float | None = None
@@ -71,7 +72,7 @@ class BreakpointSet:
         """Start over from ``app``'s breakpoints when ``run`` is another run than the last one seen."""
         if run is self.run:
             return
-        self.run, self.first = run, first
+        self.run, self.first, self.app = run, first, app
         self.operations = app.operations
         self.index = {op.id: i for i, op in enumerate(app.operations)}
         self.active = {op.id for op in app.operations if op.breakpoint}
@@ -79,6 +80,18 @@ class BreakpointSet:
         for each in (self.at, self.held, self.finished, self.waiting, self.stepping, self.taken):
             each.clear()
         self._held_total, self._held_since = 0.0, None
+
+    def adopt(self, app: Application) -> None:
+        """The same run goes on with an edited application (engine/remainder_swap.py): its file's breakpoints
+        replace the old file's; those set at run time stay where their operations still are."""
+        if app is self.app:
+            return
+        old_file = {op.id for op in self.operations if op.breakpoint}
+        self.app, self.operations = app, app.operations
+        self.index = {op.id: i for i, op in enumerate(app.operations)}
+        self.active = {i for i in self.active - old_file if i in self.index} | {op.id for op in app.operations if op.breakpoint}
+        if self.target is not None and self.target not in self.index:
+            self.target = None
 
     def ids(self) -> list[str]:
         """The operations the run pauses before, in run order."""

@@ -84,6 +84,8 @@ class BreakpointControl(OperatorCommands):
         if self.app is not None and self.report is not None and bp.run is not self.report:
             bp.ensure(self.app, self.report, first)
             self.flags.held = lambda: bp.held_seconds(self.clock.now())  # a held group's time is no flag wait's
+        elif self.app is not None:
+            bp.adopt(self.app)  # a paused run's remainder was edited
         return bp
 
     async def breakpoint_command(self, action: str, operation: str, source: str) -> tuple[bool, str]:
