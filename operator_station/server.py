@@ -57,7 +57,6 @@ from operator_station.attach import AttachedSession
 from operator_station.blocks import Block, BlockDocument, walk
 from operator_station.roles import requires, secure
 from operator_station.run_audit import watch_run
-from operator_station.edit_routes import routes as edit_routes
 from operator_station.scene3d_routes import routes as scene3d_routes
 from operator_station.session import RunSession
 from operator_station.timeline_view import TimelineView
@@ -377,7 +376,6 @@ def create_app(station: Station) -> Starlette:
         *accounts.routes(station.access, lambda: station.wall()),
         Route("/api/timeline", timeline),
         *scene3d_routes(station),  # the 3D view (operator_station/scene3d_routes.py)
-        *edit_routes(station),  # edit the paused run (operator_station/edit_routes.py)
         WebSocketRoute("/ws", feed),
         Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
     ]))
