@@ -64,6 +64,7 @@ def test_every_skill_of_the_server_is_covered_by_a_builder() -> None:
         *codec.move_joints((0,) * 6),
         *codec.move_rel_joints((0,) * 6),
         codec.set_speed(10),
+        codec.monitor_speed(10),
         codec.ENABLE_AIR,
         codec.DISABLE_AIR,
         codec.GRIPPER_OPEN,

@@ -104,6 +104,7 @@ from robot_bridges.vplus.kinematics import (
 from robot_bridges.vplus.camera_port import rendered_focus_camera
 from robot_bridges.vplus.job import Job
 from robot_bridges.vplus.measurement import MeasurementError, MeasurementPort, SimulatedFocusCamera
+from robot_bridges.vplus.monitor import MonitorSpeed
 from robot_bridges.vplus.options import parse_options
 from robot_bridges.vplus.simulator import DEFAULT_PORT, VPlusSimulator
 from robot_bridges.vplus.trajectory import JOINT_RAMP, TrajectoryPlanner, plan_replay
@@ -160,6 +161,7 @@ class VPlusBackend(RobotBackend):
         # ``name`` also names the bridge node, so it stays a plain token; messages say ``label``.
         self.name = "vplus"
         self.label = f"vplus {host}:{port}"
+        self.monitor = MonitorSpeed(clock, self.client, self.label)  # the speed override: V+ monitor speed (monitor.py)
         self._simulator = simulator  # owned: started by create(), closed with us
         self._joints = self.kin.home.copy()
         self._tcp: Pose | None = None
@@ -189,9 +191,14 @@ class VPlusBackend(RobotBackend):
             job.stopped = True
             job.signal()
             await asyncio.gather(asyncio.shield(job.finished), return_exceptions=True)
+        await self.monitor.close()
         await self.client.close()
         if self._simulator is not None:
             await self._simulator.close()
+
+    def set_speed_override(self, rate: float) -> None:
+        super().set_speed_override(rate)
+        self.monitor.set(rate)  # the controller's monitor speed: the running motion too, on its path
 
     # ------------------------------------------------------------------------------ state
     def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
@@ -352,11 +359,19 @@ class VPlusBackend(RobotBackend):
         return await self._send_motion(messages, goal, self._duration(goal), what)
 
     async def _send_motion(self, messages: Sequence[Command], goal: np.ndarray, estimate: float, what: str) -> MotionResult:
-        """Write ``messages`` (ending in a break) at once and wait for the arm to reach ``goal``."""
+        """Write ``messages`` (ending in a break) at once and wait for the arm to reach ``goal`` (the wait stretched
+        by the motion time a speed override below 100 % takes)."""
+        if self.monitor.problem is not None:  # never faster than the operator asked
+            raise BridgeError(FaultKind.CONTROLLER, f"{what} not sent: {self.monitor.problem}")
         timeout = self.ack_timeout + 2.0 * estimate + self._busy_for()
         start = self._trusted_pose()
         self._busy_until = self.clock.now() + estimate + self._busy_for()
-        acks = await self._talk(messages, timeout, what, joined=True)
+        talk = asyncio.ensure_future(self._talk(messages, timeout, what, joined=True))
+        stretch = asyncio.ensure_future(self.monitor.stretching(talk))
+        try:
+            acks = await talk
+        finally:
+            stretch.cancel()
         self._busy_until = 0.0
         self._check(acks[0], start, f"{what}, start")
         self._check(acks[-1], self.kin.forward(goal), what)

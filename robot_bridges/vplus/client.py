@@ -382,6 +382,13 @@ class VPlusClient:
         finally:
             self._settle(batch)
 
+    def extend(self, seconds: float) -> None:
+        """Give every call waiting for acks ``seconds`` more: the operator's speed override slowed (or holds) the
+        motion they wait for (robot_bridges/vplus/monitor.py); a call's error names its whole allowance."""
+        for batch in self._waiting:
+            batch.deadline += seconds
+            batch.timeout += seconds
+
     def _send(
         self, messages: list[Message], timeout: float | None, before: list[tuple[Message, Ack]], later: list[tuple[Command, ...]] | None = None,
     ) -> _Batch:

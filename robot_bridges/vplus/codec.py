@@ -57,6 +57,7 @@ class Skill(str, Enum):
     MOVE_REL_JOINTS = "move_rel_joints"
     BREAK = "break"
     SET_SPEED = "set_speed"
+    MONITOR_SPEED = "monitor_speed"  # V+ SPEED s MONITOR: the operator's speed override, the running motion included
     ENABLE_AIR = "enable_air"
     DISABLE_AIR = "disable_air"
     GRIPPER_OPEN = "gripper_open"
@@ -68,7 +69,7 @@ class Skill(str, Enum):
 MOTION_SKILLS = frozenset(
     {Skill.MOVE_TO, Skill.MOVE_REL_WORLD, Skill.MOVE_REL_TOOL, Skill.MOVE_JOINTS, Skill.MOVE_REL_JOINTS}
 )
-ARITY: dict[Skill, int] = {s: (6 if s in MOTION_SKILLS else 1 if s is Skill.SET_SPEED else 0) for s in Skill}
+ARITY: dict[Skill, int] = {s: (6 if s in MOTION_SKILLS else 1 if s in (Skill.SET_SPEED, Skill.MONITOR_SPEED) else 0) for s in Skill}
 _SKILLS = {s.value: s for s in Skill}
 
 
@@ -179,6 +180,8 @@ class Command:
             format_number(a)  # finite and bounded, or ValueError
         if skill is Skill.SET_SPEED and not (0 < args[0] <= 100):
             raise ValueError(f"set_speed takes a percentage in (0, 100], got {args[0]!r}")
+        if skill is Skill.MONITOR_SPEED and not (0 <= args[0] <= 100):
+            raise ValueError(f"monitor_speed takes a percentage in [0, 100], got {args[0]!r}")
         # Encoded once: a command is immutable, and the client writes the same ones again and again.
         object.__setattr__(self, "_wire", b":" + self.payload().encode("ascii") + DELIMITER)
 
@@ -190,7 +193,7 @@ class Command:
         """The part after the id: ``skill[:args]``."""
         if not self.args:
             return self.skill.value
-        if self.skill is Skill.SET_SPEED and self.args[0] == int(self.args[0]):
+        if self.skill in (Skill.SET_SPEED, Skill.MONITOR_SPEED) and self.args[0] == int(self.args[0]):
             return f"{self.skill.value}:{int(self.args[0])}"  # the seed's grammar: an integer
         return f"{self.skill.value}:{','.join(format_number(a) for a in self.args)}"
 
@@ -431,6 +434,10 @@ def move_rel_joints(delta: Vector6, *, brk: bool = True) -> tuple[Command, ...]:
 
 def set_speed(percent: float) -> Command:
     return Command(Skill.SET_SPEED, (percent,))
+
+
+def monitor_speed(percent: float) -> Command:
+    return Command(Skill.MONITOR_SPEED, (percent,))
 
 
 BREAK = Command(Skill.BREAK)

@@ -12,6 +12,11 @@ Semantics follow AdeptServer's V+ programs (seed 000 and its ``adeptserver.V2``)
   blending).  ``break`` (V+ ``BREAK``) returns when the arm has arrived.
 * ``set_speed`` (V+ ``SPEED s``, without ``ALWAYS``) scales the joint speeds of the *next* motion
   only, as the seed says ("a speed factor for the subsequent motion command").
+* ``monitor_speed`` (V+ ``SPEED s MONITOR``, the operator's monitor speed) scales every motion, the one
+  under way included, on its path: the controller's motion time runs at that share of the clock, reached
+  within the joints' accelerations (robot_bridges/path_rate.py); 0 holds the arm on its path and a value
+  above 0 goes on from there.  It is the operator's setting, not a program's: the server takes it at
+  once, beside the motion it scales (simulator.py).
 * Air and gripper are digital outputs: air on signal 8; ``gripper_close`` turns air on and sets
   99 on / 100 off; ``gripper_open`` turns air on and sets 99 off / 100 on.
 
@@ -20,6 +25,7 @@ raises :class:`SkillError`; the server then sends no ack, as the real one does.
 """
 from __future__ import annotations
 
+import asyncio
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -28,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from node_transport.clock import Clock
+from robot_bridges.path_rate import PathRate, sampled_shape
 from robot_bridges.vplus.codec import Command, Skill
 from robot_bridges.vplus.kinematics import (
     HOME_DEG,
@@ -115,13 +122,47 @@ class SimulatedArm:
         self._segment: Segment | None = None  # the motion under way, if any
         self._rest = start  # where the arm is when no motion is under way (the last goal)
         self._next_speed = 100.0
+        #: The monitor speed as the rate the controller's motion time runs at (1: the clock's), and that time:
+        #: ``_own`` at clock ``_mark``.  A segment's times are on this motion clock.
+        self.monitor = PathRate()
+        self._own = self._mark = clock.now()
+        self._changed: asyncio.Event | None = None
         self.signals: dict[int, bool] = {AIR_SIGNAL: False, GRIPPER_CLOSE_SIGNAL: False, GRIPPER_OPEN_SIGNAL: False}
         self.motions = 0
 
     # --------------------------------------------------------------------------- state
     def joints(self) -> Joints:
         """Joint positions (rad) now."""
-        return self._segment.at(self.clock.now()) if self.moving and self._segment else self._rest
+        return self._segment.at(self.motion_time()) if self.moving and self._segment else self._rest
+
+    def motion_time(self) -> float:
+        """The controller's motion clock now: the run clock's time, at the monitor speed's rate since it changed."""
+        now = self.clock.now()
+        rate, segment = self.monitor, self._segment
+        if now <= self._mark:
+            return self._own
+        if rate.settled:
+            self._own += (now - self._mark) * rate.rate
+        elif segment is None or self._own >= segment.t_end:  # nothing moves: nothing to ramp
+            rate.rate = rate.target
+            self._own += (now - self._mark) * rate.rate
+        else:  # ramping within the joints' accelerations, in steps no longer than 5 ms
+            shape = sampled_shape(lambda tau: segment.at(segment.t0 + tau), segment.duration)
+            limits = self.kin.max_velocity / self.ramp
+            t = self._mark
+            while t < now - 1e-12:
+                dt = min(0.005, now - t)
+                self._own += rate.advance(dt, self._own - segment.t0, shape, limits)
+                t += dt
+        self._mark = now
+        return self._own
+
+    def set_monitor_speed(self, percent: float) -> None:
+        """V+ ``SPEED percent MONITOR``: every motion, the running one included, at that share of its speed on its path."""
+        self.motion_time()  # the time so far at the rate it had
+        self.monitor.aim(percent / 100.0)
+        if self._changed is not None:
+            self._changed.set()
 
     def location(self) -> Location:
         """Flange location now (x, y, z mm; yaw, pitch, roll deg), as V+ ``HERE`` + ``DECOMPOSE``."""
@@ -131,12 +172,17 @@ class SimulatedArm:
     def moving(self) -> bool:
         # A timer may fire a hair before its time (loop clock resolution): count that as arrived,
         # or a wait for the end could spin on sleeps too short to move the clock.
-        return self._segment is not None and self.clock.now() < self._segment.t_end - _ARRIVED
+        return self._segment is not None and self.motion_time() < self._segment.t_end - _ARRIVED
 
     @property
     def motion_end(self) -> float:
-        """Run time at which the current (or last) motion ends."""
-        return self._segment.t_end if self._segment else 0.0
+        """Run time at which the current (or last) motion ends (at the monitor speed now; inf while held at 0)."""
+        if self._segment is None:
+            return 0.0
+        left = self._segment.t_end - self.motion_time()
+        if left <= 0.0:
+            return self.clock.now() + left
+        return self.clock.now() + left / self.monitor.rate if self.monitor.rate > 0.0 else math.inf
 
     # --------------------------------------------------------------------------- skills
     async def run(self, command: Command) -> None:
@@ -146,6 +192,8 @@ class SimulatedArm:
             await self._wait_motion()
         elif skill is Skill.SET_SPEED:
             self._next_speed = args[0]
+        elif skill is Skill.MONITOR_SPEED:
+            self.set_monitor_speed(args[0])
         elif skill is Skill.ENABLE_AIR:
             self.signals[AIR_SIGNAL] = True
         elif skill is Skill.DISABLE_AIR:
@@ -204,9 +252,24 @@ class SimulatedArm:
         amax = self.kin.max_velocity[moving] / self.ramp
         velocity = float(np.min(vmax / delta[moving]))
         acceleration = float(np.min(amax / delta[moving]))
-        self._segment = Segment(start, goal, self.clock.now(), velocity, acceleration)
+        self._segment = Segment(start, goal, self.motion_time(), velocity, acceleration)
 
     async def _wait_motion(self) -> None:
-        """Sleep until the current motion has ended (returns at once when idle)."""
+        """Sleep until the current motion has ended (returns at once when idle); a change of the monitor speed
+        wakes it to look again, and while the rate ramps it looks every 5 ms."""
+        if self._changed is None:
+            self._changed = asyncio.Event()
         while self.moving and self._segment is not None:
-            await self.clock.sleep_until(self._segment.t_end)
+            self._changed.clear()
+            end = self.motion_end
+            wait = 0.005 if not self.monitor.settled else end - self.clock.now()
+            if math.isinf(wait):  # held on the path at 0 %: until the monitor speed changes
+                await self._changed.wait()
+                continue
+            if self.monitor.rate == 1.0 and self.monitor.settled and self._own == self._mark:
+                await self.clock.sleep_until(end)  # the clock's own time: as before any monitor speed
+                continue
+            try:
+                await self.clock.wait_for(self._changed.wait(), max(0.0, wait))
+            except asyncio.TimeoutError:
+                pass

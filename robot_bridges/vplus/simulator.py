@@ -311,6 +311,12 @@ class VPlusSimulator:
             return False
         _keep(self.received, message)
         skill = message.command.skill.value
+        if message.command.skill is Skill.MONITOR_SPEED:  # the operator's setting: at once, beside the motion it scales
+            await self.arm.run(message.command)
+            ack = Ack(message.id, t_recv, self.controller_time(), self.arm.location())
+            if not writer.is_closing() and skill not in faults.mute:
+                await self._write_ack(ack, writer)
+            return True
         async with self._robot:
             if skill in faults.drop_on:
                 faults.drop_on.discard(skill)
