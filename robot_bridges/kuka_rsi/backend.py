@@ -131,6 +131,13 @@ class KukaRsiBackend(RobotBackend):
         """The simulated controller's thread, when it runs in this process and has started."""
         return None if self.simulator is None else self.simulator.thread
 
+    def set_speed_override(self, rate: float) -> None:
+        """The loop plays every move and stream at ``rate`` of its speed on its path from its next cycle, the change
+        within the axes' accelerations (otg.py: the speed cap; streaming.py: the path's rate)."""
+        super().set_speed_override(rate)
+        if self.iface is not None:
+            self.iface.set_speed_override(0, rate)
+
     def _simulator_stop_reason(self) -> str | None:
         return None if self.simulator is None else self.simulator.stop_reason()
 
@@ -154,6 +161,8 @@ class KukaRsiBackend(RobotBackend):
         iface = events.iface
         assert iface is not None
         iface.start()
+        if self.speed_override != 1.0:  # set before the loop started: it holds from the first cycle
+            iface.set_speed_override(0, self.speed_override)
         events.watch(iface.fileno(), events.on_events)
         await events.until(lambda: self.iface is not None and self.iface.events.address is not None, None, "the RSI loop to bind")
         address = iface.events.address

@@ -117,6 +117,7 @@ class Channel:
         self._pending: tuple[object, ...] | None = None
         self._pending_age = 0
         self._cmd_version = slots.command.version() & ~1
+        self._override_version = slots.override.version() & ~1  # the speed override: never written is 100 %
         self._flags_version = slots.flags.version() & ~1
         self._flags = 0
         self.staged: dict[int, ToolPath] = {}
@@ -306,6 +307,10 @@ class Channel:
         if got is not None:
             self._cmd_version = got[0]
             self._command(got[1])
+        override = _newer(self.slots.override, self._override_version)
+        if override is not None:
+            self._override_version = override[0]
+            self.motion.set_override(float(override[1][0]))  # type: ignore[arg-type]
         if self._pending is not None:
             self._try_pending()
 

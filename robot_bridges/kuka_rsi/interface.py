@@ -326,6 +326,14 @@ class RsiInterface:
             self._slots[robot].command.write(CommandKind.HALT, cmd, *(0.0,) * 11)
         return cmd
 
+    def set_speed_override(self, robot: int, rate: float) -> None:
+        """Play every move and stream of robot ``robot`` at ``rate`` (0..1) of its speed, on its path, from the next cycle
+        (a record of its own: it changes the running command, never supersedes it)."""
+        if not 0.0 <= rate <= 1.0:
+            raise ValueError(f"a speed override rate lies in [0, 1], got {rate!r}")
+        with self._lock:
+            self._slots[robot].override.write(float(rate))
+
     def set_tool_path(self, robot: int, path: ToolPath, *, max_speed: float = 2.0, max_angular_speed: float = 3.0) -> int:
         """Stream ``path`` one point per cycle (checked completely first: speeds, accelerations, an
         end at rest, against the link's limits); returns the command id."""

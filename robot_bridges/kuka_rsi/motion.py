@@ -87,6 +87,7 @@ class Motion:
         self.mode = "joint"  # which drives the corrections: joint, cart, stream
         self.stream_space = "joint"
         self.cursor: StreamCursor | None = None
+        self.override = 1.0  # the operator's speed override (set_override)
         self.path: ToolPath | None = None
         self.q_ref = np.zeros(6)
         self.base = np.eye(4)  # the pose (our kinematics) the Cartesian correction is measured from
@@ -382,6 +383,17 @@ class Motion:
             return False
         return self.joint.done if self.mode == "joint" else self.cart.done
 
+    def set_override(self, rate: float) -> None:
+        """The operator's speed override (0..1): every move and stream of this robot at that share of its speed, on
+        its path, the change within the axes' accelerations (0: braked to rest there, target kept); refused if it is
+        not a share."""
+        if not 0.0 <= rate <= 1.0:
+            self._warn("speed override", f"a speed override of {rate!r} is no share of the speed; ignored")
+            return
+        self.override = self.joint.scale = self.cart.scale = rate
+        if self.cursor is not None:
+            self.cursor.cap = rate
+
     def launch_joint(self, target: Vector, speed: Vector, accel: float) -> None:
         """Aim the joint generator at ``target``, no faster than the axes allow."""
         self.fold_to("joint")
@@ -426,7 +438,8 @@ class Motion:
             opening = np.maximum(opening, np.abs(points[2] - 2 * points[1] + points[0]))
         moving = opening > STILL
         ratio = float(np.min(budget[moving] / opening[moving])) if np.any(moving) else math.inf
-        self.cursor = StreamCursor(points, ramp, 1.0 if ratio >= 1.0 else max(0.0, ratio - ramp))
+        self.cursor = StreamCursor(points, ramp, min(self.override, 1.0 if ratio >= 1.0 else max(0.0, ratio - ramp)))
+        self.cursor.cap = self.override
         self.path, self.stream_space, self.mode = path, space, "stream"
         self._applied_cursor = (0.0, 0.0)
         return None

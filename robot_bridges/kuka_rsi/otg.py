@@ -92,6 +92,7 @@ class VectorOTG:
         self.target: Vector | None = None
         self.vmax = np.ones(n_groups)
         self.amax = np.ones(n_groups)
+        self.scale = 1.0  # the speed override: the share of vmax the move may reach (0: brakes to rest on its line)
         self.done = True
 
     def reset(self, position: Sequence[float] | Vector, velocity: Sequence[float] | Vector | None = None) -> None:
@@ -136,7 +137,7 @@ class VectorOTG:
         if self.done:
             return True
         error = self.error()
-        self.velocity = next_velocity(error, self.velocity, self.vmax, self.amax, self.dt, self.norm)
+        self.velocity = next_velocity(error, self.velocity, self.vmax, self.amax, self.dt, self.norm, self.scale)
         self.position = self.position + self.velocity * self.dt
         if self._settled():
             if self.target is not None:
@@ -150,7 +151,7 @@ class VectorOTG:
         return at_target and float(np.max(np.abs(self.velocity))) <= VELOCITY_EPS
 
 
-def next_velocity(error: Vector, velocity: Vector, vmax: Vector, amax: Vector, dt: float, norm: GroupNorm) -> Vector:
+def next_velocity(error: Vector, velocity: Vector, vmax: Vector, amax: Vector, dt: float, norm: GroupNorm, cap: float = 1.0) -> Vector:
     """One cycle of the braking-curve law (see the module docstring).
 
     The error is measured in units of its largest component: its sizes against the limits then
@@ -158,6 +159,8 @@ def next_velocity(error: Vector, velocity: Vector, vmax: Vector, amax: Vector, d
     subnormal remainder (a target like 1e-300 rad on one axis, the others landed exactly) had a
     size whose reciprocal overflowed to inf; ``0 * inf`` made the set point NaN, the controller
     refused every reply, and RSI stopped after 100 late packets.
+    ``cap`` (the speed override, 0..1) caps the speed at that share of ``vmax``, reached within ``amax`` like any
+    change and along the same direction, so a move keeps its line; 0 brakes it to rest there, its target kept.
     """
     scale = float(np.max(np.abs(error)))
     if scale > 0.0:
@@ -165,7 +168,7 @@ def next_velocity(error: Vector, velocity: Vector, vmax: Vector, amax: Vector, d
         # 1 / size_v (speed limit) and the braking speed at deceleration 1 / size_a.
         unit = error / scale
         size_v, size_a = norm(unit, vmax), norm(unit, amax)
-        wanted = unit * min(1.0 / size_v, braking_speed(scale, 1.0 / size_a, dt))
+        wanted = unit * min(cap / size_v, braking_speed(scale, 1.0 / size_a, dt))
     else:
         wanted = np.zeros_like(velocity)
     change = wanted - velocity
@@ -231,6 +234,7 @@ class CartesianOTG:
         self.target_rotation: Matrix | None = None
         self.vmax = np.ones(2)
         self.amax = np.ones(2)
+        self.scale = 1.0  # the speed override (VectorOTG.scale)
         self.done = True
 
     def reset(self, position: Sequence[float] | Vector, rotation: Matrix, velocity: Sequence[float] | Vector | None = None) -> None:
@@ -274,7 +278,7 @@ class CartesianOTG:
         if self.done:
             return True
         error = self.error()
-        self.velocity = next_velocity(error, self.velocity, self.vmax, self.amax, self.dt, self.norm)
+        self.velocity = next_velocity(error, self.velocity, self.vmax, self.amax, self.dt, self.norm, self.scale)
         self.position = self.position + self.velocity[:3] * self.dt
         self.rotation = rotvec_to_matrix(self.velocity[3:] * self.dt) @ self.rotation
         if float(np.max(np.abs(self.velocity))) <= VELOCITY_EPS and float(np.max(np.abs(self.error()))) <= POSITION_EPS:

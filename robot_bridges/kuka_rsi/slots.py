@@ -84,6 +84,8 @@ FLAGS_FORMAT = "Q"
 #: rejected packets, limiter clamps, then RIst (m, rad), RSol, AIPos (rad), ASPos, and the joint
 #: set point the external system commands (rad): 30 doubles.
 STATE_FORMAT = "qqqqQQqqqqq30d"
+#: the operator's speed override: the rate (0..1) every motion of the robot plays at, on its path.
+OVERRIDE_FORMAT = "d"
 
 
 class CommandKind:
@@ -104,15 +106,16 @@ class Status:
 
 @dataclass(frozen=True)
 class RobotSlots:
-    """The three records of one robot."""
+    """The four records of one robot."""
 
     command: SeqSlot
     flags: SeqSlot
     state: SeqSlot
+    override: SeqSlot
 
 
 def robot_block_size() -> int:
-    return SeqSlot.size_of(COMMAND_FORMAT) + SeqSlot.size_of(FLAGS_FORMAT) + SeqSlot.size_of(STATE_FORMAT)
+    return SeqSlot.size_of(COMMAND_FORMAT) + SeqSlot.size_of(FLAGS_FORMAT) + SeqSlot.size_of(STATE_FORMAT) + SeqSlot.size_of(OVERRIDE_FORMAT)
 
 
 def layout(buffer: memoryview, robots: int) -> list[RobotSlots]:
@@ -126,7 +129,9 @@ def layout(buffer: memoryview, robots: int) -> list[RobotSlots]:
         offset += flags.size
         state = SeqSlot(buffer, offset, STATE_FORMAT)
         offset += state.size
-        out.append(RobotSlots(command, flags, state))
+        override = SeqSlot(buffer, offset, OVERRIDE_FORMAT)
+        offset += override.size
+        out.append(RobotSlots(command, flags, state, override))
     if offset > len(buffer):
         raise ValueError(f"{robots} robots need {offset} bytes of shared buffer, have {len(buffer)}")
     return out

@@ -261,6 +261,7 @@ class StreamCursor:
         self.ramp = ramp
         self.position = 0.0
         self.rate = rate
+        self.cap = 1.0  # the speed override: the rate moves towards it by ``ramp`` per cycle, up or down
 
     @property
     def done(self) -> bool:
@@ -280,8 +281,10 @@ class StreamCursor:
 
     def advance(self) -> NDArray[np.float64]:
         """The set point of the next cycle."""
-        if self.rate < 1.0:
-            self.rate = min(1.0, self.rate + self.ramp)
+        if self.rate < self.cap:
+            self.rate = min(self.cap, self.rate + self.ramp)
+        elif self.rate > self.cap:  # slowing down costs what speeding up does: within the budget (ramp_rate)
+            self.rate = max(self.cap, self.rate - self.ramp)
         self.position = min(float(self.last), self.position + self.rate)
         return self.at(self.position)
 
