@@ -29,6 +29,7 @@ from node_transport.msgs import Bool, Trigger
 from node_transport.port import Transport, TransportError
 from node_transport.qos import LATCHED
 from node_transport.ros import RosTransport
+from execution_engine.engine.breakpoints import BREAKPOINT_SERVICE, RUN_TO_SERVICE, BreakpointService, RunToService
 from node_transport.wire import ENGINE_SERVICES, SAFETY_STOP, engine_service
 from operator_station.feed import Feed
 from operator_station.session import FeedStream, observe, publish_safety
@@ -104,6 +105,8 @@ class AttachedSession:
             node = transport.create_node("operator_station")
             observe(node, self.robot, self.feed, [TraceWriter(FeedStream(self.feed))])
             self._clients = {c: node.create_client(Trigger, engine_service(c)) for c in ENGINE_SERVICES}
+            self._clients["breakpoint"] = node.create_client(BreakpointService, BREAKPOINT_SERVICE)
+            self._clients["run_to"] = node.create_client(RunToService, RUN_TO_SERVICE)
             self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
             self._closing = asyncio.Event()
             self._loop = asyncio.get_running_loop()
@@ -130,6 +133,23 @@ class AttachedSession:
             except (TransportError, asyncio.TimeoutError) as error:
                 return False, f"{command}: the engine's service did not answer: {error or 'timeout'}"
             return bool(response.success), str(response.message)
+
+        return await asyncio.wrap_future(asyncio.run_coroutine_threadsafe(call(), loop))
+
+    async def breakpoint(self, action: str, operation: str) -> tuple[bool, str, list[str]]:
+        """A breakpoint or run-to command: the engine's breakpoint and run-to services (engine/breakpoints.py)."""
+        loop = self._loop
+        client = self._clients.get("run_to" if action == "run_to" else "breakpoint")
+        if loop is None or client is None:
+            return False, "not attached to a cell", []
+        request = RunToService.Request(operation=operation) if action == "run_to" else BreakpointService.Request(operation=operation, action=action)
+
+        async def call() -> tuple[bool, str, list[str]]:
+            try:
+                response = await client.call(request, timeout=SERVICE_TIMEOUT)
+            except (TransportError, asyncio.TimeoutError) as error:
+                return False, f"{action}: the engine's service did not answer: {error or 'timeout'}", []
+            return bool(response.success), str(response.message), list(getattr(response, "breakpoints", ()))
 
         return await asyncio.wrap_future(asyncio.run_coroutine_threadsafe(call(), loop))
 

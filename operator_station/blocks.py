@@ -148,6 +148,8 @@ def _step_json(step: Step) -> dict[str, Any]:
         inner = getattr(step, "inner", None)
         if inner:
             out["inner"] = {group: list(texts) for group, texts in inner.items()}
+        if step.breakpoint:
+            out["break"] = True
         return out
     return {"type": step.kind, "attributes": dict(step.attributes), "params": [{"name": p.name, "value": p.value} for p in step.params],
             "body": [_step_json(s) for s in step.body], "comments": list(step.comments), "trailer": list(step.trailer)}
@@ -189,7 +191,7 @@ def _steps(data: list[Any], where: str, depth: int, counter: list[int]) -> list[
     for index, entry in zip(operations, entries):
         if len({c.group for c in entry.calls}) != len(entry.calls):
             raise DocumentError(f"{label(index + 1)}: a group is given twice")
-        out[index] = OperationStep(entry.id, entry.name, entry.calls, entry.comments, _inner(data[index].get("inner"), entry, label(index + 1)))
+        out[index] = OperationStep(entry.id, entry.name, entry.calls, entry.comments, entry.breakpoint, _inner(data[index].get("inner"), entry, label(index + 1)))
     return [step for step in out if step is not None]
 
 

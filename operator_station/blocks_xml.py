@@ -123,8 +123,8 @@ def _children(element: etree._Element, unheld: list[str]) -> list[etree._Element
 
 
 def _operation(element: etree._Element, comments: list[str], unheld: list[str]) -> OperationStep:
-    _attributes(element, ("id", "name"), unheld)
-    operation = OperationStep(element.get("id", ""), element.get("name"), comments=list(comments))
+    _attributes(element, ("id", "name", "break"), unheld)
+    operation = OperationStep(element.get("id", ""), element.get("name"), comments=list(comments), breakpoint=element.get("break") == "true")
     pending: list[str] = []
     for group in element:
         if group.tag is etree.Comment:  # above a group's call, or after the last one
@@ -246,6 +246,8 @@ def _write_operation(parent: etree._Element, operation: OperationEntry, here: tu
     element = etree.SubElement(parent, "operation")
     _set(element, "id", operation.id, where)
     _set(element, "name", operation.name, where)
+    if operation.breakpoint:  # the builder's toggle on the operation's block
+        _set(element, "break", "true", where)
     placed[element] = Where(here, part="operation")
     inner: dict[str, list[str]] = getattr(operation, "inner", {})
     for call in operation.calls:

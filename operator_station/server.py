@@ -58,6 +58,7 @@ from operator_station.blocks import Block, BlockDocument, walk
 from operator_station.roles import requires, secure
 from operator_station.run_audit import watch_run
 from operator_station.scene3d_routes import routes as scene3d_routes
+from operator_station.breakpoint_routes import routes as breakpoint_routes
 from operator_station.session import RunSession
 from operator_station.timeline_view import TimelineView
 
@@ -268,7 +269,8 @@ def create_app(station: Station) -> Starlette:
         if app is None:
             record(request, "run start", ok=False, answer="not run: the application has errors", path=_shown(station, path), application=digest(text))
             return FastJSON({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
-        operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin} for op in app.operations]
+        operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin, "line": op.line,
+                       **({"break": True} if op.breakpoint else {})} for op in app.operations]
         ok, answer = station.session.start(app, operations)
         entry = record(request, "run start", ok=ok, answer=answer, path=_shown(station, path), application=digest(text))
         if ok:
@@ -376,6 +378,7 @@ def create_app(station: Station) -> Starlette:
         *accounts.routes(station.access, lambda: station.wall()),
         Route("/api/timeline", timeline),
         *scene3d_routes(station),  # the 3D view (operator_station/scene3d_routes.py)
+        *breakpoint_routes(station),  # breakpoints and run to here (operator_station/breakpoint_routes.py)
         WebSocketRoute("/ws", feed),
         Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
     ]))

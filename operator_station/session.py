@@ -233,6 +233,17 @@ class RunSession:
         except asyncio.TimeoutError:
             return False, f"{command}: the engine did not answer within 30 s"
 
+    async def breakpoint(self, action: str, operation: str) -> tuple[bool, str, list[str]]:
+        """A breakpoint or run-to command from the page (engine/breakpoints.py, source ``studio``): the engine's
+        answer and the operations the run pauses before now."""
+        loop, deployment = self._loop, self._deployment
+        if loop is None or deployment is None:
+            return False, "no run is going: a breakpoint in the file is set in the builder (the gutter of its operation)", []
+        engine = deployment.engine
+        future = asyncio.run_coroutine_threadsafe(engine.breakpoint_command(action, operation, SOURCE), loop)
+        ok, answer = await asyncio.wait_for(asyncio.wrap_future(future), 30.0)
+        return ok, answer, engine.breakpoints.ids()
+
     def safety_stop(self, active: bool) -> tuple[bool, str]:
         """Raise or clear the cell's safety stop input: the engine pauses every group and records it."""
         return publish_safety(self._loop, self._safety, active, "no run is going")

@@ -53,6 +53,7 @@ class OperationEntry:
     name: str | None = None
     calls: list[CallEntry] = field(default_factory=list)
     comments: list[str] = field(default_factory=list)  # the comments written just above it
+    breakpoint: bool = False  # break="true": the run pauses before it (engine/breakpoints.py)
 
     def call(self, group: str) -> CallEntry | None:
         return next((c for c in self.calls if c.group == group), None)
@@ -81,6 +82,7 @@ class AppDocument:
             "operations": [{
                 "id": op.id, "name": op.name, "comments": list(op.comments),
                 "calls": [{"group": c.group, "function": c.function, "params": [{"value": p.value, "name": p.name} for p in c.params]} for c in op.calls],
+                **({"break": True} if op.breakpoint else {}),
             } for op in self.operations],
             "header": list(self.header), "trailer": list(self.trailer), "steps": list(self.steps),
         }
@@ -151,7 +153,10 @@ def _operation(data: Any, index: int) -> OperationEntry:
             entries.append(ParamEntry(value, name))
         calls.append(CallEntry(group, function, entries))
     where = f"operation {index}"
-    return OperationEntry(_text(data, "id", where), _optional(data, "name", where), calls, _texts(data, "comments", where))
+    breakpoint = data.get("break", False)
+    if not isinstance(breakpoint, bool):
+        raise DocumentError(f"{where}: break must be true or false")
+    return OperationEntry(_text(data, "id", where), _optional(data, "name", where), calls, _texts(data, "comments", where), breakpoint)
 
 
 # ------------------------------------------------------------------------------ reading
@@ -200,7 +205,7 @@ def _comment(node: etree._Comment) -> str:
 
 
 def _read_operation(element: etree._Element, comments: list[str]) -> OperationEntry:
-    operation = OperationEntry(id=element.get("id", ""), name=element.get("name"), comments=list(comments))
+    operation = OperationEntry(id=element.get("id", ""), name=element.get("name"), comments=list(comments), breakpoint=element.get("break") == "true")
     for group in element:
         if not isinstance(group.tag, str):
             continue
@@ -283,7 +288,8 @@ def serialize(document: AppDocument) -> tuple[str, list[Placement]]:
         for comment in operation.comments:
             emit(_comment_lines(comment, "  ")[0], at_operation)
         name = f" name={_attr(operation.name, chr(39))}" if operation.name is not None else ""
-        emit(f"  <operation id={_attr(operation.id, chr(39))}{name}>", at_operation)
+        stop = " break='true'" if operation.breakpoint else ""
+        emit(f"  <operation id={_attr(operation.id, chr(39))}{name}{stop}>", at_operation)
         for call in operation.calls:
             at_call, at_function = Placement(index, call.group, part="call"), Placement(index, call.group, part="function")
             lines.append(f"    <{call.group}>")

@@ -180,7 +180,11 @@ const Builder = (() => {
     name.addEventListener("change", () => { op.name = name.value === "" ? null : name.value; edited(); });
     const idCell = el("div", {class: `op-idcell${opMessages.length ? " has-error" : ""}`, title: opMessages.map((m) => m.message).join("\n")}, id,
       opMessages.length ? el("div", {class: "cell-msg", text: opMessages[0].message}) : null);
-    const line = el("div", {class: "ops-row", "data-op": row.leaf, "data-step": row.key, ...depth}, el("div", {class: "op-index", text: String(row.leaf + 1)}), idCell, name);
+    // The gutter toggles the operation's breakpoint (break="true" when saved): the run pauses before it.
+    const gutter = el("div", {class: `op-index op-break${op.break ? " on" : ""}`, text: String(row.leaf + 1), "data-op": row.leaf,
+      title: op.break ? "breakpoint: the run pauses before this operation (click to remove)" : "click to set a breakpoint: the run pauses before this operation",
+      onclick: () => { if (op.break) delete op.break; else op.break = true; edited(); }});
+    const line = el("div", {class: "ops-row", "data-op": row.leaf, "data-step": row.key, ...depth}, gutter, idCell, name);
     line.style.gridTemplateColumns = b.columns;
     for (const g of gs) line.append(renderCell(row, g));
     line.append(tools(row));
