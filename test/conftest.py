@@ -25,7 +25,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 REAL_TIME_FILES = frozenset({
     "test_rsi_backend.py", "test_rsi_busy_computer.py", "test_rsi_linear_recording.py", "test_rsi_loop.py", "test_rsi_node.py",
     "test_rsi_peer.py", "test_rsi_simulator.py", "test_rsi_streaming.py", "test_rsi_tiny_values.py", "test_rsi_trust.py",
-    "test_rsi_conventions.py", "test_rsi_signals.py",
+    "test_rsi_conventions.py", "test_rsi_signals.py", "test_speed_override_kuka.py",
     "test_mixed_cell.py",  # the mixed cell's KUKA: the simulated KR C4 on the wall clock
     "test_dds_follow_joint_trajectory.py", "test_follow_joint_trajectory_ros.py",  # their KUKA cases: the simulated KR C4 on the wall clock
 })
