@@ -112,7 +112,7 @@ def summarize(path: str | Path) -> RunSummary:
         if recording.problem:
             header.append(f"  reading stopped at damaged data: {recording.problem}")
     timeline = builder.snapshot()
-    extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator")]
+    extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator", "breakpoint")]
     return RunSummary(str(path), header, timeline, recording.cut, extra)
 
 

@@ -123,7 +123,7 @@ class Mark:
     """A point in time worth a marker: an error, an operator action, an engine state change."""
 
     t: float
-    kind: str  # error / operator / engine_state / flag / outcome (a tested function's) / branch (an operation left out)
+    kind: str  # error / operator / engine_state / flag / outcome (a tested function's) / branch (an operation left out) / breakpoint
     group: str
     text: str
 
@@ -165,6 +165,9 @@ class TimelineBuilder:
         self.t_first = t if self.t_first is None else min(self.t_first, t)
         self.t_last = max(self.t_last, t)
         event, group = record.get("event"), str(record.get("group", "?"))
+        if event == "breakpoint":  # the run paused before an operation: a mark on the held group's lane, or the engine's
+            self.marks.append(Mark(t, "breakpoint", group, str(record.get("message") or f"paused before {record.get('operation')}")))
+            return
         if group == "engine":
             self._engine(record, t)
             return

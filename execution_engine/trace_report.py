@@ -37,6 +37,7 @@ class TraceSummary:
     by_group: Counter[str] = field(default_factory=Counter)
     errors: list[str] = field(default_factory=list)  # the error texts of error records
     operator: list[str] = field(default_factory=list)  # one line per operator command
+    breakpoints: list[str] = field(default_factory=list)  # one line per pause before an operation (engine/breakpoints.py)
     last: dict[str, Any] | None = None  # the last valid record
     end: dict[str, Any] | None = None  # the run_end record, if the trace is whole
     problems: list[str] = field(default_factory=list)  # lines that are not records
@@ -65,6 +66,7 @@ class TraceSummary:
             out.append("  the last line is incomplete (cut in the middle of a write) and was skipped")
         for group, count in sorted(self.by_group.items()):
             out.append(f"  {printable(group):<12} {count} record(s)")
+        out.extend(f"  breakpoint: {printable(line)}" for line in self.breakpoints)
         out.extend(f"  operator: {printable(line)}" for line in self.operator)
         out.extend(f"  error: {printable(text)}" for text in self.errors)
         if self.problem_count:
@@ -138,7 +140,10 @@ def _take(summary: TraceSummary, number: int, raw: bytes) -> None:
         summary.errors.append(f"{record.get('group')} at {record['t']:.3f} s: {record['error']}")
     elif record["event"] == "operator":
         answer = "accepted" if record.get("accepted") else "refused"
-        summary.operator.append(f"{record['t']:.3f} s {record.get('command')} from {record.get('source')}: {answer}")
+        target = f" {record['target']}" if record.get("target") else ""  # the operation a breakpoint or run-to command names
+        summary.operator.append(f"{record['t']:.3f} s {record.get('command')}{target} from {record.get('source')}: {answer}")
+    elif record["event"] == "breakpoint":  # the run paused before an operation, or passed it (engine/breakpoints.py)
+        summary.breakpoints.append(f"{record['t']:.3f} s {record.get('group')}: {record.get('message')}")
     elif record["event"] == "swap":  # a paused run's remainder edited (engine/remainder_swap.py)
         summary.operator.append(f"{record['t']:.3f} s edit from {record.get('source')}: operations from {record.get('from_operation')} on "
                                 f"swapped for {record.get('file')}'s, application {str(record.get('from_digest'))[:12]} -> {str(record.get('to_digest'))[:12]}")

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,18 +21,9 @@ if browser.missing() is not None:
 
 from selenium.webdriver.common.by import By  # noqa: E402
 
-from test_studio_browser import WAIT, open_station, press, text, until, validated  # noqa: E402
+from test_studio_browser import WAIT, driver, open_station, press, text, until, validated  # noqa: E402,F401 - driver: the fixture
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def driver() -> Iterator[Any]:
-    chrome = browser.chromium()
-    try:
-        yield chrome
-    finally:
-        chrome.quit()
 
 
 def where(driver: Any) -> str:
