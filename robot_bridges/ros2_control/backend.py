@@ -10,7 +10,10 @@ is comes only from ``/joint_states``, checked sample by sample (:mod:`.feed`).
 
 Pause cancels the running trajectory -- the controller holds the arm where it is -- and resume
 plans what is left of the path again from where the arm really stopped, never sending the old
-trajectory a second time; stop cancels and abandons.  Grippers are driven through
+trajectory a second time; stop cancels and abandons.  FollowJointTrajectory has no way to scale a
+running trajectory, so a change of the speed override does what a pause and resume do: it cancels the
+goal, the arm comes to rest on its path, and the rest of the path goes again from where it stands,
+timed at the new share of the speed (0 %: it waits on the path until the override is raised).  Grippers are driven through
 control_msgs/action/GripperCommand where a group names one; other end effectors, vision and I/O
 are not available on such a robot and say so (in the dry run: at the call's line, before a run).
 """
@@ -18,7 +21,9 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Coroutine
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -61,6 +66,7 @@ class _GroupRun:
 
     speed: float = 1.0
     busy: bool = False
+    following: bool = False  # a goal of it is with the controller (a change of the speed override cancels it)
     paused: bool = False
     stopping: bool = False
     wake: asyncio.Event = field(default_factory=asyncio.Event)
@@ -80,6 +86,7 @@ class Ros2ControlBackend(RobotBackend):
         self.limits: dict[str, Limits] = {}
         self.runs = {g.group: _GroupRun() for g in settings.groups}
         self.holder: dict[str, str] = {}  # a group moved by another's full-body move -> that group
+        self._cancels: set[asyncio.Task[None]] = set()  # the cancels a change of the speed override sent
 
     @property
     def groups(self) -> tuple[str, ...]:
@@ -174,6 +181,29 @@ class Ros2ControlBackend(RobotBackend):
             run.wake.set()
             for member in team:
                 await self.link.cancel(self.settings.group(member))
+
+    def set_speed_override(self, rate: float) -> None:
+        """Cancel every running goal; its motion goes on from where the arm stops, timed at the new share (_move)."""
+        before = self.speed_override
+        super().set_speed_override(rate)
+        for leader, run in self.runs.items():
+            if rate > 0.0:
+                run.wake.set()
+            if run.following and rate != before:
+                task = asyncio.get_running_loop().create_task(self._cancel_team(run.team or (leader,)))
+                self._cancels.add(task)
+                task.add_done_callback(self._cancels.discard)
+
+    async def _following(self, run: _GroupRun, goal: Coroutine[Any, Any, str]) -> str:
+        run.following = True
+        try:
+            return await goal
+        finally:
+            run.following = False
+
+    async def _cancel_team(self, team: tuple[str, ...]) -> None:
+        for member in team:
+            await self.link.cancel(self.settings.group(member))
 
     async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
         if group not in self.runs:
@@ -278,8 +308,8 @@ class Ros2ControlBackend(RobotBackend):
         plan, progress = path, 0
         while True:
             await self._wait_while_paused(team[0], run)
-            timed = time_path(plan, limits, run.speed)
-            outcome = await self._follow(team, timed)
+            timed = time_path(plan, limits, run.speed * self.speed_override)
+            outcome = await self._following(run, self._follow(team, timed))
             if outcome != CANCELED:
                 break
             if run.stopping:
@@ -311,7 +341,8 @@ class Ros2ControlBackend(RobotBackend):
         return CANCELED if CANCELED in outcomes else SUCCEEDED
 
     async def _wait_while_paused(self, group: GroupSettings, run: _GroupRun) -> None:
-        while run.paused and not run.stopping:
+        while (run.paused or self.speed_override == 0.0) and not run.stopping:  # paused, or held on the path at 0 %
+            run.wake.clear()
             await run.wake.wait()
         if run.stopping:
             raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped")
@@ -355,11 +386,12 @@ class Ros2ControlBackend(RobotBackend):
         here = self._group_q(group)
         if float(np.max(np.abs(points[0] - here))) > self.settings.goal_tolerance:
             await self._move((group,), run, np.vstack((here, points[0])), f"{what}: to its first point")
-        timed = retime(primitive.times, points, limits, run.speed)
+        await self._wait_while_paused(group, run)
+        timed = retime(primitive.times, points, limits, run.speed * self.speed_override)
         if math.isclose(timed.duration, 0.0):
             return await self.measure(group.group)
         # played as a path: a pause re-plans the rest from where the arm stopped, at the same speed limits
-        first = await self._follow((group,), timed) if not run.paused else CANCELED
+        first = await self._following(run, self._follow((group,), timed)) if not run.paused else CANCELED
         if first == CANCELED:
             if run.stopping:
                 raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped during {what}")
