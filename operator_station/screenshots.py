@@ -23,6 +23,7 @@ from typing import Any
 from app_functions.registry import full_catalog
 from operator_station import browser
 from operator_station.cli import build_station
+from operator_station.screenshots_audit import shoot_audit
 from operator_station.testing import serve
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -99,6 +100,7 @@ def shoot(out: Path) -> list[Path]:
             replay.close()
             driver.quit()
     shots.append(shoot_loops(out))
+    shots += shoot_audit(out, _args, _until)
     return shots
 
 

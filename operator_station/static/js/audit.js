@@ -48,7 +48,8 @@ const Audit = (() => {
     const tr = document.createElement("tr");
     tr.className = entry.ok ? "ok" : "bad";
     tr.dataset.seq = entry.seq;
-    const details = Object.entries(entry).filter(([k]) => !KNOWN.has(k)).map(([k, v]) => `${k}=${typeof v === "string" ? v : JSON.stringify(v)}`);
+    const shown = (v) => (typeof v === "string" ? (v.startsWith("sha256:") ? short(v) : v) : JSON.stringify(v));
+    const details = Object.entries(entry).filter(([k]) => !KNOWN.has(k)).map(([k, v]) => `${k}=${shown(v)}`);
     const digests = entry.before !== undefined || entry.after !== undefined ? `${short(entry.before)} → ${short(entry.after)}` : "";
     const cells = [entry.when.replace("T", " ").replace("+00:00", "Z"), entry.who, entry.role, entry.what, entry.ok ? "ok" : "refused",
                    entry.answer || "", digests, details.join(" "), entry.session ? `${entry.session} ${entry.address}` : entry.address];
@@ -57,7 +58,8 @@ const Audit = (() => {
       td.textContent = text;
       tr.appendChild(td);
     }
-    if (entry.before !== undefined) tr.title = `before ${entry.before || "(none)"}\nafter ${entry.after || "(none)"}`;
+    const digests_in = Object.entries(entry).filter(([k, v]) => typeof v === "string" && v.startsWith("sha256:")).map(([k, v]) => `${k} ${v}`);
+    if (digests_in.length) tr.title = digests_in.join("\n");  // the whole digests, on hover
     return tr;
   }
   async function poll() {
