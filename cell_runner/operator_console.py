@@ -19,6 +19,10 @@ Breakpoints (engine/breakpoints.py): ``b`` toggles one on the next operation to 
 which operation to run to (its number as the status counts them, or its id, then Enter: the one
 question the console asks, read as a line even at a terminal) and ``c`` clears them all; in line
 mode ``b 5`` and ``g 7`` name the operation at once.  Continue is ``r``, step ``t``.
+
+The speed override (engine/speed.py): ``+`` and ``-`` raise and lower it by :data:`SPEED_STEP` percent (never
+above 100 %: the application's own speed), ``%`` asks for a value (then Enter; ``% 50`` in line mode); ``-`` down
+to 0 % holds every motion on its path, ``+`` goes on from there.  The engine records each with the key as source.
 """
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ import contextlib
 import os
 import sys
 from collections.abc import Awaitable, Callable, Coroutine
-from typing import IO, Any
+from typing import IO, Any, Protocol
 
 from execution_engine.engine.breakpoints import BREAKPOINT_SERVICE, RUN_TO_SERVICE, BreakpointService, RunToService
 from execution_engine.engine.operator import CONSOLE_KEYS, console_source
@@ -51,9 +55,22 @@ BreakCommander = Callable[[str, str, str], Awaitable[tuple[bool, str]]]
 #: Breakpoint keys: b toggles a breakpoint on the next operation (``b N`` on operation N), g asks for an
 #: operation and runs to it (``g N`` at once), c clears every breakpoint; continue and step are r and t.
 BREAK_KEYS = {"b": "toggle", "g": "run_to", "c": "clear_all"}
+#: Speed override keys: + and - change it by SPEED_STEP percent, % asks for a value.
+SPEED_KEYS = ("+", "-", "%")
+SPEED_STEP = 10.0
+
+
+class SpeedControl(Protocol):
+    """The engine's speed override (execution_engine/engine/speed.py)."""
+
+    percent: float
+
+    def set(self, percent: object, source: str) -> tuple[bool, str]: ...
+
 
 KEY_LIST = (" ".join(f"{key} ({command})" for command, key in CONSOLE_KEYS.items())
-            + " b (breakpoint on the next operation) g (run to an operation) c (clear breakpoints) h (help)")
+            + " b (breakpoint on the next operation) g (run to an operation) c (clear breakpoints)"
+            + f" +/- (speed override {SPEED_STEP:g} % up/down) % (speed override: type it) h (help)")
 HELP = "operator commands: " + KEY_LIST
 PROMPT_KEYS = f"operator keys, no Enter needed: {KEY_LIST}"
 PROMPT_LINES = f"operator commands, type a key (or the command's name) and Enter: {KEY_LIST}"
@@ -124,8 +141,12 @@ class KeyDecoder:
 
 
 class OperatorConsole:
-    def __init__(self, node: Node, out: IO[str] = sys.stdout, commander: Commander | None = None, breaks: BreakCommander | None = None) -> None:
+    def __init__(
+        self, node: Node, out: IO[str] = sys.stdout, commander: Commander | None = None, breaks: BreakCommander | None = None,
+        speed: SpeedControl | None = None,
+    ) -> None:
         self.node = node
+        self.speed = speed
         self.out = out
         self.commander = commander
         self.breaks = breaks
@@ -172,13 +193,23 @@ class OperatorConsole:
         word = typed.lower()
         if not word:
             return
-        if self._asking is not None:  # the answer to "run to which operation?" (a lone key other than a digit: not an answer)
-            self._asking = None
+        asking, self._asking = self._asking, None
+        if asking == "speed":  # the answer to "speed override?"
+            self._say(self.change_speed("%", typed))
+            return
+        if asking is not None:  # the answer to "run to which operation?" (a lone key other than a digit: not an answer)
             if len(word) > 1 or word.isdigit():
                 self.out.write(await self.breakpoint("run_to", typed, "g") + "\n")
                 self.out.flush()
                 return
         head, _, argument = typed.partition(" ")
+        if head in SPEED_KEYS:
+            if head == "%" and not argument.strip():
+                self._asking = "speed"
+                self._say("speed override in percent of the application's speed (0-100; 0 holds on the path), then Enter")
+            else:
+                self._say(self.change_speed(head, argument.strip()))
+            return
         if head.lower() in BREAK_KEYS:
             action = BREAK_KEYS[head.lower()]
             if action == "run_to" and not argument.strip():
@@ -197,6 +228,25 @@ class OperatorConsole:
             self.out.write(f"unknown command {word!r}; {HELP}\n")
             return
         self.out.write(await self.command(name, word) + "\n")
+        self.out.flush()
+
+    def change_speed(self, key: str, typed: str = "") -> str:
+        """``+``/``-``: the override a step up or down; ``%``: the value typed.  The engine's answer for the console."""
+        if self.speed is None:
+            return "speed: no engine in this process; set its parameter: ros2 param set /execution_engine speed_override P"
+        now = self.speed.percent
+        if key == "%":
+            try:
+                value: object = float(typed.removesuffix("%").strip())
+            except ValueError:
+                return f"speed: refused - {typed!r} is no percentage; type 0 to 100, then Enter"
+        else:
+            value = min(100.0, now + SPEED_STEP) if key == "+" else max(0.0, now - SPEED_STEP)
+        ok, answer = self.speed.set(value, console_source(key))
+        return f"speed: {'ok' if ok else 'refused'} - {answer}"
+
+    def _say(self, text: str) -> None:
+        self.out.write(text + "\n")
         self.out.flush()
 
     def spawn(self, work: Coroutine[Any, Any, Any], loop: asyncio.AbstractEventLoop) -> None:
@@ -223,7 +273,7 @@ class OperatorConsole:
         except (AttributeError, ValueError, OSError):
             return False
         keys = self._cbreak(fd)
-        decoder = KeyDecoder(keys, frozenset({"g"}))  # g asks for an operation: its number is typed with Enter
+        decoder = KeyDecoder(keys, frozenset({"g", "%"}))  # g asks for an operation, % for a speed: typed with Enter
 
         def readable() -> None:
             try:

@@ -78,7 +78,8 @@ async def _run(
     recorder = await start_recording(settings, app, deployment.transport, name, observer)  # checkpoints after the trace
     if recorder.writer is not None:  # an edit of the paused run: the checkpoint goes on with the new application
         deployment.engine.remainder.hooks.append(recorder.writer.swapped)
-    console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command, deployment.engine.breakpoint_command)
+    console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command, deployment.engine.breakpoint_command,
+                              deployment.engine.speed)
     loop = asyncio.get_running_loop()
     interactive = console.attach_stdin(loop) if operators else False
     setup = setup_for(name, options) if settings.check else None  # checked where the robot is
