@@ -94,19 +94,20 @@ def is_entry(line: bytes) -> bool:
     return isinstance(value, dict) and all(isinstance(value.get(k), str) for k in ("when", "who", "what"))
 
 
-def check_audit_file(path: Path, shown: str) -> None:
+def check_audit_file(path: Path, shown: str) -> int:
     """Refuse (AuditError, one line) a path the audit may not append to: a directory or device, or an existing
-    file that is not an audit log (its last line no entry) -- appending would change another file."""
+    file that is not an audit log (its last line no entry) -- appending would change another file.  The ``seq``
+    of the file's last entry (0 for a new or empty file), which the next entry continues."""
     try:
         info = path.stat()
     except FileNotFoundError:
-        return
+        return 0
     except OSError as error:
         raise AuditError(f"{shown}: cannot be read ({error.strerror or error})") from None
     if not stat.S_ISREG(info.st_mode):
         raise AuditError(f"{shown}: not a regular file; give a file for the audit log")
     if info.st_size == 0:
-        return
+        return 0
     try:
         with open(path, "rb") as handle:
             handle.seek(max(0, info.st_size - TAIL))
@@ -116,6 +117,8 @@ def check_audit_file(path: Path, shown: str) -> None:
     last = tail.rstrip(b"\n").rsplit(b"\n", 1)[-1]
     if not is_entry(last):
         raise AuditError(f"{shown}: exists and is not an audit log (its last line is no audit entry); the station appends only to its own: give another file")
+    seq = json.loads(last).get("seq")
+    return seq if isinstance(seq, int) and 0 <= seq < 1 << 53 else 0
 
 
 @dataclass
@@ -133,12 +136,12 @@ class AuditLog:
     @classmethod
     def open(cls, path: Path, shown: str, wall: Callable[[], float] = time.time) -> AuditLog:
         """The audit log appending to ``path`` (checked first, created with mode 600); AuditError if refused."""
-        check_audit_file(path, shown)
+        last = check_audit_file(path, shown)
         try:
             fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600)
         except OSError as error:
             raise AuditError(f"{shown}: cannot be written ({error.strerror or error}); give a writable file") from None
-        return cls(path, wall, _file=os.fdopen(fd, "ab", buffering=0))
+        return cls(path, wall, _seq=last, _file=os.fdopen(fd, "ab", buffering=0))
 
     def close(self) -> None:
         with self._lock:

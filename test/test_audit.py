@@ -121,7 +121,7 @@ def test_entries_are_appended_as_json_lines_to_a_file_only_its_owner_reads(tmp_p
         "after": digest(b"new"), "path": "app.xml", "detail_when": "spoofed"}  # a detail never replaces the station's own keys
     assert (lines[1]["who"], lines[1]["ok"], lines[1]["answer"]) == ("unknown from unknown", False, "no run is going")
     again = AuditLog.open(path, "audit", lambda: 1764230401.0)  # the next start appends; nothing is lost
-    again.append(ANNA, "login")
+    assert again.append(ANNA, "login")["seq"] == 3  # and numbers on from the file's last entry
     again.close()
     assert len(path.read_text().splitlines()) == 3 and all(is_entry(line.encode()) for line in path.read_text().splitlines())
     assert [e["what"] for e in log.newest()] == ["pause", "save"] and [e["what"] for e in log.newest(after=1)] == ["pause"]
@@ -140,7 +140,7 @@ def test_an_audit_file_is_never_another_file(tmp_path: Path) -> None:
         check_audit_file(trace, "--audit run.jsonl")
     empty = tmp_path / "empty.jsonl"
     empty.touch()
-    check_audit_file(empty, "--audit empty.jsonl")  # an empty file is the start of one
+    assert check_audit_file(empty, "--audit empty.jsonl") == 0  # an empty file is the start of one
 
 
 class FullDisk:
