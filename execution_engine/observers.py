@@ -266,8 +266,8 @@ class LivePrinter:
             self._print(event.t, "engine", f"operator {event.command} from {event.source}: {answer} - {event.answer}")
         elif event.event == "flag" and event.source:
             self._print(event.t, event.source, event.message)
-        elif event.event == "breakpoint" and event.source:  # sync="flags": a second group may join a pause already said
-            self._print(event.t, event.source, event.message)
+        elif event.event == "breakpoint" and (event.source or event.answer == "passed"):  # a group joining a pause; a pass
+            self._print(event.t, event.source or "engine", event.message)
 
     def _print(self, t: float, who: str, text: str) -> None:
         """One line; names and texts from the application and the peers with control and bidi characters escaped."""

@@ -247,3 +247,30 @@ def test_an_edited_remainder_takes_its_files_breakpoints_and_keeps_those_set_at_
     bp.ensure(old, run)  # the same run: nothing starts over
     bp.adopt(edited)
     assert bp.ids() == ["4", "5"] and bp.target is None  # 2's breakpoint was the old file's; operation 3 is gone
+
+
+class Resumed:
+    """Where a resumed run starts (checkpoint/resume.py's ResumePlan, without a crash before it): operation 3."""
+
+    index = 2
+    outcomes: dict[str, str] = {}
+
+    async def first_operation(self, engine: Any, operation: Any) -> Any:
+        return operation
+
+
+def test_a_resumed_run_keeps_the_files_breakpoints_after_where_it_starts(run_sim: Any) -> None:
+    async def main(clock: Clock) -> tuple[Any, ...]:
+        cell = await Cell(clock, durations=DURATIONS).start()
+        engine = cell.deployment.engine
+        run = asyncio.ensure_future(engine.run(with_breaks(make_app(OPS), 1, 4), Resumed()))
+        await until_state(cell, clock, "paused")
+        at = (engine._message, started(cell, "left_arm"))
+        assert (await cell.operator("resume")).success
+        report = await run
+        await cell.deployment.close()
+        return at, report
+
+    (message, left), report = run_sim(main)
+    assert message == "paused at breakpoint before operation 4 '4' (line 4)" and left == ["3"]  # 1 was done before the crash
+    assert report.ok and [h.operation for h in report.breakpoints] == ["4"]
