@@ -27,7 +27,7 @@ from starlette.routing import BaseRoute, Route
 
 from operator_station.access import OPERATOR, Access, Who
 from operator_station.audit import AuditLog, MAX_ANSWER, log_of, record, requester
-from operator_station.guard import cookie_name
+from operator_station.guard import LOGIN_PATH, cookie_name
 from operator_station.roles import public, requires, whoami
 
 #: Wrong passwords one name may be given within :data:`FAILURE_WINDOW` seconds.
@@ -99,6 +99,7 @@ def routes(access: Access, wall: Callable[[], float]) -> list[BaseRoute]:
             audit.append(stranger, "login", ok=False, answer="wrong name or password")
             return _answer({"ok": False, "error": "login: wrong name or password"}, 401)
         failures.forget(name)
+        access.end_session(request.cookies.get(cookie_name(request.scope)))  # a session the browser had is over: never two at once
         cookie, ident = access.new_session(user.name, user.role)
         entry = audit.append(Who("session", ident, _client(request), user.name, user.role), "login", answer="name and password")
         response = _answer({"ok": True, "name": user.name, "role": user.role, "session": ident, "when": entry["when"]})
@@ -127,7 +128,7 @@ def routes(access: Access, wall: Callable[[], float]) -> list[BaseRoute]:
         return _answer({"ok": True, "entries": audit.newest(after, limit), "file": str(audit.path or ""), "problem": audit.problem})
 
     return [
-        Route("/login", login, methods=["POST"]),
+        Route(LOGIN_PATH, login, methods=["POST"]),
         Route("/api/logout", logout, methods=["POST"]),
         Route("/api/whoami", who),
         Route("/api/audit", trail),

@@ -58,6 +58,8 @@ PROTECTED = ("/api/", "/ws")
 HOST_HEADER = re.compile(r"(?P<name>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(?P<port>[0-9]{1,5}))?")
 #: The station's login form, served instead of the page to a browser without a session when users are configured.
 LOGIN_PAGE = "login.html"
+#: Where the form posts: outside PROTECTED (there is no session yet), under every other rule, Sec-Fetch-Site too.
+LOGIN_PATH = "/login"
 #: Headers on every HTTP answer: no framing by other sites, no sniffing, no referrer (the token is in a URL once).
 SECURITY_HEADERS = (
     (b"x-frame-options", b"DENY"),
@@ -113,7 +115,7 @@ def origin_problem(headers: Headers, scope: Scope) -> str | None:
     if origin is not None and origin.lower() != own:
         return f"Origin {origin!r} is not this station's ({own}): requests from other sites are refused"
     fetch_site = headers.get("sec-fetch-site")
-    if fetch_site is not None and fetch_site not in ("same-origin", "none") and scope["path"].startswith(PROTECTED):
+    if fetch_site is not None and fetch_site not in ("same-origin", "none") and (scope["path"].startswith(PROTECTED) or scope["path"] == LOGIN_PATH):
         return f"a {fetch_site} request (Sec-Fetch-Site): requests from other sites are refused"
     return None
 

@@ -11,6 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
 from starlette.responses import JSONResponse  # noqa: E402
@@ -196,6 +198,33 @@ def test_a_token_page_load_gives_a_session_in_that_tokens_role(cell_dir: Path) -
         assert entries(station)[-1]["what"] == "login" and entries(station)[-1]["who"] == name
     with pytest.raises(Exception, match="operator-token-file holds the station's own token"):
         Access.for_address("127.0.0.1", ENGINEER_TOKEN, operator_token=ENGINEER_TOKEN)
+
+
+def test_a_login_ends_the_session_the_browser_had_and_is_refused_to_other_sites(cell_dir: Path) -> None:
+    station = station_for(cell_dir)
+    page = logged_in(station, "anna", "anna-pw")
+    first = page.cookies["studio_session_8080"]
+    assert page.post("/login", json={"name": "ben", "password": "ben-pw"}).json()["role"] == ENGINEER
+    assert page.cookies["studio_session_8080"] != first and station.access.session(first) is None  # anna's session is over
+    stranger = client(station)
+    for headers in ({"Sec-Fetch-Site": "cross-site"}, {"Sec-Fetch-Site": "same-site"}, {"Origin": "http://localhost:9000"}):
+        answer = stranger.post("/login", json={"name": "anna", "password": "anna-pw"}, headers=headers)
+        assert answer.status_code == 403 and "set-cookie" not in answer.headers
+    assert [e["what"] for e in entries(station)] == ["login", "login"]  # the refused ones never reached the route
+
+
+JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.text(max_size=80), lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=10), inner, max_size=3), max_leaves=8)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(body=st.one_of(JSON, st.fixed_dictionaries({"name": JSON, "password": JSON}), st.fixed_dictionaries({"name": st.text(max_size=70), "password": st.text(max_size=1100)})))
+def test_any_login_body_is_answered_in_one_line_and_opens_no_session_but_the_right_ones(cell_dir: Path, body: Any) -> None:
+    station = station_for(cell_dir)
+    station.wall = iter(range(10**6)).__next__  # a minute between tries: the bound on wrong passwords holds no one up here
+    answer = client(station).post("/login", content=json.dumps(body), headers={"Content-Type": "application/json"})
+    opened = isinstance(body, dict) and (body.get("name"), body.get("password")) in (("anna", "anna-pw"), ("ben", "ben-pw"))
+    assert answer.status_code == (200 if opened else 400 if not isinstance(body, dict) or not isinstance(body.get("name"), str) or not isinstance(body.get("password"), str) or not 0 < len(body["name"]) <= 64 or len(body["password"]) > 1024 else 401)
+    assert ("set-cookie" in answer.headers) == opened and "\n" not in answer.json().get("error", "")
 
 
 # ------------------------------------------------------------------------------------------ the route table
