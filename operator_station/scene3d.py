@@ -153,12 +153,12 @@ class SceneLog:
     def goal(self, t: float, group: str, primitive: Any) -> None:
         """A machine sent its bridge ``primitive`` at run time ``t``: its goal, if it moves the group."""
         goal = goal_json(primitive)
-        if goal is not None:
-            self.add({"t": t, "event": "goal", "group": group, "primitive": type(primitive).KIND, **goal})
+        if goal is not None:  # at the trace's resolution (a microsecond), on the records' time line
+            self.add({"t": round(t, 6), "event": "goal", "group": group, "primitive": type(primitive).KIND, **goal})
 
     def located(self, t: float, group: str, frames: Mapping[str, Pose]) -> None:
         """Every frame ``group`` has located so far (the message is cumulative), measured, in the world."""
-        self.add({"t": t, "event": "located", "group": group, "frames": {name: pose_json(p) for name, p in list(frames.items())[:MAX_FRAMES]}})
+        self.add({"t": round(t, 6), "event": "located", "group": group, "frames": {name: pose_json(p) for name, p in list(frames.items())[:MAX_FRAMES]}})
 
     def read(self, start: int) -> tuple[int, list[dict[str, Any]], int]:
         """The run, its events from ``start`` (at most :data:`MAX_BATCH`), how many there are in all."""

@@ -212,21 +212,22 @@ const View3D = (() => {
     const latest = {};
     for (let i = 0; i < state.events.length; i++) {
       const e = state.events[i];
-      if (e.t > t) break;
+      if (e.t > t + 1e-6) break;
       if (e.event === "goal") latest[e.group] = i;
     }
     const out = [];
     for (const [group, i] of Object.entries(latest)) {
       const goal = state.events[i];
-      // the primitive before it may end at the very instant the goal is sent: only a later end ends this one
-      if (!(state.ends[group] || []).some((x) => x > goal.t && x <= t)) out.push([i, goal]);
+      // the primitive before it may end at the very instant the goal is sent (its time rounded through a message
+      // stamp: within a microsecond): only a later end ends this one
+      if (!(state.ends[group] || []).some((x) => x > goal.t + 1e-6 && x <= t)) out.push([i, goal]);
     }
     return out;
   }
 
   function locatedAt(t) {
     const byGroup = {};
-    for (const e of state.events) { if (e.t > t) break; if (e.event === "located") byGroup[e.group] = e.frames; }
+    for (const e of state.events) { if (e.t > t + 1e-6) break; if (e.event === "located") byGroup[e.group] = e.frames; }
     const out = {};
     for (const frames of Object.values(byGroup)) Object.assign(out, frames);
     return out;
@@ -329,6 +330,7 @@ const View3D = (() => {
     },
     linkPosition: (name) => Geo.linkPosition(state.robots, name),
     tcp: (group) => Geo.tcpPose(state.robots, group),
+    colour: (name) => Geo.bodyColour(state.robots, name),
     highlighted: () => state.highlighted.slice(),
     findings: () => activeFindings(Store.now()).map((f) => ({kind: f.kind, source: f.source, t: f.t, bodies: (f.bodies || []).map((b) => b.name), target: f.target || null})),
     goals: () => goalsAt(Store.now()).map(([, g]) => ({group: g.group, kind: g.kind, label: g.label || "", t: g.t})),

@@ -326,6 +326,13 @@ const View3DGeometry = (() => {
     return [...wanted.keys()];
   }
 
+  // The colour a body is drawn in now (a link's first mesh, a cell object): what the highlight changed.
+  function bodyColour(robots, name) {
+    const link = findLink(robots, name);
+    const mesh = link ? linkMeshes(link)[0] : cellObjects.get(name);
+    return mesh ? "#" + mesh.material.color.getHexString() : null;
+  }
+
   function linkPosition(robots, name) {
     const link = findLink(robots, name);
     if (!link) return null;
@@ -334,7 +341,7 @@ const View3DGeometry = (() => {
     return [p.x, p.y, p.z];
   }
 
-  return {init, place, buildCell, robotFrames, goalPath, drawGoals, drawLocated, drawFindings, highlight, linkPosition,
+  return {init, place, buildCell, robotFrames, goalPath, drawGoals, drawLocated, drawFindings, highlight, linkPosition, bodyColour,
           tcpOf, tcpPose: (robots, group) => { const f = tcpOf(robots, group); return f ? poseOf(tcpMatrix(f, new THREE.Matrix4())) : null; },
           cellNames: () => [...cellObjects.keys()]};
 })();

@@ -1,0 +1,162 @@
+"""The 3D view in a real headless Chromium (Selenium): the robot follows the joint states of a live run, the dry run's
+collision of the two arms is shown on the robot (the two hands it names turned red), and a recording replayed puts the
+robot where its joint states say at each slider position.
+
+Skipped only where no Chromium can be driven (the reason says what is missing).  Waits are bounded polls of what the
+page shows (WebDriverWait), never a fixed sleep; the page's hook ``window.view3d`` reads the drawn scene itself (the
+URDF robot's joint angles, its TCP through the URDF's chain, the colour a body is drawn in).
+"""
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
+from operator_station import browser  # noqa: E402
+
+if browser.missing() is not None:
+    pytest.skip(f"no browser to drive: {browser.missing()}", allow_module_level=True)
+
+from selenium.common.exceptions import ElementClickInterceptedException, JavascriptException, NoSuchElementException, StaleElementReferenceException  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
+
+from app_functions.registry import full_catalog  # noqa: E402
+from operator_station.cli import build_station  # noqa: E402
+from operator_station.testing import ServedStation, serve  # noqa: E402
+from test_scene3d import arms_meet, cli, demonstrator, record, recorded_joint_states  # noqa: E402
+from test_studio_server import station_args  # noqa: E402
+
+WAIT = 120.0  # wall seconds any one condition may take (a dry run and a run on a loaded CI machine), then the test fails
+HANDS = re.compile(r"collision between left_arm hand \((\w+)\) and right_arm hand \((\w+)\), .* \(at (\d+\.\d+) s\)$")
+
+
+@pytest.fixture(scope="module")
+def driver() -> Iterator[Any]:
+    chrome = browser.chromium(1280, 860)
+    try:
+        yield chrome
+    finally:
+        chrome.quit()
+
+
+def until(driver: Any, condition: Any, timeout: float = WAIT) -> Any:
+    ignored = (NoSuchElementException, StaleElementReferenceException, ElementClickInterceptedException, JavascriptException)
+    return WebDriverWait(driver, timeout, poll_frequency=0.05, ignored_exceptions=ignored).until(condition)
+
+
+def open_3d(driver: Any, folder: Path, **changes: Any) -> ServedStation:
+    """Serve a station, load its page, show the 3D tab once its robot is drawn."""
+    served = serve(build_station(station_args(**changes), full_catalog(), folder))
+    driver.get(served.url)
+    until(driver, lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "true")
+    until(driver, lambda d: d.execute_script("return window.view3d.ready()"))
+    show_3d(driver)
+    return served
+
+
+def show_3d(driver: Any) -> None:
+    until(driver, lambda d: d.find_element(By.ID, "tab-view3d").click() or True)
+    until(driver, lambda d: "active" in d.find_element(By.ID, "view-view3d").get_attribute("class"))
+
+
+def last_tcps(trace: Path) -> dict[str, dict[str, float]]:
+    """Each arm's TCP as the bridge reported it at the end of its last motion."""
+    out: dict[str, dict[str, float]] = {}
+    for line in trace.read_text(encoding="utf-8").splitlines():
+        record = json.loads(line)
+        tcp = (record.get("result") or {}).get("tcp") if record["event"] == "primitive_end" else None
+        if tcp:
+            out[record["group"]] = tcp
+    return out
+
+
+def test_the_robot_follows_a_live_runs_joint_states(driver: Any, tmp_path: Path) -> None:
+    app = demonstrator(tmp_path, "rivet_first_three", 3)
+    trace = tmp_path / "run.jsonl"
+    served = open_3d(driver, tmp_path, file=app.name, speed=4.0, trace=str(trace))
+    try:
+        until(driver, lambda d: d.find_element(By.ID, "ctl-start").click() or True)
+        show_3d(driver)
+        # mid-run, twice: the drawn joints are the joint state the page received last, and each arm's goal drawn is the
+        # target of the motion the monitor says the arm is in
+        seen: list[dict[str, float]] = []
+
+        def follows(d: Any) -> bool:
+            now = d.execute_script("""
+                const s = Store.joints.samples[Store.joints.samples.length - 1];
+                const views = Store.groupView();
+                return {drawn: view3d.jointValues(), names: Store.joints.names, sample: s ? s.slice(1) : null,
+                        goals: view3d.goals(), primitives: Object.fromEntries(Object.entries(views).map(([g, v]) => [g, v.primitive]))};""")
+            if now["sample"] is None:
+                return False
+            expected = dict(zip(now["names"], now["sample"]))
+            if any(abs(now["drawn"][name] - value) > 1e-9 for name, value in expected.items()):
+                return False
+            moving = [g for g in now["goals"] if g["kind"] == "pose" and now["primitives"].get(g["group"]) and g["label"] in now["primitives"][g["group"]]]
+            if not moving or (seen and max(abs(seen[-1][n] - v) for n, v in expected.items()) < 0.05):
+                return False
+            seen.append(expected)
+            return len(seen) >= 2
+
+        until(driver, follows)
+        until(driver, lambda d: d.find_element(By.ID, "engine-state").text == "finished")
+        # at the end: the robot drawn through the URDF's chain puts each hand where the bridge said it ended
+        reported = last_tcps(trace)
+        for group in ("left_arm", "right_arm"):
+            drawn = until(driver, lambda d, g=group: d.execute_script("view3d.update(); return view3d.tcp(arguments[0])", g))
+            assert drawn[:3] == pytest.approx([reported[group][k] for k in ("x", "y", "z")], abs=2e-4), group
+        stats = driver.execute_script("return view3d.measure(30)")
+        assert stats["frames"] >= 30 and stats["render_ms_mean"] > 0  # the frame-time counter the bench reads
+    finally:
+        served.close()
+
+
+def test_the_dry_runs_collision_of_the_two_arms_is_shown_on_the_robot(driver: Any, tmp_path: Path) -> None:
+    """Must show (issue 25): the dry run refuses the run; the 3D view turns the two bodies it named red."""
+    app = arms_meet(tmp_path)
+    code, _, err = cli("validate", "--simulate", str(app))
+    named = [m.groups() for line in err.splitlines() if (m := HANDS.search(line))]
+    assert code == 1 and named, err
+    served = open_3d(driver, tmp_path, file=app.name)
+    try:
+        assert driver.execute_script("return view3d.highlighted()") == []
+        colour = driver.execute_script("return view3d.colour('LARM_JOINT5_Link')")
+        until(driver, lambda d: d.find_element(By.ID, "ctl-start").click() or True)
+        until(driver, lambda d: "not run" in d.find_element(By.ID, "run-messages").text + d.find_element(By.ID, "alarms").text
+              or d.execute_script("return view3d.highlighted().length") > 0)
+        show_3d(driver)
+        until(driver, lambda d: d.execute_script("return view3d.highlighted().length") == 2)
+        assert sorted(driver.execute_script("return view3d.highlighted()")) == sorted(named[0][:2])
+        for name in named[0][:2]:
+            assert driver.execute_script("return view3d.colour(arguments[0])", name) == "#e0201b" != colour
+        found = driver.execute_script("return view3d.findings()")
+        assert {(f["kind"], f["source"], tuple(f["bodies"]), f["t"]) for f in found} == {("collision", "dry run", tuple(named[0][:2]), float(named[0][2]))}
+        assert "collision: left_arm approach" in driver.find_element(By.ID, "view3d-findings").text
+    finally:
+        served.close()
+
+
+def test_a_replayed_recording_moves_the_robot_with_the_slider(driver: Any, tmp_path: Path) -> None:
+    recording = record(tmp_path, demonstrator(tmp_path, "rivet_first_three", 3))
+    states = recorded_joint_states(recording)
+    epoch = states[0][0]
+    served = open_3d(driver, tmp_path, replay=str(recording))
+    try:
+        until(driver, lambda d: d.execute_script("return view3d.run()") >= 0 and d.execute_script("return view3d.located().length") > 0)
+        picked = [states[len(states) // 3], states[2 * len(states) // 3]]
+        drawn = []
+        for stamp, values in picked:
+            t = (stamp - epoch) * 1e-9
+            driver.execute_script("const s = document.getElementById('view3d-slider'); s.value = arguments[0]; s.dispatchEvent(new Event('input'))", t)
+            until(driver, lambda d, v=values: all(abs(d.execute_script("return view3d.jointValues()")[n] - x) < 1e-9 for n, x in v.items()))
+            drawn.append(driver.execute_script("return view3d.jointValues()"))
+            assert driver.find_element(By.ID, "view3d-time").text.startswith("replay ")
+        assert max(abs(drawn[0][n] - drawn[1][n]) for n in drawn[0]) > 0.05  # two instants, two poses
+    finally:
+        served.close()
