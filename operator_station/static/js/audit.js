@@ -3,7 +3,8 @@
 // data-needs="engineer" (Save, and the teach and edit controls) is disabled with the reason as its
 // title -- the station refuses those requests anyway (403, audited); this only says so beforehand.
 // The Audit view polls GET /api/audit with the last entry it has (seq) and shows the newest first:
-// who did what, when, in which role, and the digests of what an edit, teach or save replaced.
+// who did what, when, in which role, and the digests of what an edit, teach or save replaced. It asks
+// only while it is shown and the live feed is connected (a station gone is not asked every second).
 "use strict";
 
 const Audit = (() => {
@@ -62,7 +63,17 @@ const Audit = (() => {
     if (digests_in.length) tr.title = digests_in.join("\n");  // the whole digests, on hover
     return tr;
   }
+  const shown = () => $("view-audit").classList.contains("active");
+  let timer = null, busy = false;
   async function poll() {
+    if (busy) return;  // a poll is under way (the view was opened meanwhile): it schedules the next
+    clearTimeout(timer);
+    if (!shown() || !Store.connected) {
+      applyRole();
+      timer = setTimeout(poll, POLL_MS);
+      return;
+    }
+    busy = true;
     try {
       const answer = await Store.get(`/api/audit?after=${state.last}`);
       if (answer.ok && answer.entries.length) {
@@ -81,12 +92,15 @@ const Audit = (() => {
       applyRole();
     } catch (e) {
       /* the station is gone or restarting: try again at the next tick */
+    } finally {
+      busy = false;
     }
-    setTimeout(poll, POLL_MS);
+    timer = setTimeout(poll, POLL_MS);
   }
 
   document.addEventListener("DOMContentLoaded", () => {
     $("logout-btn").addEventListener("click", logout);
+    Store.on("view", (view) => { if (view === "audit") poll(); });
     whoami();
     poll();
   });
