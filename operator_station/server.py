@@ -58,7 +58,9 @@ from operator_station.blocks import Block, BlockDocument, walk
 from operator_station.roles import requires, secure
 from operator_station.run_audit import watch_run
 from operator_station.scene3d_routes import routes as scene3d_routes
+from operator_station.jog_routes import routes as jog_routes
 from operator_station.breakpoint_routes import routes as breakpoint_routes
+from operator_station.jog_station import JogStation
 from operator_station.session import RunSession
 from operator_station.timeline_view import TimelineView
 
@@ -102,11 +104,13 @@ class Station:
         self.audit: deque[dict[str, str]] = deque(maxlen=MAX_AUDIT)  # the safety stop's actions (all actions: audit_log)
         self.audit_log = audit_log or AuditLog(wall=lambda: self.wall())  # operator_station/audit.py: every action, --audit FILE
         self._opened: tuple[tuple[float, int], bytes] | None = None  # the start file's answer, by (mtime, size)
+        self.jog = JogStation()  # jogging and teaching (operator_station/jog_routes.py): its own back end, thread and clock
 
     def stop(self) -> None:
         """End every page's feed (from any thread): the station is going away."""
         self.stopped = True
         self.feed.wake()
+        self.jog.close()
 
     def note(self, action: str, who: Any, answer: str) -> dict[str, str]:
         """Log a safety-stop action with who took it and when (UTC)."""
@@ -271,6 +275,7 @@ def create_app(station: Station) -> Starlette:
             return FastJSON({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
         operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin, "line": op.line,
                        **({"break": True} if op.breakpoint else {})} for op in app.operations]
+        await station.jog.release("a run starts")  # the run drives the robot: the jog's back end lets go of it first
         ok, answer = station.session.start(app, operations)
         entry = record(request, "run start", ok=ok, answer=answer, path=_shown(station, path), application=digest(text))
         if ok:
@@ -295,7 +300,9 @@ def create_app(station: Station) -> Starlette:
             return _error("safety: clearing the safety stop is its own confirmed action: POST /api/safety/clear {\"confirm\": true}")
         if active is not True:
             return _error("safety: give {\"active\": true} to raise the safety stop (clear it with /api/safety/clear)")
+        jogged = await station.jog.safety_stop(True)  # a jog stops at once, and jogging is refused until the clear
         ok, answer = station.session.safety_stop(True)  # type: ignore[union-attr] - _run_field checked it
+        ok, answer = (ok, answer) if ok else (True, f"safety stop raised with no run going: {jogged}")
         station.note("safety stop raised" if ok else "safety stop raise refused", request.scope.get(WHO), answer)
         return FastJSON({"ok": ok, "answer": answer})
 
@@ -306,7 +313,9 @@ def create_app(station: Station) -> Starlette:
             return refusal
         if confirm is not True:
             return _error("safety clear: confirm it with {\"confirm\": true} once the cell is safe; the robot moves again on Resume")
+        jogged = await station.jog.safety_stop(False)
         ok, answer = station.session.safety_stop(False)  # type: ignore[union-attr]
+        ok, answer = (ok, answer) if ok else (True, f"safety stop cleared with no run going: {jogged}")
         entry = station.note("safety stop cleared" if ok else "safety stop clear refused", request.scope.get(WHO), answer)
         return FastJSON({"ok": ok, "answer": answer, "who": entry["who"], "when": entry["when"]})
 
@@ -378,6 +387,7 @@ def create_app(station: Station) -> Starlette:
         *accounts.routes(station.access, lambda: station.wall()),
         Route("/api/timeline", timeline),
         *scene3d_routes(station),  # the 3D view (operator_station/scene3d_routes.py)
+        *jog_routes(station),  # jog and teach (operator_station/jog_routes.py)
         *breakpoint_routes(station),  # breakpoints and run to here (operator_station/breakpoint_routes.py)
         WebSocketRoute("/ws", feed),
         Mount("/static", app=StaticFiles(directory=STATIC), name="static"),

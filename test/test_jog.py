@@ -1,0 +1,194 @@
+"""Jogging on the simulated clock: hold-to-move, the dead man, the caps, limits and collisions (operator_station/jog.py).
+
+Every jog here runs the Nextage simulator in process on virtual time, with the heartbeats a page sends every
+100 ms; "within one control cycle" is measured on that clock, and the arm not moving after the stop is read
+from the simulator's own joints.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core_functions.primitives import MoveJoints
+from core_functions.robots import NEXTAGE_OPEN
+from execution_engine.app_model.cell import Cell, load_cell
+from node_transport.clock import Clock, run_with_clock, simulated_clock
+from operator_station.jog import MAX_SPEED, Jogger, JogRequest, JogSettings, parse_request
+from robot_bridges.collision import cell_boxes, scene_for
+from robot_bridges.nextage_sim.backend import NextageSimBackend
+
+ROOT = Path(__file__).resolve().parents[1]
+CELL = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
+BEAT = 0.1  # s: the page's heartbeat
+
+
+def jogging(body: Callable[[Clock, NextageSimBackend, Jogger], Awaitable[Any]], settings: JogSettings = JogSettings()) -> Any:
+    """Run ``body`` with the simulator (collision check on) in the rivet cell and a jogger with its scene."""
+
+    async def main(clock: Clock) -> Any:
+        cell: Cell = load_cell(CELL).bind(NEXTAGE_OPEN)
+        snapshot = cell.to_snapshot(NEXTAGE_OPEN)
+        backend = NextageSimBackend(clock, check_collisions=True)
+        backend.set_cell(snapshot)
+        scene = scene_for(NEXTAGE_OPEN, margin=settings.clearance)
+        scene.set_cell(cell_boxes(snapshot))
+        jogger = Jogger(backend, clock, NEXTAGE_OPEN, settings, frames=cell.pose, scene=scene)
+        try:
+            return await body(clock, backend, jogger)
+        finally:
+            await jogger.stop("the test ends")
+            await backend.close()
+
+    return run_with_clock(main, simulated_clock())
+
+
+async def hold(clock: Clock, jogger: Jogger, seconds: float, samples: list[tuple[float, np.ndarray]] | None = None) -> None:
+    """Beat every 100 ms for ``seconds`` (the button held), sampling the joints each period if asked."""
+    end = clock.now() + seconds
+    next_beat = clock.now() + BEAT
+    while clock.now() < end - 1e-9 and jogger.moving:
+        await clock.sleep(jogger.period)
+        if samples is not None:
+            samples.append((clock.now(), np.array(jogger.backend.joint_state()[1])))
+        if clock.now() >= next_beat - 1e-9:
+            jogger.beat()
+            next_beat += BEAT
+
+
+def joint(backend: NextageSimBackend, name: str) -> float:
+    names, positions = backend.joint_state()
+    return positions[names.index(name)]
+
+
+def test_a_joint_jog_moves_while_held_at_most_a_tenth_of_the_limit_and_stops_within_a_cycle_of_the_release() -> None:
+    async def body(clock: Clock, backend: NextageSimBackend, jogger: Jogger) -> dict[str, Any]:
+        start = joint(backend, "LARM_JOINT0")
+        ok, _ = await jogger.start(JogRequest("left_arm", "joint", "LARM_JOINT0", 1))
+        samples: list[tuple[float, np.ndarray]] = []
+        await hold(clock, jogger, 3.0, samples)
+        moved = joint(backend, "LARM_JOINT0") - start
+        await jogger.stop("jog released")
+        at_release = jogger.state
+        await clock.sleep(1.0)  # nothing moves afterwards
+        return {"ok": ok, "moved": moved, "samples": samples, "state": at_release, "after": joint(backend, "LARM_JOINT0"),
+                "limit": backend.joint_limits("left_arm").velocity[0], "period": jogger.period}
+
+    seen = jogging(body)
+    assert seen["ok"] and seen["moved"] > 0.02  # it went the way asked while the beats came
+    index = NEXTAGE_OPEN.joint_names.index("LARM_JOINT0")
+    speeds = [abs(b[1][index] - a[1][index]) / (b[0] - a[0]) for a, b in zip(seen["samples"], seen["samples"][1:])]
+    assert max(speeds) <= MAX_SPEED * seen["limit"] + 1e-9  # the cap: 10 % of the joint's speed limit
+    state = seen["state"]
+    assert not state.moving and state.reason == "jog released" and not state.refused
+    assert state.stopped_at - state.stop_asked <= seen["period"] + 1e-9  # still within one control period
+    assert state.travel_after_stop <= MAX_SPEED * seen["limit"] * seen["period"] + 1e-12  # at most one period's travel once asked
+    assert seen["after"] == state.joints["LARM_JOINT0"]  # and nothing afterwards
+
+
+def test_a_missed_heartbeat_stops_the_jog_within_a_control_cycle_of_the_lease() -> None:
+    async def body(clock: Clock, backend: NextageSimBackend, jogger: Jogger) -> Any:
+        await jogger.start(JogRequest("right_arm", "joint", "RARM_JOINT0", -1))
+        await hold(clock, jogger, 1.0)
+        last_beat = clock.now()
+        jogger.beat()
+        while jogger.moving and clock.now() < last_beat + 2.0:  # the page went quiet: no more beats
+            await clock.sleep(jogger.period)
+        return last_beat, jogger.state, jogger.period
+
+    last_beat, state, period = jogging(body)
+    lease = JogSettings().lease
+    assert state.refused and "no heartbeat from the page for 0.30 s" in state.reason
+    assert state.stop_asked == pytest.approx(last_beat + lease, abs=1e-9)  # asked the moment the lease ran out
+    assert state.stopped_at - state.stop_asked <= period + 1e-9
+    assert state.travel_after_stop <= MAX_SPEED * 1.0 * period + 1e-12  # the Nextage's joints: 1 rad/s
+
+
+def test_a_jog_stops_at_the_joint_limit_and_a_jog_beyond_it_is_refused_naming_it() -> None:
+    async def body(clock: Clock, backend: NextageSimBackend, jogger: Jogger) -> Any:
+        limits = backend.joint_limits("left_arm")
+        upper = limits.upper[limits.joint_names.index("LARM_JOINT5")]  # the wrist roll: 2.8449 rad
+        await backend.execute("left_arm", MoveJoints((upper - 0.03,), ("LARM_JOINT5",)))  # 0.03 rad short of it
+        await jogger.start(JogRequest("left_arm", "joint", "LARM_JOINT5", 1))
+        await hold(clock, jogger, 60.0)
+        reached, first = joint(backend, "LARM_JOINT5"), jogger.state
+        ok, answer = await jogger.start(JogRequest("left_arm", "joint", "LARM_JOINT5", 1))
+        return upper, reached, first, ok, answer
+
+    upper, reached, first, ok, answer = jogging(body)
+    assert reached == pytest.approx(upper, abs=1e-6) and reached <= upper + 1e-9  # stopped at the limit, never past
+    assert first.refused and "LARM_JOINT5 is at its upper limit" in first.reason
+    assert not ok and "LARM_JOINT5 is at its upper limit (2.8449 rad, 163.00 deg)" in answer
+
+
+def test_a_jog_into_the_tray_is_stopped_before_it_touches_naming_the_bodies() -> None:
+    async def body(clock: Clock, backend: NextageSimBackend, jogger: Jogger) -> Any:
+        await jogger.start(JogRequest("right_arm", "cartesian", "z", -1, "world"))
+        await hold(clock, jogger, 30.0)
+        state = jogger.state
+        names, positions = backend.joint_state()
+        q = np.array(positions)[[names.index(n) for n in jogger.scene.joint_names]]
+        touching = [c for c in jogger.scene.contacts(q) if c.distance <= 0]
+        ok, answer = await jogger.start(JogRequest("right_arm", "cartesian", "z", -1, "world"))
+        await hold(clock, jogger, 1.0)
+        return state, touching, ok, answer, jogger.state
+
+    state, touching, ok, answer, again = jogging(body)
+    assert state.refused and state.reason.startswith("jog stopped before a collision: ")
+    assert "cell rivet_tray" in state.reason or "cell part" in state.reason
+    assert touching == []  # stopped short: nothing touches
+    assert again.refused and again.reason.startswith("jog stopped before a collision")  # and pressing on is stopped again
+
+
+def test_a_cartesian_jog_in_the_tool_frame_moves_along_the_tool_axis_and_keeps_the_orientation() -> None:
+    async def body(clock: Clock, backend: NextageSimBackend, jogger: Jogger) -> Any:
+        before = backend.tcp_pose("left_arm")
+        await jogger.start(JogRequest("left_arm", "cartesian", "x", 1, "tool"))
+        await hold(clock, jogger, 2.0)
+        await jogger.stop("jog released")
+        return before, backend.tcp_pose("left_arm")
+
+    before, after = jogging(body)
+    moved = np.array(after.position) - np.array(before.position)
+    axis = before.matrix()[:3, 0]  # the tool's x in the world
+    assert np.linalg.norm(moved) > 0.005
+    assert np.dot(moved, axis) / np.linalg.norm(moved) > 0.999  # along the tool's x, the way asked
+    assert before.angle_to(after) < math.radians(0.2)
+    assert np.linalg.norm(moved) / 2.0 <= 0.05  # never above 50 mm/s
+
+
+def test_a_cartesian_jog_in_a_cell_frame_moves_along_that_frames_axis() -> None:
+    async def body(clock: Clock, backend: NextageSimBackend, jogger: Jogger) -> Any:
+        before = backend.tcp_pose("left_arm")
+        await jogger.start(JogRequest("left_arm", "cartesian", "x", 1, "drill_1"))  # drill_1's x is the world's y
+        await hold(clock, jogger, 2.0)
+        await jogger.stop("jog released")
+        return before, backend.tcp_pose("left_arm"), jogger.frames("drill_1")
+
+    before, after, frame = jogging(body)
+    moved = np.array(after.position) - np.array(before.position)
+    assert np.dot(moved, frame.matrix()[:3, 0]) / np.linalg.norm(moved) > 0.999
+
+
+def test_requests_and_settings_out_of_their_ranges_are_one_line_refusals() -> None:
+    frames = ("drill_1",)
+    good = {"group": "left_arm", "mode": "joint", "axis": "LARM_JOINT0", "direction": 1}
+    assert parse_request(good, NEXTAGE_OPEN, frames) == JogRequest("left_arm", "joint", "LARM_JOINT0", 1)
+    for change, words in (({"group": "both"}, "group must be one of"), ({"axis": "RARM_JOINT0"}, "axis must be a joint of left_arm"),
+                          ({"direction": 2}, "direction must be 1 or -1"), ({"direction": True}, "direction must be 1 or -1"),
+                          ({"mode": "cartesian", "axis": "q"}, "axis must be one of x, y, z"),
+                          ({"mode": "cartesian", "axis": "x", "frame": "drill_9"}, "frame must be world, tool or a frame"),
+                          ({"speed": "fast"}, "speed must be a percentage")):
+        with pytest.raises(ValueError, match=words):
+            parse_request({**good, **change}, NEXTAGE_OPEN, frames)
+    with pytest.raises(ValueError, match=r"jog speed must be in \(0, 10%\]"):
+        JogSettings(speed=0.2)
+    with pytest.raises(ValueError, match="percentage from 1 to 10"):
+        JogSettings().slower(50.0 + 60.0)
+    slower = JogSettings().slower(5.0)
+    assert slower.speed == pytest.approx(0.05) and slower.cartesian_speed == pytest.approx(0.025)
+    assert JogSettings().slower(50.0).speed == MAX_SPEED  # asking for more than the cap gives the cap
