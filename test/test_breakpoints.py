@@ -274,3 +274,18 @@ def test_a_resumed_run_keeps_the_files_breakpoints_after_where_it_starts(run_sim
     (message, left), report = run_sim(main)
     assert message == "paused at breakpoint before operation 4 '4' (line 4)" and left == ["3"]  # 1 was done before the crash
     assert report.ok and [h.operation for h in report.breakpoints] == ["4"]
+
+
+def test_flags_mode_a_partner_already_at_the_barrier_does_not_time_out_while_the_other_is_held(run_sim: Any) -> None:
+    ops = [{"left_arm": MOVE}, {"left_arm": MOVE}, {"left_arm": ("full_body_move", "initial"), "right_arm": ("full_body_move", "initial")}]
+
+    async def main(clock: Clock) -> Any:
+        cell = await Cell(clock, durations={**DURATIONS, "full_body": 1.0}).start()
+        run = asyncio.ensure_future(cell.run(with_breaks(make_app(ops), 2, sync="flags")))
+        await until_state(cell, clock, "paused")
+        await clock.sleep(60.0)  # twice the barrier's 30 s: the right arm has waited there since the start
+        assert (await cell.operator("resume")).success
+        return await run
+
+    report = run_sim(main)
+    assert report.ok and not report.errors, report.summary_lines()

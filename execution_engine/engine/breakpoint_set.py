@@ -61,6 +61,7 @@ class BreakpointSet:
     held: dict[str, Hold] = field(default_factory=dict)  # groups holding before an operation now
     waiting: set[str] = field(default_factory=set)  # sync="flags": groups waiting for a held partner
     stepping: set[str] = field(default_factory=set)  # sync="flags": groups to hold before their next operation
+    paused: set[str] = field(default_factory=set)  # sync="flags": groups at a barrier with a held group, paused meanwhile
     taken: set[str] = field(default_factory=set)  # operations a hold before was continued: passed from now on
     run: object | None = None  # the report of the run these belong to
     app: Application | None = None  # the application they were read from (an edit of a paused run swaps it)
@@ -77,7 +78,7 @@ class BreakpointSet:
         self.index = {op.id: i for i, op in enumerate(app.operations)}
         self.active = {op.id for op in app.operations if op.breakpoint}
         self.target = None
-        for each in (self.at, self.held, self.finished, self.waiting, self.stepping, self.taken):
+        for each in (self.at, self.held, self.finished, self.waiting, self.stepping, self.taken, self.paused):
             each.clear()
         self._held_total, self._held_since = 0.0, None
 

@@ -28,13 +28,17 @@ from typing import TYPE_CHECKING
 from execution_engine.app_model.model import Operation
 from execution_engine.engine.breakpoint_set import ACTIONS, BreakpointSet, describe, pause_message
 from execution_engine.engine.commands import OperatorCommands
+from execution_engine.engine.flags_mode import meeting
 from execution_engine.engine.operator import ENDED
 from execution_engine.engine.report import BreakpointHit, OperatorAction
+from execution_engine.machine.table import WORKING_STATES
 from node_transport import mirrors
 from node_transport.wire import EngineEvent
 
 if TYPE_CHECKING:
+    from core_functions.catalog import Catalog
     from execution_engine.app_model.model import Application, Call
+    from node_transport.wire import GroupProgress
     from execution_engine.engine.flags import FlagBoard
 
 BREAKPOINT_SERVICE = "execution_engine/breakpoint"
@@ -54,12 +58,13 @@ class BreakpointControl(OperatorCommands):
 
     if TYPE_CHECKING:  # the engine's own state, which these methods read and change
         app: Application | None
+        catalog: Catalog
         flags: FlagBoard
         _op_index: int
+        _progress: dict[str, GroupProgress]
 
         def _sits_out(self, call: Call) -> bool: ...
         async def _gate(self) -> bool: ...
-        async def _run_group(self, group: str, steps: list[tuple[Operation, Call]]) -> None: ...
 
     def _serve_breakpoints(self) -> BreakpointSet:
         """The breakpoint and run-to services of the engine node; the (empty) set they change."""
@@ -160,8 +165,9 @@ class BreakpointControl(OperatorCommands):
         ))
 
     async def _cmd_resume(self, source: str) -> list[str]:
-        notes = await super()._cmd_resume(source)
+        notes = await super()._cmd_resume(source)  # every paused machine resumes, those paused at a barrier too
         self.breakpoints.release(self.clock)
+        self.breakpoints.paused.clear()
         return notes
 
     async def _cmd_step(self, source: str) -> list[str]:
@@ -169,6 +175,7 @@ class BreakpointControl(OperatorCommands):
         notes = await super()._cmd_step(source)
         if flags:  # the held groups each run one operation, then hold again
             self.breakpoints.release(self.clock, step=True)
+            await self._resume_partners()
             self._set_state("stepping", f"one step by {source}")
         return notes
 
@@ -203,6 +210,7 @@ class BreakpointControl(OperatorCommands):
         kind = bp.due(group, index)
         if kind is not None and self._hit(kind, index, operation, (group,)):
             bp.hold((group,), index, kind, self.clock)
+            await self._pause_partners(group)
             while group in bp.held and self._stop_reason is None:
                 await self._await_operator()
         others = [p for p in partners if p != group]
@@ -214,6 +222,25 @@ class BreakpointControl(OperatorCommands):
                 bp.waiting.discard(group)
         bp.at[group] = index + 1
         return self._stop_reason is None
+
+    async def _pause_partners(self, group: str) -> None:
+        """Pause the groups already at a barrier with ``group`` (their synchronised function names it): a paused
+        machine's barrier wait starts its timeout again when it resumes, so the hold cannot time it out."""
+        bp = self.breakpoints
+        for other, progress in list(self._progress.items()):
+            index = bp.index.get(progress.operation or "")
+            if other == group or other in bp.held or other in bp.paused or index is None or bp.at.get(other) != index + 1:
+                continue
+            call = bp.operations[index].calls.get(other)
+            if call is not None and group in meeting(bp.operations[index], call, self.catalog) and self.links[other].state in WORKING_STATES:
+                ok, _ = await self.links[other].command("pause")
+                if ok:
+                    bp.paused.add(other)
+
+    async def _resume_partners(self) -> None:
+        for other in sorted(self.breakpoints.paused):
+            await self.links[other].command("resume")
+        self.breakpoints.paused.clear()
 
     async def _run_group(self, group: str, steps: list[tuple[Operation, Call]]) -> None:
         """Flags mode's run of one group, which the breakpoints see end (the run may then wait for the operator alone)."""
@@ -228,7 +255,7 @@ class BreakpointControl(OperatorCommands):
         held partner, a flag or a zone), simulated time stands still as for any operator; else look again soon."""
         bp = self.breakpoints
         waits = set(self.flags.waiting) | set(self.flags.zones.waiting if self.flags.zones is not None else {})
-        going = [g for g in bp.at if g not in bp.finished and g not in bp.held and g not in bp.waiting and g not in waits]
+        going = [g for g in bp.at if g not in bp.finished and g not in bp.held and g not in bp.waiting and g not in bp.paused and g not in waits]
         if not going:
             with self._operator_wait():
                 await self._wait_control()
