@@ -40,6 +40,7 @@ from node_transport.qos import LATCHED, SENSOR
 from node_transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
 from operator_station.feed import Feed
+from operator_station.paused_edit import EditTarget
 from operator_station.scene3d import begin_run
 from operator_station.scene3d_live import observe as observe_scene
 from robot_bridges import registry
@@ -68,6 +69,7 @@ class RunSession:
         self.report: RunReport | None = None
         self._verdict: DryRunReport | None = None  # the dry run before connecting, from the simulator's start
         self._kept: str | None = None  # the line saying the verdict was kept (no dry run this time)
+        self.edit_target: EditTarget | None = None  # the run an edit of the paused run goes to (operator_station/paused_edit.py)
 
     @property
     def running(self) -> bool:
@@ -185,6 +187,8 @@ class RunSession:
         observe(node, app.robot, self.feed, [w for w in (writer, page) if w is not None])
         self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
         self._loop, self._deployment = asyncio.get_running_loop(), deployment
+        setup = setup_for(self.backend_name(app), self._options(app)) if self.settings.check else None  # an edit is checked as the Start is
+        self.edit_target = EditTarget.of(deployment.engine, app, backend, clock, setup, self.trajectory_db(app))
         self._ready.set()
         try:
             run = asyncio.get_running_loop().create_task(await self._started(app, deployment, backend, clock))
@@ -202,7 +206,7 @@ class RunSession:
                 self.feed.update(messages=[{"severity": "error", "message": lost.line(report.outcome, "the run's report").removeprefix("error: ")}])
             return report
         finally:
-            self._loop = None
+            self._loop, self.edit_target = None, None
             await deployment.close()
 
     async def _started(self, app: Application, deployment: Deployment, backend: Any, clock: Clock) -> Coroutine[Any, Any, RunReport]:

@@ -411,6 +411,7 @@ const Builder = (() => {
   let timer = null;
   function edited() { renderRows(); validateSoon(250); }
   function validateSoon(delay) { clearTimeout(timer); timer = setTimeout(validate, delay); }
+  async function validateNow() { clearTimeout(timer); await validate(); }  // before an edit is applied to the paused run (paused_edit.js)
   function current() { return {path: $("doc-path").value.trim() || "untitled.xml", document: b.doc}; }
   async function validate() {
     if (!b.doc) return;
@@ -503,5 +504,5 @@ const Builder = (() => {
     }));
   });
   Store.on("view", (view) => { if (view === "builder") renderRows(); });
-  return {current, showMessages, select, scrollTo, state: b};
+  return {current, showMessages, select, scrollTo, validateNow, state: b};
 })();
