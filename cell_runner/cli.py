@@ -46,6 +46,7 @@ from core_functions.option_ranges import RangeError, argument_type, bounds
 from core_functions.robots import ROBOTS
 from execution_engine.checkpoint.store import ANSWERS
 from execution_engine.app_model import read_application
+from execution_engine.engine.speed import START_HELD
 from node_transport.console_log import ConsoleLog
 
 
@@ -158,6 +159,14 @@ def parse_speed(text: str) -> float:
         raise argparse.ArgumentTypeError(f"speed must be a number in {speed.describe()} or 'max', got {text!r}") from None
 
 
+def parse_override(text: str) -> float:
+    """A speed override a run may start at: in [0, 100] %, and above 0 (nothing would move)."""
+    percent = argument_type("speed_override", label="speed override")(text)
+    if percent == 0.0:
+        raise argparse.ArgumentTypeError(f"speed override: {START_HELD}")
+    return percent
+
+
 def parse_option(text: str) -> tuple[str, str]:
     key, sep, value = text.partition("=")
     if not sep or not key.strip():
@@ -223,6 +232,9 @@ def build_parser(extra: Sequence[ExtraCommand] = ()) -> argparse.ArgumentParser:
     add_vision_parser(sub)
     run = sub.add_parser("run", help="run an application (default: on the Nextage kinematic simulator)")
     run.add_argument("file", metavar="FILE")
+    run.add_argument("--speed-override", type=parse_override, default=100.0, metavar="P",
+                     help="percent of the application's own speed every motion starts at, on its path, in (0, 100] (default 100; "
+                          "changed while it runs with + - %% at the --interactive terminal or the engine's parameter speed_override)")
     run.add_argument("--speed", type=parse_speed, default=1.0, help="robot seconds per wall second, in [0.01, 1000]: 1 (the default) is real time, any other factor simulated time that counts only the computer's idle waits; or 'max': simulated time as fast as the computer goes")
     run.add_argument("--trace", metavar="PATH", help="write every event as a JSON line to PATH")
     run.add_argument("--robot", choices=("nextage-sim", "vplus", "kuka-rsi", "ros2-control"), help="back end (default: the application robot's)")
@@ -270,7 +282,7 @@ def backend_settings(args: argparse.Namespace, host: str | None, port: int | Non
     ``--controller-host``/``--controller-port``, given here as ``host`` and ``port``)."""
     return BackendSettings(
         name=args.robot, host=host, port=port, rsi_listen=args.rsi_listen, faults=tuple(args.fault or ()), seed=args.seed,
-        options=tuple(args.backend_option or ()),
+        options=tuple(args.backend_option or ()), speed_override=getattr(args, "speed_override", 100.0),
     )
 
 

@@ -12,6 +12,7 @@ import sys
 import time
 from typing import IO
 
+from cell_runner.console_edit import console_editor
 from cell_runner.deployment import deploy_local
 from cell_runner.dry_run.check import check as dry_run_check, options_refusal
 from cell_runner.dry_run.report import DryRunReport
@@ -62,6 +63,7 @@ async def _run(
         out.write("warning: --interactive: standard input is not a terminal, so there are no operator keys; an alarm ends the run at once\n")
     deployment = await deploy_local(
         clock, app.robot, backend, machine_parameters=machine_parameters, operators=operators, hold_for_operators=operators and clock.simulated,
+        engine_parameters={"speed_override": settings.backend.speed_override},  # --speed-override: the engine's, changeable while it runs
     )
     observer = RunObserver(deployment.transport.create_node("run_observer"), app.robot.group_names)
     if writer is not None:  # before the console: whatever the console shows is in the trace already
@@ -83,6 +85,7 @@ async def _run(
     loop = asyncio.get_running_loop()
     interactive = console.attach_stdin(loop) if operators else False
     setup = setup_for(name, options) if settings.check else None  # checked where the robot is
+    console.editor = console_editor(deployment.engine, app, backend, clock, setup, trajectory_db)  # key e: edit the paused run
     run_task = loop.create_task(start_checked(deployment.engine, app, backend, clock, setup, trajectory_db, checked, recorder.resume, out))
     interrupts = 0
 

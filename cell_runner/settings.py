@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from core_functions.option_ranges import bounds
 from execution_engine.app_model import Application
 from execution_engine.checkpoint.store import ANSWERS
+from execution_engine.engine.speed import START_HELD
 from node_transport.clock import Clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions
 
@@ -32,9 +33,12 @@ class BackendSettings:
     faults: tuple[str, ...] = ()  # simulator fault injections, GROUP:KIND@FRACTION
     seed: int = 0  # simulator random seed (vision noise)
     options: tuple[tuple[str, str], ...] = ()  # --backend-option KEY=VALUE, in the order given (a later one wins)
+    speed_override: float = 100.0  # --speed-override: percent of the application's speed the run starts at (engine/speed.py)
 
     def __post_init__(self) -> None:
         bounds("seed").check_int("--seed", self.seed)
+        if bounds("speed_override").check("--speed-override", self.speed_override) == 0.0:
+            raise ValueError(f"--speed-override: {START_HELD}")
         if self.port is not None:
             bounds("port").check_int("--port", self.port)
 
@@ -49,7 +53,8 @@ class BackendSettings:
 
     def backend_options(self, app: Application) -> BackendOptions:
         """What the back end of ``app``'s robot is built from."""
-        return BackendOptions(robot=app.robot, host=self.host, port=self.port, rsi_listen=self.rsi_listen, faults=self.faults, seed=self.seed, extra=self.extra)
+        return BackendOptions(robot=app.robot, host=self.host, port=self.port, rsi_listen=self.rsi_listen, faults=self.faults, seed=self.seed, extra=self.extra,
+                              speed_override=self.speed_override / 100.0)
 
 
 @dataclass(frozen=True)

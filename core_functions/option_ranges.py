@@ -121,7 +121,7 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("speed", Range(0.01, 1000.0, "x real time"),
             "run/launch/studio --speed, bridge parameter speed, vplus controller_speed, the simulators' --speed",
             "simulated seconds per wall second ('max' for simulated time, where offered)"),
-    Setting("speed_override", Range(0.0, 100.0, "%"), "run/studio --speed-override, engine parameter speed_override (changeable while it runs)",
+    Setting("speed_override", Range(0.0, 100.0, "%"), "run --speed-override, engine parameter speed_override (changeable while it runs), the studio's slider",
             "the share of the application's own speed every motion runs at, on its path (0: held on the path)"),
     Setting("seed", Range(0, 2**32 - 1, integer=True), "--seed, bridge parameter seed, the KR C4 simulator's --seed",
             "the simulator's random seed (vision noise, injected faults)"),

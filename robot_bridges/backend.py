@@ -172,6 +172,7 @@ class BackendOptions:
     faults: tuple[str, ...] = ()  # fault injections for tests and demos, e.g. "right_arm:joint_limit@0.5"
     seed: int = 0
     extra: dict[str, str] = field(default_factory=dict)
+    speed_override: float = 1.0  # the operator's speed override the robot starts at (a rate, 0..1): the run's and its dry run's
 
     def check(self, backend: str, robot: RobotModel, known_extras: Iterable[str]) -> None:
         """Refuse, rather than ignore, options meant for another robot or back end, and a seed out of its range.

@@ -37,7 +37,11 @@ def backend_factory(name: str) -> BackendFactory:
 
 
 async def create_backend(name: str, clock: Clock, options: BackendOptions) -> RobotBackend:
-    return await backend_factory(name)(clock, options)
+    """The back end ``name`` built from ``options``, at the speed override they start with."""
+    backend = await backend_factory(name)(clock, options)
+    if options.speed_override != 1.0:
+        backend.set_speed_override(options.speed_override)
+    return backend
 
 
 def check_options(name: str, options: BackendOptions, speed: float) -> None:

@@ -18,14 +18,31 @@ import pytest
 from core_functions.primitives import ExecuteTrajectory, MoveJoints, SetSpeed
 from node_transport.clock import Clock
 from robot_bridges.kuka_rsi.backend import KukaRsiBackend
+from robot_bridges.kuka_rsi.external import LoopSettings
+from robot_bridges.kuka_rsi.krc_model import RsiContext
+from robot_bridges.kuka_rsi.sim_controller import SimulatorSpec
 from speed_override_checks import Samples, assert_within_limits, distance_to_path
-from test_rsi_backend import READY, _with_backend
+from test_rsi_backend import READY
 
 Run = Callable[[Callable[[Clock], Coroutine[Any, Any, Any]]], Any]
 CYCLE = 0.004
 FRACTION = 0.25  # A1 at 156 deg/s x 0.25 = 0.68 rad/s, accelerating at 6 x 0.25 = 1.5 rad/s^2 (MotionLimits.joint_accel)
 GOAL = tuple(np.array(READY) + np.radians([100.0, 0, 0, 0, 0, 0]))
 SPEED, ACCEL = math.radians(156.0) * FRACTION, 6.0 * FRACTION
+
+
+def _with_backend(run_sim: Run, body: Callable[[KukaRsiBackend], Coroutine[Any, Any, Any]]) -> Any:
+    """``body`` on a back end driving the accelerated simulated KR C4 (in this process), started at READY."""
+    async def main(clock: Clock) -> Any:
+        simulator = SimulatorSpec(runner="thread", accelerated=True, context=RsiContext(start_deg=tuple(math.degrees(v) for v in READY)))
+        backend = KukaRsiBackend(listen=("127.0.0.1", 0), simulator=simulator, runner="thread", settings=LoopSettings(silence_timeout=1.0))
+        try:  # a back end that did not start closes what it began
+            await backend.start()
+            return await body(backend)
+        finally:
+            await backend.close()
+
+    return run_sim(main)
 
 
 async def sampled(b: KukaRsiBackend, work: Coroutine[Any, Any, Any], changes: dict[int, float], every: int = 5) -> tuple[Any, Samples]:

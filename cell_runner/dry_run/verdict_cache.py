@@ -140,6 +140,7 @@ def verdict_key(app: Application, setup: DryRunSetup, trajectory_db: str | None)
         "backend": setup.backend, "simulated_clock": setup.simulated_clock, "robot": options.robot.name, "host": options.host,
         "port": options.port, "rsi_listen": options.rsi_listen, "faults": list(options.faults), "seed": options.seed,
         "extra": sorted(options.extra.items()),
+        **({"speed_override": options.speed_override} if options.speed_override != 1.0 else {}),  # the dry run's times depend on it
     }
     _feed(digest, "setup", json.dumps(described, sort_keys=True).encode())
     for name, value in sorted(options.extra.items()):  # an option naming a file (an RSI configuration): its bytes

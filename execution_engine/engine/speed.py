@@ -25,6 +25,8 @@ from node_transport.port import Node, ParameterChange
 PARAMETER = "speed_override"
 #: How the engine's status says the robot stands still at 0 %.
 HOLDING = "speed override 0 %: holding on the path"
+#: Why a run may not start at 0 %: nothing would move, and its dry run could not plan it.
+START_HELD = "a run cannot start at 0 %: every motion would wait before it began (0 % holds a running motion on its path)"
 #: The operator command's name in the trace, the events and the report.
 COMMAND = "speed_override"
 
@@ -32,6 +34,13 @@ COMMAND = "speed_override"
 def shown(percent: float) -> str:
     """``50 %``, ``12.5 %``."""
     return f"{percent:g} %"
+
+
+def speed_for_next_run(percent: object) -> tuple[bool, str]:
+    """Whether ``percent`` may be the next run's override, and the answer the operator reads."""
+    value = percent if isinstance(percent, (int, float)) and not isinstance(percent, bool) else math.nan
+    refusal = SpeedOverride.refusal(float(value)) or (START_HELD if value == 0 else "")
+    return (False, refusal) if refusal else (True, f"speed override {shown(float(value))} for the next run")
 
 
 @dataclass(frozen=True)
@@ -52,11 +61,12 @@ class SpeedOverride:
         self._publish = publish
         self._state = state
         self.percent = float(declare_bounded(node, PARAMETER, 100.0, "share of the application's own speed every motion runs at, on its path (0: held on the path); changeable while the engine runs"))
-        node.changeable_parameter(PARAMETER, ParameterChange(self._refusal, self._from_parameter))
+        node.changeable_parameter(PARAMETER, ParameterChange(self.refusal, self._from_parameter))
         self.changes: list[SpeedChange] = []
 
     @staticmethod
-    def _refusal(value: ParameterValue) -> str:
+    def refusal(value: ParameterValue) -> str:
+        """Why ``value`` cannot be the override ("" when it can)."""
         try:
             bounds(PARAMETER).check(f"parameter {PARAMETER!r}", value)
         except RangeError as error:
@@ -70,7 +80,7 @@ class SpeedOverride:
     def set(self, percent: object, source: str, *, parameter: bool = True) -> tuple[bool, str]:
         """Take (or refuse, changing nothing) a new override from ``source``; the answer the operator reads."""
         value = percent if isinstance(percent, (int, float)) and not isinstance(percent, bool) else math.nan
-        refusal = self._refusal(float(value))
+        refusal = self.refusal(float(value))
         now = self.node.clock.now()
         if refusal:
             self._record(OperatorAction(now, COMMAND, source, self._state(), False, refusal))

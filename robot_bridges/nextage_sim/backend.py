@@ -63,7 +63,7 @@ from robot_bridges.nextage_sim.guard import CollisionGuard
 from robot_bridges.nextage_sim.hands import HandIO
 from robot_bridges.nextage_sim.jobs import DONE, Job, JobBoard, Tick
 from robot_bridges.nextage_sim.model import WORLD_FRAME, ArmKinematics, NextageModel
-from robot_bridges.nextage_sim.trajectory import CartesianLimits, Motion, plan_joint_move, plan_replay, sample
+from robot_bridges.nextage_sim.trajectory import CartesianLimits, Motion, at_rate, plan_joint_move, plan_replay, sample
 from robot_bridges.path_rate import sampled_shape
 
 if TYPE_CHECKING:
@@ -427,7 +427,7 @@ class NextageSimBackend(RobotBackend):
         """Drive the joints along ``motion`` on the clock, checking limits every period."""
         group = sorted(job.groups)[0]
         if self.motion_observer is not None:  # the dry run keeps the exact path for its collision sweep
-            self.motion_observer(job.groups, tuple(self.model.joint_names[int(i)] for i in motion.indices), motion, motion.duration)
+            self.motion_observer(job.groups, tuple(self.model.joint_names[int(i)] for i in motion.indices), *at_rate(motion, job.rate.rate))
 
         checks.note_work(self.model, self._q, self._work, job.groups, motion)
         job.shape, job.limits = sampled_shape(motion.at, motion.duration), self.model.acceleration[motion.indices]

@@ -83,6 +83,33 @@ class Motion(ABC):
         return np.array([0.0, self.duration])
 
 
+class Scaled(Motion):
+    """``motion`` played at a constant ``rate`` (0, 1] of its own time: a motion started under a speed override, as the
+    dry run's collision sweep must see it (its positions at the clock's times, its speeds scaled by the rate)."""
+
+    def __init__(self, motion: Motion, rate: float) -> None:
+        if not 0.0 < rate <= 1.0:
+            raise ValueError(f"a motion plays at a rate in (0, 1], not {rate!r}")
+        self.motion, self.rate = motion, rate
+        self.indices = motion.indices
+        self.duration = motion.duration / rate
+
+    def at(self, t: float) -> Vector:
+        return self.motion.at(t * self.rate)
+
+    def speed_bound(self, start: float = 0.0, end: float = math.inf) -> Vector:
+        return self.motion.speed_bound(start * self.rate, end * self.rate) * self.rate
+
+    def breakpoints(self) -> Vector:
+        return self.motion.breakpoints() / self.rate
+
+
+def at_rate(motion: Motion, rate: float) -> tuple[Motion, float]:
+    """``motion`` and its duration as played at ``rate`` (itself at 1)."""
+    shown = motion if rate == 1.0 else Scaled(motion, rate)
+    return shown, shown.duration
+
+
 class Hold(Motion):
     """Stay at ``positions`` for ``duration`` (a dwell, a hand or camera action)."""
 
