@@ -59,6 +59,7 @@ from operator_station.roles import requires, secure
 from operator_station.run_audit import watch_run
 from operator_station.scene3d_routes import routes as scene3d_routes
 from operator_station.jog_routes import routes as jog_routes
+from operator_station.speed_routes import routes as speed_routes
 from operator_station.breakpoint_routes import routes as breakpoint_routes
 from operator_station.jog_station import JogStation
 from operator_station.edit_routes import routes as edit_routes
@@ -389,6 +390,7 @@ def create_app(station: Station) -> Starlette:
         Route("/api/timeline", timeline),
         *scene3d_routes(station),  # the 3D view (operator_station/scene3d_routes.py)
         *jog_routes(station),  # jog and teach (operator_station/jog_routes.py)
+        *speed_routes(station),  # the speed override (operator_station/speed_routes.py)
         *breakpoint_routes(station),  # breakpoints and run to here (operator_station/breakpoint_routes.py)
         *edit_routes(station),  # edit the paused run (operator_station/edit_routes.py)
         WebSocketRoute("/ws", feed),

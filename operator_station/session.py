@@ -16,6 +16,7 @@ import logging
 import threading
 from collections.abc import Callable, Coroutine
 from concurrent.futures import Future
+from dataclasses import replace
 from typing import IO, Any
 
 from cell_runner.deployment import Deployment, deploy_local
@@ -31,6 +32,7 @@ from core_functions.robots import RobotModel
 from core_functions.trajectory_store import application_store
 from execution_engine.app_model import Application
 from execution_engine.engine.report import RunReport
+from execution_engine.engine.speed import speed_for_next_run
 from execution_engine.observers import RunObserver, TraceWriter
 from node_transport import codec, typed
 from node_transport.clock import Clock, run_with_clock
@@ -69,6 +71,7 @@ class RunSession:
         self.report: RunReport | None = None
         self._verdict: DryRunReport | None = None  # the dry run before connecting, from the simulator's start
         self._kept: str | None = None  # the line saying the verdict was kept (no dry run this time)
+        self.speed_percent = 100.0  # the speed override the next run starts with; a run's own is its engine's (engine/speed.py)
         self.edit_target: EditTarget | None = None  # the run an edit of the paused run goes to (operator_station/paused_edit.py)
 
     @property
@@ -120,7 +123,8 @@ class RunSession:
 
     # ------------------------------------------------------------------------ the run thread
     def _options(self, app: Application) -> BackendOptions:
-        return self.settings.backend.backend_options(app)
+        """The back end's options, at the override the page set for the next run (its dry run's times too)."""
+        return replace(self.settings.backend.backend_options(app), speed_override=self.speed_percent / 100.0)
 
     def _main(self, app: Application) -> None:
         try:
@@ -178,7 +182,7 @@ class RunSession:
     async def _run(self, app: Application, clock: Clock, trace: IO[str] | None) -> RunReport:
         backend = await registry.create_backend(self.backend_name(app), clock, self._options(app))
         parameters = {"trajectory_db": self.trajectory_db(app)}
-        deployment = await deploy_local(clock, app.robot, backend, machine_parameters=parameters, engine_parameters={"autostart": False})
+        deployment = await deploy_local(clock, app.robot, backend, machine_parameters=parameters, engine_parameters={"autostart": False, "speed_override": self.speed_percent})
         deployment.engine.hold_for_operators = True  # the operator is a person at a page: simulated time waits
         node = deployment.transport.create_node("operator_station")
         iterations = app.iterations()  # the loop iteration or call of each expanded operation, on its records
@@ -248,9 +252,25 @@ class RunSession:
         ok, answer = await asyncio.wait_for(asyncio.wrap_future(future), 30.0)
         return ok, answer, engine.breakpoints.ids()
 
+    async def speed_override(self, percent: object) -> tuple[bool, str]:
+        """The page's speed override: the running motion's (the engine records it, source ``studio``), or the next run's."""
+        loop, deployment = self._loop, self._deployment
+        if loop is None or deployment is None:
+            ok, answer = speed_for_next_run(percent)
+            self.speed_percent = float(percent) if ok else self.speed_percent  # type: ignore[arg-type] - checked
+            return ok, answer
+        future: Future[tuple[bool, str]] = asyncio.run_coroutine_threadsafe(_set_speed(deployment, percent), loop)
+        ok, answer = await asyncio.wait_for(asyncio.wrap_future(future), 30.0)
+        self.speed_percent = deployment.engine.speed.percent
+        return ok, answer
+
     def safety_stop(self, active: bool) -> tuple[bool, str]:
         """Raise or clear the cell's safety stop input: the engine pauses every group and records it."""
         return publish_safety(self._loop, self._safety, active, "no run is going")
+
+
+async def _set_speed(deployment: Deployment, percent: object) -> tuple[bool, str]:
+    return deployment.engine.speed.set(percent, SOURCE)
 
 
 def publish_safety(loop: asyncio.AbstractEventLoop | None, publisher: Any, active: bool, absent: str) -> tuple[bool, str]:
@@ -313,7 +333,7 @@ def _decoded(node: Node, cls: type[Any], sink: Callable[[Any], None]) -> Callabl
 def _status_json(status: EngineStatus) -> dict[str, Any]:
     return {
         "app": status.app, "state": status.state, "operation_index": status.operation_index, "operation_count": status.operation_count,
-        "t": status.t, "operation_id": status.operation_id, "message": status.message,
+        "t": status.t, "operation_id": status.operation_id, "message": status.message, "speed_override": status.speed_override,
         "groups": {g: {"state": p.state, "operation": p.operation, "function": p.function} for g, p in status.groups.items()},
     }
 
