@@ -231,7 +231,7 @@ class Jogger:
         try:
             await self.backend.execute(group, SetSpeed(self._fraction(request, settings)))
             while not self._halted:
-                before = self._joints()
+                before, began = self._joints(), self.clock.now()
                 try:
                     await self.backend.execute(group, leg)
                 except BridgeError as error:
@@ -244,7 +244,13 @@ class Jogger:
                         self._halt(f"jog {request.describe()} stopped: {error.detail}", True)
                         break
                 else:
+                    # A leg done sooner than its share of the jog's speed (a controller faster than the cap asked):
+                    # wait the rest, so that on average the TCP and joints never go faster than the cap.
+                    rest = began + self._leg_time(settings) * scale - self.clock.now()
                     scale = 1.0
+                    while rest > 1e-9 and not self._halted:
+                        await self.clock.sleep(min(rest, self.period))
+                        rest = began + self._leg_time(settings) - self.clock.now()
                 try:
                     leg = self._leg(request, settings, scale)
                 except (ValueError, KeyError) as refusal:
@@ -373,7 +379,9 @@ class Jogger:
                 raise ValueError(f"jog: {request.axis} is at its {side} limit ({bound:.4f} rad, {math.degrees(bound):.2f} deg): "
                                  "it goes no further that way")
         step = min(settings.speed * speed * seconds, room)
-        return MoveJoints((value + request.direction * step,), (request.axis,))
+        joints = self.robot.group(request.group).joint_names  # every joint of the group: V+ takes whole-arm moves only
+        target = tuple(value + request.direction * step if n == request.axis else positions[names.index(n)] for n in joints)
+        return MoveJoints(target, joints)
 
     def _first_step(self, request: JogRequest, settings: JogSettings) -> np.ndarray | None:
         """Where a joint jog is one look-ahead from now (None for a Cartesian one: its path is the back end's)."""

@@ -15,12 +15,14 @@ import numpy as np
 import pytest
 
 from core_functions.primitives import MoveJoints
-from core_functions.robots import NEXTAGE_OPEN
+from core_functions.robots import NEXTAGE_OPEN, find_robot
 from execution_engine.app_model.cell import Cell, load_cell
 from node_transport.clock import Clock, run_with_clock, simulated_clock
-from operator_station.jog import MAX_SPEED, Jogger, JogRequest, JogSettings, parse_request
+from operator_station.jog import MAX_CARTESIAN, MAX_SPEED, Jogger, JogRequest, JogSettings, parse_request
+from robot_bridges.backend import BackendOptions
 from robot_bridges.collision import cell_boxes, scene_for
 from robot_bridges.nextage_sim.backend import NextageSimBackend
+from robot_bridges.registry import create_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = ROOT / "apps_xml" / "cells" / "rivet_cell.xml"
@@ -192,3 +194,30 @@ def test_requests_and_settings_out_of_their_ranges_are_one_line_refusals() -> No
     slower = JogSettings().slower(5.0)
     assert slower.speed == pytest.approx(0.05) and slower.cartesian_speed == pytest.approx(0.025)
     assert JogSettings().slower(50.0).speed == MAX_SPEED  # asking for more than the cap gives the cap
+
+
+def test_on_vplus_a_jog_goes_in_short_legs_paced_to_the_cap_and_stops_at_the_end_of_the_leg_under_way() -> None:
+    """V+ runs a motion to its end (AdeptServer): legs of 0.1 s of travel, whole-arm joint moves, never faster than the cap."""
+    robot = find_robot("viper")
+
+    async def main(clock: Clock) -> Any:
+        backend = await create_backend("vplus", clock, BackendOptions(robot))  # its controller simulator, on loopback
+        await backend.start()
+        jogger = Jogger(backend, clock, robot)
+        seen = []
+        try:
+            for request in (JogRequest("arm", "joint", "joint_1", 1), JogRequest("arm", "cartesian", "z", 1, "world")):
+                before, began = backend.tcp_pose("arm"), clock.now()
+                ok, answer = await jogger.start(request)
+                await hold(clock, jogger, 2.0)
+                await jogger.stop("jog released")
+                seen.append((ok, answer, before.distance_to(backend.tcp_pose("arm")), clock.now() - began, jogger.state))
+        finally:
+            await backend.close()
+        return seen
+
+    (joint_ok, _, _, _, joint_state), (ok, _, moved, seconds, state) = run_with_clock(main, simulated_clock())
+    assert joint_ok and joint_state.reason == "jog released"  # a whole-arm MoveJoints: V+ takes no single joint
+    assert ok and state.reason == "jog released" and moved > 0.01
+    assert moved / seconds <= MAX_CARTESIAN + 1e-9  # paced: the controller's own legs are quicker than the cap
+    assert state.stopped_at - state.stop_asked <= JogSettings().short_leg + 1e-9  # at the latest, the end of the leg under way
