@@ -31,6 +31,7 @@ class Snapshot:
     structures: dict[str, Any] = field(default_factory=dict)
     status: dict[str, Any] | None = None
     plan: list[float] = field(default_factory=list)  # planned seconds per operation (dry run)
+    plan_functions: list[dict[str, Any]] = field(default_factory=list)  # group, operation, planned: seconds per function (dry run)
     operations: list[dict[str, Any]] = field(default_factory=list)  # id, name, calls per operation
     joint_names: list[str] = field(default_factory=list)
     messages: list[dict[str, Any]] = field(default_factory=list)  # why a run was refused or broke down

@@ -42,6 +42,7 @@ from node_transport.qos import LATCHED, SENSOR
 from node_transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
 from operator_station.feed import Feed
+from operator_station.timeline_view import plan_json
 from operator_station.paused_edit import EditTarget
 from operator_station.scene3d import begin_run
 from operator_station.scene3d_live import observe as observe_scene
@@ -175,7 +176,7 @@ class RunSession:
             found += [{"severity": "error", "message": f"not checked: {note}"} for note in report.notes]
             self.feed.update(messages=[{"severity": "error", "message": f"not run: {len(report.findings)} problem(s) found by the dry run"}, *found])
             return False
-        self.feed.update(plan=planned_durations(report, app))
+        self.feed.update(plan=planned_durations(report, app), plan_functions=plan_json(report.timeline))  # the timeline's planned bars
         self._verdict = report
         return True
 
