@@ -87,8 +87,8 @@ const Breakpoints = (() => {
         () => toggle(op.id), on);
       const label = document.createElement("span");
       label.className = "bp-label";
-      label.textContent = `${i + 1} ${op.id}${op.name ? ` – ${op.name}` : ""}${op.line ? ` (line ${op.line})` : ""}${here ? " ⏸ paused here" : ""}${op.id === target ? " → run-to target" : ""}`;
-      row.append(mark, label, button("bp-run-to", "Run to here", "go on and pause before this operation", () => runTo(op.id), on && i >= current));
+      label.textContent = `${i + 1} ${op.id}${op.name ? ` – ${op.name}` : ""}${op.line ? ` (line ${op.line})` : ""}${here ? " · paused here" : ""}${op.id === target ? " · run-to target" : ""}`;
+      row.append(mark, label, button("bp-run-to", "Run to here", "go on and pause before this operation", () => runTo(op.id), on && i >= current && !here));
       return row;
     }));
   }
