@@ -289,3 +289,42 @@ def test_flags_mode_a_partner_already_at_the_barrier_does_not_time_out_while_the
 
     report = run_sim(main)
     assert report.ok and not report.errors, report.summary_lines()
+
+
+def test_stop_at_a_breakpoint_ends_the_run_there_in_both_modes(run_sim: Any) -> None:
+    def stopped(sync: str) -> tuple[Any, list[str], float]:
+        async def main(clock: Clock) -> tuple[Any, list[str], float]:
+            cell = await Cell(clock, durations=DURATIONS).start()
+            run = asyncio.ensure_future(cell.run(with_breaks(make_app(OPS), 3, sync=sync)))
+            await until_state(cell, clock, "paused")
+            t = clock.now()
+            assert (await cell.operator("stop")).success
+            report = await run
+            return report, started(cell, "left_arm"), clock.now() - t
+
+        return run_sim(main)
+
+    for sync in ("operation", "flags"):
+        report, left, took = stopped(sync)
+        assert report.outcome == "stopped" and left == ["1", "2"] and took < 5.0, sync
+
+
+def test_flags_mode_run_to_holds_the_group_that_reaches_the_target(run_sim: Any) -> None:
+    ops = [{"left_arm": MOVE}, {"left_arm": MOVE}, {"left_arm": MOVE}, {"right_arm": ("gripper_open",)}, {"right_arm": ("gripper_close",)}]
+
+    async def main(clock: Clock) -> tuple[Any, ...]:
+        cell = await Cell(clock, durations=DURATIONS).start()
+        engine = cell.deployment.engine
+        run = asyncio.ensure_future(cell.run(with_breaks(make_app(ops), sync="flags")))
+        await clock.sleep(1.0)
+        answer = await engine.breakpoint_command("run_to", "3", "studio")
+        await until_state(cell, clock, "paused")
+        at = (clock.now(), engine._message, started(cell, "left_arm"), started(cell, "right_arm"))
+        assert (await cell.operator("resume")).success
+        return answer, at, await run
+
+    answer, (t, message, left, right), report = run_sim(main)
+    assert answer == (True, "running to operation 3 '3' (line 3): the run pauses before it")
+    assert t == pytest.approx(4.0, abs=0.1) and left == ["1", "2"] and right == ["4", "5"]
+    assert message.startswith("paused before operation 3 '3' (line 3): the run-to target is reached; left_arm holds there")
+    assert report.ok and [(h.operation, h.kind, h.groups) for h in report.breakpoints] == [("3", "run_to", ("left_arm",))]
