@@ -57,6 +57,10 @@ BreakCommander = Callable[[str, str, str], Awaitable[tuple[bool, str]]]
 BREAK_KEYS = {"b": "toggle", "g": "run_to", "c": "clear_all"}
 #: Speed override keys: + and - change it by SPEED_STEP percent, % asks for a value.
 SPEED_KEYS = ("+", "-", "%")
+#: The key that edits the paused run: it asks for the edited application's file (``e FILE`` in line mode).
+EDIT_KEY = "e"
+#: ``(file, source) -> lines``: run's edit of the paused run from a file (cell_runner/console_edit.py).
+Editor = Callable[[str, str], Awaitable[list[str]]]
 SPEED_STEP = 10.0
 
 
@@ -70,7 +74,7 @@ class SpeedControl(Protocol):
 
 KEY_LIST = (" ".join(f"{key} ({command})" for command, key in CONSOLE_KEYS.items())
             + " b (breakpoint on the next operation) g (run to an operation) c (clear breakpoints)"
-            + f" +/- (speed override {SPEED_STEP:g} % up/down) % (speed override: type it) h (help)")
+            + f" +/- (speed override {SPEED_STEP:g} % up/down) % (speed override: type it) e (edit the paused run: its file) h (help)")
 HELP = "operator commands: " + KEY_LIST
 PROMPT_KEYS = f"operator keys, no Enter needed: {KEY_LIST}"
 PROMPT_LINES = f"operator commands, type a key (or the command's name) and Enter: {KEY_LIST}"
@@ -153,6 +157,7 @@ class OperatorConsole:
         self._clients = {c: node.create_client(Trigger, engine_service(c)) for c in ENGINE_SERVICES}
         self._break_clients = (node.create_client(BreakpointService, BREAKPOINT_SERVICE), node.create_client(RunToService, RUN_TO_SERVICE))
         self._asking: str | None = None  # after g: the next word names the operation to run to
+        self.editor: Editor | None = None  # the edit of the paused run, when the engine is in this process (set by run)
         self._tasks: set[asyncio.Task[Any]] = set()
         self._fd: int | None = None
         self._saved: tuple[int, list[Any]] | None = None  # the terminal's settings to put back
@@ -197,6 +202,15 @@ class OperatorConsole:
         if asking == "speed":  # the answer to "speed override?"
             self._say(self.change_speed("%", typed))
             return
+        head, _, argument = typed.partition(" ")
+        if asking == "edit" or head.lower() == EDIT_KEY:  # the answer to "which file?", or e FILE
+            file = typed if asking == "edit" else argument.strip()
+            if asking != "edit" and not file:
+                self._asking = "edit"
+                self._say("edit the paused run: the edited application's file, then Enter")
+                return
+            self._say("\n".join(await self.edit(file)))
+            return
         if asking is not None:  # the answer to "run to which operation?" (a lone key other than a digit: not an answer)
             if len(word) > 1 or word.isdigit():
                 self.out.write(await self.breakpoint("run_to", typed, "g") + "\n")
@@ -229,6 +243,12 @@ class OperatorConsole:
             return
         self.out.write(await self.command(name, word) + "\n")
         self.out.flush()
+
+    async def edit(self, file: str) -> list[str]:
+        """Edit the paused run from ``file`` (cell_runner/console_edit.py): the lines to show."""
+        if self.editor is None:
+            return ["edit: the engine runs in another process: edit the paused run where it was started (run --interactive, or the studio)"]
+        return await self.editor(file, console_source(EDIT_KEY))
 
     def change_speed(self, key: str, typed: str = "") -> str:
         """``+``/``-``: the override a step up or down; ``%``: the value typed.  The engine's answer for the console."""
@@ -273,7 +293,7 @@ class OperatorConsole:
         except (AttributeError, ValueError, OSError):
             return False
         keys = self._cbreak(fd)
-        decoder = KeyDecoder(keys, frozenset({"g", "%"}))  # g asks for an operation, % for a speed: typed with Enter
+        decoder = KeyDecoder(keys, frozenset({"g", "%", EDIT_KEY}))  # g asks for an operation, % for a speed, e for a file: typed with Enter
 
         def readable() -> None:
             try:

@@ -18,10 +18,12 @@ import pytest
 
 from app_functions.registry import full_catalog
 from cell_runner.cli import main
+from cell_runner.console_edit import console_editor
 from cell_runner.deployment import Deployment, deploy_local
 from cell_runner.dry_run.remainder import remainder_check
 from cell_runner.dry_run.simulators import setup_for
 from cell_runner.dry_run.start import backend_measure
+from cell_runner.operator_console import OperatorConsole
 from cell_runner.record_hook import record_node
 from execution_engine.app_model import Application, load_application
 from execution_engine.checkpoint.resume import app_meta, check_same
@@ -82,6 +84,7 @@ class PausedRun:
     store: CheckpointStore
     check: Any
     recorder: Any
+    backend: Any
 
     async def edit(self, new: Application) -> SwapAnswer:
         return await swap_remainder(self.deployment.engine, new, self.check, str(new.path), "test")
@@ -125,7 +128,7 @@ async def paused(clock: Clock, app: Application, tmp: Path, steps: int = 2) -> P
             if engine.state == "paused":
                 break
         assert engine.state == "paused"
-    return PausedRun(clock, deployment, app, run, trace, store, check, recorder)
+    return PausedRun(clock, deployment, app, run, trace, store, check, recorder, backend)
 
 
 def test_a_safe_edit_is_swapped_in_and_its_operations_run_recorded_with_both_digests(run_sim: Any, tmp_path: Path) -> None:
@@ -227,3 +230,31 @@ def test_a_run_stopped_after_a_swap_resumes_with_the_new_remainder(run_sim: Any,
     err = io.StringIO()
     assert main(["run", str(old.path), "--resume", str(tmp_path / "run.checkpoint.sqlite"), "--speed", "max", "--quiet"], out=io.StringIO(), err=err) == 2
     assert "the run was edited while paused (after operation hold): it goes on with" in err.getvalue()
+
+
+def test_the_terminal_edits_the_paused_run_from_a_file_and_says_why_it_will_not(run_sim: Any, tmp_path: Path) -> None:
+    """run --interactive: e asks for the file (a line), e FILE in line mode; the answers are the console's lines."""
+    old, new = load(tmp_path, "old.xml", OLD), load(tmp_path, "safe.xml", SAFE)
+    (tmp_path / "broken.xml").write_text(SAFE.replace("move_to", "fly_to", 1))
+    screen = io.StringIO()
+
+    async def main_(clock: Clock) -> RunReport:
+        run = await paused(clock, old, tmp_path)
+        engine = run.deployment.engine
+        console = OperatorConsole(run.deployment.transport.create_node("operator_console"), screen, engine.operator_command)
+        console.editor = console_editor(engine, old, run.backend, clock, setup_for("nextage-sim", BackendOptions(robot=old.robot)), None)
+        await console.handle_line("e\n")  # asks for the file
+        await console.handle_line(f"{tmp_path / 'broken.xml'}\n")
+        await console.handle_line(f"e {tmp_path / 'nowhere.xml'}\n")
+        await console.handle_line(f"e {new.path}\n")
+        return await run.finish()
+
+    report = run_sim(main_)
+    lines = screen.getvalue().splitlines()
+    assert lines[0] == "edit the paused run: the edited application's file, then Enter"
+    assert any(line.startswith(f"{tmp_path / 'broken.xml'}:") and "fly_to" in line for line in lines)
+    assert f"edit: {tmp_path / 'broken.xml'}: not swapped: 1 problem(s); nothing changed" in lines
+    assert f"edit: {tmp_path / 'nowhere.xml'}: no such file; nothing changed" in lines
+    assert lines[-1].startswith("edit: swapped: operations from 3 on are")
+    assert report.ok and report.operations_total == 5
+    assert any("edited while paused" in line and "terminal console (key 'e')" in line for line in report.summary_lines())
