@@ -19,7 +19,7 @@ from cell_runner.settings import ReportSettings
 from core_functions.printable import printable
 from execution_engine.record_limits import TIME_BOUND
 from execution_engine.record_reader import NotARecording, OverLimit, read_record
-from execution_engine.timeline import Timeline, TimelineBuilder
+from execution_engine.timeline import Lane, Timeline, TimelineBuilder
 
 EXIT_OK, EXIT_UNREADABLE, EXIT_USAGE, EXIT_OUTPUT = 0, 1, 2, 4  # as run's: a refused option 2, an output not written 4
 
@@ -49,10 +49,7 @@ class RunSummary:
                 f"  {group:<12} busy {lane.busy:9.3f} s ({100 * lane.busy / total:5.1f} %), idle {t.idle_total(group):9.3f} s, "
                 f"{len(lane.bars)} function(s)" + (f", {failed} failed" if failed else "")
             )
-            waited: dict[str, float] = {}
-            for gap in lane.idle:
-                if gap.waiting:
-                    waited[gap.waiting] = waited.get(gap.waiting, 0.0) + gap.duration
+            waited = waits_of(lane)
             if waited:  # sync="flags": the idle time the waits for flags and zones account for
                 rest = t.idle_total(group) - sum(waited.values())
                 parts = ", ".join(f"waiting for {what} {d:.3f} s" for what, d in sorted(waited.items(), key=lambda kv: -kv[1]))
@@ -62,6 +59,16 @@ class RunSummary:
         out.extend(self.extra)
         out.extend(vision_lines(t))
         return [printable(line) for line in out]  # every name and text in them came from the file
+
+
+def waits_of(lane: Lane) -> dict[str, float]:
+    """The idle seconds of a lane each flag or zone wait accounts for (sync="flags"), by what it waited for
+    (``flag part_ready``, ``zone hole_area``); the run summary of the studio names the costliest the same way."""
+    waited: dict[str, float] = {}
+    for gap in lane.idle:
+        if gap.waiting:
+            waited[gap.waiting] = waited.get(gap.waiting, 0.0) + gap.duration
+    return waited
 
 
 def vision_lines(timeline: Timeline) -> list[str]:

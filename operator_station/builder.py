@@ -242,16 +242,16 @@ def save_document(document: AppDocument | BlockDocument, path: Path, catalog: Ca
 
 def planned_durations(report: Any, app: Application) -> list[float]:
     """Each operation's planned duration from a dry run's timeline: from its first span's start to the next
-    operation's (the last one's to the predicted cycle time), so the waits between operations count too."""
+    operation's (the last one's to the predicted cycle time), so the waits between operations count too.
+    The plan's clock never goes back: with sync="flags" a group runs ahead into an operation listed after one
+    still going, so each operation starts at the latest start so far (the first at 0) -- the durations add up
+    to the predicted cycle time, as the ETA (operator_station/eta.py) and the run summary take them."""
     starts: dict[str, float] = {}
     for span in report.timeline:
         starts[span.operation] = min(starts.get(span.operation, math.inf), span.start)
-    known = [starts.get(op.id) for op in app.operations]
-    out = []
-    for i, start in enumerate(known):
-        if start is None:
-            out.append(0.0)
-            continue
-        following = next((s for s in known[i + 1:] if s is not None), float(report.cycle_time))
-        out.append(max(0.0, following - start))
-    return out
+    position, at = 0.0, []
+    for op in app.operations:  # an operation the dry run never reached takes no time
+        position = max(position, starts.get(op.id, position))
+        at.append(position)
+    ends = [*at[1:], max(float(report.cycle_time), at[-1] if at else 0.0)]
+    return [end - start for start, end in zip(at, ends)]

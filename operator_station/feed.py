@@ -36,6 +36,8 @@ class Snapshot:
     joint_names: list[str] = field(default_factory=list)
     messages: list[dict[str, Any]] = field(default_factory=list)  # why a run was refused or broke down
     ended: bool = False
+    eta: dict[str, Any] | None = None  # the time left (operator_station/eta.py), pushed as operations start
+    summary: dict[str, Any] | None = None  # the run summary once it has ended (operator_station/run_summary.py)
 
 
 class Feed:

@@ -22,6 +22,7 @@ from core_functions.printable import printable
 from execution_engine.machine.table import FINISH, READY, TABLE_2
 from execution_engine.record_reader import printable_record, read_record
 from operator_station.feed import Feed
+from operator_station.run_summary import summarize
 from operator_station.scene3d_recording import load_scene
 
 #: Records a replay keeps (a day of a busy cell is well below); the rest are counted and said.
@@ -66,7 +67,7 @@ def load_replay(feed: Feed, path: Path) -> int:
     total = max(ended) if ended else len({r["operation"] for r in records if r["event"] == "function_start" and r.get("operation")})
     messages = [{"severity": "warning", "message": note} for note in notes]
     feed.begin("replay", printable(path.name), groups, structures={g: table_structure(g) for g in groups}, messages=messages, ended=True,
-               status={"state": "replay", "operation_count": total, "t": records[-1]["t"] if records else 0.0})
+               summary=summarize(records, (), groups).to_json(), status={"state": "replay", "operation_count": total, "t": records[-1]["t"] if records else 0.0})
     load_scene(feed, path)  # a recording's 3D scene and joint states for the 3D view (operator_station/scene3d_recording.py)
     joint_names = list(dict.fromkeys(n for r in records for n in _names(_result(r).get("joint_names")) if isinstance(n, str)))
     known = {name: float("nan") for name in joint_names}

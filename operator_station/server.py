@@ -412,7 +412,7 @@ async def _until_gone(socket: WebSocket, waiter: asyncio.Event) -> None:
 def _live_state(snapshot: Any) -> dict[str, Any]:
     """What changes during a run (the rest of the snapshot is sent once per run)."""
     return {"status": snapshot.status, "messages": snapshot.messages, "ended": snapshot.ended, "structures": snapshot.structures,
-            "joint_names": snapshot.joint_names, "plan": snapshot.plan}
+            "joint_names": snapshot.joint_names, "plan": snapshot.plan, "eta": snapshot.eta, "summary": snapshot.summary}
 
 
 def _edited_for(request: Request, path: Path, doc: BlockDocument) -> str | None:
