@@ -22,9 +22,10 @@ from execution_engine.app_model import read_application  # noqa: E402
 from execution_engine.app_model.cell import load_cell, read_cell  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
-from operator_station.session import RunSession  # noqa: E402
 from operator_station.teach import TeachRefused, plan_teach  # noqa: E402
-from test_studio_server import BASE, CATALOG, ROOT, station_args  # noqa: E402
+from test_studio_server import BASE, CATALOG, ROOT, station_args, wait_until  # noqa: E402
+
+JOG = "ws://127.0.0.1:8080/ws/jog"
 
 
 
@@ -75,6 +76,8 @@ def test_a_taught_frame_is_the_tcp_under_its_parent_shown_as_a_diff_and_saved_on
     assert app is not None, problems  # the application still validates with the taught cell
     again = client.post("/api/teach/save", json={"id": answer["id"], "confirm": True})
     assert again.status_code == 404  # a plan is saved once
+    audited = [(e["what"], e["ok"]) for e in station.audit_log.newest()]
+    assert ("teach save", True) in audited and ("teach", True) in audited  # who taught and saved what is in the audit log
 
 
 def test_an_updated_frame_changes_its_own_line_only_and_a_cell_changed_since_the_diff_is_not_overwritten(station: Station, folder: Path) -> None:
@@ -127,23 +130,37 @@ def test_the_diff_keeps_the_files_units_and_a_frame_under_a_leaf_opens_it(tmp_pa
         plan_teach(cell_file, "cell.xml", cell_file.read_bytes(), taught, "t_leaf", "t_leaf", tcp)  # not its own parent
 
 
-def test_jogging_is_refused_while_a_run_is_active_and_during_the_safety_stop(station: Station, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_jogging_is_refused_while_a_run_is_active_and_during_the_safety_stop(folder: Path) -> None:
+    station = build_station(station_args(file="rivet_installation.xml", speed=1.0, no_check=True), CATALOG, folder)  # real time: the run lasts
     client, current = client_for(station)
+    try:
+        refused_while_running(station, client, current)
+    finally:
+        station.stop()
+
+
+def refused_while_running(station: Station, client: TestClient, current: dict[str, Any]) -> None:
     assert client.post("/api/jog/open", json=current).json()["ok"]
     press = {"type": "start", "group": "left_arm", "mode": "joint", "axis": "LARM_JOINT0", "direction": 1}
-    monkeypatch.setattr(RunSession, "running", property(lambda self: True))  # a run going on (paused or not): the thread is alive
-    with client.websocket_connect("ws://127.0.0.1:8080/ws/jog", headers={"Origin": BASE}) as socket:
+    assert client.post("/api/run", json=current).json()["ok"]
+    assert not station.jog.ready  # the run took the robot: the jog's back end let go of it
+    assert wait_until(lambda: client.post("/api/operator/pause", json={}).json()["ok"])
+    assert station.session.running  # paused, not ended
+    with client.websocket_connect(JOG, headers={"Origin": BASE}) as socket:
         socket.send_json(press)
         assert socket.receive_json() == {"type": "answer", "ok": False, "answer": "jog: a run is active (paused too): stop it before jogging"}
     assert client.post("/api/jog/open", json=current).json()["error"] == "jog: a run is active (paused too): stop it before jogging"
-    monkeypatch.undo()
+    assert client.post("/api/operator/stop", json={}).json()["ok"]
+    station.session.join(30.0)
+    assert not station.session.running
+    assert client.post("/api/jog/open", json=current).json()["ok"]  # the run over, the jog may have the robot again
     raised = client.post("/api/safety", json={"active": True}).json()
     assert raised["ok"] and "jogging stopped and refused until the safety stop is cleared" in raised["answer"]
-    with client.websocket_connect("ws://127.0.0.1:8080/ws/jog", headers={"Origin": BASE}) as socket:
+    with client.websocket_connect(JOG, headers={"Origin": BASE}) as socket:
         socket.send_json(press)
         assert socket.receive_json()["answer"] == "jog: the safety stop is raised: clear it before jogging"
     assert client.post("/api/safety/clear", json={"confirm": True}).json()["ok"]
-    with client.websocket_connect("ws://127.0.0.1:8080/ws/jog", headers={"Origin": BASE}) as socket:
+    with client.websocket_connect(JOG, headers={"Origin": BASE}) as socket:
         socket.send_json(press)
         messages = [socket.receive_json() for _ in range(2)]
         assert {"type": "answer", "ok": True, "answer": "jogging left_arm LARM_JOINT0+"} in messages
