@@ -57,6 +57,8 @@ WORLD, TOOL = "world", "tool"
 DEFAULT_PERIOD = 0.01
 #: rad: a joint this close to its limit is at it (a jog towards it is refused).
 AT_LIMIT = 1e-4
+#: s between two states sent to the page while the arm moves (its joints and TCP follow the arm).
+SHOW_EVERY = 0.1
 #: Times a leg the back end refuses before moving (out of reach, a joint limit on the way) is halved before
 #: the jog says it cannot go on.
 HALVINGS = 5
@@ -149,6 +151,7 @@ class JogState:
     stopped_at: float | None = None  # clock time the group was still again
     travel_after_stop: float = 0.0  # rad: the most any joint of the group moved between the two
     joints: dict[str, float] = field(default_factory=dict)
+    tcp: list[float] | None = None  # the group's TCP in the world: x y z (m), roll pitch yaw (rad)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -200,12 +203,14 @@ class Jogger:
             first = self._leg(request, settings, 1.0)
             self._check_ahead(self._joints(), self._first_step(request, settings))
         except (ValueError, KeyError) as refusal:
-            self.state = JogState(False, asdict(request), str(refusal).strip("'\""), True, joints=self._group_joints(request.group))
+            self.state = JogState(False, asdict(request), str(refusal).strip("'\""), True)
+            self.observe(request.group)
             self._changed()
             return False, self.state.reason
         self._group, self._halted, self._stop_q = request.group, False, None
         self._deadline = self.clock.now() + settings.lease
-        self.state = JogState(True, asdict(request), "", False, joints=self._group_joints(request.group))
+        self.state = JogState(True, asdict(request), "", False)
+        self.observe(request.group)
         self._drive = asyncio.get_running_loop().create_task(self._run(request, settings, first))
         self._watch = asyncio.get_running_loop().create_task(self._guard(settings))
         self._changed()
@@ -269,7 +274,7 @@ class Jogger:
             end = self._joints()
             self.state.moving = False
             self.state.stopped_at = self.clock.now()
-            self.state.joints = self._group_joints(group)
+            self.observe(group)
             if self._stop_q is not None:
                 idx = self._group_index(group)
                 self.state.travel_after_stop = float(np.max(np.abs(end[idx] - self._stop_q[idx]))) if len(idx) else 0.0
@@ -288,6 +293,7 @@ class Jogger:
     async def _guard(self, settings: JogSettings) -> None:
         """The dead man and the look-ahead: wakes every control period, and exactly when the lease ends."""
         q, at = self._joints(), self.clock.now()
+        shown = at
         lookahead = 2.0 * self.period if self.backend.holds_within_motion else settings.short_leg + self.period
         while not self._halted:
             now = self.clock.now()
@@ -303,6 +309,10 @@ class Jogger:
                     self._halt(str(problem), True)
                     return
             q, at = current, now
+            if now >= shown + SHOW_EVERY - 1e-9:  # the page follows the arm while it moves
+                shown = now
+                self.observe(self._group)
+                self._changed()
             await self.clock.sleep(min(self.period, self._deadline - now))
 
     def _check_ahead(self, now: np.ndarray, ahead: np.ndarray | None) -> None:
@@ -401,6 +411,12 @@ class Jogger:
     def _group_index(self, group: str) -> list[int]:
         names = self.backend.joint_state()[0]
         return [names.index(n) for n in self.robot.group(group).joint_names if n in names]
+
+    def observe(self, group: str) -> None:
+        """The group's joints and TCP now, into the state the page shows."""
+        self.state.joints = self._group_joints(group)
+        tcp = self.backend.tcp_pose(group)
+        self.state.tcp = None if tcp is None else [*tcp.position, *tcp.rpy()]
 
     def _group_joints(self, group: str) -> dict[str, float]:
         names, positions = self.backend.joint_state()

@@ -106,6 +106,8 @@ class JogStation:
             limits = self._backend.joint_limits(group)
             groups[group] = {"joints": list(self.app.robot.group(group).joint_names), "tcp": self._backend.tcp_pose(group) is not None,
                              "lower": list(limits.lower) if limits else None, "upper": list(limits.upper) if limits else None}
+        if not self._jogger.moving and not self._jogger.state.joints:  # a fresh jog: where the first arm is
+            self._jogger.observe(next((g for g in groups if groups[g]["tcp"]), self.app.robot.group_names[0]))
         cell = self.app.cell
         return {"backend": self._backend.name, "groups": groups, "frames": sorted(cell.frames) if cell is not None else [],
                 "speed": round(self.settings.speed * 100, 3), "cartesian_speed": round(self.settings.cartesian_speed * 1000, 3),

@@ -151,10 +151,12 @@ def test_a_cartesian_jog_in_the_tool_frame_moves_along_the_tool_axis_and_keeps_t
         before = backend.tcp_pose("left_arm")
         await jogger.start(JogRequest("left_arm", "cartesian", "x", 1, "tool"))
         await hold(clock, jogger, 2.0)
+        shown, now = jogger.state.tcp, backend.tcp_pose("left_arm")  # what the page is shown while it moves
         await jogger.stop("jog released")
-        return before, backend.tcp_pose("left_arm")
+        return before, backend.tcp_pose("left_arm"), shown, now
 
-    before, after = jogging(body)
+    before, after, shown, now = jogging(body)
+    assert shown is not None and np.linalg.norm(np.array(shown[:3]) - np.array(now.position)) <= 0.05 * 0.1 + 1e-9  # at most 0.1 s behind
     moved = np.array(after.position) - np.array(before.position)
     axis = before.matrix()[:3, 0]  # the tool's x in the world
     assert np.linalg.norm(moved) > 0.005

@@ -25,6 +25,7 @@ const Jog = (() => {
         if (!message.state.moving && message.state.reason) say(message.state.reason, message.state.refused);
         else if (message.state.moving) say("jogging: hold the button; release it to stop");
         showJoints(message.state.joints || {});
+        showTcp(message.state.tcp);
       }
     };
     socket.onclose = () => { if (jog.held) { release(false); say("jog stopped: the connection to the station closed", true); } };
@@ -73,6 +74,18 @@ const Jog = (() => {
     }
   }
 
+  function showTcp(tcp) {
+    let line = $("jog-tcp");
+    if (!line) {  // under the status line: where the TCP is, which is what a teach writes
+      line = document.createElement("p");
+      line.id = "jog-tcp";
+      line.className = "hint";
+      $("jog-status").after(line);
+    }
+    line.textContent = tcp ? `TCP in the world: x ${(tcp[0] * 1000).toFixed(1)} y ${(tcp[1] * 1000).toFixed(1)} z ${(tcp[2] * 1000).toFixed(1)} mm, ` +
+      `roll ${(tcp[3] * 180 / Math.PI).toFixed(2)} pitch ${(tcp[4] * 180 / Math.PI).toFixed(2)} yaw ${(tcp[5] * 180 / Math.PI).toFixed(2)}°` : "";
+  }
+
   function render() {
     const pad = $("jog-pad");
     pad.replaceChildren();
@@ -93,7 +106,7 @@ const Jog = (() => {
       row.append(button("−", axis, -1), name, button("+", axis, 1), value);
       pad.append(row);
     }
-    if (jog.state) showJoints(jog.state.joints || {});
+    if (jog.state) { showJoints(jog.state.joints || {}); showTcp(jog.state.tcp); }
   }
 
   async function open() {
