@@ -10,8 +10,10 @@ way round from a run: it moves only while it keeps hearing from the page, and ev
   A back end that holds inside a motion (the Nextage simulator, KUKA RSI) gets legs of :attr:`JogSettings.leg`
   seconds of travel and is stopped inside one; V+ runs a motion to its end, so it gets legs of
   :attr:`JogSettings.short_leg` seconds and stops at the end of the leg under way.
-* **Capped speed.**  At most :data:`MAX_SPEED` (10 %) of each joint's speed limit, and the TCP at most
-  :data:`MAX_CARTESIAN` (50 mm/s) whatever the robot's own TCP limit; a page may ask for less.
+* **Capped speed.**  At most :data:`MAX_SPEED` (10 %) of each joint's speed limit, and the TCP of a Cartesian jog
+  at most :data:`MAX_CARTESIAN` (50 mm/s) whatever the robot's own TCP limit; a page may ask for less.  The back
+  ends' speed fraction scales time, acceleration too, so where a back end replays trajectories and stops inside
+  them a joint jog is a trajectory of its own (:func:`ramp`: full acceleration up to the cap).
 * **Dead man.**  The page beats every ~100 ms while the button is held; a release, a closed connection or
   :attr:`JogSettings.lease` seconds without a beat stops the group (``stop``: inside the motion at the back
   end's next control period).  The watch sleeps until the lease ends, not a period longer.
@@ -37,7 +39,7 @@ import numpy as np
 
 from core_functions.geometry import Pose
 from core_functions.motion_profile import TcpLimits
-from core_functions.primitives import MoveJoints, MoveRelative, Primitive, SetSpeed
+from core_functions.primitives import ExecuteTrajectory, MoveJoints, MoveRelative, Primitive, SetSpeed
 from core_functions.robots import RobotModel
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
@@ -182,6 +184,7 @@ class Jogger:
         self._group = ""
         self._halted = False
         self._stop_q: np.ndarray | None = None
+        self._profiles = True  # joint jogs as trajectories of their own (full acceleration, capped speed) where taken
         names = backend.joint_state()[0]
         self._order = [names.index(n) for n in scene.joint_names] if scene is not None else []
 
@@ -234,7 +237,7 @@ class Jogger:
     async def _run(self, request: JogRequest, settings: JogSettings, first: Primitive) -> None:
         group, leg, scale = request.group, first, 1.0
         try:
-            await self.backend.execute(group, SetSpeed(self._fraction(request, settings)))
+            await self.backend.execute(group, SetSpeed(1.0 if isinstance(leg, ExecuteTrajectory) else self._fraction(request, settings)))
             while not self._halted:
                 before, began = self._joints(), self.clock.now()
                 try:
@@ -243,7 +246,10 @@ class Jogger:
                     if self._halted:
                         break
                     unmoved = np.allclose(before, self._joints(), atol=1e-9)
-                    if unmoved and scale > 0.5 ** HALVINGS and error.kind in (FaultKind.UNREACHABLE, FaultKind.JOINT_LIMIT):
+                    if unmoved and isinstance(leg, ExecuteTrajectory) and error.kind is FaultKind.UNSUPPORTED:
+                        self._profiles = False  # this back end replays no trajectory: legs it plans itself, time-scaled
+                        await self.backend.execute(group, SetSpeed(self._fraction(request, settings)))
+                    elif unmoved and scale > 0.5 ** HALVINGS and error.kind in (FaultKind.UNREACHABLE, FaultKind.JOINT_LIMIT):
                         scale /= 2.0  # the plan failed before moving: try a shorter leg to go as far as it can
                     else:
                         self._halt(f"jog {request.describe()} stopped: {error.detail}", True)
@@ -251,11 +257,10 @@ class Jogger:
                 else:
                     # A leg done sooner than its share of the jog's speed (a controller faster than the cap asked):
                     # wait the rest, so that on average the TCP and joints never go faster than the cap.
-                    rest = began + self._leg_time(settings) * scale - self.clock.now()
+                    due = began + self._leg_time(settings) * scale
                     scale = 1.0
-                    while rest > 1e-9 and not self._halted:
-                        await self.clock.sleep(min(rest, self.period))
-                        rest = began + self._leg_time(settings) - self.clock.now()
+                    while due - self.clock.now() > 1e-9 and not self._halted:
+                        await self.clock.sleep(min(due - self.clock.now(), self.period))
                 try:
                     leg = self._leg(request, settings, scale)
                 except (ValueError, KeyError) as refusal:
@@ -373,7 +378,7 @@ class Jogger:
         except KeyError:
             raise ValueError(f"jog: frame {name!r} is not in the cell model") from None
 
-    def _joint_leg(self, request: JogRequest, settings: JogSettings, seconds: float) -> MoveJoints:
+    def _joint_leg(self, request: JogRequest, settings: JogSettings, seconds: float) -> MoveJoints | ExecuteTrajectory:
         names, positions = self.backend.joint_state()
         value = positions[names.index(request.axis)]
         limits = self.backend.joint_limits(request.group)
@@ -390,8 +395,13 @@ class Jogger:
                                  "it goes no further that way")
         step = min(settings.speed * speed * seconds, room)
         joints = self.robot.group(request.group).joint_names  # every joint of the group: V+ takes whole-arm moves only
-        target = tuple(value + request.direction * step if n == request.axis else positions[names.index(n)] for n in joints)
-        return MoveJoints(target, joints)
+        here = tuple(positions[names.index(n)] for n in joints)
+        k = joints.index(request.axis)
+        if self._profiles and self.backend.holds_within_motion and limits is not None:
+            times, path = ramp(step, settings.speed * speed, limits.acceleration[limits.joint_names.index(request.axis)], self.period)
+            points = tuple(tuple(here[i] + request.direction * d if i == k else here[i] for i in range(len(joints))) for d in path)
+            return ExecuteTrajectory("jog", joints, points, times)
+        return MoveJoints(tuple(here[i] + request.direction * step if i == k else here[i] for i in range(len(joints))), joints)
 
     def _first_step(self, request: JogRequest, settings: JogSettings) -> np.ndarray | None:
         """Where a joint jog is one look-ahead from now (None for a Cartesian one: its path is the back end's)."""
@@ -426,3 +436,26 @@ class Jogger:
     def _changed(self) -> None:
         if self.on_change is not None:
             self.on_change(self.state)
+
+
+def ramp(distance: float, speed: float, acceleration: float, period: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Times and distances of a joint going ``distance`` from rest to rest: at its full ``acceleration`` up to
+    ``speed`` (the jog's cap), on at it, and down again, sampled every ``period`` -- a joint jog at speed within a
+    fraction of a second, where a time-scaled move (the back ends' speed fraction) would take seconds to get there."""
+    cruise_from = speed / acceleration
+    if distance < speed * cruise_from:  # too short to reach the speed: a triangle
+        cruise_from = math.sqrt(distance / acceleration)
+        speed = acceleration * cruise_from
+    total = 2.0 * cruise_from + (distance - speed * cruise_from) / speed
+    count = max(1, math.ceil(total / period - 1e-9))
+    times = tuple(min(i * period, total) for i in range(count + 1))
+
+    def at(t: float) -> float:
+        if t <= cruise_from:
+            return 0.5 * acceleration * t * t
+        if t <= total - cruise_from:
+            return 0.5 * acceleration * cruise_from ** 2 + speed * (t - cruise_from)
+        left = total - t
+        return distance - 0.5 * acceleration * left * left
+
+    return times, tuple(min(distance, max(0.0, at(t))) for t in times)

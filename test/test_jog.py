@@ -85,6 +85,8 @@ def test_a_joint_jog_moves_while_held_at_most_a_tenth_of_the_limit_and_stops_wit
     index = NEXTAGE_OPEN.joint_names.index("LARM_JOINT0")
     speeds = [abs(b[1][index] - a[1][index]) / (b[0] - a[0]) for a, b in zip(seen["samples"], seen["samples"][1:])]
     assert max(speeds) <= MAX_SPEED * seen["limit"] + 1e-9  # the cap: 10 % of the joint's speed limit
+    reached = next(i for i, v in enumerate(speeds) if v >= 0.99 * MAX_SPEED * seen["limit"])
+    assert seen["samples"][reached + 1][0] - seen["samples"][0][0] <= 0.1  # and at it within 0.1 s (full acceleration)
     state = seen["state"]
     assert not state.moving and state.reason == "jog released" and not state.refused
     assert state.stopped_at - state.stop_asked <= seen["period"] + 1e-9  # still within one control period
