@@ -105,6 +105,7 @@ def shoot(out: Path) -> list[Path]:
     shots += shoot_audit(out, _args, _until)
     shots += shoot_jog(out, _args, _until)
     shots.append(shoot_breakpoints(out, _args, _until))
+    shots += shoot_timeline(out)
     return shots
 
 
@@ -126,6 +127,37 @@ def shoot_loops(out: Path) -> Path:
             served.close()
             driver.quit()
     return out / "studio_builder_loops.png"
+
+
+def shoot_timeline(out: Path) -> list[Path]:
+    """The timeline of the asynchronous rivet demonstrator (sync="flags") after its run, with a vision fault the retry
+    recovers: the axis, the critical path crossing between the arms, the flag and zone waits by name, the dry run's
+    plan under each function, the error and the retry; then zoomed in on the right arm's wait for the left arm's flag,
+    the primitives inside the functions."""
+    out.mkdir(parents=True, exist_ok=True)
+    shots = [out / "studio_timeline_critical.png", out / "studio_timeline_zoomed.png"]
+    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
+        shutil.copytree(ROOT / "apps_xml" / "cells", Path(name, "cells"))
+        shutil.copy(ROOT / "apps_xml" / "rivet_async.xml", Path(name, "rivet_async.xml"))
+        driver = browser.chromium(1600, 560)
+        served = serve(build_station(_args(file="rivet_async.xml", fault=["left_arm:vision"]), full_catalog(), Path(name)))
+        try:
+            driver.get(served.url)
+            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
+            driver.find_element("id", "ctl-start").click()
+            _until(driver, "document.getElementById('engine-state').textContent === 'finished'", 300.0)
+            served.station.session.join(60.0)  # type: ignore[union-attr]
+            _tab(driver, "timeline")
+            _until(driver, "Timeline.model() && Timeline.model().critical.length > 0 && Timeline.model().plan.length > 0")
+            driver.save_screenshot(str(shots[0]))
+            wait = driver.execute_script("return Timeline.model().waits.right_arm.find((w) => w.waiting.startsWith('flag '))")
+            driver.execute_script(f"Timeline.show({wait['start'] - 1.5}, {wait['end'] + 2.5})")
+            _until(driver, "document.querySelector('#timeline-svg rect.primitive') !== null")
+            driver.save_screenshot(str(shots[1]))
+        finally:
+            served.close()
+            driver.quit()
+    return shots
 
 
 def main() -> int:

@@ -66,6 +66,13 @@ const Timeline = (() => {
     const scale = plot / (t1 - t0);
     const px = (t) => LEFT + (t - t0) * scale;
     const visible = (a, b) => b >= t0 && a <= t1;
+    // A label kept inside its bar (the part of it in the window): a nested svg clips what would run over the next one.
+    const inside = (x, y, w, h, className, text) => {
+      const left = Math.max(x, LEFT), right = Math.min(x + w, LEFT + plot);
+      const box = svg("svg", {x: left, y, width: Math.max(0, right - left), height: h});
+      box.append(svg("text", {x: 3, y: h - 5, class: className}, text));
+      return box;
+    };
     const height = AXIS + model.groups.length * LANE + 12;
     const root = svg("svg", {id: "timeline-svg", width, height, "data-t0": t0, "data-t1": t1, "data-end": model.end});
     const defs = svg("defs");
@@ -89,12 +96,15 @@ const Timeline = (() => {
 
     // Operation boundaries, under the bars.
     const iterations = Object.fromEntries(model.operations.map((op) => [op.id, op.iteration]));
+    let free = -Infinity;  // where the next operation label has room (labels never overlap; every boundary is drawn)
     for (const op of model.operations) {
       if (!visible(op.start, op.start)) continue;
       area.append(svg("line", {x1: px(op.start), x2: px(op.start), y1: 4, y2: height - 8, class: "op-boundary", "data-operation": op.id}));
+      if (px(op.start) < free) continue;
       const text = svg("text", {x: px(op.start) + 2, y: 12, class: "op-label", "data-iteration": op.iteration || ""}, op.id);
       if (op.iteration) text.append(svg("title", {}, `${op.id}: ${op.iteration}`));  // the loop iteration or call it was made for
       area.append(text);
+      free = px(op.start) + 8 + 7 * op.id.length;
     }
     const critical = new Map((model.critical || []).map((step) => [step.id, step]));
     const planOf = new Map((model.plan || []).map((p) => [`${p.group}\u0000${p.operation}`, p]));
@@ -120,8 +130,8 @@ const Timeline = (() => {
         if (bar.error) lines.push(`error: ${bar.error}`);
         if (path) lines.push(`on the critical path${path.via && path.via !== "then" ? ` (the next step waited on it: ${path.via})` : ""}`);
         g.append(svg("title", {}, lines.join("\n")));
-        if (path) g.append(svg("rect", {x: x - 2, y: y + 4, width: w + 4, height: LANE - 18, rx: 4, class: "critical-outline"}));
         g.append(svg("rect", {x, y: y + 6, width: w, height: LANE - 22, rx: 3, style: `fill:${bar.colour};stroke:${bar.edge}`}));
+        if (path) g.append(svg("rect", {x: x - 1, y: y + 4, width: w + 2, height: LANE - 18, rx: 4, class: "critical-outline"}));
         if (scale >= PRIMITIVES_FROM) {
           for (const p of bar.primitives || []) {
             const pr = svg("rect", {x: px(p.start), y: y + LANE / 2 - 4, width: Math.max(1, (p.end - p.start) * scale), height: LANE / 2 - 14, class: `primitive state-${p.state}`, style: `fill:${p.colour}`});
@@ -132,8 +142,8 @@ const Timeline = (() => {
         if (bar.planned !== null && bar.planned !== undefined && bar.attempt === 1) {  // the plan, from the function's (first) start
           g.append(svg("rect", {x, y: y + LANE - 14, width: Math.max(1, bar.planned * scale), height: 4, class: "planned", "data-planned": bar.planned}));
         }
-        if (w > 40) g.append(svg("text", {x: Math.max(x, LEFT) + 3, y: y + 19, class: "bar-label"}, bar.function));
-        if (bar.attempt > 1) g.append(svg("text", {x: x + 2, y: y + LANE - 19, class: "retry-label"}, `↻${bar.attempt}`));
+        if (w > 40) g.append(inside(x, y + 6, w, 17, "bar-label", bar.function));
+        if (bar.attempt > 1 && w > 12) g.append(inside(x, y + 22, w, 14, "retry-label", w > 50 ? `try ${bar.attempt}` : String(bar.attempt)));
         area.append(g);
       }
       // Named idle time, over the bars: a zone holds a function before its motion, so its wait lies inside the bar.
@@ -143,7 +153,7 @@ const Timeline = (() => {
         const g = svg("g", {class: "wait", "data-group": group, "data-label": wait.label, "data-waiting": wait.waiting});
         g.append(svg("title", {}, `${group} ${wait.label}\n${wait.start.toFixed(3)} – ${wait.end.toFixed(3)} s (${seconds(wait.end - wait.start)})${wait.outcome ? ` · ${wait.outcome}` : " · still waiting"}`));
         g.append(svg("rect", {x, y: y + 21, width: w, height: 15}));
-        if (w > 90) g.append(svg("text", {x: Math.max(x, LEFT) + 4, y: y + 32, class: "wait-label"}, wait.label.replace(/^waiting for /, "⏳ ")));
+        if (w > 60) g.append(inside(x, y + 21, w, 15, "wait-label", wait.label.replace(/^waiting for /, "waits: ")));
         area.append(g);
       }
     });
