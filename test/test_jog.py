@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from core_functions.primitives import MoveJoints
 from core_functions.robots import NEXTAGE_OPEN, find_robot
@@ -225,3 +227,27 @@ def test_on_vplus_a_jog_goes_in_short_legs_paced_to_the_cap_and_stops_at_the_end
     assert ok and state.reason == "jog released" and moved > 0.01
     assert moved / seconds <= MAX_CARTESIAN + 1e-9  # paced: the controller's own legs are quicker than the cap
     assert state.stopped_at - state.stop_asked <= JogSettings().short_leg + 1e-9  # at the latest, the end of the leg under way
+
+
+JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True) | st.text(max_size=12),
+                    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3), max_leaves=8)
+FIELDS = {"group": st.sampled_from(["left_arm", "right_arm", "torso_head", "arm", ""]) | JSON,
+          "mode": st.sampled_from(["joint", "cartesian", "Joint"]) | JSON,
+          "axis": st.sampled_from(["LARM_JOINT0", "RARM_JOINT5", "CHEST_JOINT0", "x", "rz", "w"]) | JSON,
+          "direction": st.sampled_from([1, -1, 0, 2, True, 1.0]) | JSON,
+          "frame": st.sampled_from(["world", "tool", "drill_1", "nowhere"]) | JSON, "speed": st.none() | JSON}
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.fixed_dictionaries({}, optional=FIELDS))
+def test_any_message_of_a_page_is_a_jog_request_of_the_robot_or_a_one_line_refusal(body: dict[str, Any]) -> None:
+    """A page's start message is outside input: whatever it holds, it is a request naming a group, a joint of that
+    group (or an axis) and a direction of +-1, or ValueError in one line -- never another exception."""
+    try:
+        request = parse_request(body, NEXTAGE_OPEN, ("drill_1",))
+    except ValueError as error:
+        assert "\n" not in str(error) and str(error).startswith("jog: ")
+        return
+    assert request.group in NEXTAGE_OPEN.group_names and request.direction in (1, -1)
+    joints = NEXTAGE_OPEN.group(request.group).joint_names
+    assert request.axis in joints if request.mode == "joint" else request.axis in ("x", "y", "z", "rx", "ry", "rz")

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import math
 import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
 from starlette.testclient import TestClient  # noqa: E402
@@ -175,3 +178,41 @@ def refused_while_running(station: Station, client: TestClient, current: dict[st
 def _n(value: float) -> str:
     text = f"{value:.6f}".rstrip("0").rstrip(".")
     return "0" if text in ("-0", "") else text
+
+
+CELLS = {name: load_cell(ROOT / "apps_xml" / "cells" / name) for name in ("rivet_cell.xml", "example_cell.xml")}
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(sorted(CELLS)), st.text(alphabet=st.characters(codec="utf-8"), max_size=10) | st.sampled_from(["drill_1", "hole_a", "t.1", "_x-2"]),
+       st.data(), st.tuples(*[st.floats(-0.5, 0.5)] * 3, *[st.floats(-3.1, 3.1)] * 3))
+def test_any_name_parent_and_pose_is_taught_into_a_cell_that_reads_back_with_the_frame_there_or_refused(
+        which: str, name: str, data: st.DataObject, pose: tuple[float, ...]) -> None:
+    """Whatever the page names (the name is outside input), the edit either is refused in one line or gives a
+    cell the reader takes, with the frame under that parent where the TCP was, every other frame unchanged."""
+    cell = CELLS[which]
+    parent = data.draw(st.sampled_from(["world", *sorted(cell.frames)]))
+    tcp = Pose.from_xyz_rpy(*pose)
+    source = ROOT / "apps_xml" / "cells" / which
+    try:
+        plan = plan_teach(source, which, source.read_bytes(), cell, name, parent, tcp)
+    except TeachRefused as refused:
+        assert "\n" not in str(refused) and str(refused).startswith("teach: ")
+        return
+    with tempfile.TemporaryDirectory() as folder:
+        written = Path(folder) / which
+        written.write_text(plan.text, encoding="utf-8")
+        taught, problems = read_cell(written)
+    assert taught is not None, problems
+    assert taught.frames[name].parent == parent
+    assert taught.pose(name).distance_to(tcp) < 1e-5 and taught.pose(name).angle_to(tcp) < 1e-4
+    assert all(taught.pose(f).distance_to(cell.pose(f)) < 1e-9 for f in cell.frames if f != name and not _under(cell, f, name))
+
+
+def _under(cell: Any, frame: str, ancestor: str) -> bool:
+    parent = cell.frames[frame].parent
+    while parent != "world":
+        if parent == ancestor:
+            return True
+        parent = cell.frames[parent].parent
+    return False
