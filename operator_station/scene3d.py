@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cell_runner.dry_run.report import DryRunReport
 from core_functions.cell_index import CellFrame
 from core_functions.cell_robots import CELL_ROBOT, CellRobotModel, cell_robot_model
 from core_functions.geometry import Pose
@@ -39,6 +40,8 @@ MAX_BATCH = 5000
 MAX_FRAMES = 20_000
 #: Points of a trajectory goal kept for its path (evenly chosen; the last point always).
 MAX_PATH_POINTS = 200
+#: The named pose a robot is drawn in before any joint state has come (its simulator's start), the first one it has.
+REST_POSES = ("initial", "home")
 
 
 def pose_json(pose: Pose) -> list[float]:
@@ -57,10 +60,12 @@ class RobotView:
     prefix: str  # how the dry run's collision model names its links ("assembler/"), "" for one robot
     joints: tuple[str, ...]
     tcps: Mapping[str, tuple[str, Pose]]  # group -> (link, tool pose in it)
+    rest: Mapping[str, float] = field(default_factory=dict)  # drawn before any joint state: the model's initial pose
 
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "model": self.model, "urdf": self.urdf, "base": pose_json(self.base), "prefix": self.prefix,
-                "joints": list(self.joints), "tcps": {g: {"link": link, "tool": pose_json(tool)} for g, (link, tool) in self.tcps.items()}}
+                "joints": list(self.joints), "tcps": {g: {"link": link, "tool": pose_json(tool)} for g, (link, tool) in self.tcps.items()},
+                "rest": dict(self.rest)}
 
 
 def robot_views(robot: RobotModel) -> tuple[list[RobotView], list[str]]:
@@ -74,8 +79,9 @@ def robot_views(robot: RobotModel) -> tuple[list[RobotView], list[str]]:
             notes.append(f"{name}: no URDF is known for {model.name}: the 3D view shows its frames, not its links")
             continue
         urdf, tcps = known
+        rest = next((model.poses[p] for p in (*REST_POSES, *model.poses) if p in model.poses), {})
         views.append(RobotView(name, model.name, urdf.read_text(encoding="utf-8"), base, prefix, tuple(model.joint_names),
-                               {g: (tcp.frame, tcp.tool) for g, tcp in tcps.items()}))
+                               {g: (tcp.frame, tcp.tool) for g, tcp in tcps.items()}, rest))
     return views, notes
 
 
@@ -125,6 +131,7 @@ class SceneLog:
     cell: dict[str, Any] | None = None
     events: list[dict[str, Any]] = field(default_factory=list)
     dropped: int = 0
+    dry_run: dict[str, Any] | None = None  # the refused run's dry run: where it started the robot, when it ended
     joint_names: list[str] = field(default_factory=list)  # a recording's joint states (a live run's are the feed's)
     joint_samples: list[list[float]] = field(default_factory=list)
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
@@ -137,7 +144,7 @@ class SceneLog:
             if run < self.run:
                 return
             self.run, self.robots, self.notes, self.cell, self.events, self.dropped = run, [v.to_json() for v in views], notes, cell, [], 0
-            self.joint_names, self.joint_samples = [], []
+            self.joint_names, self.joint_samples, self.dry_run = [], [], None
 
     def set_cell(self, cell: dict[str, Any]) -> None:
         with self.lock:
@@ -165,6 +172,10 @@ class SceneLog:
         with self.lock:
             return self.run, self.events[start:start + MAX_BATCH], len(self.events)
 
+    def set_dry_run(self, dry_run: dict[str, Any]) -> None:
+        with self.lock:
+            self.dry_run = dry_run
+
     def set_joints(self, names: list[str], samples: list[list[float]]) -> None:
         """A recording's joint states: rows ``[t, *positions]`` in ``names`` order."""
         with self.lock:
@@ -178,7 +189,8 @@ class SceneLog:
     def static(self) -> dict[str, Any]:
         with self.lock:
             notes = list(self.notes) + ([f"{self.dropped} later goal(s) and located frames are not shown (more than {MAX_EVENTS})"] if self.dropped else [])
-            return {"run": self.run, "robots": list(self.robots), "cell": self.cell, "notes": notes, "recorded_joints": len(self.joint_samples)}
+            return {"run": self.run, "robots": list(self.robots), "cell": self.cell, "notes": notes, "recorded_joints": len(self.joint_samples),
+                    "dry_run": self.dry_run}
 
 
 _LOGS: weakref.WeakKeyDictionary[Feed, SceneLog] = weakref.WeakKeyDictionary()
@@ -228,3 +240,21 @@ def head_scene(robot_name: str, cell_path: Path | None) -> tuple[RobotModel | No
             notes.append(str(error.args[0]))
     drawn = cell_json(cell.name, cell.snapshot_parts(robot)["frames"]) if cell is not None else None
     return robot, drawn, notes
+
+
+def keep_dry_run(feed: Feed, report: DryRunReport, app: Any) -> None:
+    """The dry run that refused the run of ``app`` on ``feed``: nothing moved, so there is no joint state to draw; the
+    view draws the robot where the run would have started (where the dry run started it: where the robot is) with the
+    bodies the findings name, and marks the cell frames the calls of each finding work at (``places``: where the
+    arms would meet), and says when the dry run met them."""
+    start = report.start
+    cell = getattr(app, "cell", None)
+    places: dict[str, list[dict[str, Any]]] = {}
+    if cell is not None:
+        wanted = {(f.operation, f.group) for f in report.findings}
+        for operation in app.operations:
+            for group, call in operation.calls.items():
+                if (operation.id, group) in wanted:
+                    named = [p for p in call.params if isinstance(p, str) and p in cell.frames]
+                    places[f"{operation.id}/{group}"] = [{"name": n, "pose": pose_json(cell.pose(n))} for n in named[:8]]
+    scene_log(feed).set_dry_run({"t_end": report.cycle_time, "joints": dict(zip(start[0], start[1])) if start is not None else {}, "places": places})

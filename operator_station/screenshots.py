@@ -23,6 +23,7 @@ from typing import Any
 from app_functions.registry import full_catalog
 from operator_station import browser
 from operator_station.cli import build_station
+from operator_station.scene3d_screenshots import shoot_3d
 from operator_station.screenshots_audit import shoot_audit
 from operator_station.screenshots_jog import shoot_jog
 from operator_station.screenshots_breakpoints import shoot_breakpoints
@@ -103,6 +104,7 @@ def shoot(out: Path) -> list[Path]:
             driver.quit()
     shots.append(shoot_loops(out))
     shots += shoot_audit(out, _args, _until)
+    shots += shoot_3d(out, _args, _until)
     shots += shoot_jog(out, _args, _until)
     shots.append(shoot_breakpoints(out, _args, _until))
     shots += shoot_timeline(out)

@@ -44,7 +44,7 @@ from operator_station.builder import planned_durations
 from operator_station.feed import Feed
 from operator_station.timeline_view import plan_json
 from operator_station.paused_edit import EditTarget
-from operator_station.scene3d import begin_run
+from operator_station.scene3d import begin_run, keep_dry_run
 from operator_station.scene3d_live import observe as observe_scene
 from robot_bridges import registry
 from robot_bridges.backend import BackendOptions
@@ -172,6 +172,7 @@ class RunSession:
             self.feed.update(messages=[{"severity": "error", "message": f"not run: the dry run could not be done: {error}"}])
             return False
         if not report.ok:
+            keep_dry_run(self.feed, report, app)  # the 3D view: the robot where the run would start, the bodies, the places
             found = [{"severity": "error", "message": str(d), "line": d.line} for d in report.diagnostics()]
             found += [{"severity": "error", "message": f"not checked: {note}"} for note in report.notes]
             self.feed.update(messages=[{"severity": "error", "message": f"not run: {len(report.findings)} problem(s) found by the dry run"}, *found])

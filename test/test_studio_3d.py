@@ -138,6 +138,7 @@ def test_the_dry_runs_collision_of_the_two_arms_is_shown_on_the_robot(driver: An
         found = driver.execute_script("return view3d.findings()")
         assert {(f["kind"], f["source"], tuple(f["bodies"]), f["t"]) for f in found} == {("collision", "dry run", tuple(named[0][:2]), float(named[0][2]))}
         assert "collision: left_arm approach" in driver.find_element(By.ID, "view3d-findings").text
+        assert driver.execute_script("return view3d.places()") == [f"at drill_1, {float(named[0][2]):.2f} s"]  # the hole both calls work at
     finally:
         served.close()
 

@@ -74,17 +74,17 @@ const View3D = (() => {
     state.dirty = true;
   }
 
-  // Frame the robots and the cell: the camera in front of the robot, to its right and above, looking at the
+  // Frame the robots and the cell: the camera in front of the robot, to its left and above, looking at the
   // middle between the robot and the cell's things (where the work is).
   function fit() {
     const robots = new THREE.Box3().setFromObject(robotsRoot), cell = new THREE.Box3().setFromObject(cellRoot);
     const bounds = robots.clone().union(cell);
     if (bounds.isEmpty()) return;
     const centre = bounds.getCenter(new THREE.Vector3());
-    if (!cell.isEmpty()) centre.lerp(cell.getCenter(new THREE.Vector3()), 0.6);
+    if (!cell.isEmpty()) centre.lerp(cell.getCenter(new THREE.Vector3()), 0.5);
     const size = Math.max(0.4, bounds.getSize(new THREE.Vector3()).length());
     controls.target.copy(centre);
-    camera.position.copy(centre).add(new THREE.Vector3(0.95, -0.62, 0.62).normalize().multiplyScalar(0.8 * size));
+    camera.position.copy(centre).add(new THREE.Vector3(0.85, 0.5, 0.8).normalize().multiplyScalar(0.85 * size));
     controls.update();
     const floor = world.getObjectByName("floor grid");
     floor.position.set(centre.x, centre.y, bounds.min.z);  // the floor under the lowest solid, not through the cell
@@ -203,6 +203,14 @@ const View3D = (() => {
     }
   }
 
+  // Before any joint state: where a refused run's dry run started the robot (where it is: nothing moved), else
+  // each robot's initial pose (its simulator's start).
+  function restPose() {
+    const dry = state.scene && state.scene.dry_run;
+    if (dry && Object.keys(dry.joints).length) { setJoints(Object.keys(dry.joints), Object.values(dry.joints)); return; }
+    for (const r of state.robots) setJoints(Object.keys(r.info.rest || {}), Object.values(r.info.rest || {}));
+  }
+
   function noteEnds(records) {
     for (const r of records) if (r.event === "primitive_end" && typeof r.group === "string") (state.ends[r.group] = state.ends[r.group] || []).push(r.t);
   }
@@ -233,6 +241,17 @@ const View3D = (() => {
     return out;
   }
 
+  // Where a refused run's collisions would happen: the cell frames their calls work at, one mark per frame.
+  function collisionPlaces(found) {
+    const places = (state.scene && state.scene.dry_run && state.scene.dry_run.places) || {};
+    const marks = new Map();
+    for (const f of found) {
+      if (f.source !== "dry run" || f.kind !== "collision") continue;
+      for (const p of places[`${f.operation}/${f.group}`] || []) if (!marks.has(p.name)) marks.set(p.name, {kind: "collision", label: `at ${p.name}, ${f.t !== null ? f.t.toFixed(2) + " s" : ""}`, target: p.pose});
+    }
+    return [...marks.values()];
+  }
+
   function activeFindings(t) {
     return state.findings.filter((f) => f.source === "dry run" || (f.t !== null && f.t <= t));
   }
@@ -242,14 +261,18 @@ const View3D = (() => {
     const t = Store.now();
     const sample = sampleAt(t);
     if (sample) setJoints(joints().names, sample.slice(1));
+    else restPose();
     for (const r of state.robots) r.holder.updateMatrixWorld(true);
     const goals = goalsAt(t).map(([i, goal]) => [goal, Geo.goalPath(i, goal, state, sampleAt(goal.t))]);
     Geo.drawGoals(goals, state);
     Geo.drawLocated(locatedAt(t), state.cell);
     const found = activeFindings(t);
     state.highlighted = Geo.highlight(found, state.robots, cellRoot);
-    Geo.drawFindings(found);
-    $("view3d-findings").replaceChildren(...found.map((f) => Object.assign(document.createElement("div"), {className: "finding", textContent: `${f.source === "dry run" ? "dry run" : "run"}${f.t !== null ? ` at ${f.t.toFixed(2)} s` : ""}: ${f.kind}: ${f.group} ${f.function}${f.bodies ? ` -- ${f.bodies.map((b) => b.label).join(" and ")}` : f.label ? ` -- ${f.label}` : ""}`})));
+    Geo.drawFindings([...found.filter((f) => f.target), ...collisionPlaces(found)]);
+    const dry = state.scene && state.scene.dry_run;
+    const drawn = dry && !sample && found.some((f) => f.source === "dry run")
+      ? [Object.assign(document.createElement("div"), {className: "finding-note", textContent: `Not run: nothing moved. The robot is drawn where the run would start; in red the bodies the dry run found would collide, and the red mark where their calls work (at the time it says).`})] : [];
+    $("view3d-findings").replaceChildren(...drawn, ...found.map((f) => Object.assign(document.createElement("div"), {className: "finding", textContent: `${f.source === "dry run" ? "dry run" : "run"}${f.t !== null ? ` at ${f.t.toFixed(2)} s` : ""}: ${f.kind}: ${f.group} ${f.function}${f.bodies ? ` -- ${f.bodies.map((b) => b.label).join(" and ")}` : f.label ? ` -- ${f.label}` : ""}`})));
     const slider = $("view3d-slider");
     const samples = joints().samples;
     const end = Math.max(Store.records.length ? Store.records[Store.records.length - 1].t : 0, samples.length ? samples[samples.length - 1][0] : 0);
@@ -335,7 +358,9 @@ const View3D = (() => {
     findings: () => activeFindings(Store.now()).map((f) => ({kind: f.kind, source: f.source, t: f.t, bodies: (f.bodies || []).map((b) => b.name), target: f.target || null})),
     goals: () => goalsAt(Store.now()).map(([, g]) => ({group: g.group, kind: g.kind, label: g.label || "", t: g.t})),
     located: () => Object.keys(locatedAt(Store.now())),
+    places: () => collisionPlaces(activeFindings(Store.now())).map((p) => p.label),
     cellObjects: () => Geo.cellNames(),
+    look: (eye, target) => { camera.position.set(...eye); controls.target.set(...target); controls.update(); state.dirty = true; },
     frameStats: stats,
     measure,
     error: () => state.error,
