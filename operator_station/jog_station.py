@@ -33,6 +33,9 @@ T = TypeVar("T")
 
 #: s the page's thread waits for the jog's loop to answer.
 ANSWER_TIMEOUT = 10.0
+#: s the station's stop waits for the jog to stop and its back end to close, then for its thread: SIGTERM ends
+#: the station within 2 s.
+CLOSE_TIMEOUT = 0.5
 
 
 @dataclass(frozen=True)
@@ -142,11 +145,11 @@ class JogStation:
                     await backend.close()
 
             try:
-                asyncio.run_coroutine_threadsafe(close(), loop).result(1.0)
+                asyncio.run_coroutine_threadsafe(close(), loop).result(CLOSE_TIMEOUT)
             except Exception:  # noqa: BLE001 - the station is ending: say so, go on
-                log.warning("studio: the jog's back end did not close within 1 s")
+                log.warning("studio: the jog's back end did not close within %.1f s", CLOSE_TIMEOUT)
         loop.call_soon_threadsafe(loop.stop)
-        thread.join(1.0)
+        thread.join(CLOSE_TIMEOUT)
         self._loop = self._thread = None
 
     # ------------------------------------------------------------------ jogging
