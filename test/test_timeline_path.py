@@ -2,10 +2,13 @@
 the dry run's plan against what each function took, retries and errors kept with their message."""
 from __future__ import annotations
 
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from execution_engine.timeline import TimelineBuilder, build_timeline, plan_deltas, planned_functions
 from execution_engine.timeline_path import critical_path, path_ids
@@ -123,3 +126,42 @@ def test_planned_against_actual_per_function_with_its_retries() -> None:
     assert (deltas["left_arm", "1"].actual, deltas["left_arm", "1"].delta) == (8.0, pytest.approx(1.5))
     insert = deltas["right_arm", "2"]  # both attempts count: from the first start to the retry's end
     assert (insert.actual, insert.attempts, insert.delta, insert.done) == (4.5, 2, pytest.approx(1.5), True)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(
+    st.sampled_from(["function_start", "function_end", "flag", "error"]),
+    st.sampled_from(["left_arm", "right_arm", "torso_head"]),
+    st.floats(0.0, 20.0),
+    st.sampled_from(["1", "2", "3"]),
+    st.sampled_from(["flag", "zone"]),
+    st.sampled_from(["waiting", "passed", "set", "left", "timeout", "stopped"]),
+    st.sampled_from(["a", "b"]),
+), max_size=60))
+def test_any_trace_gives_a_path_that_ends_with_the_last_function_and_named_waits(events: list[tuple[Any, ...]]) -> None:
+    """Whatever order a (cut, replayed, hostile) trace gives its records in, the path is a chain of distinct bars ending
+    with the function that ended last, and every wait has a name."""
+    records = [rec(t, event, group, operation=operation, function=f"f{operation}", flag=name, kind=kind, state=state, outcome="succeeded", error="e")
+               for event, group, t, operation, kind, state, name in sorted(events, key=lambda e: e[2])]
+    timeline = build_timeline(records)
+    path = critical_path(timeline)
+    bars = [bar for lane in timeline.lanes.values() for bar in lane.bars]
+    assert len(path_ids(path)) == len(set(path_ids(path)))
+    if bars:
+        assert path and path[-1].bar.end(timeline.t_end) == max(bar.end(timeline.t_end) for bar in bars) and path[-1].via == ""
+    else:
+        assert path == []
+    for lane in timeline.lanes.values():
+        for gap in lane.idle:
+            assert gap.label.startswith("waiting for ") if gap.waiting else gap.label == "idle"
+
+
+def test_the_reports_plot_names_the_waits_and_shows_the_path_and_the_plan(tmp_path: Path) -> None:
+    from execution_engine.timeline_plot import plot_timeline  # matplotlib is slow to load (0.4 s): only this test draws
+
+    planned = {("left_arm", "1"): 7.0, ("right_arm", "2"): 4.5}
+    svg = plot_timeline(build_timeline(FLAG_RUN, ["left_arm", "right_arm"], planned), tmp_path / "t.svg").read_text(encoding="utf-8")
+    assert "waiting for flag hole_ready set by left_arm" in svg
+    assert "critical path" in svg and "planned (dry run)" in svg
+    plain = plot_timeline(build_timeline(FLAG_RUN[:3], ["left_arm"]), tmp_path / "plain.svg").read_text(encoding="utf-8")
+    assert "planned (dry run)" not in plain  # no plan, no legend for it
