@@ -41,9 +41,11 @@ from node_transport.port import Node
 from node_transport.qos import LATCHED, SENSOR
 from node_transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
+from operator_station.eta import EtaFeed
 from operator_station.feed import Feed
-from operator_station.timeline_view import plan_json
 from operator_station.paused_edit import EditTarget
+from operator_station.run_summary import summarize
+from operator_station.timeline_view import plan_json
 from operator_station.scene3d import begin_run, keep_dry_run
 from operator_station.scene3d_live import observe as observe_scene
 from robot_bridges import registry
@@ -72,8 +74,8 @@ class RunSession:
         self.report: RunReport | None = None
         self._verdict: DryRunReport | None = None  # the dry run before connecting, from the simulator's start
         self._kept: str | None = None  # the line saying the verdict was kept (no dry run this time)
-        self.speed_percent = 100.0  # the speed override the next run starts with; a run's own is its engine's (engine/speed.py)
         self.edit_target: EditTarget | None = None  # the run an edit of the paused run goes to (operator_station/paused_edit.py)
+        self.speed_percent = 100.0  # the speed override the next run starts with; a run's own is its engine's (engine/speed.py)
 
     @property
     def running(self) -> bool:
@@ -189,7 +191,7 @@ class RunSession:
         node = deployment.transport.create_node("operator_station")
         iterations = app.iterations()  # the loop iteration or call of each expanded operation, on its records
         writer = TraceWriter(trace, iterations) if trace is not None else None
-        page = TraceWriter(FeedStream(self.feed), iterations)  # the page gets the trace's records, written by the same code
+        page = TraceWriter(FeedStream(self.feed, EtaFeed(self.feed, clock).see), iterations)  # the page gets the trace's records, written by the same code; the ETA follows them
         observe(node, app.robot, self.feed, [w for w in (writer, page) if w is not None])
         self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
         self._loop, self._deployment = asyncio.get_running_loop(), deployment
@@ -206,6 +208,8 @@ class RunSession:
             for each in (writer, page):
                 if each is not None:
                     each.finish(t_end, report.outcome, code, report.operations_done, report.operations_total)
+            snapshot, records, _, _ = self.feed.read(0, 0)
+            self.feed.update(summary=summarize(records, snapshot.plan, snapshot.groups).to_json())  # the monitor's run summary
             if writer is not None and writer.error is not None:  # said on the page, as run says it on its console
                 lost = WriteFailure("--trace", str(self.settings.outputs.trace), writer.error.strerror or str(writer.error),
                                     f"{writer.lost} record(s) lost, the trace is incomplete")
@@ -309,13 +313,17 @@ def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter
 class FeedStream:
     """A text stream of trace lines into the feed: the page's records are the trace's, line for line."""
 
-    def __init__(self, feed: Feed) -> None:
+    def __init__(self, feed: Feed, on_record: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.feed = feed
+        self.on_record = on_record
 
     def write(self, text: str) -> int:
         for line in text.splitlines():
             if line:
-                self.feed.append(json.loads(line))
+                record = json.loads(line)
+                self.feed.append(record)
+                if self.on_record is not None:
+                    self.on_record(record)
         return len(text)
 
     def flush(self) -> None:

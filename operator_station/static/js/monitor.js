@@ -1,8 +1,9 @@
 // The live monitor: each group machine's state graph (from the structure it published, laid out by
 // ELK through graph_layout.js, the active state and the last transition highlighted), its current function and primitive, the engine's status
-// with an ETA from the dry run's planned durations, errors and alarms with the operator actions
+// with an ETA in run and wall time, errors and alarms with the operator actions
 // that resolve them, and the joint positions as plots (uPlot).  Everything is derived from the
-// feed at the store's cursor, so the time slider puts this view back at any instant too.
+// feed at the store's cursor, so the time slider puts this view back at any instant too.  The ETA is the
+// station's (operator_station/eta.py), in run time and in wall time at the run's speed.
 "use strict";
 
 const Monitor = (() => {
@@ -90,8 +91,11 @@ const Monitor = (() => {
       if (each.text) each.text.classList.toggle("last", on);
     }
     const trigger = graph.trigger;
-    if (!last) { trigger.textContent = ""; trigger.removeAttribute("data-edge"); return; }
-    // The trigger (the signal) beside the middle of its edge, on the side away from the edge's run.
+    trigger.textContent = "";
+    trigger.removeAttribute("data-edge");
+    for (const each of Object.values(graph.edges)) if (each.text) each.text.toggleAttribute("data-trigger", !!last && each.edge.id === last.id);
+    if (!last || graph.edges[last.id].text) return;  // an edge with a label of its own (its signal) shows it lit
+    // A spoke has none: the trigger (the signal) beside the middle of the edge, on the side away from its run.
     trigger.textContent = view.last.signal;
     trigger.dataset.edge = last.id;
     const [a, b] = midSegment(last.points);
@@ -158,16 +162,30 @@ const Monitor = (() => {
     const made = ((engine.operation_id ? ((snap.operations || []).find((o) => o.id === engine.operation_id) || {}).iteration : "") || "").replace(/ at \S+:\d+/g, "");
     $("engine-op").textContent = engine.operation_count ? `${engine.operation_index}/${engine.operation_count}${engine.operation_id ? ` (id ${engine.operation_id}${made ? `, ${made}` : ""})` : ""}` : "–";
     $("engine-elapsed").textContent = fmt(now);
-    // ETA: the planned (dry run) durations of the operations still to run, the current one counted from its start.
-    const plan = snap.plan || [];
-    if (plan.length && engine.operation_index) {
-      const i = engine.operation_index - 1;
-      const started = Store.visible().find((r) => r.event === "function_start" && r.operation === engine.operation_id);
-      const inCurrent = started ? Math.max(0, (plan[i] || 0) - (now - started.t)) : plan[i] || 0;
-      const rest = plan.slice(i + 1).reduce((a, x) => a + x, 0);
-      $("engine-eta").textContent = ["finished", "failed", "stopped"].includes(engine.state) ? "–" : fmt(inCurrent + rest);
-    } else $("engine-eta").textContent = "–";
+    $("engine-eta").textContent = etaText(engine, now);
   }
+
+  // ETA (operator_station/eta.py): the run seconds left by the dry run's plan and the wall seconds they take at the
+  // run's speed -- both shown, since at --speed 10 they differ tenfold.  The station sends an estimate as each
+  // operation starts; between two the wall seconds count down here (and the run seconds with them, at the speed),
+  // held while the run is paused.  A replay shows what is left of the recording at the cursor.
+  let etaSeen = null, etaAt = 0;
+  function etaText(engine, now) {
+    const snap = Store.snapshot;
+    if (["finished", "failed", "stopped"].includes(engine.state)) return "–";
+    if (snap.mode === "replay") {
+      const end = Store.records.length ? Store.records[Store.records.length - 1].t : 0;
+      return Store.cursor === null ? "–" : `${fmt(Math.max(0, end - now))} left in the recording`;
+    }
+    const eta = snap.eta;
+    if (!eta) return "–";
+    if (eta !== etaSeen) { etaSeen = eta; etaAt = performance.now(); }
+    if (eta.speed === null) return `${fmt(eta.remaining)} run time (simulated: no wait)`;
+    const going = !eta.held && engine.state === "running";
+    const wall = Math.max(0, eta.wall - (going ? (performance.now() - etaAt) / 1000 : 0));
+    return `${fmt(wall)} (${fmt(wall * eta.speed)} run time at x${eta.speed})${eta.held ? " held" : ""}`;
+  }
+  setInterval(() => { if (Store.snapshot && Store.snapshot.eta && Store.cursor === null) renderEngine(); }, 250);
 
   // Each problem with the operator actions that resolve it.
   function renderAlarms(views) {
