@@ -29,6 +29,7 @@ import pytest
 import zstandard
 from branch_files import BRANCH_FILES
 from breakpoint_files import BREAKPOINT_FILES
+from paused_edit_files import PAUSED_EDIT_FILES
 from dds_domain import domain_env, stop_group
 from mixed_cell_files import MIXED_FILES
 from roles_files import ROLE_FILES, ROLE_MODES
@@ -147,6 +148,7 @@ FILES: dict[str, str | bytes] = {
 FILES.update(MIXED_FILES)  # rows 250-259: mixed cells, each row naming the cell and the application
 FILES.update(BRANCH_FILES)  # rows 240-249: outcome branches
 FILES.update(BREAKPOINT_FILES)  # rows 260-269: breakpoints
+FILES.update(PAUSED_EDIT_FILES)  # rows 280-289: a paused run's edit
 FILES.update(ROLE_FILES)  # rows 320-329: the studio's users, tokens and audit log
 MODES: dict[str, int] = {"shared_token": 0o644}
 MODES.update(ROLE_MODES)

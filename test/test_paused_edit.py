@@ -157,7 +157,7 @@ def test_a_safe_edit_is_swapped_in_and_its_operations_run_recorded_with_both_dig
     assert row[1:] == (2, "hold", digests["from_digest"], digests["to_digest"], str(new.path))
     assert store.meta()["application_path"] == str(new.path)
     check_same(store, new)  # a resume goes on with the edited application
-    with pytest.raises(CheckpointError, match=r"edited while paused \(after operation hold\): it goes on with .*safe.xml, operations from 3 on"):
+    with pytest.raises(CheckpointError, match=r"cannot resume with .*old.xml: the run was edited while paused \(after operation hold\) and goes on with .*safe.xml \(sha256 [0-9a-f]{12}…\), operations from 3 on"):
         check_same(store, old)  # never silently with the old one
     store.close()
     assert any(line.startswith("  edited while paused at") and "operations from 3 on swapped" in line for line in report.summary_lines())
@@ -229,7 +229,7 @@ def test_a_run_stopped_after_a_swap_resumes_with_the_new_remainder(run_sim: Any,
     assert started and started[0] == ("wider", "left_arm") and ("right_in", "right_arm") in started and ("reach", "left_arm") not in started
     err = io.StringIO()
     assert main(["run", str(old.path), "--resume", str(tmp_path / "run.checkpoint.sqlite"), "--speed", "max", "--quiet"], out=io.StringIO(), err=err) == 2
-    assert "the run was edited while paused (after operation hold): it goes on with" in err.getvalue()
+    assert "the run was edited while paused (after operation hold) and goes on with" in err.getvalue()
 
 
 def test_the_terminal_edits_the_paused_run_from_a_file_and_says_why_it_will_not(run_sim: Any, tmp_path: Path) -> None:

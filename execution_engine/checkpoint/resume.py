@@ -69,10 +69,13 @@ def check_same(store: CheckpointStore, app: Application) -> None:
         changed.append(f"the cell model {now['cell_path'] or '(none)'} (was {then.get('cell_path') or '(none)'}, sha256 "
                        f"{then.get('cell_sha256', '?')[:12] or '-'}… then, {now['cell_sha256'][:12] or '-'}… now)")
     edits = store.swaps()
-    if changed and edits and then.get("application_sha256") != now["application_sha256"]:
+    if changed and edits and then.get("application_sha256") != now["application_sha256"]:  # the run goes on with the edited file
         _, frontier, operation, _, _, path = edits[-1]
-        changed[0] += (f"; the run was edited while paused (after operation {operation or '-'}): it goes on with {path}, "
-                       f"operations from {frontier + 1} on as that file has them -- resume with that file")
+        raise CheckpointError(
+            f"{store.path}: cannot resume with {now['application_path']}: the run was edited while paused (after operation "
+            f"{operation or '-'}) and goes on with {path} (sha256 {then.get('application_sha256', '?')[:12]}…), operations from "
+            f"{frontier + 1} on as that file has them; resume with that file, or start the run afresh without --resume"
+        )
     if changed:
         raise CheckpointError(
             f"{store.path}: cannot resume: {' and '.join(changed)} changed since the checkpoint; resuming would skip or repeat "
