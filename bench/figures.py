@@ -349,6 +349,14 @@ def _studio(s: Summary) -> Measured:
                     at_most(max(large["shown_ms"], large["validated_ms"]), 2000))
 
 
+def _studio_3d(s: Summary) -> Measured:
+    scene, bare = s["scene"], s["bare"]
+    return Measured(f"{n(scene['render_ms_mean'], 2)} ms a frame ({scene['calls']} draw calls, {n(scene['triangles'])} triangles; "
+                    f"frame interval {n(scene['interval_ms_mean'], 1)} ms in SwiftShader), geometries held {s['held_before']['geometries']} -> {scene['geometries']}",
+                    f"the floor alone: {n(bare['render_ms_mean'], 2)} ms", scene["render_ms_mean"] / bare["render_ms_mean"],
+                    at_most(scene["render_ms_mean"], 1000 / 60) and scene["geometries"] == s["held_before"]["geometries"])
+
+
 def _studio_run(s: Summary) -> Measured:
     r = s["speed_max_run"]
     return Measured(f"{r['page_records']:,} of {r['records']:,} records, identical: {'yes' if r['identical'] else 'NO'}; {r['run_s']:.1f} s",
@@ -411,6 +419,9 @@ OTHERS = (
     Bench("studio_page.py", ("--repeat", "3", "--run-operations", "20"), 240, (
         Figure("operator station page, 10,000 operations", "<= 2 s each", _studio, "operator-station-the-page-in-headless-chromium-issue-9"),
         Figure("operator station page during a `--speed max` run", "every record, identical", _studio_run, "operator-station-the-page-in-headless-chromium-issue-9"),
+    ), needs="selenium", issue=False),
+    Bench("studio_3d.py", ("--frames", "120", "--positions", "50"), 240, (
+        Figure("operator station 3D view, the rivet cell, per frame", "<= 16.7 ms (60 fps)", _studio_3d, "operator-station-3d-view-issue-25"),
     ), needs="selenium", issue=False),
     Bench("ros_primitive_overhead.py", ("1000",), 240, (
         Figure("ROS 2 (rclpy), per primitive within a skill", "<= 1 ms", _ros, "ros-2-overhead-per-primitive-with-every-node-in-its-own-process-issue-7"),

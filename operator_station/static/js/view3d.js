@@ -17,6 +17,7 @@ const View3D = (() => {
     ends: {}, recorded: null, recordedRun: -1, tcpCache: new Map(), frames: [], renderMs: [], intervals: [], lastFrame: null, frameCount: 0, error: null,
   };
   let renderer = null, camera = null, controls = null, world = null, robotsRoot = null, cellRoot = null, marks = null, frameRoot = null;
+  const UP = new THREE.Vector3(0, 0, 1);
 
   // ------------------------------------------------------------------ set-up
   function init() {
@@ -298,24 +299,32 @@ const View3D = (() => {
     if (state.frameCount % 30 === 0) { const s = stats(); $("view3d-fps").textContent = `${s.render_ms_mean.toFixed(1)} ms/frame`; }
   }
 
+  // The frame times kept (the last 240 frames) and what a frame draws: draw calls, triangles, and the geometries and
+  // textures the renderer holds (constant while the scene only moves: nothing is made per frame).
   function stats() {
     const mean = (xs) => xs.length ? xs.reduce((a, x) => a + x, 0) / xs.length : 0;
     const max = (xs) => xs.length ? Math.max(...xs) : 0;
+    const info = renderer ? renderer.info : {render: {}, memory: {}};
     return {frames: state.frameCount, render_ms_mean: mean(state.renderMs), render_ms_max: max(state.renderMs),
-            interval_ms_mean: mean(state.intervals), fps: state.intervals.length ? 1000 / mean(state.intervals) : 0};
+            interval_ms_mean: mean(state.intervals), fps: state.intervals.length ? 1000 / mean(state.intervals) : 0,
+            calls: info.render.calls || 0, triangles: info.render.triangles || 0, geometries: info.memory.geometries || 0, textures: info.memory.textures || 0};
   }
 
   // Render ``n`` frames back to back (every frame redrawn, the camera turning) and measure them: what the bench reads.
-  function measure(n) {
+  // ``bare``: with the floor alone (robots, cell and marks hidden), the renderer's own cost, as the bench's baseline.
+  function measure(n, bare = false) {
+    const shown = [robotsRoot, cellRoot, marks, frameRoot].map((o) => o.visible);
+    if (bare) for (const o of [robotsRoot, cellRoot, marks, frameRoot]) o.visible = false;
+    const done = (resolve) => { [robotsRoot, cellRoot, marks, frameRoot].forEach((o, i) => { o.visible = shown[i]; }); state.dirty = true; resolve(stats()); };
     return new Promise((resolve) => {
       state.renderMs = []; state.intervals = [];
       let left = n;
       const angle = 2 * Math.PI / Math.max(1, n);
       const step = () => {
-        camera.position.applyAxisAngle(new THREE.Vector3(0, 0, 1), angle);
+        camera.position.applyAxisAngle(UP, angle);
         camera.lookAt(controls.target);
         state.dirty = true;
-        if (--left > 0) requestAnimationFrame(step); else requestAnimationFrame(() => resolve(stats()));
+        if (--left > 0) requestAnimationFrame(step); else requestAnimationFrame(() => done(resolve));
       };
       requestAnimationFrame(step);
     });
