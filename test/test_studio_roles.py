@@ -18,6 +18,7 @@ pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) i
 from starlette.responses import JSONResponse  # noqa: E402
 from starlette.routing import Route, WebSocketRoute  # noqa: E402
 from starlette.testclient import TestClient  # noqa: E402
+from starlette.websockets import WebSocketDisconnect  # noqa: E402
 
 from operator_station.access import ENGINEER, OPERATOR, Access  # noqa: E402
 from operator_station.audit import AuditLog  # noqa: E402
@@ -228,6 +229,29 @@ def test_any_login_body_is_answered_in_one_line_and_opens_no_session_but_the_rig
 
 
 # ------------------------------------------------------------------------------------------ the route table
+def test_an_operator_token_is_refused_every_engineers_route_edit_teach_and_jog_among_them(cell_dir: Path) -> None:
+    station = station_for(cell_dir)
+    app = create_app(station)
+    engineers = {r.path: declared(r.endpoint)[1] for r in app.routes  # type: ignore[attr-defined, index]
+                 if isinstance(r, (Route, WebSocketRoute)) and (declared(r.endpoint) or ("", ""))[0] == ENGINEER}  # type: ignore[attr-defined]
+    assert {"/api/save", "/api/edit", "/api/teach", "/api/teach/save", "/api/jog/open", "/ws/jog"} <= set(engineers)
+    script = client(station, OPERATOR_TOKEN)
+    original = {p: p.read_bytes() for p in cell_dir.rglob("*.xml")}
+    for path, action in engineers.items():
+        if path.startswith("/ws"):
+            with pytest.raises(WebSocketDisconnect) as closed:
+                with script.websocket_connect(path) as socket:
+                    socket.receive_text()
+            assert closed.value.code == 1008
+            continue
+        answer = script.post(path.replace("{command}", "x"), json={"path": "rivet_installation.xml", "document": {}})
+        assert answer.status_code == 403 and answer.json() == {"ok": False, "error": f"{action}: needs the engineer role; this token is operator 'operator token'"}
+    assert {p: p.read_bytes() for p in cell_dir.rglob("*.xml")} == original
+    refused = [(e["what"], e["path"]) for e in entries(station) if e.get("refused")]
+    assert sorted(refused) == sorted((action, path) for path, action in engineers.items())
+    assert all(e["role"] == OPERATOR and e["who"] == "operator token" for e in entries(station))
+
+
 def test_every_state_changing_route_of_the_station_declares_its_role(cell_dir: Path) -> None:
     app = create_app(station_for(cell_dir))
     assert undeclared(app.routes) == []

@@ -1,5 +1,6 @@
 """Roles and the audit trail in a real headless Chromium (issue 26 item 5): an operator logs in on the station's
-form, finds Save disabled with the reason, is refused a save even by a script of the page (403, the file unchanged),
+form, finds Save and Teach disabled with the reason, is refused a save and a teach even by a script of the page
+(403, the file unchanged),
 runs the saved application, pauses and resumes it; the Audit view shows each of those actions -- the refusals
 too -- newest first, with who and role; an engineer logged in after saves, and the save's digests show.
 
@@ -70,6 +71,14 @@ def test_an_operator_is_refused_save_runs_and_pauses_and_the_audit_view_shows_it
             "Store.post('/api/save', Builder.current()).then(done);")
         assert refused == {"ok": False, "error": "save: needs the engineer role; this session is operator 'anna'"}
         assert (tmp_path / "rivet_installation.xml").read_bytes() == original
+        press(driver, "tab-jog")  # teaching and jogging are the engineer's: disabled, and refused when sent anyway
+        until(driver, lambda d: d.find_element(By.ID, "teach-btn").get_attribute("disabled") is not None)
+        assert driver.find_element(By.ID, "teach-btn").get_attribute("title") == "needs the engineer role; this session is operator 'anna'"
+        taught = driver.execute_async_script(
+            "const done = arguments[arguments.length - 1];"
+            "Store.post('/api/teach', {group: 'left_arm', name: 'taught_1'}).then(done);")
+        assert taught == {"ok": False, "error": "teach: needs the engineer role; this session is operator 'anna'"}
+        press(driver, "tab-builder")
 
         press(driver, "ctl-start")  # the saved application, unedited: an operator runs it
         until(driver, lambda d: (station.feed.snapshot.status or {}).get("state") == "running")
@@ -82,10 +91,10 @@ def test_an_operator_is_refused_save_runs_and_pauses_and_the_audit_view_shows_it
 
         press(driver, "tab-audit")
         expected = [("anna", "operator", "stop"), ("anna", "operator", "resume"), ("anna", "operator", "pause"), ("anna", "operator", "run start"),
-                    ("anna", "operator", "save"), ("anna", "operator", "login"), ("anna", "", "login")]
-        until(driver, lambda d: [tuple(r[1:4]) for r in audit_rows(d) if r[3] != "run end"][:7] == expected)
+                    ("anna", "operator", "teach"), ("anna", "operator", "save"), ("anna", "operator", "login"), ("anna", "", "login")]
+        until(driver, lambda d: [tuple(r[1:4]) for r in audit_rows(d) if r[3] != "run end"][:8] == expected)
         rows = {(r[3], r[4]) for r in audit_rows(driver)}
-        assert ("save", "refused") in rows and ("login", "refused") in rows and ("pause", "ok") in rows
+        assert ("save", "refused") in rows and ("teach", "refused") in rows and ("login", "refused") in rows and ("pause", "ok") in rows
         assert all(r[0].endswith("Z") and r[8] for r in audit_rows(driver))  # when (UTC) and the session on every row
 
         press(driver, "logout-btn")

@@ -1,7 +1,7 @@
 // Who this page is, what its role lets it do, and the station's audit trail.
 // GET /api/whoami gives the session's name and role: for an operator every control marked
-// data-needs="engineer" (Save, and the teach and edit controls) is disabled with the reason as its
-// title -- the station refuses those requests anyway (403, audited); this only says so beforehand.
+// data-needs="engineer" (Save, Apply to the paused run, jog's reconnect) -- or inside an element so marked
+// (the jog pad, the teach bar) -- is disabled with the reason as its title -- the station refuses those requests anyway (403, audited); this only says so beforehand.
 // The Audit view polls GET /api/audit with the last entry it has (seq) and shows the newest first:
 // who did what, when, in which role, and the digests of what an edit, teach or save replaced. It asks
 // only while it is shown and the live feed is connected (a station gone is not asked every second).
@@ -21,12 +21,15 @@ const Audit = (() => {
   // Disable what this role may not do (run again as controls appear: other views add theirs).
   function applyRole() {
     if (!state.who) return;
-    for (const element of document.querySelectorAll("[data-needs]")) {
-      const needed = element.dataset.needs;
+    for (const marked of document.querySelectorAll("[data-needs]")) {
+      const needed = marked.dataset.needs;
       if (allows(needed)) continue;
-      element.disabled = true;
-      element.title = reason(needed);
-      element.classList.add("role-refused");
+      const controls = marked.matches("button, input, select, textarea") ? [marked] : marked.querySelectorAll("button, input, select, textarea");
+      for (const element of controls) {
+        element.disabled = true;
+        element.title = reason(needed);
+        element.classList.add("role-refused");
+      }
     }
   }
   async function whoami() {
@@ -104,5 +107,7 @@ const Audit = (() => {
     whoami();
     poll();
   });
-  return {state, allows, reason, applyRole};
+  // The reason this page may not do what needs `role` ("" when it may, or while its role is not known yet).
+  const refuses = (role) => (state.who && !allows(role) ? reason(role) : "");
+  return {state, allows, refuses, reason, applyRole};
 })();

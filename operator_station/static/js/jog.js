@@ -110,6 +110,8 @@ const Jog = (() => {
   }
 
   async function open() {
+    const refused = typeof Audit === "undefined" ? "" : Audit.refuses("engineer");  // an operator: said here, not asked of the station
+    if (refused) { jog.info = null; render(); say(`jog: ${refused}`, true); return; }
     const answer = await Store.post("/api/jog/open", Builder.current());
     if (!answer.ok) { jog.info = null; render(); say(answer.error, true); return; }
     jog.info = answer;
