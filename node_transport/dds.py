@@ -44,12 +44,14 @@ from node_transport import dds_graph as graph
 from node_transport.dds_args import RosArguments, parse_ros_arguments, user_arguments
 from node_transport.dds_convert import DdsConverter
 from node_transport.dds_entities import Caller, Taker, delete, matched, write
+from node_transport.dds_parameters import serve as serve_parameters
 from node_transport.dds_pulse import LiveCount, Pulse
 from node_transport.dds_waiter import DdsWaiter, Inbox
 from node_transport.idl import InterfaceError, InterfaceRegistry
 from node_transport.idl_hash import type_hash_user_data
 from node_transport.port import (
     EndpointNode,
+    ParameterChange,
     ParameterValue,
     Publisher,
     ServiceClient,
@@ -377,9 +379,15 @@ class DdsNode(EndpointNode):
         self.readers: list[bytes] = []
         self.writers: list[bytes] = []
         self.destroyed = False
+        self._parameter_services: list[ServiceServer] = []  # ros2 param set/get, once a parameter may change (dds_parameters.py)
         # rclpy's own parameter, declared as rclpy declares it: with it, the run clock follows /clock
         if self.declare_parameter(USE_SIM_TIME, False, USE_SIM_TIME_DESCRIPTION) is True:
             self.clock = follow_clock(self, transport.loop, transport.clock_stall_timeout)
+
+    def changeable_parameter(self, name: str, change: ParameterChange) -> None:
+        super().changeable_parameter(name, change)
+        if not self._parameter_services:
+            self._parameter_services = serve_parameters(self)
 
     def resolve(self, name: str) -> str:
         resolved = resolve_name(name, self.namespace, self.name)

@@ -248,6 +248,7 @@ class Node(ABC):
         self._override_texts: dict[str, str] = dict(override_texts or {})  # as the user wrote them
         self._parameters: dict[str, ParameterValue] = {}
         self._changeable: dict[str, ParameterChange] = {}  # parameters that may change while the node runs
+        self.descriptions: dict[str, str] = {}  # what each declared parameter is (ros2 param describe)
         self.fault_handler: FaultHandler = self._log_fault
 
     @property
@@ -277,7 +278,12 @@ class Node(ABC):
         except ParameterTypeError as error:
             raise TransportError(str(error)) from None
         self._parameters[name] = value
+        self.descriptions[name] = description
         return value
+
+    def changeable(self, name: str) -> bool:
+        """Whether ``name`` may change while the node runs (:meth:`changeable_parameter`)."""
+        return name in self._changeable
 
     def get_parameter(self, name: str) -> ParameterValue:
         try:
