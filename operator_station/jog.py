@@ -44,6 +44,7 @@ from core_functions.robots import RobotModel
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 from robot_bridges.collision import CollisionScene
+from operator_station.jog_cartesian import ResolvedRates
 
 log = logging.getLogger(__name__)
 
@@ -184,7 +185,8 @@ class Jogger:
         self._group = ""
         self._halted = False
         self._stop_q: np.ndarray | None = None
-        self._profiles = True  # joint jogs as trajectories of their own (full acceleration, capped speed) where taken
+        self._profiles = True  # jogs as trajectories of their own (full acceleration, capped speed) where taken
+        self._rates = ResolvedRates(scene) if scene is not None else None
         names = backend.joint_state()[0]
         self._order = [names.index(n) for n in scene.joint_names] if scene is not None else []
 
@@ -350,7 +352,8 @@ class Jogger:
         seconds = self._leg_time(settings) * scale
         if request.mode == "joint":
             return self._joint_leg(request, settings, seconds)
-        if self.backend.tcp_pose(request.group) is None:
+        tcp_now = self.backend.tcp_pose(request.group)
+        if tcp_now is None:
             raise ValueError(f"jog: {request.group} has no TCP: jog its joints")
         fraction = self._fraction(request, settings)
         limits = self._tcp_limits()
@@ -361,6 +364,17 @@ class Jogger:
             rotation = np.eye(3) if request.frame == WORLD else self._frame(request.frame).matrix()[:3, :3]
             unit, reference = tuple(float(v) for v in rotation[:, axis]), "world"
         sign = float(request.direction)
+        rates = self._rates_for(request.group, tcp_now)
+        if rates is not None:  # a leg of the jog's own: at speed within a fraction of a second
+            world = np.array(unit) if reference == "world" else tcp_now.matrix()[:3, axis]
+            names, positions = self.backend.joint_state()
+            q = np.array(positions, dtype=float)[self._order]
+            joints = self.robot.group(request.group).joint_names
+            limits_j = self.backend.joint_limits(request.group)
+            assert limits_j is not None  # _rates_for checked it
+            leg = rates.plan(request.group, q, joints, limits_j, sign * world, request.axis.startswith("r"), settings.speed,
+                             settings.cartesian_speed, limits, seconds, self.period)
+            return ExecuteTrajectory("jog", joints, leg.points, leg.times)
         if request.axis.startswith("r"):
             half = 0.5 * sign * fraction * limits.angular_velocity * seconds
             s = math.sin(half)
@@ -369,6 +383,14 @@ class Jogger:
             length = sign * fraction * limits.linear_velocity * seconds
             delta = Pose(unit[0] * length, unit[1] * length, unit[2] * length)
         return MoveRelative(delta, reference, "linear")  # type: ignore[arg-type] - reference is world or tool
+
+    def _rates_for(self, group: str, tcp: Pose) -> ResolvedRates | None:
+        """The planner of the jog's own Cartesian legs, where the back end replays trajectories and stops inside
+        them and the scene's model puts the TCP where the back end does; None: the back end's own legs."""
+        if not (self._profiles and self.backend.holds_within_motion and self._rates is not None and self.backend.joint_limits(group) is not None):
+            return None
+        q = self._joints()[self._order]
+        return self._rates if self._rates.agrees(group, q, tcp.position) else None
 
     def _frame(self, name: str) -> Pose:
         if self.frames is None:

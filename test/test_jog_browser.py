@@ -30,6 +30,8 @@ from operator_station.testing import serve  # noqa: E402
 from test_studio_server import CATALOG, ROOT, station_args  # noqa: E402
 
 WAIT = 90.0  # wall seconds any one condition may take (a loaded CI machine), then the test fails
+#: Wall seconds a loaded machine may keep the station's jog thread off the CPU (a lease is 0.3 s, a leg 1 s).
+MAX_STALL = 0.2
 
 
 @pytest.fixture
@@ -62,6 +64,16 @@ def stopped_after(chrome: Any, station: Any) -> dict[str, Any]:
     return station.jog.state.to_json()
 
 
+def within_a_cycle(state: dict[str, Any], period: float) -> None:
+    """The stop, on the station's wall clock: the group still at the back end's next control period after the stop
+    was asked, and no further than the cap allows in that time.  (The simulator runs on the wall clock here: a
+    process kept off the CPU for a while moves its arm on by that while, as a controller would go on moving while
+    its host is late -- the exact one-period promise is test_jog's, on the simulated clock.)"""
+    took = state["stopped_at"] - state["stop_asked"]
+    assert took <= max(period, MAX_STALL)  # still at the next tick: not the lease running out, not the leg's end
+    assert state["travel_after_stop"] <= MAX_SPEED * 1.0 * max(period, took) + 1e-12  # the Nextage's joints: 1 rad/s
+
+
 def test_the_jog_stops_within_a_control_cycle_of_the_release_and_of_a_dropped_connection_and_a_taught_frame_is_saved(page: tuple[Any, Any], folder: Path) -> None:
     chrome, station = page
     plus = chrome.find_element(By.CSS_SELECTOR, '#jog-pad .jog-button[data-axis="LARM_JOINT0"][data-direction="1"]')
@@ -74,8 +86,7 @@ def test_the_jog_stops_within_a_control_cycle_of_the_release_and_of_a_dropped_co
     ActionChains(chrome).release(plus).perform()
     released = stopped_after(chrome, station)
     assert released["reason"] == "jog released" and not released["refused"]
-    # on the wall clock a tick may come a scheduling hiccup late: the promise is in the arm, at most one control period's travel
-    assert released["travel_after_stop"] <= MAX_SPEED * 1.0 * period + 1e-12
+    within_a_cycle(released, period)
     WebDriverWait(chrome, WAIT).until(lambda d: "jog released" in d.find_element(By.ID, "jog-status").text)
 
     ActionChains(chrome).click_and_hold(plus).perform()
@@ -84,7 +95,7 @@ def test_the_jog_stops_within_a_control_cycle_of_the_release_and_of_a_dropped_co
     dropped = stopped_after(chrome, station)
     ActionChains(chrome).release(plus).perform()
     assert dropped["reason"] == "jog stopped: the page's connection closed" and dropped["refused"]
-    assert dropped["travel_after_stop"] <= MAX_SPEED * 1.0 * period + 1e-12
+    within_a_cycle(dropped, period)
 
     name = chrome.find_element(By.ID, "teach-name")
     name.clear()
