@@ -95,9 +95,20 @@ class SceneAnswers:
             if seen_messages != messages:
                 dry = [f for m in messages if isinstance(m, dict) and isinstance(m.get("message"), str) if (f := dry_run_finding(m["message"])) is not None]
             new = self.feed.records[seen:]  # a slice of the list the run appends to (a new run gets a new list)
-            found = found + [f for r in new if isinstance(r, dict) and r.get("event") == "error" if (f := run_finding(r)) is not None]
+            found = list(found)
+            known = {_same(f) for f in found}
+            for record in new:  # one fault is reported by each group it stops (and the engine): placed once
+                f = run_finding(record) if isinstance(record, dict) and record.get("event") == "error" else None
+                if f is not None and _same(f) not in known:
+                    known.add(_same(f))
+                    found.append(f)
             self._findings = (snapshot.run, messages, seen + len(new), dry, found)
             return dry + found
+
+
+def _same(finding: dict[str, Any]) -> tuple[Any, ...]:
+    """What makes two placed findings of a run the same: when, what kind, which bodies or target."""
+    return (finding["t"], finding["kind"], tuple(b["name"] for b in finding.get("bodies", ())), tuple(finding.get("target") or ()))
 
 
 def routes(station: Any) -> list[Route]:

@@ -1,6 +1,7 @@
 """The 3D view's screenshots of docs/studio.md (taken by ``python -m operator_station.screenshots``): the rivet
-demonstrator mid-run, a recording of it replayed at two slider positions, the dry run's collision of the two arms,
-and the mixed cell's two robots where its cell places them -- each in headless Chromium with the tests' own driver.
+demonstrator mid-run, a recording of it replayed at two slider positions, the dry run's collision of the two arms, the
+same collision stopped by the simulator at its moment, and the mixed cell's two robots where its cell places them --
+each in headless Chromium with the tests' own driver.
 """
 from __future__ import annotations
 
@@ -76,7 +77,7 @@ def _show(driver: Any, until: Until, frames: bool = False) -> None:
 
 def shoot_3d(out: Path, args: Callable[..., argparse.Namespace], until: Until) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    shots = [out / f"studio_3d_{n}.png" for n in ("live", "replay_early", "replay_late", "collision", "mixed_cell")]
+    shots = [out / f"studio_3d_{n}.png" for n in ("live", "replay_early", "replay_late", "collision", "mixed_cell", "collision_run")]
     with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
         folder = _folder(name)
         driver = browser.chromium(1400, 860)
@@ -118,6 +119,19 @@ def shoot_3d(out: Path, args: Callable[..., argparse.Namespace], until: Until) -
                 driver.save_screenshot(str(shots[3]))
             finally:
                 meet.close()
+            stopped = serve(build_station(args(file="rivet_arms_meet.xml", no_check=True), full_catalog(), folder))
+            try:  # the same application without the dry run: the simulator's own check stops the arm as the hands meet
+                driver.get(stopped.url)
+                until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
+                driver.find_element("id", "ctl-start").click()
+                until(driver, "document.getElementById('engine-state').textContent === 'failed' && view3d.findings().length > 0", 300.0)
+                _show(driver, until)
+                driver.execute_script("const s = document.getElementById('view3d-slider'); s.value = view3d.findings()[0].t; s.dispatchEvent(new Event('input'))")
+                driver.execute_script("view3d.look([0.95, 0.55, 0.55], [0.34, 0.02, 0.05])")  # close to the part, where the hands met
+                time.sleep(0.6)
+                driver.save_screenshot(str(shots[5]))
+            finally:
+                stopped.close()
             mixed = serve(build_station(args(file="examples/mixed_cell.xml"), full_catalog(), folder))
             try:
                 driver.get(mixed.url)

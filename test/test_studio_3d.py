@@ -1,6 +1,7 @@
 """The 3D view in a real headless Chromium (Selenium): the robot follows the joint states of a live run, the dry run's
-collision of the two arms is shown on the robot (the two hands it names turned red), and a recording replayed puts the
-robot where its joint states say at each slider position.
+collision of the two arms is shown on the robot (the two hands it names turned red) -- and, run without the dry run, at
+the moment the simulator stops it with the hands where they met --, and a recording replayed puts the robot where its
+joint states say at each slider position.
 
 Skipped only where no Chromium can be driven (the reason says what is missing).  Waits are bounded polls of what the
 page shows (WebDriverWait), never a fixed sleep; the page's hook ``window.view3d`` reads the drawn scene itself (the
@@ -9,6 +10,7 @@ URDF robot's joint angles, its TCP through the URDF's chain, the colour a body i
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Iterator
 from pathlib import Path
@@ -139,6 +141,31 @@ def test_the_dry_runs_collision_of_the_two_arms_is_shown_on_the_robot(driver: An
         assert {(f["kind"], f["source"], tuple(f["bodies"]), f["t"]) for f in found} == {("collision", "dry run", tuple(named[0][:2]), float(named[0][2]))}
         assert "collision: left_arm approach" in driver.find_element(By.ID, "view3d-findings").text
         assert driver.execute_script("return view3d.places()") == [f"at drill_1, {float(named[0][2]):.2f} s"]  # the hole both calls work at
+    finally:
+        served.close()
+
+
+def test_a_collision_the_simulator_stops_is_shown_at_its_moment_with_the_hands_where_they_met(driver: Any, tmp_path: Path) -> None:
+    """The same application run without the dry run (--no-check): the simulator's own check stops the right arm as the
+    hands meet; the view highlights the two hands from that record's time on, not before, drawn where they met."""
+    app = arms_meet(tmp_path)
+    served = open_3d(driver, tmp_path, file=app.name, no_check=True)
+    try:
+        until(driver, lambda d: d.find_element(By.ID, "ctl-start").click() or True)
+        until(driver, lambda d: d.find_element(By.ID, "engine-state").text == "failed")
+        show_3d(driver)
+        until(driver, lambda d: d.execute_script("return view3d.findings().length") > 0)
+        found = driver.execute_script("return view3d.findings()")
+        assert len(found) == 1 and found[0]["source"] == "run" and found[0]["bodies"] == ["LARM_JOINT5_Link", "RARM_JOINT5_Link"]
+        error = next(r for r in driver.execute_script("return Store.records") if r["event"] == "error")
+        assert found[0]["t"] == error["t"] and "collision between left_arm hand (LARM_JOINT5_Link) and right_arm hand (RARM_JOINT5_Link)" in error["error"]
+        slide = "const s = document.getElementById('view3d-slider'); s.value = arguments[0]; s.dispatchEvent(new Event('input'))"
+        driver.execute_script(slide, error["t"] - 0.5)
+        until(driver, lambda d: d.execute_script("return view3d.highlighted()") == [])
+        driver.execute_script(slide, error["t"])
+        until(driver, lambda d: sorted(d.execute_script("return view3d.highlighted()")) == ["LARM_JOINT5_Link", "RARM_JOINT5_Link"])
+        left, right = (driver.execute_script("return view3d.linkPosition(arguments[0])", name) for name in ("LARM_JOINT5_Link", "RARM_JOINT5_Link"))
+        assert math.dist(left, right) < 0.1  # the two hands' frames a hand's width apart: where they met
     finally:
         served.close()
 

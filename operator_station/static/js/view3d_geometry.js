@@ -27,7 +27,9 @@ const View3DGeometry = (() => {
   const locatedPool = [];
   const findingPool = [];
   let cellObjects = new Map();  // frame name -> its solid
-  const colourOf = (() => { const known = {}; return (group) => known[group] ?? (known[group] = GROUP_COLOURS[Object.keys(known).length % GROUP_COLOURS.length]); })();
+  // A group's colour, the same in every view and run: the Nextage's and a single arm's fixed, any other by its name.
+  const FIXED = {left_arm: 0x1f77b4, right_arm: 0xff7f0e, torso_head: 0x2ca02c, arm: 0x9467bd};
+  const colourOf = (group) => FIXED[group] ?? GROUP_COLOURS[[...group].reduce((h, c) => (h * 31 + c.charCodeAt(0)) >>> 0, 7) % GROUP_COLOURS.length];
 
   function init(root) { marks = root; }
 
