@@ -13,7 +13,7 @@ import re
 import shutil
 from pathlib import Path
 import pytest
-from hypothesis import given
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lxml import etree
 from mcap.reader import make_reader
@@ -28,7 +28,7 @@ from core_functions.geometry import Pose  # noqa: E402
 from core_functions.primitives import EndEffector, ExecuteTrajectory, MoveCartesian, MoveJoints  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
 from execution_engine.app_model import load_cell  # noqa: E402
-from execution_engine.record_reader import NotARecording  # noqa: E402
+from execution_engine.record_reader import NotARecording, OverLimit  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.scene3d import goal_json, head_scene, robot_views, scene_log  # noqa: E402
 from operator_station.scene3d_findings import collision_bodies, dry_run_finding, run_finding  # noqa: E402
@@ -288,3 +288,24 @@ def test_a_cut_recording_gives_what_came_before_the_cut(recording: Path, tmp_pat
     with pytest.raises(NotARecording) as refused:
         read_scene(text)
     assert "notes.mcap" in str(refused.value) and "\n" not in str(refused.value)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(flips=st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(1, 255)), min_size=1, max_size=6), keep=st.floats(0.05, 1.0))
+def test_a_damaged_recording_gives_a_scene_or_one_line(recording: Path, tmp_path: Path, flips: list[tuple[float, int]], keep: float) -> None:
+    """Bytes flipped anywhere, the tail cut: the scene of what could be read, or NotARecording/OverLimit in one line --
+    never another exception, never a value that is not a finite number among the joints drawn."""
+    data = bytearray(recording.read_bytes())
+    for where, xor in flips:
+        data[int(where * (len(data) - 1))] ^= xor
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data[: max(1, int(len(data) * keep))]))
+    try:
+        scene = read_scene(damaged)
+    except (NotARecording, OverLimit) as refused:
+        assert "\n" not in str(refused) and "damaged.mcap" in str(refused)
+        return
+    for row in scene.samples:
+        assert len(row) == len(scene.joint_names) + 1 and all(isinstance(x, float) for x in row)
+        assert all(math.isfinite(x) for x in row[1:] if not math.isnan(x))  # a joint not reported yet is NaN, never inf
+    assert all(e["event"] in ("goal", "located") and math.isfinite(e["t"]) for e in scene.events)
