@@ -40,6 +40,7 @@ from operator_station.blocks import BlockDocument
 from operator_station.jog_station import JogStation
 from operator_station.roles import requires
 from operator_station.session import RunSession
+from robot_bridges.backend import BridgeError
 from operator_station.teach import TeachPlan, TeachRefused, check_taught, digest_of, plan_teach, save_taught
 
 log = logging.getLogger(__name__)
@@ -149,7 +150,7 @@ def routes(station: Any) -> list[BaseRoute]:
             group, name, parent = body.get("group"), body.get("name"), body.get("parent", "world")
             if group not in app.robot.group_names:
                 raise TeachRefused(f"teach: group must be one of {', '.join(app.robot.group_names)}, got {group!r}")
-            tcp = await jog.tcp(group)
+            tcp = await jog.tcp(group, app)
             if tcp is None:
                 raise TeachRefused(f"teach: {group} has no TCP to teach")
             data = await asyncio.to_thread(cell_path.read_bytes)
@@ -160,6 +161,8 @@ def routes(station: Any) -> list[BaseRoute]:
             problems = await asyncio.to_thread(check_taught, plan, path, text, station.catalog)
         except (ValueError, DocumentError, OSError) as error:
             return _error(str(error))
+        except BridgeError as error:  # the back end could not say where the TCP is
+            return _error(f"teach: {error}", 409)
         key = f"t{next(numbers)}"
         plans[key] = (plan, path, text)
         while len(plans) > MAX_PLANS:

@@ -190,11 +190,14 @@ class JogStation:
             return "jogging stopped and refused until the safety stop is cleared"
         return "jogging allowed again"
 
-    async def tcp(self, group: str) -> Pose | None:
-        """The group's TCP in the world now, by the back end's word; ValueError while it jogs."""
-        jogger, backend = self._jogger, self._backend
-        if jogger is None or backend is None:
+    async def tcp(self, group: str, app: Application) -> Pose | None:
+        """The group's TCP in the world now, by the back end's word, for ``app``; ValueError while it jogs, or when
+        the jog was made for another robot or cell (a teach must not take one robot's pose into another's cell)."""
+        jogger, backend, target = self._jogger, self._backend, self._target
+        if jogger is None or backend is None or target is None:
             raise ValueError("teach: open the jog panel first: the pose taught is where the jog's back end says the TCP is")
+        if (target.robot, target.cell) != (app.robot.name, str(app.cell.path if app.cell is not None else "")):
+            raise ValueError(f"teach: the jog panel was opened on another robot or cell ({target.robot}); reconnect it to this application first")
         if jogger.moving:
             raise ValueError("teach: the arm is jogging: release the button first")
         return await self._on_loop(lambda: _async(backend.tcp_pose, group))

@@ -116,6 +116,19 @@ def test_what_cannot_be_taught_is_a_one_line_refusal_and_nothing_is_written(stat
     assert cell_file.read_bytes() == before
 
 
+def test_a_teach_for_another_robot_than_the_jog_was_opened_on_is_refused(station: Station, folder: Path) -> None:
+    """The pose comes from the jog's back end: a page whose builder has since opened another application (another
+    robot, another cell) must not write the first robot's TCP into the second's cell."""
+    shutil.copy(ROOT / "apps_xml" / "vplus_pick_inspect.xml", folder / "vplus_pick_inspect.xml")
+    client, current = client_for(station)
+    assert client.post("/api/jog/open", json=current).json()["ok"]
+    other = client.post("/api/open", json={"path": "vplus_pick_inspect.xml"}).json()
+    before = (folder / "cells" / "vplus_cell.xml").read_bytes()
+    answer = client.post("/api/teach", json={"path": other["path"], "document": other["document"], "group": "arm", "name": "t1", "parent": "world"}).json()
+    assert answer["error"] == "teach: the jog panel was opened on another robot or cell (nextage_open); reconnect it to this application first"
+    assert (folder / "cells" / "vplus_cell.xml").read_bytes() == before
+
+
 def test_the_diff_keeps_the_files_units_and_a_frame_under_a_leaf_opens_it(tmp_path: Path) -> None:
     source = (ROOT / "apps_xml" / "cells" / "example_cell.xml").read_text(encoding="utf-8")
     cell_file = tmp_path / "cell.xml"
