@@ -109,6 +109,7 @@ def shoot(out: Path) -> list[Path]:
     shots += shoot_jog(out, _args, _until)
     shots.append(shoot_breakpoints(out, _args, _until))
     shots.append(shoot_paused_edit(out, _args, _until))
+    shots += shoot_monitor(out)
     shots += shoot_timeline(out)
     return shots
 
@@ -158,6 +159,52 @@ def shoot_timeline(out: Path) -> list[Path]:
             driver.execute_script(f"Timeline.show({wait['start'] - 1.5}, {wait['end'] + 2.5})")
             _until(driver, "document.querySelector('#timeline-svg rect.primitive') !== null")
             driver.save_screenshot(str(shots[1]))
+        finally:
+            served.close()
+            driver.quit()
+    return shots
+
+
+#: Scroll an element to the top of the window, below the sticky top bar.
+SCROLL_TO = "arguments[0].scrollIntoView(); window.scrollBy(0, -document.getElementById('topbar').offsetHeight - 6);"
+
+
+def shoot_monitor(out: Path) -> list[Path]:
+    """The monitor's state graphs and run summary: the asynchronous rivet demonstrator (sync="flags") at 4x with a
+    vision fault the retry recovers; the left arm's card paused mid-motion (Pause current, the pause edge lit, the state it left
+    marked), then the summary panel once the run has ended."""
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
+        folder = Path(name)
+        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
+        shutil.copy(ROOT / "apps_xml" / "rivet_async.xml", folder / "rivet_async.xml")
+        driver = browser.chromium(1600, 1000)
+        served = serve(build_station(_args(file="rivet_async.xml", speed=4.0, fault=["left_arm:vision"]), full_catalog(), folder))
+        shots = [out / "studio_state_graph.png", out / "studio_run_summary.png"]
+        try:
+            driver.get(served.url)
+            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
+            driver.find_element("id", "ctl-start").click()
+            _tab(driver, "monitor")
+            for _ in range(8):  # an arm between two primitives is held in Ready, not paused mid-motion: then again
+                _until(driver, "['Motion','Vision','EndEffector'].includes(Store.groupView().left_arm.state)")
+                driver.find_element("id", "ctl-pause").click()
+                _until(driver, "document.getElementById('engine-state').textContent === 'paused'")
+                time.sleep(1.0)  # the machines follow the engine's pause (a picture, not a test)
+                if driver.execute_script("return Store.groupView().left_arm.state") == "Pause":
+                    break
+                driver.find_element("id", "ctl-resume").click()
+            driver.execute_script("Monitor.render()")
+            time.sleep(0.3)
+            card = driver.find_element("css selector", '.group-card[data-group="left_arm"]')
+            driver.execute_script(SCROLL_TO, card)  # the whole card in the window, below the top bar: the picture is of what is shown
+            card.screenshot(str(shots[0]))
+            driver.find_element("id", "ctl-resume").click()
+            _until(driver, "document.body.dataset.summary === 'finished'", 300.0)
+            time.sleep(0.3)
+            summary = driver.find_element("id", "run-summary")
+            driver.execute_script(SCROLL_TO, summary)
+            summary.screenshot(str(shots[1]))
         finally:
             served.close()
             driver.quit()

@@ -55,8 +55,10 @@ const GraphLayout = (() => {
     }
     for (const b of bundles.values()) {
       const sources = [...new Set(b.transitions.map((t) => t.from))];
-      if (b.from === HUB) b.label = sources.length === 1 ? `${b.signal} (${sources[0]})` : b.signal;
-      else b.label = b.target === HISTORY ? `${b.signal} → back` : b.target === hub ? `${b.signal} → ${hub}` : `${b.signal} → ${b.target}`;
+      // Short labels (the tooltip lists every transition an edge stands for): the signal, and where an edge
+      // into the hub goes when that is one state (ok -> Ready); resume goes back to the state it paused.
+      if (b.from === HUB) b.label = b.signal;
+      else b.label = b.target === HISTORY ? b.signal : `${b.signal} → ${b.target}`;
       b.title = b.transitions.map((t) => `${t.from} —${t.signal}→ ${t.to === HISTORY ? "the state it paused" : t.to}`).join("\n");
     }
     return {hub, working, band, spokes, bundles: [...bundles.values()], internal};
@@ -77,7 +79,7 @@ const GraphLayout = (() => {
       id: "root",
       layoutOptions: {
         "elk.algorithm": "layered", "elk.direction": "DOWN", "elk.hierarchyHandling": "SEPARATE_CHILDREN",
-        "elk.edgeRouting": "ORTHOGONAL", "elk.padding": "[top=4,left=12,bottom=4,right=12]",
+        "elk.edgeRouting": "ORTHOGONAL", "elk.padding": "[top=4,left=4,bottom=4,right=4]",
         "elk.layered.spacing.nodeNodeBetweenLayers": "20", "elk.spacing.nodeNode": "34", "elk.spacing.edgeEdge": "10", "elk.spacing.edgeLabel": "2",
         "elk.layered.spacing.edgeEdgeBetweenLayers": "8", "elk.edgeLabels.inline": "false",
         "elk.layered.considerModelOrder.strategy": "NODES_AND_EDGES", "elk.layered.crossingMinimization.forceNodeModelOrder": "true",
