@@ -89,7 +89,7 @@ def routes(station: Any) -> list[BaseRoute]:
             _, _, app, _ = await validated(request)
             session = station.session
             described = await jog.open(app, session.backend_name(app), session.settings.backend.backend_options(app))
-        except (ValueError, KeyError, DocumentError, ConnectionError, OSError) as error:
+        except (ValueError, KeyError, DocumentError, ConnectionError, OSError, BridgeError) as error:  # OSError: a timeout too
             text = str(error).strip("'")
             return _error(text if text.startswith("jog: ") else f"jog: {text}")
         return JSONResponse({"ok": True, **described})
