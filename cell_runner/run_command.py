@@ -80,6 +80,8 @@ async def _run(
     recorder = await start_recording(settings, app, deployment.transport, name, observer)  # checkpoints after the trace
     if recorder.writer is not None:  # an edit of the paused run: the checkpoint goes on with the new application
         deployment.engine.remainder.hooks.append(recorder.writer.swapped)
+    if writer is not None:  # and the trace names the new operations' iterations
+        deployment.engine.remainder.hooks.append(writer.swapped)
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command, deployment.engine.breakpoint_command,
                               deployment.engine.speed)
     loop = asyncio.get_running_loop()

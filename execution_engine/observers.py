@@ -31,7 +31,8 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import IO, Any, TypeVar
 
 from core_functions.printable import printable
-from execution_engine.engine.remainder_swap import decode_answer
+from execution_engine.app_model.model import Application
+from execution_engine.engine.remainder_swap import Swap, decode_answer
 from node_transport import codec, typed
 from node_transport.port import Node
 from node_transport.qos import EVENTS
@@ -153,6 +154,11 @@ class TraceWriter:
         self.last_t = 0.0  # run time of the latest record: where a run that broke off ended
         self._last_engine_message = ""
         self._operation: str | None = None
+
+    def swapped(self, app: Application, swap: Swap) -> None:
+        """A paused run's remainder was edited (the engine's hook, engine/remainder_swap.py): the iterations its
+        operations were made for, from now on."""
+        self.iterations = app.iterations()
 
     def on_status(self, status: SmStatus) -> None:
         record = trace_record(status)

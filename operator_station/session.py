@@ -197,6 +197,7 @@ class RunSession:
         self._loop, self._deployment = asyncio.get_running_loop(), deployment
         setup = setup_for(self.backend_name(app), self._options(app)) if self.settings.check else None  # an edit is checked as the Start is
         self.edit_target = EditTarget.of(deployment.engine, app, backend, clock, setup, self.trajectory_db(app))
+        deployment.engine.remainder.hooks += [w.swapped for w in (writer, page) if w is not None]  # an edit's iterations in the records
         self._ready.set()
         try:
             run = asyncio.get_running_loop().create_task(await self._started(app, deployment, backend, clock))

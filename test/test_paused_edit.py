@@ -20,7 +20,8 @@ from app_functions.registry import full_catalog
 from cell_runner.cli import main
 from cell_runner.console_edit import console_editor
 from cell_runner.deployment import Deployment, deploy_local
-from cell_runner.dry_run.remainder import remainder_check
+from cell_runner.dry_run.remainder import remainder_app, remainder_check
+from cell_runner.dry_run.runner import dry_run_setup
 from cell_runner.dry_run.simulators import setup_for
 from cell_runner.dry_run.start import backend_measure
 from cell_runner.operator_console import OperatorConsole
@@ -29,7 +30,8 @@ from execution_engine.app_model import Application, load_application
 from execution_engine.checkpoint.resume import app_meta, check_same
 from execution_engine.checkpoint.store import CheckpointError, CheckpointStore
 from execution_engine.checkpoint.writer import CheckpointWriter
-from execution_engine.engine.remainder_swap import SwapAnswer, application_digest, swap_remainder
+from core_functions.geometry import Pose
+from execution_engine.engine.remainder_swap import PresentState, SwapAnswer, application_digest, swap_remainder
 from execution_engine.engine.report import RunReport
 from execution_engine.observers import RunObserver, TraceWriter
 from execution_engine.record_reader import read_record
@@ -37,6 +39,7 @@ from node_transport.clock import Clock
 from robot_bridges.backend import BackendOptions
 from robot_bridges.registry import create_backend
 
+ROOT = Path(__file__).resolve().parents[1]
 LEFT_OUT, RIGHT_OUT, LEFT_IN = "0.30,0.20,0.10,180deg,0,90deg", "0.30,-0.20,0.10,180deg,0,90deg", "0.30,0.12,0.10,180deg,0,90deg"
 
 
@@ -116,7 +119,7 @@ async def paused(clock: Clock, app: Application, tmp: Path, steps: int = 2) -> P
     observer.sinks += [writer.on_status, checkpoint.on_status]
     observer.engine_sinks.append(writer.on_engine)
     observer.event_sinks += [writer.on_event, checkpoint.on_event]
-    engine.remainder.hooks.append(checkpoint.swapped)
+    engine.remainder.hooks += [checkpoint.swapped, writer.swapped]
     recorder = record_node(deployment.transport.create_node("recorder"), str(tmp / "run.mcap"), app, "nextage-sim", derive_tf=True)
     check = remainder_check(setup_for("nextage-sim", BackendOptions(robot=app.robot)), None, backend_measure(app.robot, backend, "the simulator"), clock)
     run = asyncio.get_running_loop().create_task(engine.run(app))
@@ -161,6 +164,21 @@ def test_a_safe_edit_is_swapped_in_and_its_operations_run_recorded_with_both_dig
         check_same(store, old)  # never silently with the old one
     store.close()
     assert any(line.startswith("  edited while paused at") and "operations from 3 on swapped" in line for line in report.summary_lines())
+
+
+def test_a_loop_added_by_an_edit_runs_each_iteration_named_in_the_trace(run_sim: Any, tmp_path: Path) -> None:
+    old = load(tmp_path, "old.xml", OLD)
+    looped = load(tmp_path, "looped.xml", application(REACH, HOLD, '  <repeat count="2">\n' + op("in_{index}", left_arm=("move_to", LEFT_IN)) + "  </repeat>\n", HOME))
+
+    async def main_(clock: Clock) -> tuple[SwapAnswer, RunReport, PausedRun]:
+        run = await paused(clock, old, tmp_path)
+        answer = await run.edit(looped)
+        return answer, await run.finish(), run
+
+    answer, report, run = run_sim(main_)
+    assert answer.ok and report.ok and report.operations_done == 5
+    named = {(r["operation"], r.get("iteration")) for r in run.records("function_start") if r["operation"].startswith("in_")}
+    assert named == {("in_1", "repeat index=1"), ("in_2", "repeat index=2")}
 
 
 def test_an_edit_that_would_collide_is_refused_with_the_finding_and_the_old_remainder_runs(run_sim: Any, tmp_path: Path) -> None:
@@ -258,3 +276,31 @@ def test_the_terminal_edits_the_paused_run_from_a_file_and_says_why_it_will_not(
     assert lines[-1].startswith("edit: swapped: operations from 3 on are")
     assert report.ok and report.operations_total == 5
     assert any("edited while paused" in line and "terminal console (key 'e')" in line for line in report.summary_lines())
+
+
+def test_the_remainder_is_checked_from_the_flags_set_the_frames_located_and_the_branches_decided(tmp_path: Path) -> None:
+    """What the dry run of an edit starts from besides the joints: the flags set (set again first, moving nothing), the
+    located frames at their measured poses (children with them, the simulated camera's truth where it was), and the
+    <if> branches on operations already run resolved as the run will take them."""
+    app = load_application(str(ROOT / "apps_xml" / "rivet_loop_branch.xml"), full_catalog())
+    ids = [op.id for op in app.operations]
+    frontier = ids.index("look_drill_1") + 1
+    assert app.cell is not None
+    measured = Pose(0.341, 0.0602, 0.0005, 1.0, 0.0, 0.0, 0.0)
+    truth = app.cell.to_snapshot().truth
+    state = PresentState(frontier, {"drill_1": measured}, ("tray_ready",), {"look_drill_1/left_arm": "not_found"})
+    rest = remainder_app(app, state)
+    first = rest.operations[0]
+    assert first.calls["left_arm"].function == "set_flag" and first.calls["left_arm"].params == ("tray_ready",)
+    assert all(call.implicit for group, call in first.calls.items() if group != "left_arm")
+    kept = [op.id for op in rest.operations[1:]]
+    assert kept[:2] == ["put_back_drill_1", "over_drill_2"] and "debur_drill_1" not in kept and "insert_drill_1" not in kept
+    assert rest.operations[1].when == () and rest.operation("debur_drill_2").when == app.operation("debur_drill_2").when
+    assert rest.cell is not None
+    assert rest.cell.pose("drill_1").distance_to(measured) < 1e-9
+    assert rest.cell.to_snapshot().truth["drill_1"].distance_to(truth["drill_1"]) < 1e-9  # the camera's truth stays
+    assert rest.cell.pose("drill_2").distance_to(app.cell.pose("drill_2")) < 1e-9  # not located: nominal
+
+    old = load(tmp_path, "old.xml", OLD)
+    report = dry_run_setup(remainder_app(old, PresentState(2, {}, ("tray_ready",), {})), setup_for("nextage-sim", BackendOptions(robot=old.robot)))
+    assert report.ok and report.operations_checked == 3  # the flag's operation, then closer and home
