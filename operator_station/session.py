@@ -303,10 +303,12 @@ def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter
     order = list(robot.joint_names)
     feed.update(joint_names=order)
 
+    known: dict[str, float] = {}  # a cell of several robots: each bridge publishes its own robot's joints
+
     def on_joints(msg: JointState) -> None:
-        index = dict(zip(msg.name, msg.position))
-        if all(name in index for name in order):
-            feed.joint_sample(node.clock.now(), [index[name] for name in order])
+        known.update(zip(msg.name, msg.position))
+        if all(name in known for name in order):
+            feed.joint_sample(node.clock.now(), [known[name] for name in order])
 
     node.create_subscription(JointState, JOINT_STATES, on_joints, SENSOR)
 

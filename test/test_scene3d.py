@@ -6,6 +6,7 @@ The browser half (the page draws this and moves it with the joint states and the
 """
 from __future__ import annotations
 
+import asyncio
 import io
 import json
 import math
@@ -29,7 +30,15 @@ from core_functions.primitives import EndEffector, ExecuteTrajectory, MoveCartes
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
 from execution_engine.app_model import load_cell  # noqa: E402
 from execution_engine.record_reader import NotARecording, OverLimit  # noqa: E402
+from node_transport.carriage import TypedPublisher  # noqa: E402
+from node_transport.clock import Clock  # noqa: E402
+from node_transport.local import LocalTransport  # noqa: E402
+from node_transport.msgs import JointState  # noqa: E402
+from node_transport.qos import COMMANDS, LATCHED, SENSOR  # noqa: E402
+from node_transport.wire import ENGINE_CELL, JOINT_STATES, BridgeCommand, CellSnapshot, LocatedFrames, bridge_topic, sm_topic  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
+from operator_station.feed import Feed  # noqa: E402
+from operator_station.session import observe  # noqa: E402
 from operator_station.scene3d import goal_json, head_scene, robot_views, scene_log  # noqa: E402
 from operator_station.scene3d_findings import collision_bodies, dry_run_finding, run_finding  # noqa: E402
 from operator_station.scene3d_recording import read_scene  # noqa: E402
@@ -229,6 +238,47 @@ def test_the_routes_serve_the_start_files_scene_and_refuse_bad_input(tmp_path: P
     for bad, said in (("x1", "from must be a whole number of events, got 'x1'"), ("-3", "from must be in [0, 1099511627776], got -3")):
         answer = client.get(f"/api/scene3d/events?from={bad}")
         assert answer.status_code == 400 and answer.json() == {"ok": False, "error": said}
+
+
+# ------------------------------------------------------------------ a live run's scene, from its transport
+def test_a_live_cell_of_two_robots_gives_the_view_its_joints_goals_located_frames_and_cell(run_sim: Any) -> None:
+    """Each robot's bridge publishes its own joints: the page gets one sample of both once each has spoken; a goal
+    sent to the KUKA's bridge, the frames the Nextage's arm located and the engine's cell reach the 3D view's scene."""
+    cell = load_cell(APPS / "examples" / "cells" / "mixed_cell.xml")
+    robot = cell_robot_model(cell.name, cell.robots)
+    feed = Feed()
+    feed.begin("live", "mixed", list(robot.group_names))
+    target = Pose.from_xyz_rpy(0.33, -0.26, 0.08, math.pi, 0, math.pi / 2)
+
+    async def main(clock: Clock) -> None:
+        transport = LocalTransport(clock)
+        node, sender = transport.create_node("operator_station"), transport.create_node("cell")
+        observe(node, robot, feed, [])
+        joints = sender.create_publisher(JointState, JOINT_STATES, SENSOR)
+        for member in cell.robots:  # each bridge its own robot's joints
+            names = member.model.joint_names
+            joints.publish(JointState(name=tuple(names), position=tuple(0.01 * k for k in range(len(names)))))
+            await asyncio.sleep(0.2)
+        TypedPublisher(sender, BridgeCommand, bridge_topic("arm", "command"), COMMANDS).publish(
+            BridgeCommand("c1", "arm", "execute", MoveCartesian(target, "ptp", "buffer_slot approach")))
+        TypedPublisher(sender, LocatedFrames, sm_topic("right_arm", "located"), LATCHED).publish(
+            LocatedFrames("right_arm", cell.name, {"buffer_slot": target}, clock.now()))
+        TypedPublisher(sender, CellSnapshot, ENGINE_CELL, LATCHED).publish(cell.to_snapshot(robot))
+        await asyncio.sleep(0.2)
+        node.destroy()
+        sender.destroy()
+
+    run_sim(main)
+    order = list(robot.joint_names)
+    expected = {n: 0.01 * k for m in cell.robots for k, n in enumerate(m.model.joint_names)}
+    assert feed.snapshot.joint_names == order and len(feed.joints) == 1 and list(feed.joints)[0][1:] == [expected[n] for n in order]
+    scene = scene_log(feed)
+    goal = next(e for e in scene.events if e["event"] == "goal")
+    assert (goal["group"], goal["kind"], goal["label"], goal["t"]) == ("arm", "pose", "buffer_slot approach", pytest.approx(0.4, abs=1e-6))
+    assert goal["target"] == pytest.approx([target.x, target.y, target.z, target.qx, target.qy, target.qz, target.qw])
+    assert [e["frames"] for e in scene.events if e["event"] == "located"] == [{"buffer_slot": pytest.approx(goal["target"])}]
+    assert scene.cell is not None and {f["name"] for f in scene.cell["frames"]} == set(cell.frames) | set(cell.zones)
+    assert [r["name"] for r in scene.robots] == ["feeder", "assembler"]
 
 
 # ------------------------------------------------------------------ recordings
