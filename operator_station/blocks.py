@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
+from pathlib import Path
 from dataclasses import dataclass, field, replace
 from typing import Any, Union
 
@@ -138,6 +139,21 @@ def walk(body: list[Step], visit: Callable[[Step, tuple[int, ...]], object], pat
         visit(step, here)
         if isinstance(step, Block):
             walk(step.body, visit, here)
+
+
+def calls_inside(resolve: Callable[[str], object], path: Path, document: BlockDocument) -> None:
+    """Every file the document's calls name passes ``resolve`` (the station's folders), as the files the page opens and
+    saves: validating a call reads the called file (ValueError, one line naming the step)."""
+
+    def visit(step: Step, where: tuple[int, ...]) -> None:
+        application = step.attributes.get("application", "").strip() if isinstance(step, Block) and step.kind == "call" else ""
+        if application:
+            try:
+                resolve(str(path.parent / application))
+            except ValueError as error:
+                raise ValueError(f"step {'.'.join(str(i + 1) for i in where)}: call of {error}") from None
+
+    walk(document.body, visit)
 
 
 def _step_json(step: Step) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from execution_engine.engine.remainder_swap import application_digest
 from operator_station import builder
 from operator_station.access import ENGINEER, WHO, Who
 from operator_station.audit import record
-from operator_station.blocks import Block, BlockDocument, walk
+from operator_station.blocks import BlockDocument, calls_inside
 from operator_station.paused_edit import operations_json, placer
 from operator_station.roles import requires
 from operator_station.session import SOURCE, RunSession
@@ -40,7 +40,7 @@ def routes(station: Any) -> list[BaseRoute]:
                 raise ValueError("the request must be a JSON object")
             path = station.resolve(body.get("path"))
             document = BlockDocument.from_json(body.get("document"))
-            _calls_inside(station, path, document)
+            calls_inside(station.resolve, path, document)
         except (ValueError, DocumentError) as error:  # JSONDecodeError is a ValueError
             return _error(f"edit: {error}")
         session = station.session
@@ -83,20 +83,6 @@ def _who(request: Request) -> str:
     who: Who | None = request.scope.get(WHO)
     name = (who.name or who.ident) if who is not None else ""
     return f"edit by {name}" if name else "edit"
-
-
-def _calls_inside(station: Any, path: Path, document: BlockDocument) -> None:
-    """A call's file must lie in the station's folders, as the files it opens: validating it reads it."""
-
-    def visit(step: Any, where: tuple[int, ...]) -> None:
-        application = step.attributes.get("application", "").strip() if isinstance(step, Block) and step.kind == "call" else ""
-        if application:
-            try:
-                station.resolve(str(path.parent / application))
-            except ValueError as error:
-                raise ValueError(f"step {'.'.join(str(i + 1) for i in where)}: call of {error}") from None
-
-    walk(document.body, visit)
 
 
 def _error(message: str, status: int = 400) -> JSONResponse:

@@ -54,7 +54,7 @@ from operator_station.feed import Feed
 from operator_station.folders import Folders
 from operator_station.guard import WHO, BodyTooLarge, Guard, page
 from operator_station.attach import AttachedSession
-from operator_station.blocks import Block, BlockDocument, walk
+from operator_station.blocks import BlockDocument, calls_inside
 from operator_station.roles import requires, secure
 from operator_station.run_audit import watch_run
 from operator_station.scene3d_routes import routes as scene3d_routes
@@ -194,7 +194,7 @@ def _with_document(station: Station, handler: Callable[..., Awaitable[Response]]
             body = await _body(request)
             path = station.resolve(body.get("path"))
             document = BlockDocument.from_json(body.get("document"))
-            _calls_inside(station, path, document)
+            calls_inside(station.resolve, path, document)
         except (ValueError, DocumentError) as error:  # JSONDecodeError is a ValueError
             return _error(str(error))
         try:
@@ -203,21 +203,6 @@ def _with_document(station: Station, handler: Callable[..., Awaitable[Response]]
             return _error(str(error))
 
     return route
-
-
-def _calls_inside(station: Station, path: Path, document: BlockDocument) -> None:
-    """Every file the page's calls name lies in the station's folders, as the files it opens and saves: validating
-    a call reads the called file (ValueError, one line naming the step)."""
-
-    def visit(step: Any, where: tuple[int, ...]) -> None:
-        application = step.attributes.get("application", "").strip() if isinstance(step, Block) and step.kind == "call" else ""
-        if application:
-            try:
-                station.resolve(str(path.parent / application))
-            except ValueError as error:
-                raise ValueError(f"step {'.'.join(str(i + 1) for i in where)}: call of {error}") from None
-
-    walk(document.body, visit)
 
 
 def create_app(station: Station) -> Starlette:
