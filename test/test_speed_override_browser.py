@@ -1,5 +1,7 @@
 """Must show (issue 26): in a real headless Chromium, moving the control bar's speed slider to 50 % halves the
-running motion's joint velocities, measured from the joint states the page received; on the same path.
+running motion's joint velocities, measured from the joint states the page received; on the same path.  In the
+replay of that run's trace, the slider (disabled) shows 100 % before the change and 50 % after it as the time
+slider moves.
 
 The run is paced (``--speed 0.5``: a robot second takes two wall seconds), so the page has time to act while the
 arm cruises; every time compared is the run's clock, stamped on each joint sample.  Waits are bounded polls of
@@ -57,7 +59,8 @@ def joint_samples(driver: Any) -> Samples:
 def test_moving_the_speed_slider_to_50_percent_halves_the_running_motions_joint_velocities(driver: Any, tmp_path: Path) -> None:
     shutil.copytree(ROOT / "apps_xml" / "cells", tmp_path / "cells")
     (tmp_path / "slow_down.xml").write_text(APP, encoding="utf-8")
-    served = serve(build_station(station_args(file="slow_down.xml", speed=0.5, no_check=True), full_catalog(), tmp_path))
+    trace = tmp_path / "slow_down.jsonl"
+    served = serve(build_station(station_args(file="slow_down.xml", speed=0.5, no_check=True, trace=str(trace)), full_catalog(), tmp_path))
     station = served.station
     try:
         driver.get(served.url)
@@ -81,6 +84,19 @@ def test_moving_the_speed_slider_to_50_percent_halves_the_running_motions_joint_
         samples = joint_samples(driver)
     finally:
         served.close()
+    replay = serve(build_station(station_args(replay=str(trace)), full_catalog(), tmp_path))
+    try:
+        driver.get(replay.url)
+        until(driver, lambda d: d.find_element("tag name", "body").get_attribute("data-ready") == "true")
+        until(driver, lambda d: d.execute_script("return Store.records.length") > 0)
+        shown = {}
+        for at in (changed[0][0] - 0.5, changed[0][0] + 0.5):
+            driver.execute_script("Store.setCursor(arguments[0]);", at)
+            until(driver, lambda d: text(d, "speed-value") in ("100 %", "50 %"))
+            shown[at] = (text(driver, "speed-value"), driver.find_element("id", "speed-override").get_attribute("disabled"))
+    finally:
+        replay.close()
+    assert list(shown.values()) == [("100 %", "true"), ("50 %", "true")]
     assert len(changed) == 1 and changed[0][1:] == ["studio", True, "speed override 50 % (was 100 %)"]
     t = changed[0][0]  # the change on the run's clock, as the engine recorded it
     settle = settle_time(0.5, np.array([1.0]), np.array([1.5]))  # 1 rad/s, 1.5 rad/s^2: the rate halves within 0.33 s
