@@ -32,6 +32,7 @@ from node_transport.ros import RosTransport
 from execution_engine.engine.breakpoints import BREAKPOINT_SERVICE, RUN_TO_SERVICE, BreakpointService, RunToService
 from node_transport.wire import ENGINE_SERVICES, SAFETY_STOP, engine_service
 from operator_station.feed import Feed
+from operator_station.run_summary import SummaryOnEnd
 from operator_station.session import FeedStream, observe, publish_safety
 
 log = logging.getLogger(__name__)
@@ -103,7 +104,7 @@ class AttachedSession:
         transport = await self.connect(clock)
         try:
             node = transport.create_node("operator_station")
-            observe(node, self.robot, self.feed, [TraceWriter(FeedStream(self.feed))])
+            observe(node, self.robot, self.feed, [TraceWriter(FeedStream(self.feed, SummaryOnEnd(self.feed).see))])  # the run summary when the engine ends
             self._clients = {c: node.create_client(Trigger, engine_service(c)) for c in ENGINE_SERVICES}
             self._clients["breakpoint"] = node.create_client(BreakpointService, BREAKPOINT_SERVICE)
             self._clients["run_to"] = node.create_client(RunToService, RUN_TO_SERVICE)

@@ -25,6 +25,8 @@ from cell_runner.run_report import waits_of
 from execution_engine.timeline import build_timeline
 from node_transport.wire import FaultKind
 
+#: The engine's states a run ends in.
+ENDED = ("finished", "failed", "stopped")
 #: The costliest waits listed (the rest are in the timeline).
 MAX_WAITS = 5
 #: docs/faults.md, for the rows an error's message matches (absent from an installed package: no hints then).
@@ -128,7 +130,9 @@ def summarize(records: Sequence[Mapping[str, Any]], plan: Sequence[float] = (), 
     timeline = build_timeline(records, groups)
     end = next((r for r in reversed(records) if r.get("event") == "run_end"), None)
     t_end = float(end["t"]) if end is not None else timeline.t_end
-    outcome = str(end.get("outcome", "?")) if end is not None else "cut"
+    # a cell watched on the ROS graph (studio --transport ros) writes no run_end: the engine's last state says how it ended
+    engine = next((str(r.get("to")) for r in reversed(records) if r.get("event") == "engine_state"), "")
+    outcome = str(end.get("outcome", "?")) if end is not None else engine if engine in ENDED else "cut"
     shares, waits = [], []
     for group, lane in timeline.lanes.items():
         waited = waits_of(lane)
@@ -145,6 +149,21 @@ def summarize(records: Sequence[Mapping[str, Any]], plan: Sequence[float] = (), 
         cycle_time=t_end - timeline.t_start, predicted=sum(plan) if plan else None, retries=timeline.retries,
         groups=shares, waits=waits[:MAX_WAITS], errors=errors_of(records, outcome), t_end=t_end,
     )
+
+
+class SummaryOnEnd:
+    """For a cell the station only watches (``studio --transport ros``): the summary, into the feed, as soon as the
+    engine says the run ended -- nobody there writes a ``run_end``.  Fed the page's records in order."""
+
+    def __init__(self, feed: Any) -> None:
+        self.feed = feed
+
+    def see(self, record: Mapping[str, Any]) -> None:
+        if record.get("event") == "engine_state" and record.get("to") in ENDED:
+            snapshot, records, _, _ = self.feed.read(0, 0)
+            self.feed.update(summary=summarize(records, snapshot.plan, snapshot.groups).to_json())
+        elif record.get("event") == "engine_state" and record.get("to") == "running" and self.feed.snapshot.summary is not None:
+            self.feed.update(summary=None)  # started again: the last run's summary is no longer what the page shows
 
 
 def _count(value: object) -> int | None:

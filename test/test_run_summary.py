@@ -20,7 +20,8 @@ import pytest
 from cell_runner.run_report import summarize as report_summary
 from execution_engine.timeline import build_timeline
 from operator_station.program import main as cli_main
-from operator_station.run_summary import ADVICE, faults_row, summarize
+from operator_station.feed import Feed
+from operator_station.run_summary import ADVICE, SummaryOnEnd, faults_row, summarize
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -95,3 +96,19 @@ def test_a_cut_record_and_text_no_row_matches() -> None:
     assert error.kind == "controller" and error.actions == (ADVICE["controller"],) and error.faults_row is None
     assert faults_row("nothing like any row of the table at all") is None
     assert summary.to_json()["errors"][0]["group"] == "left_arm"
+
+
+def test_a_watched_cells_summary_comes_when_its_engine_ends_and_goes_when_it_starts_again(tmp_path: Path) -> None:
+    """studio --transport ros: no run_end on the graph; the engine's finished state brings the summary."""
+    records = [r for r in run(tmp_path, "rivet_installation.xml") if r["event"] != "run_end"]
+    feed = Feed()
+    feed.begin("live", "rivet_installation", ["left_arm", "right_arm", "torso_head"])
+    hook = SummaryOnEnd(feed)
+    ended = next(i for i, r in enumerate(records) if r["event"] == "engine_state" and r["to"] == "finished")
+    for i, record in enumerate(records):
+        feed.append(record)
+        hook.see(record)
+        assert (feed.snapshot.summary is not None) == (i >= ended)
+    assert feed.snapshot.summary is not None and feed.snapshot.summary["outcome"] == "finished"
+    hook.see({"t": 99.0, "event": "engine_state", "group": "engine", "to": "running"})
+    assert feed.snapshot.summary is None

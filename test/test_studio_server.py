@@ -302,6 +302,9 @@ def test_attached_through_the_transport_port_the_page_sees_and_commands_a_cell_i
         assert set(feed.snapshot.structures) == {"left_arm", "right_arm", "torso_head"} and feed.joints
         model = client.get("/api/timeline").json()
         assert model["bars"] == sum(1 for r in feed.records if r["event"] == "function_end")
+        # the run summary, though nobody on the graph writes a run_end: from the engine's last state (run_summary.SummaryOnEnd)
+        assert wait_until(lambda: (feed.snapshot.summary or {}).get("outcome") == "finished", 30.0)
+        assert [g["group"] for g in feed.snapshot.summary["groups"]] == ["left_arm", "right_arm", "torso_head"]  # type: ignore[index]
     finally:
         session.join(30.0)
 
