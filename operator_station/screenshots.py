@@ -28,6 +28,7 @@ from operator_station.screenshots_audit import shoot_audit
 from operator_station.screenshots_jog import shoot_jog
 from operator_station.screenshots_breakpoints import shoot_breakpoints
 from operator_station.screenshots_paused_edit import shoot_paused_edit
+from operator_station.screenshots_speed import shoot_speed
 from operator_station.testing import serve
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -109,6 +110,7 @@ def shoot(out: Path) -> list[Path]:
     shots += shoot_jog(out, _args, _until)
     shots.append(shoot_breakpoints(out, _args, _until))
     shots.append(shoot_paused_edit(out, _args, _until))
+    shots.append(shoot_speed(out, _args, _until))
     shots += shoot_monitor(out)
     shots += shoot_timeline(out)
     return shots
