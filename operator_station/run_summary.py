@@ -100,6 +100,7 @@ class RunSummaryView:
     waits: list[WaitItem] = field(default_factory=list)
     errors: list[ErrorItem] = field(default_factory=list)
     t_end: float = 0.0  # run time of the end: the replay shows the summary from there on
+    held: float = 0.0  # of the cycle, seconds paused or at an alarm (waiting for an operator, not the cell's time)
 
     @property
     def deviation(self) -> float | None:
@@ -114,7 +115,8 @@ class RunSummaryView:
     def lines(self) -> list[str]:
         """The summary as text, one line each (the page draws the same fields as a panel)."""
         predicted = "" if self.predicted is None else f" against {self.predicted:.2f} s predicted ({self.deviation:+.2f} s)"
-        out = [f"{self.outcome}: operations {self.operations_done}/{self.operations_total}, cycle {self.cycle_time:.2f} s{predicted}, retries {self.retries}"]
+        held = f" ({self.held:.2f} s of it paused or at an alarm)" if self.held > 0 else ""
+        out = [f"{self.outcome}: operations {self.operations_done}/{self.operations_total}, cycle {self.cycle_time:.2f} s{held}{predicted}, retries {self.retries}"]
         out += [f"{g.group}: busy {g.busy:.2f} s, idle {g.idle:.2f} s (waiting {g.waiting:.2f} s)" for g in self.groups]
         out += [f"{w.group} {w.label}: {w.seconds:.2f} s" for w in self.waits]
         for e in self.errors:
@@ -147,8 +149,22 @@ def summarize(records: Sequence[Mapping[str, Any]], plan: Sequence[float] = (), 
         operations_done=_count(end.get("operations_done")) or 0 if end is not None else sum(1 for o in timeline.operations if o.t_end is not None),
         operations_total=_count(end.get("operations_total")) or 0 if end is not None else len(timeline.operations),
         cycle_time=t_end - timeline.t_start, predicted=sum(plan) if plan else None, retries=timeline.retries,
-        groups=shares, waits=waits[:MAX_WAITS], errors=errors_of(records, outcome), t_end=t_end,
+        groups=shares, waits=waits[:MAX_WAITS], errors=errors_of(records, outcome), t_end=t_end, held=held_time(records, t_end),
     )
+
+
+def held_time(records: Sequence[Mapping[str, Any]], t_end: float) -> float:
+    """Run seconds the engine spent paused or at an alarm: the operator's time in the cycle, not the cell's."""
+    held, since = 0.0, None
+    for r in records:
+        if r.get("event") != "engine_state":
+            continue
+        holding = r.get("to") in ("paused", "alarm")
+        if holding and since is None:
+            since = float(r["t"])
+        elif not holding and since is not None:
+            held, since = held + float(r["t"]) - since, None
+    return held + (max(0.0, t_end - since) if since is not None else 0.0)
 
 
 class SummaryOnEnd:

@@ -91,7 +91,7 @@ def test_a_cut_record_and_text_no_row_matches() -> None:
     records = [{"t": 0.0, "event": "function_start", "group": "left_arm", "operation": "1", "function": "home"},
                {"t": 2.5, "event": "error", "group": "left_arm", "operation": "1", "function": "home", "error": "move_joints(home): controller: drive error 17"}]
     summary = summarize(records, (), ["left_arm"])
-    assert summary.outcome == "cut" and summary.exit_code is None and summary.cycle_time == 2.5
+    assert summary.outcome == "cut" and summary.exit_code is None and summary.cycle_time == 2.5 and summary.held == 0.0
     (error,) = summary.errors
     assert error.kind == "controller" and error.actions == (ADVICE["controller"],) and error.faults_row is None
     assert faults_row("nothing like any row of the table at all") is None
@@ -112,3 +112,12 @@ def test_a_watched_cells_summary_comes_when_its_engine_ends_and_goes_when_it_sta
     assert feed.snapshot.summary is not None and feed.snapshot.summary["outcome"] == "finished"
     hook.see({"t": 99.0, "event": "engine_state", "group": "engine", "to": "running"})
     assert feed.snapshot.summary is None
+
+
+def test_the_time_paused_or_at_an_alarm_is_said_as_part_of_the_cycle() -> None:
+    state = lambda t, to: {"t": t, "event": "engine_state", "group": "engine", "to": to}  # noqa: E731
+    records = [state(0.0, "running"), state(2.0, "paused"), state(5.0, "running"), state(6.0, "alarm"), state(6.5, "running"),
+               state(8.0, "paused"), {"t": 9.0, "event": "run_end", "group": "engine", "outcome": "stopped", "exit_code": 3}]
+    summary = summarize(records)
+    assert summary.held == pytest.approx(3.0 + 0.5 + 1.0)  # the last pause lasts until the end
+    assert "(4.50 s of it paused or at an alarm)" in summary.lines()[0]

@@ -37,7 +37,7 @@ const Summary = (() => {
       : `<p class="hint">no errors</p>`;
     box.innerHTML = `<h3>Run summary: <span class="summary-outcome outcome-${esc(s.outcome)}">${esc(s.outcome)}</span>
       <span class="hint">operations ${s.operations_done}/${s.operations_total}, ${s.retries} retr${s.retries === 1 ? "y" : "ies"}</span></h3>
-      <p>cycle time <b class="summary-cycle">${sec(s.cycle_time)}</b> ${predicted}</p>
+      <p>cycle time <b class="summary-cycle">${sec(s.cycle_time)}</b>${s.held > 0 ? ` <span class="summary-held">(${sec(s.held)} of it paused or at an alarm)</span>` : ""} ${predicted}</p>
       <table class="summary-groups"><thead><tr><th>group</th><th>busy</th><th></th><th>idle</th><th>of it waiting</th><th>functions</th></tr></thead><tbody>${groups}</tbody></table>
       ${waits}${errors}`;
   }
