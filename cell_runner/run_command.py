@@ -82,6 +82,8 @@ async def _run(
         deployment.engine.remainder.hooks.append(recorder.writer.swapped)
     if writer is not None:  # and the trace names the new operations' iterations
         deployment.engine.remainder.hooks.append(writer.swapped)
+    if recorder.recorder is not None:  # and the recording holds the edited file
+        deployment.engine.remainder.hooks.append(recorder.recorder.swapped)
     console = OperatorConsole(deployment.transport.create_node("operator_console"), out, deployment.engine.operator_command, deployment.engine.breakpoint_command,
                               deployment.engine.speed)
     loop = asyncio.get_running_loop()

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from mcap.reader import make_reader
 
 from app_functions.registry import full_catalog
 from cell_runner.cli import main
@@ -121,6 +122,8 @@ async def paused(clock: Clock, app: Application, tmp: Path, steps: int = 2) -> P
     observer.event_sinks += [writer.on_event, checkpoint.on_event]
     engine.remainder.hooks += [checkpoint.swapped, writer.swapped]
     recorder = record_node(deployment.transport.create_node("recorder"), str(tmp / "run.mcap"), app, "nextage-sim", derive_tf=True)
+    assert recorder is not None
+    engine.remainder.hooks.append(recorder.swapped)  # as run wires it: the recording holds the edited file
     check = remainder_check(setup_for("nextage-sim", BackendOptions(robot=app.robot)), None, backend_measure(app.robot, backend, "the simulator"), clock)
     run = asyncio.get_running_loop().create_task(engine.run(app))
     await asyncio.sleep(0)  # the run has begun (its state reset): the step is this run's
@@ -155,6 +158,13 @@ def test_a_safe_edit_is_swapped_in_and_its_operations_run_recorded_with_both_dig
     recorded = []
     read_record(tmp_path / "run.mcap", lambda r: recorded.append(r) if r.get("event") == "swap" else None)
     assert [{k: r[k] for k in digests} for r in recorded] == [digests]
+    with open(tmp_path / "run.mcap", "rb") as stream:
+        reader = make_reader(stream)
+        attached = {a.name: a.data for a in reader.iter_attachments()}
+        described = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert attached["edited/1/safe.xml"] == new.path.read_bytes() and "application/old.xml" in attached
+    edit = described["dual_arm_executive_edit_1"]
+    assert (edit["from_digest"], edit["to_digest"], edit["from_operation"], edit["after_operation"]) == (digests["from_digest"], digests["to_digest"], "3", "hold")
     store = CheckpointStore(tmp_path / "run.checkpoint.sqlite", read_only=True)
     (row,) = store.swaps()
     assert row[1:] == (2, "hold", digests["from_digest"], digests["to_digest"], str(new.path))

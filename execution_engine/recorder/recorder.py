@@ -22,6 +22,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from execution_engine.app_model.model import Application
+from execution_engine.engine.remainder_swap import Swap
 from execution_engine.machine.table import FINISH
 from execution_engine.recorder.definitions import known
 from execution_engine.recorder.writer import McapSink, RecordingStats
@@ -77,6 +79,7 @@ class Recorder:
         self._operation: str | None = None
         self._task: asyncio.Task[None] | None = None
         self._engine_status = node.resolve(ENGINE_STATUS)
+        self._edits = 0  # edits of the paused run recorded so far
 
     def start(self) -> None:
         """Subscribe to what exists now, to every topic a node of this process starts publishing
@@ -200,6 +203,21 @@ class Recorder:
             "cell_sha256": file_digest(cell),
             "software_version": software_version(),
             **fields,
+        })
+
+    def swapped(self, app: Application, swap: Swap) -> None:
+        """A paused run's remainder was edited (the engine's hook, engine/remainder_swap.py): the edited application
+        as an attachment ``edited/<n>/<file>`` and a metadata record ``dual_arm_executive_edit_<n>`` (both digests,
+        where, who); the engine's ``swap`` event is in the recording already."""
+        self._edits += 1
+        stamp = self.node.now_stamp()
+        now_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if Path(app.path).is_file():
+            self.sink.add_attachment(f"edited/{self._edits}/{Path(app.path).name}", "application/xml", Path(app.path).read_bytes(), now_ns)
+        self.sink.add_metadata(f"dual_arm_executive_edit_{self._edits}", {
+            "t": repr(swap.t), "from_operation": str(swap.frontier + 1), "after_operation": swap.operation or "",
+            "from_digest": swap.old_digest, "to_digest": swap.new_digest, "application_path": swap.file,
+            "application_sha256": file_digest(Path(app.path)), "source": swap.source,
         })
 
     async def close(self) -> RecordingStats:
