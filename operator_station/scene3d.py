@@ -27,6 +27,7 @@ from core_functions.cell_robots import CELL_ROBOT, CellRobotModel, cell_robot_mo
 from core_functions.geometry import Pose
 from core_functions.primitives import ExecuteTrajectory, FullBodyMove, MoveCartesian, MoveJoints, MoveRelative, RecordTrajectory
 from core_functions.robots import RobotModel, find_robot
+from execution_engine.app_model import Application
 from execution_engine.app_model.cell import read_cell
 from node_transport.wire import CellSnapshot
 from operator_station.feed import Feed
@@ -173,6 +174,7 @@ class SceneLog:
             return self.run, self.events[start:start + MAX_BATCH], len(self.events)
 
     def set_dry_run(self, dry_run: dict[str, Any]) -> None:
+        """What the view needs of the dry run that refused this run (:func:`keep_dry_run`)."""
         with self.lock:
             self.dry_run = dry_run
 
@@ -187,6 +189,7 @@ class SceneLog:
             return self.run, list(self.joint_names), self.joint_samples[start:start + MAX_BATCH], len(self.joint_samples)
 
     def static(self) -> dict[str, Any]:
+        """Everything but the events and a recording's joint states: what ``GET /api/scene3d`` answers."""
         with self.lock:
             notes = list(self.notes) + ([f"{self.dropped} later goal(s) and located frames are not shown (more than {MAX_EVENTS})"] if self.dropped else [])
             return {"run": self.run, "robots": list(self.robots), "cell": self.cell, "notes": notes, "recorded_joints": len(self.joint_samples),
@@ -206,15 +209,12 @@ def scene_log(feed: Feed) -> SceneLog:
         return log
 
 
-def cell_of_application(app: Any) -> dict[str, Any] | None:
+def cell_of_application(app: Application) -> dict[str, Any] | None:
     """An application's cell as the view draws it (None without a cell): the frames and zones its snapshot holds."""
-    cell = getattr(app, "cell", None)
-    if cell is None:
-        return None
-    return snapshot_cell(cell.to_snapshot(app.robot))
+    return snapshot_cell(app.cell.to_snapshot(app.robot)) if app.cell is not None else None
 
 
-def begin_run(feed: Feed, app: Any) -> None:
+def begin_run(feed: Feed, app: Application) -> None:
     """A run of ``app`` begins on ``feed`` (after :meth:`Feed.begin`): the view shows its robot and cell at once,
     also when the dry run then refuses it and nothing moves."""
     scene_log(feed).begin(feed.snapshot.run, app.robot, cell_of_application(app))
@@ -242,13 +242,13 @@ def head_scene(robot_name: str, cell_path: Path | None) -> tuple[RobotModel | No
     return robot, drawn, notes
 
 
-def keep_dry_run(feed: Feed, report: DryRunReport, app: Any) -> None:
+def keep_dry_run(feed: Feed, report: DryRunReport, app: Application) -> None:
     """The dry run that refused the run of ``app`` on ``feed``: nothing moved, so there is no joint state to draw; the
     view draws the robot where the run would have started (where the dry run started it: where the robot is) with the
     bodies the findings name, and marks the cell frames the calls of each finding work at (``places``: where the
     arms would meet), and says when the dry run met them."""
     start = report.start
-    cell = getattr(app, "cell", None)
+    cell = app.cell
     places: dict[str, list[dict[str, Any]]] = {}
     if cell is not None:
         wanted = {(f.operation, f.group) for f in report.findings}

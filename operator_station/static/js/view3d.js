@@ -14,7 +14,7 @@ const View3D = (() => {
   const state = {
     scene: null, run: -1, robots: [], cell: null, events: [], eventRun: -1, fetching: false, fetchAgain: false,
     findings: [], highlighted: [], showFrames: false, tcpFrames: [], dirty: true, visible: false, ready: false,
-    ends: {}, recorded: null, recordedRun: -1, tcpCache: new Map(), frames: [], renderMs: [], intervals: [], lastFrame: null, frameCount: 0, error: null,
+    ends: {}, recorded: null, recordedRun: -1, tcpCache: new Map(), renderMs: [], intervals: [], lastFrame: null, frameCount: 0, error: null,
   };
   let renderer = null, camera = null, controls = null, world = null, robotsRoot = null, cellRoot = null, marks = null, frameRoot = null;
   const UP = new THREE.Vector3(0, 0, 1);
@@ -94,6 +94,7 @@ const View3D = (() => {
 
   // ------------------------------------------------------------------ the scene of the run
   async function loadScene() {
+    if (!Store.connected) return;  // the station is gone (or not yet there): its feed's snapshot asks again
     let answer;
     try { answer = await Store.get("/api/scene3d"); } catch (e) { return; }
     if (!answer || !answer.ok) return;
@@ -131,6 +132,7 @@ const View3D = (() => {
   }
 
   async function loadEvents() {
+    if (!Store.connected) return;
     if (state.fetching) { state.fetchAgain = true; return; }
     state.fetching = true;
     try {
@@ -336,7 +338,7 @@ const View3D = (() => {
   let reload = null;
   const reloadSoon = () => { if (reload === null) reload = setTimeout(() => { reload = null; loadScene(); }, 200); };
   let lastMessages = "";
-  Store.on("snapshot", () => { state.ends = {}; state.run = -1; reloadSoon(); });
+  Store.on("snapshot", () => { state.ends = {}; state.run = -1; reloadSoon(); });  // each (re)connection sends one
   Store.on("records", (records) => {
     noteEnds(records);
     if (records.some((r) => r.event === "error")) reloadSoon();
@@ -349,7 +351,7 @@ const View3D = (() => {
   Store.on("joints", soon);
   Store.on("cursor", soon);
   Store.on("view", (view) => { state.visible = view === "view3d"; if (state.visible) { resize(); state.dirty = true; } });
-  document.addEventListener("DOMContentLoaded", () => { init(); reloadSoon(); });
+  document.addEventListener("DOMContentLoaded", init);
 
   // What the tests and the benchmark read of the view.
   const api = {
