@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import IO, Any, NoReturn
 
 from app_functions.registry import full_catalog
-from cell_runner import launcher
+from cell_runner import camera_sim_cli, launcher
 from cell_runner.catalog_document import PARAM_TYPE_HELP, XML_USAGE, catalog_document
 from cell_runner.exits import EXIT_INTERNAL, EXIT_INVALID, EXIT_OK, EXIT_STOPPED, EXIT_USAGE, explain
 from cell_runner.run_checks import Refused, check_trajectory_db
@@ -252,6 +252,7 @@ def build_parser(extra: Sequence[ExtraCommand] = ()) -> argparse.ArgumentParser:
     for command in extra:
         command.add_parser(sub)
     launcher.add_parser(sub)  # one process per node, over DDS or rclpy
+    camera_sim_cli.add_parser(sub)  # a mock robot's cameras
     return parser
 
 
@@ -323,6 +324,15 @@ def dispatch(args: argparse.Namespace, out: IO[str], err: IO[str], extra: Sequen
         from cell_runner.run_report import cmd_report  # slow to load: the recording's reader (mcap, its ROS 2 decoder)
 
         return cmd_report(report_settings(args), out, err)
+    if args.command == "camera-sim":
+        try:
+            sim = camera_sim_cli.settings_of(args)
+        except ValueError as error:
+            err.write(f"error: camera-sim: {error}\n")
+            return EXIT_USAGE
+        from cell_runner.camera_sim import cmd_camera_sim  # slow to load: the renderer and the URDF model (numpy, OpenCV, pinocchio)
+
+        return cmd_camera_sim(sim, out, err)
     if args.command == "vision":
         return run_vision(args, out, err)
     if Path(args.file).is_dir():

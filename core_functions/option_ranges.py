@@ -194,7 +194,8 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("primitive_timeout", Range(1.0, 86_400.0, "s"), "machine parameter", "longest a primitive may run"),
     Setting("sync_timeout", Range(0.1, 3600.0, "s"), "machine parameter", "how long partners may take to meet at a barrier"),
     Setting("state_period", Range(0.001, 1.0, "s"), "bridge parameter", "joint_states / tcp_pose period"),
-    Setting("camera_timeout", Range(0.01, 600.0, "s"), "bridge parameter", "longest wait for an image from a ROS camera"),
+    Setting("camera_timeout", Range(0.01, 600.0, "s"), "bridge parameter; ros2-control option camera_timeout", "longest wait for an image from a ROS camera"),
+    Setting("camera_rate", Range(0.1, 60.0, "Hz"), "camera-sim --rate", "images per second each simulated camera publishes"),
 )
 
 #: The settings by (scope, name).

@@ -7,7 +7,9 @@ A goal is checked as joint_trajectory_controller checks it (every joint of the c
 once, points with positions, times increasing, within the URDF's ranges and speeds) and refused by
 ending ABORTED with control_msgs' error code and a message; an accepted one is played in the
 server's clock, positions interpolated linearly between points (a positions-only goal in the
-controller), cancel holds the arm where it is, a new goal preempts the running one.  Test knobs:
+controller), cancel holds the arm where it is, a new goal preempts the running one.  Grippers
+(``gripper``, ``grippers``) serve GripperCommand, tools (``tools``) std_srvs/SetBool, each call kept in
+``grips``/``tool_calls``.  Test knobs: ``tool_refusal`` (the tools say no, with that message),
 ``refuse`` (the next goal ends with that code and text), ``states_on`` (stop publishing), ``corrupt``
 (the next joint state carries that value for a joint).
 """
@@ -28,6 +30,7 @@ from node_transport.qos import JOINT_STATES, ROBOT_DESCRIPTION
 
 FJT = mirrors.action("control_msgs/action/FollowJointTrajectory")
 Gripper = mirrors.action("control_msgs/action/GripperCommand")
+SetBool = mirrors.service("std_srvs/srv/SetBool")
 ControllerState = mirrors.mirror("control_msgs/msg/JointTrajectoryControllerState")
 R = FJT.Result
 
@@ -57,6 +60,14 @@ class Played:
     started: float = 0.0
 
 
+@dataclass(frozen=True)
+class _Playing:
+    begin: float
+    joints: tuple[str, ...]
+    times: tuple[float, ...]  # from 0.0, where the arm was
+    points: tuple[tuple[float, ...], ...]
+
+
 @dataclass
 class FakeDriver:
     node: Node
@@ -66,6 +77,8 @@ class FakeDriver:
     start: Mapping[str, float]
     gripper: str | None = None
     state_period: float = 0.02
+    grippers: Sequence[str] = ()  # more GripperCommand actions (a dual-arm robot's hands)
+    tools: Sequence[str] = ()  # std_srvs/SetBool services switching a tool
     period: float = 0.01
     positions: dict[str, float] = field(init=False)
     limits: dict[str, tuple[float, float, float]] = field(init=False)
@@ -74,6 +87,8 @@ class FakeDriver:
     states_on: bool = True
     corrupt: tuple[str, float] | None = None
     grips: list[float] = field(default_factory=list)
+    tool_calls: list[tuple[str, bool]] = field(default_factory=list)
+    tool_refusal: str | None = None  # the tools answer success=False with this message
     cancels: int = 0
 
     def __post_init__(self) -> None:
@@ -83,19 +98,23 @@ class FakeDriver:
         self.states = self.node.create_publisher(JointState, "/joint_states", JOINT_STATES)
         self.servers: list[ActionServer] = []
         self.active: dict[str, GoalHandle] = {}
+        self.playing: dict[str, _Playing] = {}  # controller -> the trajectory it plays
         self.state_pubs = {}
         for name, joints in self.controllers.items():
             self.servers.append(ActionServer(
                 self.node, FJT, name, execute=self._executor(name, tuple(joints)), accept=lambda goal: None, cancel=self._on_cancel,
             ))
             self.state_pubs[name] = (self.node.create_publisher(ControllerState, name.rsplit("/", 1)[0] + "/controller_state", JOINT_STATES), tuple(joints))
-        if self.gripper is not None:
-            self.servers.append(ActionServer(self.node, Gripper, self.gripper, execute=self._grip, accept=lambda goal: None, cancel=lambda handle: None))
+        for gripper in (*([self.gripper] if self.gripper is not None else []), *self.grippers):
+            self.servers.append(ActionServer(self.node, Gripper, gripper, execute=self._grip, accept=lambda goal: None, cancel=lambda handle: None))
+        self.services = [self.node.create_service(SetBool, name, self._tool(name)) for name in self.tools]
         self.task = asyncio.get_running_loop().create_task(self._publish_states())
 
     async def _publish_states(self) -> None:
         while True:
             if self.states_on:
+                for name in list(self.playing):
+                    self._sample(name)
                 names = tuple(self.positions)
                 values = [self.positions[n] for n in names]
                 if self.corrupt is not None:
@@ -148,30 +167,40 @@ class FakeDriver:
             previous = self.active.get(name)
             if previous is not None:
                 previous.cancel_requested = True  # preempted, as the controller does with a new goal
+                self._sample(name)
             self.active[name] = handle
-            begin = self.clock.now()
             start = [self.positions[n] for n in names]
-            times = (0.0, *played.times)
-            points = (tuple(start), *played.points)
+            playing = self.playing[name] = _Playing(self.clock.now(), names, (0.0, *played.times), (tuple(start), *played.points))
             try:
                 while True:
                     if handle.cancel_requested:
                         played.outcome = "canceled"
                         return R(error_code=R.SUCCESSFUL)
-                    t = self.clock.now() - begin
-                    if t >= times[-1]:
-                        self.positions.update(zip(names, points[-1]))
+                    self._sample(name)
+                    if self.clock.now() - playing.begin >= playing.times[-1]:
                         played.outcome = "succeeded"
                         return R(error_code=R.SUCCESSFUL)
-                    k = max(i for i in range(len(times)) if times[i] <= t)
-                    u = (t - times[k]) / (times[k + 1] - times[k])
-                    self.positions.update((n, a + u * (b - a)) for n, a, b in zip(names, points[k], points[k + 1]))
                     await self.clock.sleep(self.period)
             finally:
                 if self.active.get(name) is handle:
                     del self.active[name]
+                if self.playing.get(name) is playing:
+                    self._sample(name)  # held where it is now
+                    del self.playing[name]
 
         return execute
+
+    def _sample(self, name: str) -> None:
+        """The positions of controller ``name``'s trajectory now: as the controller's update loop, the states
+        published at a time are where the trajectory is at that time, however late the server's loop runs."""
+        playing = self.playing.get(name)
+        if playing is None:
+            return
+        times, points = playing.times, playing.points
+        t = min(max(self.clock.now() - playing.begin, 0.0), times[-1])
+        k = min(max(i for i in range(len(times)) if times[i] <= t), len(times) - 2)
+        u = min(1.0, (t - times[k]) / (times[k + 1] - times[k]))
+        self.positions.update((n, a + u * (b - a)) for n, a, b in zip(playing.joints, points[k], points[k + 1]))
 
     async def _grip(self, handle: GoalHandle) -> Any:
         target = handle.goal.command.position
@@ -179,7 +208,18 @@ class FakeDriver:
         await self.clock.sleep(0.3)
         return Gripper.Result(position=target, reached_goal=True)
 
+    def _tool(self, name: str) -> Any:
+        async def switch(request: Any) -> Any:
+            self.tool_calls.append((name, bool(request.data)))
+            if self.tool_refusal is not None:
+                return SetBool.Response(success=False, message=self.tool_refusal)
+            return SetBool.Response(success=True, message="on" if request.data else "off")
+
+        return switch
+
     async def close(self) -> None:
+        for service in self.services:
+            service.destroy()
         self.task.cancel()
         await asyncio.gather(self.task, return_exceptions=True)
         for server in self.servers:

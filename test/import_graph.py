@@ -44,6 +44,7 @@ HEAVY_MODULES = {
     "cell_runner.run_command": "numpy",  # run: back ends, simulators, dry run (numpy, pinocchio, coal: 0.5 s)
     "cell_runner.dry_run.check": "numpy",  # validate --simulate: the dry run (numpy, pinocchio, coal)
     "cell_runner.vision_detect": "cv2",  # vision detect: OpenCV (0.2 s)
+    "cell_runner.camera_sim": "numpy",  # camera-sim: the renderer and the URDF model (numpy, OpenCV, pinocchio)
     "cell_runner.run_report": "mcap",  # report: the recording's reader and its ROS 2 decoder (0.05 s)
     "robot_bridges.kuka_rsi.backend": "numpy",  # a KUKA dry run's clock: the RSI back end (0.05 s) left out of other runs
     "operator_station.cli": "numpy",  # studio: sessions, simulators, dry run (numpy, pinocchio, coal)

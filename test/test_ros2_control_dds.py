@@ -7,20 +7,19 @@ URDF's speeds.  In real time (DDS has no simulated clock): the demonstrator's 11
 """
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from dds_domain import domain_env, stop_group
 from fake_fjt_server import FakeDriver, moved_too_fast, urdf_limits
+from fjt_dds import base_env, driver_on_dds
 
+from node_transport.clock import Clock
+from node_transport.port import Node
 from core_functions.robots import KUKA_KR
-from node_transport.clock import Clock, real_clock, run_with_clock
-from node_transport.dds import DdsTransport
 
 ROOT = Path(__file__).resolve().parents[1]
 URDF = (ROOT / "robot_bridges" / "kuka_rsi" / "urdf" / "kuka_kr6_r900.urdf").read_text()
@@ -35,52 +34,26 @@ def env() -> Iterator[dict[str, str]]:
         yield claimed
 
 
-def serve(env: dict[str, str], done: threading.Event, started: threading.Event, out: dict[str, FakeDriver]) -> None:
-    async def main(clock: Clock) -> None:
-        transport = DdsTransport(clock, [], env=env)
-        driver = FakeDriver(transport.create_node("controller_manager"), clock, URDF, {CONTROLLER: KUKA_KR.group("arm").joint_names},
-                            KUKA_KR.poses["home"], gripper=GRIPPER)
-        out["driver"] = driver
-        started.set()
-        try:
-            deadline = clock.now() + BOUND + 10.0
-            while not done.is_set() and clock.now() < deadline:
-                await clock.sleep(0.05)
-        finally:
-            await driver.close()
-            await transport.shutdown()
-
-    run_with_clock(main, real_clock())
-
-
 def test_run_with_the_ros2_control_back_end_finishes_against_a_dds_controller(env: dict[str, str], tmp_path: Path) -> None:
-    done, started, out = threading.Event(), threading.Event(), {}
-    server = threading.Thread(target=serve, args=(env, done, started, out), daemon=True)
-    server.start()
-    try:
-        assert started.wait(30.0), "the stand-in controller did not start"
+    def build(node: Node, clock: Clock) -> FakeDriver:
+        return FakeDriver(node, clock, URDF, {CONTROLLER: KUKA_KR.group("arm").joint_names}, KUKA_KR.poses["home"], gripper=GRIPPER)
+
+    with driver_on_dds(env, build, BOUND) as driver:
         command = [
             sys.executable, "-m", "execution_engine", "run", str(ROOT / "apps_xml" / "kuka_rsi_demo.xml"), "--robot", "ros2-control",
             "--backend-option", f"arm.controller={CONTROLLER}", "--backend-option", f"arm.gripper={GRIPPER}",
             "--trajectory-db", str(tmp_path / "trajectories.sqlite"),
         ]
-        process = subprocess.Popen(command, cwd=tmp_path, env={**_base_env(), **env, "PYTHONPATH": str(ROOT)}, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        process = subprocess.Popen(command, cwd=tmp_path, env={**base_env(), **env, "PYTHONPATH": str(ROOT)}, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                    start_new_session=True)
         try:
             output, _ = process.communicate(timeout=BOUND)
         finally:
             stop_group(process)
-    finally:
-        done.set()
-        server.join(30.0)
     assert process.returncode == 0, output
     assert "dry run of kuka_rsi_demo on ros2-control: no problems found" in output
     assert "application kuka_rsi_demo: FINISHED" in output and "operations: 8/8" in output
-    driver = out["driver"]
     assert len(driver.goals) == 9 and all(g.outcome == "succeeded" for g in driver.goals)
     assert [bad for g in driver.goals for bad in moved_too_fast(g, urdf_limits(URDF))] == []
     assert driver.grips == [0.08, 0.0, 0.08]  # the default open and closed positions
 
-
-def _base_env() -> dict[str, str]:
-    return {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "CYCLONEDDS", "RMW_"))}

@@ -13,8 +13,9 @@ remapping apply as usual; sensor-data QoS (best effort, as camera drivers publis
 from __future__ import annotations
 
 import asyncio
+import math
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import cv2
@@ -108,9 +109,10 @@ def from_messages(image: Image, info: CameraInfo) -> Frame:
 class ImagePublisher:
     """The capture hook that publishes every image taken, with its camera_info."""
 
-    def __init__(self, node: Node, cameras: Iterable[str]) -> None:
+    def __init__(self, node: Node, cameras: Iterable[str] | Mapping[str, str]) -> None:
+        topics = dict(cameras) if isinstance(cameras, Mapping) else {c: c for c in cameras}  # camera -> its topic prefix
         self._pubs: dict[str, tuple[Publisher[Image], Publisher[CameraInfo]]] = {
-            c: (node.create_publisher(Image, image_topic(c), SENSOR), node.create_publisher(CameraInfo, info_topic(c), SENSOR)) for c in cameras
+            c: (node.create_publisher(Image, image_topic(t), SENSOR), node.create_publisher(CameraInfo, info_topic(t), SENSOR)) for c, t in topics.items()
         }
 
     def __call__(self, spec: CameraSpec, pose: Pose, frame: Frame) -> None:
@@ -123,43 +125,56 @@ class ImagePublisher:
 
 
 class RosCamera(CameraSource):
-    """Images from ``<camera>/image_raw`` + ``<camera>/camera_info`` topics (a real camera driver, or a simulator publishing)."""
+    """Images from ``<camera>/image_raw`` + ``<camera>/camera_info`` topics (a real camera driver, or a simulator publishing).
 
-    def __init__(self, node: Node, cameras: Iterable[str], timeout: float = 2.0) -> None:
+    ``cameras`` maps each camera to its topic prefix (default: its name).  With ``fresh`` an image
+    stamped before the capture was asked for is skipped: it may have been exposed while the arm was
+    still on its way (an unstamped image, stamp 0, is taken)."""
+
+    def __init__(self, node: Node, cameras: Iterable[str] | Mapping[str, str], timeout: float = 2.0, fresh: bool = False) -> None:
         if not timeout > 0:
             raise ValueError(f"camera_timeout must be > 0 s, got {timeout}")
         self.node = node
         self.clock: Clock = node.clock
         self.timeout = timeout
+        self.fresh = fresh
+        self.topics = dict(cameras) if isinstance(cameras, Mapping) else {c: c for c in cameras}
         self._info: dict[str, CameraInfo] = {}
-        self._waiting: dict[str, deque[asyncio.Future[Image]]] = {}
+        self._waiting: dict[str, deque[tuple[asyncio.Future[Image], float]]] = {}
         self.rejected: list[str] = []
-        for camera in cameras:
+        for camera, prefix in self.topics.items():
             self._waiting[camera] = deque()
-            node.create_subscription(Image, image_topic(camera), lambda m, c=camera: self._on_image(c, m), SENSOR)
-            node.create_subscription(CameraInfo, info_topic(camera), lambda m, c=camera: self._info.__setitem__(c, m), SENSOR)
+            node.create_subscription(Image, image_topic(prefix), lambda m, c=camera: self._on_image(c, m), SENSOR)
+            node.create_subscription(CameraInfo, info_topic(prefix), lambda m, c=camera: self._info.__setitem__(c, m), SENSOR)
 
     def _on_image(self, camera: str, msg: Image) -> None:
         waiting = self._waiting[camera]
-        while waiting:
-            future = waiting.popleft()
-            if not future.done():
-                future.set_result(msg)
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        for entry in list(waiting):
+            future, not_before = entry
+            if future.done() or stamp == 0.0 or stamp >= not_before:
+                waiting.remove(entry)
+                if not future.done():
+                    future.set_result(msg)
 
     async def capture(self, spec: CameraSpec, pose: Pose) -> Frame:
         waiting = self._waiting.get(spec.name)
-        topic = self.node.resolve(image_topic(spec.name))
         if waiting is None:
             raise CaptureError(f"no image topic for camera {spec.name!r} (cameras: {', '.join(self._waiting)})")
+        prefix = self.topics[spec.name]
+        topic = self.node.resolve(image_topic(prefix))
         future: asyncio.Future[Image] = asyncio.get_running_loop().create_future()
-        waiting.append(future)
+        waiting.append((future, self.node.now_stamp().to_seconds() if self.fresh else -math.inf))
         try:
             image = await self.clock.wait_for(future, self.timeout)
         except asyncio.TimeoutError:
-            raise CaptureError(f"no image on {topic} within {self.timeout:g} s") from None
+            raise CaptureError(f"no image on {topic} within {self.timeout:g} s{' stamped after the capture was asked for' if self.fresh else ''}") from None
+        finally:
+            for entry in [e for e in waiting if e[0] is future]:
+                waiting.remove(entry)
         info = self._info.get(spec.name)
         if info is None:
-            raise CaptureError(f"an image on {topic} but no camera_info on {self.node.resolve(info_topic(spec.name))}")
+            raise CaptureError(f"an image on {topic} but no camera_info on {self.node.resolve(info_topic(prefix))}")
         try:
             return from_messages(image, info)
         except ValueError as error:

@@ -24,6 +24,10 @@ class CameraSpec:
     optics: Optics
     max_range: float  # m: farther features are not found
 
+    def optical_pose(self, link: Pose) -> Pose:
+        """Where the optical frame is when the link is at ``link`` (world): every back end places its cameras so."""
+        return link.compose(self.mount)
+
 
 def body_mount(x: float, y: float, z: float) -> Pose:
     """A camera at (x, y, z) of a link looking along the link's x axis (REP 103 body -> optical)."""

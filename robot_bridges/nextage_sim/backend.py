@@ -322,7 +322,7 @@ class NextageSimBackend(RobotBackend):
         with self._jobs.hold(frozenset({group}), primitive) as job:
             fault = self._take_fault(job, group)
             # The images are taken now, with the cameras where the kinematics put them now.
-            placed = [(cam, Pose.from_matrix(self.model.frame_matrix(self._q, cam.link) @ cam.mount.matrix())) for cam in cameras]
+            placed = [(cam, cam.optical_pose(Pose.from_matrix(self.model.frame_matrix(self._q, cam.link)))) for cam in cameras]
             observation: VisionResult | BridgeError
             try:
                 checks.check_range(primitive, primitive.nominal or self._vision.frame_pose(primitive.target), placed)

@@ -14,8 +14,10 @@ trajectory a second time; stop cancels and abandons.  FollowJointTrajectory has 
 running trajectory, so a change of the speed override does what a pause and resume do: it cancels the
 goal, the arm comes to rest on its path, and the rest of the path goes again from where it stands,
 timed at the new share of the speed (0 %: it waits on the path until the override is raised).  Grippers are driven through
-control_msgs/action/GripperCommand where a group names one; other end effectors, vision and I/O
-are not available on such a robot and say so (in the dry run: at the call's line, before a run).
+control_msgs/action/GripperCommand where a group names one, a tool (``tool_on``/``tool_off``) through the
+std_srvs/srv/SetBool service a group names; vision through the robot's cameras on ROS topics with
+``camera_source=ros`` (:mod:`.cameras`; the dry run renders the cell instead).  Anything else, and these
+without their option, is not available on such a robot and says so (in the dry run: at the call's line, before a run).
 """
 from __future__ import annotations
 
@@ -43,11 +45,17 @@ from core_functions.primitives import (
     RecordTrajectory,
     SetSpeed,
     TrajectoryResult,
+    Vision,
+    VisionResult,
     describe,
 )
 from core_functions.robots import RobotModel
+from node_transport.wire import CellSnapshot
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind, JointLimits, RobotBackend  # JointLimits: the port's signature
+from robot_bridges.camera.sources import CameraSource
+from robot_bridges.camera.vision import CameraVision
+from robot_bridges.ros2_control.cameras import camera_pose
 from robot_bridges.ros2_control.feed import JointFeed
 from robot_bridges.ros2_control.link import CANCELED, SUCCEEDED, ControllerLink
 from robot_bridges.ros2_control.model import Chain, UrdfError, UrdfModel
@@ -58,6 +66,7 @@ from robot_bridges.ros2_control.planning import Limits, Timed, line_path, line_p
 SETTLE_TIME = 0.1
 STILL = 1e-4
 GRIPPER_ACTIONS = {"gripper_open": "gripper_open", "gripper_close": "gripper_closed"}
+TOOL_ACTIONS = {"tool_on": True, "tool_off": False}
 
 
 @dataclass
@@ -87,6 +96,9 @@ class Ros2ControlBackend(RobotBackend):
         self.runs = {g.group: _GroupRun() for g in settings.groups}
         self.holder: dict[str, str] = {}  # a group moved by another's full-body move -> that group
         self._cancels: set[asyncio.Task[None]] = set()  # the cancels a change of the speed override sent
+        #: The robot's cameras with camera_source=ros (:meth:`use_cameras`), else None: vision is not available.
+        self.cameras: CameraVision | None = None
+        self._cell: CellSnapshot | None = None
 
     @property
     def groups(self) -> tuple[str, ...]:
@@ -108,6 +120,18 @@ class Ros2ControlBackend(RobotBackend):
 
     async def close(self) -> None:
         await self.link.close()
+
+    def use_cameras(self, source: CameraSource) -> None:
+        """Take the robot's cameras' images from ``source`` (ROS topics, or the renderer in the dry run)."""
+        assert self.settings.cameras is not None
+        self.cameras = CameraVision(source, None, self.settings.cameras.specs)
+        if self._cell is not None:
+            self.cameras.set_cell(self._cell)
+
+    def set_cell(self, cell: CellSnapshot) -> None:
+        self._cell = cell
+        if self.cameras is not None:
+            self.cameras.set_cell(cell)
 
     # ------------------------------------------------------------------ where the robot is
     def _positions(self) -> dict[str, float]:
@@ -265,8 +289,31 @@ class Ros2ControlBackend(RobotBackend):
             return await self.measure(group.group)
         if isinstance(primitive, EndEffector):
             return await self._end_effector(group, primitive)
+        if isinstance(primitive, Vision):
+            return await self._look(group, primitive)
         raise BridgeError(FaultKind.UNSUPPORTED, f"{what} is not available on this robot: the ros2-control back end drives joints "
-                          "through FollowJointTrajectory and grippers through GripperCommand")
+                          "through FollowJointTrajectory, grippers through GripperCommand, tools through SetBool and cameras on ROS topics")
+
+    async def _look(self, group: GroupSettings, primitive: Vision) -> VisionResult:
+        """Images of the cameras where the URDF's kinematics put them now (a hand camera moves with its arm,
+        a camera whose link is a cell frame stands there), then located as on every back end."""
+        if self.cameras is None or self.settings.cameras is None:
+            raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: {describe(primitive)} is not available on this robot: no cameras "
+                              "(give --backend-option camera_source=ros: the cameras' <camera>/image_raw and camera_info topics)")
+        name = primitive.camera or self.robot.group(group.group).camera
+        try:
+            cameras = self.settings.cameras.taking_part(name)
+        except KeyError:
+            raise BridgeError(FaultKind.VISION, f"{group.group}: no camera {name!r} (cameras: {', '.join(self.settings.cameras.specs)})") from None
+        assert self.model is not None
+        q = self._q()
+        placed = []
+        for cam in cameras:
+            pose = camera_pose(cam, self.model, q, self._cell)
+            if pose is None:
+                raise BridgeError(FaultKind.VISION, f"{cam.name}: its link {cam.link!r} is neither a link of the URDF nor a frame of the cell")
+            placed.append((cam, pose))
+        return await self.cameras.observe(primitive, placed)
 
     def _joint_target(self, group: GroupSettings, primitive: MoveJoints) -> np.ndarray:
         values = np.array(primitive.positions, dtype=float)
@@ -449,10 +496,16 @@ class Ros2ControlBackend(RobotBackend):
             left -= step
 
     async def _end_effector(self, group: GroupSettings, primitive: EndEffector) -> EndEffectorResult:
+        if primitive.action in TOOL_ACTIONS:
+            if group.tool_service is None:
+                raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: {primitive.action} is not available on this robot: no tool service is configured "
+                                  f"(give its std_srvs/srv/SetBool service with --backend-option {group.group}.tool_service=NAME)")
+            await self.link.set_tool(group, TOOL_ACTIONS[primitive.action])
+            return EndEffectorResult()
         option = GRIPPER_ACTIONS.get(primitive.action)
         if option is None:
             raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: end effector action {primitive.action} is not available on this robot "
-                              "(the ros2-control back end drives grippers only: gripper_open, gripper_close)")
+                              "(the ros2-control back end drives grippers and tools: gripper_open, gripper_close, tool_on, tool_off)")
         if group.gripper is None:
             raise BridgeError(FaultKind.UNSUPPORTED, f"{group.group}: {primitive.action} is not available on this robot: no gripper is configured "
                               f"(give its control_msgs/action/GripperCommand action with --backend-option {group.group}.gripper=NAME)")

@@ -4,7 +4,8 @@
 needed, rmw_cyclonedds_cpp's wire -- in ``ROS_DOMAIN_ID``; ``transport=ros`` as an rclpy node (inside a
 sourced ROS 2).  The link has a transport of its own: in ``run`` the cell's nodes talk in-process
 while the back end talks to the robot's driver on the graph.  ``transport=model`` is the dry run's:
-the URDF model is the robot (the URDF from ``urdf=FILE``, or read once from ``/robot_description``).
+the URDF model is the robot (the URDF from ``urdf=FILE``, or read once from ``/robot_description``),
+and with ``camera_source=ros`` its cameras render the cell as the Nextage simulator's do.
 """
 from __future__ import annotations
 
@@ -22,6 +23,9 @@ from node_transport.port import Transport, poll_until
 from node_transport.qos import ROBOT_DESCRIPTION
 from node_transport.ros import RosTransport  # rclpy itself is imported only when one starts
 from robot_bridges.backend import BackendOptions
+from robot_bridges.camera.render import Scene
+from robot_bridges.camera.ros_camera import RosCamera
+from robot_bridges.camera.sources import CameraSource, RenderedCamera
 from robot_bridges.ros2_control.backend import Ros2ControlBackend, group_chains
 from robot_bridges.ros2_control.link import GraphLink, ModelLink
 from robot_bridges.ros2_control.model import UrdfModel
@@ -91,4 +95,10 @@ async def create(clock: Clock, options: BackendOptions) -> Ros2ControlBackend:
         link: GraphLink | ModelLink = ModelLink(clock, settings, urdf, start_pose(options.robot, settings, model))
     else:
         link = OwnTransportLink(graph_transport(settings.transport, clock), settings)
-    return Ros2ControlBackend(clock, options.robot, settings, link)
+    backend = Ros2ControlBackend(clock, options.robot, settings, link)
+    if settings.camera_source == "ros":
+        # the dry run renders the cell as a simulator's cameras do; a run takes the images the topics bring
+        source: CameraSource = (RenderedCamera(lambda: backend.cameras.scene() if backend.cameras else Scene(), options.seed, clock.now)
+                                if isinstance(link, ModelLink) else RosCamera(link.node, settings.camera_topics, settings.camera_timeout, fresh=True))
+        backend.use_cameras(source)
+    return backend

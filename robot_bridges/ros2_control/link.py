@@ -20,7 +20,7 @@ from node_transport.action import GoalStatus
 from node_transport.action_client import ActionClient, ActionError, ClientGoal
 from node_transport.clock import Clock
 from node_transport.msgs import JointState, String
-from node_transport.port import Node, poll_until
+from node_transport.port import Node, ServiceUnavailable, poll_until
 from node_transport.qos import ROBOT_DESCRIPTION, Durability, History, QoS, Reliability
 from robot_bridges.backend import BridgeError, FaultKind
 from robot_bridges.ros2_control.feed import JointFeed
@@ -30,6 +30,7 @@ from robot_bridges.trajectory_goal import FollowJointTrajectory, point_message
 
 GripperCommand = mirrors.action("control_msgs/action/GripperCommand")
 GripperCommandMsg = mirrors.mirror("control_msgs/msg/GripperCommand")
+SetBool = mirrors.service("std_srvs/srv/SetBool")
 JointTrajectory = mirrors.mirror("trajectory_msgs/msg/JointTrajectory")
 ControllerState = mirrors.mirror("control_msgs/msg/JointTrajectoryControllerState")
 #: /joint_states as joint_state_broadcaster offers it (reliable) or a driver (best effort): best effort takes both.
@@ -39,6 +40,7 @@ SUCCEEDED, CANCELED = "succeeded", "canceled"
 #: s between the checks of a running motion (the joint states' age, a pause)
 WATCH_PERIOD = 0.02
 GRIP_MODEL_TIME = 0.5  # s a modelled gripper takes
+TOOL_MODEL_TIME = 0.1  # s a modelled tool's service takes to answer
 
 
 class ControllerLink(ABC):
@@ -66,6 +68,10 @@ class ControllerLink(ABC):
     @abstractmethod
     async def grip(self, group: GroupSettings, position: float) -> None:
         """Move the group's gripper to ``position`` (m) and wait until it is there or holds a part."""
+
+    @abstractmethod
+    async def set_tool(self, group: GroupSettings, on: bool) -> None:
+        """Switch the group's tool on or off through its SetBool service; BridgeError with the driver's words if it says no."""
 
     def trouble(self) -> str | None:
         """Why the robot's state cannot be trusted now (a bad or stale joint_states), or None."""
@@ -95,6 +101,7 @@ class GraphLink(ControllerLink):
         self.node, self.settings, self.clock = node, settings, node.clock
         self.controllers: dict[str, ActionClient] = {}
         self.grippers: dict[str, ActionClient] = {}
+        self.tools: dict[str, Any] = {}  # group -> its tool's SetBool client
         self.controller_joints: dict[str, tuple[str, ...]] = {}
         self.running: dict[str, _Running] = {}
         self.cancel_pending: set[str] = set()  # a cancel that came while the goal was on its way
@@ -125,6 +132,8 @@ class GraphLink(ControllerLink):
                 self.node.create_subscription(ControllerState, state_topic, self._state_keeper(group.group), STATE_QOS)
             if group.gripper is not None:
                 self.grippers[group.group] = ActionClient(self.node, GripperCommand, group.gripper)
+            if group.tool_service is not None:
+                self.tools[group.group] = self.node.create_client(SetBool, group.tool_service)
         timeout = self.settings.start_timeout
         for group in self.settings.groups:
             if not await self.controllers[group.group].wait_for_server(timeout):
@@ -132,6 +141,9 @@ class GraphLink(ControllerLink):
                                   f"(option {group.group}.controller): is the controller spawned and active?")
             if group.group in self.grippers and not await self.grippers[group.group].wait_for_server(timeout):
                 raise BridgeError(FaultKind.CONNECTION, f"{group.group}: no GripperCommand server at {group.gripper} in {timeout:g} s (option {group.group}.gripper)")
+            if group.group in self.tools and not await self.tools[group.group].wait_for_service(timeout):
+                raise BridgeError(FaultKind.CONNECTION, f"{group.group}: no std_srvs/srv/SetBool service at {group.tool_service} in {timeout:g} s "
+                                  f"(option {group.group}.tool_service)")
         if not await poll_until(self.clock, lambda: feed.latest is not None or feed.fault is not None, timeout, WATCH_PERIOD):
             joints = sorted(feed.speeds)
             raise BridgeError(FaultKind.CONNECTION, f"no /joint_states with the joints {', '.join(joints)} in {timeout:g} s: is joint_state_broadcaster "
@@ -217,6 +229,17 @@ class GraphLink(ControllerLink):
             raise BridgeError(FaultKind.CONTROLLER, f"{group.group}: {group.gripper} did not reach {position:g} m (ended at {answer.position:g} m)")
 
 
+    async def set_tool(self, group: GroupSettings, on: bool) -> None:
+        what = f"{group.group}: {group.tool_service}"
+        try:
+            answer = await self.tools[group.group].call(SetBool.Request(data=on), self.settings.result_timeout)
+        except (ServiceUnavailable, TimeoutError, asyncio.TimeoutError) as error:
+            raise BridgeError(FaultKind.CONNECTION, f"{what} did not answer the tool {'on' if on else 'off'} in {self.settings.result_timeout:g} s "
+                              f"(result_timeout): {error or type(error).__name__}") from None
+        if not answer.success:
+            raise BridgeError(FaultKind.CONTROLLER, f"{what} refused the tool {'on' if on else 'off'}: {answer.message or 'no reason given'}")
+
+
 class ModelLink(ControllerLink):
     """The URDF model as the robot, on ``clock``: the dry run's link (never a controller)."""
 
@@ -255,6 +278,9 @@ class ModelLink(ControllerLink):
 
     async def cancel(self, group: GroupSettings) -> None:
         self.cancelled.add(group.group)
+
+    async def set_tool(self, group: GroupSettings, on: bool) -> None:
+        await self.clock.sleep(TOOL_MODEL_TIME)
 
     async def grip(self, group: GroupSettings, position: float) -> None:
         if not math.isfinite(position):

@@ -8,19 +8,24 @@ so both refuse a value in the same one line naming the option.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 from core_functions import option_ranges
 from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
 from robot_bridges.backend import BackendOptions
+from robot_bridges.camera.spec import parse_mount
+from robot_bridges.ros2_control.cameras import KNOWN, RobotCameras, robot_cameras
 
 BACKEND = "ros2-control"
 TRANSPORTS = ("dds", "ros", "model")  # model: no controller, the URDF model follows the trajectories (the dry run)
 #: name: default (the range is core_functions.option_ranges')
-NUMBERS: dict[str, float] = {"acceleration_time": 0.5, "state_timeout": 0.5, "start_timeout": 10.0, "goal_tolerance": 0.01, "result_timeout": 5.0}
-GLOBAL_TEXTS = ("transport", "urdf", "description")
-GROUP_TEXTS = ("controller", "joints", "tip", "tool", "gripper")
+NUMBERS: dict[str, float] = {"acceleration_time": 0.5, "state_timeout": 0.5, "start_timeout": 10.0, "goal_tolerance": 0.01, "result_timeout": 5.0,
+                             "camera_timeout": 2.0}
+GLOBAL_TEXTS = ("transport", "urdf", "description", "camera_source")
+GROUP_TEXTS = ("controller", "joints", "tip", "tool", "gripper", "tool_service")
+CAMERA_TEXTS = ("topic", "mount")  # per camera: CAMERA.topic, CAMERA.mount
 #: per group: name -> (default, the option_ranges setting it is checked against)
 GROUP_NUMBERS: dict[str, tuple[float, str]] = {
     "gripper_open": (0.08, "gripper_position"),
@@ -41,6 +46,7 @@ class GroupSettings:
     tip: str | None
     tool: Pose  # the TCP in the tip frame
     gripper: str | None
+    tool_service: str | None  # the std_srvs/SetBool service switching the group's tool (tool_on, tool_off)
     gripper_open: float
     gripper_closed: float
     gripper_effort: float
@@ -57,6 +63,10 @@ class Ros2ControlSettings:
     start_timeout: float
     goal_tolerance: float
     result_timeout: float
+    camera_timeout: float = 2.0
+    camera_source: str = ""  # "": no cameras (vision not available); "ros": <topic>/image_raw + camera_info
+    cameras: RobotCameras | None = None  # with camera_source=ros: the robot's cameras, mounts as given
+    camera_topics: Mapping[str, str] = field(default_factory=dict)  # camera -> its topic prefix (relative by default)
 
     def group(self, name: str) -> GroupSettings:
         for settings in self.groups:
@@ -69,6 +79,9 @@ def known_options(robot: RobotModel) -> list[str]:
     names = [*GLOBAL_TEXTS, *NUMBERS]
     for group in robot.group_names:
         names += [f"{group}.{key}" for key in (*GROUP_TEXTS, *GROUP_NUMBERS)]
+    cameras = robot_cameras(robot)
+    for camera in cameras.specs if cameras is not None else ():
+        names += [f"{camera}.{key}" for key in CAMERA_TEXTS]
     return names
 
 
@@ -84,9 +97,10 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> Ros2ControlSet
     extra = dict(options.extra)
     unknown = sorted(set(extra) - set(known_options(robot)))
     if unknown:
-        groups = ", ".join(robot.group_names)
+        groups, cameras = ", ".join(robot.group_names), robot_cameras(robot)
         raise ValueError(f"{BACKEND}: unknown option(s) {', '.join(unknown)} (known: {', '.join((*GLOBAL_TEXTS, *NUMBERS))}, "
-                         f"and per group ({groups}) GROUP.{', GROUP.'.join((*GROUP_TEXTS, *GROUP_NUMBERS))})")
+                         f"per group ({groups}) GROUP.{', GROUP.'.join((*GROUP_TEXTS, *GROUP_NUMBERS))}"
+                         + (f", and per camera ({', '.join(cameras.specs)}) CAMERA.topic, CAMERA.mount)" if cameras is not None else ")"))
     for what, given in (("--host", options.host), ("--port", options.port), ("--rsi-listen", options.rsi_listen)):
         if given is not None:
             raise ValueError(f"{BACKEND}: takes no {what}: it reaches the robot through the ROS graph (transport=dds or ros, ROS_DOMAIN_ID)")
@@ -109,7 +123,31 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> Ros2ControlSet
             raise ValueError(f"{BACKEND}: urdf={urdf}: {error.strerror or error}") from None
     numbers = {key: _number(extra, key, default, key) for key, default in NUMBERS.items()}
     groups = tuple(_group(robot, name, extra) for name in robot.group_names)
-    return Ros2ControlSettings(transport, urdf, description, groups, **numbers)
+    source, cameras, topics = _cameras(robot, extra)
+    return Ros2ControlSettings(transport, urdf, description, groups, **numbers, camera_source=source, cameras=cameras, camera_topics=topics)
+
+
+def _cameras(robot: RobotModel, extra: dict[str, str]) -> tuple[str, RobotCameras | None, dict[str, str]]:
+    """camera_source and the per-camera options; the cameras only with camera_source=ros."""
+    source = extra.get("camera_source", "")
+    known = robot_cameras(robot)
+    given = sorted(k for k in extra if k.split(".", 1)[0] in (known.specs if known else ()))
+    if source not in ("", "ros"):
+        raise ValueError(f"{BACKEND}: camera_source={source!r} must be ros (the cameras' <camera>/image_raw and camera_info topics) or empty (no cameras)")
+    if not source:
+        if given:
+            raise ValueError(f"{BACKEND}: {given[0]} needs camera_source=ros (without it the robot has no cameras)")
+        return "", None, {}
+    if known is None:
+        raise ValueError(f"{BACKEND}: camera_source=ros: no camera model of robot {robot.name} (cameras are known for: {', '.join(KNOWN)})")
+    topics = {}
+    for camera in known.specs:
+        topic = extra.get(f"{camera}.topic", camera)
+        if not topic or any(c.isspace() for c in topic) or topic.endswith("/") or "//" in topic:
+            raise ValueError(f"{BACKEND}: {camera}.topic={topic!r} is not a topic prefix (e.g. {camera} or /cell/{camera}: its image_raw and camera_info are under it)")
+        topics[camera] = topic
+    mounts = {c: parse_mount(extra[f"{c}.mount"], f"{BACKEND}: {c}.mount") for c in known.specs if f"{c}.mount" in extra}
+    return source, known.mounted(mounts), topics
 
 
 def _group(robot: RobotModel, group: str, extra: dict[str, str]) -> GroupSettings:
@@ -122,9 +160,12 @@ def _group(robot: RobotModel, group: str, extra: dict[str, str]) -> GroupSetting
         raise ValueError(f"{BACKEND}: {group}.joints must name {len(app_joints)} different joints, the controller's names of "
                          f"{', '.join(app_joints)} in that order; got {len(joints)}")
     gripper = extra.get(f"{group}.gripper") or None
+    tool_service = extra.get(f"{group}.tool_service") or None
+    if tool_service is not None and (any(c.isspace() for c in tool_service) or tool_service.endswith("/")):
+        raise ValueError(f"{BACKEND}: {group}.tool_service={tool_service!r} is not a service name (e.g. /{group}_tool/set, a std_srvs/srv/SetBool)")
     numbers = {key: _number(extra, f"{group}.{key}", default, setting) for key, (default, setting) in GROUP_NUMBERS.items()}
     tool = _tool(group, extra.get(f"{group}.tool", "0 0 0 0 0 0"))
-    return GroupSettings(group, controller, joints, app_joints, extra.get(f"{group}.tip") or None, tool, gripper, **numbers)
+    return GroupSettings(group, controller, joints, app_joints, extra.get(f"{group}.tip") or None, tool, gripper, tool_service, **numbers)
 
 
 def _tool(group: str, text: str) -> Pose:
