@@ -3,15 +3,17 @@ from __future__ import annotations
 
 import asyncio
 import io
+import shutil
 import sqlite3
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from app_builder import Cell, make_app
-from killed_runs import records, run_and_kill
+from killed_runs import env, records, run_and_freeze
 from app_functions.registry import full_catalog
 from cell_runner.cli import main
 from core_functions.primitives import TrajectoryResult
@@ -31,23 +33,47 @@ TRACE_LINES = 480  # about what a whole rivet run writes
 
 def required() -> set[tuple[str, str]]:
     catalog = full_catalog()
-    app = load_application(RIVET, catalog)
+    app = load_application(ROOT / RIVET, catalog)
     return {(op.id, g) for op in app.operations for g, call in op.calls.items() if not sits_out(app, catalog, call)}
 
 
-def start_and_kill(folder: Path, after_lines: int) -> Path:
-    """Start a run in its own process and kill -9 it once its trace holds ``after_lines`` lines."""
-    return run_and_kill(RIVET, folder, lambda trace: trace.count(b"\n") >= after_lines)
+def lines(count: int) -> Callable[[bytes], bool]:
+    return lambda trace: trace.count(b"\n") >= count
 
 
+MOMENTS = [5 + moment * (TRACE_LINES - 10) // 19 for moment in range(20)]  # trace lines, spread over the whole run
+IN_AN_OPERATION = 150  # trace lines: a moment inside an operation
+
+
+@pytest.fixture(scope="module")
+def cuts(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
+    """One run of the demonstrator in its own process, with what a kill -9 leaves at each of the 20 moments and at
+    IN_AN_OPERATION, by trace lines (killed_runs.run_and_freeze: stopped and copied at each, killed with SIGKILL at the last)."""
+    counts = sorted([*MOMENTS, IN_AN_OPERATION])
+    return dict(zip(counts, run_and_freeze(ROOT / RIVET, tmp_path_factory.mktemp("killed"), [lines(count) for count in counts])))
+
+
+def resume_copy(cut: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A copy of its own of what a kill left, as the working directory with its home: the run named its outputs relative
+    to its folder."""
+    folder = Path(shutil.copytree(cut, tmp_path / "run", symlinks=True))
+    monkeypatch.chdir(folder)
+    for name, value in env(folder).items():
+        monkeypatch.setenv(name, value)
+    return folder
+
+
+@pytest.mark.xdist_group("resume_cuts")  # one worker makes the run they share, once
 @pytest.mark.parametrize("moment", range(20))
-def test_kill_anywhere_then_resume_runs_every_function_once(tmp_path: Path, moment: int) -> None:
-    trace = start_and_kill(tmp_path, 5 + moment * (TRACE_LINES - 10) // 19)
+def test_kill_anywhere_then_resume_runs_every_function_once(cuts: dict[int, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, moment: int) -> None:
+    folder = resume_copy(cuts[MOMENTS[moment]], tmp_path, monkeypatch)
+    trace = folder / "run.jsonl"
+    assert len(records(trace)) >= MOMENTS[moment] - 1  # killed at its moment (the last line may be cut)
     out, err = io.StringIO(), io.StringIO()
-    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", str(tmp_path / "run.sqlite"),
-                 "--on-interrupted", "redo", "--trace", str(tmp_path / "resumed.jsonl")], out, err)
+    code = main(["run", str(ROOT / RIVET), "--speed", "max", "-q", "--no-check", "--resume", "run.sqlite",
+                 "--on-interrupted", "redo", "--trace", "resumed.jsonl"], out, err)
     assert code == 0, err.getvalue()
-    first, second = records(trace), records(tmp_path / "resumed.jsonl")
+    first, second = records(trace), records(folder / "resumed.jsonl")
     done = Counter((r["operation"], r["group"]) for r in first + second if r["event"] == "function_end" and r["outcome"] == "succeeded")
     assert set(done) == required() and set(done.values()) == {1}, "every function completed exactly once across the two runs"
     inserted = [r["operation"] for r in first + second if r["event"] == "function_end" and r.get("function") == "insert_rivet" and r["outcome"] == "succeeded"]
@@ -55,25 +81,27 @@ def test_kill_anywhere_then_resume_runs_every_function_once(tmp_path: Path, mome
     assert second[-1]["event"] == "run_end" and second[-1]["outcome"] == "finished"
     resumed = [r for r in second if r["event"] == "engine_state" and str(r.get("message", "")).startswith("resumed from")]
     if any(r["event"] == "function_start" for r in second):
-        assert resumed and str(trace) in resumed[0]["message"]  # the new trace names the one it continues
+        assert resumed and "continues run.jsonl" in resumed[0]["message"]  # the new trace names the one it continues, as the run was given it
 
 
-def test_an_interrupted_function_waits_for_the_operator(tmp_path: Path) -> None:
-    trace = start_and_kill(tmp_path, 150)
-    checkpoint = str(tmp_path / "run.sqlite")
+@pytest.mark.xdist_group("resume_cuts")
+def test_an_interrupted_function_waits_for_the_operator(cuts: dict[int, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    folder = resume_copy(cuts[IN_AN_OPERATION], tmp_path, monkeypatch)
+    trace = folder / "run.jsonl"
+    checkpoint = "run.sqlite"
     store = CheckpointStore(checkpoint)
     in_flight = {(r.operation, r.group) for r in store.functions() if r.outcome == "started"} - {(r.operation, r.group) for r in store.functions() if r.outcome == "succeeded"}
     store.close()
     assert in_flight, "the kill landed inside an operation"
     out, err = io.StringIO(), io.StringIO()
-    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", checkpoint, "--trace", str(tmp_path / "asked.jsonl")], out, err)
+    code = main(["run", str(ROOT / RIVET), "--speed", "max", "-q", "--no-check", "--resume", checkpoint, "--trace", str(tmp_path / "asked.jsonl")], out, err)
     assert code == 1  # nobody at a terminal can answer: the run ends before anything moves
     asked = records(tmp_path / "asked.jsonl")
     assert not [r for r in asked if r["event"] == "function_start"]
     alarm = [r for r in asked if r["event"] == "engine_state" and r["to"] == "alarm"]
     assert alarm and alarm[0]["message"].startswith("interrupted: ") and "reset to redo the function, or skip" in alarm[0]["message"]
     out, err = io.StringIO(), io.StringIO()
-    code = main(["run", RIVET, "--speed", "max", "-q", "--no-check", "--resume", checkpoint, "--on-interrupted", "skip",
+    code = main(["run", str(ROOT / RIVET), "--speed", "max", "-q", "--no-check", "--resume", checkpoint, "--on-interrupted", "skip",
                  "--trace", str(tmp_path / "skipped.jsonl")], out, err)
     assert code == 0, err.getvalue()
     skipped = records(tmp_path / "skipped.jsonl")

@@ -1,11 +1,12 @@
 """Crash resume of an application made of loops and calls (issue 24 item 4): kill -9 in the second
-iteration, resume, and the run goes on at the iteration it was in, every function done once; a changed
+iteration (what a kill leaves at three moments of one run: killed_runs.run_and_freeze), resume, and the run goes on at the iteration it was in, every function done once; a changed
 library block refuses the resume like a changed application."""
 from __future__ import annotations
 
 import io
 import shutil
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -15,7 +16,7 @@ from cell_runner.cli import main
 from execution_engine.app_model import load_application
 from execution_engine.checkpoint.resume import sits_out
 from execution_engine.recorder.reading import Recording, iter_messages
-from killed_runs import records, run_and_kill
+from killed_runs import env, records, run_and_freeze
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCKS = ROOT / "apps_xml" / "rivet_blocks.xml"
@@ -32,20 +33,36 @@ def copy_application(folder: Path) -> Path:
     return folder / "app.xml"
 
 
-def start_and_kill(app: Path, folder: Path, starts: int) -> Path:
-    """Run in a process of its own; kill -9 once the trace shows ``starts`` function starts of the second iteration."""
+def second_iteration_starts(starts: int) -> Callable[[bytes], bool]:
+    """Once the trace shows ``starts`` function starts of the second iteration."""
     mark = b'"iteration":"for_each hole=drill_2'
-    return run_and_kill(app, folder, lambda trace: sum(
-        1 for line in trace.splitlines() if mark in line and b'"event":"function_start"' in line) >= starts)
+    return lambda trace: sum(1 for line in trace.splitlines() if mark in line and b'"event":"function_start"' in line) >= starts
 
 
+@pytest.fixture(scope="module")
+def cuts(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Path]]:
+    """The block-built demonstrator run once in its own process, with what a kill -9 leaves at 1, 2 and 3 function
+    starts of the second iteration (killed_runs.run_and_freeze: stopped and copied at each, killed with SIGKILL at the
+    last): the application and the copies."""
+    folder = tmp_path_factory.mktemp("killed")
+    app = copy_application(folder)
+    return app, run_and_freeze(app, folder, [second_iteration_starts(starts) for starts in (1, 2, 3)])
+
+
+@pytest.mark.xdist_group("resume_loops_cuts")  # one worker makes the run they share, once
 @pytest.mark.parametrize("starts", [1, 2, 3])
-def test_kill_in_the_second_iteration_then_resume_does_every_function_once(tmp_path: Path, starts: int) -> None:
-    app = copy_application(tmp_path)
+def test_kill_in_the_second_iteration_then_resume_does_every_function_once(
+    cuts: tuple[Path, list[Path]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, starts: int
+) -> None:
+    app = cuts[0]
     catalog = full_catalog()
     application = load_application(app, catalog)
     required = {(op.id, g) for op in application.operations for g, call in op.calls.items() if not sits_out(application, catalog, call)}
-    trace = start_and_kill(app, tmp_path, starts)
+    folder = Path(shutil.copytree(cuts[1][starts - 1], tmp_path / "run", symlinks=True))  # a copy of its own to resume
+    monkeypatch.chdir(folder)  # the run named its outputs relative to its folder
+    for name, value in env(folder).items():
+        monkeypatch.setenv(name, value)
+    trace = folder / "run.jsonl"
     first = records(trace)
     done_first = {(r["operation"], r["group"]) for r in first if r["event"] == "function_end" and r["outcome"] == "succeeded"}
     left = next(op for op in application.operations if any((op.id, g) in required and (op.id, g) not in done_first for g in op.calls))
@@ -55,10 +72,10 @@ def test_kill_in_the_second_iteration_then_resume_does_every_function_once(tmp_p
     iterations = [line for line in out.getvalue().splitlines() if line.strip().startswith("iterations:")]
     assert len(iterations) == 1 and " (for_each hole=drill_2 > call blocks/rivet_block.xml hole=drill_2 slot=rivet_2 at " in iterations[0]
     out, err = io.StringIO(), io.StringIO()
-    code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", str(tmp_path / "run.sqlite"),
-                 "--on-interrupted", "redo", "--trace", str(tmp_path / "resumed.jsonl")], out, err)
+    code = main(["run", str(app), "--speed", "max", "-q", "--no-check", "--resume", "run.sqlite",
+                 "--on-interrupted", "redo", "--trace", "resumed.jsonl"], out, err)
     assert code == 0, err.getvalue()
-    second = records(tmp_path / "resumed.jsonl")
+    second = records(folder / "resumed.jsonl")
     started = [r for r in second if r["event"] == "function_start"]
     assert started[0]["operation"] == left.id and started[0]["iteration"] == left.origin  # on at the iteration it was in
     done = Counter((r["operation"], r["group"]) for r in first + second if r["event"] == "function_end" and r["outcome"] == "succeeded")

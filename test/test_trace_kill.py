@@ -1,9 +1,10 @@
 """``kill -9`` of a run at 20 moments: the trace survives whole up to the kill.
 
 The rivet demonstrator runs as ``python -m execution_engine run ... --trace T`` in a child
-process; the test reads its console line by line and kills it with SIGKILL after the k-th line,
+process; the test reads its console line by line and takes what a kill leaves after the k-th line,
 for 20 values of k spread over the run (seeded, one in each twentieth of the console output, so
-the moments are chosen by progress, not by sleeps).  Each trace must parse, end at a complete
+the moments are chosen by progress, not by sleeps): one run, stopped and its trace copied at each
+moment, killed with SIGKILL at the last (the ``killed`` fixture says why a stop's copy is a kill's).  Each trace must parse, end at a complete
 record, be reported as cut (no ``run_end``), and hold every state change the console had
 printed before the kill -- the trace is written, and flushed, before the console line.
 """
@@ -22,9 +23,11 @@ import pytest
 
 from execution_engine.trace_report import read_trace
 
+pytestmark = pytest.mark.xdist_group("trace_kill")  # one worker runs the two runs its fixtures make, once
+
 ROOT = Path(__file__).resolve().parents[1]
 MOMENTS = 20
-#: Fast enough that 20 runs take well under a minute, slow enough that the console has a few hundred
+#: Fast enough that a run takes a few seconds, slow enough that the console has a few hundred
 #: lines to choose from while the run is still going (the demonstrator is 86 s of robot time).
 SPEED = "40"
 BOUND = 120.0  # wall seconds any one run may take before the test gives up on it
@@ -69,28 +72,56 @@ def moments(total: int) -> list[int]:
     return [1 + int(span * (i + rng.random()) / MOMENTS) for i in range(MOMENTS)]
 
 
-@pytest.mark.parametrize("moment", range(MOMENTS))
-def test_a_run_killed_at_any_moment_leaves_a_whole_trace_up_to_the_kill(moment: int, whole_run: int, tmp_path: Path) -> None:
-    after = moments(whole_run)[moment]
-    trace = tmp_path / "trace.jsonl"
+@pytest.fixture(scope="module")
+def killed(whole_run: int, tmp_path_factory: pytest.TempPathFactory) -> list[tuple[Path, list[str], str]]:
+    """One run, read line by line, with what a kill -9 leaves at each of the 20 moments: the trace as it is then, the
+    console lines read, and how the process was taken there.
+
+    At each moment but the last the run is stopped (SIGSTOP, waited for until the kernel reports it stopped), its
+    trace copied and the run continued (SIGCONT); at the last it is killed with SIGKILL. A kill leaves the file as it is
+    at that instant (what the process had written; nothing of what it still held), and so does a stop: each copy is
+    what a kill at that moment leaves, for one run instead of twenty."""
+    folder = tmp_path_factory.mktemp("killed")
+    trace = folder / "trace.jsonl"
     child = start(trace)
+    taken: list[tuple[Path, list[str], str]] = []
     shown: list[str] = []
+    seen = 0
     try:
         assert child.stdout is not None
-        seen = 0
-        for line in child.stdout:
-            shown.append(line.rstrip("\n"))
-            if TRANSITION.match(line):
-                seen += 1
-                if seen >= after:
+        for index, after in enumerate(moments(whole_run)):
+            while seen < after:
+                line = child.stdout.readline()
+                if not line:  # the run ended
                     break
-        os.kill(child.pid, signal.SIGKILL)
-        child.wait(timeout=BOUND)
+                shown.append(line.rstrip("\n"))
+                if TRANSITION.match(line):
+                    seen += 1
+            last = index == MOMENTS - 1
+            os.kill(child.pid, signal.SIGKILL if last else signal.SIGSTOP)
+            if last:
+                child.wait(timeout=BOUND)
+                how = "killed" if child.returncode == -signal.SIGKILL else f"ended before the kill ({child.returncode})"
+            else:
+                _, status = os.waitpid(child.pid, os.WUNTRACED)  # returns once it is stopped (does not reap it)
+                how = "stopped" if os.WIFSTOPPED(status) else f"ended before the kill ({status})"
+            copy = folder / f"trace_{index}.jsonl"
+            copy.write_bytes(trace.read_bytes())
+            taken.append((copy, list(shown), how))
+            if not last:
+                os.kill(child.pid, signal.SIGCONT)
     finally:
         if child.poll() is None:
             child.kill()
             child.wait()
-    assert child.returncode == -signal.SIGKILL, "the run ended before the kill"
+    return taken
+
+
+@pytest.mark.parametrize("moment", range(MOMENTS))
+def test_a_run_killed_at_any_moment_leaves_a_whole_trace_up_to_the_kill(moment: int, whole_run: int, killed: list[tuple[Path, list[str], str]]) -> None:
+    after = moments(whole_run)[moment]
+    trace, shown, how = killed[moment]
+    assert how == ("killed" if moment == MOMENTS - 1 else "stopped"), "the run ended before the kill"
     summary = read_trace(trace)
     assert summary.cut, "a killed run's trace must not look whole"
     assert not summary.incomplete_tail and summary.problem_count == 0, summary.lines()
