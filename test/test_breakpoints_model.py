@@ -12,6 +12,7 @@ from pathlib import Path
 from app_model_support import pos
 
 from app_functions.registry import full_catalog
+from cell_runner.dry_run.app_digest import app_digest
 from execution_engine.app_model import load_application, validate_application
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,3 +55,13 @@ def test_a_break_that_is_not_true_or_false_or_not_on_an_operation_is_one_line_na
     line = pos(text, '<for_each var="hole"')[0]
     assert problem.startswith(f"{path}:{line}:")
     assert problem.endswith('<for_each> has no attribute break (a breakpoint goes on an <operation>: break="true" on the first operation inside); it takes: in, index, var')
+
+
+def test_a_breakpoint_changes_nothing_a_kept_dry_run_verdict_depends_on(tmp_path: Path) -> None:
+    path, text = written(tmp_path, "rivet_loop.xml", '<operation id="insert_{hole}" name="insert {index}">',
+                         '<operation id="insert_{hole}" name="insert {index}" break="true">')
+    marked = load_application(path, CATALOG)
+    path.write_text(text.replace(' break="true"', ""), encoding="utf-8")  # the same file, its breakpoint cleared
+    plain = load_application(path, CATALOG)
+    assert any(op.breakpoint for op in marked.operations)
+    assert app_digest(marked.operations) == app_digest(plain.operations)  # the verdict's key (cell_runner/dry_run/app_digest.py)

@@ -1,5 +1,7 @@
 """A breakpoint in the file, in the trace, the MCAP recording and ``report`` of either, from the command line.
 
+The dry run before the run checks every operation and pauses at none (it would wait for nobody).
+
 ``run`` without ``--interactive`` has nobody who could continue a paused run: the breakpoint is passed and
 said so (the run does not hang), and that pause that was not is recorded like any other -- a ``breakpoint``
 line of the trace, an EngineEvent of the recording -- and ``report`` names it from either record.
@@ -25,7 +27,7 @@ def test_run_passes_a_breakpoint_it_cannot_hold_and_every_record_says_so(tmp_pat
     assert "break='true'" in app.read_text(encoding="utf-8")
     trace, record = tmp_path / "run.jsonl", tmp_path / "run.mcap"
     out, err = io.StringIO(), io.StringIO()
-    code = main(["run", str(app), "--speed", "max", "--no-check", "--trace", str(trace), "--record", str(record)], out=out, err=err)
+    code = main(["run", str(app), "--speed", "max", "--trace", str(trace), "--record", str(record)], out=out, err=err)  # the dry run first
     assert code == 0, err.getvalue()
     said = "breakpoint before operation 3 '3' (line "
     (hit,) = [r for r in map(json.loads, trace.read_text(encoding="utf-8").splitlines()) if r["event"] == "breakpoint"]

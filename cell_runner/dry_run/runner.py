@@ -226,7 +226,7 @@ async def _run_operations(app: Application, deployment: Deployment, recorder: Re
     """
     results = _Results(deployment)
     total, offset = 0.0, 0
-    operations = list(app.operations)
+    operations = [replace(op, breakpoint=False) if op.breakpoint else op for op in app.operations]  # checked, never paused at
     dropped: dict[str, set[str]] = {}  # operation id -> groups whose failed call is not run again
     recorder.timing.start()
     while offset < len(operations):

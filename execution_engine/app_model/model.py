@@ -8,7 +8,7 @@ defaults, and a group left out of an operation gets an explicit, ``implicit=True
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -86,8 +86,9 @@ class Operation:
     #: The <if>/<else> it is inside, outermost first: it runs only when every one is met.
     when: tuple[Condition, ...] = ()
     #: ``break="true"``: the run pauses before it (execution_engine/engine/breakpoints.py); an operation a
-    #: loop makes from it breaks in every iteration.
-    breakpoint: bool = False
+    #: loop makes from it breaks in every iteration.  Not part of equality: it changes nothing the robot does, so
+    #: a dry run's kept verdict (its key digests the application) holds with breakpoints set or cleared.
+    breakpoint: bool = field(default=False, compare=False)
 
 
 @dataclass(frozen=True)
