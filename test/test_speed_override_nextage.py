@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core_functions.primitives import MoveJoints
+from core_functions.primitives import MoveJoints, RecordTrajectory
 from core_functions.robots import NEXTAGE_OPEN
 from node_transport.clock import Clock
 from robot_bridges.nextage_sim.backend import NextageSimBackend
@@ -94,5 +94,17 @@ def test_a_motion_started_under_an_override_runs_at_it_and_never_above_the_progr
         assert np.abs(samples.velocities()[:, 0]).max() <= 0.25 + 1e-6
         with pytest.raises(ValueError, match=r"\[0, 1\]"):
             backend.set_speed_override(1.5)
+
+    run_sim(main)
+
+
+def test_a_taught_recording_keeps_the_persons_time_at_any_override(run_sim: Run) -> None:
+    async def main(clock: Clock) -> None:
+        backend = NextageSimBackend(clock)
+        backend.set_speed_override(0.0)  # the robot's motions held: the hand that guides the arm is not
+        start = clock.now()
+        teach = RecordTrajectory("taught", "teach", duration=1.0, sample_period=0.25)
+        result = await clock.wait_for(backend.execute("right_arm", teach), 5.0)  # bounded: a held teach would never end
+        assert clock.now() - start == pytest.approx(1.0, abs=1e-6) and result.times == (0.0, 0.25, 0.5, 0.75, 1.0)
 
     run_sim(main)

@@ -59,12 +59,13 @@ class Job:
         """Where the job's own time will be at clock ``now`` if nothing changes (held while paused)."""
         if self.paused:
             return self.progress
-        return min(self.progress + max(now - self._last, 0.0) * self.rate.rate, self.duration)
+        return min(self.progress + max(now - self._last, 0.0) * (1.0 if self.teaching else self.rate.rate), self.duration)
 
     def advance(self, now: float) -> None:
-        """Count the time since the last call at the override's rate unless paused, never past the horizon."""
+        """Count the time since the last call at the override's rate unless paused, never past the horizon (a
+        teaching job is a person's time: the override slows the robot, not the hand that guides it)."""
         if not self.paused:
-            covered = self.rate.advance(now - self._last, self.progress, self.shape, self.limits)
+            covered = (now - self._last) if self.teaching else self.rate.advance(now - self._last, self.progress, self.shape, self.limits)
             self.progress = min(self.progress + covered, self.horizon)
         self._last = now
 
@@ -200,7 +201,7 @@ class JobBoard:
                     return
                 job.horizon = next(s for s in stops if s > job.horizon + DONE)
                 continue
-            if job.paused or job.rate.holding:  # paused, or held on the path by a 0 % override
+            if job.paused or (job.rate.holding and not job.teaching):  # paused, or held on the path by a 0 % override
                 job.wake.clear()
                 await job.wake.wait()
                 job.advance(clock.now())
