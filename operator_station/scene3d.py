@@ -31,6 +31,7 @@ from execution_engine.app_model import Application
 from execution_engine.app_model.cell import read_cell
 from node_transport.wire import CellSnapshot
 from operator_station.feed import Feed
+from operator_station.scene3d_findings import dry_run_finding
 from robot_bridges.collision.robots import MODELS
 
 #: Events (goals and located frames) kept per run; a day of a busy cell sends far fewer.
@@ -41,6 +42,8 @@ MAX_BATCH = 5000
 MAX_FRAMES = 20_000
 #: Points of a trajectory goal kept for its path (evenly chosen; the last point always).
 MAX_PATH_POINTS = 200
+#: The dry run's findings placed at most (each with every joint of the robot; the report's diagnostics are capped lower).
+MAX_FINDINGS = 500
 #: The named pose a robot is drawn in before any joint state has come (its simulator's start), the first one it has.
 REST_POSES = ("initial", "home")
 
@@ -244,9 +247,10 @@ def head_scene(robot_name: str, cell_path: Path | None) -> tuple[RobotModel | No
 
 def keep_dry_run(feed: Feed, report: DryRunReport, app: Application) -> None:
     """The dry run that refused the run of ``app`` on ``feed``: nothing moved, so there is no joint state to draw; the
-    view draws the robot where the run would have started (where the dry run started it: where the robot is) with the
-    bodies the findings name, and marks the cell frames the calls of each finding work at (``places``: where the
-    arms would meet), and says when the dry run met them."""
+    view draws the robot where the run would have started (where the dry run started it: where the robot is) and each
+    finding at its moment -- the robot at the finding's joints, the bodies it names, its time (``findings``, from the
+    report's data) --, and marks the cell frames the calls of each finding work at (``places``: where the arms would
+    meet)."""
     start = report.start
     cell = app.cell
     places: dict[str, list[dict[str, Any]]] = {}
@@ -257,4 +261,6 @@ def keep_dry_run(feed: Feed, report: DryRunReport, app: Application) -> None:
                 if (operation.id, group) in wanted:
                     named = [p for p in call.params if isinstance(p, str) and p in cell.frames]
                     places[f"{operation.id}/{group}"] = [{"name": n, "pose": pose_json(cell.pose(n))} for n in named[:8]]
-    scene_log(feed).set_dry_run({"t_end": report.cycle_time, "joints": dict(zip(start[0], start[1])) if start is not None else {}, "places": places})
+    found = [f for finding in report.findings[:MAX_FINDINGS] if (f := dry_run_finding(finding)) is not None]
+    scene_log(feed).set_dry_run({"t_end": report.cycle_time, "joints": dict(zip(start[0], start[1])) if start is not None else {}, "places": places,
+                                 "findings": found})

@@ -1,12 +1,12 @@
 """The dry run's findings and a run's collision faults, placed for the 3D view: which two bodies a collision
-is between, where an unreachable target is, and when.
+is between, where an unreachable target is, when, and -- for the dry run's -- where the robot was then.
 
-The dry run refuses a run with its diagnostics (``FILE:LINE:COL: operation OP GROUP FUNCTION: KIND: DETAIL
-(at T s)``, :mod:`cell_runner.dry_run.report`), which the station shows as the run's messages; a run that meets
-a collision (a simulator's own check, a controller's) ends the call with an error naming the bodies as the
-collision model labels them (:meth:`robot_bridges.collision.scene.Body.label`: ``left_arm hand
-(LARM_JOINT5_Link)``, ``left_arm LARM_JOINT3_Link``, ``cell part``, ``robot WAIST``).  A text that says
-neither is not a finding the view can place, and is left to the messages.
+The dry run's findings are its report's data (:class:`cell_runner.dry_run.report.Finding`: the bodies, the target,
+every joint at the finding's instant), never read back from its message.  A run that meets a collision (a
+simulator's own check, a controller's) ends the call with an error record naming the bodies as the collision model
+labels them (:meth:`robot_bridges.collision.scene.Body.label`: ``left_arm hand (LARM_JOINT5_Link)``, ``left_arm
+LARM_JOINT3_Link``, ``cell part``, ``robot WAIST``): that text is all a record says, so it is read.  A text that
+says neither is not a finding the view can place, and is left to the messages.
 """
 from __future__ import annotations
 
@@ -15,15 +15,11 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from cell_runner.dry_run.report import Finding
 from core_functions.geometry import Pose
 
 #: Characters of a message read at most (a diagnostic is a line; a crafted one is cut, not scanned whole).
 MAX_TEXT = 4000
-_DIAGNOSTIC = re.compile(
-    r"^(?P<file>.*?):(?P<line>\d+):(?P<col>\d+): operation (?P<operation>\S+)(?: \([^()]*\))? (?P<group>\S+) (?P<function>\S+): "
-    r"(?P<kind>[a-z_]+): (?P<detail>.*)$"
-)
-_WHEN = re.compile(r"\((?:at (?P<at>\d+(?:\.\d+)?) s|[^()]*first at (?P<first>\d+(?:\.\d+)?) s)\)\s*$")
 _BETWEEN = re.compile(r"collision between (?P<a>.+?) and (?P<b>.+?)(?=, against |\s*$| - |\s+\(at )")
 _MARGIN = re.compile(r"collision margin: (?P<a>.+?) and (?P<b>.+?) \d+(?:\.\d+)? mm apart")
 _NUMBER = r"(-?\d+(?:\.\d+)?)"
@@ -83,19 +79,19 @@ def placed(kind: str, detail: str) -> dict[str, Any] | None:
     return None
 
 
-def dry_run_finding(text: str) -> dict[str, Any] | None:
-    """A finding of the dry run from its diagnostic line, placed; None for a line that is no placeable finding."""
-    text = text[:MAX_TEXT]
-    match = _DIAGNOSTIC.match(text)
-    if match is None:
+def dry_run_finding(finding: Finding) -> dict[str, Any] | None:
+    """A finding of the dry run, placed from its data: the bodies of a collision or the target refused, its time, the
+    robot's joints then (by name); None for one the view cannot place (a function's own failure)."""
+    if finding.bodies:
+        where: dict[str, Any] = {"bodies": [{"owner": b.owner, "name": b.name, "label": b.label} for b in finding.bodies]}
+    elif finding.target is not None:
+        t = finding.target
+        where = {"target": [t.x, t.y, t.z, t.qx, t.qy, t.qz, t.qw], "label": finding.primitive}
+    else:
         return None
-    where = placed(match.group("kind"), match.group("detail"))
-    if where is None:
-        return None
-    when = _WHEN.search(text)
-    t = float(when.group("at") or when.group("first")) if when else None
-    return {"source": "dry run", "kind": match.group("kind"), "group": match.group("group"), "operation": match.group("operation"),
-            "function": match.group("function"), "line": int(match.group("line")), "t": t, "message": text, **where}
+    joints = {name: float(value) for name, value in zip(*finding.joints)} if finding.joints is not None else None
+    return {"source": "dry run", "kind": finding.kind, "group": finding.group, "operation": finding.operation, "function": finding.function,
+            "line": finding.line, "t": finding.t, "message": str(finding.diagnostic())[:MAX_TEXT], "joints": joints, **where}
 
 
 def run_finding(record: dict[str, Any]) -> dict[str, Any] | None:
@@ -112,10 +108,3 @@ def run_finding(record: dict[str, Any]) -> dict[str, Any] | None:
                 return {"source": "run", "kind": kind, "group": str(record.get("group", "")), "operation": str(record.get("operation") or ""),
                         "function": str(record.get("function") or ""), "line": None, "t": float(t), "message": text, **where}
     return None
-
-
-def findings(messages: list[dict[str, Any]], records: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Every placeable finding: the dry run's (from the run's messages) then the run's own (from its records)."""
-    out = [f for m in messages if isinstance(m, dict) and isinstance(m.get("message"), str) if (f := dry_run_finding(m["message"])) is not None]
-    out += [f for r in records if isinstance(r, dict) and r.get("event") == "error" if (f := run_finding(r)) is not None]
-    return out

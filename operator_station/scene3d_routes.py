@@ -22,7 +22,7 @@ from core_functions.robots import ROBOTS, RobotModel
 from execution_engine.app_model.document import read_document
 from operator_station.feed import Feed
 from operator_station.scene3d import SceneLog, head_scene, scene_log
-from operator_station.scene3d_findings import dry_run_finding, run_finding
+from operator_station.scene3d_findings import run_finding
 
 #: The largest ``from`` asked (a run keeps far fewer events).
 MAX_FROM = 1 << 40
@@ -58,8 +58,8 @@ class SceneAnswers:
         self.feed = feed
         self.app_path = app_path
         self._lock = threading.Lock()
-        # run, the messages read, records read, the dry run's findings, the run's
-        self._findings: tuple[int, list[Any], int, list[dict[str, Any]], list[dict[str, Any]]] = (-1, [], 0, [], [])
+        # run, records read, the run's findings
+        self._findings: tuple[int, int, list[dict[str, Any]]] = (-1, 0, [])
 
     def scene(self) -> dict[str, Any]:
         log = scene_log(self.feed)
@@ -67,6 +67,8 @@ class SceneAnswers:
         if log.run != snapshot.run:  # nothing began this run's scene: the start file's, or the trace's robot
             self._fallback(log, snapshot.run, snapshot.mode, list(snapshot.joint_names))
         answer = log.static()
+        if answer["dry_run"] is not None:  # its findings are in the answer's findings, once
+            answer["dry_run"] = {k: v for k, v in answer["dry_run"].items() if k != "findings"}
         answer.update(ok=True, mode=snapshot.mode, findings=self.findings())
         return answer
 
@@ -84,16 +86,15 @@ class SceneAnswers:
         log.notes.extend(notes)
 
     def findings(self) -> list[dict[str, Any]]:
-        """The dry run's placed findings (from the run's messages, read again when they change) and the run's
+        """The dry run's placed findings (kept with the scene from its report, :func:`keep_dry_run`) and the run's
         collision faults (from its error records, each record read once)."""
         snapshot = self.feed.snapshot
-        messages = list(snapshot.messages or [])
+        dry_run = scene_log(self.feed).static()["dry_run"]
+        dry = list(dry_run.get("findings", [])) if dry_run is not None else []
         with self._lock:
-            run, seen_messages, seen, dry, found = self._findings
+            run, seen, found = self._findings
             if run != snapshot.run:
-                seen_messages, seen, dry, found = [], 0, [], []
-            if seen_messages != messages:
-                dry = [f for m in messages if isinstance(m, dict) and isinstance(m.get("message"), str) if (f := dry_run_finding(m["message"])) is not None]
+                seen, found = 0, []
             new = self.feed.records[seen:]  # a slice of the list the run appends to (a new run gets a new list)
             found = list(found)
             known = {_same(f) for f in found}
@@ -102,7 +103,7 @@ class SceneAnswers:
                 if f is not None and _same(f) not in known:
                     known.add(_same(f))
                     found.append(f)
-            self._findings = (snapshot.run, messages, seen + len(new), dry, found)
+            self._findings = (snapshot.run, seen + len(new), found)
             return dry + found
 
 

@@ -142,6 +142,8 @@ class RunSession:
                 if trace is not None:
                     trace.close()
         except StartRefused as refusal:  # the dry run from where the robot is: nothing moved
+            if refusal.report is not None and refusal.report.findings:
+                keep_dry_run(self.feed, refusal.report, app)  # the 3D view: each finding at its moment
             found = [{"severity": "error", "message": line} for line in refusal.lines]
             self.feed.update(messages=[{"severity": "error", "message": f"not run: {refusal.reason}"}, *found])
         except Exception as error:  # noqa: BLE001 - the page must hear of it; the thread must not die silently

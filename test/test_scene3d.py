@@ -24,17 +24,20 @@ pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) i
 
 from app_functions.registry import full_catalog  # noqa: E402
 from cell_runner.cli import main  # noqa: E402
+from cell_runner.dry_run.report import DryRunReport  # noqa: E402
+from cell_runner.dry_run.runner import dry_run  # noqa: E402
 from core_functions.cell_robots import cell_robot_model  # noqa: E402
 from core_functions.geometry import Pose  # noqa: E402
 from core_functions.primitives import EndEffector, ExecuteTrajectory, MoveCartesian, MoveJoints  # noqa: E402
 from core_functions.robots import NEXTAGE_OPEN  # noqa: E402
-from execution_engine.app_model import load_cell  # noqa: E402
+from execution_engine.app_model import load_application, load_cell  # noqa: E402
 from execution_engine.record_reader import NotARecording, OverLimit  # noqa: E402
 from node_transport.carriage import TypedPublisher  # noqa: E402
 from node_transport.clock import Clock  # noqa: E402
 from node_transport.local import LocalTransport  # noqa: E402
 from node_transport.msgs import JointState  # noqa: E402
 from node_transport.qos import COMMANDS, LATCHED, SENSOR  # noqa: E402
+from robot_bridges.backend import BackendOptions  # noqa: E402
 from node_transport.wire import ENGINE_CELL, JOINT_STATES, BridgeCommand, CellSnapshot, LocatedFrames, bridge_topic, sm_topic  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.feed import Feed  # noqa: E402
@@ -166,17 +169,26 @@ def test_each_moving_primitive_says_its_goal() -> None:
 
 
 # ------------------------------------------------------------------ findings
+def dry_run_of(path: Path) -> DryRunReport:
+    app = load_application(path, full_catalog())
+    return dry_run(app, "nextage-sim", BackendOptions(robot=app.robot))
+
+
 def test_the_dry_runs_collision_of_two_arms_names_both_hands(tmp_path: Path) -> None:
-    code, _, err = cli("validate", "--simulate", str(arms_meet(tmp_path)))
+    """Placed from the report's data: the bodies, line and time the diagnostic ``validate --simulate`` prints says."""
+    app = arms_meet(tmp_path)
+    code, _, err = cli("validate", "--simulate", str(app))
     lines = [line for line in err.splitlines() if LOCATION.match(line)]
     assert code == 1 and len(lines) == 2, err
+    report = dry_run_of(app)
+    assert sorted(str(f.diagnostic()) for f in report.findings) == sorted(lines)
     for line in lines:
-        finding = dry_run_finding(line)
+        finding = next(dry_run_finding(f) for f in report.findings if str(f.diagnostic()) == line)
         assert finding is not None and finding["kind"] == "collision" and finding["source"] == "dry run"
         assert [b["name"] for b in finding["bodies"]] == ["LARM_JOINT5_Link", "RARM_JOINT5_Link"]
         assert [b["owner"] for b in finding["bodies"]] == ["left_arm", "right_arm"]
         assert finding["operation"] == "3" and finding["line"] == int(LOCATION.match(line).group("line"))  # type: ignore[union-attr]
-        assert finding["t"] == pytest.approx(float(re.search(r"\(at (\d+\.\d+) s\)$", line).group(1)))  # type: ignore[union-attr]
+        assert round(finding["t"], 2) == pytest.approx(float(re.search(r"\(at (\d+\.\d+) s\)$", line).group(1)))  # type: ignore[union-attr]  # (the line says it to 10 ms)
 
 
 def test_an_unreachable_target_is_placed_where_the_dry_run_says(tmp_path: Path) -> None:
@@ -187,7 +199,7 @@ def test_an_unreachable_target_is_placed_where_the_dry_run_says(tmp_path: Path) 
     app.write_text("<application name='far' robot='nextage' cell='cells/rivet_cell.xml'><operation id='1'><right_arm>"
                    "<function name='approach'><params><param value='drill_4'/></params></function></right_arm></operation></application>", encoding="utf-8")
     code, _, err = cli("validate", "--simulate", str(app))
-    found = [f for line in err.splitlines() if (f := dry_run_finding(line)) is not None]
+    found = [f for finding in dry_run_of(app).findings if (f := dry_run_finding(finding)) is not None]
     assert code == 1 and found and found[0]["kind"] == "unreachable", err
     hole = load_cell(cell).pose("drill_4")
     assert found[0]["target"][:2] == pytest.approx([hole.x, hole.y], abs=1e-3) and found[0]["target"][2] > hole.z  # above the hole it approaches
@@ -222,7 +234,7 @@ def test_collision_labels_give_back_their_bodies(owner_a: str, link_a: str, owne
 
 @given(st.text(max_size=300))
 def test_any_text_is_a_placed_finding_or_none(text: str) -> None:
-    for found in (dry_run_finding(text), run_finding({"event": "error", "t": 1.0, "error": text})):
+    for found in (run_finding({"event": "error", "t": 1.0, "error": text}),):
         assert found is None or (found["kind"] in ("collision", "unreachable", "joint_limit", "singularity") and ("bodies" in found or "target" in found))
 
 

@@ -146,12 +146,14 @@ class DryRunBackend(RobotBackend):
                 self.recorder.outcome_met(group, error.kind.value, target, error.detail)
                 self.recorder.span(group, held, what, start, timing.now())
                 return self.as_if_done(group, primitive)
-            if self.recorder.defer(group, held, error.kind.value, what, target, error.detail, start, timing.now()):
+            joints = self.inner.joint_state() if before is not None else None  # where the arm stood when it was refused
+            pose = primitive.target if isinstance(primitive, MoveCartesian) else None
+            if self.recorder.defer(group, held, error.kind.value, what, target, error.detail, start, timing.now(), joints=joints, pose=pose):
                 return self.as_if_done(group, primitive)  # on a side of an <if>, maybe the assumption's doing: the nominal pose
             self._note_controller(group, error)
             if self.stuck is None:
                 span = self.recorder.span(group, held, what, start, timing.now(), error.kind.value)
-                self.recorder.finding(group, error.kind.value, what, error.detail, span.end)
+                self.recorder.finding(group, error.kind.value, what, error.detail, span.end, joints=joints, target=pose)
             return self.as_if_done(group, primitive)
         span = self.recorder.span(group, held, what, start, timing.now())
         if before is not None:

@@ -15,17 +15,18 @@ reported at the lines of both functions.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from cell_runner.dry_run.motions import GripRecord, MotionRecord
 from cell_runner.dry_run.recorder import Recorder
+from cell_runner.dry_run.report import FoundBody
 from core_functions.geometry import Pose
 from execution_engine.app_model.model import Application
 from robot_bridges.collision import CollisionScene, Contact, cell_boxes, held_part, scene_for
-from robot_bridges.collision.scene import STATIC
+from robot_bridges.collision.scene import STATIC, Body
 from robot_bridges.collision.sweep import PIECES, Advancement
 
 COLLISION = "collision"
@@ -78,8 +79,8 @@ def sweep(
         times = sorted({t for m in line.ordered for t in _samples(m, step)} | {g.t for g in grips})
         for t in times:
             line.reach(t)
-            findings.note(t, scene.contacts(line.q, line.work))
-        findings.report(scene.margin)
+            findings.note(t, scene.contacts(line.q, line.work), line.now)
+        findings.report(scene.margin, scene.joint_names)
         return SweepStats(len(line.ordered), len(times), findings.found)
     spans = [s.start for s in recorder.spans if s.start > line.first]
     pieces = [m.start + m.duration * k / PIECES for m in line.ordered for k in range(1, PIECES)]
@@ -89,16 +90,16 @@ def sweep(
     for n, b in enumerate(boundaries):
         if previous is not None:
             for t, contacts in engine.advance(b, line.q_at):
-                findings.note(t, contacts)
+                findings.note(t, contacts, line.q_at)
         held = line.reach(b)
         engine.set_speeds(line.speeds(b, boundaries[n + 1] if n + 1 < len(boundaries) else b), b)
         if held or previous is None:
             engine.relayout(b)
         engine.set_work(line.work, b)
         engine.recheck_reported(b)
-        findings.note(b, engine.check_due(b, line.q))
+        findings.note(b, engine.check_due(b, line.q), line.now)
         previous = b
-    findings.report(scene.margin)
+    findings.report(scene.margin, scene.joint_names)
     return SweepStats(len(line.ordered), engine.checks, findings.found)
 
 
@@ -130,6 +131,10 @@ class _Timeline:
         for k in self.active:
             probe[self.columns[k]] = self.ordered[k].at(t - self.ordered[k].start)[self.keep[k]]
         return probe
+
+    def now(self, t: float) -> np.ndarray:
+        """The joints the timeline has reached (``t``: the instant it was moved on to)."""
+        return self.q
 
     def reach(self, t: float) -> bool:
         """Move on to ``t``: motions started and ended by then, parts taken and let go of (True: a grip changed the bodies)."""
@@ -172,17 +177,19 @@ class _Findings:
         self.app = app
         self.recorder = recorder
         self.calls = _Calls(app, recorder)
-        self.worst: dict[tuple[str, str, str], tuple[Contact, float, tuple[str, str] | None]] = {}
+        self.worst: dict[tuple[str, str, str], _Worst] = {}
         self.found = 0
 
-    def note(self, t: float, contacts: list[Contact]) -> None:
+    def note(self, t: float, contacts: list[Contact], q_at: Callable[[float], np.ndarray]) -> None:
+        """Contacts found at ``t``; ``q_at(t)``: the joints then, read only for a contact closer than its call's closest so far."""
         for contact in contacts:
             self.found += 1
-            _note(self.worst, contact, t, self.calls.at(t))
+            _note(self.worst, contact, t, self.calls.at(t), q_at)
 
-    def report(self, margin: float) -> None:
-        for (group, operation, function), (contact, t, other) in self.worst.items():
-            self.recorder.add(group, operation, function, COLLISION, "", _message(contact, margin, group, other, self.app), t)
+    def report(self, margin: float, joint_names: tuple[str, ...]) -> None:
+        for (group, operation, function), (contact, t, other, q) in self.worst.items():
+            self.recorder.add(group, operation, function, COLLISION, "", _message(contact, margin, group, other, self.app), t,
+                              joints=(joint_names, tuple(float(v) for v in q)), bodies=(_found(contact.a), _found(contact.b)))
 
 
 class _Calls:
@@ -234,7 +241,18 @@ def _tcp(scene: CollisionScene, q: np.ndarray, columns: np.ndarray, end: np.ndar
     return Pose.from_matrix(scene.tcp_matrix(group))
 
 
-def _note(worst: dict, contact: Contact, t: float, calls: dict[str, tuple[str, str]]) -> None:
+#: The closest contact of one call: the contact, its instant, the call of the other group in it, the joints then.
+_Worst = tuple[Contact, float, tuple[str, str, str] | None, np.ndarray]
+
+
+def _found(body: Body) -> FoundBody:
+    """A body of the collision model as the finding keeps it (whose: a group, ``cell`` or ``robot``)."""
+    owner = "robot" if body.group == STATIC else body.group
+    return FoundBody(owner, body.name, body.label())
+
+
+def _note(worst: dict[tuple[str, str, str], _Worst], contact: Contact, t: float, calls: dict[str, tuple[str, str]],
+          q_at: Callable[[float], np.ndarray]) -> None:
     """Keep the closest contact of each call of each group involved (the first time it came that close)."""
     groups = [b.group for b in (contact.a, contact.b) if b.group not in (STATIC, "cell")]
     for group in groups:
@@ -246,7 +264,7 @@ def _note(worst: dict, contact: Contact, t: float, calls: dict[str, tuple[str, s
         key = (group, call[0], call[1])
         known = worst.get(key)
         if known is None or contact.distance < known[0].distance - 1e-9:
-            worst[key] = (contact, t, None if other is None else (other_group, *other))
+            worst[key] = (contact, t, None if other is None else (other_group, *other), q_at(t).copy())
 
 
 def _message(contact: Contact, margin: float, group: str, other: tuple[str, str, str] | None, app: Application) -> str:

@@ -10,7 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from cell_runner.dry_run.report import Finding, Span, TimeBase
+from cell_runner.dry_run.report import Finding, FoundBody, JointPositions, Span, TimeBase
+from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
 from execution_engine.app_model.model import Application, Call
 from execution_engine.engine.waits import FlagWait
@@ -112,6 +113,8 @@ class Deferred:
     t: float
     tested: tuple[tuple[str, str], ...]
     span: int  # its place in Recorder.spans
+    joints: JointPositions | None = None  # where the robot was (Finding.joints)
+    where: Pose | None = None  # the TCP target refused (Finding.target)
 
 
 class Recorder:
@@ -161,7 +164,8 @@ class Recorder:
         if outcome is not None and assumed is not None and outcome != assumed and key not in self._contradicted:
             self._contradicted[key] = Contradiction(assumed, outcome, kind, target, message)
 
-    def defer(self, group: str, held: tuple[str, ...], kind: str, primitive: str, target: str, message: str, start: float, end: float) -> bool:
+    def defer(self, group: str, held: tuple[str, ...], kind: str, primitive: str, target: str, message: str, start: float, end: float, *,
+              joints: JointPositions | None = None, pose: Pose | None = None) -> bool:
         """Hold back a fault met on a side of an ``<if>`` until the run ends (:meth:`findings`): it is no finding when
         it is the one the function the side tests met on the same target, the pass having assumed otherwise --
         the consequence of the assumption, not of the application.  Its span goes on the timeline now, marked
@@ -173,7 +177,7 @@ class Recorder:
         if not tested:
             return False
         span = self.span(group, held, primitive, start, end)
-        held_back = Deferred(group, where[0], where[1], kind, primitive, target, message, span.end, tuple(tested), len(self.spans) - 1)
+        held_back = Deferred(group, where[0], where[1], kind, primitive, target, message, span.end, tuple(tested), len(self.spans) - 1, joints, pose)
         self._deferred.append(held_back)
         return True
 
@@ -184,7 +188,7 @@ class Recorder:
                           and (c.kind, c.target) == (held.kind, held.target)), None)
             if cause is None:
                 self.spans[held.span] = replace(self.spans[held.span], finding=held.kind)
-                self.add(held.group, held.operation, held.function, held.kind, held.primitive, held.message, held.t)
+                self.add(held.group, held.operation, held.function, held.kind, held.primitive, held.message, held.t, joints=held.joints, target=held.where)
             else:
                 self._excused.setdefault(cause, []).append(held)
         self._deferred.clear()
@@ -204,13 +208,15 @@ class Recorder:
         return out
 
     # ---------------------------------------------------------------------------- findings
-    def finding(self, group: str, kind: str, primitive: str, message: str, t: float | None = None) -> None:
-        """A problem met by ``group`` in the call it is running now (at ``t``, default: now)."""
+    def finding(self, group: str, kind: str, primitive: str, message: str, t: float | None = None, *,
+                joints: JointPositions | None = None, target: Pose | None = None) -> None:
+        """A problem met by ``group`` in the call it is running now (at ``t``, default: now), the robot's joints then."""
         operation, function = self.locate(group) or ("?", "?")
-        self.add(group, operation, function, kind, primitive, message, t)
+        self.add(group, operation, function, kind, primitive, message, t, joints=joints, target=target)
 
-    def add(self, group: str, operation: str, function: str, kind: str, primitive: str, message: str, t: float | None = None) -> None:
-        """A problem of call (``operation``, ``group``); the same kind again there only counts."""
+    def add(self, group: str, operation: str, function: str, kind: str, primitive: str, message: str, t: float | None = None, *,
+            joints: JointPositions | None = None, bodies: tuple[FoundBody, ...] = (), target: Pose | None = None) -> None:
+        """A problem of call (``operation``, ``group``); the same kind again there only counts (the first one's instant kept)."""
         key = (operation, group, kind)
         if key in self._findings:
             self._counts[key] += 1
@@ -219,7 +225,8 @@ class Recorder:
         file = call.file if call is not None and call.file else str(self.app.path)
         line, col = (call.line, call.col) if call is not None and call.line else self._lines.get(operation, (0, 0))
         when = self.timing.elapsed() if t is None else t
-        self._findings[key] = Finding(kind, group, operation, function, primitive, message, file, line, col, when, origin=self._origins.get(operation, ""))
+        self._findings[key] = Finding(kind, group, operation, function, primitive, message, file, line, col, when, origin=self._origins.get(operation, ""),
+                                      joints=joints, bodies=bodies, target=target)
         self._counts[key] = 1
 
     def findings(self) -> tuple[Finding, ...]:

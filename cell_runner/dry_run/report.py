@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Literal, Protocol
 
+from core_functions.geometry import Pose
 from execution_engine.app_model.diagnostics import Diagnostic, capped
 from execution_engine.engine.waits import FlagWait, costliest, wait_totals
 
@@ -20,6 +21,17 @@ from execution_engine.engine.waits import FlagWait, costliest, wait_totals
 TimeBase = Literal["simulated clock", "robot cycles", "wall clock"]
 #: Joint names and positions (rad), as a back end's ``joint_state()`` gives them.
 JointPositions = tuple[tuple[str, ...], tuple[float, ...]]
+
+
+@dataclass(frozen=True)
+class FoundBody:
+    """One body of a collision finding: whose it is (a group, ``cell`` for a cell object, ``robot`` for a robot's fixed
+    base), its name (a link of the URDF -- ``member/link`` in a cell of several robots --, a cell frame) and the label
+    the message gives it (:meth:`robot_bridges.collision.scene.Body.label`)."""
+
+    owner: str
+    name: str
+    label: str
 
 
 @dataclass(frozen=True)
@@ -46,6 +58,14 @@ class Finding:
     count: int = 1
     origin: str = ""  # the iteration of a loop or call the operation was made for (Operation.origin)
     assumed: str = ""  # the outcomes the dry run assumed where it met it (an application with <if>s)
+    #: Where the robot was when it met it, kept as data so that a view can show the finding at its moment without
+    #: reading the message: every joint of every group of every robot (the collision model's names, rad) at ``t``
+    #: -- for a collision the instant of the closest contact, for a refused target where the arm stood --, the two
+    #: bodies of a collision, and the TCP target (world frame) a refused motion asked for.  Empty/None where the
+    #: dry run could not say (a function's own failure, a back end without joint states).
+    joints: JointPositions | None = None
+    bodies: tuple[FoundBody, ...] = ()
+    target: Pose | None = None
 
     def diagnostic(self) -> Diagnostic:
         """The finding in the form validation prints: ``FILE:LINE:COL: operation 8 right_arm f: kind: ... (at 63.20 s)``;
