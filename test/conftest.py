@@ -35,11 +35,21 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "xdist_group(name): tests pytest-xdist's --dist loadgroup runs on one worker")
 
 
+def shares_a_module_fixture(item: pytest.Item) -> bool:
+    """Whether the test uses a module-scoped fixture: a set-up (a whole run, a started cell) made once for its file."""
+    info = getattr(item, "_fixtureinfo", None)  # pytest's own record of the test's fixtures
+    return info is not None and any(defs and defs[-1].scope == "module" for defs in info.name2fixturedefs.values())
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's worker reads the groups off the marks
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if item.path.name in REAL_TIME_FILES:
             item.add_marker(pytest.mark.xdist_group("real_time"))
+        elif item.get_closest_marker("xdist_group") is None and shares_a_module_fixture(item):
+            # the tests sharing a module's set-up go to one worker, which makes it once: spread over the
+            # workers, each would make it (xdist joins every group mark of a test, so only where it has none)
+            item.add_marker(pytest.mark.xdist_group(f"shared_setup:{item.path.name}"))
 
 
 @pytest.fixture(autouse=True)
