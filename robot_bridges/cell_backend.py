@@ -157,6 +157,12 @@ class CellBackend(RobotBackend):
         for part in self.parts:
             part.backend.set_cell(cell)
 
+    def set_speed_override(self, rate: float) -> None:
+        """One override for the cell: every robot's back end plays its motions at it."""
+        super().set_speed_override(rate)
+        for part in self.parts:
+            part.backend.set_speed_override(rate)
+
     def joint_limits(self, group: str) -> JointLimits | None:
         return self.of(group).joint_limits(group)
 

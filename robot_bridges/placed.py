@@ -117,6 +117,10 @@ class PlacedBackend(RobotBackend):
     def tcp_pose(self, group: str) -> Pose | None:
         return self._out(self.inner.tcp_pose(group))
 
+    def set_speed_override(self, rate: float) -> None:
+        super().set_speed_override(rate)
+        self.inner.set_speed_override(rate)  # the robot plays its motions at it; where its base stands changes nothing
+
     def set_cell(self, cell: CellSnapshot) -> None:
         """The cell as the robot sees it: every frame and true pose in its base frame."""
         frames = tuple(replace(f, pose=self._in(f.pose)) for f in cell.frames)

@@ -11,9 +11,13 @@ import numpy as np
 import pytest
 
 from core_functions.primitives import MoveJoints, RecordTrajectory
+from core_functions.cell_robots import CellRobot
+from core_functions.geometry import Pose
 from core_functions.robots import NEXTAGE_OPEN
 from node_transport.clock import Clock
+from robot_bridges.cell_backend import CellBackend, Part
 from robot_bridges.nextage_sim.backend import NextageSimBackend
+from robot_bridges.placed import PlacedBackend
 from speed_override_checks import Samples, assert_within_limits, distance_to_path, sample, settle_time
 
 Run = Callable[[Callable[[Clock], Coroutine[Any, Any, None]]], None]
@@ -106,5 +110,20 @@ def test_a_taught_recording_keeps_the_persons_time_at_any_override(run_sim: Run)
         teach = RecordTrajectory("taught", "teach", duration=1.0, sample_period=0.25)
         result = await clock.wait_for(backend.execute("right_arm", teach), 5.0)  # bounded: a held teach would never end
         assert clock.now() - start == pytest.approx(1.0, abs=1e-6) and result.times == (0.0, 0.25, 0.5, 0.75, 1.0)
+
+    run_sim(main)
+
+
+def test_a_robot_placed_in_a_mixed_cell_takes_the_cells_override(run_sim: Run) -> None:
+    async def main(clock: Clock) -> None:
+        inner = NextageSimBackend(clock)
+        placed = PlacedBackend(inner, Pose(1.0, 0.0, 0.0), "nextage")
+        cell = CellBackend((Part(CellRobot("nextage", NEXTAGE_OPEN, Pose(1.0, 0.0, 0.0), "nextage-sim"), placed),))
+        cell.set_speed_override(0.5)  # as the dry run's registry and each robot's bridge give it
+        assert (cell.speed_override, placed.speed_override, inner.speed_override) == (0.5, 0.5, 0.5)
+        await inner.execute("left_arm", START)
+        start = clock.now()
+        await placed.execute("left_arm", GOAL)
+        assert clock.now() - start == pytest.approx(2 * (2.6 + 1 / 1.5), abs=0.02)  # the move at half its speed
 
     run_sim(main)
