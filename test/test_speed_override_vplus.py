@@ -105,3 +105,15 @@ def test_a_monitor_speed_reaches_the_controller_while_its_motion_link_waits_for_
             await motion
 
     run_sim(main)
+
+
+def test_a_motion_right_after_a_change_waits_until_the_controller_has_the_monitor_speed(run_sim: Run) -> None:
+    async def main(clock: Clock) -> None:
+        async with rig(clock) as (sim, backend):
+            backend.set_speed_override(0.5)
+            await backend.execute("arm", MoveJoints(GOAL))  # sent at once: its messages wait for the monitor speed's ack
+            order = [m.command.skill for m in sim.received]
+            assert order.index(Skill.MONITOR_SPEED) < order.index(Skill.MOVE_JOINTS)
+            assert sim.arm.monitor.target == 0.5
+
+    run_sim(main)

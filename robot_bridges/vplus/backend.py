@@ -361,6 +361,7 @@ class VPlusBackend(RobotBackend):
     async def _send_motion(self, messages: Sequence[Command], goal: np.ndarray, estimate: float, what: str) -> MotionResult:
         """Write ``messages`` (ending in a break) at once and wait for the arm to reach ``goal`` (the wait stretched
         by the motion time a speed override below 100 % takes)."""
+        await self.monitor.delivered()
         if self.monitor.problem is not None:  # never faster than the operator asked
             raise BridgeError(FaultKind.CONTROLLER, f"{what} not sent: {self.monitor.problem}")
         timeout = self.ack_timeout + 2.0 * estimate + self._busy_for()

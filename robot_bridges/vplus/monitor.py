@@ -61,6 +61,12 @@ class MonitorSpeed:
                 return
             self.sent, self.problem = rate, None
 
+    async def delivered(self) -> None:
+        """Until every value asked for has reached the controller or failed (each send is bounded by the link's
+        timeout): a motion goes out only once the controller has the operator's speed."""
+        while self._tasks:
+            await asyncio.gather(*list(self._tasks), return_exceptions=True)
+
     async def stretching(self, work: asyncio.Future[object]) -> None:
         """While ``work`` (a motion's acks) is awaited: every period the controller spent below 100 %, its
         calls get the motion time it lost."""
