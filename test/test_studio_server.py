@@ -10,7 +10,7 @@ import re
 import shutil
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -271,22 +271,28 @@ def test_any_trace_file_even_cut_is_replayed_or_refused_line_by_line(tmp_path_fa
     assert timeline["records"] == count
 
 
-def test_attached_through_the_transport_port_the_page_sees_and_commands_a_cell_it_does_not_run(cell_dir: Path) -> None:
-    """``--transport ros`` with the in-process transport standing in for the ROS graph: the cell is started by
-    someone else (autostart off), the station joins as one more node, starts it through the engine's service,
-    sees every record, pauses and resumes it and sees it finish."""
-    app = load_application(cell_dir / "rivet_installation.xml", CATALOG)
-    cell_done: list[Any] = []
+def cell_elsewhere(app: Any) -> Callable[[Clock], Coroutine[Any, Any, Transport]]:
+    """A connect for AttachedSession: the cell (nextage-sim, autostart off) on an in-process transport standing in for
+    the ROS graph, its engine already running ``app`` (waiting for the start service)."""
 
     async def connect(clock: Clock) -> Transport:
         transport = LocalTransport(clock)
         backend = await create_backend("nextage-sim", clock, BackendOptions(robot=app.robot))
         deployment = await deploy_local(clock, app.robot, backend, transport=transport, engine_parameters={"autostart": False})
-        cell_done.append(asyncio.get_running_loop().create_task(deployment.engine.run(app)))
+        running.append(asyncio.get_running_loop().create_task(deployment.engine.run(app)))  # kept: a task nobody holds may be collected
         return transport
 
+    running: list[Any] = []
+    return connect
+
+
+def test_attached_through_the_transport_port_the_page_sees_and_commands_a_cell_it_does_not_run(cell_dir: Path) -> None:
+    """``--transport ros`` with the in-process transport standing in for the ROS graph: the cell is started by
+    someone else (autostart off), the station joins as one more node, starts it through the engine's service,
+    sees every record, pauses and resumes it and sees it finish."""
+    app = load_application(cell_dir / "rivet_installation.xml", CATALOG)
     feed = Feed()
-    session = AttachedSession(feed, app.robot, app.name, connect, scaled_clock(20.0))  # the cell simulated at 20x
+    session = AttachedSession(feed, app.robot, app.name, cell_elsewhere(app), scaled_clock(20.0))  # the cell simulated at 20x
     session.attach()
     client = client_for(Station(CATALOG, feed, session, cell_dir, cell_dir / "rivet_installation.xml"))
     try:
