@@ -112,17 +112,15 @@ class PathRate:
         wanted = (self.target - start) / dt
         low, high = -self.max_change, self.max_change
         if shape is not None and limits is not None:
-            velocity, acceleration = shape(tau)
-            lo, hi = rate_change_bounds(velocity, acceleration, limits, start)
-            low, high = max(low, lo), min(high, hi)
+            # at both ends of the step (a little beyond: the path's acceleration may change within it, at a ramp's
+            # end, and the derivatives are differences over _PROBE), at the highest rate the step may reach
+            highest = start if self.target <= start else min(self.target, start + self.max_change * dt)
+            for at in (tau, tau + max(start, highest) * dt + 2.0 * _PROBE):
+                velocity, acceleration = shape(at)
+                lo, hi = rate_change_bounds(velocity, acceleration, limits, highest)
+                low, high = max(low, lo), min(high, hi)
         change = min(max(wanted, low), high)
         end = start + change * dt
         end = self.target if (change > 0 and end >= self.target) or (change < 0 and end <= self.target) else end
         self.rate = min(max(end, 0.0), 1.0)
         return 0.5 * (start + self.rate) * dt
-
-    def time_to_settle(self, worst_velocity_ratio: float) -> float:
-        """An upper bound of the clock time a change to the target takes while the path cruises
-        (no planned acceleration), ``worst_velocity_ratio`` being max over joints of |q'|/A."""
-        slope = self.max_change if worst_velocity_ratio <= 0 else min(self.max_change, 1.0 / worst_velocity_ratio)
-        return abs(self.target - self.rate) / slope
