@@ -21,6 +21,7 @@ from fake_fjt_server import FakeDriver
 
 from app_functions.registry import full_catalog
 from cell_runner.dry_run.runner import dry_run
+from core_functions.geometry import Pose
 from core_functions.primitives import EndEffector, Vision
 from core_functions.robots import KUKA_KR, NEXTAGE_OPEN
 from execution_engine.app_model import load_application
@@ -29,7 +30,9 @@ from node_transport.local import LocalTransport
 from node_transport.msgs import CameraInfo, Image
 from node_transport.qos import SENSOR
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
+from robot_bridges.camera.render import MAX_BLUR, render
 from robot_bridges.camera.ros_camera import RosCamera, to_messages
+from robot_bridges.camera.scene import build_scene
 from robot_bridges.camera.sources import Frame
 from robot_bridges.camera.spec import CameraSpec
 from robot_bridges.registry import check_options
@@ -163,3 +166,16 @@ def test_a_bad_camera_or_tool_option_is_one_line_naming_it(robot: Any, extra: di
     with pytest.raises(ValueError) as caught:
         check_options("ros2-control", BackendOptions(robot=robot, extra=extra), 1.0)
     assert str(caught.value).startswith(message) and "\n" not in str(caught.value)
+
+
+def test_a_camera_swept_against_the_part_draws_its_image_with_a_bounded_blur() -> None:
+    """camera-sim draws the hand cameras at every pose of a motion: 10 um above a part asked the renderer for a blur of
+    millions of pixels (a kernel of gigabytes, minutes); the blur is capped where the image is a uniform grey anyway."""
+    app = load_application(RIVET, full_catalog())
+    assert app.cell is not None
+    cell = app.cell.to_snapshot(app.robot)
+    spec = parse_options(BackendOptions(robot=NEXTAGE_OPEN, extra={"camera_source": "ros"})).cameras.specs["left_hand_camera"]  # type: ignore[union-attr]
+    assert float(spec.optics.blur_sigma(spec.intrinsics, 1e-9)) == MAX_BLUR
+    touching = cell.truth["drill_1"].compose(Pose.from_xyz_rpy(0.0, 0.0, -1e-5, 0.0, 0.0, 0.0))
+    image = render(build_scene(cell.frames, cell.elements, cell.truth), spec.intrinsics, touching.matrix(), spec.optics, np.random.default_rng(0))
+    assert image.shape == (480, 640)

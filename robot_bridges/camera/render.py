@@ -36,6 +36,10 @@ Array = NDArray[np.float64]
 BACKGROUND = 0.12
 #: Pixels added around a computed window against rounding at its edges (a speed-up only: see _window).
 WINDOW_MARGIN = 2
+#: px: the largest defocus blur drawn.  A surface almost touching the lens (a hand camera swept past a part while
+#: the arm moves, as camera-sim draws it) would ask for a blur of millions of pixels -- a Gaussian kernel of gigabytes
+#: and minutes; past a few dozen pixels the image is a uniform grey either way.
+MAX_BLUR = 50.0
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,7 @@ class Optics:
         """Defocus blur (px, Gaussian sigma ~ circle of confusion / 2) at ``depth`` (m)."""
         f = 0.5 * (intrinsics.fx + intrinsics.fy)
         z = np.maximum(np.asarray(depth, dtype=float), 1e-6)
-        return 0.5 * self.aperture * f * np.abs(1.0 / z - 1.0 / self.focus_distance)
+        return np.minimum(0.5 * self.aperture * f * np.abs(1.0 / z - 1.0 / self.focus_distance), MAX_BLUR)
 
 
 @dataclass(frozen=True)
