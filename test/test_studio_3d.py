@@ -16,6 +16,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pinocchio as pin
 import pytest
 
 pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
@@ -29,9 +31,11 @@ from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
 
 from app_functions.registry import full_catalog  # noqa: E402
+from cell_runner.dry_run.collisions import scene_of  # noqa: E402
+from execution_engine.app_model import load_application  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
 from operator_station.testing import ServedStation, serve  # noqa: E402
-from test_scene3d import arms_meet, cli, demonstrator, record, recorded_joint_states  # noqa: E402
+from test_scene3d import arms_meet, cli, demonstrator, dry_run_of, record, recorded_joint_states  # noqa: E402
 from test_studio_server import station_args  # noqa: E402
 
 WAIT = 120.0  # wall seconds any one condition may take (a dry run and a run on a loaded CI machine), then the test fails
@@ -63,8 +67,10 @@ def open_3d(driver: Any, folder: Path, **changes: Any) -> ServedStation:
 
 
 def show_3d(driver: Any) -> None:
-    until(driver, lambda d: d.find_element(By.ID, "tab-view3d").click() or True)
-    until(driver, lambda d: "active" in d.find_element(By.ID, "view-view3d").get_attribute("class"))
+    """Show the 3D tab; clicked again while not shown (a started run shows the monitor when the station answers, which
+    on a loaded machine can come after the click)."""
+    until(driver, lambda d: "active" in d.find_element(By.ID, "view-view3d").get_attribute("class")
+          or (d.find_element(By.ID, "tab-view3d").click() or False))
 
 
 def last_tcps(trace: Path) -> dict[str, dict[str, float]]:
@@ -121,14 +127,19 @@ def test_the_robot_follows_a_live_runs_joint_states(driver: Any, tmp_path: Path)
 
 
 def test_the_dry_runs_collision_of_the_two_arms_is_shown_on_the_robot(driver: Any, tmp_path: Path) -> None:
-    """Must show (issue 25): the dry run refuses the run; the 3D view turns the two bodies it named red."""
+    """Must show (issue 25): the dry run refuses the run; the 3D view turns the two bodies it named red, with the robot
+    drawn as the dry run had it at the collision's instant: the two hands meet where they stood apart before."""
     app = arms_meet(tmp_path)
     code, _, err = cli("validate", "--simulate", str(app))
     named = [m.groups() for line in err.splitlines() if (m := HANDS.search(line))]
     assert code == 1 and named, err
+    finding = next(f for f in dry_run_of(app).findings if f.kind == "collision")
+    at_collision = dict(zip(*finding.joints))  # type: ignore[arg-type]
     served = open_3d(driver, tmp_path, file=app.name)
     try:
         assert driver.execute_script("return view3d.highlighted()") == []
+        hands = [f"{side}ARM_JOINT5_Link" for side in ("L", "R")]
+        assert math.dist(*(driver.execute_script("return view3d.linkPosition(arguments[0])", n) for n in hands)) > 0.2  # apart at the start
         colour = driver.execute_script("return view3d.colour('LARM_JOINT5_Link')")
         until(driver, lambda d: d.find_element(By.ID, "ctl-start").click() or True)
         until(driver, lambda d: "not run" in d.find_element(By.ID, "run-messages").text + d.find_element(By.ID, "alarms").text
@@ -139,9 +150,31 @@ def test_the_dry_runs_collision_of_the_two_arms_is_shown_on_the_robot(driver: An
         for name in named[0][:2]:
             assert driver.execute_script("return view3d.colour(arguments[0])", name) == "#e0201b" != colour
         found = driver.execute_script("return view3d.findings()")
-        assert {(f["kind"], f["source"], tuple(f["bodies"]), f["t"]) for f in found} == {("collision", "dry run", tuple(named[0][:2]), float(named[0][2]))}
+        assert {(f["kind"], f["source"], tuple(f["bodies"]), round(f["t"], 2)) for f in found} == {("collision", "dry run", tuple(named[0][:2]), float(named[0][2]))}
         assert "collision: left_arm approach" in driver.find_element(By.ID, "view3d-findings").text
         assert driver.execute_script("return view3d.places()") == [f"at drill_1, {float(named[0][2]):.2f} s"]  # the hole both calls work at
+        # at its moment: the robot drawn with the joints the dry run found at the collision, the time said above the view
+        shown = driver.execute_script("return view3d.shown()")
+        assert (shown["source"], shown["bodies"], shown["t"]) == ("dry run", list(named[0][:2]), finding.t)
+        drawn = driver.execute_script("return view3d.jointValues()")
+        assert set(drawn) == set(at_collision) and all(drawn[n] == pytest.approx(v, abs=1e-9) for n, v in at_collision.items())
+        assert driver.find_element(By.ID, "view3d-time").text == f"dry run {finding.t:.2f} s"
+        scene = scene_of(load_application(app, full_catalog()))
+        assert scene is not None
+        pin.framesForwardKinematics(scene.model, scene.data, np.array([at_collision[n] for n in scene.joint_names]))
+        left, right = (driver.execute_script("return view3d.linkPosition(arguments[0])", n) for n in hands)
+        for name, drawn_at in zip(hands, (left, right)):  # the drawn links are the collision model's at that instant
+            assert drawn_at == pytest.approx(list(scene.data.oMf[scene.model.getFrameId(name)].translation), abs=1e-4), name
+        assert math.dist(left, right) < 0.01  # the two hands' frames within 10 mm: they meet
+        # the finding list: a click on the finding shown draws the robot as it is (apart), on the other finding at its moment
+        rows = driver.find_elements(By.CSS_SELECTOR, "#view3d-findings .finding")
+        assert len(rows) == 2 and "shown" in rows[0].get_attribute("class")
+        until(driver, lambda d: d.find_elements(By.CSS_SELECTOR, "#view3d-findings .finding")[0].click() or True)
+        until(driver, lambda d: d.execute_script("return view3d.shown()") is None)
+        assert math.dist(*(driver.execute_script("return view3d.linkPosition(arguments[0])", n) for n in hands)) > 0.2
+        until(driver, lambda d: d.find_elements(By.CSS_SELECTOR, "#view3d-findings .finding")[1].click() or True)
+        until(driver, lambda d: (d.execute_script("return view3d.shown()") or {}).get("joints") == at_collision)  # the right arm's finding, same instant
+        assert math.dist(*(driver.execute_script("return view3d.linkPosition(arguments[0])", n) for n in hands)) < 0.01
     finally:
         served.close()
 

@@ -1,7 +1,8 @@
 // The 3D view: the robot from the URDF its bridge publishes, moving with the joint states, the cell from the
 // cell model, frames on demand, each group's current goal and path, the frames vision located beside the
 // nominal ones, and the dry run's findings placed on the robot (a collision's two bodies highlighted, an
-// unreachable target marked).  Everything is drawn at the store's cursor (Store.now()) from the store's joint
+// unreachable target marked), each at its moment: the finding list beside the view puts the robot where the dry run
+// had it at that finding's instant (its joints, kept by the dry run) or a run's fault at its time on the slider.  Everything is drawn at the store's cursor (Store.now()) from the store's joint
 // samples and records and the scene's goals (GET /api/scene3d/events), so the time slider of a replay moves it
 // as it moves the other views.  The scene is kept light: one geometry and material per kind of thing, shared;
 // objects made once and moved; rendering only when something changed, in requestAnimationFrame.
@@ -13,7 +14,7 @@ const View3D = (() => {
   const $ = (id) => document.getElementById(id);
   const state = {
     scene: null, run: -1, robots: [], cell: null, events: [], eventRun: -1, fetching: false, fetchAgain: false,
-    findings: [], highlighted: [], showFrames: false, tcpFrames: [], dirty: true, visible: false, ready: false,
+    findings: [], selected: null, highlighted: [], showFrames: false, tcpFrames: [], dirty: true, visible: false, ready: false,
     ends: {}, recorded: null, recordedRun: -1, tcpCache: new Map(), renderMs: [], intervals: [], lastFrame: null, frameCount: 0, error: null,
   };
   let renderer = null, camera = null, controls = null, world = null, robotsRoot = null, cellRoot = null, marks = null, frameRoot = null;
@@ -58,8 +59,8 @@ const View3D = (() => {
       state.dirty = true;
     });
     $("view3d-fit").addEventListener("click", fit);
-    $("view3d-slider").addEventListener("input", (e) => Store.setCursor(Number(e.target.value)));
-    $("view3d-live").addEventListener("click", () => Store.setCursor(null));
+    $("view3d-slider").addEventListener("input", (e) => { state.selected = null; Store.setCursor(Number(e.target.value)); });
+    $("view3d-live").addEventListener("click", () => { state.selected = null; Store.setCursor(null); });
     requestAnimationFrame(tick);
   }
 
@@ -112,7 +113,9 @@ const View3D = (() => {
     }
     if (answer.recorded_joints && (!state.recorded || state.recordedRun !== answer.run)) await loadJoints(answer.run);
     else if (!answer.recorded_joints) state.recorded = null;
+    const before = state.selected !== null ? state.findings[state.selected] : null;
     state.findings = answer.findings || [];
+    state.selected = pickFinding(before);
     $("view3d-notes").textContent = (answer.notes || []).join(" · ");
     state.ready = true;
     await loadEvents();
@@ -206,6 +209,45 @@ const View3D = (() => {
     }
   }
 
+  // A finding's joints (the collision model's names: ``member/joint`` in a cell of several robots) on each robot.
+  function setFindingJoints(joints) {
+    for (const r of state.robots) {
+      const prefix = r.info.prefix || "";
+      const names = [], values = [];
+      for (const [name, value] of Object.entries(joints)) {
+        if (prefix && !name.startsWith(prefix)) continue;
+        names.push(name.slice(prefix.length)); values.push(value);
+      }
+      for (let i = 0; i < names.length; i++) {
+        const joint = r.model.joints[names[i]];
+        if (joint && typeof values[i] === "number" && values[i] === values[i] && joint.jointType !== "fixed") joint.setJointValue(values[i]);
+      }
+    }
+  }
+
+  // The finding shown at its moment after the findings were read again: the same one as before if it is still there;
+  // else, for a refused run (nothing moved: no joint state), the dry run's first collision, then its first with joints.
+  function pickFinding(before) {
+    const same = (f) => before && f.source === before.source && f.kind === before.kind && f.t === before.t && f.group === before.group;
+    const kept = state.findings.findIndex(same);
+    if (kept >= 0) return kept;
+    if (joints().samples.length) return null;
+    const dry = state.findings.map((f, i) => [f, i]).filter(([f]) => f.source === "dry run" && f.joints);
+    const first = dry.find(([f]) => f.kind === "collision") || dry[0];
+    return first ? first[1] : null;
+  }
+
+  // Click on a finding: the view at its moment (a dry run's: the robot at its joints; a run's: the slider at its
+  // time, every view with it); on the one shown: back to the robot as it is.
+  function select(i) {
+    if (i === state.selected || i === null || !state.findings[i]) { state.selected = null; update(); return; }
+    state.selected = i;
+    const f = state.findings[i];
+    if (f.source === "run" && f.t !== null) Store.setCursor(f.t); else update();
+  }
+
+  const shown = () => (state.selected !== null ? state.findings[state.selected] || null : null);
+
   // Before any joint state: where a refused run's dry run started the robot (where it is: nothing moved), else
   // each robot's initial pose (its simulator's start).
   function restPose() {
@@ -263,25 +305,36 @@ const View3D = (() => {
     if (!world || !state.ready) return;
     const t = Store.now();
     const sample = sampleAt(t);
-    if (sample) setJoints(joints().names, sample.slice(1));
+    const at = shown();
+    const moment = at && at.source === "dry run" && at.joints ? at : null;  // the robot where the dry run had it then
+    if (moment) { restPose(); setFindingJoints(moment.joints); }
+    else if (sample) setJoints(joints().names, sample.slice(1));
     else restPose();
     for (const r of state.robots) r.holder.updateMatrixWorld(true);
     const goals = goalsAt(t).map(([i, goal]) => [goal, Geo.goalPath(i, goal, state, sampleAt(goal.t))]);
     Geo.drawGoals(goals, state);
     Geo.drawLocated(locatedAt(t), state.cell);
     const found = activeFindings(t);
-    state.highlighted = Geo.highlight(found, state.robots, cellRoot);
+    state.highlighted = Geo.highlight(at && found.includes(at) ? [at] : found, state.robots, cellRoot);
     Geo.drawFindings([...found.filter((f) => f.target), ...collisionPlaces(found)]);
     const dry = state.scene && state.scene.dry_run;
-    const drawn = dry && !sample && found.some((f) => f.source === "dry run")
-      ? [Object.assign(document.createElement("div"), {className: "finding-note", textContent: `Not run: nothing moved. The robot is drawn where the run would start; in red the bodies the dry run found would collide, and the red mark where their calls work (at the time it says).`})] : [];
-    $("view3d-findings").replaceChildren(...drawn, ...found.map((f) => Object.assign(document.createElement("div"), {className: "finding", textContent: `${f.source === "dry run" ? "dry run" : "run"}${f.t !== null ? ` at ${f.t.toFixed(2)} s` : ""}: ${f.kind}: ${f.group} ${f.function}${f.bodies ? ` -- ${f.bodies.map((b) => b.label).join(" and ")}` : f.label ? ` -- ${f.label}` : ""}`})));
+    const note = moment
+      ? `Not run: nothing moved. The robot is drawn as the dry run had it ${moment.t.toFixed(2)} s into the run, at this finding; in red the bodies it names, the red mark where their calls work. Click it again for the robot as it is.`
+      : dry && !sample && found.some((f) => f.source === "dry run")
+        ? "Not run: nothing moved. The robot is drawn where the run would start; click a finding to see the robot at its moment." : "";
+    const rows = found.map((f) => {
+      const row = Object.assign(document.createElement("div"), {className: "finding" + (f === at ? " shown" : ""), title: f.message || "",
+        textContent: `${f.source === "dry run" ? "dry run" : "run"}${f.t !== null ? ` at ${f.t.toFixed(2)} s` : ""}: ${f.kind}: ${f.group} ${f.function}${f.bodies ? ` -- ${f.bodies.map((b) => b.label).join(" and ")}` : f.label ? ` -- ${f.label}` : ""}`});
+      row.addEventListener("click", () => select(state.findings.indexOf(f)));
+      return row;
+    });
+    $("view3d-findings").replaceChildren(...(note ? [Object.assign(document.createElement("div"), {className: "finding-note", textContent: note})] : []), ...rows);
     const slider = $("view3d-slider");
     const samples = joints().samples;
     const end = Math.max(Store.records.length ? Store.records[Store.records.length - 1].t : 0, samples.length ? samples[samples.length - 1][0] : 0);
     slider.max = String(end);
     if (Store.cursor !== null) slider.value = String(Store.cursor); else slider.value = String(end);
-    $("view3d-time").textContent = `${Store.cursor === null ? "live" : "replay"} ${t.toFixed(2)} s`;
+    $("view3d-time").textContent = moment ? `dry run ${moment.t.toFixed(2)} s` : `${Store.cursor === null ? "live" : "replay"} ${t.toFixed(2)} s`;
     state.dirty = true;
   }
 
@@ -338,7 +391,7 @@ const View3D = (() => {
   let reload = null;
   const reloadSoon = () => { if (reload === null) reload = setTimeout(() => { reload = null; loadScene(); }, 200); };
   let lastMessages = "";
-  Store.on("snapshot", () => { state.ends = {}; state.run = -1; reloadSoon(); });  // each (re)connection sends one
+  Store.on("snapshot", () => { state.ends = {}; state.run = -1; state.selected = null; reloadSoon(); });  // each (re)connection sends one
   Store.on("records", (records) => {
     noteEnds(records);
     if (records.some((r) => r.event === "error")) reloadSoon();
@@ -366,6 +419,8 @@ const View3D = (() => {
     tcp: (group) => Geo.tcpPose(state.robots, group),
     colour: (name) => Geo.bodyColour(state.robots, name),
     highlighted: () => state.highlighted.slice(),
+    shown: () => { const f = shown(); return f ? {kind: f.kind, source: f.source, t: f.t, bodies: (f.bodies || []).map((b) => b.name), joints: f.joints || null} : null; },
+    select: (i) => select(i),
     findings: () => activeFindings(Store.now()).map((f) => ({kind: f.kind, source: f.source, t: f.t, bodies: (f.bodies || []).map((b) => b.name), target: f.target || null})),
     goals: () => goalsAt(Store.now()).map(([, g]) => ({group: g.group, kind: g.kind, label: g.label || "", t: g.t})),
     located: () => Object.keys(locatedAt(Store.now())),
