@@ -1,6 +1,6 @@
 """The 3D view's screenshots of docs/studio.md (taken by ``python -m operator_station.screenshots``): the rivet
-demonstrator mid-run, a recording of it replayed at two slider positions, the dry run's collision of the two arms, the
-same collision stopped by the simulator at its moment, and the mixed cell's two robots where its cell places them --
+demonstrator mid-run, a recording of it replayed at two slider positions, the dry run's collision of the two arms at its
+moment, the same collision stopped by the simulator at its moment, and the mixed cell's two robots where its cell places them --
 each in headless Chromium with the tests' own driver.
 """
 from __future__ import annotations
@@ -77,7 +77,7 @@ def _show(driver: Any, until: Until, frames: bool = False) -> None:
 
 def shoot_3d(out: Path, args: Callable[..., argparse.Namespace], until: Until) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    shots = [out / f"studio_3d_{n}.png" for n in ("live", "replay_early", "replay_late", "collision", "mixed_cell", "collision_run")]
+    shots = [out / f"studio_3d_{n}.png" for n in ("live", "replay_early", "replay_late", "dry_run_collision", "mixed_cell", "collision_run")]
     with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
         folder = _folder(name)
         driver = browser.chromium(1400, 860)
@@ -114,8 +114,14 @@ def shoot_3d(out: Path, args: Callable[..., argparse.Namespace], until: Until) -
                 driver.get(meet.url)
                 until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
                 driver.find_element("id", "ctl-start").click()
-                until(driver, "view3d.highlighted().length === 2", 300.0)
+                until(driver, "view3d.highlighted().length === 2 && view3d.shown() !== null", 300.0)
                 _show(driver, until)
+                # in front of the robot, both arms coming in to where the dry run has the two hands meet (the robot drawn at
+                # that finding's instant)
+                driver.execute_script("""const [a, b] = view3d.shown().bodies.map((n) => view3d.linkPosition(n));
+                    const m = a.map((x, i) => (x + b[i]) / 2);
+                    view3d.look([m[0] + 0.9, m[1] - 0.1, m[2] + 0.6], [m[0] - 0.05, m[1], m[2] + 0.15]);""")
+                time.sleep(0.6)
                 driver.save_screenshot(str(shots[3]))
             finally:
                 meet.close()
