@@ -36,7 +36,7 @@ from robot_bridges.camera.scene import build_scene
 from robot_bridges.camera.sources import Frame
 from robot_bridges.camera.spec import CameraSpec
 from robot_bridges.registry import check_options
-from robot_bridges.ros2_control.backend import Ros2ControlBackend
+from robot_bridges.ros2_control.backend import SETTLE_TIME, Ros2ControlBackend
 from robot_bridges.ros2_control.link import GraphLink
 from robot_bridges.ros2_control.options import parse_options
 
@@ -79,7 +79,7 @@ def test_no_image_on_the_camera_topic_is_a_vision_fault_naming_the_topic_after_c
 
     error, waited = run_sim(main)
     assert error.kind is FaultKind.VISION and "no image on /cell/left_cam/image_raw within 0.5 s" in str(error)
-    assert 0.5 <= waited < 0.6
+    assert 0.5 <= waited - SETTLE_TIME < 0.6  # the arm kept still for SETTLE_TIME first, then camera_timeout
 
 
 def test_an_image_taken_before_the_request_is_skipped_and_the_next_one_is_used(run_sim: Run) -> None:
@@ -95,7 +95,7 @@ def test_an_image_taken_before_the_request_is_skipped_and_the_next_one_is_used(r
         asked = clock.epoch_now()
 
         async def camera() -> None:
-            await clock.sleep(0.1)
+            await clock.sleep(SETTLE_TIME + 0.2)  # the back end waits for the arm to keep still, then asks
             for stamp in (asked - 1.0, clock.epoch_now()):  # an old frame first, then one taken now
                 image, info = to_messages("left_hand_camera", Frame(blank(spec), spec.intrinsics, stamp))
                 info_pub.publish(info)

@@ -306,6 +306,9 @@ class Ros2ControlBackend(RobotBackend):
         except KeyError:
             raise BridgeError(FaultKind.VISION, f"{group.group}: no camera {name!r} (cameras: {', '.join(self.settings.cameras.specs)})") from None
         assert self.model is not None
+        # A motion ends within goal_tolerance of its target: the arm may still be closing the last millimetres. An image
+        # taken then, placed by the joints read a moment before, puts the hole off by as much (1 mm seen on the Jazzy mock).
+        await self._settle((group,))
         q = self._q()
         placed = []
         for cam in cameras:
@@ -395,13 +398,14 @@ class Ros2ControlBackend(RobotBackend):
             raise BridgeError(FaultKind.STOPPED, f"{group.group}: stopped")
 
     async def _settle(self, team: tuple[GroupSettings, ...]) -> None:
-        """Wait (within result_timeout) until the arms stand still after a cancel: the resume plans from there."""
+        """Wait (within result_timeout) until the arms stand still: after a cancel (the resume plans from there), before
+        a capture (the cameras are placed from there)."""
         deadline = self.clock.now() + self.settings.result_timeout
         before = self._team_q(team)
         still_since = self.clock.now()
         while self.clock.now() - still_since < SETTLE_TIME:
             if self.clock.now() > deadline:
-                raise BridgeError(FaultKind.CONTROLLER, f"{team[0].group}: the arm did not come to rest within {self.settings.result_timeout:g} s of the cancel")
+                raise BridgeError(FaultKind.CONTROLLER, f"{team[0].group}: the arm did not come to rest within {self.settings.result_timeout:g} s (result_timeout)")
             await self.clock.sleep(SETTLE_TIME / 4)
             now = self._team_q(team)
             if float(np.max(np.abs(now - before))) > STILL:
