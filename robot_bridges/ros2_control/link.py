@@ -2,7 +2,7 @@
 
 :class:`GraphLink` is a client of what a ros2_control driver offers: ``/robot_description``,
 ``/joint_states`` (every sample through :class:`~.feed.JointFeed`), one FollowJointTrajectory action
-per group and, where configured, a GripperCommand action.  :class:`ModelLink` answers the same calls
+per group and, where configured, a GripperCommand action and a tool's std_srvs/SetBool service.  :class:`ModelLink` answers the same calls
 from the URDF alone -- a trajectory is followed on the back end's clock, sample by sample, so a dry
 run's timeline and a pause inside a motion behave as on the robot -- and never touches a controller.
 """
