@@ -61,7 +61,7 @@ class UrdfTree:
             if joint_frame.type == pin.FrameType.FIXED_JOINT:
                 joints.append(TreeJoint(joint_frame.name, parent_link, frame.name, movable=False))
                 continue
-            joint = self.model.joints[_parent_joint(frame)]
+            joint = self.model.joints[parent_joint(frame)]
             if joint.nq not in _MOVABLE_NQ or joint.nv != 1:
                 continue  # floating or planar
             joints.append(TreeJoint(joint_frame.name, parent_link, frame.name, movable=True))
@@ -136,6 +136,6 @@ def _parent_frame(frame: pin.Frame) -> int:
     return int(frame.parentFrame if hasattr(frame, "parentFrame") else frame.previousFrame)
 
 
-def _parent_joint(frame: pin.Frame) -> int:
+def parent_joint(frame: pin.Frame) -> int:
     """The joint that moves a frame: ``parentJoint`` since pinocchio 3, ``parent`` in 2.x."""
     return int(frame.parentJoint if hasattr(frame, "parentJoint") else frame.parent)

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from core_functions.geometry import Pose
 from core_functions.robots import RobotModel
+from core_functions.urdf_tree import parent_joint
 from robot_bridges.collision.bodies import CellBox, HeldPart
 from robot_bridges.collision.layout import Layout
 
@@ -262,7 +263,7 @@ class CollisionScene:
                 along[2, 3] = 0.5 * (part.tip - part.top)
                 hung.append((solid, tool @ along))
             for solid, offset in hung:
-                solid.joint = frame.parentJoint
+                solid.joint = parent_joint(frame)  # pinocchio 3 and 2 (ROS 2 Jazzy's 2.7)
                 solid.centre = np.asarray((frame.placement.homogeneous @ offset)[:3, 3], dtype=float)
                 extra.append(len(solids))
                 solids.append(solid)

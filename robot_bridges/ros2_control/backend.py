@@ -50,6 +50,7 @@ from core_functions.primitives import (
     describe,
 )
 from core_functions.robots import RobotModel
+from core_functions.urdf_tree import parent_joint
 from node_transport.wire import CellSnapshot
 from node_transport.clock import Clock
 from robot_bridges.backend import BridgeError, FaultKind, JointLimits, RobotBackend  # JointLimits: the port's signature
@@ -536,6 +537,6 @@ def default_tip(model: UrdfModel, last_joint: str) -> str:
         return "tool0"
     jid = model.model.getJointId(last_joint)
     for frame in model.model.frames:
-        if frame.parentJoint == jid and frame.name != last_joint:
+        if parent_joint(frame) == jid and frame.name != last_joint:
             return str(frame.name)
     raise UrdfError(f"no link after joint {last_joint!r} to use as the tip: name one (option GROUP.tip)")
