@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 import numpy as np
 import pytest
-from fake_fjt_server import FakeDriver
+from fake_fjt_server import FakeDriver, urdf_limits
 
 from app_functions.registry import full_catalog
 from cell_runner.dry_run.runner import dry_run
@@ -27,8 +27,8 @@ from core_functions.robots import KUKA_KR, NEXTAGE_OPEN
 from execution_engine.app_model import load_application
 from node_transport.clock import Clock
 from node_transport.local import LocalTransport
-from node_transport.msgs import CameraInfo, Image
-from node_transport.qos import SENSOR
+from node_transport.msgs import CameraInfo, Header, Image, JointState, Time
+from node_transport.qos import JOINT_STATES, SENSOR
 from robot_bridges.backend import BackendOptions, BridgeError, FaultKind
 from robot_bridges.camera.render import MAX_BLUR, render
 from robot_bridges.camera.ros_camera import RosCamera, to_messages
@@ -179,3 +179,27 @@ def test_a_camera_swept_against_the_part_draws_its_image_with_a_bounded_blur() -
     touching = cell.truth["drill_1"].compose(Pose.from_xyz_rpy(0.0, 0.0, -1e-5, 0.0, 0.0, 0.0))
     image = render(build_scene(cell.frames, cell.elements, cell.truth), spec.intrinsics, touching.matrix(), spec.optics, np.random.default_rng(0))
     assert image.shape == (480, 640)
+
+
+def test_a_backlog_of_joint_states_is_read_whole_not_as_a_jump(run_sim: Run) -> None:
+    """A process that falls behind (a loaded machine, images decoded beside the states) gets half a second of
+    joint_state_broadcaster's 100 Hz at once: every sample must come through, or two far apart look like a jump."""
+    async def main(clock: Clock) -> tuple[str | None, int]:
+        graph, driver, backend = await nextage(clock, {})
+        driver.states_on = False
+        publisher = graph.create_node("broadcaster").create_publisher(JointState, "/joint_states", JOINT_STATES)
+        names = tuple(driver.positions)
+        start, counted = clock.epoch_now(), backend.link.feed.count
+        speed = urdf_limits(URDF_FILE.read_text())["RARM_JOINT2"][2]
+        for k in range(1, 51):  # 0.5 s of samples published while the back end's loop does not run
+            at = {**driver.positions, "RARM_JOINT2": driver.positions["RARM_JOINT2"] - 0.9 * speed * 0.01 * k}
+            publisher.publish(JointState(Header(stamp=Time.from_seconds(start + 0.01 * k)), names, tuple(at[n] for n in names)))
+        await clock.sleep(0.05)
+        try:
+            return backend.link.feed.fault, backend.link.feed.count - counted
+        finally:
+            await driver.close()
+            await graph.shutdown()
+
+    fault, samples = run_sim(main)
+    assert fault is None and samples == 50

@@ -34,7 +34,9 @@ SetBool = mirrors.service("std_srvs/srv/SetBool")
 JointTrajectory = mirrors.mirror("trajectory_msgs/msg/JointTrajectory")
 ControllerState = mirrors.mirror("control_msgs/msg/JointTrajectoryControllerState")
 #: /joint_states as joint_state_broadcaster offers it (reliable) or a driver (best effort): best effort takes both.
-STATE_QOS = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, History.KEEP_LAST, 10)
+#: 100 samples: a second of joint_state_broadcaster at 100 Hz, so a process that falls behind for a moment (a loaded
+#: machine, images decoded beside the states) still sees every sample, not two a fraction of a second apart (a "jump").
+STATE_QOS = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, History.KEEP_LAST, 100)
 FJT_CODES = {0: "SUCCESSFUL", -1: "INVALID_GOAL", -2: "INVALID_JOINTS", -3: "OLD_HEADER_TIMESTAMP", -4: "PATH_TOLERANCE_VIOLATED", -5: "GOAL_TOLERANCE_VIOLATED"}
 SUCCEEDED, CANCELED = "succeeded", "canceled"
 #: s between the checks of a running motion (the joint states' age, a pause)
