@@ -16,7 +16,7 @@ from cell_runner.cli import main
 from execution_engine.app_model import load_application
 from execution_engine.checkpoint.resume import sits_out
 from execution_engine.recorder.reading import Recording, iter_messages
-from killed_runs import env, records, run_and_freeze
+from killed_runs import env, records, run_and_freeze, run_and_kill
 
 ROOT = Path(__file__).resolve().parent.parent
 BLOCKS = ROOT / "apps_xml" / "rivet_blocks.xml"
@@ -37,6 +37,12 @@ def second_iteration_starts(starts: int) -> Callable[[bytes], bool]:
     """Once the trace shows ``starts`` function starts of the second iteration."""
     mark = b'"iteration":"for_each hole=drill_2'
     return lambda trace: sum(1 for line in trace.splitlines() if mark in line and b'"event":"function_start"' in line) >= starts
+
+
+def start_and_kill(app: Path, folder: Path, starts: int) -> Path:
+    """Run in a process of its own; kill -9 once the trace shows ``starts`` function starts of the second iteration
+    (test_branches_run's kill)."""
+    return run_and_kill(app, folder, second_iteration_starts(starts))
 
 
 @pytest.fixture(scope="module")
