@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given
+from hypothesis import assume, example, given
 from hypothesis import strategies as st
 
 from core_functions.geometry import Pose
@@ -64,6 +64,8 @@ def test_the_model_carries_the_robot_descriptions_joint_ranges() -> None:
 
 
 @given(joints)
+@example(q=(1.0, 0.0, 1.5, 0.0, 1e-07, 0.0))  # just off the wrist singularity (CI at 868e7bd: joint 6 from r's third row missed by 1.5e-8)
+@example(q=(1.0, 0.0, 1.5, 0.0, 1e-08, 0.0))
 def test_inverse_kinematics_reaches_every_reachable_pose(q: tuple[float, ...]) -> None:
     target = KIN.forward(q)
     solved = KIN.inverse(target, seed=q)

@@ -249,5 +249,9 @@ def _wrist_solutions(r: Matrix, q4_near: float) -> list[tuple[float, float, floa
         return [(q4_near, math.pi, -math.atan2(r[1, 0], -r[0, 0]) + q4_near)]
     q5 = math.atan2(s5, r[2, 2])
     q4 = math.atan2(r[1, 2], r[0, 2])
-    q6 = math.atan2(r[2, 1], -r[2, 0])
+    # Joint 6 from what joints 4 and 5 leave of the rotation, not from r's third row: near q5 = 0 joint 4's
+    # angle is known only to about eps / sin(q5), and joint 6 taken this way absorbs that error (q4 + q6 is
+    # what the rotation fixes there), so the flange lands on the target to rounding at any q5.
+    rest = (_rz(q4) @ _ry(q5)).T @ r
+    q6 = math.atan2(rest[1, 0], rest[0, 0])
     return [(q4, q5, q6), (q4 + math.pi, -q5, q6 + math.pi)]
