@@ -30,8 +30,10 @@ from operator_station.testing import serve  # noqa: E402
 from test_studio_server import CATALOG, ROOT, station_args  # noqa: E402
 
 WAIT = 90.0  # wall seconds any one condition may take (a loaded CI machine), then the test fails
-#: Wall seconds a loaded machine may keep the station's jog thread off the CPU (a lease is 0.3 s, a leg 1 s).
-MAX_STALL = 0.2
+#: Wall seconds a loaded machine may keep the station's jog thread off the CPU: below a leg's 1 s, so a stop that
+#: waited for the leg's end still fails; the lease's lapse (0.3 s) is told apart by the stop's reason, not its time
+#: (a helper's run at load 12 saw 0.27 s; the one-period promise itself is test_jog's, on the simulated clock).
+MAX_STALL = 0.6
 
 
 @pytest.fixture
