@@ -33,4 +33,4 @@ def _checkpoint() -> bytes:
         return path.read_bytes()
 
 
-PAUSED_EDIT_FILES: dict[str, str | bytes] = {"edit_old.xml": OLD, "edit_new.xml": NEW, "edited.checkpoint.sqlite": _checkpoint()}
+PAUSED_EDIT_FILES: dict[str, str | bytes] = {"edit_old.xml": OLD, "edited.checkpoint.sqlite": _checkpoint()}
