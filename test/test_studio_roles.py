@@ -112,6 +112,8 @@ def test_an_operator_runs_pauses_steps_resumes_and_stops_the_saved_application_a
                 answer = page.post(f"/api/operator/{command}", json={})
                 assert answer.status_code == 200, answer.text  # the engine's answer, never the role's refusal
             assert page.post("/api/safety", json={"active": True}).json()["ok"]
+            # the engine obeys it (a raise cleared before the engine heard it would leave no pause of its own to audit)
+            assert wait_until(lambda: any(r.get("source", "").startswith("safety stop on") for r in station.feed.records))
             assert page.post("/api/safety/clear", json={"confirm": True}).json()["ok"]
         finally:
             assert page.post("/api/operator/stop", json={}).status_code == 200
