@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import math
 import shutil
 import statistics
 import sys
@@ -37,26 +36,7 @@ from app_functions.registry import full_catalog  # noqa: E402
 from cell_runner.cli import main as run_main  # noqa: E402
 from operator_station import browser  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
-from operator_station.testing import serve  # noqa: E402
-
-
-def station_args(**changes: Any) -> argparse.Namespace:
-    args = argparse.Namespace(file=None, replay=None, controller_host=None, controller_port=None, rsi_listen=None, fault=None, seed=0,
-                               backend_option=None, robot=None, speed=math.inf, trace=None, trajectory_db=":memory:", no_check=True)
-    vars(args).update(changes)
-    return args
-
-
-def wait(driver: Any, script: str, timeout: float = 120.0) -> Any:
-    """Poll a page expression until it is truthy (bounded)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = driver.execute_script(f"try {{ return {script}; }} catch (e) {{ return null; }}")
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"the page never had {script}")
-        time.sleep(0.02)
+from operator_station.testing import serve, station_args, until as wait  # noqa: E402
 
 
 def main() -> int:
@@ -76,7 +56,7 @@ def main() -> int:
         recording = folder / "rivet.mcap"
         if run_main(["run", str(folder / "rivet_installation.xml"), "--speed", "max", "-q", "--record", str(recording)], io.StringIO(), io.StringIO()) != 0:
             raise RuntimeError("the recording could not be made")
-        served = serve(build_station(station_args(replay=str(recording)), full_catalog(), folder))
+        served = serve(build_station(station_args(replay=str(recording), no_check=True), full_catalog(), folder))
         driver = browser.chromium(args.width, args.height + 200)
         try:
             driver.get(served.url)

@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import math
 import shutil
 import statistics
 import subprocess
@@ -40,31 +39,12 @@ from execution_engine.app_model import read_application  # noqa: E402
 from execution_engine.app_model.document import OperationEntry, read_document, to_xml  # noqa: E402
 from operator_station import browser  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
-from operator_station.testing import serve  # noqa: E402
-
-
-def station_args(**changes: Any) -> argparse.Namespace:
-    args = argparse.Namespace(file=None, replay=None, controller_host=None, controller_port=None, rsi_listen=None, fault=None, seed=0,
-                               backend_option=None, robot=None, speed=math.inf, trace=None, trajectory_db=":memory:", no_check=True)
-    vars(args).update(changes)
-    return args
-
-
-def wait(driver: Any, script: str, timeout: float = 120.0) -> Any:
-    """Poll a page expression until it is truthy (bounded)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = driver.execute_script(f"return {script}")
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"the page never had {script}")
-        time.sleep(0.01)
+from operator_station.testing import serve, station_args, until as wait  # noqa: E402
 
 
 def page_times(driver: Any, folder: Path, app: str, repeat: int) -> dict[str, float]:
     """Median shown / validated milliseconds since navigation over ``repeat`` fresh loads."""
-    served = serve(build_station(station_args(file=app), full_catalog(), folder))
+    served = serve(build_station(station_args(file=app, no_check=True), full_catalog(), folder))
     shown, validated, operations = [], [], 0
     try:
         for _ in range(repeat):
@@ -99,7 +79,7 @@ def repeated_rivets(folder: Path, operations: int, name: str = "run") -> Path:
 def run_max(driver: Any, folder: Path, app: str) -> dict[str, Any]:
     """A --speed max run watched by the page: the page's records against the trace."""
     trace = folder / "max_run.jsonl"
-    served = serve(build_station(station_args(file=app, trace=str(trace)), full_catalog(), folder))
+    served = serve(build_station(station_args(file=app, trace=str(trace), no_check=True), full_catalog(), folder))
     try:
         driver.get(served.url)
         wait(driver, "document.body.dataset.ready === 'true' && Builder.state.valid")

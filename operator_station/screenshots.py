@@ -29,25 +29,9 @@ from operator_station.screenshots_jog import shoot_jog
 from operator_station.screenshots_breakpoints import shoot_breakpoints
 from operator_station.screenshots_paused_edit import shoot_paused_edit
 from operator_station.screenshots_speed import shoot_speed
-from operator_station.testing import serve
+from operator_station.testing import serve, shipped_apps, station_args, until
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def _args(**changes: Any) -> argparse.Namespace:
-    args = argparse.Namespace(file=None, replay=None, controller_host=None, controller_port=None, rsi_listen=None, fault=None, seed=0,
-                              backend_option=None, robot=None, speed=math.inf, trace=None, trajectory_db=":memory:", no_check=False)
-    vars(args).update(changes)
-    return args
-
-
-def _until(driver: Any, script: str, timeout: float = 120.0) -> None:
-    """Poll a page expression until it holds (bounded; wall time: the page is real)."""
-    deadline = time.monotonic() + timeout
-    while not driver.execute_script(f"try {{ return !!({script}); }} catch (e) {{ return false; }}"):
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"the page never showed: {script}")
-        time.sleep(0.05)
 
 
 def _tab(driver: Any, name: str) -> None:
@@ -58,46 +42,43 @@ def _tab(driver: Any, name: str) -> None:
 def shoot(out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     shots: list[Path] = []
-    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
-        folder = Path(name)
-        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
-        shutil.copy(ROOT / "apps_xml" / "rivet_installation.xml", folder / "rivet_installation.xml")
+    with shipped_apps("rivet_installation.xml") as folder:
         trace = folder / "run.jsonl"
         driver = browser.chromium(1600, 1000)
-        served = serve(build_station(_args(file="rivet_installation.xml", speed=4.0, trace=str(trace)), full_catalog(), folder))
+        served = serve(build_station(station_args(file="rivet_installation.xml", speed=4.0, trace=str(trace)), full_catalog(), folder))
         take: Callable[[str], None] = lambda name: (driver.save_screenshot(str(out / name)), shots.append(out / name))  # noqa: E731
         try:
             driver.get(served.url)
-            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
+            until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
             driver.execute_script("Builder.select(1, 'left_arm')")
             field = driver.find_element("id", "param-0")
             field.clear()
             field.send_keys("drill_9")
-            _until(driver, "document.querySelector('.op-cell.has-error') !== null")
+            until(driver, "document.querySelector('.op-cell.has-error') !== null")
             take("studio_builder.png")
             field = driver.find_element("id", "param-0")
             field.clear()
             field.send_keys("drill_1")
-            _until(driver, "Builder.state.valid === true")
+            until(driver, "Builder.state.valid === true")
             driver.find_element("id", "ctl-start").click()
-            _until(driver, "['Motion','Vision','EndEffector'].includes(Store.groupView().left_arm.state) && Store.groupView().right_arm.state === 'Motion'")
+            until(driver, "['Motion','Vision','EndEffector'].includes(Store.groupView().left_arm.state) && Store.groupView().right_arm.state === 'Motion'")
             take("studio_monitor.png")
-            _until(driver, "document.getElementById('engine-state').textContent === 'finished'", 300.0)
+            until(driver, "document.getElementById('engine-state').textContent === 'finished'", 300.0)
             served.station.session.join(60.0)  # type: ignore[union-attr]
             _tab(driver, "timeline")
-            _until(driver, "Timeline.model() && Timeline.model().bars > 0")
+            until(driver, "Timeline.model() && Timeline.model().bars > 0")
             take("studio_timeline.png")
         finally:
             served.close()
-        replay = serve(build_station(_args(replay=str(trace)), full_catalog(), folder))
+        replay = serve(build_station(station_args(replay=str(trace)), full_catalog(), folder))
         try:
             driver.get(replay.url)
-            _until(driver, "Store.snapshot && Store.snapshot.mode === 'replay' && Store.records.length > 0")
+            until(driver, "Store.snapshot && Store.snapshot.mode === 'replay' && Store.records.length > 0")
             _tab(driver, "timeline")
-            _until(driver, "Timeline.model() && Timeline.model().bars > 0")
+            until(driver, "Timeline.model() && Timeline.model().bars > 0")
             middle = driver.execute_script("return Timeline.model().end / 2")
             driver.execute_script(f"Store.setCursor({middle})")
-            _until(driver, f"Timeline.model() && Math.abs(Timeline.model().end - {middle}) < 1e-6")
+            until(driver, f"Timeline.model() && Math.abs(Timeline.model().end - {middle}) < 1e-6")
             take("studio_replay_timeline.png")
             _tab(driver, "monitor")
             take("studio_replay_monitor.png")
@@ -105,12 +86,12 @@ def shoot(out: Path) -> list[Path]:
             replay.close()
             driver.quit()
     shots.append(shoot_loops(out))
-    shots += shoot_audit(out, _args, _until)
-    shots += shoot_3d(out, _args, _until)
-    shots += shoot_jog(out, _args, _until)
-    shots.append(shoot_breakpoints(out, _args, _until))
-    shots.append(shoot_paused_edit(out, _args, _until))
-    shots.append(shoot_speed(out, _args, _until))
+    shots += shoot_audit(out, station_args, until)
+    shots += shoot_3d(out, station_args, until)
+    shots += shoot_jog(out, station_args, until)
+    shots.append(shoot_breakpoints(out, station_args, until))
+    shots.append(shoot_paused_edit(out, station_args, until))
+    shots.append(shoot_speed(out, station_args, until))
     shots += shoot_monitor(out)
     shots += shoot_timeline(out)
     return shots
@@ -123,12 +104,12 @@ def shoot_loops(out: Path) -> Path:
         shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
         shutil.copytree(ROOT / "apps_xml" / "examples", folder / "examples")
         driver = browser.chromium(1600, 700)
-        served = serve(build_station(_args(file="examples/pallet_grid.xml"), full_catalog(), folder))
+        served = serve(build_station(station_args(file="examples/pallet_grid.xml"), full_catalog(), folder))
         try:
             driver.get(served.url)
-            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true && Builder.state.cellNames")
+            until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true && Builder.state.cellNames")
             driver.execute_script("Builder.select(1, 'right_arm')")
-            _until(driver, "document.getElementById('fn-select') !== null")
+            until(driver, "document.getElementById('fn-select') !== null")
             driver.save_screenshot(str(out / "studio_builder_loops.png"))
         finally:
             served.close()
@@ -143,23 +124,21 @@ def shoot_timeline(out: Path) -> list[Path]:
     the primitives inside the functions."""
     out.mkdir(parents=True, exist_ok=True)
     shots = [out / "studio_timeline_critical.png", out / "studio_timeline_zoomed.png"]
-    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
-        shutil.copytree(ROOT / "apps_xml" / "cells", Path(name, "cells"))
-        shutil.copy(ROOT / "apps_xml" / "rivet_async.xml", Path(name, "rivet_async.xml"))
+    with shipped_apps("rivet_async.xml") as folder:
         driver = browser.chromium(1600, 560)
-        served = serve(build_station(_args(file="rivet_async.xml", fault=["left_arm:vision"]), full_catalog(), Path(name)))
+        served = serve(build_station(station_args(file="rivet_async.xml", fault=["left_arm:vision"]), full_catalog(), folder))
         try:
             driver.get(served.url)
-            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
+            until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
             driver.find_element("id", "ctl-start").click()
-            _until(driver, "document.getElementById('engine-state').textContent === 'finished'", 300.0)
+            until(driver, "document.getElementById('engine-state').textContent === 'finished'", 300.0)
             served.station.session.join(60.0)  # type: ignore[union-attr]
             _tab(driver, "timeline")
-            _until(driver, "Timeline.model() && Timeline.model().critical.length > 0 && Timeline.model().plan.length > 0")
+            until(driver, "Timeline.model() && Timeline.model().critical.length > 0 && Timeline.model().plan.length > 0")
             driver.save_screenshot(str(shots[0]))
             wait = driver.execute_script("return Timeline.model().waits.right_arm.find((w) => w.waiting.startsWith('flag '))")
             driver.execute_script(f"Timeline.show({wait['start'] - 1.5}, {wait['end'] + 2.5})")
-            _until(driver, "document.querySelector('#timeline-svg rect.primitive') !== null")
+            until(driver, "document.querySelector('#timeline-svg rect.primitive') !== null")
             driver.save_screenshot(str(shots[1]))
         finally:
             served.close()
@@ -176,22 +155,19 @@ def shoot_monitor(out: Path) -> list[Path]:
     vision fault the retry recovers; the left arm's card paused mid-motion (Pause current, the pause edge lit, the state it left
     marked), then the summary panel once the run has ended."""
     out.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
-        folder = Path(name)
-        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
-        shutil.copy(ROOT / "apps_xml" / "rivet_async.xml", folder / "rivet_async.xml")
+    with shipped_apps("rivet_async.xml") as folder:
         driver = browser.chromium(1600, 1000)
-        served = serve(build_station(_args(file="rivet_async.xml", speed=4.0, fault=["left_arm:vision"]), full_catalog(), folder))
+        served = serve(build_station(station_args(file="rivet_async.xml", speed=4.0, fault=["left_arm:vision"]), full_catalog(), folder))
         shots = [out / "studio_state_graph.png", out / "studio_run_summary.png"]
         try:
             driver.get(served.url)
-            _until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
+            until(driver, "document.body.dataset.ready === 'true' && Builder.state.valid === true")
             driver.find_element("id", "ctl-start").click()
             _tab(driver, "monitor")
             for _ in range(8):  # an arm between two primitives is held in Ready, not paused mid-motion: then again
-                _until(driver, "['Motion','Vision','EndEffector'].includes(Store.groupView().left_arm.state)")
+                until(driver, "['Motion','Vision','EndEffector'].includes(Store.groupView().left_arm.state)")
                 driver.find_element("id", "ctl-pause").click()
-                _until(driver, "document.getElementById('engine-state').textContent === 'paused'")
+                until(driver, "document.getElementById('engine-state').textContent === 'paused'")
                 time.sleep(1.0)  # the machines follow the engine's pause (a picture, not a test)
                 if driver.execute_script("return Store.groupView().left_arm.state") == "Pause":
                     break
@@ -202,7 +178,7 @@ def shoot_monitor(out: Path) -> list[Path]:
             driver.execute_script(SCROLL_TO, card)  # the whole card in the window, below the top bar: the picture is of what is shown
             card.screenshot(str(shots[0]))
             driver.find_element("id", "ctl-resume").click()
-            _until(driver, "document.body.dataset.summary === 'finished'", 300.0)
+            until(driver, "document.body.dataset.summary === 'finished'", 300.0)
             time.sleep(0.3)
             summary = driver.find_element("id", "run-summary")
             driver.execute_script(SCROLL_TO, summary)

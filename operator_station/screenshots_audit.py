@@ -5,8 +5,6 @@ runs the rivet demonstrator at 4x, pauses and resumes it; then the Audit view wi
 """
 from __future__ import annotations
 
-import shutil
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -16,10 +14,8 @@ from app_functions.registry import full_catalog
 from operator_station import browser
 from operator_station.access import Access
 from operator_station.cli import build_station
-from operator_station.testing import serve
+from operator_station.testing import serve, shipped_apps
 from operator_station.users import hash_password, parse_users
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def shoot_audit(out: Path, args: Callable[..., Any], until: Callable[..., None]) -> list[Path]:
@@ -27,10 +23,7 @@ def shoot_audit(out: Path, args: Callable[..., Any], until: Callable[..., None])
     out.mkdir(parents=True, exist_ok=True)
     users = parse_users(f"anna:operator:{hash_password('anna-pw', 'sha256')}\nben:engineer:{hash_password('ben-pw', 'sha256')}\n", "users")
     shot = out / "studio_audit.png"
-    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
-        folder = Path(name)
-        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
-        shutil.copy(ROOT / "apps_xml" / "rivet_installation.xml", folder / "rivet_installation.xml")
+    with shipped_apps("rivet_installation.xml") as folder:
         driver = browser.chromium(1600, 640)
         station = build_station(args(file="rivet_installation.xml", speed=4.0, no_check=True), full_catalog(), folder, Access.for_address("127.0.0.1", users=users))
         served = serve(station)

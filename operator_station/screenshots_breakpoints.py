@@ -5,8 +5,6 @@ and the monitor's Breakpoints panel says why, with a run-time breakpoint set bef
 """
 from __future__ import annotations
 
-import shutil
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -14,19 +12,14 @@ from typing import Any
 from app_functions.registry import full_catalog
 from operator_station import browser
 from operator_station.cli import build_station
-from operator_station.testing import serve
-
-ROOT = Path(__file__).resolve().parent.parent
+from operator_station.testing import serve, shipped_apps
 
 
 def shoot_breakpoints(out: Path, args: Callable[..., Any], until: Callable[..., None]) -> Path:
     """``args``/``until``: the screenshot script's station arguments and bounded page poll."""
     out.mkdir(parents=True, exist_ok=True)
     shot = out / "studio_breakpoints.png"
-    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
-        folder = Path(name)
-        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
-        shutil.copy(ROOT / "apps_xml" / "rivet_installation.xml", folder / "rivet_installation.xml")
+    with shipped_apps("rivet_installation.xml") as folder:
         driver = browser.chromium(1600, 900)
         served = serve(build_station(args(file="rivet_installation.xml", no_check=True), full_catalog(), folder))
         try:

@@ -5,8 +5,6 @@ its TCP taught as frame ``taught_1`` under ``part``: the diff of the cell shown,
 """
 from __future__ import annotations
 
-import shutil
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,19 +16,14 @@ from selenium.webdriver.support.ui import Select
 from app_functions.registry import full_catalog
 from operator_station import browser
 from operator_station.cli import build_station
-from operator_station.testing import serve
-
-ROOT = Path(__file__).resolve().parent.parent
+from operator_station.testing import serve, shipped_apps
 
 
 def shoot_jog(out: Path, args: Callable[..., Any], until: Callable[..., None]) -> list[Path]:
     """``args``/``until``: the screenshot script's station arguments and bounded page poll."""
     out.mkdir(parents=True, exist_ok=True)
     shot = out / "studio_jog.png"
-    with tempfile.TemporaryDirectory(prefix="studio_shots_") as name:
-        folder = Path(name)
-        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
-        shutil.copy(ROOT / "apps_xml" / "rivet_installation.xml", folder / "rivet_installation.xml")
+    with shipped_apps("rivet_installation.xml") as folder:
         driver = browser.chromium(1600, 900)
         station = build_station(args(file="rivet_installation.xml"), full_catalog(), folder)
         served = serve(station)

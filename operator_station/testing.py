@@ -1,14 +1,23 @@
-"""Serving a station for tests and the screenshot script: uvicorn on a free loopback port, in a thread that stops by itself.
+"""Serving a station for tests, the screenshot script and the page benches: uvicorn on a free loopback port, in a
+thread that stops by itself; the settings ``studio`` would parse, a folder holding copies of shipped applications,
+and a bounded poll of a page expression.
 
 The server thread is bounded: :meth:`ServedStation.close` asks uvicorn to exit and joins it; a
 server that would not start within ``start_timeout`` wall seconds is an error, not a hang.
 """
 from __future__ import annotations
 
+import argparse
+import math
+import shutil
 import socket
+import tempfile
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from operator_station.server import Station, create_app
@@ -48,3 +57,38 @@ def serve(station: Station, start_timeout: float = 15.0) -> ServedStation:
             raise RuntimeError(f"the station did not start on 127.0.0.1:{port} within {start_timeout} s")
         time.sleep(0.02)
     return ServedStation(station, f"http://127.0.0.1:{port}/", server, thread)
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def station_args(**changes: Any) -> argparse.Namespace:
+    """``studio``'s parsed options with their defaults (``--speed max``, trajectories in memory), ``changes`` applied."""
+    args = argparse.Namespace(file=None, replay=None, controller_host=None, controller_port=None, rsi_listen=None, fault=None, seed=0,
+                              backend_option=None, robot=None, speed=math.inf, trace=None, trajectory_db=":memory:", no_check=False)
+    vars(args).update(changes)
+    return args
+
+
+@contextmanager
+def shipped_apps(*apps: str, prefix: str = "studio_shots_") -> Iterator[Path]:
+    """A temporary folder with copies of ``apps_xml/cells`` and of each named application of ``apps_xml``: a station
+    started there may save and write beside them without touching the shipped files."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as name:
+        folder = Path(name)
+        shutil.copytree(ROOT / "apps_xml" / "cells", folder / "cells")
+        for app in apps:
+            shutil.copy(ROOT / "apps_xml" / app, folder / app)
+        yield folder
+
+
+def until(driver: Any, script: str, timeout: float = 120.0) -> Any:
+    """Poll a page expression until it is truthy and return its value (bounded; wall time: the page is real)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = driver.execute_script(f"try {{ return ({script}); }} catch (e) {{ return null; }}")
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the page never showed: {script}")
+        time.sleep(0.02)
