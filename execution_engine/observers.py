@@ -96,7 +96,9 @@ def engine_record(event: EngineEvent) -> dict[str, Any]:
             "event": "operator", "command": event.command, "source": event.source,
             "state": event.state, "accepted": event.accepted, "answer": event.answer,
         })
-        if event.message:  # a breakpoint or run-to command: the operation it names
+        if event.message and event.command == "speed_override":  # the new override (percent), for whoever follows the run's pace
+            record["percent"] = float(event.message)
+        elif event.message:  # a breakpoint or run-to command: the operation it names
             record["target"] = event.message
     return record
 

@@ -209,6 +209,7 @@ class EngineEvent:
     # breakpoint: the run paused before ``operation`` (``command`` why: break, run_to or step; ``source`` the groups held
     # in sync="flags", none in lock-step: all; ``answer`` held, or passed: nobody could continue it); operator commands on
     # breakpoints (break, unbreak, unbreak_all, run_to) carry the operation they name in ``message`` (engine/breakpoints.py)
+    # and an accepted speed_override the new percentage (engine/speed.py)
     t: float
     state: str  # the engine's state after a state change; the state a command arrived in
     operation: str | None = None

@@ -11,6 +11,12 @@ froze between records: at ``--speed 10`` it said ten times too long.)
 A pause stops the current operation's clock: time paused (or waiting at an alarm) is not work done, so the
 estimate holds still while paused and goes on from there on resume.
 
+The operator's speed override changes the pace too: the plan is the dry run's at the override the run started with,
+and each change (the trace's ``speed_override`` records, with their ``percent``) makes a run second worth that
+share of a planned one -- at 50 % of a start at 100 % the rest takes twice as long, work done counts half.  At 0 %
+every motion holds on its path: like a pause, the estimate holds.  Motions scale with the override, dwells and
+camera captures do not, so between the two this overestimates what is left of an operation that is mostly waiting.
+
 Its error is bounded by the dry run's own: in lock-step, at any instant, |ETA - time actually left| is at most
 the sum over the current and later operations of |planned - actual| seconds (test/test_eta.py checks it at a
 scaled speed, and the sync="flags" variant within the whole run's such error).
@@ -56,9 +62,12 @@ class EtaTracker:
     group runs ahead (the head moves to its last pose while the arms are still at the first holes), and the
     run is as far as its slowest group.  Between operations (no group in a function) it is the latest started."""
 
-    def __init__(self, plan: Sequence[float], operations: Sequence[str]) -> None:
-        """``plan``: planned seconds per operation; ``operations``: their ids, in the same order."""
+    def __init__(self, plan: Sequence[float], operations: Sequence[str], start_percent: float = 100.0) -> None:
+        """``plan``: planned seconds per operation (the dry run's at ``start_percent``); ``operations``: their ids, in
+        the same order."""
         self.plan = [max(0.0, float(p)) for p in plan]
+        self.start_percent = start_percent if start_percent > 0 else 100.0
+        self.paces: list[tuple[float, float]] = [(-math.inf, 1.0)]  # (from run time, planned seconds per run second)
         self.index = {op: i for i, op in enumerate(operations)}
         self.starts: dict[int, float] = {}  # operation index -> run time its first function started
         self.working: dict[str, int] = {}  # group -> index of the operation of the function it is in
@@ -87,6 +96,8 @@ class EtaTracker:
                 self.ended = True
         elif event == "run_end":
             self.ended = True
+        elif event == "operator" and record.get("command") == "speed_override" and record.get("accepted") and "percent" in record:
+            self.paces.append((t, max(0.0, float(record["percent"])) / self.start_percent))
 
     def current(self) -> int:
         """Index of the operation the estimate counts from (-1 before the first)."""
@@ -96,21 +107,32 @@ class EtaTracker:
         """Run seconds held (paused, at an alarm) between ``since`` and ``now``."""
         return sum(max(0.0, min(b, now) - max(a, since)) for a, b in self.holds)
 
+    def worked(self, since: float, now: float) -> float:
+        """Planned seconds of work done between ``since`` and ``now``: each run second not held, at its pace."""
+        done = 0.0
+        for i, (start, pace) in enumerate(self.paces):
+            end = self.paces[i + 1][0] if i + 1 < len(self.paces) else math.inf
+            a, b = max(start, since), min(end, now)
+            if b > a:
+                done += pace * (b - a - self.held(a, b))
+        return done
+
     def at(self, now: float, speed: float) -> Eta | None:
         """The estimate at run time ``now`` (at or after the last record seen); None without a plan."""
         if not self.plan:
             return None
         planned = sum(self.plan)
-        holding = bool(self.holds) and math.isinf(self.holds[-1][1])
+        pace = self.paces[-1][1]
+        holding = (bool(self.holds) and math.isinf(self.holds[-1][1])) or pace == 0.0
+        per = 1.0 / pace if pace > 0 else 1.0  # run seconds per planned second from now on (at 0 %: held, as planned)
         current = self.current()
         if self.ended:
             return Eta(now, 0.0, speed, planned, current + 1)
         if current < 0:
-            return Eta(now, planned, speed, planned, 0, holding)
+            return Eta(now, planned * per, speed, planned, 0, holding)
         started = self.starts[current]
-        worked = max(0.0, now - started - self.held(started, now))
-        left = max(0.0, self.plan[current] - worked) + sum(self.plan[current + 1:])
-        return Eta(now, left, speed, planned, current + 1, holding)
+        left = max(0.0, self.plan[current] - self.worked(started, now)) + sum(self.plan[current + 1:])
+        return Eta(now, left * per, speed, planned, current + 1, holding)
 
 
 class EtaFeed:
@@ -119,17 +141,18 @@ class EtaFeed:
     An estimate is pushed whenever an operation starts or the engine changes state; between them the page
     counts the wall seconds down itself (the speed is in the estimate)."""
 
-    def __init__(self, feed: Any, clock: Any) -> None:
+    def __init__(self, feed: Any, clock: Any, start_percent: float = 100.0) -> None:
         self.feed = feed
         self.clock = clock
+        self.start_percent = start_percent  # the speed override the run starts at, which its dry run planned
         self.tracker: EtaTracker | None = None
 
     def see(self, record: Mapping[str, Any]) -> None:
         if self.tracker is None:
             snapshot = self.feed.snapshot
-            self.tracker = EtaTracker(snapshot.plan, [str(op.get("id")) for op in snapshot.operations])
+            self.tracker = EtaTracker(snapshot.plan, [str(op.get("id")) for op in snapshot.operations], self.start_percent)
         self.tracker.see(record)
-        if record.get("event") in ("function_start", "engine_state", "run_end"):
+        if record.get("event") in ("function_start", "engine_state", "run_end") or record.get("command") == "speed_override":
             eta = self.tracker.at(float(record.get("t", 0.0)), wall_speed(self.clock))
             if eta is not None:
                 self.feed.update(eta=eta.to_json())

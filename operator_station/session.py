@@ -193,7 +193,7 @@ class RunSession:
         node = deployment.transport.create_node("operator_station")
         iterations = app.iterations()  # the loop iteration or call of each expanded operation, on its records
         writer = TraceWriter(trace, iterations) if trace is not None else None
-        page = TraceWriter(FeedStream(self.feed, EtaFeed(self.feed, clock).see), iterations)  # the page gets the trace's records, written by the same code; the ETA follows them
+        page = TraceWriter(FeedStream(self.feed, EtaFeed(self.feed, clock, self.speed_percent).see), iterations)  # the page gets the trace's records, written by the same code; the ETA follows them
         observe(node, app.robot, self.feed, [w for w in (writer, page) if w is not None])
         self._safety = node.create_publisher(Bool, SAFETY_STOP, LATCHED)
         self._loop, self._deployment = asyncio.get_running_loop(), deployment

@@ -20,7 +20,9 @@ import pytest
 from app_functions.registry import full_catalog
 from cell_runner.settings import Outputs, RunSettings
 from execution_engine.app_model import load_application
+from execution_engine.observers import engine_record
 from node_transport.clock import Clock
+from node_transport.wire import EngineEvent
 from operator_station.eta import EtaTracker
 from operator_station.feed import Feed
 from operator_station.session import RunSession
@@ -123,3 +125,41 @@ def test_no_plan_no_estimate_and_simulated_time_has_no_wall_to_wait() -> None:
     assert EtaTracker([], []).at(1.0, 10.0) is None
     eta = EtaTracker([5.0], ["1"]).at(0.0, math.inf)
     assert eta is not None and eta.remaining == 5.0 and eta.wall == 0.0 and eta.to_json()["speed"] is None
+
+
+def test_a_speed_override_changes_the_pace_of_what_is_left_and_0_percent_holds_the_estimate() -> None:
+    """Planned at 100 %: after the override goes to 50 % at 4 s into a 10 s operation, the next 2 run seconds do one
+    planned second of work and what is left takes twice its planned time; at 0 % the estimate holds as in a pause."""
+    tracker = EtaTracker([10.0, 10.0], ["1", "2"], start_percent=100.0)
+    tracker.see({"t": 0.0, "event": "function_start", "operation": "1"})
+    tracker.see({"t": 4.0, "event": "operator", "command": "speed_override", "accepted": True, "percent": 50.0})
+    at = tracker.at(6.0, 1.0)
+    assert at is not None and math.isclose(at.remaining, (10.0 - 5.0 + 10.0) * 2.0) and math.isclose(at.wall, 30.0)
+    tracker.see({"t": 6.0, "event": "operator", "command": "speed_override", "accepted": False, "percent": 500.0})  # refused: no change
+    tracker.see({"t": 6.0, "event": "operator", "command": "speed_override", "accepted": True, "percent": 0.0})
+    held = tracker.at(50.0, 1.0)
+    assert held is not None and held.held and math.isclose(held.remaining, 15.0)
+    tracker.see({"t": 50.0, "event": "operator", "command": "speed_override", "accepted": True, "percent": 100.0})
+    going = tracker.at(53.0, 1.0)
+    assert going is not None and not going.held and math.isclose(going.remaining, 12.0)
+
+
+def test_a_run_started_at_half_speed_is_planned_at_it() -> None:
+    """The dry run planned at the start's 50 %: at 50 % the plan is the pace; raised to 100 %, the rest takes half."""
+    tracker = EtaTracker([8.0], ["1"], start_percent=50.0)
+    tracker.see({"t": 0.0, "event": "function_start", "operation": "1"})
+    assert math.isclose(tracker.at(2.0, 1.0).remaining, 6.0)  # type: ignore[union-attr]
+    tracker.see({"t": 2.0, "event": "operator", "command": "speed_override", "accepted": True, "percent": 100.0})
+    assert math.isclose(tracker.at(3.0, 1.0).remaining, (8.0 - 2.0 - 2.0) / 2.0)  # type: ignore[union-attr]
+
+
+def test_the_trace_record_of_an_accepted_override_carries_its_percent() -> None:
+    """What the tracker reads: the engine's event for a change (engine/speed.py) becomes a record with ``percent``."""
+    event = EngineEvent("operator", 4.0, "running", "1", message="50", command="speed_override", source="studio", accepted=True,
+                        answer="speed override 50 % (was 100 %)")
+    record = engine_record(event)
+    assert record["percent"] == 50.0 and "target" not in record
+    tracker = EtaTracker([10.0], ["1"])
+    tracker.see({"t": 0.0, "event": "function_start", "operation": "1"})
+    tracker.see(record)
+    assert math.isclose(tracker.at(4.0, 1.0).remaining, 12.0)  # type: ignore[union-attr]

@@ -98,11 +98,11 @@ def test_the_parameter_and_the_terminal_scale_a_running_motion_on_its_path_and_e
     assert np.ptp(held.q[:, 0]) < 1e-9  # held on the path
     assert end == pytest.approx(0.8, abs=1e-9)  # and finished the same motion
     assert_within_limits(samples.window(halved - 0.5, samples.t[-1]), np.full(6, 1.0), acceleration, slack=0.1)
-    changes = [(a.command, a.source, a.accepted, a.answer) for a in report.operator_actions if a.command == "speed_override"]
+    changes = [(a.command, a.source, a.accepted, a.answer, a.target) for a in report.operator_actions if a.command == "speed_override"]
     assert changes == [
-        ("speed_override", "parameter /execution_engine/speed_override", True, "speed override 50 % (was 100 %)"),
-        ("speed_override", "terminal console (key '0')", True, "speed override 0 % (was 50 %); holding on the path"),
-        ("speed_override", "studio", True, "speed override 100 % (was 0 %)"),
+        ("speed_override", "parameter /execution_engine/speed_override", True, "speed override 50 % (was 100 %)", "50"),
+        ("speed_override", "terminal console (key '0')", True, "speed override 0 % (was 50 %); holding on the path", "0"),
+        ("speed_override", "studio", True, "speed override 100 % (was 0 %)", "100"),
     ]
     assert any(s.speed_override == 0.0 and HOLDING in s.message for s in statuses)
     assert statuses[-1].speed_override == 100.0 and HOLDING not in statuses[-1].message

@@ -134,7 +134,7 @@ class ExecutionEngine(BreakpointControl, FlagsMode):  # BreakpointControl extend
         self.flags = FlagBoard(self.clock, self._publish_flag, lambda: self._stop_reason is not None)  # set_flag / wait_flag (engine/flags.py)
         self.zones = ZoneBoard(node, self.catalog, self._publish_flag)  # interference zones, both modes (engine/zones.py)
         self.breakpoints = self._serve_breakpoints()  # break="true" and the run-time ones (engine/breakpoints.py)
-        self.speed = SpeedOverride(node, self._record, self._publish_status, lambda: self.state)  # on the path, every back end (engine/speed.py)
+        self.speed = SpeedOverride(node, self._record_target, self._publish_status, lambda: self.state)  # on the path, every back end (engine/speed.py)
         self.remainder = Remainder(self._publish_event, self._cell_frames.located)  # a paused run's edit (engine/remainder_swap.py)
 
     # ============================================================================ running

@@ -91,7 +91,7 @@ class SpeedOverride:
             self.node.show_parameter(PARAMETER, value)
         self.changes.append(SpeedChange(now, value, source))
         answer = f"speed override {shown(value)} (was {shown(previous)})" + (f"; {HOLDING.split(': ', 1)[1]}" if value == 0.0 else "")
-        self._record(OperatorAction(now, COMMAND, source, self._state(), True, answer))
+        self._record(OperatorAction(now, COMMAND, source, self._state(), True, answer, f"{value:g}"))  # the trace's percent
         self._publish()
         return True, answer
 
