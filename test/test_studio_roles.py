@@ -123,8 +123,9 @@ def test_an_operator_runs_pauses_steps_resumes_and_stops_the_saved_application_a
     assert [(e["what"], e["answer"]) for e in cell] == [("safety event", "pause by safety stop on /cell/safety_stop")]
     done = [(e["what"], e["who"], e["role"]) for e in entries(station) if e["who"] != "cell"]
     assert done[:4] == [("login", "anna", OPERATOR), ("run start", "anna", OPERATOR), ("pause", "anna", OPERATOR), ("step", "anna", OPERATOR)]
-    assert done[4:] == [("resume", "anna", OPERATOR), ("safety stop raised", "anna", OPERATOR), ("safety stop cleared", "anna", OPERATOR),
-                        ("stop", "anna", OPERATOR), ("run end", "anna", OPERATOR)]
+    assert done[4:7] == [("resume", "anna", OPERATOR), ("safety stop raised", "anna", OPERATOR), ("safety stop cleared", "anna", OPERATOR)]
+    # the stop is audited with the engine's answer, which may come after the run's end it caused was seen (CI at db7a0b6)
+    assert sorted(done[7:]) == [("run end", "anna", OPERATOR), ("stop", "anna", OPERATOR)]
     start = [e for e in entries(station) if e["what"] == "run start"][0]
     assert start["path"] == "rivet_installation.xml" and len(start["application"]) == len("sha256:") + 64  # the digest of the XML run
     end = entries(station)[-1]
