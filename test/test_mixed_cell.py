@@ -81,7 +81,8 @@ def test_a_collision_between_the_kuka_and_a_nextage_arm_is_found_by_the_dry_run_
     assert code == 1, out.getvalue() + err.getvalue()
     lines = err.getvalue().splitlines()
     assert any("collision between right_arm hand (assembler/RARM_JOINT5_Link) and arm feeder/link_" in line for line in lines), err.getvalue()
-    assert lines[-1].startswith(f"{app}: not run: ") and lines[-1].endswith("problem(s) found by the dry run; use --no-check to run anyway")
+    # the verdict's line; the simulated KR C4's log (late replies on a loaded machine) may come after it
+    assert any(line.startswith(f"{app}: not run: ") and line.endswith("problem(s) found by the dry run; use --no-check to run anyway") for line in lines), err.getvalue()
     assert not trace.exists() or not any(r.get("event") == "function_start" for r in _records(trace))
 
 

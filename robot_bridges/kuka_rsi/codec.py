@@ -244,7 +244,7 @@ class PacketCodec:
         try:
             root = etree.fromstring(_name_digit_attributes(data) if self._digit_names else data, self._parser)
         except etree.XMLSyntaxError as error:
-            raise PacketError(f"not well-formed XML: {error.msg or error}", "xml") from None
+            raise PacketError(f"not well-formed XML: {' '.join(str(error.msg or error).split())}", "xml") from None  # one line
         if root.tag != self.root:
             raise PacketError(f"root element <{root.tag}> where <{self.root}> is expected", "root element")
         attributes = _attributes(root)

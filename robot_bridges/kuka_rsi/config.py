@@ -178,7 +178,8 @@ def parse_config(data: bytes | str, source: str = "<string>") -> RsiConfig:
     try:
         root = etree.fromstring(raw, _parser())
     except etree.XMLSyntaxError as error:
-        raise ConfigError(f"{source}:{error.lineno}: not well-formed XML: {error.msg}") from None
+        # lxml's message may run over lines (a NUL byte: "... out of allowed range\n, line 2, column 101"): one line
+        raise ConfigError(f"{source}:{error.lineno}: not well-formed XML: {' '.join(str(error.msg).split())}") from None
     return _read_root(root, source)
 
 
