@@ -5,7 +5,6 @@ import argparse
 import asyncio
 import io
 import json
-import math
 import re
 import shutil
 import sys
@@ -36,22 +35,13 @@ from operator_station.feed import Feed  # noqa: E402
 from operator_station.program import main as cli_main  # noqa: E402
 from operator_station.replay import load_replay  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
+from operator_station.testing import station_args  # noqa: E402,F401 - the other studio tests take it from here
 from operator_station.timeline_view import TimelineView  # noqa: E402
 from robot_bridges.backend import BackendOptions  # noqa: E402
 from robot_bridges.registry import create_backend  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CATALOG = full_catalog()
-
-
-def station_args(**changes: Any) -> argparse.Namespace:
-    args = argparse.Namespace(
-        file=None, replay=None, controller_host=None, controller_port=None, rsi_listen=None, fault=None, seed=0, backend_option=None,
-        robot=None, speed=math.inf, trace=None, trajectory_db=":memory:", no_check=False,
-    )
-    for key, value in changes.items():
-        setattr(args, key, value)
-    return args
 
 
 @pytest.fixture
