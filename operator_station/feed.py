@@ -87,7 +87,7 @@ class Feed:
             if not force and t - self._last_joint_t < JOINT_SAMPLE_PERIOD:
                 return
             self._last_joint_t = t
-            self.joints.append([t, *positions])
+            self.joints.append([float(t), *map(float, positions)])  # (a back end's numpy values: the page gets JSON numbers)
             self.joints_total += 1
         self.wake()
 

@@ -206,6 +206,7 @@ class RunSession:
             await asyncio.sleep(0)  # the engine takes its first steps: a start now is this run's
             await deployment.engine.operator_command("start", SOURCE)
             report = await run
+            final_joint_sample(self.feed, app.robot, backend, clock.now())
             code = EXIT_OK if report.ok else EXIT_STOPPED if report.outcome == "stopped" else EXIT_FAILED
             t_end = clock.now()
             for each in (writer, page):
@@ -288,6 +289,16 @@ def publish_safety(loop: asyncio.AbstractEventLoop | None, publisher: Any, activ
         return False, absent
     loop.call_soon_threadsafe(publisher.publish, Bool(active))
     return True, "safety stop raised: every group pauses" if active else "safety stop cleared: resume to continue"
+
+
+def final_joint_sample(feed: Feed, robot: RobotModel, backend: Any, t: float) -> None:
+    """Where the robot came to rest, read from the back end as the run ends: the bridge publishes joint_states every
+    ``state_period``, so its last message may be from before the last motion's end -- and the page's robot and plots
+    must end where the robot is."""
+    names, positions = backend.joint_state()
+    known = dict(zip(names, positions))
+    if all(name in known for name in robot.joint_names):
+        feed.joint_sample(t, [known[name] for name in robot.joint_names], force=True)
 
 
 def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter]) -> None:

@@ -285,7 +285,7 @@ class BridgeNode:
         task.add_done_callback(self._tasks.discard)
 
     def publish_state(self) -> None:
-        """Publish joint_states and every TCP pose once (also called after each primitive)."""
+        """Publish joint_states and every TCP pose once."""
         stamp = self.node.now_stamp()
         names, positions = self.backend.joint_state()
         self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(names), position=tuple(positions)))

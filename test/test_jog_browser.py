@@ -73,8 +73,9 @@ def within_a_cycle(state: dict[str, Any], period: float) -> None:
     its host is late -- the exact one-period promise is test_jog's, on the simulated clock.)"""
     took = state["stopped_at"] - state["stop_asked"]
     assert took <= max(period, MAX_STALL)  # still at the next tick: not the lease running out, not the leg's end
-    # measured from the joints as last updated before the ask (up to one period earlier) to where the group stood still
-    assert state["travel_after_stop"] <= MAX_SPEED * 1.0 * (period + took) + 1e-12  # the Nextage's joints: 1 rad/s
+    # measured from the joints as last updated before the ask to where the group stood still: that update is a period
+    # old, or more when the simulator's own tick was kept off the CPU as long (it then catches up with the wall clock)
+    assert state["travel_after_stop"] <= MAX_SPEED * 1.0 * (period + MAX_STALL + took) + 1e-12  # the Nextage's joints: 1 rad/s
 
 
 def test_the_jog_stops_within_a_control_cycle_of_the_release_and_of_a_dropped_connection_and_a_taught_frame_is_saved(page: tuple[Any, Any], folder: Path) -> None:
