@@ -35,13 +35,13 @@ from execution_engine.app_model.document import DocumentError
 from operator_station import builder
 from operator_station.access import ENGINEER
 from operator_station.attach import AttachedSession
-from operator_station.audit import record
+from operator_station.audit import digest, log_of, record, requester
 from operator_station.blocks import BlockDocument
 from operator_station.jog_station import JogStation
 from operator_station.roles import requires
 from operator_station.session import RunSession
 from robot_bridges.backend import BridgeError
-from operator_station.teach import TeachPlan, TeachRefused, check_taught, digest_of, plan_teach, save_taught
+from operator_station.teach import TeachPlan, TeachRefused, check_taught, plan_teach, save_taught
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +71,13 @@ def routes(station: Any) -> list[BaseRoute]:
     plans: OrderedDict[str, tuple[TeachPlan, Path, str]] = OrderedDict()
     numbers = itertools.count(1)
 
+    def noted(owner: object | None, what: str, ok: bool, answer: str, details: dict[str, Any]) -> None:
+        """A jog's start or stop, from the jog's loop: audited under whoever holds the button (its socket)."""
+        audit = log_of(owner) or station.audit_log
+        audit.append(requester(owner), what, ok=ok, answer=answer, details=details)
+
+    jog.note = noted
+
     async def validated(request: Request) -> tuple[dict[str, Any], Path, Application, str]:
         body = await _body(request)
         path = station.resolve(body.get("path"))
@@ -84,14 +91,20 @@ def routes(station: Any) -> list[BaseRoute]:
     async def open_(request: Request) -> Response:
         refused = refusal(station)
         if refused:
+            record(request, "jog open", ok=False, answer=refused)
             return _error(refused, 409)
+        path: Path | None = None
         try:
-            _, _, app, _ = await validated(request)
+            _, path, app, text = await validated(request)
             session = station.session
             described = await jog.open(app, session.backend_name(app), session.settings.backend.backend_options(app))
         except (ValueError, KeyError, DocumentError, ConnectionError, OSError, BridgeError) as error:  # OSError: a timeout too
             text = str(error).strip("'")
-            return _error(text if text.startswith("jog: ") else f"jog: {text}")
+            text = text if text.startswith("jog: ") else f"jog: {text}"
+            record(request, "jog open", ok=False, answer=text, **({"path": station.folders.shown(path)} if path is not None else {}))
+            return _error(text)
+        record(request, "jog open", answer=f"jogging {app.robot.name} on {described['backend']}", path=station.folders.shown(path),
+               application=digest(text), backend=described["backend"])
         return JSONResponse({"ok": True, **described})
 
     async def state(request: Request) -> Response:
@@ -99,7 +112,8 @@ def routes(station: Any) -> list[BaseRoute]:
 
     async def socket(ws: WebSocket) -> None:
         await ws.accept()
-        owner = object()
+        owner = ws  # the socket holds the button: its requester is who the jog's audit names
+        record(ws, "jog connect", answer="the page's jog connection opened")
         queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=64)
 
         def heard(shown: dict[str, Any]) -> None:
@@ -137,9 +151,11 @@ def routes(station: Any) -> list[BaseRoute]:
         except (WebSocketDisconnect, RuntimeError, OSError):
             pass
         finally:
-            await jog.stop("jog stopped: the page's connection closed", owner, True)
-            jog.listeners.remove(listening)
-            sender.cancel()
+            try:
+                await jog.disconnect(owner, "jog stopped: the page's connection closed")  # audited there, after the stop
+            finally:
+                jog.listeners.remove(listening)
+                sender.cancel()
 
     async def teach(request: Request) -> Response:
         try:
@@ -167,8 +183,8 @@ def routes(station: Any) -> list[BaseRoute]:
         plans[key] = (plan, path, text)
         while len(plans) > MAX_PLANS:
             plans.popitem(last=False)
-        record(request, "teach", ok=not problems, answer=f"frame {plan.frame} shown as a diff of {plan.shown}", before=plan.digest,
-               frame=plan.frame, parent=plan.parent, cell=plan.shown, group=group)
+        record(request, "teach", ok=not problems, answer=f"frame {plan.frame} shown as a diff of {plan.shown}", before=_hex(plan.digest),
+               frame=plan.frame, parent=plan.parent, cell=plan.shown, group=group, proposed=digest(plan.text))  # the save's after, if saved
         return JSONResponse({"ok": not problems, "id": key, "problems": problems, **plan.to_json()})
 
     async def teach_save(request: Request) -> Response:
@@ -186,13 +202,13 @@ def routes(station: Any) -> list[BaseRoute]:
         try:
             await asyncio.to_thread(save_taught, plan, path, text, station.catalog, outputs)
         except TeachRefused as refused:
-            record(request, "teach save", ok=False, answer=str(refused), before=plan.digest, frame=plan.frame, cell=plan.shown)
+            record(request, "teach save", ok=False, answer=str(refused), before=_hex(plan.digest), frame=plan.frame, cell=plan.shown)
             return _error(str(refused), 409)
         except OSError as error:
             return _error(f"teach save: {plan.shown}: cannot write: {error.strerror or error}")
         plans.pop(str(body.get("id")), None)
         answer = f"frame {plan.frame} {'added to' if plan.created else 'updated in'} {plan.shown}"
-        record(request, "teach save", answer=answer, before=plan.digest, after=_digest(plan.text), frame=plan.frame, cell=plan.shown)
+        record(request, "teach save", answer=answer, before=_hex(plan.digest), after=digest(plan.text), frame=plan.frame, cell=plan.shown)
         return JSONResponse({"ok": True, "answer": answer, **plan.to_json()})
 
     return [
@@ -208,13 +224,14 @@ async def _start(station: Any, jog: JogStation, ws: WebSocket, message: dict[str
     """A button went down: the jog starts unless something refuses it (said in one line)."""
     refused = refusal(station)
     if refused:
+        record(ws, "jog start", ok=False, answer=refused)
         return {"type": "answer", "ok": False, "answer": refused}
     try:
         request = jog.request(message)
     except ValueError as error:
+        record(ws, "jog start", ok=False, answer=str(error))
         return {"type": "answer", "ok": False, "answer": str(error)}
-    ok, answer = await jog.start(request, owner)
-    record(ws, "jog", ok=ok, answer=answer, group=request.group, axis=request.axis, direction=request.direction, frame=request.frame)
+    ok, answer = await jog.start(request, owner)  # audited on the jog's loop, in order with its stop (JogStation.note)
     return {"type": "answer", "ok": ok, "answer": answer}
 
 
@@ -232,5 +249,6 @@ def _error(message: str, status: int = 400) -> JSONResponse:
     return JSONResponse({"ok": False, "error": message}, status_code=status)
 
 
-def _digest(text: str) -> str:
-    return digest_of(text.encode("utf-8"))
+def _hex(hexdigest: str) -> str:
+    """A teach plan's SHA-256 (hex) as the audit writes digests (``sha256:<hex>``, operator_station.audit.digest)."""
+    return f"sha256:{hexdigest}"

@@ -17,7 +17,7 @@ import logging
 import threading
 from collections.abc import Callable, Coroutine
 from concurrent.futures import Future
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any, TypeVar
 
 from core_functions.geometry import Pose
@@ -36,6 +36,19 @@ ANSWER_TIMEOUT = 10.0
 #: s the station's stop waits for the jog to stop and its back end to close, then for its thread: SIGTERM ends
 #: the station within 2 s.
 CLOSE_TIMEOUT = 0.5
+#: Told of each jog's start (or refusal by the jog's checks) and of each stop, on the jog's loop in the order they
+#: happen: (the owner that holds the button, what, ok, the one-line answer, details) -- the audit's hook.
+JogNote = Callable[[object | None, str, bool, str, dict[str, Any]], None]
+#: Why a jog stopped, for the audit: the first of these its stop reason contains (else "stopped by a check").
+CAUSES = (("jog released", "released"), ("no heartbeat", "heartbeat lapsed"), ("connection closed", "connection dropped"),
+          ("safety stop", "safety stop"), ("collision", "refused by the collision check"), ("limit", "refused by a limit"),
+          ("another jog button", "another button pressed"), ("a run starts", "released for a run"),
+          ("the station stops", "the station stops"), ("another application", "the jog panel reopened"), ("message", "a bad message"))
+
+
+def stop_cause(reason: str) -> str:
+    """The short cause of a jog's stop reason (the reasons are this package's own lines)."""
+    return next((cause for key, cause in CAUSES if key in reason), "stopped by a check")
 
 
 @dataclass(frozen=True)
@@ -64,6 +77,8 @@ class JogStation:
         self._backend: RobotBackend | None = None
         self._jogger: Jogger | None = None
         self._target: JogTarget | None = None
+        self.note: JogNote | None = None  # the audit's hook (operator_station/jog_routes.py)
+        self._moving = False  # whether the last change told was of a moving jog (a stop is its end)
 
     # ------------------------------------------------------------------ the back end
     @property
@@ -166,10 +181,15 @@ class JogStation:
         if self.safety:
             return False, "jog: the safety stop is raised: clear it before jogging"
         jogger = self._jogger
-        ok, answer = await self._on_loop(lambda: jogger.start(request))
-        if ok:
-            self.owner = owner
-        return ok, answer
+
+        async def start() -> tuple[bool, str]:
+            ok, answer = await jogger.start(request)  # a jog going on is stopped first, under its own owner
+            if ok:
+                self.owner = owner
+            self._noted(owner, "jog start", ok, answer, asdict(request))  # before the new jog can stop: in order
+            return ok, answer
+
+        return await self._on_loop(start)
 
     def beat(self, owner: object) -> None:
         if self._jogger is not None and self._loop is not None and owner is self.owner:
@@ -181,6 +201,19 @@ class JogStation:
         if jogger is None or (owner is not None and owner is not self.owner):
             return
         await self._on_loop(lambda: jogger.stop(reason, refused))
+
+    async def disconnect(self, owner: object, reason: str) -> None:
+        """A page's jog connection closed: the jog it holds stops, then the close is audited -- on the jog's loop, so in
+        that order and to the end even when the page's side is cancelled meanwhile (a server that ends the socket)."""
+        jogger = self._jogger
+
+        async def close() -> None:
+            if jogger is not None and owner is self.owner:
+                await jogger.stop(reason, True)
+            self._noted(owner, "jog close", True, "the page's jog connection closed", {})
+
+        future: Future[None] = asyncio.run_coroutine_threadsafe(close(), self._start_loop())
+        await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(future)), ANSWER_TIMEOUT)  # a cancel here leaves it going
 
     async def safety_stop(self, active: bool) -> str:
         """Latch or clear the station's safety stop; raised, it stops any jog at once."""
@@ -231,8 +264,21 @@ class JogStation:
         future: Future[T] = asyncio.run_coroutine_threadsafe(make(), loop)
         return await asyncio.wait_for(asyncio.wrap_future(future), ANSWER_TIMEOUT)
 
+    def _noted(self, owner: object | None, what: str, ok: bool, answer: str, details: dict[str, Any]) -> None:
+        if self.note is not None:
+            try:
+                self.note(owner, what, ok, answer, details)
+            except Exception:  # noqa: BLE001 - the jog goes on (a stop must never wait for a log); said
+                log.exception("studio: the jog's audit failed")
+
     def _tell(self, state: JogState) -> None:
-        """From the jog's loop: every page hears of the change on its socket's loop."""
+        """From the jog's loop: every page hears of the change on its socket's loop; a stop is audited."""
+        if self._moving and not state.moving:
+            self._noted(self.owner, "jog stop", True, state.reason, {
+                **(state.request or {}), "cause": stop_cause(state.reason), "by_check": state.refused,
+                "stopped_in": None if state.stop_asked is None or state.stopped_at is None else round(state.stopped_at - state.stop_asked, 4),
+                "travel_after_stop": state.travel_after_stop})
+        self._moving = state.moving
         shown = state.to_json()
         for loop, listener in list(self.listeners):
             if not loop.is_closed():
