@@ -6,15 +6,17 @@ serves them here, with the types of ``rcl_interfaces`` (copied in ``interfaces/r
 /execution_engine speed_override 50`` from a ROS install reaches it as it would reach an rclpy node.  A change is
 checked as the rclpy adapter checks it (:meth:`Node.check_parameter`: the declared type, the parameter's own check)
 and refused with the reason in the result; every other parameter was read at start-up and is refused so.  ``list``,
-``get``, ``describe`` (the description, with the range the code declared it with, and read-only for the parameters
-read at start-up) and the types answer as rclpy's would; an atomic set takes every value or none.
+``get``, ``describe`` (the description; a numeric parameter's range as rclpy's descriptor carries it, in
+``floating_point_range`` or ``integer_range``, so ``ros2 param describe`` prints its Min and Max; read-only for the
+parameters read at start-up) and the types answer as rclpy's would; a value outside the range is refused with
+rclpy's own reason (:class:`~node_transport.parameters.NumericRange`); an atomic set takes every value or none.
 """
 from __future__ import annotations
 
 from typing import Any
 
 from node_transport import mirrors
-from node_transport.parameters import ParameterValue
+from node_transport.parameters import ParameterValue, descriptor_range
 from node_transport.port import Node, ServiceServer
 
 SetParameters = mirrors.service("rcl_interfaces/srv/SetParameters")
@@ -27,6 +29,8 @@ ParameterValueMsg = mirrors.mirror("rcl_interfaces/msg/ParameterValue")
 SetParametersResult = mirrors.mirror("rcl_interfaces/msg/SetParametersResult")
 ListParametersResult = mirrors.mirror("rcl_interfaces/msg/ListParametersResult")
 ParameterDescriptor = mirrors.mirror("rcl_interfaces/msg/ParameterDescriptor")
+FloatingPointRange = mirrors.mirror("rcl_interfaces/msg/FloatingPointRange")
+IntegerRange = mirrors.mirror("rcl_interfaces/msg/IntegerRange")
 
 #: rcl_interfaces/ParameterType: the field of a ParameterValue that holds a value of each type.
 _FIELDS = {1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value",
@@ -106,7 +110,7 @@ def serve(node: Node) -> list[ServiceServer]:
         declared = node.declared_parameters()
         return DescribeParameters.Response(descriptors=tuple(
             ParameterDescriptor(name=name, type=int(message_of(declared.get(name)).type), description=node.descriptions.get(name, ""),
-                                read_only=name in declared and not node.changeable(name))
+                                read_only=name in declared and not node.changeable(name), **descriptor_range(node.ranges.get(name), FloatingPointRange, IntegerRange))
             for name in request.names
         ))
 

@@ -22,7 +22,7 @@ from typing import Any, Generic, TypeVar
 
 from node_transport.clock import Clock
 from node_transport.msgs import Time
-from node_transport.parameters import ParameterTypeError, ParameterValue, coerce_parameter
+from node_transport.parameters import NumericRange, ParameterTypeError, ParameterValue, coerce_parameter
 from node_transport.qos import COMMANDS, QoS
 
 M = TypeVar("M")
@@ -249,6 +249,7 @@ class Node(ABC):
         self._parameters: dict[str, ParameterValue] = {}
         self._changeable: dict[str, ParameterChange] = {}  # parameters that may change while the node runs
         self.descriptions: dict[str, str] = {}  # what each declared parameter is (ros2 param describe)
+        self.ranges: dict[str, NumericRange] = {}  # the ROS range of each numeric parameter declared with one
         self.fault_handler: FaultHandler = self._log_fault
 
     @property
@@ -268,15 +269,35 @@ class Node(ABC):
         return Time.from_seconds(self.clock.epoch_now())
 
     # ------------------------------------------------------------------------- parameters
-    def declare_parameter(self, name: str, default: ParameterValue, description: str = "") -> ParameterValue:
-        """Declare a parameter with a default; an override is converted to its type (:func:`coerce_parameter`)."""
-        if name in self._parameters:
-            raise TransportError(f"{self.fully_qualified_name}: parameter {name!r} declared twice")
-        value = self._overrides.get(name, default)
+    def initial_parameter(self, name: str, default: ParameterValue) -> ParameterValue:
+        """The value :meth:`declare_parameter` would give ``name``: its override in the default's type
+        (:func:`coerce_parameter`), else the default; TransportError saying how to write it."""
         try:
-            value = coerce_parameter(self.fully_qualified_name, name, default, value, self._override_texts.get(name))
+            return coerce_parameter(self.fully_qualified_name, name, default, self._overrides.get(name, default), self._override_texts.get(name))
         except ParameterTypeError as error:
             raise TransportError(str(error)) from None
+
+    def declare_parameter(
+        self, name: str, default: ParameterValue, description: str = "", numeric_range: NumericRange | None = None,
+    ) -> ParameterValue:
+        """Declare a parameter with a default; an override is converted to its type (:func:`coerce_parameter`).
+
+        ``numeric_range``: the range a numeric parameter carries the ROS way (in the type of ``default``: an
+        IntegerRange for an integer, a FloatingPointRange for a double); the value declared -- the override,
+        else the default -- must lie in it, as rclpy requires, or the declaration is a TransportError with
+        rclpy's reason, and a later change outside it is refused (:meth:`check_parameter`)."""
+        if name in self._parameters:
+            raise TransportError(f"{self.fully_qualified_name}: parameter {name!r} declared twice")
+        value = self.initial_parameter(name, default)
+        if numeric_range is not None:
+            try:
+                numeric_range = numeric_range.for_type(default)
+            except ValueError as error:
+                raise TransportError(f"{self.fully_qualified_name}: parameter {name!r}: {error}") from None
+            refusal = numeric_range.refusal(name, value)
+            if refusal:
+                raise TransportError(f"{self.fully_qualified_name}: {refusal}")
+            self.ranges[name] = numeric_range
         self._parameters[name] = value
         self.descriptions[name] = description
         return value
@@ -298,7 +319,10 @@ class Node(ABC):
         self._changeable[name] = change
 
     def check_parameter(self, name: str, value: ParameterValue) -> tuple[ParameterValue | None, str]:
-        """A changeable parameter's new value in its declared type, or (None, why it is refused)."""
+        """A changeable parameter's new value in its declared type, or (None, why it is refused): the type, whether
+        it may change, its own check, then its ROS range (rclpy's reason), which rclpy itself checks first."""
+        if name not in self._parameters:
+            return None, f"parameter {name!r} is not declared by {self.fully_qualified_name}"
         change = self._changeable.get(name)
         if change is None:
             return None, f"{name} read at start-up; restart {self.fully_qualified_name} to change"
@@ -306,7 +330,8 @@ class Node(ABC):
             value = coerce_parameter(self.fully_qualified_name, name, self._parameters[name], value)
         except ParameterTypeError as error:
             return None, str(error)
-        refusal = change.check(value)
+        numeric_range = self.ranges.get(name)
+        refusal = change.check(value) or (numeric_range.refusal(name, value) if numeric_range is not None else "")
         return (None, refusal) if refusal else (value, "")
 
     def apply_parameter(self, name: str, value: ParameterValue) -> None:

@@ -63,6 +63,7 @@ from node_transport.port import (
     resolve_name,
     validate_node_name,
 )
+from node_transport.parameters import NumericRange, descriptor_range
 from node_transport.qos import QoS
 from node_transport.ros_args import raw_parameter_texts
 from node_transport.ros_convert import (
@@ -132,6 +133,8 @@ class _Rclpy:
     no_signal_handlers: Any
     remove_ros_args: Any
     parameter_descriptor: Any
+    floating_point_range: Any
+    integer_range: Any
     parameter_value: Any
     set_parameters_result: Any
     publisher_events: Any
@@ -142,7 +145,7 @@ def _import_rclpy() -> _Rclpy:
     try:  # optional: rclpy (a sourced ROS 2 environment), imported when the ros transport starts
         import rclpy
         import rclpy.qos
-        from rcl_interfaces.msg import ParameterDescriptor, ParameterValue as ParameterValueMsg, SetParametersResult
+        from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterValue as ParameterValueMsg, SetParametersResult
         from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
         from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
         from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
@@ -167,6 +170,8 @@ def _import_rclpy() -> _Rclpy:
         no_signal_handlers=SignalHandlerOptions.NO,
         remove_ros_args=remove_ros_args,
         parameter_descriptor=ParameterDescriptor,
+        floating_point_range=FloatingPointRange,
+        integer_range=IntegerRange,
         parameter_value=ParameterValueMsg,
         set_parameters_result=SetParametersResult,
         publisher_events=PublisherEventCallbacks,
@@ -217,6 +222,7 @@ class RosNode(EndpointNode):
         self._endpoints: list[Any] = []
         self.dying_services: list[RosService] = []  # destroyed by us, not yet by rclpy
         self.destroyed = False
+        self.ros_node.add_pre_set_parameters_callback(self._widen_integers)
         self.ros_node.add_on_set_parameters_callback(self._on_set_parameters)
         ros_logging.install(self.logger.name, self.ros_node.get_logger())
         if self._use_sim_time():
@@ -241,11 +247,13 @@ class RosNode(EndpointNode):
         return Time(int(sec), int(nanosec))
 
     # ------------------------------------------------------------------------ parameters
-    def declare_parameter(self, name: str, default: ParameterValue, description: str = "") -> ParameterValue:
-        value = super().declare_parameter(name, default, description)
+    def declare_parameter(
+        self, name: str, default: ParameterValue, description: str = "", numeric_range: NumericRange | None = None,
+    ) -> ParameterValue:
+        value = super().declare_parameter(name, default, description, numeric_range)
         api = self.transport.api
         code = parameter_type_code(default)
-        descriptor = api.parameter_descriptor(description=description, type=code)
+        descriptor = api.parameter_descriptor(description=description, type=code, **descriptor_range(self.ranges.get(name), api.floating_point_range, api.integer_range))
         try:
             if self.ros_node.has_parameter(name):
                 # rclpy declared the override with a bare descriptor and the override's own type:
@@ -258,6 +266,17 @@ class RosNode(EndpointNode):
             raise TransportError(f"{self.fully_qualified_name}: rclpy refused parameter {name!r}: {error}") from None
         self._read_at_start.add(name)
         return value
+
+    def _widen_integers(self, parameters: list[Any]) -> list[Any]:
+        """rclpy pre-set callback (any thread): an integer for a double parameter is that double, as on the
+        command line -- ``ros2 param set /execution_engine speed_override 50`` sends the integer 50, which
+        rclpy would refuse as the wrong type before its range or our check saw it."""
+        api = self.transport.api
+        return [
+            api.parameter(p.name, value=float(p.value))
+            if isinstance(self._parameters.get(p.name), float) and isinstance(p.value, int) and not isinstance(p.value, bool) else p
+            for p in parameters
+        ]
 
     def _on_set_parameters(self, parameters: list[Any]) -> Any:
         """rclpy callback (any thread): refuse changes to parameters our code has already read, and

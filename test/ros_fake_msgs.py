@@ -32,13 +32,14 @@ _DEFAULTS: dict[str, Callable[[], Any]] = {
     "sequence<double>": lambda: array.array("d"),
     "sequence<string>": list,
     "int64": int,
+    "uint64": int,
     "sequence<boolean>": list,
     "sequence<int64>": lambda: array.array("q"),
     "sequence<uint8>": lambda: array.array("B"),  # uint8[] (image data): array.array('B')
     "double[9]": lambda: np.zeros(9),  # fixed-size arrays are numpy arrays in rosidl Python
     "double[12]": lambda: np.zeros(12),
 }
-_INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint16": (0, 65535), "uint8": (0, 255), "int8": (-128, 127)}
+_INT_RANGES = {"int64": (-(2**63), 2**63 - 1), "uint64": (0, 2**64 - 1), "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "uint16": (0, 65535), "uint8": (0, 255), "int8": (-128, 127)}
 
 
 class FakeMessage:
@@ -83,6 +84,10 @@ def _check(kind: str, nested: type | None, name: str, value: Any) -> Any:
     if nested is not None and kind.startswith("sequence<"):  # rosidl keeps the sequence it is given
         assert isinstance(value, (list, tuple)) and all(isinstance(v, nested) for v in value), (
             f"The '{name}' field must be a set or sequence and each value of type '{nested.__name__}'"
+        )
+        bound = kind[:-1].rpartition(", ")[2] if ", " in kind else ""  # a bounded sequence: sequence<T, N>
+        assert not bound or len(value) <= int(bound), (
+            f"The '{name}' field must be a set or sequence with length <= {bound} and each value of type '{nested.__name__}'"
         )
         return value
     if nested is not None:
@@ -223,8 +228,14 @@ class Trigger:
     Response = message_class("Trigger_Response", {"success": "boolean", "message": "string"})
 
 
+FloatingPointRange = message_class("FloatingPointRange", {"from_value": "double", "to_value": "double", "step": "double"})
+IntegerRange = message_class("IntegerRange", {"from_value": "int64", "to_value": "int64", "step": "uint64"})
 ParameterDescriptor = message_class(
-    "ParameterDescriptor", {"name": "string", "type": "uint8", "description": "string", "read_only": "boolean", "dynamic_typing": "boolean"}
+    "ParameterDescriptor",
+    {"name": "string", "type": "uint8", "description": "string", "additional_constraints": "string", "read_only": "boolean",
+     "dynamic_typing": "boolean", "floating_point_range": "sequence<rcl_interfaces/FloatingPointRange, 1>",
+     "integer_range": "sequence<rcl_interfaces/IntegerRange, 1>"},
+    {"floating_point_range": FloatingPointRange, "integer_range": IntegerRange},
 )
 ParameterValue = message_class(
     "ParameterValue",
@@ -301,7 +312,10 @@ INTERFACE_MODULES: dict[str, dict[str, Any]] = {
     "tf2_msgs.msg": {"TFMessage": TFMessage},
     "diagnostic_msgs.msg": {"KeyValue": KeyValue, "DiagnosticStatus": DiagnosticStatus, "DiagnosticArray": DiagnosticArray},
     "std_srvs.srv": {"Trigger": Trigger},
-    "rcl_interfaces.msg": {"ParameterDescriptor": ParameterDescriptor, "ParameterValue": ParameterValue, "SetParametersResult": SetParametersResult},
+    "rcl_interfaces.msg": {
+        "ParameterDescriptor": ParameterDescriptor, "FloatingPointRange": FloatingPointRange, "IntegerRange": IntegerRange,
+        "ParameterValue": ParameterValue, "SetParametersResult": SetParametersResult,
+    },
 }
 INTERFACE_MODULES.update(_rosidl_package("unique_identifier_msgs", {}))
 INTERFACE_MODULES.update(_rosidl_package("action_msgs", {

@@ -19,7 +19,8 @@ the parts that bit us on a real Jazzy -- not rclpy's internals.  One module per 
   be sent raises ``InvalidHandle`` (as rclpy's ``send_response`` does);
 * ``ros_fake_node`` and ``ros_fake_parameters`` -- ``Node`` with parameter overrides (and automatic
   declaration with a bare descriptor, the override's own type), ``declare_parameter``,
-  ``set_descriptor`` (type checks, alternative value), ``describe_parameter``, on-set callbacks;
+  ``set_descriptor`` (type checks, alternative value), ``describe_parameter``, descriptor ranges
+  (``floating_point_range``/``integer_range``, refused with rclpy's reasons), pre-set and on-set callbacks;
   ``use_sim_time`` makes ``get_clock()`` follow ``/clock`` (``ros_fake_time``); ``get_logger()``
   writes to a ``/rosout`` record filtered by ``--log-level`` (``ros_fake_logging``); guard
   conditions (``ros_fake_callbacks``);
