@@ -81,8 +81,9 @@ async def deploy_local(
     machines: dict[str, GroupMachine] = {}
     for group in robot.group_names:
         # a machine drives its group with its own robot's model (in a mixed cell: that robot's, not the cell's)
-        model = robot.member_of(group).model if isinstance(robot, CellRobotModel) else robot
-        params = {"group": group, "robot": model.name, **(machine_parameters or {})}
+        member = robot.member_of(group) if isinstance(robot, CellRobotModel) else None
+        names = {"cell_names": member.names.text()} if member is not None and not member.names.identity else {}
+        params = {"group": group, "robot": member.model.name if member is not None else robot.name, **names, **(machine_parameters or {})}
         machines[group] = GroupMachine(transport.create_node(f"{group}_machine", parameters=params), library)
     engine = ExecutionEngine(
         transport.create_node("execution_engine", parameters=engine_parameters), library.catalog(None), operators=operators, hold_for_operators=hold_for_operators,

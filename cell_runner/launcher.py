@@ -89,7 +89,7 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
     if isinstance(robot, CellRobotModel):  # a mixed cell: one bridge node per robot, each with its cell's options and base
         if speed != 1.0:
             raise ValueError(f"--speed {speed:g}: a cell of several robots runs in real time (each robot's bridge keeps its own clock)")
-        specs = [_bridge_spec(m.backend, transport, speed, m.name, m.options, m.base) for m in robot.members]
+        specs = [_bridge_spec(m.backend, transport, speed, m.name, m.options, m.base, m.names.text()) for m in robot.members]
     else:
         specs = [_bridge_spec(robot.default_backend, transport, speed)]
     # A simulator at another speed than real time is the cell's clock (it publishes /clock): every
@@ -99,9 +99,10 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
         name = machine_node_name(group)
         member = robot.member_of(group) if isinstance(robot, CellRobotModel) else None
         model, backend = (member.model, member.backend) if member is not None else (robot, robot.default_backend)
+        named = ("-p", f"cell_names:={member.names.text()}") if member is not None and not member.names.identity else ()
         specs.append(NodeSpec(name, (
             *_python(*_ENTRY["machine"]), *_common(transport, backend), "-r", f"__node:={name}", "-p", f"group:={group}", "-p", f"robot:={model.name}",
-            *followers,
+            *named, *followers,
         )))
     common = _common(transport, robot.members[0].backend if isinstance(robot, CellRobotModel) else robot.default_backend)
     specs.append(NodeSpec(ENGINE_NODE, (
@@ -113,9 +114,10 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
 
 def _bridge_spec(
     backend: str, transport: str, speed: float, robot: str = "", options: tuple[tuple[str, str], ...] = (), base: Pose | None = None,
+    names: str = "",
 ) -> NodeSpec:
     """The bridge node of ``backend``; for a robot of a mixed cell named ``<robot>_bridge``, with the cell's options
-    for it as parameters and its base pose."""
+    for it as parameters, its base pose and the cell's names of its groups and joints."""
     module = backend.replace("-", "_")
     bridge = list(_common(transport, backend))
     if speed != 1.0:
@@ -132,6 +134,8 @@ def _bridge_spec(
         bridge += ["-r", f"__node:={name}"]
         if base is not None and base != Pose():
             bridge += ["-p", "base_pose:=" + " ".join(repr(v) for v in (*base.position, *base.rpy()))]
+        if names:
+            bridge += ["-p", f"cell_names:={names}"]
         for key, value in options:
             bridge += ["-p", f"{key}:={value}"]
     return NodeSpec(name, (*_python(f"cell_runner.bridge_nodes.{module}", "main"), *bridge))

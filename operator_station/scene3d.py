@@ -23,7 +23,7 @@ from typing import Any
 
 from cell_runner.dry_run.report import DryRunReport
 from core_functions.cell_index import CellFrame
-from core_functions.cell_robots import CELL_ROBOT, CellRobotModel, cell_robot_model
+from core_functions.cell_robots import CELL_ROBOT, CellNames, CellRobotModel, cell_robot_model
 from core_functions.geometry import Pose
 from core_functions.primitives import ExecuteTrajectory, FullBodyMove, MoveCartesian, MoveJoints, MoveRelative, RecordTrajectory
 from core_functions.robots import RobotModel, find_robot
@@ -62,22 +62,24 @@ class RobotView:
     urdf: str
     base: Pose
     prefix: str  # how the dry run's collision model names its links ("assembler/"), "" for one robot
-    joints: tuple[str, ...]
+    joints: tuple[str, ...]  # as /joint_states names them: the cell's names (with joint_prefix)
     tcps: Mapping[str, tuple[str, Pose]]  # group -> (link, tool pose in it)
     rest: Mapping[str, float] = field(default_factory=dict)  # drawn before any joint state: the model's initial pose
+    joint_prefix: str = ""  # what the cell puts before the URDF's joint names (<robot prefix="viper_">)
 
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "model": self.model, "urdf": self.urdf, "base": pose_json(self.base), "prefix": self.prefix,
                 "joints": list(self.joints), "tcps": {g: {"link": link, "tool": pose_json(tool)} for g, (link, tool) in self.tcps.items()},
-                "rest": dict(self.rest)}
+                "rest": dict(self.rest), "joint_prefix": self.joint_prefix}
 
 
 def robot_views(robot: RobotModel) -> tuple[list[RobotView], list[str]]:
     """The robots to draw for ``robot`` (every member of a mixed cell), and a note for each without a URDF."""
-    members = [(m.name, m.model, m.base, f"{m.name}/") for m in robot.members] if isinstance(robot, CellRobotModel) else [(robot.name, robot, Pose(), "")]
+    members = ([(m.name, m.cell_model, m.base, f"{m.name}/", m.names) for m in robot.members] if isinstance(robot, CellRobotModel)
+               else [(robot.name, robot, Pose(), "", CellNames())])
     views: list[RobotView] = []
     notes: list[str] = []
-    for name, model, base, prefix in members:
+    for name, model, base, prefix, names in members:  # model: under the cell's names, as /joint_states and the groups carry them
         known = MODELS.get(model.name)
         if known is None:
             notes.append(f"{name}: no URDF is known for {model.name}: the 3D view shows its frames, not its links")
@@ -85,7 +87,7 @@ def robot_views(robot: RobotModel) -> tuple[list[RobotView], list[str]]:
         urdf, tcps = known
         rest = next((model.poses[p] for p in (*REST_POSES, *model.poses) if p in model.poses), {})
         views.append(RobotView(name, model.name, urdf.read_text(encoding="utf-8"), base, prefix, tuple(model.joint_names),
-                               {g: (tcp.frame, tcp.tool) for g, tcp in tcps.items()}, rest))
+                               {names.group(g): (tcp.frame, tcp.tool) for g, tcp in tcps.items()}, rest, names.prefix))
     return views, notes
 
 

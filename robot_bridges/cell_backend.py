@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
-from core_functions.cell_robots import BACKEND_NAMES, CellRobot, CellRobotModel
+from core_functions.cell_robots import BACKEND_NAMES, CellNames, CellRobot, CellRobotModel
 from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, Primitive, PrimitiveResult
 from node_transport.clock import Clock
@@ -67,6 +67,18 @@ def parse_options(options: BackendOptions, speed: float = 1.0) -> None:
             raise ValueError(f"robot {member.name!r} ({member.backend}): {error}") from None
 
 
+def renamed_observer(observer: Any, names: CellNames) -> Any:
+    """``observer`` (a simulator's planned motions: its groups, its joints, then the motion) told the cell's
+    group and joint names, as the cell's collision model names them."""
+    if names.identity:
+        return observer
+
+    def observe(groups: frozenset[str], joints: tuple[str, ...], *motion: Any) -> None:
+        observer(frozenset(names.group(g) for g in groups), tuple(names.joint(j) for j in joints), *motion)
+    observe.inner = observer  # type: ignore[attr-defined]  # what the getter hands back
+    return observe
+
+
 class CellBackend(RobotBackend):
     """Every robot's back end; a group's calls go to the robot it belongs to."""
 
@@ -88,15 +100,17 @@ class CellBackend(RobotBackend):
 
     @property
     def motion_observer(self) -> Any:
-        """The dry run's observer of planned motions, handed to every simulator that shows them (joint names
-        are the robots' own, which the cell's collision model keeps)."""
+        """The dry run's observer of planned motions, handed to every simulator that shows them (told the
+        cell's group and joint names, which the cell's collision model uses)."""
         observers = [getattr(b, "motion_observer") for b in self._simulators_with("motion_observer")]
-        return observers[0] if observers else None
+        return getattr(observers[0], "inner", observers[0]) if observers else None
 
     @motion_observer.setter
     def motion_observer(self, observer: Any) -> None:
-        for backend in self._simulators_with("motion_observer"):
-            setattr(backend, "motion_observer", observer)
+        for part in self.parts:
+            backend = part.backend.inner if isinstance(part.backend, PlacedBackend) else part.backend
+            if "motion_observer" in vars(backend):
+                setattr(backend, "motion_observer", renamed_observer(observer, part.robot.names) if observer is not None else None)
 
     @property
     def collisions(self) -> Any:
@@ -176,7 +190,7 @@ async def create(clock: Clock, options: BackendOptions) -> CellBackend:
                 inner = await create_backend(member.backend, clock, member_options(options, member))
             except (KeyError, ValueError) as error:  # one line naming the robot of the cell whose options they are
                 raise ValueError(f"robot {member.name!r} ({member.backend}): {error.args[0] if error.args else error}") from None
-            placed = inner if member.base == Pose() else PlacedBackend(inner, member.base, member.name)
+            placed = inner if member.base == Pose() and member.names.identity else PlacedBackend(inner, member.base, member.name, member.names)
             parts.append(Part(member, placed))
     except BaseException:
         for part in reversed(parts):

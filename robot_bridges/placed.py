@@ -1,25 +1,37 @@
-"""A robot whose base stands somewhere in the cell: poses go in and out in the cell's world frame.
+"""A robot of a cell of several: poses in the cell's world frame, groups and joints under the cell's names.
 
 Each back end works in its own robot's base frame (a KUKA's ``base``, a Nextage's ``WAIST``); in a
 cell of several robots the application's frames are written in the cell's one world frame.  This
 wrapper turns every pose a primitive carries into the robot's base frame before the back end sees
 it, and every pose the back end reports (TCP, located features, the cell it is given) back, so a
 back end never needs to know where it stands.
+
+The same goes for names: a cell may name a robot's groups and joints for itself
+(:class:`core_functions.cell_robots.CellNames`: a Viper's ``arm`` as ``inspector``, its ``joint_1`` as
+``viper_joint_1``), so that two robots whose models share a group or joint name stand side by side.
+The back end keeps its own names; everything that leaves this wrapper (its groups, hence the bridge's
+per-group topics and FollowJointTrajectory actions, /joint_states, results, limits) carries the cell's,
+and every group or joint name coming in is turned back into the robot's own.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 from typing import Any
 
+from core_functions.cell_robots import CellNames
 from core_functions.geometry import Pose, rotate
 from core_functions.primitives import (
+    ExecuteTrajectory,
+    FullBodyMove,
     MasterSlaveMove,
     MotionResult,
     MoveCartesian,
+    MoveJoints,
     MoveRelative,
     Primitive,
     PrimitiveResult,
     RecordTrajectory,
+    TrajectoryResult,
     Vision,
     VisionResult,
 )
@@ -28,12 +40,14 @@ from robot_bridges.backend import JointLimits, RobotBackend
 
 
 class PlacedBackend(RobotBackend):
-    """``inner`` with its base at ``base`` in the cell's world frame."""
+    """``inner`` with its base at ``base`` in the cell's world frame, its groups and joints named by ``names``."""
 
-    def __init__(self, inner: RobotBackend, base: Pose, robot_name: str) -> None:
+    def __init__(self, inner: RobotBackend, base: Pose, robot_name: str, names: CellNames = CellNames()) -> None:
         self.inner = inner
         self.base = base
         self.to_base = base.inverse()
+        self.names = names
+        self._own_group = {names.group(g): g for g in inner.groups}
         self.name = f"{robot_name}: {inner.name}"
         self.world_frame = "world"
         self.holds_within_motion = inner.holds_within_motion
@@ -46,7 +60,38 @@ class PlacedBackend(RobotBackend):
 
     @property
     def groups(self) -> tuple[str, ...]:
-        return self.inner.groups
+        return tuple(self._own_group)
+
+    def own_group(self, group: str) -> str:
+        """The robot's name of its cell group ``group`` (a name it does not have: as it is, for the robot to refuse)."""
+        return self._own_group.get(group, group)
+
+    def own_joints(self, joints: tuple[str, ...]) -> tuple[str, ...]:
+        """The robot's names of the cell's joint names ``joints``: the prefix taken off; a name without the
+        prefix is passed as it is, for the robot to refuse as the unknown joint it is."""
+        prefix = self.names.prefix
+        return tuple(j[len(prefix):] if prefix and j.startswith(prefix) else j for j in joints)
+
+    def cell_joints(self, joints: tuple[str, ...]) -> tuple[str, ...]:
+        return tuple(self.names.joint(j) for j in joints)
+
+    def renamed_in(self, primitive: Primitive) -> Primitive:
+        """``primitive`` with the robot's own group and joint names."""
+        if self.names.identity:
+            return primitive
+        if isinstance(primitive, (MoveJoints, ExecuteTrajectory, FullBodyMove)) and primitive.joint_names:
+            return replace(primitive, joint_names=self.own_joints(primitive.joint_names))
+        if isinstance(primitive, MasterSlaveMove):
+            return replace(primitive, master=self.own_group(primitive.master), slave=self.own_group(primitive.slave))
+        return primitive
+
+    def renamed_out(self, result: PrimitiveResult) -> PrimitiveResult:
+        """``result`` with the cell's joint names."""
+        if self.names.identity:
+            return result
+        if isinstance(result, (MotionResult, TrajectoryResult)) and result.joint_names:
+            return replace(result, joint_names=self.cell_joints(result.joint_names))
+        return result
 
     async def start(self) -> None:
         await self.inner.start()
@@ -96,39 +141,50 @@ class PlacedBackend(RobotBackend):
         return result
 
     async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
-        return self.outward(await self.inner.execute(group, self.inward(primitive)))
+        result = await self.inner.execute(self.own_group(group), self.renamed_in(self.inward(primitive)))
+        return self.renamed_out(self.outward(result))
 
     async def pause(self, group: str) -> None:
-        await self.inner.pause(group)
+        await self.inner.pause(self.own_group(group))
 
     async def resume(self, group: str) -> None:
-        await self.inner.resume(group)
+        await self.inner.resume(self.own_group(group))
 
     async def stop(self, group: str) -> None:
-        await self.inner.stop(group)
+        await self.inner.stop(self.own_group(group))
 
     async def measure(self, group: str) -> MotionResult:
-        result = await self.inner.measure(group)
-        return replace(result, tcp=self._out(result.tcp))
+        result = await self.inner.measure(self.own_group(group))
+        return replace(result, tcp=self._out(result.tcp), joint_names=self.cell_joints(result.joint_names))
 
     def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
-        return self.inner.joint_state()
+        names, positions = self.inner.joint_state()
+        return self.cell_joints(names), positions
 
     def tcp_pose(self, group: str) -> Pose | None:
-        return self._out(self.inner.tcp_pose(group))
+        return self._out(self.inner.tcp_pose(self.own_group(group)))
 
     def set_speed_override(self, rate: float) -> None:
         super().set_speed_override(rate)
         self.inner.set_speed_override(rate)  # the robot plays its motions at it; where its base stands changes nothing
 
     def set_cell(self, cell: CellSnapshot) -> None:
-        """The cell as the robot sees it: every frame and true pose in its base frame."""
+        """The cell as the robot sees it: every frame and true pose in its base frame, its joint poses (those of
+        its own joints) under its own names."""
         frames = tuple(replace(f, pose=self._in(f.pose)) for f in cell.frames)
         truth = {name: self._in(pose) for name, pose in cell.truth.items()}
-        self.inner.set_cell(replace(cell, frames=frames, truth=truth))
+        seen = replace(cell, frames=frames, truth=truth)
+        if not self.names.identity:
+            prefix = self.names.prefix
+            poses = {name: dict(zip(self.own_joints(tuple(values)), values.values()))
+                     for name, values in cell.joint_poses.items() if all(j.startswith(prefix) for j in values)}
+            groups = {name: self._own_group[g] for name, g in cell.joint_pose_groups.items() if g in self._own_group and name in poses}
+            seen = replace(seen, joint_poses=poses, joint_pose_groups=groups)
+        self.inner.set_cell(seen)
 
     def joint_limits(self, group: str) -> JointLimits | None:
-        return self.inner.joint_limits(group)
+        limits = self.inner.joint_limits(self.own_group(group))
+        return None if limits is None else replace(limits, joint_names=self.cell_joints(limits.joint_names))
 
     def robot_description(self) -> str | None:
         return None  # its URDF's root is the robot's base, not the cell's world: not published as the cell's

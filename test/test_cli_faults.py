@@ -32,6 +32,7 @@ from breakpoint_files import BREAKPOINT_FILES
 from paused_edit_files import PAUSED_EDIT_FILES
 from dds_domain import domain_env, stop_group
 from mixed_cell_files import MIXED_FILES
+from cell_group_names_files import NAMED_FILES
 from roles_files import ROLE_FILES, ROLE_MODES
 
 from execution_engine.trace_report import read_trace
@@ -146,6 +147,7 @@ FILES: dict[str, str | bytes] = {
 #: The mode each file is written with, whatever the umask the tests run under (a row about who may read
 #: a file must not hold only under the usual 022); every other file: its owner's only.
 FILES.update(MIXED_FILES)  # rows 250-259: mixed cells, each row naming the cell and the application
+FILES.update(NAMED_FILES)  # rows 300-309: cells that name their robots' groups and joints
 FILES.update(BRANCH_FILES)  # rows 240-249: outcome branches
 FILES.update(BREAKPOINT_FILES)  # rows 260-269: breakpoints
 FILES.update(PAUSED_EDIT_FILES)  # rows 280-289: a paused run's edit

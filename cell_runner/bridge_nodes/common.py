@@ -29,6 +29,7 @@ from cell_runner.ros_main import (
     startup_errors,
     warn_undeclared,
 )
+from core_functions.cell_robots import CellNames
 from core_functions.geometry import Pose
 from node_transport.clock import Clock, FollowingClock, scaled_clock
 from node_transport.msgs import ClockMessage, Time
@@ -102,15 +103,28 @@ def declare_base_pose(node: Node) -> Pose | None:
     return Pose.from_xyz_rpy(*values)
 
 
+def declare_cell_names(node: Node) -> CellNames:
+    """``cell_names``: how a mixed cell names the robot's groups and joints (``launch`` sets it from the cell's
+    ``<robot prefix>`` and ``<group name as>``): its per-group topics, actions and /joint_states carry them."""
+    text = str(node.declare_parameter(
+        "cell_names", "", "how a cell of several robots names this robot's groups and joints (prefix=viper_;arm=inspector); '' = its own names",
+    ))
+    try:
+        return CellNames.parse(text)
+    except ValueError as error:
+        raise StartupError(f"{node.fully_qualified_name}: parameter {error}") from None
+
+
 async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: Outcome) -> None:
     """Build the back end and its bridge node, then serve; the back end is closed on the way out."""
     with startup_errors():
         setup = declare(node)
         base = declare_base_pose(node)
+        names = declare_cell_names(node)
         clock = backend_clock(node, setup.speed)
         robot_backend = await create_backend(backend, clock, setup.options)
-        if base is not None:  # a robot of a mixed cell: poses in and out in the cell's world frame
-            robot_backend = PlacedBackend(robot_backend, base, node.name.removesuffix("_bridge"))
+        if base is not None or not names.identity:  # a robot of a mixed cell: poses in the cell's world frame, groups and joints by its names
+            robot_backend = PlacedBackend(robot_backend, base or Pose(), node.name.removesuffix("_bridge"), names)
     try:
         with startup_errors():
             bridge = BridgeNode(node, robot_backend)

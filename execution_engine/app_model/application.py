@@ -14,6 +14,7 @@ from types import MappingProxyType
 from core_functions.catalog import Catalog
 from execution_engine.app_model import wire_fit
 from execution_engine.app_model.cell import Cell, check_joint_poses, read_cell_log
+from execution_engine.app_model.cell_groups import cell_structure
 from execution_engine.app_model.branches import check_branches
 from execution_engine.app_model.expand import Expander, merge_iterations
 from execution_engine.app_model.expanded_source import ExpandedSource
@@ -55,6 +56,7 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
     doc, log = read_structured(path, "application", max_bytes=max_bytes, data=data)
     if doc is None:
         return None, capped(log)
+    log = cell_structure(doc, log)
     draft = ApplicationReader(doc, log).read()
     draft.source.detach()  # the drafts hold offsets, not elements: the tree can go before the cell and the checks
     del doc
@@ -103,6 +105,8 @@ def _read_application(path: Path, catalog: Catalog, max_bytes: int, data: bytes 
 def _read_called(path: Path, display: str, log: DiagnosticLog, max_bytes: int) -> ApplicationDraft | None:
     """A called application's steps, read as the application itself is (its problems in ``log``)."""
     doc, own = read_structured(path, "application", display=display, max_bytes=max_bytes)
+    if doc is not None:
+        own = cell_structure(doc, own)
     log.merge(own)
     if doc is None:
         return None

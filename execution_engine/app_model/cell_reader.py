@@ -194,7 +194,12 @@ class CellReader:
             elif child.tag == "zone":
                 self.read_zone(child, at, zones)
             elif child.tag == "robot":
-                read_robot(self, child, at, robots, robot_lines, self.source.at_offset(at).line)
+                parts: list[tuple[etree._Element, int]] = []  # its <option> and <group>, each where it is written
+                for part, part_at in self.children(child):
+                    parts.append((part, part_at))
+                    self.walk.skip(part)
+                read_robot(self, child, at, parts, robots, robot_lines, self.source.at_offset(at).line)
+                continue
             self.walk.skip(child)
         frames = self.check_tree(drafts)
         self.check_element_references(drafts, elements)

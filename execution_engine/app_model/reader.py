@@ -346,7 +346,7 @@ class ApplicationReader:
             if not isinstance(group, str):
                 continue
             child_at = walk.visit(child)
-            if group not in GROUP_TAGS:
+            if group not in GROUP_TAGS and group not in self.groups:  # a cell's own group names are the robot's
                 walk.skip(child)  # the schema reports unknown elements
                 continue
             call = self.read_call(child, group)

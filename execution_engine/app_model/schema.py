@@ -102,6 +102,24 @@ def load_schema(name: str) -> SchemaInfo:
     return _describe(name, xsd.getroot(), etree.XMLSchema(xsd))
 
 
+@lru_cache(maxsize=16)
+def application_schema_with(groups: frozenset[str]) -> SchemaInfo:
+    """application.xsd whose operations also take ``groups`` as group elements: the groups a cell of
+    several robots names for its robots (``viper_arm``), which no fixed list of tags can know.  The
+    schema names every robot model's own groups; a cell's are added to that list, so its operations
+    are checked element by element as any other's."""
+    path: Path = share_path("apps_xml", "schema", "application.xsd")
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
+    xsd = etree.parse(str(path), parser)
+    operation = xsd.getroot().find(f"{XS}complexType[@name='operation']/{XS}choice")
+    if operation is None:
+        raise LookupError("application.xsd: no <xs:choice> of groups in complexType operation")
+    known = {e.get("name") for e in operation.iterfind(f"{XS}element")}
+    for group in sorted(groups - known):
+        etree.SubElement(operation, f"{XS}element", name=group, type="group")
+    return _describe("application", xsd.getroot(), etree.XMLSchema(xsd))
+
+
 class PathIndex:
     """Resolves libxml2's node paths (``/application/operation[3]/left_arm``) in linear total time."""
 

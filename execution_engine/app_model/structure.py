@@ -251,11 +251,12 @@ class StructureCheck:
         return self.doc.source.element(problem.node)
 
 
-def validate_structure(doc: XmlDocument, schema: str, log: DiagnosticLog | None = None) -> DiagnosticLog:
+def validate_structure(doc: XmlDocument, schema: str | SchemaInfo, log: DiagnosticLog | None = None) -> DiagnosticLog:
     """Every schema violation of ``doc``, one diagnostic per element or attribute at fault, in
-    ``log`` (a new one when None): the first ones described, the rest counted."""
+    ``log`` (a new one when None): the first ones described, the rest counted.  ``schema``: a name
+    under apps_xml/schema, or a schema made for the document (a cell's groups added)."""
     log = log if log is not None else DiagnosticLog()
-    info = load_schema(schema)
+    info = load_schema(schema) if isinstance(schema, str) else schema
     if doc.valid_against is not info.schema:  # the parser found it valid already: nothing to say
         log.extend(StructureCheck(doc, info, log).run())
     return log

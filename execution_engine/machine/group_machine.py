@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from core_functions.functions import SkillContext
+from core_functions.cell_robots import CellNames, named_model
 from core_functions.robots import find_robot
 from core_functions.trajectory_store import TrajectoryStore
 from execution_engine.function_library import FunctionLibrary
@@ -102,6 +103,9 @@ class GroupMachine:
         self.clock = node.clock
         self.group = str(node.declare_parameter("group", "left_arm", "the robot group this machine drives"))
         robot_name = str(node.declare_parameter("robot", "nextage_open", "robot model (nextage_open, adept_viper_s850, kuka_kr)"))
+        cell_names = str(node.declare_parameter(
+            "cell_names", "", "how a cell of several robots names this robot's groups and joints (prefix=viper_;arm=inspector); '' = its own names",
+        ))
         libraries = str(node.declare_parameter("libraries", "all", "comma-separated function libraries, or all"))
         db = str(node.declare_parameter(
             "trajectory_db", "", "SQLite file of recorded trajectories, best next to the application (APP.trajectories.sqlite); "
@@ -112,7 +116,7 @@ class GroupMachine:
             primitive_timeout=declare_bounded(node, "primitive_timeout", MachineConfig.primitive_timeout, "longest a primitive may run (s)"),
             sync_timeout=declare_bounded(node, "sync_timeout", MachineConfig.sync_timeout, "how long partners may take to meet at a barrier (s)"),
         )
-        self.robot = find_robot(robot_name)
+        self.robot = named_model(find_robot(robot_name), CellNames.parse(cell_names))
         if self.group not in self.robot.group_names:
             raise ValueError(f"{node.fully_qualified_name}: group {self.group!r} is not a group of {self.robot.name} ({', '.join(self.robot.group_names)})")
         chosen = None if libraries.strip() == "all" else [x.strip() for x in libraries.split(",") if x.strip()]

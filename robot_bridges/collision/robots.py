@@ -46,8 +46,8 @@ def scene_for(robot: RobotModel, margin: float = DEFAULT_MARGIN) -> CollisionSce
 
 def cell_urdf(robot: CellRobotModel) -> tuple[str, dict[str, ArmTcp]]:
     """One URDF of every robot of the cell and their TCPs: each robot's links and fixed joints named
-    ``ROBOT/NAME`` (two robots may both have a ``base_link``), its moving joints as they are (the groups
-    name them), its root link fixed to the cell's ``world`` at the robot's base pose.  KeyError for a
+    ``ROBOT/NAME`` (two robots may both have a ``base_link``), its moving joints as the cell names them
+    (the groups name them: their own names, or with the robot's ``prefix``), its root link fixed to the cell's ``world`` at the robot's base pose.  KeyError for a
     robot without a collision model."""
     root = etree.Element("robot", name=robot.name)
     etree.SubElement(root, "link", name="world")
@@ -63,6 +63,8 @@ def cell_urdf(robot: CellRobotModel) -> tuple[str, dict[str, ArmTcp]]:
                 continue
             if element.tag == "link" or element.get("type") == "fixed":
                 element.set("name", prefix + element.get("name", ""))
+            else:  # a moving joint: the cell's name of it, as /joint_states and the groups carry it
+                element.set("name", member.names.joint(element.get("name", "")))
             for end in ("parent", "child"):
                 node = element.find(end) if element.tag == "joint" else None
                 if node is not None:
@@ -73,5 +75,5 @@ def cell_urdf(robot: CellRobotModel) -> tuple[str, dict[str, ArmTcp]]:
         etree.SubElement(mount, "child", link=prefix + roots[0])
         base = member.base
         etree.SubElement(mount, "origin", xyz=" ".join(repr(v) for v in base.position), rpy=" ".join(repr(v) for v in base.rpy()))
-        tcps.update({group: replace(tcp, frame=prefix + tcp.frame) for group, tcp in member_tcps.items()})
+        tcps.update({member.names.group(group): replace(tcp, frame=prefix + tcp.frame) for group, tcp in member_tcps.items()})
     return etree.tostring(root, encoding="unicode"), tcps

@@ -197,12 +197,18 @@ const View3D = (() => {
     return samples[lo];
   }
 
+  // A robot's URDF joint of a name /joint_states carries: the cell's name (its prefix="..." before the URDF's).
+  function urdfJoint(r, name) {
+    const jp = r.info.joint_prefix || "";
+    if (jp && !name.startsWith(jp)) return null;
+    return r.model.joints[name.slice(jp.length)] || null;
+  }
+
   // The joints the records report (a replayed trace has no joint states: the motions' results).
   function setJoints(names, values) {
     for (const r of state.robots) {
-      const joints = r.model.joints;
       for (let i = 0; i < names.length; i++) {
-        const joint = joints[names[i]];
+        const joint = urdfJoint(r, names[i]);
         const value = values[i];
         if (joint && typeof value === "number" && value === value && joint.jointType !== "fixed") joint.setJointValue(value);
       }
@@ -219,7 +225,7 @@ const View3D = (() => {
         names.push(name.slice(prefix.length)); values.push(value);
       }
       for (let i = 0; i < names.length; i++) {
-        const joint = r.model.joints[names[i]];
+        const joint = r.model.joints[names[i]] || urdfJoint(r, names[i]);
         if (joint && typeof values[i] === "number" && values[i] === values[i] && joint.jointType !== "fixed") joint.setJointValue(values[i]);
       }
     }

@@ -163,12 +163,14 @@ const View3DGeometry = (() => {
     return out.multiplyMatrices(found.link.matrixWorld, scratchTool);
   }
   // The TCP (world) with the robot's joints set to ``names``/``values`` for the moment; the joints are put back.
+  // (``names`` as /joint_states carries them: a cell's prefix="..." before the URDF's joint names.)
   function tcpWith(found, names, values) {
-    const joints = found.robot.model.joints;
-    const saved = names.map((n) => joints[n] ? joints[n].angle : null);
-    names.forEach((n, i) => { if (joints[n] && typeof values[i] === "number" && values[i] === values[i]) joints[n].setJointValue(values[i]); });
+    const all = found.robot.model.joints, jp = found.robot.info.joint_prefix || "";
+    const joints = names.map((n) => (jp ? (n.startsWith(jp) ? all[n.slice(jp.length)] : null) : all[n]) || null);
+    const saved = joints.map((j) => j ? j.angle : null);
+    joints.forEach((j, i) => { if (j && typeof values[i] === "number" && values[i] === values[i]) j.setJointValue(values[i]); });
     const m = tcpMatrix(found, new THREE.Matrix4());
-    names.forEach((n, i) => { if (joints[n] && saved[i] !== null) joints[n].setJointValue(saved[i]); });
+    joints.forEach((j, i) => { if (j && saved[i] !== null) j.setJointValue(saved[i]); });
     found.robot.holder.updateMatrixWorld(true);
     return m;
   }

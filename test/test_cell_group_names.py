@@ -1,0 +1,150 @@
+"""A cell of two robots whose models share a group name (issue 23 item 4): the cell names each robot's groups and
+joints for itself (``<robot prefix>``, ``<group name as>``), and everything downstream speaks those names.
+
+apps_xml/examples/side_by_side.xml: a KUKA KR 6 (group ``arm``, joints A1..A6) as ``kuka_arm`` / ``kuka_A1``.., and
+an Adept Viper s850 (group ``arm``, joints joint_1..6) as ``inspector`` / ``viper_joint_1``...  Here: the model the
+application, the machines and the studio see; the bridges' per-group command topics, FollowJointTrajectory actions
+and /joint_states of both robots on one bus (an independent client, simulated time); the collision model; what
+``launch`` tells each node.  The example's dry run and run: test_cell_group_names_run.py.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from fjt_client import FJT, RSI, VPLUS, Arm, Kind, goal, make_backend, three_points
+
+from cell_runner.launcher import cell_nodes
+from app_functions.registry import full_catalog
+from core_functions.cell_robots import CellNames, CellRobotModel, named_model
+from core_functions.geometry import Pose
+from core_functions.primitives import MotionResult, MoveJoints
+from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR
+from execution_engine.app_model import load_application
+from node_transport.action import GoalStatus
+from node_transport.clock import Clock
+from node_transport.local import LocalTransport
+from node_transport.port import poll_until
+from robot_bridges.bridge_node import BridgeNode
+from robot_bridges.collision.robots import cell_urdf
+from robot_bridges.placed import PlacedBackend
+from operator_station.scene3d import robot_views
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "apps_xml" / "examples" / "side_by_side.xml"
+KUKA_NAMES = CellNames("kuka_")
+VIPER_NAMES = CellNames("viper_", (("arm", "inspector"),))
+VIPER_BASE = Pose.from_xyz_rpy(1.5, 0.0, 0.0, 0.0, 0.0, math.pi)
+BOUND = 30.0
+
+
+def test_the_application_s_robot_has_the_groups_joints_and_poses_the_cell_names() -> None:
+    app = load_application(EXAMPLE, full_catalog())
+    robot = app.robot
+    assert isinstance(robot, CellRobotModel)
+    assert robot.group_names == ("kuka_arm", "inspector")
+    assert robot.group("kuka_arm").joint_names == tuple(f"kuka_A{i}" for i in range(1, 7))
+    assert robot.group("inspector").joint_names == tuple(f"viper_joint_{i}" for i in range(1, 7))
+    assert robot.member_of("inspector").name == "checker" and robot.member_of("kuka_arm").name == "loader"
+    assert robot.member_of("inspector").model is ADEPT_VIPER_S850  # its back end is built from the robot's own model
+    assert robot.poses["home"]["viper_joint_2"] == ADEPT_VIPER_S850.poses["home"]["joint_2"]
+    assert robot.poses["home"]["kuka_A3"] == KUKA_KR.poses["home"]["A3"]
+    assert {c.group for op in app.operations for c in op.calls.values()} == {"kuka_arm", "inspector"}
+    assert CellNames.parse(VIPER_NAMES.text()) == VIPER_NAMES and CellNames.parse("") == CellNames()
+
+
+def test_launch_tells_each_bridge_and_machine_the_cell_s_names() -> None:
+    """Every node of ``launch`` hears the names: a bridge serves its groups under them, a machine drives its group
+    with its robot's model under them (the model's own name still finds the robot)."""
+    specs = {spec.name: " ".join(spec.argv) for spec in cell_nodes(EXAMPLE, "dds", 1.0)}
+    assert set(specs) >= {"loader_bridge", "checker_bridge", "kuka_arm_machine", "inspector_machine"}
+    assert "cell_names:=prefix=kuka_" in specs["loader_bridge"] and "cell_names:=prefix=kuka_" in specs["kuka_arm_machine"]
+    assert "cell_names:=prefix=viper_;arm=inspector" in specs["checker_bridge"]
+    assert "group:=inspector" in specs["inspector_machine"] and "robot:=adept_viper_s850" in specs["inspector_machine"]
+    machine_model = named_model(ADEPT_VIPER_S850, CellNames.parse("prefix=viper_;arm=inspector"))
+    assert machine_model.group_names == ("inspector",) and machine_model.name == ADEPT_VIPER_S850.name
+
+
+def test_the_collision_model_and_the_3d_view_name_the_joints_and_tcps_as_the_cell_does() -> None:
+    robot = load_application(EXAMPLE, full_catalog()).robot
+    assert isinstance(robot, CellRobotModel)
+    urdf, tcps = cell_urdf(robot)
+    assert set(tcps) == {"kuka_arm", "inspector"}
+    assert 'name="kuka_A1"' in urdf and 'name="viper_joint_6"' in urdf and 'name="A1"' not in urdf and 'name="joint_1"' not in urdf
+    views, notes = robot_views(robot)
+    assert not notes
+    by_name = {v.name: v for v in views}
+    assert by_name["checker"].joint_prefix == "viper_" and set(by_name["checker"].tcps) == {"inspector"}
+    assert by_name["checker"].joints[0] == "viper_joint_1" and "viper_joint_2" in by_name["checker"].rest
+
+
+class RobotArm(Arm):
+    """The client's view of one robot of the cell: /joint_states carries both robots' messages, each its own joints."""
+
+    def joints(self) -> np.ndarray:
+        where = next(state for _, state in reversed(self.states) if self.kind.joints[0] in state)
+        return np.array([where[n] for n in self.kind.joints])
+
+
+async def _named(kind: Kind, clock: Clock, base: Pose, robot: str, names: CellNames, bus: LocalTransport) -> BridgeNode:
+    bridge = BridgeNode(bus.create_node(f"{robot}_bridge"), PlacedBackend(await make_backend(kind, clock), base, robot, names))
+    await bridge.start()
+    return bridge
+
+
+def test_two_robots_with_one_group_name_serve_their_cell_groups_side_by_side(run_sim: Any) -> None:
+    """A Viper and a KUKA, each bridge on the one bus: FollowJointTrajectory at /kuka_arm_controller/... and
+    /inspector_controller/... (none at /arm_controller), /joint_states with both robots' joints under the cell's
+    names, a goal on each moving only that robot; a goal naming the robot's own joint (joint_1) is refused as an
+    unknown joint; a primitive on the cell's group name with the cell's joint names reaches the right robot."""
+    kuka_kind = Kind("rsi", "kuka_arm_controller", tuple(f"kuka_{j}" for j in RSI.joints))
+    viper_kind = Kind("vplus", "inspector_controller", tuple(f"viper_{j}" for j in VPLUS.joints))
+
+    async def main(clock: Clock) -> dict[str, Any]:
+        bus = LocalTransport(clock)
+        kuka = await _named(RSI, clock, Pose(), "loader", KUKA_NAMES, bus)
+        viper = await _named(VPLUS, clock, VIPER_BASE, "checker", VIPER_NAMES, bus)
+        try:
+            kuka_arm = RobotArm(bus.create_node("client_kuka"), kuka_kind, clock)
+            viper_arm = RobotArm(bus.create_node("client_viper"), viper_kind, clock)
+            await kuka_arm.ready(BOUND)
+            await viper_arm.ready(BOUND)
+            assert await poll_until(clock, lambda: all(any(a.kind.joints[0] in s for _, s in a.states) for a in (kuka_arm, viper_arm)), BOUND, 0.01)
+            old = Arm(bus.create_node("client_old"), Kind("old", "arm_controller", VPLUS.joints), clock)
+            no_arm_controller = await old.client.send.wait_for_service(0.5)
+            names_seen = set().union(*(set(state) for _, state in viper_arm.states))
+            kuka_start, viper_start = kuka_arm.joints(), viper_arm.joints()
+            kuka_done = await kuka_arm.run(goal(kuka_kind.joints, three_points(kuka_start, (0.1, 0.05, -0.05, 0.0, 0.1, 0.0))), BOUND)
+            await clock.sleep(0.2)
+            viper_still = viper_arm.joints()
+            viper_done = await viper_arm.run(goal(viper_kind.joints, three_points(viper_start, (0.1, 0.05, -0.1, 0.0, -0.1, 0.0))), BOUND)
+            await clock.sleep(0.2)
+            own_names = await viper_arm.run(goal(VPLUS.joints, [(1.0, viper_arm.joints())]), BOUND)
+            target = tuple(float(v) for v in viper_arm.joints() - 0.05)
+            moved = await viper.backend.execute("inspector", MoveJoints(target, joint_names=viper_kind.joints))
+            limits = viper.backend.joint_limits("inspector")
+            return dict(no_arm_controller=no_arm_controller, names=names_seen, kuka_done=kuka_done, viper_done=viper_done,
+                        kuka_moved=kuka_arm.joints() - kuka_start, viper_still=viper_still - viper_start,
+                        viper_moved=viper_arm.joints() - viper_start, own_names=own_names, target=target, moved=moved,
+                        limits=limits, groups=(kuka.backend.groups, viper.backend.groups))
+        finally:
+            await viper.close()
+            await kuka.close()
+
+    got = run_sim(main)
+    assert got["groups"] == (("kuka_arm",), ("inspector",))
+    assert not got["no_arm_controller"], "a bridge serves the model's own group name"
+    assert set(kuka_kind.joints) | set(viper_kind.joints) <= got["names"]
+    assert not got["names"] & {"A1", "joint_1"}, got["names"]
+    for done in (got["kuka_done"], got["viper_done"]):
+        assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.error_code == FJT.Result.SUCCESSFUL, done.result.error_string
+    assert np.allclose(got["kuka_moved"], np.array((0.1, 0.05, -0.05, 0.0, 0.1, 0.0)) * 3, atol=2e-3)
+    assert np.allclose(got["viper_still"], 0.0, atol=1e-9)  # the KUKA's goal never moved the Viper
+    refused = got["own_names"].result
+    assert refused.error_code == FJT.Result.INVALID_JOINTS and "joint 'joint_1' is not one of the group's joints (viper_joint_1" in refused.error_string
+    moved = got["moved"]
+    assert isinstance(moved, MotionResult) and moved.joint_names == viper_kind.joints
+    assert np.allclose(moved.positions, got["target"], atol=1e-6)
+    assert got["limits"].joint_names == viper_kind.joints
