@@ -107,6 +107,20 @@ class PausedRun:
 
 async def paused(clock: Clock, app: Application, tmp: Path, steps: int = 2) -> PausedRun:
     """Start ``app`` as run does (trace, MCAP recording, checkpoint) and step ``steps`` operations: paused after them."""
+    run = await started(clock, app, tmp)
+    engine = run.deployment.engine
+    for _ in range(steps):
+        assert (await engine.operator_command("step", "test"))[0]
+        for _ in range(400):  # bounded: 40 s of simulated time
+            await clock.sleep(0.1)
+            if engine.state == "paused":
+                break
+        assert engine.state == "paused"
+    return run
+
+
+async def started(clock: Clock, app: Application, tmp: Path) -> PausedRun:
+    """``app`` set up as run does (trace, MCAP recording, checkpoint, the edit's check) and waiting for its start."""
     backend = await create_backend("nextage-sim", clock, BackendOptions(robot=app.robot))
     deployment = await deploy_local(clock, app.robot, backend, machine_parameters={"trajectory_db": ":memory:"})
     engine = deployment.engine
@@ -126,14 +140,7 @@ async def paused(clock: Clock, app: Application, tmp: Path, steps: int = 2) -> P
     engine.remainder.hooks.append(recorder.swapped)  # as run wires it: the recording holds the edited file
     check = remainder_check(setup_for("nextage-sim", BackendOptions(robot=app.robot)), None, backend_measure(app.robot, backend, "the simulator"), clock)
     run = asyncio.get_running_loop().create_task(engine.run(app))
-    await asyncio.sleep(0)  # the run has begun (its state reset): the step is this run's
-    for _ in range(steps):
-        assert (await engine.operator_command("step", "test"))[0]
-        for _ in range(400):  # bounded: 40 s of simulated time
-            await clock.sleep(0.1)
-            if engine.state == "paused":
-                break
-        assert engine.state == "paused"
+    await asyncio.sleep(0)  # the run has begun (its state reset): a command now is this run's
     return PausedRun(clock, deployment, app, run, trace, store, check, recorder, backend)
 
 

@@ -8,6 +8,8 @@ from the run's present state, not from the application's start:
 * the frames vision located so far: the remainder's motions go where the run's will, to the measured
   poses (a located frame's pose in the checked cell is its measured one, its children move with it);
 * the flags set so far (set first, by the engine's own ``set_flag``, which moves nothing);
+* with ``sync="flags"``, each group from its own position (the calls it has ended left out, the one it is
+  in run again from where the arm is) and the zones held as they are (the holder's call first);
 * the outcomes of the tested functions that ran: an operation whose ``<if>`` on them is not met is
   left out as the run will leave it out; one whose ``<if>`` is met runs without that condition.
 
@@ -27,7 +29,7 @@ from cell_runner.dry_run.start import Measure, StartRefused
 from core_functions.geometry import Pose
 from execution_engine.app_model.cell_model import Cell
 from execution_engine.app_model.diagnostics import Diagnostic
-from execution_engine.app_model.model import Application, Call, Operation
+from execution_engine.app_model.model import WAIT, Application, Call, Condition, Operation
 from execution_engine.engine.flags import SET_FLAG
 from execution_engine.engine.remainder_swap import PresentState, RemainderCheck
 from node_transport.clock import Clock
@@ -35,7 +37,11 @@ from node_transport.clock import Clock
 
 def remainder_app(new: Application, state: PresentState) -> Application:
     """What is left to run of ``new`` from ``state``: its operations from the frontier (branches on outcomes
-    already known resolved), in the cell as vision found it, after the flags set so far."""
+    already known resolved), in the cell as vision found it, after the flags set so far; with ``sync="flags"``
+    each group's calls from where it stands (:func:`flags_remainder`)."""
+    cell = located_cell(new.cell, state.located) if new.cell is not None else None
+    if state.groups:
+        return replace(new, operations=flags_remainder(new, state), cell=cell)
     done = {op.id for op in new.operations[: state.frontier]}
     operations: list[Operation] = list(_flag_prelude(new, state.flags))
     for operation in new.operations[state.frontier:]:
@@ -43,8 +49,45 @@ def remainder_app(new: Application, state: PresentState) -> Application:
         if not all(c.met(state.outcomes.get(f"{c.operation}/{c.group}")) for c in known):
             continue  # its branch was decided the other way before the pause
         operations.append(replace(operation, when=tuple(c for c in operation.when if c.operation not in done)))
-    cell = located_cell(new.cell, state.located) if new.cell is not None else None
     return replace(new, operations=tuple(operations), cell=cell)
+
+
+def flags_remainder(new: Application, state: PresentState) -> tuple[Operation, ...]:
+    """sync="flags": each group starts from its own position -- its calls that ended (or were left out) are left out
+    here too, the call it is in runs again from where the arm is (the rest of its motion, its wait for a flag), the
+    rest as they are.  The flags set stay set (set first); a zone held stays held: the call inside it goes first,
+    ahead of every other call of that zone (its operation split, the holder's call in front); an ``<if>`` whose tested
+    function has ended (or was left out) is resolved as the run resolves it."""
+    groups = new.robot.group_names
+
+    def decided(condition: Condition) -> bool:
+        at = state.groups.get(condition.group)
+        return f"{condition.operation}/{condition.group}" in state.outcomes or (at is not None and condition.operation in at.done)
+
+    holders = {call for call in state.zones.values()}
+    front: list[Operation] = []
+    rest: list[Operation] = []
+    for operation in new.operations:
+        known = [c for c in operation.when if decided(c)]
+        if not all(c.met(state.outcomes.get(f"{c.operation}/{c.group}")) for c in known):
+            continue  # its branch was decided the other way before the pause
+        when = tuple(c for c in operation.when if not decided(c))
+        calls = dict(operation.calls)
+        for group, call in operation.calls.items():
+            at = state.groups.get(group)
+            if at is not None and operation.id in at.done:
+                calls[group] = _sits_out(call)
+            elif (operation.id, group) in holders and not call.implicit:
+                front.append(replace(operation, when=when, calls={g: call if g == group else _sits_out(c) for g, c in operation.calls.items()}))
+                calls[group] = _sits_out(call)
+        if any(not c.implicit for c in calls.values()):
+            rest.append(replace(operation, when=when, calls={g: calls[g] for g in groups if g in calls}))
+    return (*_flag_prelude(new, state.flags), *front, *rest)
+
+
+def _sits_out(call: Call) -> Call:
+    """``call`` as a group left out of its operation (the implicit wait), where it is written."""
+    return Call(call.group, WAIT, (), implicit=True, file=call.file, line=call.line, col=call.col)
 
 
 def _flag_prelude(app: Application, flags: Sequence[str]) -> list[Operation]:

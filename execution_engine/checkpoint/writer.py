@@ -72,7 +72,12 @@ class CheckpointWriter:
         to the new application, by its file and digest, and indexes the functions by its operations."""
         self.app = app
         self._index = {op.id: i for i, op in enumerate(app.operations)}
-        self._guard(lambda: self.store.swap(swap.t, swap.frontier, swap.operation, swap.old_digest, swap.new_digest, app_meta(app)))
+
+        def record() -> None:  # sync="flags": where each group stood, as the meta key swap_<n>_groups
+            where = {f"swap_{len(self.store.swaps()) + 1}_groups": swap.where()} if swap.groups else {}
+            self.store.swap(swap.t, swap.frontier, swap.operation, swap.old_digest, swap.new_digest, {**app_meta(app), **where})
+
+        self._guard(record)
 
     def on_event(self, event: EngineEvent) -> None:
         if event.event == "operator" and event.accepted:

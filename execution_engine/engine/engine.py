@@ -175,7 +175,7 @@ class ExecutionEngine(BreakpointControl, FlagsMode):  # BreakpointControl extend
             self._set_state("running")
             if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags_mode.py)
                 await self._run_groups(app)
-                report.operations_done = len(app.operations)
+                report.operations_done = len((self.app or app).operations)  # the edited application's, after a swap
             for index, operation in self.remainder.operations(self, resume.index + 1 if resume is not None else 0) if app.sync != "flags" else ():
                 if resume is not None and index < resume.index:
                     report.operations_done = index + 1  # done before the crash

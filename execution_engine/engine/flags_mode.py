@@ -5,12 +5,12 @@ apart from the operation-by-operation run: each group runs its calls in document
 its own, with no barrier per operation; a group waits only at a ``wait_flag`` (engine/flags.py), a
 synchronised function (its machine meets the partners at the barrier, as in lock-step: same barrier
 key, same partner list) or, before a motion, a zone (engine/zones.py).  The first failure the error
-policy does not recover from ends every group.
+policy does not recover from ends every group.  Each group takes its next call afresh from the run's
+application (engine/remainder_groups.py keeps where it stands), so a paused run's edit goes on from there.
 """
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from core_functions.catalog import Catalog
@@ -18,6 +18,7 @@ from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.branches import OutcomeBoard, branch_taken, ended_with_outcome
 from execution_engine.engine.dispatch import ApplicationAborted
 from execution_engine.engine.flags import ENGINE_FUNCTIONS
+from execution_engine.engine.remainder_groups import group_steps
 from execution_engine.engine.report import GroupError
 from execution_engine.machine.table import ERROR_HANDLING, READY
 from node_transport.wire import SmRequest, SmResult
@@ -26,13 +27,9 @@ if TYPE_CHECKING:
     from node_transport.clock import Clock
     from execution_engine.engine.dispatch import Dispatch
     from execution_engine.engine.group_link import GroupLink
+    from execution_engine.engine.remainder_swap import Remainder
     from execution_engine.engine.report import RunReport
     from execution_engine.engine.zones import ZoneBoard
-
-
-def group_steps(app: Application, group: str, sits_out: Callable[[Call], bool]) -> list[tuple[Operation, Call]]:
-    """The calls a group runs in flags mode, in document order: left-out groups' and bare waits dropped."""
-    return [(op, op.calls[group]) for op in app.operations if group in op.calls and not op.calls[group].implicit and not sits_out(op.calls[group])]
 
 
 def meeting(operation: Operation, call: Call, catalog: Catalog) -> dict[str, Call]:
@@ -60,6 +57,7 @@ class FlagsMode:
         _operation: Operation | None
         _op_index: int
         _stop_reason: str | None
+        remainder: Remainder
 
         def _sits_out(self, call: Call) -> bool: ...
         def note_branch(self, event: str, operation: str, group: str, function: str | None, outcome: str, message: str) -> None: ...
@@ -78,6 +76,9 @@ class FlagsMode:
     async def _run_groups(self, app: Application) -> None:
         """Each group through its own calls at once; the first failure ends them all."""
         groups = [g for g in app.robot.group_names if group_steps(app, g, self._sits_out)]
+        self.remainder.groups.start(app.robot.group_names, self._sits_out)  # each group's position: a paused run's edit
+        for group in set(app.robot.group_names) - set(groups):
+            self.remainder.groups.finish(group)
         tasks = {g: asyncio.ensure_future(self._run_group(g, group_steps(app, g, self._sits_out))) for g in groups}
         try:
             done, _ = await asyncio.wait(tasks.values(), return_when=asyncio.FIRST_EXCEPTION)
@@ -95,18 +96,25 @@ class FlagsMode:
 
     async def _run_group(self, group: str, steps: list[tuple[Operation, Call]]) -> None:
         """One group's calls in order, each when the one before succeeded (retried as the policy says)."""
-        report = self.report
+        report, walk = self.report, self.remainder.groups
         assert report is not None
-        for operation, call in steps:
+        while self.app is not None and (step := walk.step(self.app, group)) is not None:  # ``steps`` afresh: an edit while paused
             if not await self._gate():
                 raise ApplicationAborted(self._stop_reason or "stopped")
-            if operation.when:  # under an <if>: once the outcome it tests is decided, whichever group decides it
-                await self.outcome_board.wait(operation, report)
-                if not branch_taken(self, operation, report):
-                    self.zones.ended(operation.id, group)
-                    continue
+            if (step := walk.step(self.app, group)) is None:
+                break
+            operation, call = step
+            if not await self._branch_runs(group, operation):
+                continue
             if not await self._group_gate(group, operation, tuple(meeting(operation, call, self.catalog))):  # a breakpoint there
                 raise ApplicationAborted(self._stop_reason or "stopped")
+            if (fresh := walk.step(self.app, group)) is None:
+                break
+            if fresh != step:  # swapped while held there: what is there now (its breakpoint was this hold)
+                operation, call = fresh
+                if not await self._branch_runs(group, operation):
+                    continue
+            walk.enter(group, operation)
             self._operation = operation
             index = self.app.operations.index(operation) if self.app is not None else 0
             self._op_index = index
@@ -125,9 +133,25 @@ class FlagsMode:
                     if call.function not in ENGINE_FUNCTIONS:
                         await self._await_ready((group,))
                     self.zones.ended(operation.id, group)
+                    walk.passed(group, operation)
                     break
                 await self._on_group_failure(group, operation, dispatch.request, result)
                 attempt += 1
+        walk.finish(group)
+
+    async def _branch_runs(self, group: str, operation: Operation) -> bool:
+        """Under an <if>: once the outcome it tests is decided, whichever group decides it, whether it runs (left out:
+        passed, holding no zone)."""
+        report = self.report
+        assert report is not None
+        if not operation.when:
+            return True
+        await self.outcome_board.wait(operation, report)
+        if branch_taken(self, operation, report):
+            return True
+        self.zones.ended(operation.id, group)
+        self.remainder.groups.passed(group, operation)
+        return False
 
     async def _on_group_failure(self, group: str, operation: Operation, request: SmRequest, result: SmResult) -> None:
         """The error policy for one group's failed function in flags mode; returns to retry, raises to end."""

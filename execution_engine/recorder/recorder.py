@@ -218,6 +218,7 @@ class Recorder:
             "t": repr(swap.t), "from_operation": str(swap.frontier + 1), "after_operation": swap.operation or "",
             "from_digest": swap.old_digest, "to_digest": swap.new_digest, "application_path": swap.file,
             "application_sha256": file_digest(Path(app.path)), "source": swap.source,
+            **({"groups": swap.where()} if swap.groups else {}),  # sync="flags": where each group stood
         })
 
     async def close(self) -> RecordingStats:
