@@ -4,13 +4,18 @@ simulator, both models calling their arm 'arm', in one cell that names them kuka
 The dry run of the whole cell finds no problem (both robots placed in the cell's world frame, one collision model
 under the cell's joint names); the run, one bridge per robot, ends FINISHED with the hand-over ordered across the
 robots by the flag and the zone, every record naming the cell's groups.  A cell with a KUKA over RSI runs in real
-time (RSI keeps the robot's clock; --speed max is refused for it): these are the two slow tests of the feature.
+time (RSI keeps the robot's clock; --speed max is refused for it): these are the slow tests of the feature.
 """
 from __future__ import annotations
 
 import io
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
+
+from dds_domain import stop_group
 
 from cell_runner.cli import main
 
@@ -46,3 +51,22 @@ def test_the_side_by_side_example_runs_to_finished_and_hands_the_part_over_by_th
     assert flag("kuka_arm", "handover", "left") <= flag("inspector", "handover", "passed")  # one hand at a time above the buffer
     motions = [r["result"] for r in records if r.get("event") == "primitive_end" and r.get("result", {}).get("joint_names")]
     assert motions and all(all(n.startswith(("kuka_", "viper_")) for n in m["joint_names"]) for m in motions)
+
+
+def test_launch_gives_each_process_the_cell_s_names_and_the_example_runs_to_finished_over_dds(tmp_path: Path, dds_env: dict[str, str]) -> None:
+    """launch: each robot's bridge process serves its groups under the cell's names (parameter cell_names), each
+    machine process drives its group by them, the engine checks the whole cell first: FINISHED over DDS."""
+    env = {**os.environ, **dds_env, "XDG_DATA_HOME": str(tmp_path / "data")}
+    process = subprocess.Popen(
+        [sys.executable, "-m", "execution_engine", "launch", str(EXAMPLE), "--transport", "dds"],
+        cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True,
+    )
+    try:
+        out, _ = process.communicate(timeout=240)
+    finally:
+        stop_group(process)
+    assert process.returncode == 0, out
+    assert "[execution_engine] application side_by_side: FINISHED" in out
+    assert "serving checker: " in out and "for inspector" in out, out
+    for node in ("loader_bridge", "checker_bridge", "kuka_arm_machine", "inspector_machine"):
+        assert f"[launch] {node} stopped (exit code 0)" in out, out
