@@ -98,3 +98,16 @@ def stop_group(process: subprocess.Popen[str] | subprocess.Popen[bytes], grace: 
             continue
     with contextlib.suppress(ProcessLookupError):  # the nodes a launch started, if it ended before them
         os.killpg(process.pid, signal.SIGKILL)
+
+
+def run_group(argv: Sequence[str], cwd: Path, env: dict[str, str], timeout: float) -> tuple[int, str]:
+    """Run ``argv`` (a ``launch``: it starts processes of its own) in a process group of its own, its output and
+    errors as one text; whatever is left of the group is ended afterwards (:func:`stop_group`).  Exit code, output."""
+    process = subprocess.Popen(
+        list(argv), cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True,
+    )
+    try:
+        out, _ = process.communicate(timeout=timeout)
+    finally:
+        stop_group(process)
+    return process.returncode, out

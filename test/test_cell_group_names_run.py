@@ -11,11 +11,10 @@ from __future__ import annotations
 import io
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
-from dds_domain import stop_group
+from dds_domain import run_group
 
 from cell_runner.cli import main
 
@@ -57,15 +56,8 @@ def test_launch_gives_each_process_the_cell_s_names_and_the_example_runs_to_fini
     """launch: each robot's bridge process serves its groups under the cell's names (parameter cell_names), each
     machine process drives its group by them, the engine checks the whole cell first: FINISHED over DDS."""
     env = {**os.environ, **dds_env, "XDG_DATA_HOME": str(tmp_path / "data")}
-    process = subprocess.Popen(
-        [sys.executable, "-m", "execution_engine", "launch", str(EXAMPLE), "--transport", "dds"],
-        cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True,
-    )
-    try:
-        out, _ = process.communicate(timeout=240)
-    finally:
-        stop_group(process)
-    assert process.returncode == 0, out
+    code, out = run_group([sys.executable, "-m", "execution_engine", "launch", str(EXAMPLE), "--transport", "dds"], ROOT, env, 240)
+    assert code == 0, out
     assert "[execution_engine] application side_by_side: FINISHED" in out
     assert "serving checker: " in out and "for inspector" in out, out
     for node in ("loader_bridge", "checker_bridge", "kuka_arm_machine", "inspector_machine"):
