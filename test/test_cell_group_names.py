@@ -22,7 +22,7 @@ from core_functions.cell_robots import CellNames, CellRobotModel, named_model
 from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, MoveJoints
 from core_functions.robots import ADEPT_VIPER_S850, KUKA_KR
-from execution_engine.app_model import load_application
+from execution_engine.app_model import load_application, validate_application
 from node_transport.action import GoalStatus
 from node_transport.clock import Clock
 from node_transport.local import LocalTransport
@@ -148,3 +148,32 @@ def test_two_robots_with_one_group_name_serve_their_cell_groups_side_by_side(run
     assert isinstance(moved, MotionResult) and moved.joint_names == viper_kind.joints
     assert np.allclose(moved.positions, got["target"], atol=1e-6)
     assert got["limits"].joint_names == viper_kind.joints
+
+
+def _problems(tmp_path: Path, robots: str, body: str) -> list[str]:
+    (tmp_path / "cell.xml").write_text(f'<?xml version="1.0"?>\n<cell name="named">\n{robots}</cell>\n', encoding="utf-8")
+    app = tmp_path / "app.xml"
+    app.write_text(f'<?xml version="1.0"?>\n<application name="named" robot="cell" cell="cell.xml">\n{body}</application>\n', encoding="utf-8")
+    return [f"{Path(d.file).name}:{d.line}:{d.col}: {d.message}" for d in validate_application(app, full_catalog())]
+
+
+WAIT = '<function name="wait"><params><param value="0.1"/></params></function>'
+
+
+def test_an_application_on_a_cell_s_group_names_is_checked_element_by_element(tmp_path: Path) -> None:
+    """The schema with the cell's groups added says of a cell group what it says of a model's: two functions in one."""
+    robots = '  <robot name="checker" model="viper" xyz="0 0 0" rpy="0 0 0"><group name="arm" as="inspector"/></robot>\n'
+    assert _problems(tmp_path, robots, f'  <operation id="1"><inspector>{WAIT}</inspector></operation>\n') == []
+    assert _problems(tmp_path, robots, f'  <operation id="1"><inspector>{WAIT}{WAIT}</inspector></operation>\n') == [
+        "app.xml:3:102: <function> is not allowed here inside <inspector> (a group runs exactly one <function> per operation; put the next one in a new <operation>)",
+    ]
+
+
+def test_a_robot_s_groups_named_twice_or_onto_one_name_are_refused_at_their_line(tmp_path: Path) -> None:
+    body = f'  <operation id="1"><arms>{WAIT}</arms></operation>\n'
+    twice = ('  <robot name="twins" model="nextage" xyz="0 0 0" rpy="0 0 0">\n    <group name="left_arm" as="arms"/>\n'
+             '    <group name="left_arm" as="hands"/>\n  </robot>\n')
+    assert "cell.xml:5:12: robot 'twins': group 'left_arm' is named twice" in _problems(tmp_path, twice, body)
+    onto_one = ('  <robot name="twins" model="nextage" xyz="0 0 0" rpy="0 0 0">\n    <group name="left_arm" as="arms"/>\n'
+                '    <group name="right_arm" as="arms"/>\n  </robot>\n')
+    assert "cell.xml:5:29: robot 'twins': its groups 'left_arm' and 'right_arm' would both be 'arms' in the cell" in _problems(tmp_path, onto_one, body)

@@ -211,7 +211,7 @@ class Rewriter:
         where = f" inside <{parent}>" if parent else ""
         message = f"<{element}> is not allowed here{where}"
         hint = _PLACEMENT_HINTS.get((parent, element))
-        if hint is None and element == "function" and parent in {"left_arm", "right_arm", "torso_head", "arm"}:
+        if hint is None and element == "function" and self.info.children.get(parent) == ("function",):  # a group (a cell's own too)
             hint = _GROUP_HINT
         allowed = self.info.children.get(parent, ())
         if element not in allowed and allowed:
