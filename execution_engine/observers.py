@@ -32,7 +32,7 @@ from typing import IO, Any, TypeVar
 
 from core_functions.printable import printable
 from execution_engine.app_model.model import Application
-from execution_engine.engine.remainder_swap import Swap, decode_answer
+from execution_engine.engine.remainder_swap import Swap, decode_answer, decode_groups
 from node_transport import codec, typed
 from node_transport.port import Node
 from node_transport.qos import EVENTS
@@ -87,6 +87,8 @@ def engine_record(event: EngineEvent) -> dict[str, Any]:
         old, new, frontier = decode_answer(event.answer) or ("", "", -1)
         record.update({"event": "swap", "from_digest": old, "to_digest": new, "from_operation": frontier + 1,
                        "file": event.command, "source": event.source, "message": event.message})
+        if groups := decode_groups(event.answer):  # sync="flags": where each group stood
+            record["groups"] = groups
     elif event.event == "breakpoint":  # the run paused before an operation (sync="flags": on the held group's lane)
         groups = (event.source or "").split()
         record.update({"event": "breakpoint", "group": groups[0] if len(groups) == 1 else "engine", "kind": event.command,

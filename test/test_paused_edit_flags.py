@@ -20,6 +20,7 @@ from execution_engine.checkpoint.store import CheckpointError, CheckpointStore
 from execution_engine.engine.remainder_groups import GroupAt
 from execution_engine.engine.remainder_swap import PresentState, SwapAnswer, application_digest, decode_groups, encode_answer
 from execution_engine.engine.report import RunReport
+from execution_engine.record_reader import read_record
 from node_transport.clock import Clock
 from test_paused_edit import HOME, LEFT_IN, LEFT_OUT, REACH, RIGHT_OUT, PausedRun, load, op, started
 
@@ -91,6 +92,11 @@ def test_a_safe_edit_is_swapped_with_each_group_where_it_stands_and_the_run_fini
     (swap,) = run.records("swap")
     assert {k: swap[k] for k in digests} == digests and swap["file"] == str(new.path)
     assert f"({WHERE})" in swap["message"]
+    assert swap["groups"] == {"left_arm": {"where": "before", "operation": 3}, "right_arm": {"where": "in", "operation": 2},
+                              "torso_head": {"where": "finished", "operation": 7}}
+    recorded = []
+    read_record(tmp_path / "run.mcap", lambda r: recorded.append(r) if r.get("event") == "swap" else None)
+    assert [r["groups"] for r in recorded] == [swap["groups"]]  # the recording's event reads back the same
     assert answer.swap is not None and answer.swap.groups == (("left_arm", "before", 2), ("right_arm", "in", 1), ("torso_head", "finished", 6))
     assert decode_groups(encode_answer(answer.swap)) == {
         "left_arm": {"where": "before", "operation": 3}, "right_arm": {"where": "in", "operation": 2}, "torso_head": {"where": "finished", "operation": 7}}
@@ -198,3 +204,25 @@ def test_the_dry_run_of_a_flags_remainder_starts_each_group_where_it_stands_with
                      ("both_in", {"right_arm": "move_to"}), ("left_done", {"left_arm": "set_flag"}), ("right_in", {"right_arm": "move_to"}),
                      ("home", {"left_arm": "move_to_joint_pose", "right_arm": "move_to_joint_pose"})]
     assert rest.operations[1].calls["left_arm"].line == app.operation("both_in").calls["left_arm"].line  # findings land on the file's lines
+
+
+def test_a_step_after_the_swap_runs_the_held_groups_next_edited_operation_and_holds_before_the_one_after(run_sim: Any, tmp_path: Path) -> None:
+    old, new = load(tmp_path, "old.xml", OLD), load(tmp_path, "safe.xml", SAFE)
+
+    async def main_(clock: Clock) -> tuple[list[str], RunReport, PausedRun]:
+        run = await held(clock, old, tmp_path)
+        engine = run.deployment.engine
+        assert (await run.edit(new)).ok
+        assert (await engine.operator_command("step", "test"))[0]
+        for _ in range(300):  # bounded: 30 s of simulated time
+            await clock.sleep(0.1)
+            if engine.state == "paused" and "left_arm" in engine.breakpoints.held:
+                break
+        holds = [f"{g} {engine.app.operations[h.index].id} {h.kind}" for g, h in engine.breakpoints.held.items()]
+        return holds, await run.finish(), run
+
+    holds, report, run = run_sim(main_)
+    assert holds == ["left_arm left_done step"]
+    assert report.ok and report.operations_done == 7
+    ended = [(r["operation"], r["group"]) for r in run.records("function_end") if r["outcome"] == "succeeded"]
+    assert ended.index(("wider", "left_arm")) < ended.index(("right_more", "right_arm"))  # the right arm went on once the flag was set
