@@ -37,8 +37,16 @@ from import_graph import (
 )
 from package_graph import arrows, block_in, is_entry, mermaid, package_of
 
-WALK = walk()
 MAX_LINES = 600
+
+
+@pytest.fixture(scope="module")
+def project() -> Walk:
+    """The walk of every file of the project (seconds of parsing): made when this file's tests run, once -- the suite's
+    conftest puts the tests sharing it on one worker -- rather than when it is imported, which every pytest-xdist
+    worker and every ``--collect-only`` does."""
+    return walk()
+
 
 #: Each package and the packages it may import (its own always).
 MAY_IMPORT: dict[str, set[str]] = {
@@ -66,8 +74,8 @@ def layer_violations(found: Walk) -> list[str]:
     return wrong
 
 
-def test_every_package_imports_only_the_layers_below_it() -> None:
-    wrong = layer_violations(WALK)
+def test_every_package_imports_only_the_layers_below_it(project: Walk) -> None:
+    wrong = layer_violations(project)
     assert wrong == [], "imports pointing up or across:\n" + "\n".join(wrong)
 
 
@@ -97,50 +105,50 @@ def test_the_rules_name_every_package_of_the_project() -> None:
     assert packages == set(MAY_IMPORT)
 
 
-def test_nothing_imports_a_program_entry() -> None:
-    wrong = [describe(i) for i in WALK.imports if i.target is not None and is_entry(i.target)]
+def test_nothing_imports_a_program_entry(project: Walk) -> None:
+    wrong = [describe(i) for i in project.imports if i.target is not None and is_entry(i.target)]
     assert wrong == []
 
 
-def test_the_program_entry_composes_the_command_line_with_the_station() -> None:
+def test_the_program_entry_composes_the_command_line_with_the_station(project: Walk) -> None:
     """``python -m execution_engine`` is the whole program: every subcommand, the studio's too."""
-    entry = {i.module for i in WALK.imports if i.file == "execution_engine/__main__.py" and i.target is not None}
+    entry = {i.module for i in project.imports if i.file == "execution_engine/__main__.py" and i.target is not None}
     assert entry == {"operator_station.program"}
-    assert {"cell_runner.cli", "operator_station.cli"} <= {i.module for i in WALK.imports if i.file == "operator_station/program.py"}
+    assert {"cell_runner.cli", "operator_station.cli"} <= {i.module for i in project.imports if i.file == "operator_station/program.py"}
 
 
 # -------------------------------------------------------------------------- 2. between files
-def test_no_import_cycle_between_files() -> None:
-    found = cycles(graph(WALK.imports))
+def test_no_import_cycle_between_files(project: Walk) -> None:
+    found = cycles(graph(project.imports))
     lines = []
     for component in found:
         members = set(component)
         lines.append(" <-> ".join(component))
-        lines += [f"    {describe(i)}" for i in WALK.imports if i.file in members and i.target in members and i.target != i.file]
+        lines += [f"    {describe(i)}" for i in project.imports if i.file in members and i.target in members and i.target != i.file]
     assert found == [], "import cycles between files:\n" + "\n".join(lines)
 
 
-def test_no_private_name_of_another_module_is_used() -> None:
-    taken = [describe(i) for i in private_imports(WALK)]
-    reached = [f"{u.file}:{u.line}: {u.module}.{u.name}" for u in WALK.private_uses]
+def test_no_private_name_of_another_module_is_used(project: Walk) -> None:
+    taken = [describe(i) for i in private_imports(project)]
+    reached = [f"{u.file}:{u.line}: {u.module}.{u.name}" for u in project.private_uses]
     assert taken + reached == [], "underscore names of another module:\n" + "\n".join(taken + reached)
 
 
-def test_every_function_level_import_says_why_it_is_not_at_the_top() -> None:
-    lines = [describe(i) for i in unexplained(WALK.imports)]
+def test_every_function_level_import_says_why_it_is_not_at_the_top(project: Walk) -> None:
+    lines = [describe(i) for i in unexplained(project.imports)]
     assert lines == [], "function-level imports without a comment saying the library is optional or slow:\n" + "\n".join(lines)
 
 
-def test_no_function_level_import_of_the_projects_own_modules() -> None:
-    lines = [describe(i) for i in project_modules_in_functions(WALK.imports)]
+def test_no_function_level_import_of_the_projects_own_modules(project: Walk) -> None:
+    lines = [describe(i) for i in project_modules_in_functions(project.imports)]
     assert lines == [], "the project's own modules imported inside functions (import them at the top):\n" + "\n".join(lines)
 
 
 @pytest.mark.parametrize(("module", "library"), sorted(HEAVY_MODULES.items()))
-def test_a_project_module_imported_in_a_function_really_loads_its_heavy_library(module: str, library: str) -> None:
+def test_a_project_module_imported_in_a_function_really_loads_its_heavy_library(module: str, library: str, project: Walk) -> None:
     """The exemption is true (importing the module loads the library) and used (some function imports it)."""
-    assert library in loads_at_import(WALK, module)
-    assert any(i.module == module for i in function_level(WALK.imports))
+    assert library in loads_at_import(project, module)
+    assert any(i.module == module for i in function_level(project.imports))
 
 
 # ------------------------------------------------------------------------------ 3. file length
@@ -165,9 +173,9 @@ def test_no_python_file_is_past_600_lines() -> None:
 
 
 # --------------------------------------------------------------------- ROS 2 and typed settings
-def test_only_the_rclpy_transport_imports_rclpy() -> None:
+def test_only_the_rclpy_transport_imports_rclpy(project: Walk) -> None:
     wrong = [
-        describe(i) for i in WALK.imports
+        describe(i) for i in project.imports
         if package_of(i.file) and i.module.split(".")[0] in ("rclpy", "rosidl_runtime_py", "launch", "launch_ros") and i.file not in RCLPY_TRANSPORT
     ]
     assert wrong == []
@@ -189,18 +197,18 @@ def _namespace_uses(file: str) -> list[str]:
     return found
 
 
-def test_nothing_below_the_command_line_sees_argparse() -> None:
+def test_nothing_below_the_command_line_sees_argparse(project: Walk) -> None:
     """Below ``cell_runner`` settings travel as dataclasses.  argparse appears there only in a program of its own
     (the controller simulators, the interface schema writer: a ``main`` parsing its own command line, whose
     Namespace never leaves it) and in ``option_ranges.argument_type``, a ``type=`` converter that sees one string."""
-    importers = sorted({i.file for i in WALK.imports if i.module == "argparse" and package_of(i.file) in BELOW_THE_COMMAND_LINE})
+    importers = sorted({i.file for i in project.imports if i.module == "argparse" and package_of(i.file) in BELOW_THE_COMMAND_LINE})
     programs = [f for f in importers if "__main__" in (ROOT / f).read_text(encoding="utf-8")]
     assert sorted(set(importers) - set(programs)) == ["core_functions/option_ranges.py"]
     uses = [use for f in importers for use in _namespace_uses(f)]
     assert uses == []
     signatures = [
         f"{file}:{node.lineno}: {node.name}({ast.unparse(arg)})"
-        for file in WALK.files if package_of(file) in BELOW_THE_COMMAND_LINE
+        for file in project.files if package_of(file) in BELOW_THE_COMMAND_LINE
         for node in ast.walk(ast.parse((ROOT / file).read_text(encoding="utf-8")))
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
         for arg in (*node.args.args, *node.args.kwonlyargs) if arg.annotation is not None and "Namespace" in ast.unparse(arg.annotation)
@@ -209,17 +217,17 @@ def test_nothing_below_the_command_line_sees_argparse() -> None:
 
 
 # --------------------------------------------------------------------------------- the picture
-def test_the_architecture_opens_with_the_package_graph_drawn_from_the_imports_now() -> None:
+def test_the_architecture_opens_with_the_package_graph_drawn_from_the_imports_now(project: Walk) -> None:
     text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
     drawn = block_in(text)
     assert drawn is not None, "docs/architecture.md has no package graph: .venv/bin/python test/package_graph.py --write docs/architecture.md"
     assert text.index(drawn) < text.index("\n## "), "the package graph comes before the first section"
-    assert drawn == mermaid(WALK), "the package graph is stale: .venv/bin/python test/package_graph.py --write docs/architecture.md"
+    assert drawn == mermaid(project), "the package graph is stale: .venv/bin/python test/package_graph.py --write docs/architecture.md"
 
 
-def test_the_picture_counts_each_file_to_module_import_once_and_leaves_entries_out() -> None:
-    counted = arrows(WALK)
+def test_the_picture_counts_each_file_to_module_import_once_and_leaves_entries_out(project: Walk) -> None:
+    counted = arrows(project)
     assert set(counted) == {(a, b) for a, allowed in MAY_IMPORT.items() for b in allowed if counted.get((a, b))}
     assert ("execution_engine", "operator_station") not in counted  # only __main__.py names the station
-    by_hand = {(i.file, i.target) for i in WALK.imports if i.target and package_of(i.file) == "app_functions" and package_of(i.target) == "core_functions"}
+    by_hand = {(i.file, i.target) for i in project.imports if i.target and package_of(i.file) == "app_functions" and package_of(i.target) == "core_functions"}
     assert counted[("app_functions", "core_functions")] == len(by_hand) > 0

@@ -224,31 +224,35 @@ def entry_points() -> tuple[list[str], list[Path]]:
     return sorted({target.partition(":")[0] for target in scripts.values()}), sorted((ROOT / "launch").glob("*.py"))
 
 
-WALK = walk(ROOT, *entry_points())
+@pytest.fixture(scope="module")
+def nodes_walk() -> Walk:
+    """The walk from every node's entry (seconds of parsing): made once when this file's tests run (conftest keeps
+    them on one worker), not when the file is imported, which every pytest-xdist worker does."""
+    return walk(ROOT, *entry_points())
 
 
-def test_every_third_party_import_of_a_node_is_declared_in_package_xml() -> None:
+def test_every_third_party_import_of_a_node_is_declared_in_package_xml(nodes_walk: Walk) -> None:
     keys = declared(ROOT / "package.xml")
-    needed = {name: where for name, where in WALK.required.items() if name not in NOT_ON_ROS}
-    named = set(needed) | {name for group in WALK.alternatives for name in group}
+    needed = {name: where for name, where in nodes_walk.required.items() if name not in NOT_ON_ROS}
+    named = set(needed) | {name for group in nodes_walk.alternatives for name in group}
     unmapped = sorted(named - set(ROSDEP_KEYS))
     assert not unmapped, f"imports with no rosdep key in ROSDEP_KEYS (add the key from ros/rosdistro rosdep/*.yaml): {unmapped}"
     missing = [f"{ROSDEP_KEYS[name]} (for import {name} in {where})" for name, where in sorted(needed.items()) if ROSDEP_KEYS[name] not in keys]
     missing += [
         f"one of {sorted(ROSDEP_KEYS[n] for n in group)} (for import {' or '.join(sorted(group))} in {where})"
-        for group, where in WALK.alternatives.items()
+        for group, where in nodes_walk.alternatives.items()
         if not any(ROSDEP_KEYS[n] in keys for n in group)
     ]
     assert not missing, "package.xml lacks <exec_depend> for: " + "; ".join(missing)
 
 
-def test_what_ros_nodes_never_import_is_only_imported_inside_functions() -> None:
+def test_what_ros_nodes_never_import_is_only_imported_inside_functions(nodes_walk: Walk) -> None:
     """NOT_ON_ROS may not hide a module a node imports when it starts."""
-    assert set(NOT_ON_ROS) <= set(WALK.required) | set(WALK.optional)  # else the exemption is stale
-    assert not (set(NOT_ON_ROS) & WALK.at_load), {n: WALK.required[n] for n in set(NOT_ON_ROS) & WALK.at_load}
+    assert set(NOT_ON_ROS) <= set(nodes_walk.required) | set(nodes_walk.optional)  # else the exemption is stale
+    assert not (set(NOT_ON_ROS) & nodes_walk.at_load), {n: nodes_walk.required[n] for n in set(NOT_ON_ROS) & nodes_walk.at_load}
 
 
-def test_the_walk_reaches_every_node_and_what_they_load_by_name() -> None:
+def test_the_walk_reaches_every_node_and_what_they_load_by_name(nodes_walk: Walk) -> None:
     """The check above is only as good as the walk: every executable's module, the back ends that
     robot_bridges.registry imports by name and the recorder's encoder process are reached, and the
     bridges' vision code with them."""
@@ -259,10 +263,10 @@ def test_the_walk_reaches_every_node_and_what_they_load_by_name() -> None:
         "robot_bridges.nextage_sim.backend",  # importlib.import_module from the registry's table
         "core_functions.vision.camera",
     }
-    assert expected <= set(WALK.modules), expected - set(WALK.modules)
-    assert {"launch", "launch_ros", "cv2", "numpy", "lxml", "mcap"} <= WALK.at_load
-    assert "rclpy" in WALK.optional  # imported in a try that explains a missing ROS environment
-    assert frozenset({"coal", "hppfcl"}) in WALK.alternatives
+    assert expected <= set(nodes_walk.modules), expected - set(nodes_walk.modules)
+    assert {"launch", "launch_ros", "cv2", "numpy", "lxml", "mcap"} <= nodes_walk.at_load
+    assert "rclpy" in nodes_walk.optional  # imported in a try that explains a missing ROS environment
+    assert frozenset({"coal", "hppfcl"}) in nodes_walk.alternatives
 
 
 def test_launch_files_start_only_installed_executables() -> None:
