@@ -18,7 +18,10 @@ requester (:class:`operator_station.access.Who`: name, role, session) and the st
 (``save``, ``run start``, ``pause``, ``speed``, ``breakpoint set``, ``teach``, ``jog start``,
 ``safety stop raised``); ``before``/``after`` are :func:`digest` values of what the action
 replaced (an application, a cell, a remainder); further keyword arguments are details (JSON
-values).  A route whose action is refused records ``ok=False`` with the refusal as ``answer``.
+values).  A route whose action is refused records ``ok=False`` with the refusal as ``answer``.  What reaches
+the cell without a route -- the terminal, a ROS service or parameter, another station, a light curtain -- is
+recorded from the run's records by :mod:`operator_station.cell_audit`, under its source; a jog's starts and
+stops from the jog's own loop (:mod:`operator_station.jog_station`).
 
 Each entry is appended to the audit file (``studio --audit FILE``; JSON lines, opened for
 appending only, mode 600 when created) and kept in memory for the page's Audit panel

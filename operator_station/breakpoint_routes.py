@@ -19,6 +19,7 @@ from starlette.routing import BaseRoute, Route
 
 from execution_engine.engine.breakpoint_set import ACTIONS
 from operator_station.access import OPERATOR
+from operator_station.attach import AttachedSession
 from operator_station.audit import record
 from operator_station.roles import requires
 
@@ -57,6 +58,8 @@ async def _command(station: Any, request: Request, route: str) -> Response:
     session = station.session
     if session is None:
         return _error("this station replays a trace; there is no run to command", 409)
+    if isinstance(session, AttachedSession):  # on a ROS graph the engine records the call under the service's name: audited here
+        station.cell_audit.expect(route)
     ok, answer, breakpoints = await session.breakpoint(action, operation)
     record(request, "run to" if route == "run_to" else f"breakpoint {action}", ok=ok, answer=answer, operation=operation)
     return JSONResponse({"ok": ok, "answer": answer, "breakpoints": breakpoints}, status_code=200 if ok else 409)

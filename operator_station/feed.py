@@ -12,6 +12,7 @@ import asyncio
 import threading
 from collections import deque
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Any
 
 #: Joint samples kept for the plots (a ring): 20 minutes at the 0.1 s sampling.
@@ -51,6 +52,9 @@ class Feed:
         self.snapshot = Snapshot(run=0, mode="idle")
         self._waiters: set[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = set()
         self._last_joint_t = -1e300
+        #: Told of every record as it is appended, on the appending thread (the audit of the cell's operators:
+        #: operator_station/cell_audit.py); a tap must not raise.
+        self.taps: list[Callable[[dict[str, Any]], None]] = []
 
     # ---------------------------------------------------------------------------- writing
     def begin(self, mode: str, app: str, groups: list[str], **fields: Any) -> int:
@@ -68,6 +72,8 @@ class Feed:
     def append(self, record: dict[str, Any]) -> None:
         with self._lock:
             self.records.append(record)
+        for tap in self.taps:
+            tap(record)
         self.wake()
 
     def update(self, **fields: Any) -> None:

@@ -4,9 +4,9 @@ The start is audited by the route that started it; the outcome comes minutes lat
 own thread.  :func:`watch_run` waits for that thread on the server's loop -- in bounded joins, so
 a station that is ending is never held up by it -- and records ``run end`` with the engine's
 outcome (``finished``, ``stopped``, ``failed``, ...), the operations done, and why a run that
-never started was refused (the dry run's findings), as the page showed them.  Meanwhile every
-safety stop the engine obeyed is recorded as a ``safety event`` of the cell -- whoever raised it:
-the page, a light curtain on ``/cell/safety_stop``, another node -- from the run's own records.
+never started was refused (the dry run's findings), as the page showed them.  What happens during
+the run without the page -- every safety stop the engine obeyed, commands from the terminal or the
+ROS graph -- is audited from the run's records as they come (:mod:`operator_station.cell_audit`).
 """
 from __future__ import annotations
 
@@ -21,10 +21,6 @@ log = logging.getLogger(__name__)
 
 #: Wall seconds of one join of the run's thread: how soon a watch notices the station ending.
 JOIN_STEP = 0.25
-#: Who the audit names for what the cell itself did (a safety stop raised outside the station).
-CELL = Who("engine", "", "the cell", "cell", "")
-#: Joint samples are not read by a watch: a start past any count the feed will reach.
-NO_JOINTS = 1 << 62
 #: The watches going on, kept so the loop does not drop them half-way (asyncio keeps weak references).
 WATCHES: set[asyncio.Task[None]] = set()
 
@@ -39,12 +35,9 @@ def watch_run(station: Any, connection: Any, started: dict[str, Any]) -> None:
 
 async def _watch(station: Any, audit: AuditLog, who: Who | None, started: dict[str, Any]) -> None:
     session = station.session
-    seen = 0
     try:
         while session.running and not station.stopped:
             await asyncio.to_thread(session.join, JOIN_STEP)
-            seen = _safety_events(station, audit, seen)
-        _safety_events(station, audit, seen)
         report = getattr(session, "report", None)
         if session.running:  # the station ends with the run going: its shutdown stops it (operator_station.serving)
             audit.append(who, "run end", ok=False, answer="the station ended during the run", details={"started": started["seq"]})
@@ -57,13 +50,3 @@ async def _watch(station: Any, audit: AuditLog, who: Who | None, started: dict[s
     except Exception:  # noqa: BLE001 - a watch must not die silently; the run itself is unaffected
         log.exception("studio: the audit of the run's end failed")
 
-
-def _safety_events(station: Any, audit: AuditLog, seen: int) -> int:
-    """Record the safety stops among the run's records from ``seen`` on; the count of records read."""
-    _, records, _, _ = station.feed.read(seen, NO_JOINTS)
-    for record in records:
-        source = str(record.get("source", ""))
-        if record.get("event") == "operator" and source.startswith("safety stop"):
-            audit.append(CELL, "safety event", ok=bool(record.get("accepted", True)), answer=f"{record.get('command', '')} by {source}",
-                         details={"t": record.get("t")})
-    return seen + len(records)

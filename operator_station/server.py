@@ -57,13 +57,14 @@ from operator_station.attach import AttachedSession
 from operator_station.blocks import BlockDocument, calls_inside
 from operator_station.roles import requires, secure
 from operator_station.run_audit import watch_run
+from operator_station.cell_audit import CellAudit
 from operator_station.scene3d_routes import routes as scene3d_routes
 from operator_station.jog_routes import routes as jog_routes
 from operator_station.speed_routes import routes as speed_routes
 from operator_station.breakpoint_routes import routes as breakpoint_routes
 from operator_station.jog_station import JogStation
 from operator_station.edit_routes import routes as edit_routes
-from operator_station.session import RunSession
+from operator_station.session import SOURCE, RunSession
 from operator_station.timeline_view import TimelineView
 
 log = logging.getLogger(__name__)
@@ -107,6 +108,9 @@ class Station:
         self.audit_log = audit_log or AuditLog(wall=lambda: self.wall())  # operator_station/audit.py: every action, --audit FILE
         self._opened: tuple[tuple[float, int], bytes] | None = None  # the start file's answer, by (mtime, size)
         self.jog = JogStation()  # jogging and teaching (operator_station/jog_routes.py): its own back end, thread and clock
+        self.cell_audit = CellAudit(lambda: self.audit_log, SOURCE, lambda: self.wall(), ends=isinstance(session, AttachedSession))  # not from the page
+        if session is not None:
+            self.cell_audit.attach(feed)
 
     def stop(self) -> None:
         """End every page's feed (from any thread): the station is going away."""
@@ -253,6 +257,7 @@ def create_app(station: Station) -> Starlette:
             record(request, "run start", ok=False, answer=edited, path=_shown(station, path))
             return FastJSON({"ok": False, "error": edited, "messages": []}, status_code=403)
         if isinstance(station.session, AttachedSession):  # the cell runs elsewhere: its engine's start service
+            station.cell_audit.expect("start")  # the engine records the call under the service's name: this one is audited here
             ok, answer = await station.session.command("start")
             record(request, "run start", ok=ok, answer=answer, path=_shown(station, path), application=await asyncio.to_thread(file_digest, path))
             return FastJSON({"ok": ok, "answer": answer, "messages": []}, status_code=200 if ok else 409)
@@ -275,6 +280,8 @@ def create_app(station: Station) -> Starlette:
             return _error(f"unknown command {command!r} (commands: {', '.join(ENGINE_SERVICES)})", 404)
         if station.session is None:
             return _error("this station replays a trace; there is no run to command", 409)
+        if isinstance(station.session, AttachedSession):  # the engine records the call under the service's name: audited here
+            station.cell_audit.expect(command)
         ok, answer = await station.session.command(command)
         record(request, command if command != "start" else "run start", ok=ok, answer=answer)
         return FastJSON({"ok": ok, "answer": answer})
@@ -288,7 +295,10 @@ def create_app(station: Station) -> Starlette:
         if active is not True:
             return _error("safety: give {\"active\": true} to raise the safety stop (clear it with /api/safety/clear)")
         jogged = await station.jog.safety_stop(True)  # a jog stops at once, and jogging is refused until the clear
+        unsaid = station.cell_audit.publishing(True)  # audited here, with the user, not again when heard on the topic
         ok, answer = station.session.safety_stop(True)  # type: ignore[union-attr] - _run_field checked it
+        if not ok:
+            unsaid()
         ok, answer = (ok, answer) if ok else (True, f"safety stop raised with no run going: {jogged}")
         station.note("safety stop raised" if ok else "safety stop raise refused", request.scope.get(WHO), answer)
         return FastJSON({"ok": ok, "answer": answer})
@@ -301,7 +311,10 @@ def create_app(station: Station) -> Starlette:
         if confirm is not True:
             return _error("safety clear: confirm it with {\"confirm\": true} once the cell is safe; the robot moves again on Resume")
         jogged = await station.jog.safety_stop(False)
+        unsaid = station.cell_audit.publishing(False)
         ok, answer = station.session.safety_stop(False)  # type: ignore[union-attr]
+        if not ok:
+            unsaid()
         ok, answer = (ok, answer) if ok else (True, f"safety stop cleared with no run going: {jogged}")
         entry = station.note("safety stop cleared" if ok else "safety stop clear refused", request.scope.get(WHO), answer)
         return FastJSON({"ok": ok, "answer": answer, "who": entry["who"], "when": entry["when"]})

@@ -41,6 +41,7 @@ from node_transport.port import Node
 from node_transport.qos import LATCHED, SENSOR
 from node_transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
 from operator_station.builder import planned_durations
+from operator_station.cell_audit import watch_safety
 from operator_station.eta import EtaFeed
 from operator_station.feed import Feed
 from operator_station.paused_edit import EditTarget
@@ -306,6 +307,7 @@ def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter
     first, as run does, then the page's feed), the engine's status, each machine's structure, joint positions."""
     observer = RunObserver(node, robot.group_names)
     observe_scene(node, robot, feed)  # the 3D view: goals, located frames, the cell
+    watch_safety(node, feed)  # the safety stop's raises and clears by anyone, for the audit (operator_station/cell_audit.py)
     for writer in writers:
         observer.sinks.append(writer.on_status)
         observer.engine_sinks.append(writer.on_engine)

@@ -138,7 +138,7 @@ def test_an_open_refused_while_a_run_is_going_or_with_a_broken_application_is_au
     ("jog stopped: the page's connection closed", "connection dropped"),
     ("jog stopped: the safety stop was raised", "safety stop"),
     ("jog stopped before a collision: left_arm link 3 and box would touch, within the jog's 2 mm clearance", "refused by the collision check"),
-    ("jog left_arm LARM_JOINT0+ stopped: LARM_JOINT0 at its upper limit 1.53 rad", "refused by a limit"),
+    ("jog left_arm LARM_JOINT0+ stopped: jog: LARM_JOINT0 is at its upper limit (1.5300 rad, 87.66 deg): it goes no further that way", "refused by a limit"),
     ("another jog button", "another button pressed"),
     ("a run starts", "released for a run"),
     ("jog left_arm x+ stopped: the back end refused the motion", "stopped by a check"),
