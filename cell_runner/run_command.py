@@ -70,6 +70,7 @@ async def _run(
         observer.sinks.append(writer.on_status)
         observer.engine_sinks.append(writer.on_engine)
         observer.event_sinks.append(writer.on_event)
+        observer.plan_sinks.append(writer.on_plan)  # the plan the start check proved (none with --no-check)
     if not settings.quiet:
         printer = LivePrinter(out, (*app.robot.group_names, "engine"))
         observer.sinks.append(printer.on_status)

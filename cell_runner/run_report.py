@@ -19,6 +19,7 @@ from cell_runner.settings import ReportSettings
 from core_functions.printable import printable
 from execution_engine.record_limits import TIME_BOUND
 from execution_engine.record_reader import NotARecording, OverLimit, read_record
+from execution_engine.run_plan import PlanReader, RunPlan
 from execution_engine.timeline import Lane, Timeline, TimelineBuilder
 
 EXIT_OK, EXIT_UNREADABLE, EXIT_USAGE, EXIT_OUTPUT = 0, 1, 2, 4  # as run's: a refused option 2, an output not written 4
@@ -31,12 +32,17 @@ class RunSummary:
     timeline: Timeline
     cut: bool
     extra: list[str] = field(default_factory=list)  # errors and operator actions, for a recording
+    plan: RunPlan | None = None  # the dry run's plan the run was checked against, when the record holds it
 
     def lines(self) -> list[str]:
         t = self.timeline
         out = list(self.header)
         done = sum(1 for o in t.operations if o.t_end is not None)
         out.append(f"  operations: {len(t.operations)} started, {done} complete; run time {t.t_end - t.t_start:.3f} s")
+        if self.plan is not None:  # the cycle against the prediction, as the station's summary says it
+            took = t.t_end - t.t_start
+            where = "the simulator's start" if self.plan.basis == "start" else "the measured joints"
+            out.append(f"  predicted: cycle {self.plan.cycle_time:.3f} s by the dry run from {where}; the run {took:.3f} s ({took - self.plan.cycle_time:+.3f} s)")
         made = [o for o in t.operations if o.iteration]
         if made:  # operations a loop or a call made: where the run got to, by iteration
             last = max(t.operations, key=lambda o: o.t_start)
@@ -97,11 +103,18 @@ def summarize(path: str | Path) -> RunSummary:
     when the file cannot be read, NotARecording or OverLimit (one line naming the file) when it is
     no run's record or asks more than one can."""
     builder = TimelineBuilder()
-    read = read_record(path, builder.add)
+    planned = PlanReader(printable(str(path)))
+
+    def take(record: dict[str, Any]) -> None:
+        planned.take(record)
+        builder.add(record)
+
+    read = read_record(path, take)
+    plan = planned.finish()
     recording = read.recording
     if recording is None:
         assert read.trace is not None
-        return RunSummary(str(path), read.trace.lines(), builder.snapshot(), read.trace.cut)
+        return RunSummary(str(path), read.trace.lines() + [f"  {note}" for note in planned.notes], builder.snapshot(), read.trace.cut, plan=plan)
     header = [f"recording {path}: {recording.messages} message(s)"]
     meta = recording.metadata.get("dual_arm_executive", {})
     if meta:
@@ -120,7 +133,8 @@ def summarize(path: str | Path) -> RunSummary:
             header.append(f"  reading stopped at damaged data: {recording.problem}")
     timeline = builder.snapshot()
     extra = [f"  {m.kind}: {m.t:.3f} s {m.group}: {m.text}" for m in timeline.marks if m.kind in ("error", "operator", "breakpoint")]
-    return RunSummary(str(path), header, timeline, recording.cut, extra)
+    header += [f"  {note}" for note in planned.notes]
+    return RunSummary(str(path), header, timeline, recording.cut, extra, plan)
 
 
 def cmd_report(settings: ReportSettings, out: IO[str], err: IO[str]) -> int:

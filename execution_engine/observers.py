@@ -19,7 +19,9 @@ the operation a breakpoint or run-to command names) on every operator command, `
 ``sync="flags"``) when the run pauses before an operation, and ``error`` (the message of a failed run or an alarm).  The last line
 of a complete trace is ``run_end`` (``outcome``, ``exit_code``, ``operations_done``,
 ``operations_total``, ``records``); see :class:`TraceWriter` for what survives a crash.  A record of an
-operation a loop or a call made carries ``iteration`` (``for_each hole=drill_3``).
+operation a loop or a call made carries ``iteration`` (``for_each hole=drill_3``).  A run checked by its dry
+run has ``plan`` records near its start (the plan it was checked against: ``app``, ``basis``, ``cycle_time``,
+``operations`` as [id, s], ``functions`` as [group, id, s], ``part`` k of ``parts``; :mod:`execution_engine.run_plan`).
 """
 from __future__ import annotations
 
@@ -33,16 +35,18 @@ from typing import IO, Any, TypeVar
 from core_functions.printable import printable
 from execution_engine.app_model.model import Application
 from execution_engine.engine.remainder_swap import Swap, decode_answer, decode_groups
+from execution_engine.run_plan import PLAN_TOPIC, PlanError, RunPlan, plan_from_fields, plan_records
 from node_transport import codec, typed
 from node_transport.port import Node
-from node_transport.qos import EVENTS
+from node_transport.qos import EVENTS, LATCHED
+from node_transport.typed import RunPlanMsg
 from node_transport.wire import ENGINE_EVENTS, ENGINE_STATUS, EngineEvent, EngineStatus, SmStatus, sm_topic
 
 M = TypeVar("M")
 
 TRACE_EVENTS = (
     "transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag", "run_end",
-    "outcome", "branch", "swap", "breakpoint",
+    "outcome", "branch", "swap", "breakpoint", "plan",
 )
 
 
@@ -113,11 +117,23 @@ class RunObserver:
         self.sinks: list[Callable[[SmStatus], None]] = []
         self.engine_sinks: list[Callable[[EngineStatus], None]] = []
         self.event_sinks: list[Callable[[EngineEvent], None]] = []
+        self.plan_sinks: list[Callable[[RunPlan, float], None]] = []  # the plan the run was checked against, and when
         self.rejected: list[str] = []
         for group in groups:
             self._subscribe(SmStatus, sm_topic(group, "status"), self.sinks)
         self._subscribe(EngineStatus, ENGINE_STATUS, self.engine_sinks)
         self._subscribe(EngineEvent, ENGINE_EVENTS, self.event_sinks)
+        self.node.create_subscription(RunPlanMsg, PLAN_TOPIC, self._plan, LATCHED)
+
+    def _plan(self, msg: Any) -> None:
+        """The run's plan (latched: also when it was published before this observer was made); garbage rejected."""
+        try:
+            plan, t = plan_from_fields(msg), typed.run_time(self.node.clock, msg.header.stamp)
+        except (PlanError, AttributeError, TypeError, ValueError) as error:
+            self.rejected.append(f"{PLAN_TOPIC}: {error}")
+            return
+        for sink in self.plan_sinks:
+            sink(plan, t)
 
     def _subscribe(self, cls: type[M], topic: str, sinks: list[Callable[[M], None]]) -> None:
         """Decode each message of ``topic`` and hand it to every sink; garbage is kept in ``rejected``."""
@@ -181,6 +197,11 @@ class TraceWriter:
 
     def on_event(self, event: EngineEvent) -> None:
         self._write(engine_record(event))
+
+    def on_plan(self, plan: RunPlan, t: float) -> None:
+        """The plan the run was checked against (:mod:`execution_engine.run_plan`): ``plan`` records."""
+        for record in plan_records(plan, t):
+            self._write(record)
 
     def finish(self, t: float, outcome: str, exit_code: int, operations_done: int, operations_total: int) -> None:
         """The last record: how the run ended; then everything to disk."""

@@ -186,6 +186,8 @@ class TimelineBuilder:
         return self
 
     def add(self, record: Mapping[str, Any]) -> None:
+        if record.get("event") == "plan":  # the plan the run was checked against (run_plan.py): stamped at the check, no event of the run
+            return
         t = float(record.get("t", 0.0))
         self.t_first = t if self.t_first is None else min(self.t_first, t)
         self.t_last = max(self.t_last, t)

@@ -80,11 +80,12 @@ CellElementMsg = _mirror("CellElement")
 NamedJointPoseMsg = _mirror("NamedJointPose")
 CellSnapshotMsg = _mirror("CellSnapshot")
 LocatedFramesMsg = _mirror("LocatedFrames")
+RunPlanMsg = _mirror("RunPlan")  # the dry run's plan of a run (execution_engine/run_plan.py)
 
 #: every type of the interface package a node publishes (a recorder's discovery knows them)
 MESSAGE_TYPES: tuple[type, ...] = (
     MachineStateMsg, MachineStatusMsg, MachineStructureMsg, MachineRequestMsg, MachineResultMsg, EngineStatusMsg, EngineEventMsg,
-    BridgeCommandMsg, BridgeFeedbackMsg, SyncMsg, CellSnapshotMsg, LocatedFramesMsg,
+    BridgeCommandMsg, BridgeFeedbackMsg, SyncMsg, CellSnapshotMsg, LocatedFramesMsg, RunPlanMsg,
 )
 _NANO = 1_000_000_000
 

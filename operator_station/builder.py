@@ -10,7 +10,6 @@ names, through the serializer's line map: the page shows it at that cell of the 
 """
 from __future__ import annotations
 
-import math
 import os
 import re
 from collections.abc import Sequence
@@ -27,6 +26,7 @@ from core_functions.robots import find_robot
 from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
 from execution_engine.app_model.document import AppDocument, OperationEntry, Placement, parse_document, serialize
+from execution_engine.run_plan import operation_durations
 from operator_station.blocks import BlockDocument, walk
 from operator_station.blocks_xml import Where, read_blocks, write_blocks
 
@@ -241,17 +241,7 @@ def save_document(document: AppDocument | BlockDocument, path: Path, catalog: Ca
 
 
 def planned_durations(report: Any, app: Application) -> list[float]:
-    """Each operation's planned duration from a dry run's timeline: from its first span's start to the next
-    operation's (the last one's to the predicted cycle time), so the waits between operations count too.
-    The plan's clock never goes back: with sync="flags" a group runs ahead into an operation listed after one
-    still going, so each operation starts at the latest start so far (the first at 0) -- the durations add up
-    to the predicted cycle time, as the ETA (operator_station/eta.py) and the run summary take them."""
-    starts: dict[str, float] = {}
-    for span in report.timeline:
-        starts[span.operation] = min(starts.get(span.operation, math.inf), span.start)
-    position, at = 0.0, []
-    for op in app.operations:  # an operation the dry run never reached takes no time
-        position = max(position, starts.get(op.id, position))
-        at.append(position)
-    ends = [*at[1:], max(float(report.cycle_time), at[-1] if at else 0.0)]
-    return [end - start for start, end in zip(at, ends)]
+    """Each operation's planned duration from a dry run's timeline, as the run's plan holds it
+    (:func:`execution_engine.run_plan.operation_durations`: the waits between operations count too, and the
+    durations add up to the predicted cycle time)."""
+    return operation_durations(report.timeline, report.cycle_time, [op.id for op in app.operations])

@@ -34,6 +34,7 @@ from execution_engine.app_model import Application
 from execution_engine.engine.report import RunReport
 from execution_engine.engine.speed import speed_for_next_run
 from execution_engine.observers import RunObserver, TraceWriter
+from execution_engine.run_plan import PlanReader
 from node_transport import codec, typed
 from node_transport.clock import Clock, run_with_clock
 from node_transport.msgs import Bool, JointState
@@ -45,6 +46,7 @@ from operator_station.cell_audit import watch_safety
 from operator_station.eta import EtaFeed
 from operator_station.feed import Feed
 from operator_station.paused_edit import EditTarget
+from operator_station.replay import show_plan
 from operator_station.run_summary import summarize
 from operator_station.timeline_view import plan_json
 from operator_station.scene3d import begin_run, keep_dry_run
@@ -312,6 +314,7 @@ def observe(node: Node, robot: RobotModel, feed: Feed, writers: list[TraceWriter
         observer.sinks.append(writer.on_status)
         observer.engine_sinks.append(writer.on_engine)
         observer.event_sinks.append(writer.on_event)
+        observer.plan_sinks.append(writer.on_plan)  # the plan the start check proved: the trace's and the page's
     observer.engine_sinks.append(lambda status: feed.update(status=_status_json(status)))
     for group in robot.group_names:
         node.create_subscription(typed.MachineStructureMsg, sm_topic(group, "structure"), _decoded(node, SmStructure, lambda s: feed.structure(s.group, _structure_json(s))), LATCHED)
@@ -334,11 +337,14 @@ class FeedStream:
     def __init__(self, feed: Feed, on_record: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.feed = feed
         self.on_record = on_record
+        self.plan = PlanReader("the run")
 
     def write(self, text: str) -> int:
         for line in text.splitlines():
             if line:
                 record = json.loads(line)
+                if self.plan.take(record):  # the plan the run was checked against: the timeline's planned bars, as a replay's
+                    show_plan(self.feed, self.plan.plan)
                 self.feed.append(record)
                 if self.on_record is not None:
                     self.on_record(record)

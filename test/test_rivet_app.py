@@ -29,7 +29,7 @@ from robot_bridges.registry import create_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 RIVET = ROOT / "apps_xml" / "rivet_installation.xml"
-TRACE_EVENTS = {"transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag"}
+TRACE_EVENTS = {"transition", "function_start", "function_end", "primitive_start", "primitive_end", "error", "engine_state", "operator", "flag", "plan"}
 
 
 def run_cli(tmp_path: Path, *extra: str) -> tuple[int, str, list[dict[str, Any]]]:
@@ -83,6 +83,9 @@ def test_the_trace_has_the_documented_fields(clean_run: tuple[int, str, list[dic
             assert e["from"] and e["to"] and e["signal"]
         if e["event"] in ("function_start", "function_end", "primitive_start", "primitive_end"):
             assert e["function"] and e["operation"]
+        if e["event"] == "plan":  # the plan the run was checked against (execution_engine/run_plan.py)
+            assert [o for o, _ in e["operations"]] == [str(k) for k in range(1, 11)] and e["cycle_time"] > 0 and e["functions"]
+    assert [e["event"] for e in events].count("plan") == 1
     times = [e["t"] for e in events]
     assert times == sorted(times)
 

@@ -84,7 +84,7 @@ def test_the_summary_after_a_run_and_at_the_end_of_its_replay_and_the_eta_in_wal
         driver.execute_script(f"Store.setCursor({records[-1]['t']})")
         until(driver, "document.getElementById('run-summary').hidden === false")
         at_end = panel(driver)
-        assert at_end["outcome"] == "finished" and "no prediction" in at_end["text"]
+        assert at_end["outcome"] == "finished" and f"against {summary_seconds(expected.predicted)} predicted" in at_end["text"]  # the trace's plan
         assert [e[:2] for e in at_end["errors"]] == [["left_arm", True]]
         assert not [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
     finally:

@@ -1,7 +1,8 @@
 """The timeline to read, in a real headless Chromium (issue 25 items 2 and 3): after a run of the asynchronous rivet
 demonstrator the page shows a run-time axis, the critical path, the flag and zone waits by name and the dry run's
 plan under each function, zooms and pans; a replay of the run's trace at the slider's time shows only what had
-happened by then, on the whole run's axis, with the cursor there.  Waits are bounded polls, never a fixed sleep."""
+happened by then, on the whole run's axis, with the cursor there, and the planned bars the live run drew (the trace
+holds the plan it was checked against).  Waits are bounded polls, never a fixed sleep."""
 from __future__ import annotations
 
 import json
@@ -134,5 +135,10 @@ def test_the_timeline_reads_the_axis_the_critical_path_the_waits_and_the_plan_an
         assert max(e for _, e in shown) <= middle
         assert page(driver, "Timeline.model().critical.map((s) => s.id)") == path_ids(critical_path(cut))
         assert len(shown) < len([b for lane in timeline.lanes.values() for b in lane.bars])
+        # the trace's plan record: the same planned bars as the live run drew, for the functions begun by the slider
+        replayed = [float(r.get_attribute("data-planned")) for r in driver.find_elements(By.CSS_SELECTOR, "#timeline-svg rect.planned")]
+        cut_planned = TimelineBuilder(served.station.feed.snapshot.groups, planned).add_all(r for r in records if r["t"] <= middle).snapshot(middle)
+        assert replayed and sorted(replayed) == pytest.approx(sorted(
+            bar.planned for lane in cut_planned.lanes.values() for bar in lane.bars if bar.planned is not None and bar.attempt == 1))
     finally:
         replay.close()

@@ -26,6 +26,7 @@ import math
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
+from weakref import WeakKeyDictionary
 
 from cell_runner.dry_run.placement import PlacementError
 from cell_runner.dry_run.report import DryRunReport, Finding, JointPositions
@@ -35,7 +36,9 @@ from cell_runner.dry_run.way_back import WayBack, away, candidates
 from core_functions.robots import RobotModel
 from execution_engine.app_model.model import WAIT, Application, Call
 from execution_engine.engine.report import RunReport
+from execution_engine.run_plan import PlanPublisher, plan_of
 from node_transport.clock import Clock
+from node_transport.port import Node
 
 #: Joints closer than this (rad, 0.06 deg) are where a check assumed them: encoder noise, not a move.
 TOLERANCE = 1e-3
@@ -249,6 +252,7 @@ class Engine(Protocol):
 
     stops_asked: int
     autostart: bool
+    node: Node  # where the run's plan is published (announce)
 
     async def run(self, app: Application, resume: Any = None) -> RunReport: ...
 
@@ -351,7 +355,21 @@ async def check_run(
     plan = await check_start(clock, lambda: plan_start(app, setup, state, trajectory_db, checked=checked, resume=where))
     for line in plan.lines:
         say(line)
+    announce(engine, plan, "start" if checked is not None and plan.report is checked else "measured")
     return CheckedRun(engine, plan, measure, clock, resume, say, asked)
+
+
+#: Each engine's latched plan topic (an engine on a graph checks one run after another).
+_PLANS: WeakKeyDictionary[Any, PlanPublisher] = WeakKeyDictionary()
+
+
+def announce(engine: Engine, plan: StartPlan, basis: str) -> None:
+    """The plan the run was proved against, on the engine's latched plan topic, so the trace and the recording
+    keep it and a replay draws it (:mod:`execution_engine.run_plan`)."""
+    publisher = _PLANS.get(engine)
+    if publisher is None:
+        publisher = _PLANS[engine] = PlanPublisher(engine.node)
+    publisher.publish(plan_of(plan.report, [op.id for op in plan.app.operations], basis, plan.app.name))
 
 
 def not_started(app: Application, clock: Clock, why: str) -> RunReport:

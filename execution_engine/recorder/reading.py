@@ -30,6 +30,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from execution_engine.observers import engine_record, trace_record
 from execution_engine.record_limits import GroupCount, OverLimit, time_problem
+from execution_engine.run_plan import PlanError, damaged_record, plan_from_fields, plan_records
 from execution_engine.recorder.safe_read import DamagedRecord, NotARecording, outer_records, records
 from node_transport import codec, typed
 from node_transport.wire import EngineEvent, SmStatus
@@ -37,6 +38,7 @@ from node_transport.wire import EngineEvent, SmStatus
 MAGIC = b"\x89MCAP0\r\n"
 _STATUS = re.compile(r"^(?:/[A-Za-z0-9_]+)*/([A-Za-z0-9_]+)/sm/status$")
 _EVENTS = re.compile(r"^(?:/[A-Za-z0-9_]+)*/execution_engine/events$")
+_PLAN = re.compile(r"^(?:/[A-Za-z0-9_]+)*/execution_engine/plan$")
 
 
 @dataclass
@@ -163,6 +165,9 @@ def trace_records(path: str | Path, recording: Recording) -> Iterator[dict[str, 
     for message in iter_messages(path, recording, wanted=_is_event):
         if epoch is None:
             epoch = _Epoch((recording.start_ns or 0) * 1e-9)
+        if _PLAN.match(message.topic):  # the plan the run was checked against: the trace's plan records
+            yield from _plan_records(message, epoch)
+            continue
         cls = SmStatus if _STATUS.match(message.topic) else EngineEvent
         try:  # (a damaged schema may lack a field)
             decoded = typed.from_fields(cls, message.msg, epoch, source=message.topic)
@@ -176,10 +181,25 @@ def trace_records(path: str | Path, recording: Recording) -> Iterator[dict[str, 
         yield record
 
 
+def _plan_records(message: DecodedMessage, epoch: _Epoch) -> list[dict[str, Any]]:
+    """A recorded plan as the trace's ``plan`` records; one saying it is damaged when it cannot be taken."""
+    try:
+        t = typed.run_time(epoch, message.msg.header.stamp)
+    except (AttributeError, TypeError, ValueError, OverflowError):
+        return [damaged_record(0.0, "its header.stamp is no time")]
+    t = t if time_problem(t) is None else 0.0
+    try:
+        return plan_records(plan_from_fields(message.msg), t)
+    except PlanError as error:
+        return [damaged_record(round(t, 6), str(error))]
+
+
 def _is_event(topic: str, ros_type: str) -> bool:
-    """A machine's status or the engine's events: what the report reads of a recording."""
+    """A machine's status, the engine's events or the run's plan: what the report reads of a recording."""
     if _STATUS.match(topic):
         return ros_type == str(typed.MachineStatusMsg.ROS_TYPE)  # type: ignore[attr-defined]
+    if _PLAN.match(topic):
+        return ros_type == str(typed.RunPlanMsg.ROS_TYPE)  # type: ignore[attr-defined]
     return bool(_EVENTS.match(topic)) and ros_type == str(typed.EngineEventMsg.ROS_TYPE)  # type: ignore[attr-defined]
 
 
