@@ -15,6 +15,7 @@ import pytest
 
 pytest.importorskip("starlette", reason="the studio extra (starlette, uvicorn) is not installed")
 from operator_station.access import ENGINEER  # noqa: E402
+from operator_station.jog import JogSettings  # noqa: E402
 from operator_station.jog_station import stop_cause  # noqa: E402
 from operator_station.server import Station  # noqa: E402
 from test_studio_roles import body, entries, logged_in, station_for  # noqa: E402
@@ -22,6 +23,9 @@ from test_studio_server import BASE, cell_dir, wait_until  # noqa: E402, F401
 
 JOG = "ws://127.0.0.1:8080/ws/jog"
 PRESS = {"type": "start", "group": "left_arm", "mode": "joint", "axis": "LARM_JOINT0", "direction": 1}
+#: s of the dead man's lease here: the longest there is, so that a loaded machine's stall between a press and its
+#: release (or the safety stop) is not taken for a lapse; the lapse itself is still seen, 2 s after a press.
+LEASE = 2.0
 #: Messages read from the jog socket at most while waiting for a stop (a state every ~0.1 s while it moves).
 MAX_MESSAGES = 2000
 
@@ -29,6 +33,7 @@ MAX_MESSAGES = 2000
 @pytest.fixture
 def station(cell_dir: Path) -> Iterator[Station]:
     made = station_for(cell_dir)
+    made.jog.settings = JogSettings(lease=LEASE)
     yield made
     made.stop()
 
