@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from core_functions.geometry import Pose
-from core_functions.robots import GroupSpec, RobotModel
+from core_functions.robots import GroupSpec, RobotModel, find_robot
 
 #: The application's ``robot`` value that means "the robots its cell lists".
 CELL_ROBOT = "cell"
@@ -81,6 +81,14 @@ def named_model(model: RobotModel, names: CellNames) -> RobotModel:
     )
     poses = {pose: {names.joint(j): v for j, v in values.items()} for pose, values in model.poses.items()}
     return replace(model, groups=groups, poses=poses, joint_order=tuple(names.joint(j) for j in model.joint_order))
+
+
+def cell_group_names(model_name: str, names: CellNames) -> tuple[str, ...]:
+    """The cell's names of the groups of the robot model ``model_name`` (none for a model that does not exist)."""
+    try:
+        return named_model(find_robot(model_name), names).group_names
+    except KeyError:
+        return ()
 
 
 @dataclass(frozen=True)

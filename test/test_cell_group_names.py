@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from cell_group_names_files import NAMED_FILES
 from fjt_client import FJT, RSI, VPLUS, Arm, Kind, goal, make_backend, three_points
 
 from cell_runner.launcher import cell_nodes
@@ -177,3 +178,13 @@ def test_a_robot_s_groups_named_twice_or_onto_one_name_are_refused_at_their_line
     onto_one = ('  <robot name="twins" model="nextage" xyz="0 0 0" rpy="0 0 0">\n    <group name="left_arm" as="arms"/>\n'
                 '    <group name="right_arm" as="arms"/>\n  </robot>\n')
     assert "cell.xml:5:29: robot 'twins': its groups 'left_arm' and 'right_arm' would both be 'arms' in the cell" in _problems(tmp_path, onto_one, body)
+
+
+def test_a_cell_with_a_name_clash_is_the_one_problem_told(tmp_path: Path) -> None:
+    """The cell's error is reported at its line; the application naming the groups that cell gives is not also told
+    that they do not exist (the groups are read from the cell file as written)."""
+    for name in ("cg_taken_cell.xml", "cg_taken.xml"):
+        (tmp_path / name).write_text(NAMED_FILES[name], encoding="utf-8")
+    problems = [f"{Path(d.file).name}:{d.line}: {d.message}" for d in validate_application(tmp_path / "cg_taken.xml", full_catalog())]
+    assert len(problems) == 2 and problems[1].startswith("cg_taken_cell.xml:4: robot 'checker': group 'kuka_arm' (its 'arm' renamed)"), problems
+    assert "has errors" in problems[0]

@@ -9,11 +9,13 @@ plain schema refused, on ``robot="cell"``, is looked at again: any other is read
 """
 from __future__ import annotations
 
-from core_functions.cell_robots import CELL_ROBOT
+from pathlib import Path
+
+from core_functions.cell_robots import CELL_ROBOT, CellNames, cell_group_names
 from execution_engine.app_model.cell import read_cell_log
 from execution_engine.app_model.diagnostics import DiagnosticLog
 from execution_engine.app_model.reader import GROUP_TAGS
-from execution_engine.app_model.safe_xml import XmlDocument
+from execution_engine.app_model.safe_xml import XmlDocument, read_xml
 from execution_engine.app_model.schema import application_schema_with
 from execution_engine.app_model.structure import validate_structure
 
@@ -25,10 +27,20 @@ def cell_structure(doc: XmlDocument, log: DiagnosticLog) -> DiagnosticLog:
     cell_name = (root.get("cell") or "").strip()
     if not log.has_errors or root.get("robot") != CELL_ROBOT or not cell_name:
         return log
-    cell, _ = read_cell_log(doc.path.parent / cell_name, fits=False)  # its own problems are reported where the application reads it
-    if cell is None:
-        return log
-    groups = frozenset(group for robot in cell.robots for group in robot.groups)
+    path = doc.path.parent / cell_name
+    cell, _ = read_cell_log(path, fits=False)  # its own problems are reported where the application reads it
+    groups = frozenset(group for robot in cell.robots for group in robot.groups) if cell is not None else written_groups(path)
     if groups <= GROUP_TAGS:
         return log
     return validate_structure(doc, application_schema_with(groups))
+
+
+def written_groups(path: Path) -> frozenset[str]:
+    """The group names a cell file with errors gives its robots, as far as they can be read: its problems are
+    reported at their lines already, and an application naming those groups is not told they do not exist."""
+    cell, _ = read_xml(path)
+    groups: set[str] = set()
+    for robot in cell.root.iterfind("robot") if cell is not None else ():
+        renamed = tuple((own, named) for own, named in ((g.get("name"), g.get("as")) for g in robot.iterfind("group")) if own and named)
+        groups.update(cell_group_names(robot.get("model", ""), CellNames(robot.get("prefix", ""), renamed)))
+    return frozenset(groups)
