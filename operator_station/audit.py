@@ -75,6 +75,12 @@ def digest(data: bytes | str | None) -> str | None:
     return "sha256:" + hashlib.sha256(raw).hexdigest()
 
 
+def hex_digest(hexdigest: str | None) -> str | None:
+    """A SHA-256 given as bare hex (a teach plan's, an application's form in the trace's swap record) in the audit's
+    ``sha256:<hex>`` form, so every digest of the log reads alike; None (or "") stays None."""
+    return f"sha256:{hexdigest}" if hexdigest else None
+
+
 def file_digest(path: str | Path) -> str | None:
     """:func:`digest` of a file's bytes; None if there is no such file (yet)."""
     try:

@@ -36,7 +36,7 @@ from node_transport.port import Node
 from node_transport.qos import LATCHED
 from node_transport.wire import SAFETY_STOP, engine_service
 from operator_station.access import Who
-from operator_station.audit import AuditLog
+from operator_station.audit import AuditLog, hex_digest
 from operator_station.feed import Feed
 
 log = logging.getLogger(__name__)
@@ -146,7 +146,7 @@ class CellAudit:
     def _swap(self, record: dict[str, Any]) -> None:
         """A paused run's remainder edited by someone else than this page (whose route audits its own)."""
         source = str(record.get("source", ""))
-        before, after = (f"sha256:{record[k]}" if record.get(k) else None for k in ("from_digest", "to_digest"))
+        before, after = (hex_digest(str(record[k])) if record.get(k) else None for k in ("from_digest", "to_digest"))
         self.audit().append(Who("cell", "", "", source or UNNAMED, ""), "edit paused run", answer=str(record.get("message", "")), before=before, after=after,
                             details={"t": record.get("t"), "source": source, "file": record.get("file"), "from_operation": record.get("from_operation")})
 

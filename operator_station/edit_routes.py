@@ -25,7 +25,7 @@ from execution_engine.app_model.document import DocumentError
 from execution_engine.engine.remainder_swap import application_digest
 from operator_station import builder
 from operator_station.access import ENGINEER, WHO, Who
-from operator_station.audit import record
+from operator_station.audit import hex_digest, record
 from operator_station.blocks import BlockDocument, calls_inside
 from operator_station.paused_edit import operations_json, placer
 from operator_station.roles import requires
@@ -58,7 +58,7 @@ def routes(station: Any) -> list[BaseRoute]:
         shown = [m.to_json() for m in messages]
         if app is None:
             return _refused(request, "edit: the edited application has errors (listed at their cells); nothing changed", shown, path)
-        before = application_digest(target.engine.app) if target.engine.app is not None else None
+        before = hex_digest(application_digest(target.engine.app)) if target.engine.app is not None else None  # as the trace's, sha256:
         answer = await target.swap(app, station.folders.shown(path), f"{SOURCE} ({_who(request)})")
         shown += [m.to_json() for m in placer(document, path)(list(answer.findings))]
         if not answer.ok:
@@ -66,7 +66,7 @@ def routes(station: Any) -> list[BaseRoute]:
         assert answer.swap is not None
         operations = operations_json(app)
         session.feed.update(operations=operations)  # pages that connect from now on list the run's operations as they are
-        record(request, "edit paused run", ok=True, answer=answer.message, before=answer.swap.old_digest, after=answer.swap.new_digest,
+        record(request, "edit paused run", ok=True, answer=answer.message, before=hex_digest(answer.swap.old_digest), after=hex_digest(answer.swap.new_digest),
                path=station.folders.shown(path), from_operation=answer.swap.frontier + 1)
         return JSONResponse({"ok": True, "answer": answer.message, "messages": shown, "operations": operations, "from_operation": answer.swap.frontier + 1})
 

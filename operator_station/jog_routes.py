@@ -35,7 +35,7 @@ from execution_engine.app_model.document import DocumentError
 from operator_station import builder
 from operator_station.access import ENGINEER
 from operator_station.attach import AttachedSession
-from operator_station.audit import digest, log_of, record, requester
+from operator_station.audit import digest, hex_digest, log_of, record, requester
 from operator_station.blocks import BlockDocument
 from operator_station.jog_station import JogStation
 from operator_station.roles import requires
@@ -183,7 +183,7 @@ def routes(station: Any) -> list[BaseRoute]:
         plans[key] = (plan, path, text)
         while len(plans) > MAX_PLANS:
             plans.popitem(last=False)
-        record(request, "teach", ok=not problems, answer=f"frame {plan.frame} shown as a diff of {plan.shown}", before=_hex(plan.digest),
+        record(request, "teach", ok=not problems, answer=f"frame {plan.frame} shown as a diff of {plan.shown}", before=hex_digest(plan.digest),
                frame=plan.frame, parent=plan.parent, cell=plan.shown, group=group, proposed=digest(plan.text))  # the save's after, if saved
         return JSONResponse({"ok": not problems, "id": key, "problems": problems, **plan.to_json()})
 
@@ -202,13 +202,13 @@ def routes(station: Any) -> list[BaseRoute]:
         try:
             await asyncio.to_thread(save_taught, plan, path, text, station.catalog, outputs)
         except TeachRefused as refused:
-            record(request, "teach save", ok=False, answer=str(refused), before=_hex(plan.digest), frame=plan.frame, cell=plan.shown)
+            record(request, "teach save", ok=False, answer=str(refused), before=hex_digest(plan.digest), frame=plan.frame, cell=plan.shown)
             return _error(str(refused), 409)
         except OSError as error:
             return _error(f"teach save: {plan.shown}: cannot write: {error.strerror or error}")
         plans.pop(str(body.get("id")), None)
         answer = f"frame {plan.frame} {'added to' if plan.created else 'updated in'} {plan.shown}"
-        record(request, "teach save", answer=answer, before=_hex(plan.digest), after=digest(plan.text), frame=plan.frame, cell=plan.shown)
+        record(request, "teach save", answer=answer, before=hex_digest(plan.digest), after=digest(plan.text), frame=plan.frame, cell=plan.shown)
         return JSONResponse({"ok": True, "answer": answer, **plan.to_json()})
 
     return [
@@ -247,8 +247,3 @@ async def _body(request: Request) -> dict[str, Any]:
 
 def _error(message: str, status: int = 400) -> JSONResponse:
     return JSONResponse({"ok": False, "error": message}, status_code=status)
-
-
-def _hex(hexdigest: str) -> str:
-    """A teach plan's SHA-256 (hex) as the audit writes digests (``sha256:<hex>``, operator_station.audit.digest)."""
-    return f"sha256:{hexdigest}"
