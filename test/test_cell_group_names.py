@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from hypothesis import given, strategies as st
 from cell_group_names_files import NAMED_FILES
 from fjt_client import FJT, RSI, VPLUS, Arm, Kind, goal, make_backend, three_points
 
@@ -188,3 +189,31 @@ def test_a_cell_with_a_name_clash_is_the_one_problem_told(tmp_path: Path) -> Non
     problems = [f"{Path(d.file).name}:{d.line}: {d.message}" for d in validate_application(tmp_path / "cg_taken.xml", full_catalog())]
     assert len(problems) == 2 and problems[1].startswith("cg_taken_cell.xml:4: robot 'checker': group 'kuka_arm' (its 'arm' renamed)"), problems
     assert "has errors" in problems[0]
+
+
+_name = st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,12}", fullmatch=True)
+
+
+@given(prefix=st.one_of(st.just(""), _name), renamed=st.dictionaries(_name.filter(lambda n: n != "prefix"), _name, max_size=4))
+def test_the_names_launch_passes_to_a_node_read_back_as_written(prefix: str, renamed: dict[str, str]) -> None:
+    names = CellNames(prefix, tuple(renamed.items()))
+    assert CellNames.parse(names.text()) == names
+
+
+@given(text=st.text(max_size=200))
+def test_a_cell_names_parameter_is_read_or_refused_in_one_line(text: str) -> None:
+    """Whatever a parameter holds: names, or ValueError naming the entry (a bridge's one-line start-up error)."""
+    try:
+        names = CellNames.parse(text)
+    except ValueError as error:
+        assert str(error).startswith("cell names: ") and "\n" not in str(error)
+    else:
+        assert isinstance(names, CellNames)
+
+
+@given(joints=st.lists(_name, max_size=8).map(tuple))
+def test_a_robot_s_joints_go_out_under_the_cell_s_names_and_come_back_as_its_own(joints: tuple[str, ...]) -> None:
+    placed = PlacedBackend.__new__(PlacedBackend)  # the naming alone; no back end behind it
+    placed.names = CellNames("viper_")
+    assert placed.own_joints(placed.cell_joints(joints)) == joints
+    assert all(j.startswith("viper_") for j in placed.cell_joints(joints))
