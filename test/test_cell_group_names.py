@@ -9,6 +9,8 @@ and /joint_states of both robots on one bus (an independent client, simulated ti
 """
 from __future__ import annotations
 
+import io
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -18,6 +20,7 @@ from hypothesis import given, strategies as st
 from cell_group_names_files import NAMED_FILES
 from fjt_client import FJT, RSI, VPLUS, Arm, Kind, goal, make_backend, three_points
 
+from cell_runner.cli import main
 from cell_runner.launcher import cell_nodes
 from app_functions.registry import full_catalog
 from core_functions.cell_robots import CellNames, CellRobotModel, named_model
@@ -217,3 +220,31 @@ def test_a_robot_s_joints_go_out_under_the_cell_s_names_and_come_back_as_its_own
     placed.names = CellNames("viper_")
     assert placed.own_joints(placed.cell_joints(joints)) == joints
     assert all(j.startswith("viper_") for j in placed.cell_joints(joints))
+
+
+def test_two_robots_of_one_model_share_a_cell_by_their_prefixes(tmp_path: Path) -> None:
+    """Two Nextages (every group and joint name the same) side by side, prefixes w_ and e_: the dry run (the
+    simulator's own planned paths, told the cell's names, swept in one collision model) and the run in simulated
+    time; each motion's joints are its robot's, under its prefix."""
+    (tmp_path / "cells").mkdir()
+    (tmp_path / "cells" / "nn.xml").write_text(
+        '<?xml version="1.0"?>\n<cell name="nn">\n'
+        '  <robot name="west" model="nextage" xyz="0 0 0" rpy="0 0 0" prefix="w_"/>\n'
+        '  <robot name="east" model="nextage" xyz="0 1.5 0" rpy="0 0 0" prefix="e_"/>\n'
+        '  <joint_pose name="w_ready" group="w_left_arm" unit="deg" joints="0.6 0 -100 -15.2 9.4 -3.2"/>\n</cell>\n', encoding="utf-8")
+    app = tmp_path / "nn.xml"
+    app.write_text(
+        '<?xml version="1.0"?>\n<application name="nn" robot="cell" cell="cells/nn.xml">\n  <operation id="1">\n'
+        '    <w_left_arm><function name="move_joints"><params><param value="10 0 -100 -15.2 9.4 -3.2 deg"/></params></function></w_left_arm>\n'
+        '    <e_left_arm><function name="move_joints"><params><param value="10 0 -100 -15.2 9.4 -3.2 deg"/></params></function></e_left_arm>\n'
+        '  </operation>\n  <operation id="2">\n'
+        '    <w_left_arm><function name="move_to_joint_pose"><params><param value="w_ready"/></params></function></w_left_arm>\n'
+        '  </operation>\n</application>\n', encoding="utf-8")
+    trace = tmp_path / "trace.jsonl"
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["run", str(app), "--speed", "max", "-q", "--trace", str(trace), "--trajectory-db", str(tmp_path / "t.sqlite")], out, err)
+    assert code == 0, out.getvalue() + err.getvalue()
+    assert "application nn: FINISHED" in out.getvalue()
+    ends = [json.loads(line) for line in trace.read_text(encoding="utf-8").splitlines() if '"primitive_end"' in line]
+    moved = {r["group"]: r["result"]["joint_names"] for r in ends if r["result"].get("joint_names")}
+    assert moved["w_left_arm"] == [f"w_LARM_JOINT{i}" for i in range(6)] and moved["e_left_arm"] == [f"e_LARM_JOINT{i}" for i in range(6)]
