@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 from collections.abc import Callable, Coroutine, Iterator
 from typing import Any, TypeVar
 
@@ -31,6 +32,34 @@ REAL_TIME_FILES = frozenset({
 })
 
 
+#: The longest tests that wait on something besides this computer's CPU -- a controller or a motion in real time, a
+#: launch's processes, a timeout a child process waits out, a browser -- longest first, by file, ``file::test``
+#: prefix or (LONG_ROWS) the command of a docs/faults.md row. pytest-xdist hands the work out in collection order:
+#: started last, one of them is the suite's tail while the other workers sit idle; started first (after the real-time
+#: group, the longest unit), it overlaps the rest.
+LONG_FIRST = (
+    "test_ros2_control_rivet.py",  # the rivet demonstrator on ros2-control: 49 s of motion, the controller's real time
+    "test_cli_faults.py::test_row[181-", "test_cli_faults.py::test_row[124-",  # a 20 s and a 15 s timeout waited out
+    "test_breakpoints_record.py", "test_app_model_scaling.py", "test_branches_run.py", "test_rivet_loop.py", "test_run_report.py",
+    "test_studio_browser.py", "test_breakpoints_browser.py", "test_studio_3d.py", "test_studio_two_origins.py", "test_jog_browser.py",
+    "test_studio_roles_browser.py", "test_studio_timeline.py", "test_studio_graphs.py", "test_paused_edit_browser.py",
+    "test_rivet_async.py", "test_app_model_wire_fit.py", "test_dds_cdr.py", "test_breakpoints_studio.py",
+)
+LONG_ROWS = re.compile(r"test_cli_faults\.py::test_row\[\d+-launch-")  # a launch: processes started and waited on
+
+
+def first_rank(item: pytest.Item) -> tuple[int, int]:
+    """Where ``item`` goes in the order tests are handed out: the real-time group, the long tests longest first, the
+    rest (each in collection order)."""
+    if item.path.name in REAL_TIME_FILES:
+        return (0, 0)
+    where = f"{item.path.name}::{item.name}"
+    ranks = [i for i, prefix in enumerate(LONG_FIRST) if where.startswith(prefix)]
+    if ranks:
+        return (1, ranks[0])
+    return (2, 0) if LONG_ROWS.match(where) else (3, 0)
+
+
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
     """``-n auto``: one worker per core and one more. A good share of the suite waits rather than computes -- the KUKA
     RSI loop and the mixed cell on the wall clock, processes that a launch starts, timeouts a child process waits
@@ -43,6 +72,11 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "xdist_group(name): tests pytest-xdist's --dist loadgroup runs on one worker")
+    if getattr(config.option, "loadscopereorder", False):
+        # loadgroup hands its units out biggest group first, then one test at a time in collection order: a long test
+        # alone (a launch, a browser) would wait behind the groups. In collection order instead, which
+        # pytest_collection_modifyitems makes longest first (first_rank).
+        config.option.loadscopereorder = False
 
 
 def shares_a_module_fixture(item: pytest.Item) -> bool:
@@ -53,6 +87,7 @@ def shares_a_module_fixture(item: pytest.Item) -> bool:
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's worker reads the groups off the marks
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    items[:] = sorted(items, key=first_rank)  # stable: a file's tests stay together and in order
     for item in items:
         if item.path.name in REAL_TIME_FILES:
             item.add_marker(pytest.mark.xdist_group("real_time"))
