@@ -38,7 +38,7 @@ from execution_engine.app_model.model import WAIT, Application, Call
 from execution_engine.engine.report import RunReport
 from execution_engine.run_plan import PlanPublisher, plan_of
 from node_transport.clock import Clock
-from node_transport.port import Node
+from node_transport.port import Node, TransportError
 
 #: Joints closer than this (rad, 0.06 deg) are where a check assumed them: encoder noise, not a move.
 TOLERANCE = 1e-3
@@ -366,10 +366,13 @@ _PLANS: WeakKeyDictionary[Any, PlanPublisher] = WeakKeyDictionary()
 def announce(engine: Engine, plan: StartPlan, basis: str) -> None:
     """The plan the run was proved against, on the engine's latched plan topic, so the trace and the recording
     keep it and a replay draws it (:mod:`execution_engine.run_plan`)."""
-    publisher = _PLANS.get(engine)
-    if publisher is None:
-        publisher = _PLANS[engine] = PlanPublisher(engine.node)
-    publisher.publish(plan_of(plan.report, [op.id for op in plan.app.operations], basis, plan.app.name))
+    try:
+        publisher = _PLANS.get(engine)
+        if publisher is None:
+            publisher = _PLANS[engine] = PlanPublisher(engine.node)
+        publisher.publish(plan_of(plan.report, [op.id for op in plan.app.operations], basis, plan.app.name))
+    except (TransportError, LookupError, TypeError, ValueError, ImportError) as error:  # e.g. an interface package built before RunPlan
+        engine.node.logger.warning("the run's plan is not published (a replay will show no planned bars): %s", error)
 
 
 def not_started(app: Application, clock: Clock, why: str) -> RunReport:
