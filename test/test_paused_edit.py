@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import io
 import json
+from collections.abc import Awaitable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -93,8 +94,9 @@ class PausedRun:
     async def edit(self, new: Application) -> SwapAnswer:
         return await swap_remainder(self.deployment.engine, new, self.check, str(new.path), "test")
 
-    async def finish(self) -> RunReport:
-        assert (await self.deployment.engine.operator_command("resume", "test"))[0]
+    async def finish(self, command: str = "resume") -> RunReport:
+        """Resume (or ``stop``) the run and wait for its end; its recording, checkpoint and deployment closed."""
+        assert (await self.deployment.engine.operator_command(command, "test"))[0]
         report = await self.run
         await self.recorder.close()
         self.store.close()
@@ -242,29 +244,30 @@ def test_edits_of_done_operations_other_robots_and_runs_not_paused_are_refused(r
 
 def test_a_run_stopped_after_a_swap_resumes_with_the_new_remainder(run_sim: Any, tmp_path: Path) -> None:
     old, new = load(tmp_path, "old.xml", OLD), load(tmp_path, "safe.xml", SAFE)
-
-    async def main_(clock: Clock) -> SwapAnswer:
-        run = await paused(clock, old, tmp_path)
-        answer = await run.edit(new)
-        assert (await run.deployment.engine.operator_command("stop", "test"))[0]
-        await run.run
-        await run.recorder.close()
-        run.store.close()
-        await run.deployment.close()
-        return answer
-
-    assert run_sim(main_).ok
-    out, err = io.StringIO(), io.StringIO()
-    trace = tmp_path / "resumed.jsonl"
-    code = main(["run", str(new.path), "--resume", str(tmp_path / "run.checkpoint.sqlite"), "--speed", "max", "--trace", str(trace), "--quiet"],
-                 out=out, err=err)
-    assert code == 0, err.getvalue()
-    records = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert run_sim(lambda clock: edited_and_stopped(paused(clock, old, tmp_path), new)).ok
+    records = resumed(tmp_path, new)
     started = [(r["operation"], r["group"]) for r in records if r["event"] == "function_start"]
     assert started and started[0] == ("wider", "left_arm") and ("right_in", "right_arm") in started and ("reach", "left_arm") not in started
     err = io.StringIO()
     assert main(["run", str(old.path), "--resume", str(tmp_path / "run.checkpoint.sqlite"), "--speed", "max", "--quiet"], out=io.StringIO(), err=err) == 2
     assert "the run was edited while paused (after operation hold) and goes on with" in err.getvalue()
+
+
+async def edited_and_stopped(pausing: Awaitable[PausedRun], new: Application) -> SwapAnswer:
+    """The run ``pausing`` gives, edited with ``new`` and stopped (its checkpoint left for a resume)."""
+    run = await pausing
+    answer = await run.edit(new)
+    await run.finish("stop")
+    return answer
+
+
+def resumed(tmp: Path, app: Application, *options: str) -> list[dict[str, Any]]:
+    """``run APP --resume`` the checkpoint in ``tmp`` (``options`` added); the resumed run's trace records."""
+    err, trace = io.StringIO(), tmp / "resumed.jsonl"
+    code = main(["run", str(app.path), "--resume", str(tmp / "run.checkpoint.sqlite"), *options, "--speed", "max", "--trace", str(trace), "--quiet"],
+                out=io.StringIO(), err=err)
+    assert code == 0, err.getvalue()
+    return [json.loads(line) for line in trace.read_text().splitlines()]
 
 
 def test_the_terminal_edits_the_paused_run_from_a_file_and_says_why_it_will_not(run_sim: Any, tmp_path: Path) -> None:

@@ -7,12 +7,15 @@ waits inside ``right_wait`` for the flag the left one sets after it: two groups 
 """
 from __future__ import annotations
 
+import io
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 from mcap.reader import make_reader
 
+from cell_runner.cli import main
 from cell_runner.dry_run.remainder import remainder_app
 from execution_engine.app_model import Application
 from execution_engine.checkpoint.resume import check_same
@@ -22,7 +25,7 @@ from execution_engine.engine.remainder_swap import PresentState, SwapAnswer, app
 from execution_engine.engine.report import RunReport
 from execution_engine.record_reader import read_record
 from node_transport.clock import Clock
-from test_paused_edit import HOME, LEFT_IN, LEFT_OUT, REACH, RIGHT_OUT, PausedRun, load, op, started
+from test_paused_edit import HOME, LEFT_IN, LEFT_OUT, REACH, RIGHT_OUT, PausedRun, edited_and_stopped, load, op, resumed, started
 
 #: Where each group stands at the pause (the torso has no call: through from the start).
 WHERE = "left_arm before operation 3, right_arm in operation 2, torso_head finished"
@@ -50,16 +53,18 @@ SAFE = flags_app(REACH, RIGHT_WAIT, breaks(op("wider", left_arm=("move_to", WIDE
 COLLIDES = flags_app(REACH, RIGHT_WAIT, breaks(op("closer", left_arm=("move_to", RIGHT_OUT))), LEFT_DONE, RIGHT_IN, HOME)
 
 
-async def held(clock: Clock, app: Application, tmp: Path) -> PausedRun:
-    """``app`` started and run until the left arm holds at its breakpoint and the right one waits for its flag."""
+async def held(clock: Clock, app: Application, tmp: Path, right: Callable[[Any], bool] | None = None) -> PausedRun:
+    """``app`` started and run until the left arm holds at its breakpoint and the right one waits for its flag
+    (``right``: until that holds of the engine instead)."""
     run = await started(clock, app, tmp)
     engine = run.deployment.engine
+    there = right or (lambda engine: engine.flags.waiting_for("right_arm") == "flag left_done")
     assert (await engine.operator_command("start", "test"))[0]
     for _ in range(600):  # bounded: 60 s of simulated time
         await clock.sleep(0.1)
-        if engine.state == "paused" and engine.flags.waiting_for("right_arm") == "flag left_done":
+        if engine.state == "paused" and there(engine):
             break
-    assert engine.state == "paused" and "left_arm" in engine.breakpoints.held, engine.state
+    assert engine.state == "paused" and there(engine) and "left_arm" in engine.breakpoints.held, engine.state
     return run
 
 
@@ -164,18 +169,18 @@ def test_edits_of_what_a_group_has_started_or_left_behind_are_refused_naming_the
 BUSY = flags_app(REACH, op("right_hold", right_arm=("wait", "40")), CLOSER, LEFT_DONE, RIGHT_IN, HOME)
 
 
+async def busy_held(clock: Clock, app: Application, tmp: Path) -> PausedRun:
+    """``app`` (BUSY's) started and run until the left arm holds at its breakpoint while the right one is in right_hold."""
+    return await held(clock, app, tmp, lambda engine: engine.remainder.groups.at["right_arm"].inside == "right_hold")
+
+
 def test_a_group_still_running_beside_the_held_one_is_paused_before_the_edit_is_taken(run_sim: Any, tmp_path: Path) -> None:
     old = load(tmp_path, "old.xml", BUSY)
     new = load(tmp_path, "new.xml", BUSY.replace(f'value="{LEFT_IN}"', f'value="{WIDER}"'))
 
     async def main_(clock: Clock) -> tuple[str, SwapAnswer, RunReport, PausedRun]:
-        run = await started(clock, old, tmp_path)
+        run = await busy_held(clock, old, tmp_path)
         engine = run.deployment.engine
-        assert (await engine.operator_command("start", "test"))[0]
-        for _ in range(300):  # bounded: 30 s of simulated time
-            await clock.sleep(0.1)
-            if engine.state == "paused" and engine.remainder.groups.at["right_arm"].inside == "right_hold":
-                break
         refused = (await run.edit(new)).message
         assert (await engine.operator_command("pause", "test"))[0]  # now the right arm stands too (its machine in Pause)
         answer = await run.edit(new)
@@ -226,3 +231,35 @@ def test_a_step_after_the_swap_runs_the_held_groups_next_edited_operation_and_ho
     assert report.ok and report.operations_done == 7
     ended = [(r["operation"], r["group"]) for r in run.records("function_end") if r["outcome"] == "succeeded"]
     assert ended.index(("wider", "left_arm")) < ended.index(("right_more", "right_arm"))  # the right arm went on once the flag was set
+
+
+def test_a_flags_run_stopped_after_a_swap_resumes_each_group_after_its_done_calls_with_the_edited_file(run_sim: Any, tmp_path: Path) -> None:
+    """``run EDITED.xml --resume CHECKPOINT``: each group goes on after the calls it had done (none run twice), the
+    flag wait the right arm was in runs again and passes once the left arm sets it; the old file is refused."""
+    old, new = load(tmp_path, "old.xml", OLD), load(tmp_path, "safe.xml", SAFE)
+    assert run_sim(lambda clock: edited_and_stopped(held(clock, old, tmp_path), new)).ok
+    records = resumed(tmp_path, new)
+    started = [(r["operation"], r["group"]) for r in records if r["event"] == "function_start"]
+    assert started[0] == ("wider", "left_arm") and ("reach", "left_arm") not in started and ("reach", "right_arm") not in started
+    assert started.count(("right_more", "right_arm")) == 1 and ("home", "right_arm") in started
+    assert [(r["group"], r["state"]) for r in records if r["event"] == "flag" and r["operation"] == "right_wait"][-1] == ("right_arm", "passed")
+    assert records[-1]["event"] == "run_end" and records[-1]["outcome"] == "finished"
+    err = io.StringIO()
+    assert main(["run", str(old.path), "--resume", str(tmp_path / "run.checkpoint.sqlite"), "--speed", "max", "--quiet"], out=io.StringIO(), err=err) == 2
+    assert "the run was edited while paused" in err.getvalue() and "goes on with" in err.getvalue()
+
+
+def test_a_flags_run_resumed_from_its_checkpoint_skips_the_interrupted_call_when_told_and_redoes_nothing_done(run_sim: Any, tmp_path: Path) -> None:
+    """A crash resume of a sync="flags" run (no edit): the right arm was stopped inside right_hold, the left arm held
+    before closer; ``--on-interrupted skip`` takes right_hold as done, and no call done before runs again."""
+    old = load(tmp_path, "old.xml", BUSY)
+
+    async def main_(clock: Clock) -> None:
+        await (await busy_held(clock, old, tmp_path)).finish("stop")
+
+    run_sim(main_)
+    records = resumed(tmp_path, old, "--on-interrupted", "skip")
+    calls = [(r["operation"], r["group"]) for r in records if r["event"] == "function_start"]
+    assert ("closer", "left_arm") in calls and ("right_hold", "right_arm") not in calls
+    assert ("reach", "left_arm") not in calls and ("right_in", "right_arm") in calls
+    assert records[-1]["outcome"] == "finished"

@@ -11,14 +11,14 @@ run as usual.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
-from execution_engine.checkpoint.store import SUCCEEDED, CheckpointError, CheckpointStore
+from execution_engine.checkpoint.store import DONE, SUCCEEDED, CheckpointError, CheckpointStore
 from execution_engine.engine.dispatch import ApplicationAborted
 from execution_engine.engine.operator import CONSOLE_KEYS
 from execution_engine.recorder.recorder import file_digest
@@ -103,9 +103,13 @@ class ResumePlan:
     #: The named outcome of each tested function done before, by "operation/group": the branches taken again.
     outcomes: dict[str, str] = field(default_factory=dict)
     on_skip: Callable[[int, Operation, str], None] = field(default=lambda index, op, group: None)
+    #: sync="flags" (each group its own order, :meth:`position_groups`): the calls done before, by (operation id, group),
+    #: and those started but not done -- by id, since an edit of the paused run may have moved the indexes.
+    calls_done: frozenset[tuple[str, str]] = frozenset()
+    calls_started: frozenset[tuple[str, str]] = frozenset()
 
-    def message(self, engine: ExecutionEngine, operation: Operation, group: str) -> str:
-        call = self.interrupted[group]
+    def message(self, engine: ExecutionEngine, operation: Operation, group: str, call: Call | None = None) -> str:
+        call = call or self.interrupted[group]
         where = f"{call.file}:{call.line}" if call.file else f"operation {operation.id}"
         if operation.origin:
             where += f", {operation.origin}"
@@ -122,22 +126,43 @@ class ResumePlan:
         for group in self.done:
             calls[group] = Call(group, "wait", (), implicit=True)
         for group in sorted(self.interrupted):
-            answer = self.answer
-            if answer == "ask":
-                reply = await engine.hold_for_answer(self.message(engine, operation, group))
-                if reply == "unanswerable":
-                    raise ApplicationAborted(
-                        f"{group} was interrupted and nobody can answer (run with --interactive at a terminal, "
-                        "or give the answer in advance: --on-interrupted redo|skip)"
-                    )
-                if reply == "stop":
-                    raise ApplicationAborted(f"stopped while {group} waited for an answer to its interruption")
-                answer = "redo" if reply == "reset" else "skip"
-            if answer == "skip":
+            if await self._answer(engine, operation, group, self.interrupted[group]) == "skip":
                 calls[group] = Call(group, "wait", (), implicit=True)
                 self.on_skip(self.index, operation, group)
         engine.announce(f"resumed from {self.checkpoint} at operation {operation.id}; continues {self.continues or '(no earlier record)'}")
         return replace(operation, calls=calls)
+
+    async def _answer(self, engine: ExecutionEngine, operation: Operation, group: str, call: Call) -> str:
+        """redo or skip for ``group``'s interrupted ``call``: given in advance, or the operator's; ApplicationAborted on stop."""
+        if self.answer != "ask":
+            return self.answer
+        reply = await engine.hold_for_answer(self.message(engine, operation, group, call))
+        if reply == "unanswerable":
+            raise ApplicationAborted(
+                f"{group} was interrupted and nobody can answer (run with --interactive at a terminal, "
+                "or give the answer in advance: --on-interrupted redo|skip)"
+            )
+        if reply == "stop":
+            raise ApplicationAborted(f"stopped while {group} waited for an answer to its interruption")
+        return "redo" if reply == "reset" else "skip"
+
+    async def position_groups(self, engine: ExecutionEngine, steps: Mapping[str, Sequence[tuple[Operation, Call]]]) -> dict[str, int]:
+        """sync="flags": how many of each group's steps (its calls in its own order) are behind it -- every one up to
+        its last call done, the flags and waits among them included (a group goes its calls in order; the engine's
+        flags are not checkpointed); a call started and not done after them is interrupted: redo (it stays) or skip."""
+        where: dict[str, int] = {}
+        for group, calls in steps.items():
+            k = 1 + max((i for i, (operation, _) in enumerate(calls) if (operation.id, group) in self.calls_done), default=-1)
+            if k < len(calls) and (calls[k][0].id, group) in self.calls_started:
+                operation, call = calls[k]
+                if await self._answer(engine, operation, group, call) == "skip":
+                    assert engine.app is not None
+                    self.on_skip(engine.app.operations.index(operation), operation, group)
+                    k += 1
+            where[group] = k
+        at = ", ".join(f"{g} after {k} call(s)" for g, k in where.items())
+        engine.announce(f"resumed from {self.checkpoint} ({at}); continues {self.continues or '(no earlier record)'}")
+        return where
 
 
 def reconcile(store: CheckpointStore, app: Application, *, write: bool = True, outcomes: dict[str, str] | None = None) -> set[tuple[int, str]]:
@@ -181,6 +206,10 @@ def plan_resume(store: CheckpointStore, app: Application, catalog: Catalog, answ
     outcomes: dict[str, str] = {}
     done = reconcile(store, app, write=write, outcomes=outcomes)
     touched = {r.op_index for r in store.functions()}
+    ids = [op.id for op in app.operations]
+    calls_done = frozenset({(r.operation, r.group) for r in store.functions() if r.outcome in DONE}
+                           | {(o, g) for _, o, g, _ in store.outcomes()} | {(ids[i], g) for i, g in done - store.done() if i < len(ids)})  # the trace's
+    by_id = {"calls_done": calls_done, "calls_started": frozenset((r.operation, r.group) for r in store.functions()) - calls_done}
     runs = store.runs()
     continues = ", ".join(p for _, trace, record in runs[-1:] for p in (trace, record) if p)
     for index, operation in enumerate(app.operations):
@@ -191,8 +220,8 @@ def plan_resume(store: CheckpointStore, app: Application, catalog: Catalog, answ
         finished = {g for g in needed if (index, g) in done}
         if needed - finished:
             interrupted = {g: operation.calls[g] for g in needed - finished} if index in touched else {}
-            return ResumePlan(index, frozenset(finished), interrupted, answer, str(store.path), continues, outcomes)
-    return ResumePlan(len(app.operations), frozenset(), {}, answer, str(store.path), continues, outcomes)
+            return replace(ResumePlan(index, frozenset(finished), interrupted, answer, str(store.path), continues, outcomes), **by_id)
+    return replace(ResumePlan(len(app.operations), frozenset(), {}, answer, str(store.path), continues, outcomes), **by_id)
 
 
 def next_name(path: str, run: int) -> str:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from typing import Protocol
 
@@ -71,6 +71,7 @@ class ResumePoint(Protocol):
     outcomes: dict[str, str]  # the tested functions' outcomes before the crash: the same branches again
 
     async def first_operation(self, engine: ExecutionEngine, operation: Operation) -> Operation: ...
+    async def position_groups(self, engine: ExecutionEngine, steps: Mapping[str, Sequence[tuple[Operation, Call]]]) -> dict[str, int]: ...
 
 
 class ExecutionEngine(BreakpointControl, FlagsMode):  # BreakpointControl extends OperatorCommands
@@ -174,7 +175,7 @@ class ExecutionEngine(BreakpointControl, FlagsMode):  # BreakpointControl extend
             report.t_start = self.clock.now()  # the cycle starts with the first operation, as the dry run's does
             self._set_state("running")
             if app.sync == "flags":  # no barrier per operation: each group in its own order (engine/flags_mode.py)
-                await self._run_groups(app)
+                await self._run_groups(app, resume)
                 report.operations_done = len((self.app or app).operations)  # the edited application's, after a swap
             for index, operation in self.remainder.operations(self, resume.index + 1 if resume is not None else 0) if app.sync != "flags" else ():
                 if resume is not None and index < resume.index:

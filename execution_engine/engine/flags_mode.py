@@ -11,19 +11,20 @@ application (engine/remainder_groups.py keeps where it stands), so a paused run'
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.branches import OutcomeBoard, branch_taken, ended_with_outcome
 from execution_engine.engine.dispatch import ApplicationAborted
-from execution_engine.engine.flags import ENGINE_FUNCTIONS
+from execution_engine.engine.flags import ENGINE_FUNCTIONS, SET_FLAG, FlagBoard
 from execution_engine.engine.remainder_groups import group_steps
 from execution_engine.engine.report import GroupError
 from execution_engine.machine.table import ERROR_HANDLING, READY
 from node_transport.wire import SmRequest, SmResult
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
     from node_transport.clock import Clock
     from execution_engine.engine.dispatch import Dispatch
     from execution_engine.engine.group_link import GroupLink
@@ -40,6 +41,12 @@ def meeting(operation: Operation, call: Call, catalog: Catalog) -> dict[str, Cal
     return {g: c for g, c in operation.calls.items() if (s := catalog.get(c.function)) is not None and s.sync == spec.sync}
 
 
+class GroupsResume(Protocol):
+    """A crash resume's side of flags mode (:class:`~execution_engine.checkpoint.resume.ResumePlan`)."""
+
+    async def position_groups(self, engine: Any, steps: Mapping[str, Sequence[tuple[Operation, Call]]]) -> dict[str, int]: ...
+
+
 class FlagsMode:
     """The engine's run of an application with ``sync="flags"``."""
 
@@ -50,6 +57,7 @@ class FlagsMode:
         clock: Clock
         links: dict[str, GroupLink]
         zones: ZoneBoard
+        flags: FlagBoard
         function_timeout: float
         service_timeout: float
         tested: frozenset[tuple[str, str]]
@@ -73,12 +81,21 @@ class FlagsMode:
         def _note_recovery(self, recovery: str) -> None: ...
         async def _go_safe(self, in_work: list[str]) -> None: ...
 
-    async def _run_groups(self, app: Application) -> None:
-        """Each group through its own calls at once; the first failure ends them all."""
+    async def _run_groups(self, app: Application, resume: GroupsResume | None = None) -> None:
+        """Each group through its own calls at once; the first failure ends them all.  ``resume`` (after a crash):
+        each group goes on after the calls it had done (checkpoint/resume.py), the flags they set set again."""
         groups = [g for g in app.robot.group_names if group_steps(app, g, self._sits_out)]
-        self.remainder.groups.start(app.robot.group_names, self._sits_out)  # each group's position: a paused run's edit
+        walk = self.remainder.groups
+        walk.start(app.robot.group_names, self._sits_out)  # each group's position: a paused run's edit, a resume
         for group in set(app.robot.group_names) - set(groups):
-            self.remainder.groups.finish(group)
+            walk.finish(group)
+        if resume is not None:
+            for group, done in (await resume.position_groups(self, {g: walk.steps(app, g) for g in groups})).items():
+                for operation, call in walk.steps(app, group)[:done]:
+                    if call.function == SET_FLAG:
+                        self.flags.set(group, call.params[0], operation.id)
+                    self.zones.ended(operation.id, group)
+                    walk.passed(group, operation)
         tasks = {g: asyncio.ensure_future(self._run_group(g, group_steps(app, g, self._sits_out))) for g in groups}
         try:
             done, _ = await asyncio.wait(tasks.values(), return_when=asyncio.FIRST_EXCEPTION)
