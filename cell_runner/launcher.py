@@ -132,7 +132,7 @@ def _bridge_spec(
     if robot:
         name = f"{robot}_bridge"
         bridge += ["-r", f"__node:={name}"]
-        if base is not None and base != Pose():
+        if base is not None:  # at the world's origin too: the bridge then places the robot's URDF and tf in the cell's world
             bridge += ["-p", "base_pose:=" + " ".join(repr(v) for v in (*base.position, *base.rpy()))]
         if names:
             bridge += ["-p", f"cell_names:={names}"]

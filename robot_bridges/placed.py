@@ -15,6 +15,7 @@ and every group or joint name coming in is turned back into the robot's own.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from typing import Any
 
@@ -37,6 +38,7 @@ from core_functions.primitives import (
 )
 from node_transport.wire import CellSnapshot
 from robot_bridges.backend import JointLimits, RobotBackend
+from robot_bridges.placed_urdf import placed_urdf
 
 
 class PlacedBackend(RobotBackend):
@@ -49,6 +51,11 @@ class PlacedBackend(RobotBackend):
         self.names = names
         self._own_group = {names.group(g): g for g in inner.groups}
         self.name = f"{robot_name}: {inner.name}"
+        self.robot_name = robot_name
+        #: where its bridge publishes its URDF: one topic per robot of the cell (robot_state_publisher's in a namespace
+        #: named after the robot), so /robot_description stays a single robot's -- a ros2_control driver's, for one
+        self.description_topic = "/" + (re.sub(r"\W+", "_", robot_name).strip("_") or "robot") + "/robot_description"
+        self._description: str | None = None
         self.world_frame = "world"
         self.holds_within_motion = inner.holds_within_motion
         self.clock = inner.clock
@@ -187,4 +194,12 @@ class PlacedBackend(RobotBackend):
         return None if limits is None else replace(limits, joint_names=self.cell_joints(limits.joint_names))
 
     def robot_description(self) -> str | None:
-        return None  # its URDF's root is the robot's base, not the cell's world: not published as the cell's
+        """The robot's URDF hung from the cell's world at its base, its links and joints under the cell's prefix
+        (:func:`robot_bridges.placed_urdf.placed_urdf`): its movable joints are those :meth:`joint_state` names."""
+        if self._description is None:
+            urdf = self.inner.robot_description()
+            if urdf is None:
+                return None
+            prefix = self.names.prefix
+            self._description = placed_urdf(urdf, self.base, prefix, f"{prefix}{self.inner.world_frame}_mount", self.world_frame)
+        return self._description

@@ -9,7 +9,10 @@ and ``joint_states`` disagree.
 
 As robot_state_publisher: one transform per movable URDF joint (parent link -> child link) with
 every joint-state publication; the fixed joints once on ``tf_static``; the URDF text once,
-latched.  The kinematics are pinocchio's (:mod:`core_functions.urdf_tree`), loaded only for a
+latched.  In a cell of several robots each robot's bridge does so for its robot, placed
+(:mod:`robot_bridges.placed_urdf`): its URDF on ``/<robot>/robot_description`` (as one
+robot_state_publisher per robot namespace would), its base on ``tf_static`` from the cell's
+``world``, its links under the cell's prefix.  The kinematics are pinocchio's (:mod:`core_functions.urdf_tree`), loaded only for a
 back end that has a URDF.
 """
 from __future__ import annotations
@@ -21,6 +24,7 @@ from node_transport.msgs import String, TFMessage, Time
 from node_transport.port import Node
 from node_transport.qos import ROBOT_DESCRIPTION, TF, TF_STATIC
 from node_transport.wire import ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
+from robot_bridges.placed import PlacedBackend
 
 if TYPE_CHECKING:
     from core_functions.urdf_tree import UrdfTree
@@ -30,13 +34,13 @@ if TYPE_CHECKING:
 class RobotStatePublisher:
     """Publishes one robot's URDF and link transforms through ``node``."""
 
-    def __init__(self, node: Node, urdf: str) -> None:
+    def __init__(self, node: Node, urdf: str, description_topic: str = ROBOT_DESCRIPTION_TOPIC) -> None:
         from node_transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only for a robot with a URDF
 
         self.node = node
         self.links = LinkTransforms(urdf)
         self.tree: UrdfTree = self.links.tree
-        self._description = node.create_publisher(String, ROBOT_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION)
+        self._description = node.create_publisher(String, description_topic, ROBOT_DESCRIPTION)
         self._tf = node.create_publisher(TFMessage, TF_TOPIC, TF)
         self._tf_static = node.create_publisher(TFMessage, TF_STATIC_TOPIC, TF_STATIC)
         self._description.publish(String(urdf))
@@ -44,9 +48,13 @@ class RobotStatePublisher:
 
     @classmethod
     def for_backend(cls, node: Node, backend: RobotBackend) -> RobotStatePublisher | None:
-        """The publisher for ``backend``'s URDF, or None when the back end knows no URDF."""
+        """The publisher for ``backend``'s URDF, or None when the back end knows no URDF.  A robot of a cell of
+        several (placed) publishes its URDF on ``/<robot>/robot_description``, rooted at the cell's ``world`` and
+        under the cell's prefix; its links go on the one ``tf`` and ``tf_static`` with every other robot's."""
         urdf = backend.robot_description()
-        return None if urdf is None else cls(node, urdf)
+        if urdf is None:
+            return None
+        return cls(node, urdf, backend.description_topic) if isinstance(backend, PlacedBackend) else cls(node, urdf)
 
     def publish(self, names: Sequence[str], positions: Sequence[float], stamp: Time) -> None:
         """The transforms for one joint state, stamped like it; the fixed joints the first time."""
