@@ -42,11 +42,10 @@ from cell_runner.run_checks import Refused, check_trajectory_db
 from cell_runner.settings import BackendSettings, Outputs, ReportSettings, RunSettings, ValidateSettings
 from cell_runner.vision_cli import add_vision_parser, run_vision
 from core_functions.catalog import Catalog
-from core_functions.option_ranges import RangeError, argument_type, bounds
+from core_functions.option_ranges import START_HELD, RangeError, argument_type, bounds
 from core_functions.robots import ROBOTS
 from execution_engine.checkpoint.store import ANSWERS
 from execution_engine.app_model import read_application
-from execution_engine.engine.speed import START_HELD
 from node_transport.console_log import ConsoleLog
 
 

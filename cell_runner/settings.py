@@ -14,10 +14,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from core_functions.option_ranges import bounds
+from core_functions.option_ranges import START_HELD, bounds
 from execution_engine.app_model import Application
 from execution_engine.checkpoint.store import ANSWERS
-from execution_engine.engine.speed import START_HELD
 from node_transport.clock import Clock, scaled_clock, simulated_clock
 from robot_bridges.backend import BackendOptions
 

@@ -115,6 +115,10 @@ class Setting:
         return f"{self.name} ({self.scope})" if self.scope else self.name
 
 
+#: Why a run may not start at speed_override 0 %: nothing would move, and its dry run could not plan it
+#: (the command line, the run's settings and the engine's next-run answer say the same; here, below all three).
+START_HELD = "a run cannot start at 0 %: every motion would wait before it began (0 % holds a running motion on its path)"
+
 #: Every numeric setting.
 SETTINGS: tuple[Setting, ...] = (
     # -- the run, launch and the nodes they start (CLI, node parameters)

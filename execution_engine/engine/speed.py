@@ -16,7 +16,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from core_functions.option_ranges import RangeError, bounds
+from core_functions.option_ranges import START_HELD, RangeError, bounds
 from execution_engine.engine.report import OperatorAction
 from node_transport.bounded import declare_bounded
 from node_transport.parameters import ParameterValue
@@ -25,8 +25,6 @@ from node_transport.port import Node, ParameterChange
 PARAMETER = "speed_override"
 #: How the engine's status says the robot stands still at 0 %.
 HOLDING = "speed override 0 %: holding on the path"
-#: Why a run may not start at 0 %: nothing would move, and its dry run could not plan it.
-START_HELD = "a run cannot start at 0 %: every motion would wait before it began (0 % holds a running motion on its path)"
 #: The operator command's name in the trace, the events and the report.
 COMMAND = "speed_override"
 
