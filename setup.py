@@ -66,6 +66,7 @@ setup(
             "vplus_bridge = cell_runner.bridge_nodes.vplus:main",
             "vplus_simulator = robot_bridges.vplus.simulator:main",
             "kuka_rsi_bridge = cell_runner.bridge_nodes.kuka_rsi:main",
+            "ros2_control_bridge = cell_runner.bridge_nodes.ros2_control:main",
             "kuka_rsi_simulator = robot_bridges.kuka_rsi.simulator:main",
         ]
     },

@@ -5,10 +5,11 @@
     python -m execution_engine launch apps_xml/rivet_installation.xml --transport dds --speed 2
     python -m execution_engine launch app.xml --nodes nextage_sim_bridge          # this PC: the bridge
     python -m execution_engine launch app.xml --nodes left_arm_machine,right_arm_machine,torso_head_machine,execution_engine
+    python -m execution_engine launch kuka_app.xml --robot ros2-control --backend-option arm.controller=/jtc/follow_joint_trajectory
 
 The nodes are those of ``launch/<back end>.launch.py`` with the same names and the same
 parameters (``config/<back end>.yaml`` as params file): the bridge of the application robot's back
-end, one ``group_machine`` per group, and the engine running APP with ``exit_when_done`` -- checked
+end (``--robot``, with ``--backend-option KEY=VALUE`` as its parameters; a cell's robots: theirs), one ``group_machine`` per group, and the engine running APP with ``exit_when_done`` -- checked
 first, as ``run`` is, by the dry run, here from the joints the bridge publishes (``--no-check``: the
 engine's ``check:=false``; docs/application_xml.md, "Checking before anything moves").  Each is
 the installed executable's code in its own Python process with ``--transport dds`` (no ROS
@@ -37,13 +38,15 @@ from typing import IO
 
 from app_functions.registry import full_catalog
 from cell_runner.settings import LaunchSettings
-from core_functions.cell_robots import CellRobotModel
+from core_functions.cell_robots import BACKEND_NAMES, CellRobotModel
 from core_functions.geometry import Pose
 from core_functions.option_ranges import argument_type
 from core_functions.resources import share_path
 from execution_engine.app_model import ApplicationError, load_application
 from node_transport.clock import Clock, real_clock, run_with_clock
 from node_transport.wire import ENGINE_NODE, bridge_node_name, machine_node_name
+from robot_bridges.backend import BackendOptions
+from robot_bridges.registry import check_options
 
 EXIT_NODE_DIED = 6  # a node other than the engine ended before the engine did
 EXIT_USAGE = 2
@@ -75,23 +78,58 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     launch.add_argument("--nodes", help="comma-separated node names to start (default: every node of the cell)")
     launch.add_argument("--grace", type=argument_type("grace"), default=5.0, help="seconds the engine gets to end its run by itself after another node died, in [0, 600] (default 5)")
     launch.add_argument("--stop-timeout", type=argument_type("stop_timeout"), default=10.0, help="seconds a node gets to stop on SIGTERM before SIGKILL, in [0.1, 600] (default 10)")
+    launch.add_argument("--robot", choices=BACKEND_NAMES, help="the back end of the application robot's bridge (default: the robot's usual one), as for run")
+    launch.add_argument(
+        "--backend-option", action="append", type=backend_option, metavar="KEY=VALUE",
+        help="back-end option as for run, given to the bridge as the parameter KEY (repeatable; a cell's robots take theirs from the cell)",
+    )
     launch.add_argument(
         "--no-check", action="store_true",
         help="start without the dry run from the robot's measured joints that the engine otherwise does first (its parameter check:=false)",
     )
 
 
-def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True) -> list[NodeSpec]:
+def backend_option(text: str) -> tuple[str, str]:
+    """``--backend-option KEY=VALUE``."""
+    key, equals, value = text.partition("=")
+    if not equals or not key.strip():
+        raise argparse.ArgumentTypeError(f"back-end options are KEY=VALUE, got {text!r}")
+    return key.strip(), value.strip()
+
+
+def _no_cameras(backend: str, options: tuple[tuple[str, str], ...], robot: str = "") -> None:
+    """A ros2-control robot's cameras are the back end's in ``run`` only: its bridge process takes none (ValueError)."""
+    if backend != "ros2-control":
+        return
+    given = [key for key, _ in options if key in ("camera_source", "camera_timeout") or key.endswith((".topic", ".mount"))]
+    if given:
+        whose = f"robot {robot!r} (ros2-control)" if robot else "ros2-control"
+        raise ValueError(f"{whose}: option {given[0]}: the cameras of a ros2-control robot are taken in run only; launch's bridge process drives it without cameras")
+
+
+def cell_nodes(
+    app_file: Path, transport: str, speed: float, check: bool = True, backend: str | None = None, options: tuple[tuple[str, str], ...] = (),
+) -> list[NodeSpec]:
     """The cell of ``app_file``'s robot, bridge first and engine last (the order they start in);
-    ``check``: the engine dry-runs the application from the robot's measured joints before it starts."""
+    ``check``: the engine dry-runs the application from the robot's measured joints before it starts;
+    ``backend`` and ``options``: the bridge's back end and its options (``--robot``, ``--backend-option``),
+    checked here as ``run`` checks them (ValueError naming the option)."""
     app = load_application(app_file, full_catalog())
     robot = app.robot
     if isinstance(robot, CellRobotModel):  # a mixed cell: one bridge node per robot, each with its cell's options and base
+        if backend is not None or options:
+            raise ValueError("a cell of several robots names each robot's back end and options in its <robot> elements (backend=, <option name= value=/>), not --robot or --backend-option")
         if speed != 1.0:
             raise ValueError(f"--speed {speed:g}: a cell of several robots runs in real time (each robot's bridge keeps its own clock)")
-        specs = [_bridge_spec(m.backend, transport, speed, m.name, m.options, m.base, m.names.text()) for m in robot.members]
+        for member in robot.members:
+            _no_cameras(member.backend, member.options, member.name)
+        specs = [_bridge_spec(m.backend, transport, speed, m.name, m.options, m.base, m.names.text(), m.model.name) for m in robot.members]
     else:
-        specs = [_bridge_spec(robot.default_backend, transport, speed)]
+        chosen = backend or robot.default_backend
+        if backend is not None or options:  # refused here in run's one line, before any process starts
+            check_options(chosen, BackendOptions(robot=robot, extra=dict(options)), speed)
+            _no_cameras(chosen, options)
+        specs = [_bridge_spec(chosen, transport, speed, options=options, model=robot.name)]
     # A simulator at another speed than real time is the cell's clock (it publishes /clock): every
     # other node measures its waits, timeouts and the report in the robot's time, as with use_sim_time:=true.
     followers = () if speed == 1.0 else ("-p", "use_sim_time:=true")
@@ -114,10 +152,11 @@ def cell_nodes(app_file: Path, transport: str, speed: float, check: bool = True)
 
 def _bridge_spec(
     backend: str, transport: str, speed: float, robot: str = "", options: tuple[tuple[str, str], ...] = (), base: Pose | None = None,
-    names: str = "",
+    names: str = "", model: str = "",
 ) -> NodeSpec:
-    """The bridge node of ``backend``; for a robot of a mixed cell named ``<robot>_bridge``, with the cell's options
-    for it as parameters, its base pose and the cell's names of its groups and joints."""
+    """The bridge node of ``backend`` with ``options`` as its parameters; for a robot of a mixed cell named
+    ``<robot>_bridge``, with its base pose and the cell's names of its groups and joints.  ``model``: the robot
+    model, which the ros2-control bridge is told (the others drive one model each)."""
     module = backend.replace("-", "_")
     bridge = list(_common(transport, backend))
     if speed != 1.0:
@@ -136,8 +175,10 @@ def _bridge_spec(
             bridge += ["-p", "base_pose:=" + " ".join(repr(v) for v in (*base.position, *base.rpy()))]
         if names:
             bridge += ["-p", f"cell_names:={names}"]
-        for key, value in options:
-            bridge += ["-p", f"{key}:={value}"]
+    if backend == "ros2-control":
+        bridge += ["-p", f"robot:={model}"]
+    for key, value in options:
+        bridge += ["-p", f"{key}:={value}"]
     return NodeSpec(name, (*_python(f"cell_runner.bridge_nodes.{module}", "main"), *bridge))
 
 
@@ -283,7 +324,7 @@ def launch_settings(args: argparse.Namespace) -> LaunchSettings:
     """``launch``'s options."""
     return LaunchSettings(
         file=args.file, transport=args.transport, speed=args.speed, nodes=args.nodes, grace=args.grace, stop_timeout=args.stop_timeout,
-        check=not args.no_check,
+        check=not args.no_check, backend=args.robot, options=tuple(args.backend_option or ()),
     )
 
 
@@ -296,12 +337,12 @@ def cmd_launch(settings: LaunchSettings, out: IO[str], err: IO[str]) -> int:
         err.write("error: --speed and --stop-timeout must be > 0, --grace >= 0\n")
         return EXIT_USAGE
     try:
-        specs = select(cell_nodes(path, settings.transport, settings.speed, settings.check), settings.nodes)
+        specs = select(cell_nodes(path, settings.transport, settings.speed, settings.check, settings.backend, settings.options), settings.nodes)
     except ApplicationError as error:
         err.write(f"error: cannot launch {settings.file}:\n" + "\n".join(str(d) for d in error.diagnostics) + "\n")
         return EXIT_INVALID
-    except (ValueError, FileNotFoundError) as error:
-        err.write(f"error: {error}\n")
+    except (ValueError, KeyError, FileNotFoundError) as error:
+        err.write(f"error: {error.args[0] if isinstance(error, KeyError) and error.args else error}\n")
         return EXIT_USAGE
     return int(run_with_clock(lambda clock: launch(clock, specs, out, settings.grace, settings.stop_timeout), real_clock()))
 

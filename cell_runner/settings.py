@@ -112,6 +112,8 @@ class LaunchSettings:
     grace: float = 5.0  # s the engine gets to end its run by itself after another node died
     stop_timeout: float = 10.0  # s a node gets to stop on SIGTERM before SIGKILL
     check: bool = True  # the engine's dry run from the robot's measured joints (its parameter check)
+    backend: str | None = None  # --robot: the back end of the application robot's bridge (None: the robot's usual one)
+    options: tuple[tuple[str, str], ...] = ()  # --backend-option KEY=VALUE: the bridge's parameters of those names
 
 
 @dataclass(frozen=True)

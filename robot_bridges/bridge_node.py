@@ -110,6 +110,10 @@ class BridgeNode:
         self._state_task: asyncio.Task[None] | None = None
         self.errors: list[str] = []
         self.turnaround: Turnaround | None = None  # hold_turnarounds(): a paced simulator in its own process
+        #: joints another node of this graph publishes on joint_states under these very names -- a ros2-control
+        #: robot's driver -- left out of the bridge's: a copy would reach the back end (which reads the driver's)
+        #: as fresh samples and hide a driver that stopped
+        self.graph_joints: frozenset[str] = frozenset()
 
     # ---------------------------------------------------------------------------- lifecycle
     async def start(self) -> None:
@@ -288,7 +292,12 @@ class BridgeNode:
         """Publish joint_states and every TCP pose once."""
         stamp = self.node.now_stamp()
         names, positions = self.backend.joint_state()
-        self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(names), position=tuple(positions)))
+        if self.graph_joints:
+            kept = [(n, p) for n, p in zip(names, positions) if n not in self.graph_joints]
+            if kept:
+                self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(n for n, _ in kept), position=tuple(p for _, p in kept)))
+        else:
+            self._joint_pub.publish(JointState(header=Header(stamp=stamp), name=tuple(names), position=tuple(positions)))
         if self._robot_state is not None:
             self._robot_state.publish(names, positions, stamp)
         if self.trajectories is not None:

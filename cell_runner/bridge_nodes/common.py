@@ -36,7 +36,7 @@ from node_transport.msgs import ClockMessage, Time
 from node_transport.port import Node
 from node_transport.qos import CLOCK
 from node_transport.wire import CLOCK_TOPIC, bridge_node_name
-from robot_bridges.backend import BackendOptions, BridgeError
+from robot_bridges.backend import BackendOptions, BridgeError, RobotBackend
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.placed import PlacedBackend
 from robot_bridges.registry import create_backend
@@ -57,6 +57,9 @@ class BridgeSetup:
 
     options: BackendOptions
     speed: float = 1.0
+    #: the joints the robot's own driver publishes on /joint_states under the names the bridge would give them
+    #: (a ros2-control robot, whose driver shares the graph): the bridge leaves them out of its own joint states
+    driver_joints: Callable[[RobotBackend], frozenset[str]] | None = None
 
 
 DeclareBridge = Callable[[Node], BridgeSetup]
@@ -128,6 +131,8 @@ async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: 
     try:
         with startup_errors():
             bridge = BridgeNode(node, robot_backend)
+        if setup.driver_joints is not None:
+            bridge.graph_joints = setup.driver_joints(robot_backend)
     except StartupError:
         await robot_backend.close()
         raise
