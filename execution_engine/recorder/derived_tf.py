@@ -47,26 +47,43 @@ class DerivedTf:
     offered: tuple[QoS, ...]
     joint_states: str
     description: str
-    links: Any = None  # LinkTransforms, made from the first robot_description
+    #: description topic -> its URDF's LinkTransforms: ``robot_description``, and in a cell of several robots each
+    #: robot's ``<robot>/robot_description`` beside it (each bridge publishes its robot's, robot_state.py)
+    links: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def describes(self, topic: str) -> bool:
+        """Whether ``topic`` carries a URDF this recording works ``tf`` out of: ``robot_description`` or,
+        in the same namespace, a robot's ``<robot>/robot_description``."""
+        if topic == self.description:
+            return True
+        namespace = self.description[: -len("robot_description")]
+        return topic.startswith(namespace) and topic.endswith("/robot_description") and "/" not in topic[len(namespace):-len("/robot_description")]
 
     def follow(self, topic: str, msg: dict[str, Any]) -> dict[str, Any] | None:
         """After a recorded message: the ``tf`` message it implies, or None.
 
         A URDF pinocchio cannot read, or a joint state whose names and positions differ in
-        length, gives no ``tf`` -- the bridge could not have published one either."""
-        if topic == self.description:
+        length, gives no ``tf`` -- the bridge could not have published one either.  With several
+        robots' URDFs, a joint state gives the ``tf`` of the robots whose joints it names (each
+        bridge publishes its own robot's joint states, then its tf)."""
+        if self.describes(topic):
             from node_transport.link_transforms import LinkTransforms  # pinocchio is slow to load: only when asked
 
             try:
-                self.links = LinkTransforms(str(msg.get("data", "")))
+                self.links[topic] = LinkTransforms(str(msg.get("data", "")))
             except (ValueError, RuntimeError):
-                self.links = None
+                self.links.pop(topic, None)
             return None
-        if topic != self.joint_states or self.links is None:
+        if topic != self.joint_states or not self.links:
             return None
         stamp = msg["header"]["stamp"]
         try:
-            tf = self.links.moving(msg["name"], msg["position"], Time(int(stamp["sec"]), int(stamp["nanosec"])))
+            messages = [links.moving(msg["name"], msg["position"], Time(int(stamp["sec"]), int(stamp["nanosec"]))) for links in self.links.values()]
         except ValueError:
             return None
-        return message_fields(tf)
+        if len(messages) == 1:
+            return message_fields(messages[0])  # one robot: its message, as its bridge publishes it even when empty
+        moved = [m for m in messages if m.transforms]
+        if not moved:
+            return None
+        return message_fields(moved[0] if len(moved) == 1 else TFMessage(tuple(t for m in moved for t in m.transforms)))
