@@ -11,6 +11,7 @@ import pytest
 
 from app_functions.registry import full_catalog
 from cell_runner.cli import main
+from core_functions.cell_robots import cell_robot_model
 from core_functions.robots import NEXTAGE_OPEN
 from execution_engine.app_model import check_joint_poses, read_cell, validate_application
 
@@ -100,9 +101,18 @@ def test_the_documented_master_slave_operation_is_valid(example_tree: Path) -> N
 
 
 def test_every_documented_joint_pose_fits_the_nextage() -> None:
-    """Each <joint_pose> line shown in the guide is valid for the robot it is written for."""
-    text = (Path(__file__).resolve().parents[1] / "docs" / "application_xml.md").read_text()
-    poses = re.findall(r"<joint_pose [^>]*/>", text)
+    """Each <joint_pose> line shown in the guide is valid for the robot it is written for: the Nextage's groups'
+    here; a pose of a cell of several robots is a line of a shipped cell, valid for that cell's robots."""
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "docs" / "application_xml.md").read_text()
+    poses = [p for p in re.findall(r"<joint_pose [^>]*/>", text) if (m := re.search(r'group="(\w+)"', p)) is None or m[1] in NEXTAGE_OPEN.group_names]
+    elsewhere = [p for p in re.findall(r"<joint_pose [^>]*/>", text) if p not in poses]
+    for pose in elsewhere:
+        shipped = [c for c in (root / "apps_xml").rglob("cells/*.xml") if pose in c.read_text(encoding="utf-8")]
+        assert shipped, f"{pose} is in no shipped cell"
+        cell, diagnostics = read_cell(shipped[0])
+        assert cell is not None and diagnostics == [] and cell.robots
+        assert check_joint_poses(cell, cell_robot_model(cell.name, cell.robots)) == []
     assert poses
     with tempfile.TemporaryDirectory() as folder:
         cell_path = Path(folder) / "cell.xml"
