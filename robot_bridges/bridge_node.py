@@ -27,9 +27,9 @@ from typing import Any
 
 from core_functions.primitives import PrimitiveResult, describe
 from node_transport.carriage import TypedPublisher, subscribe
-from node_transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion
+from node_transport.msgs import Header, JointState, Point, Pose, PoseStamped, Quaternion, TFMessage
 from node_transport.bounded import declare_bounded
-from node_transport.port import Node
+from node_transport.port import Node, Publisher
 from node_transport.qos import COMMANDS, LATCHED, SENSOR
 from node_transport.qos import JOINT_STATES as JOINT_STATES_QOS
 from node_transport.wire import (
@@ -45,7 +45,7 @@ from node_transport.wire import (
 )
 from robot_bridges.backend import BridgeError, FaultKind, RobotBackend
 from robot_bridges.camera.ros_camera import attach_cameras
-from robot_bridges.robot_state import RobotStatePublisher
+from robot_bridges.robot_state import RobotStatePublisher, publish_mount
 from robot_bridges.trajectory_server import TrajectoryServers, declare_controllers
 from robot_bridges.turnaround import Turnaround
 
@@ -101,6 +101,7 @@ class BridgeNode:
         self._joint_pub = node.create_publisher(JointState, JOINT_STATES, JOINT_STATES_QOS)
         self._tcp_pubs = {g: node.create_publisher(PoseStamped, tcp_pose_topic(g), SENSOR) for g in backend.groups}
         self._robot_state = RobotStatePublisher.for_backend(node, backend)  # robot_description, tf: for RViz
+        self._mount: Publisher[TFMessage] | None = None
         for group in backend.groups:
             self._feedback[group] = TypedPublisher(node, BridgeFeedback, bridge_topic(group, "feedback"), COMMANDS)
         subscribe(node, CellSnapshot, ENGINE_CELL, self.backend.set_cell, lambda error: self._report(f"ignored cell model: {error}"), LATCHED)
@@ -125,6 +126,8 @@ class BridgeNode:
         out), and a bridge that fails to start is never matched at all.
         """
         await self.backend.start()
+        if self._robot_state is None:  # a placed robot its own driver draws: its base on tf_static (its root known once started)
+            self._mount = publish_mount(self.node, self.backend)
         self.trajectories = TrajectoryServers(self.node, self.backend, self._controllers, self.primitive_running, self.state_period)
         for group in self.backend.groups:
             subscribe(

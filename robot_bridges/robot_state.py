@@ -20,8 +20,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from core_functions.geometry import Pose
 from node_transport.msgs import String, TFMessage, Time
-from node_transport.port import Node
+from node_transport.port import Node, Publisher
+from node_transport.transforms import transform_stamped
 from node_transport.qos import ROBOT_DESCRIPTION, TF, TF_STATIC
 from node_transport.wire import ROBOT_DESCRIPTION_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 from robot_bridges.placed import PlacedBackend
@@ -66,3 +68,23 @@ class RobotStatePublisher:
         if self._tf.get_subscription_count() == 0:
             return  # nobody draws the robot (a recording works tf out of joint_states itself): skip the kinematics
         self._tf.publish(self.links.moving(names, positions, stamp))
+
+
+def publish_mount(node: Node, backend: RobotBackend) -> Publisher[TFMessage] | None:
+    """For a placed robot whose URDF and links its own driver publishes (a ros2-control robot: its
+    robot_state_publisher, under the driver's names): the cell's world -> the driver's root link at the
+    robot's base, once on ``tf_static``, so the driver's drawing stands where the cell places the robot.
+    None (nothing published) for another back end, or a driver's URDF rooted at the world frame itself
+    (its links then hang from the cell's origin: the bridge says so once)."""
+    if not isinstance(backend, PlacedBackend) or backend.inner.robot_description() is not None:
+        return None
+    root = backend.inner.world_frame
+    if root == backend.world_frame:
+        if backend.base != Pose():
+            node.logger.warning("%s: the robot's links are rooted at %r, the cell's world frame itself: tf shows the robot at the cell's "
+                                "origin, not at its base (a driver's URDF rooted at its own base link stands where the cell places it)",
+                                node.fully_qualified_name, root)
+        return None
+    publisher = node.create_publisher(TFMessage, TF_STATIC_TOPIC, TF_STATIC)
+    publisher.publish(TFMessage((transform_stamped(backend.world_frame, root, backend.base, node.now_stamp()),)))
+    return publisher

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cell_picture import Picture, check, description_topic
+from cell_picture import TF_STATIC_LISTENER, Picture, check, description_topic
 from fjt_client import RSI, make_backend
 
 from app_functions.registry import full_catalog
@@ -23,11 +23,14 @@ from cell_runner.deployment import bridge_parts
 from core_functions.cell_robots import CellRobotModel
 from core_functions.geometry import Pose
 from core_functions.primitives import MotionResult, MoveJoints
+from core_functions.robots import KUKA_KR
 from core_functions.urdf_tree import UrdfTree
 from execution_engine.app_model import load_application
 from node_transport.clock import Clock
 from node_transport.local import LocalTransport
+from node_transport.msgs import String, TFMessage
 from node_transport.port import poll_until
+from node_transport.qos import ROBOT_DESCRIPTION
 from node_transport.transforms import compose_to_root
 from robot_bridges.backend import BackendOptions
 from robot_bridges.bridge_node import BridgeNode
@@ -122,3 +125,33 @@ def test_a_robot_whose_root_is_the_world_and_has_no_prefix_stands_in_the_cells_w
     assert flange["own"][0] == flange["placed"][0] == "world"
     expected = base.compose(flange["own"][1])
     assert expected.distance_to(flange["placed"][1]) < 1e-9 and expected.angle_to(flange["placed"][1]) < 1e-9
+
+
+def test_a_robot_its_own_driver_draws_gets_its_base_on_tf_static_and_no_urdf_of_the_bridges(run_sim: Any) -> None:
+    """A ros2-control robot placed in a cell: its driver's robot_state_publisher publishes its URDF and links (under
+    the driver's names); its bridge publishes no URDF of its own but world -> the driver's root link at the base."""
+    base = Pose.from_xyz_rpy(0.35, -0.9, -0.1, 0.0, 0.0, 1.5707963)
+    urdf = ROOT / "robot_bridges" / "kuka_rsi" / "urdf" / "kuka_kr6_r900.urdf"
+
+    async def main(clock: Clock) -> tuple[list[TFMessage], list[String]]:
+        inner = await create_backend("ros2-control", clock, BackendOptions(robot=KUKA_KR, extra={"transport": "model", "urdf": str(urdf)}))
+        bus = LocalTransport(clock)
+        static: list[TFMessage] = []
+        described: list[String] = []
+        viewer = bus.create_node("rviz")
+        viewer.create_subscription(TFMessage, "/tf_static", static.append, TF_STATIC_LISTENER)
+        viewer.create_subscription(String, "/feeder/robot_description", described.append, ROBOT_DESCRIPTION)
+        bridge = BridgeNode(bus.create_node("feeder_bridge"), PlacedBackend(inner, base, "feeder"))
+        await bridge.start()
+        await clock.sleep(0.2)
+        await bridge.close()
+        await inner.close()
+        return static, described
+
+    static, described = run_sim(main)
+    assert described == []
+    mounts = [t for m in static for t in m.transforms]
+    assert [(t.header.frame_id, t.child_frame_id) for t in mounts] == [("world", "base")]  # the KUKA URDF's root
+    v, q = mounts[0].transform.translation, mounts[0].transform.rotation
+    placed = Pose(v.x, v.y, v.z, q.x, q.y, q.z, q.w)
+    assert placed.distance_to(base) < 1e-9 and placed.angle_to(base) < 1e-7
