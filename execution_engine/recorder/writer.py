@@ -188,7 +188,10 @@ class McapSink:
                 self.stats.error = self.stats.error or f"the writer did not finish within {timeout:g} s"
                 self._process.kill()
             else:
-                self._stream.close()
+                try:
+                    self._stream.close()  # flushes what the reader thread wrote last: a full disk may say so only here
+                except OSError as error:
+                    self._fail(error.strerror or str(error))
             self._process.wait(max(0.1, deadline - time.monotonic()))
         return self.stats
 
