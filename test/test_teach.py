@@ -24,8 +24,10 @@ from core_functions.geometry import Pose  # noqa: E402
 from execution_engine.app_model import read_application  # noqa: E402
 from execution_engine.app_model.cell import load_cell, read_cell  # noqa: E402
 from operator_station.cli import build_station  # noqa: E402
+from operator_station.jog import JogSettings  # noqa: E402
 from operator_station.server import Station, create_app  # noqa: E402
 from operator_station.teach import TeachRefused, plan_teach  # noqa: E402
+from test_audit_jog import LEASE  # noqa: E402
 from test_studio_server import BASE, CATALOG, ROOT, station_args, wait_until  # noqa: E402
 
 JOG = "ws://127.0.0.1:8080/ws/jog"
@@ -156,6 +158,7 @@ def test_jogging_is_refused_while_a_run_is_active_and_during_the_safety_stop(fol
 
 
 def refused_while_running(station: Station, client: TestClient, current: dict[str, Any]) -> None:
+    station.jog.settings = JogSettings(lease=LEASE)  # a loaded machine's stall between press and release is no lapse
     assert client.post("/api/jog/open", json=current).json()["ok"]
     press = {"type": "start", "group": "left_arm", "mode": "joint", "axis": "LARM_JOINT0", "direction": 1}
     assert client.post("/api/run", json=current).json()["ok"]
