@@ -10,12 +10,16 @@ The same goes for names: a cell may name a robot's groups and joints for itself
 (:class:`core_functions.cell_robots.CellNames`: a Viper's ``arm`` as ``inspector``, its ``joint_1`` as
 ``viper_joint_1``), so that two robots whose models share a group or joint name stand side by side.
 The back end keeps its own names; everything that leaves this wrapper (its groups, hence the bridge's
-per-group topics and FollowJointTrajectory actions, /joint_states, results, limits) carries the cell's,
-and every group or joint name coming in is turned back into the robot's own.
+per-group topics and FollowJointTrajectory actions, /joint_states, results, limits, and the messages of its
+faults) carries the cell's, and every group or joint name coming in is turned back into the robot's own.  A
+fault's message is renamed word by word (:meth:`PlacedBackend.cell_text`): an operator reading "inspector:
+viper_joint_2 ... outside its limits" finds the group and joint the application names, never the model's ``arm``.
 """
 from __future__ import annotations
 
 import re
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from dataclasses import replace
 from typing import Any
 
@@ -37,7 +41,7 @@ from core_functions.primitives import (
     VisionResult,
 )
 from node_transport.wire import CellSnapshot
-from robot_bridges.backend import JointLimits, RobotBackend
+from robot_bridges.backend import BridgeError, JointLimits, RobotBackend
 from robot_bridges.placed_urdf import placed_urdf
 
 
@@ -50,6 +54,7 @@ class PlacedBackend(RobotBackend):
         self.to_base = base.inverse()
         self.names = names
         self._own_group = {names.group(g): g for g in inner.groups}
+        self._renaming: tuple[re.Pattern[str], dict[str, str]] | None = None
         self.name = f"{robot_name}: {inner.name}"
         self.robot_name = robot_name
         #: where its bridge publishes its URDF: one topic per robot of the cell (robot_state_publisher's in a namespace
@@ -82,6 +87,47 @@ class PlacedBackend(RobotBackend):
     def cell_joints(self, joints: tuple[str, ...]) -> tuple[str, ...]:
         return tuple(self.names.joint(j) for j in joints)
 
+    def cell_text(self, text: str) -> str:
+        """``text`` (a back end's message) with the robot's own group and joint names, as whole words, turned into
+        the cell's: ``arm: joint_2 ... outside its limits`` -> ``inspector: viper_joint_2 ...``.  A name that is part
+        of a longer word (``arm_controller``, an already prefixed ``viper_joint_2``) stays as it is, so nothing is
+        renamed twice."""
+        if self.names.identity or not text:
+            return text
+        renaming = self._renaming or self._renaming_table()
+        if renaming is None:
+            return text
+        pattern, table = renaming
+        return pattern.sub(lambda match: table[match.group(0)], text)
+
+    def _renaming_table(self) -> tuple[re.Pattern[str], dict[str, str]] | None:
+        """The robot's own names -> the cell's, as one pattern of whole words; kept once the joints are known
+        (from the limits a back end has from its model and the joints it reports: a ros2-control robot's once its
+        driver's /joint_states came; until then its group names alone)."""
+        limits = (self.inner.joint_limits(g) for g in self.inner.groups)
+        joints = [j for lim in limits if lim is not None for j in lim.joint_names] + list(self.inner.joint_state()[0])
+        table = {j: self.names.joint(j) for j in joints}
+        table.update({g: self.names.group(g) for g in self.inner.groups})  # a group named like a joint: the group's name
+        table = {own: named for own, named in table.items() if own and own != named}
+        if not table:
+            return None
+        words = "|".join(re.escape(own) for own in sorted(table, key=len, reverse=True))
+        renaming = (re.compile(rf"(?<!\w)(?:{words})(?!\w)"), table)
+        if joints:
+            self._renaming = renaming
+        return renaming
+
+    @asynccontextmanager
+    async def cell_faults(self) -> AsyncIterator[None]:
+        """A :class:`BridgeError` out of the back end raised again with its message under the cell's names."""
+        try:
+            yield
+        except BridgeError as error:
+            renamed = self.cell_text(error.detail)
+            if renamed == error.detail:
+                raise
+            raise BridgeError(error.kind, renamed) from error
+
     def renamed_in(self, primitive: Primitive) -> Primitive:
         """``primitive`` with the robot's own group and joint names."""
         if self.names.identity:
@@ -101,7 +147,8 @@ class PlacedBackend(RobotBackend):
         return result
 
     async def start(self) -> None:
-        await self.inner.start()
+        async with self.cell_faults():
+            await self.inner.start()
         self.clock = self.inner.clock
 
     async def close(self) -> None:
@@ -148,20 +195,25 @@ class PlacedBackend(RobotBackend):
         return result
 
     async def execute(self, group: str, primitive: Primitive) -> PrimitiveResult:
-        result = await self.inner.execute(self.own_group(group), self.renamed_in(self.inward(primitive)))
+        async with self.cell_faults():
+            result = await self.inner.execute(self.own_group(group), self.renamed_in(self.inward(primitive)))
         return self.renamed_out(self.outward(result))
 
     async def pause(self, group: str) -> None:
-        await self.inner.pause(self.own_group(group))
+        async with self.cell_faults():
+            await self.inner.pause(self.own_group(group))
 
     async def resume(self, group: str) -> None:
-        await self.inner.resume(self.own_group(group))
+        async with self.cell_faults():
+            await self.inner.resume(self.own_group(group))
 
     async def stop(self, group: str) -> None:
-        await self.inner.stop(self.own_group(group))
+        async with self.cell_faults():
+            await self.inner.stop(self.own_group(group))
 
     async def measure(self, group: str) -> MotionResult:
-        result = await self.inner.measure(self.own_group(group))
+        async with self.cell_faults():
+            result = await self.inner.measure(self.own_group(group))
         return replace(result, tcp=self._out(result.tcp), joint_names=self.cell_joints(result.joint_names))
 
     def joint_state(self) -> tuple[tuple[str, ...], tuple[float, ...]]:
