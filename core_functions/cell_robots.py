@@ -47,6 +47,13 @@ class CellNames:
         """The cell's name of the robot's joint ``own`` (what /joint_states and FollowJointTrajectory carry)."""
         return self.prefix + own
 
+    def camera(self, own: str) -> str:
+        """The cell's name of the robot's camera ``own``: prefixed as a joint is (a camera belongs to the robot, as
+        its joints do, and a group named outright keeps its camera's name unique only with the prefix), so two
+        robots' ``tool_camera`` are ``kuka_tool_camera`` and ``viper_tool_camera`` in the cell, its vision
+        calls and its image topics."""
+        return self.prefix + own if own else own
+
     def text(self) -> str:
         """One parameter's text (``prefix=viper_;arm=loader``), read back by :meth:`parse`: how ``launch``
         tells a robot's bridge and machines the cell's names."""
@@ -71,16 +78,18 @@ class CellNames:
 
 
 def named_model(model: RobotModel, names: CellNames) -> RobotModel:
-    """``model`` under the cell's names: its groups, joints, poses and joint order renamed, its name (what
+    """``model`` under the cell's names: its groups, joints, cameras, poses and joint order renamed, its name (what
     finds its URDF, collision model and back end) kept.  ``model`` itself when nothing is renamed."""
     if names.identity:
         return model
     groups = tuple(
-        replace(group, name=names.group(group.name), joints=tuple(replace(j, name=names.joint(j.name)) for j in group.joints))
+        replace(group, name=names.group(group.name), joints=tuple(replace(j, name=names.joint(j.name)) for j in group.joints),
+                camera=names.camera(group.camera))
         for group in model.groups
     )
     poses = {pose: {names.joint(j): v for j, v in values.items()} for pose, values in model.poses.items()}
-    return replace(model, groups=groups, poses=poses, joint_order=tuple(names.joint(j) for j in model.joint_order))
+    return replace(model, groups=groups, poses=poses, joint_order=tuple(names.joint(j) for j in model.joint_order),
+                   camera_names=tuple(names.camera(c) for c in model.camera_names))
 
 
 def cell_group_names(model_name: str, names: CellNames) -> tuple[str, ...]:
@@ -105,7 +114,7 @@ class CellRobot:
 
     @cached_property
     def cell_model(self) -> RobotModel:
-        """The robot as the application sees it: its groups and joints under the cell's names."""
+        """The robot as the application sees it: its groups, joints and cameras under the cell's names."""
         return named_model(self.model, self.names)
 
     @property
@@ -149,7 +158,7 @@ def cell_robot_model(cell_name: str, members: tuple[CellRobot, ...]) -> CellRobo
         poses=poses,
         default_backend=CELL_BACKEND,
         joint_order=tuple(j for m in members for j in m.cell_model.joint_names),
-        camera_names=tuple(dict.fromkeys(c for m in members for c in m.model.cameras)),
+        camera_names=tuple(dict.fromkeys(c for m in members for c in m.cell_model.cameras)),
         workspace="World frame: the cell's; each robot's base is placed in it by its <robot> xyz and rpy.",
         members=members,
     )

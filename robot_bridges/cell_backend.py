@@ -191,7 +191,7 @@ async def create(clock: Clock, options: BackendOptions) -> CellBackend:
             except (KeyError, ValueError) as error:  # one line naming the robot of the cell whose options they are
                 raise ValueError(f"robot {member.name!r} ({member.backend}): {error.args[0] if error.args else error}") from None
             # placed even at the world's origin and under its own names: in a cell every robot's URDF and tf hang from the world
-            parts.append(Part(member, PlacedBackend(inner, member.base, member.name, member.names)))
+            parts.append(Part(member, PlacedBackend(inner, member.base, member.name, member.names, member.model.cameras)))
     except BaseException:
         for part in reversed(parts):
             await part.backend.close()

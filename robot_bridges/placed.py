@@ -10,8 +10,8 @@ The same goes for names: a cell may name a robot's groups and joints for itself
 (:class:`core_functions.cell_robots.CellNames`: a Viper's ``arm`` as ``inspector``, its ``joint_1`` as
 ``viper_joint_1``), so that two robots whose models share a group or joint name stand side by side.
 The back end keeps its own names; everything that leaves this wrapper (its groups, hence the bridge's
-per-group topics and FollowJointTrajectory actions, /joint_states, results, limits, and the messages of its
-faults) carries the cell's, and every group or joint name coming in is turned back into the robot's own.  A
+per-group topics and FollowJointTrajectory actions, /joint_states, results, limits, its cameras' names and
+image topics, and the messages of its faults) carries the cell's, and every group or joint name coming in is turned back into the robot's own.  A
 fault's message is renamed word by word (:meth:`PlacedBackend.cell_text`): an operator reading "inspector:
 viper_joint_2 ... outside its limits" finds the group and joint the application names, never the model's ``arm``.
 """
@@ -48,8 +48,11 @@ from robot_bridges.placed_urdf import placed_urdf
 class PlacedBackend(RobotBackend):
     """``inner`` with its base at ``base`` in the cell's world frame, its groups and joints named by ``names``."""
 
-    def __init__(self, inner: RobotBackend, base: Pose, robot_name: str, names: CellNames = CellNames()) -> None:
+    def __init__(self, inner: RobotBackend, base: Pose, robot_name: str, names: CellNames = CellNames(),
+                 cameras: tuple[str, ...] = ()) -> None:
         self.inner = inner
+        #: the robot model's cameras (a stereo pair's name among them), which its faults may name
+        self.model_cameras = cameras
         self.base = base
         self.to_base = base.inverse()
         self.names = names
@@ -84,6 +87,20 @@ class PlacedBackend(RobotBackend):
         prefix = self.names.prefix
         return tuple(j[len(prefix):] if prefix and j.startswith(prefix) else j for j in joints)
 
+    def own_camera(self, camera: str) -> str:
+        """The robot's name of the cell's camera ``camera`` (the prefix taken off, as of a joint)."""
+        prefix = self.names.prefix
+        return camera[len(prefix):] if prefix and camera.startswith(prefix) else camera
+
+    def cell_camera(self, own: str) -> str:
+        """The cell's name of the robot's camera ``own``: what the bridge names its image topics after."""
+        return self.names.camera(own)
+
+    def own_cameras(self) -> tuple[str, ...]:
+        """The cameras the robot has by its own names: its model's and those of its back end's camera set."""
+        specs = getattr(getattr(self.inner, "cameras", None), "specs", None)
+        return tuple(dict.fromkeys(self.model_cameras + (tuple(specs) if isinstance(specs, dict) else ())))
+
     def cell_joints(self, joints: tuple[str, ...]) -> tuple[str, ...]:
         return tuple(self.names.joint(j) for j in joints)
 
@@ -101,12 +118,12 @@ class PlacedBackend(RobotBackend):
         return pattern.sub(lambda match: table[match.group(0)], text)
 
     def _renaming_table(self) -> tuple[re.Pattern[str], dict[str, str]] | None:
-        """The robot's own names -> the cell's, as one pattern of whole words; kept once the joints are known
+        """The robot's own names (groups, joints, cameras) -> the cell's, as one pattern of whole words; kept once the joints are known
         (from the limits a back end has from its model and the joints it reports: a ros2-control robot's once its
         driver's /joint_states came; until then its group names alone)."""
         limits = (self.inner.joint_limits(g) for g in self.inner.groups)
         joints = [j for lim in limits if lim is not None for j in lim.joint_names] + list(self.inner.joint_state()[0])
-        table = {j: self.names.joint(j) for j in joints}
+        table = {j: self.names.joint(j) for j in joints} | {c: self.names.camera(c) for c in self.own_cameras()}
         table.update({g: self.names.group(g) for g in self.inner.groups})  # a group named like a joint: the group's name
         table = {own: named for own, named in table.items() if own and own != named}
         if not table:
@@ -136,6 +153,8 @@ class PlacedBackend(RobotBackend):
             return replace(primitive, joint_names=self.own_joints(primitive.joint_names))
         if isinstance(primitive, MasterSlaveMove):
             return replace(primitive, master=self.own_group(primitive.master), slave=self.own_group(primitive.slave))
+        if isinstance(primitive, Vision) and primitive.camera:
+            return replace(primitive, camera=self.own_camera(primitive.camera))
         return primitive
 
     def renamed_out(self, result: PrimitiveResult) -> PrimitiveResult:
@@ -144,6 +163,8 @@ class PlacedBackend(RobotBackend):
             return result
         if isinstance(result, (MotionResult, TrajectoryResult)) and result.joint_names:
             return replace(result, joint_names=self.cell_joints(result.joint_names))
+        if isinstance(result, VisionResult) and result.report is not None and result.report.camera:
+            return replace(result, report=replace(result.report, camera=self.names.camera(result.report.camera)))
         return result
 
     async def start(self) -> None:

@@ -109,8 +109,10 @@ def from_messages(image: Image, info: CameraInfo) -> Frame:
 class ImagePublisher:
     """The capture hook that publishes every image taken, with its camera_info."""
 
-    def __init__(self, node: Node, cameras: Iterable[str] | Mapping[str, str]) -> None:
+    def __init__(self, node: Node, cameras: Iterable[str] | Mapping[str, str], named: Mapping[str, str] | None = None) -> None:
         topics = dict(cameras) if isinstance(cameras, Mapping) else {c: c for c in cameras}  # camera -> its topic prefix
+        #: camera -> the name its images' frame_id is made of (a cell's robot: the cell's name of the camera)
+        self._named = dict(named or {})
         self._pubs: dict[str, tuple[Publisher[Image], Publisher[CameraInfo]]] = {
             c: (node.create_publisher(Image, image_topic(t), SENSOR), node.create_publisher(CameraInfo, info_topic(t), SENSOR)) for c, t in topics.items()
         }
@@ -119,7 +121,7 @@ class ImagePublisher:
         pubs = self._pubs.get(spec.name)
         if pubs is None:
             return
-        image, info = to_messages(spec.name, frame)
+        image, info = to_messages(self._named.get(spec.name, spec.name), frame)
         pubs[1].publish(info)
         pubs[0].publish(image)
 
@@ -196,12 +198,15 @@ def attach_cameras(node: Node, backend: object) -> RosCamera | None:
         if source or publish:
             raise ValueError(f"{node.fully_qualified_name}: this back end has no cameras; leave publish_images false and camera_source ''")
         return None
-    names = list(cameras.specs)
+    # a robot of a cell of several names its cameras for the cell (robot_bridges.placed: viper_tool_camera), so two
+    # robots' tool_camera publish and subscribe apart; a robot of its own keeps the cameras' own names
+    cell_camera = getattr(backend, "cell_camera", None)
+    names = {c: cell_camera(c) if callable(cell_camera) else c for c in cameras.specs}
     ros = None
     if source == "ros":
         ros = RosCamera(node, names, timeout)
         cameras.use_source(ros)
     if publish:
-        cameras.on_capture = ImagePublisher(node, names)
+        cameras.on_capture = ImagePublisher(node, names, names)
     return ros
 
