@@ -190,7 +190,7 @@ def _engine_status_msg(s: EngineStatus, clock: Clock) -> Any:
         header=_header(clock, s.t), app=s.app, state=s.state, operation_index=s.operation_index,
         operation_count=s.operation_count, operation_id=_text(s.operation_id),
         groups=tuple(
-            GroupProgressMsg(group=g, state=p.state, operation=_text(p.operation), function=_text(p.function))
+            GroupProgressMsg(group=g, state=p.state, operation=_text(p.operation), function=_text(p.function), position=p.position)
             for g, p in s.groups.items()
         ),
         message=s.message, speed_override=float(s.speed_override),
@@ -403,7 +403,7 @@ def _structure_raw(m: Any, clock: Epoch) -> dict[str, Any]:
 def _engine_status_raw(m: Any, clock: Epoch) -> dict[str, Any]:
     groups = _nested(_items(m, "groups"), "groups", lambda g: {
         "group": _str(g, "group"), "state": _str(g, "state"),
-        "operation": _opt(_str(g, "operation")), "function": _opt(_str(g, "function")),
+        "operation": _opt(_str(g, "operation")), "function": _opt(_str(g, "function")), "position": _position(g),
     })
     by_group: dict[str, Any] = {}
     for i, g in enumerate(groups):
@@ -416,6 +416,14 @@ def _engine_status_raw(m: Any, clock: Epoch) -> dict[str, Any]:
         "operation_id": _opt(_str(m, "operation_id")), "groups": by_group, "message": _str(m, "message"),
         "speed_override": _override(m),
     }
+
+
+def _position(g: Any) -> str:
+    """``in:N`` / ``before:N`` / ``finished:N`` or "" (also from an interface package built before the field)."""
+    kind, colon, number = (value := "" if getattr(g, "position", None) is None else _str(g, "position")).partition(":")
+    if value and not (colon and kind in ("in", "before", "finished") and number.isdecimal() and number.isascii() and len(number) <= 9):
+        raise _Bad(f"expected in:N, before:N, finished:N or nothing, got {value[:40]!r}", "position")
+    return value
 
 
 def _override(m: Any) -> float:

@@ -175,6 +175,10 @@ class GroupProgress:
     state: str
     operation: str | None = None
     function: str | None = None
+    #: sync="flags": where the group stands in its own calls, as the swap event's answer says it --
+    #: ``in:N`` (inside operation N, counted from 1), ``before:N`` (its next call is there), ``finished:N`` (N the count);
+    #: "" in lock-step, where the engine's operation count is every group's.
+    position: str = ""
 
 
 @dataclass(frozen=True)

@@ -64,7 +64,7 @@ def routes(station: Any) -> list[BaseRoute]:
         if not answer.ok:
             return _refused(request, answer.message, shown, path, before)
         assert answer.swap is not None
-        operations = operations_json(app)
+        operations = operations_json(app, station.catalog)
         session.feed.update(operations=operations)  # pages that connect from now on list the run's operations as they are
         record(request, "edit paused run", ok=True, answer=answer.message, before=hex_digest(answer.swap.old_digest), after=hex_digest(answer.swap.new_digest),
                path=station.folders.shown(path), from_operation=answer.swap.frontier + 1)

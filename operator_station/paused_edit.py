@@ -21,9 +21,12 @@ from typing import Any
 from cell_runner.dry_run.remainder import remainder_check
 from cell_runner.dry_run.simulators import DryRunSetup
 from cell_runner.dry_run.start import backend_measure, backend_source
+from core_functions.catalog import Catalog
 from execution_engine.app_model import Application, Diagnostic
+from execution_engine.app_model.model import Operation
 from execution_engine.app_model.document import AppDocument, serialize
 from execution_engine.engine.engine import ExecutionEngine
+from execution_engine.engine.remainder_groups import bare_wait
 from execution_engine.engine.remainder_swap import PresentState, RemainderCheck, SwapAnswer, swap_remainder
 from node_transport.clock import Clock
 from operator_station.blocks import BlockDocument
@@ -74,6 +77,17 @@ def placer(document: AppDocument | BlockDocument, path: Path) -> Callable[[list[
     return lambda diagnostics: place(diagnostics, placements, display)
 
 
-def operations_json(app: Application) -> list[dict[str, Any]]:
-    """The run's operations as the page's snapshot lists them (id, name, calls, iteration)."""
-    return [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin} for op in app.operations]
+def operations_json(app: Application, catalog: Catalog) -> list[dict[str, Any]]:
+    """The run's operations as the page's snapshot lists them (id, name, calls, iteration, line, breakpoint); with
+    ``sync="flags"`` also ``steps``, the groups whose call there is one of their own steps (not a wait of no time they
+    sit out): with each group's ``position`` in the engine's status, which operations some group has started --
+    the builder's marks of a paused run (paused_edit.js), the same as the engine's refusals count them."""
+    def row(op: Operation) -> dict[str, Any]:
+        out: dict[str, Any] = {"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin, "line": op.line}
+        if op.breakpoint:
+            out["break"] = True
+        if app.sync == "flags":
+            out["steps"] = [g for g, c in op.calls.items() if not c.implicit and not bare_wait(c, catalog, app)]
+        return out
+
+    return [row(op) for op in app.operations]

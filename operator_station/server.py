@@ -53,6 +53,7 @@ from operator_station.audit import AuditLog, digest, file_digest, record
 from operator_station.feed import Feed
 from operator_station.folders import Folders
 from operator_station.guard import WHO, BodyTooLarge, Guard, page
+from operator_station.paused_edit import operations_json
 from operator_station.attach import AttachedSession
 from operator_station.blocks import BlockDocument, calls_inside
 from operator_station.roles import requires, secure
@@ -265,8 +266,7 @@ def create_app(station: Station) -> Starlette:
         if app is None:
             record(request, "run start", ok=False, answer="not run: the application has errors", path=_shown(station, path), application=digest(text))
             return FastJSON({"ok": False, "error": "not run: the application has errors", "messages": [m.to_json() for m in messages]})
-        operations = [{"id": op.id, "name": op.name, "calls": {g: c.function for g, c in op.calls.items()}, "iteration": op.origin, "line": op.line,
-                       **({"break": True} if op.breakpoint else {})} for op in app.operations]
+        operations = operations_json(app, station.catalog)
         await station.jog.release("a run starts")  # the run drives the robot: the jog's back end lets go of it first
         ok, answer = station.session.start(app, operations)
         entry = record(request, "run start", ok=ok, answer=answer, path=_shown(station, path), application=digest(text))

@@ -368,7 +368,7 @@ def _status_json(status: EngineStatus) -> dict[str, Any]:
     return {
         "app": status.app, "state": status.state, "operation_index": status.operation_index, "operation_count": status.operation_count,
         "t": status.t, "operation_id": status.operation_id, "message": status.message, "speed_override": status.speed_override,
-        "groups": {g: {"state": p.state, "operation": p.operation, "function": p.function} for g, p in status.groups.items()},
+        "groups": {g: {"state": p.state, "operation": p.operation, "function": p.function, "position": p.position} for g, p in status.groups.items()},
     }
 
 

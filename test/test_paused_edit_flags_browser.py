@@ -40,6 +40,7 @@ def test_a_paused_flags_run_refuses_a_colliding_edit_at_its_cell_and_swaps_a_saf
         engine = station.session.edit_target.engine  # type: ignore[union-attr]
         old = engine.app
         until(driver, lambda d: lock(d, 0) == "done" and lock(d, 2) is None)  # reach has run; closer, held before, is open
+        until(driver, lambda d: lock(d, 1) == "running" and lock(d, 3) is None)  # the right arm is in right_wait (each group's position)
 
         until(driver, lambda d: cell(d, 2, "left_arm").click() or True)  # the left hand sent to where the right one waits
         type_into(driver, "param-0", RIGHT_OUT)

@@ -5,6 +5,7 @@ is swapped with each group where it stands, audited, and the run resumed to its 
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -26,17 +27,28 @@ def document_of(client: Any, folder: Path, name: str, text: str) -> dict[str, An
     return copy.deepcopy(opened["document"])
 
 
+def station_on(tmp_path: Path, name: str, text: str) -> tuple[Any, Any]:
+    """A station opened on ``name`` (written with ``text``) and its HTTP client."""
+    (tmp_path / name).write_text(text)
+    station = build_station(station_args(file=name, trace=str(tmp_path / "run.jsonl")), CATALOG, tmp_path)
+    return station, client_for(station)
+
+
+def held(client: Any, station: Any, name: str, document: dict[str, Any]) -> Callable[[], dict[str, Any]]:
+    """``document`` run from the page until it is paused with the right arm waiting for the left's flag; the status."""
+    status = lambda: station.feed.snapshot.status or {}  # noqa: E731
+    assert client.post("/api/run", json={"path": name, "document": document}).json()["ok"]
+    assert wait_until(lambda: status().get("state") == "paused" and (status().get("groups") or {}).get("right_arm", {}).get("state") == "waiting for flag left_done", 120.0), status()
+    return status
+
+
 def test_a_paused_flags_run_refuses_a_colliding_edit_at_its_cell_and_swaps_a_safe_one_that_then_runs(tmp_path: Path) -> None:
-    (tmp_path / "edit_flags.xml").write_text(OLD)
-    station = build_station(station_args(file="edit_flags.xml", trace=str(tmp_path / "run.jsonl")), CATALOG, tmp_path)
-    client = client_for(station)
+    station, client = station_on(tmp_path, "edit_flags.xml", OLD)
     colliding = document_of(client, tmp_path, "collide.xml", COLLIDES)
     safe = document_of(client, tmp_path, "safe.xml", SAFE)
     run = document_of(client, tmp_path, "edit_flags.xml", OLD)
-    status = lambda: station.feed.snapshot.status or {}  # noqa: E731
     try:
-        assert client.post("/api/run", json={"path": "edit_flags.xml", "document": run}).json()["ok"]
-        assert wait_until(lambda: status().get("state") == "paused" and (status().get("groups") or {}).get("right_arm", {}).get("state") == "waiting for flag left_done", 120.0), status()
+        status = held(client, station, "edit_flags.xml", run)
         engine = station.session.edit_target.engine  # type: ignore[union-attr]
         old = engine.app
 

@@ -82,6 +82,8 @@ SAMPLES: list[Any] = [
         truth={"part": Pose(0.351, 0.0, 0.1, 0.0, 0.0, 0.6, 0.8)},
         joint_pose_groups={"look": "torso_head"},
     ),
+    EngineStatus("ahead", "paused", 4, 6, 3.0, "right_wait", {"left_arm": GroupProgress("Ready", "reach", "move_to", "before:2"),
+                 "right_arm": GroupProgress("waiting for flag left_done", "right_wait", "wait_flag", "in:4"), "torso_head": GroupProgress("Ready", position="finished:7")}),
     LocatedFrames("left_arm", "rivet_cell", {"drill_1": Pose(0.3607, 0.02, 0.1), "part": Pose(0.35, 0.0, 0.1)}, 6.5),
     LocatedFrames("right_arm", "rivet_cell", t=7.0),
 ]
@@ -166,6 +168,8 @@ def _status(**changes: Any) -> Any:
         (typed.EngineStatusMsg(state="running", groups=(typed.GroupProgressMsg(group="a", state="Ready"),) * 2), EngineStatus,
          "groups[1].group", "listed twice"),
         (typed.EngineStatusMsg(state="dancing"), EngineStatus, "state", "'dancing' is not one of"),
+        (typed.EngineStatusMsg(state="paused", groups=(typed.GroupProgressMsg(group="a", state="Ready", position="beside:3"),)), EngineStatus,
+         "groups[0].position", "expected in:N, before:N, finished:N or nothing, got 'beside:3'"),
         (typed.EngineEventMsg(event="state", header=Header(stamp="noon")), EngineEvent, "header.stamp", "builtin_interfaces/Time"),
         (typed.MachineStateMsg(), SmStatus, "", "expected dual_arm_executive_interfaces/msg/MachineStatus, got MachineState"),
         (typed.SyncMsg(group="left_arm", key="k", event="teleported", state="Motion"), SyncMessage, "event", "'teleported' is not one of"),
@@ -212,6 +216,20 @@ def test_random_typed_commands_decode_or_are_refused_never_raise_otherwise(text:
     except codec.WireError:
         return
     assert command.op in ("execute", "pause", "resume", "stop")
+
+
+@settings(max_examples=200, deadline=None)
+@given(position=st.one_of(st.text(max_size=20), st.from_regex(r"\A(in|before|finished):[0-9]{1,12}\Z")))
+def test_a_groups_position_reads_back_as_written_or_is_refused_in_one_line(position: str) -> None:
+    msg = typed.EngineStatusMsg(state="paused", groups=(typed.GroupProgressMsg(group="a", state="Ready", position=position),))
+    try:
+        status = typed.from_msg(EngineStatus, msg, CLOCK)
+    except codec.WireError as error:
+        assert error.path == "groups[0].position" and "\n" not in str(error)
+        return
+    assert status.groups["a"].position == position
+    kind, _, number = position.partition(":")
+    assert position == "" or (kind in ("in", "before", "finished") and number.isdecimal() and len(number) <= 9)
 
 
 def test_a_garbled_bridge_command_is_reported_and_nothing_moves(run_sim: Any) -> None:

@@ -25,7 +25,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from typing import Protocol
 
-from core_functions.catalog import BindContext, Catalog
+from core_functions.catalog import Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.engine.branches import OutcomeBoard, branch_taken, ended_with_outcome
 from execution_engine.engine.cell_tf import CellFramesBroadcaster
@@ -36,6 +36,7 @@ from execution_engine.engine.flags import ENGINE_FUNCTIONS, FlagBoard
 from execution_engine.engine.flags_mode import FlagsMode
 from execution_engine.engine.group_link import GroupLink
 from execution_engine.engine.remainder_swap import Remainder
+from execution_engine.engine.remainder_groups import bare_wait
 from execution_engine.engine.report import GroupError, RunReport
 from execution_engine.engine.safe_pose import SafePosePlan, go_safe
 from execution_engine.engine.speed import SpeedOverride
@@ -272,14 +273,8 @@ class ExecutionEngine(BreakpointControl, FlagsMode):  # BreakpointControl extend
 
     # ---------------------------------------------------------------------- operations
     def _sits_out(self, call: Call) -> bool:
-        if call.function != "wait":
-            return False
-        if call.params in ((), ("0",)):  # the implicit wait of a group left out: no parsing needed
-            return True
-        spec = self.catalog.get("wait")
-        assert spec is not None and self.app is not None
-        (seconds,) = spec.bind(call.params, BindContext(self.app.robot, call.group, self.app.cell))
-        return seconds == 0
+        assert self.app is not None
+        return bare_wait(call, self.catalog, self.app)
 
     def _requests(self, operation: Operation, calls: dict[str, Call], attempt: int) -> dict[str, SmRequest]:
         """One request per group; synchronised functions get a shared barrier key and partner list."""
@@ -579,6 +574,7 @@ class ExecutionEngine(BreakpointControl, FlagsMode):  # BreakpointControl extend
             g: GroupProgress(
                 f"waiting for {self.flags.waiting_for(g)}" if self.flags.waiting_for(g) else link.state,
                 *(self._progress[g].operation, self._progress[g].function) if g in self._progress else (None, None),
+                position=self.remainder.groups.position(app, g) if app is not None and app.sync == "flags" else "",
             )
             for g, link in self.links.items()
         }

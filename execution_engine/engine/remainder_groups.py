@@ -22,10 +22,24 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from core_functions.catalog import BindContext, Catalog
 from execution_engine.app_model.model import Application, Call, Operation
 from execution_engine.machine.table import PAUSE
 
 Step = tuple[Operation, Call]
+
+
+def bare_wait(call: Call, catalog: Catalog, app: Application) -> bool:
+    """A call its group sits out: a wait of no time (a left-out group's implicit one among them) -- no step of it,
+    in flags mode as in lock-step; the engine's test, and the station's for the builder's marks."""
+    if call.function != "wait":
+        return False
+    if call.params in ((), ("0",)):  # the implicit wait of a group left out: no parsing needed
+        return True
+    spec = catalog.get("wait")
+    assert spec is not None
+    (seconds,) = spec.bind(call.params, BindContext(app.robot, call.group, app.cell))
+    return bool(seconds == 0)
 
 
 def group_steps(app: Application, group: str, sits_out: Callable[[Call], bool]) -> list[Step]:
@@ -66,17 +80,18 @@ class GroupWalk:
     #: The engine's test for a call a group sits out (a bare wait): as the group tasks count steps.
     sits_out: Callable[[Call], bool] = lambda call: False
     _steps: dict[str, list[Step]] = field(default_factory=dict)
+    _index: dict[str, int] = field(default_factory=dict)
     _of: Application | None = None
 
     def start(self, groups: Sequence[str], sits_out: Callable[[Call], bool]) -> None:
         self.at = {g: GroupAt() for g in groups}
         self.sits_out = sits_out
-        self._steps, self._of = {}, None
+        self._steps, self._index, self._of = {}, {}, None
 
     def steps(self, app: Application, group: str) -> list[Step]:
         """``group``'s steps in ``app`` (kept until the application is another one: a swap)."""
         if app is not self._of:
-            self._steps, self._of = {}, app
+            self._steps, self._index, self._of = {}, {}, app
         if group not in self._steps:
             self._steps[group] = group_steps(app, group, self.sits_out)
         return self._steps[group]
@@ -104,13 +119,24 @@ class GroupWalk:
     def where(self, app: Application, group: str) -> tuple[str, int]:
         """(``in`` / ``before`` / ``finished``, the operation's index in ``app``; its count when finished)."""
         at = self.at[group]
-        index = {op.id: i for i, op in enumerate(app.operations)}
+        self.steps(app, group)  # the caches are this application's
+        if not self._index:  # the status asks at every change: built once per application
+            self._index = {op.id: i for i, op in enumerate(app.operations)}
+        index = self._index
         if at.inside is not None:
             return "in", index.get(at.inside, len(app.operations))
         step = None if at.finished else self.step(app, group)
         if step is None:
             return "finished", len(app.operations)
         return "before", index.get(step[0].id, len(app.operations))
+
+    def position(self, app: Application, group: str) -> str:
+        """``group``'s place as the engine's status carries it (``in:4``, ``before:5``, ``finished:8``: operations
+        counted from 1, as in the swap event's answer); "" for a group this walk does not know."""
+        if group not in self.at:
+            return ""
+        kind, index = self.where(app, group)
+        return f"{kind}:{index + 1}"
 
     def frontier(self, app: Application) -> int:
         """The first operation some group has not started (its index)."""
