@@ -1,7 +1,8 @@
 """The studio's 3D view of a cell whose robots' groups and joints the cell names (apps_xml/examples/side_by_side.xml):
 /joint_states carries kuka_A1.. and viper_joint_1.., the URDFs' joints are A1.. and joint_1..; the page puts each name
 on its robot's joint (the robot's prefix taken off) and each group's TCP on its robot's tool link.  After the run, each
-hand drawn through its URDF's chain is where its bridge said it ended, in the cell's world frame.
+hand drawn through its URDF's chain is where its bridge said it ended, in the cell's world frame, and the monitor plots
+each robot's joints apart, under the application's group names.
 
 A real headless Chromium (Selenium), skipped only where none can be driven; waits are bounded polls of the page.
 """
@@ -54,5 +55,11 @@ def test_the_3d_view_draws_both_robots_by_the_cell_s_joint_names(driver: Any, tm
         names = driver.execute_script("return Store.joints.names")
         assert {"kuka_A1", "viper_joint_1"} <= set(names)
         assert {"A1", "joint_1"} <= set(drawn_joints)  # the URDFs' own joints, set from the cell's names
+        # the monitor plots each robot's joints apart, under the application's group names (not one plot of all)
+        plotted = until(driver, lambda d: d.execute_script(
+            "const p = [...document.querySelectorAll('#joint-plots .joint-plot')];"
+            "return p.length >= 2 ? p.map((e) => [e.dataset.group, [...e.querySelectorAll('.u-series .u-label')].map((t) => t.textContent)]) : null"))
+        assert {g: labels[1:] for g, labels in plotted} == {"kuka_arm": [f"kuka_A{i}" for i in range(1, 7)],
+                                                           "inspector": [f"viper_joint_{i}" for i in range(1, 7)]}, plotted
     finally:
         served.close()

@@ -221,7 +221,40 @@ const Monitor = (() => {
         return Object.entries(robot.groups).map(([g, info]) => [g, info.joints.map((j) => names.indexOf(j.name)).filter((i) => i >= 0)]);
       }
     }
-    return names.length ? [["joints", names.map((_, i) => i)]] : [];
+    return cellJointGroups(robots, names);
+  }
+  // A cell of several robots: each joint name is a robot's own joint with the cell's prefix before it (kuka_A1,
+  // viper_joint_1; none in a cell that renames nothing), so the joints fall to their robot (the model whose own joint
+  // name ends the name the longest way, prefix what comes before it), and each robot's are plotted group by group.
+  // A plot is named by the application's group: the prefix before the model's group name (kuka_arm), else, for a
+  // group the cell names outright (<group as="inspector">), the application's groups no robot's prefix explains, in
+  // the cell's order; joints of no known robot share one plot.
+  function cellJointGroups(robots, names) {
+    const buckets = new Map();  // prefix + model -> {prefix, model, joints: own joint -> index}
+    const strangers = [];
+    names.forEach((name, i) => {
+      let best = null;
+      for (const [model, robot] of Object.entries(robots)) {
+        for (const own of robot.joint_order) {
+          if (name.endsWith(own) && (!best || own.length > best.own.length)) best = {model, own, prefix: name.slice(0, name.length - own.length)};
+        }
+      }
+      if (!best) { strangers.push(i); return; }
+      const key = `${best.prefix}\u0000${best.model}`;
+      if (!buckets.has(key)) buckets.set(key, {prefix: best.prefix, model: best.model, joints: {}});
+      buckets.get(key).joints[best.own] = i;
+    });
+    const found = [];
+    for (const b of buckets.values()) {
+      for (const [g, info] of Object.entries(robots[b.model].groups)) {
+        const indices = info.joints.map((j) => b.joints[j.name]).filter((i) => i !== undefined);
+        if (indices.length) found.push({name: b.prefix + g, model: b.model, indices});
+      }
+    }
+    const groups = (Store.snapshot && Store.snapshot.groups) || [];
+    const spare = groups.filter((g) => !found.some((p) => p.name === g));
+    const out = found.map((p) => [groups.includes(p.name) ? p.name : (spare.shift() || `${p.name} (${p.model})`), p.indices]);
+    return strangers.length ? [...out, ["joints", strangers]] : out;
   }
   const COLOURS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"];
   function renderPlots() {
