@@ -10,8 +10,9 @@
 The nodes are those of ``launch/<back end>.launch.py`` with the same names and the same
 parameters (``config/<back end>.yaml`` as params file): the bridge of the application robot's back
 end (``--robot``, with ``--backend-option KEY=VALUE`` as its parameters; a cell's robots: theirs), one ``group_machine`` per group, and the engine running APP with ``exit_when_done`` -- checked
-first, as ``run`` is, by the dry run, here from the joints the bridge publishes (``--no-check``: the
-engine's ``check:=false``; docs/application_xml.md, "Checking before anything moves").  Each is
+first, as ``run`` is, by the dry run, here from the joints the bridge publishes, on the model of the bridge's
+back end with its options (the engine's ``check_backend`` and ``check_options``, :mod:`cell_runner.engine_check`;
+``--no-check``: the engine's ``check:=false``; docs/application_xml.md, "Checking before anything moves").  Each is
 the installed executable's code in its own Python process with ``--transport dds`` (no ROS
 install) or ``--transport ros`` (rclpy).  ``--nodes`` starts only some of them, so a cell can be
 split across machines that share a DDS domain.
@@ -37,6 +38,7 @@ from pathlib import Path
 from typing import IO
 
 from app_functions.registry import full_catalog
+from cell_runner.engine_check import options_parameter
 from cell_runner.settings import LaunchSettings
 from core_functions.cell_robots import BACKEND_NAMES, CellRobotModel
 from core_functions.geometry import Pose
@@ -116,6 +118,7 @@ def cell_nodes(
     checked here as ``run`` checks them (ValueError naming the option)."""
     app = load_application(app_file, full_catalog())
     robot = app.robot
+    checked_on: tuple[str, ...] = ()  # a cell's engine checks on its robots' own back ends and options (the cell's)
     if isinstance(robot, CellRobotModel):  # a mixed cell: one bridge node per robot, each with its cell's options and base
         if backend is not None or options:
             raise ValueError("a cell of several robots names each robot's back end and options in its <robot> elements (backend=, <option name= value=/>), not --robot or --backend-option")
@@ -129,6 +132,8 @@ def cell_nodes(
         if backend is not None or options:  # refused here in run's one line, before any process starts
             check_options(chosen, BackendOptions(robot=robot, extra=dict(options)), speed)
             _no_cameras(chosen, options)
+            if check:  # the engine dry-runs on the model of the back end the bridge drives, with its options (engine_check)
+                checked_on = ("-p", f"check_backend:={chosen}", "-p", options_parameter(options))
         specs = [_bridge_spec(chosen, transport, speed, options=options, model=robot.name)]
     # A simulator at another speed than real time is the cell's clock (it publishes /clock): every
     # other node measures its waits, timeouts and the report in the robot's time, as with use_sim_time:=true.
@@ -145,7 +150,7 @@ def cell_nodes(
     common = _common(transport, robot.members[0].backend if isinstance(robot, CellRobotModel) else robot.default_backend)
     specs.append(NodeSpec(ENGINE_NODE, (
         *_python(*_ENTRY["engine"]), *common, "-p", f"application:={app_file.resolve()}", "-p", "exit_when_done:=true",
-        *(() if check else ("-p", "check:=false")), *followers,
+        *(() if check else ("-p", "check:=false")), *checked_on, *followers,
     )))
     return specs
 

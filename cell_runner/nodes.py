@@ -18,6 +18,7 @@ from pathlib import Path
 
 from cell_runner.dry_run.cell_start import CellStarts
 from cell_runner.dry_run.start import StartRefused
+from cell_runner.engine_check import options_from_text
 from cell_runner.libraries import APPLICATION_FUNCTIONS
 from cell_runner.output_files import Refused
 from cell_runner.record_hook import record_node, stop_recording
@@ -49,6 +50,8 @@ class EngineSettings:
     wait_for_goals: bool = False
     check: bool = True
     trajectory_db: str = ""
+    check_backend: str = ""  # the back end the check dry-runs on ('' = the robot model's default)
+    check_options: str = ""  # its options, KEY=VALUE;KEY=VALUE (cell_runner.engine_check)
 
 
 def declare_engine_parameters(node: Node) -> EngineSettings:
@@ -71,7 +74,24 @@ def declare_engine_parameters(node: Node) -> EngineSettings:
     trajectory_db = str(node.declare_parameter(
         "trajectory_db", "", "the machines' trajectory database, which the dry run reads (never writes); empty: the machines' default"
     ))
-    return EngineSettings(application, exit_when_done, record, wait_for_goals, check, trajectory_db)
+    check_backend = str(node.declare_parameter(
+        "check_backend", "",
+        "the back end whose model that dry run uses, as run --robot names it (launch sets the bridge's); '' = the robot model's default back end",
+    ))
+    check_options = str(node.declare_parameter(
+        "check_options", "",
+        "that back end's options for the dry run, KEY=VALUE;KEY=VALUE as run's --backend-option (launch sets the bridge's); '' = none",
+    ))
+    return EngineSettings(application, exit_when_done, record, wait_for_goals, check, trajectory_db, check_backend, check_options)
+
+
+def engine_starts(node: Node, engine: ExecutionEngine, settings: EngineSettings) -> CellStarts | None:
+    """The engine's start check on the back end and options it is given (None: ``check`` is off); ValueError
+    naming ``check_options`` when it is not KEY=VALUE;KEY=VALUE."""
+    if not settings.check:
+        return None
+    options = options_from_text(settings.check_options)
+    return CellStarts(node, engine, settings.trajectory_db or default_trajectory_db(), engine.startup_timeout, settings.check_backend, options)
 
 
 def load_or_explain(path: str) -> Application:
@@ -107,7 +127,7 @@ async def run_engine(node: Node, outcome: Outcome) -> None:
     with startup_errors():
         settings = declare_engine_parameters(node)
         engine = ExecutionEngine(node, APPLICATION_FUNCTIONS.catalog(None))
-    starts = CellStarts(node, engine, settings.trajectory_db or default_trajectory_db(), engine.startup_timeout) if settings.check else None
+        starts = engine_starts(node, engine, settings)
     goals = serve_goals(node, engine, starts)
     warn_undeclared(node)
     if not settings.application and settings.wait_for_goals:

@@ -3,8 +3,9 @@
 ``python -m execution_engine launch APP --robot ros2-control --backend-option arm.controller=...`` starts the
 ros2_control_bridge process (cell_runner/bridge_nodes/ros2_control.py) beside the machine and the engine; the
 driver is the joint_trajectory_controller stand-in (fake_fjt_server.FakeDriver) serving in the same DDS domain, as
-a ros2_control driver shares the graph with the cell.  The run is checked from the driver's /joint_states, goes to
-FINISHED and every goal the driver received stayed within the URDF's speeds.  On one graph the bridge must not
+a ros2_control driver shares the graph with the cell.  The run is checked from the driver's /joint_states on the
+ros2-control back end's model with the bridge's options (the engine's plan is that dry run's, no RSI simulator in the
+engine), goes to FINISHED and every goal the driver received stayed within the URDF's speeds.  On one graph the bridge must not
 publish the driver's joints under the driver's names again (the back end would take its copy for the driver's
 word): checked in-process on the model transport, with and without a cell's renaming.
 """
@@ -23,15 +24,21 @@ from dds_domain import domain_env, stop_group
 from fake_fjt_server import FakeDriver, moved_too_fast, urdf_limits
 from fjt_dds import base_env, driver_on_dds
 
+from app_functions.registry import full_catalog
 from cell_runner.bridge_nodes.ros2_control import driver_joints
+from cell_runner.dry_run.simulators import setup_for
+from cell_runner.dry_run.start import measured, plan_start
 from core_functions.cell_robots import CellNames
 from core_functions.geometry import Pose
 from core_functions.robots import KUKA_KR
+from execution_engine.app_model import load_application
+from execution_engine.run_plan import PLAN_TOPIC
 from node_transport.clock import Clock
 from node_transport.local import LocalTransport
 from node_transport.msgs import JointState
 from node_transport.port import Node
-from node_transport.qos import JOINT_STATES
+from node_transport.qos import JOINT_STATES, LATCHED
+from node_transport.typed import RunPlanMsg
 from robot_bridges.backend import BackendOptions
 from robot_bridges.bridge_node import BridgeNode
 from robot_bridges.placed import PlacedBackend
@@ -75,10 +82,15 @@ def env() -> Iterator[dict[str, str]]:
         yield claimed
 
 
-def launch_against_the_driver(env: dict[str, str], tmp_path: Path, app: Path, *options: str) -> tuple[subprocess.Popen[str], str, FakeDriver]:
-    """``launch APP --transport dds OPTIONS`` to its end while the stand-in driver serves in the same domain."""
+def launch_against_the_driver(
+    env: dict[str, str], tmp_path: Path, app: Path, *options: str, plans: list[Any] | None = None,
+) -> tuple[subprocess.Popen[str], str, FakeDriver]:
+    """``launch APP --transport dds OPTIONS`` to its end while the stand-in driver serves in the same domain;
+    ``plans`` gets every RunPlan the engine publishes (its latched plan topic, heard from the driver's node)."""
 
     def build(node: Node, clock: Clock) -> FakeDriver:
+        if plans is not None:
+            node.create_subscription(RunPlanMsg, f"/{PLAN_TOPIC}", plans.append, LATCHED)
         return FakeDriver(node, clock, URDF, {CONTROLLER: KUKA_KR.group("arm").joint_names}, KUKA_KR.poses["home"], gripper=GRIPPER)
 
     with driver_on_dds(env, build, BOUND) as driver:
@@ -99,10 +111,22 @@ def test_launch_with_the_ros2_control_back_end_finishes_against_a_driver_on_the_
     shutil.copy(ROOT / "apps_xml" / "cells" / "kuka_rsi_cell.xml", tmp_path / "cells" / "kuka_rsi_cell.xml")
     app = tmp_path / "short_pick.xml"
     app.write_text(SHORT_APP)
+    plans: list[Any] = []
     process, output, driver = launch_against_the_driver(
         env, tmp_path, app, "--robot", "ros2-control", "--backend-option", f"arm.controller={CONTROLLER}", "--backend-option", f"arm.gripper={GRIPPER}",
+        plans=plans,
     )
     assert process.returncode == 0, output
+    # the engine checked the run on the ros2-control model with the bridge's options, as run --robot ros2-control does:
+    # its plan is that dry run's from where the driver says the arm is (the URDF here from a file, the engine's from
+    # /robot_description: the same text), not the KUKA's RSI simulator's (4.33 s), which ran no RSI loop in the engine
+    checked = plan_start(load_application(app, full_catalog()), setup_for("ros2-control", BackendOptions(robot=KUKA_KR, extra={
+        "arm.controller": CONTROLLER, "arm.gripper": GRIPPER, "urdf": str(URDF_FILE),
+    })), measured(KUKA_KR, KUKA_KR.joint_names, [KUKA_KR.poses["home"][j] for j in KUKA_KR.joint_names], "home"))
+    assert [(p.app, p.basis) for p in plans] == [("short_pick", "measured")], plans
+    assert plans[0].cycle_time == pytest.approx(checked.report.cycle_time, abs=1e-6)
+    assert "checked on the dry run of the ros2-control back end (arm.controller=" in output, output
+    assert "RSI loop" not in output and "kuka_rsi" not in output, output
     assert "[execution_engine] application short_pick: FINISHED" in output, output
     for node in ("ros2_control_bridge", "arm_machine"):
         assert f"[launch] {node} stopped (exit code 0)" in output, output

@@ -3,8 +3,12 @@
 ``launch``, ``ros2 launch`` and every RunApplication goal start a run in an engine node that
 does not hold the back end: the robot is measured from the bridge's ``joint_states`` -- a sample
 taken after the run was asked for, every joint of the robot in it -- and the run is planned and
-carried out as :mod:`.start` says (the dry run uses the simulator of the application robot's
-back end with its default options, and the machines' trajectory database).  A refusal leaves the
+carried out as :mod:`.start` says (the dry run uses the simulator of the back end the cell's bridge
+drives, with its options, as ``run --robot B --backend-option ...`` does -- ``launch`` gives the engine
+them as ``check_backend`` and ``check_options`` (:mod:`cell_runner.engine_check`); a hand-started engine
+without them checks on the application robot's default back end with its default options; a cell of
+several robots on each robot's own back end and options, from the cell -- and the machines' trajectory
+database).  A refusal leaves the
 robot where it is: a goal ends aborted with outcome ``refused`` and the findings as its report;
 the engine process started with an application prints them and ends with exit code 1.
 
@@ -25,6 +29,8 @@ from cell_runner.dry_run.report import DryRunReport
 from cell_runner.dry_run.runner import DryRunError, dry_run_setup
 from cell_runner.dry_run.simulators import DryRunSetup, setup_for
 from cell_runner.dry_run.start import MeasuredState, StartRefused, UntrustedState, check_run, measured
+from cell_runner.engine_check import LINK_OPTIONS
+from core_functions.cell_robots import CellRobotModel
 from execution_engine.app_model.model import Application
 from execution_engine.engine.engine import ExecutionEngine
 from execution_engine.engine.report import RunReport
@@ -34,16 +40,24 @@ from node_transport.port import Node
 from node_transport.qos import SENSOR
 from node_transport.wire import JOINT_STATES
 from robot_bridges.backend import BackendOptions
+from robot_bridges.registry import check_options
 
 
 class CellStarts:
     """Checked starts for the engine on ``node``: the measured joints, the plan, the run."""
 
-    def __init__(self, node: Node, engine: ExecutionEngine, trajectory_db: str, timeout: float) -> None:
+    def __init__(
+        self, node: Node, engine: ExecutionEngine, trajectory_db: str, timeout: float, backend: str = "", options: dict[str, str] | None = None,
+    ) -> None:
         self.node = node
         self.engine = engine
         self.trajectory_db = trajectory_db or None
         self.timeout = timeout
+        self.backend = backend  # '' : each application robot's default back end
+        self.options = {k: v for k, v in (options or {}).items() if k not in LINK_OPTIONS}  # the dry run opens no link
+        if backend or self.options:
+            given = "; ".join(f"{k}={v}" for k, v in self.options.items()) or "its default options"
+            node.logger.info("%s: each run is checked on the dry run of the %s back end (%s)", node.fully_qualified_name, backend or "robot's default", given)
         self.topic = node.resolve(JOINT_STATES)
         self._latest: dict[str, tuple[float, int]] = {}  # joint -> (position, sample number)
         self._samples = 0
@@ -89,10 +103,28 @@ class CellStarts:
 
     async def run(self, app: Application, say: Callable[[str], None]) -> RunReport:
         """Run ``app`` checked from the measured joints; StartRefused when it must not start."""
-        setup = setup_for(app.robot.default_backend, BackendOptions(robot=app.robot))
+        setup = self.setup(app)
         checked = await self.verdict(app, setup, say)
         run = await check_run(self.engine, app, setup, self.trajectory_db, self.measure_for(app), self.node.clock, checked=checked, say=say)
         return await run.run()
+
+    def setup(self, app: Application) -> DryRunSetup:
+        """The dry run of ``app`` on the back end the bridge drives (``run``'s setup_for with the same options);
+        StartRefused when that back end cannot drive ``app``'s robot or refuses an option."""
+        if not self.backend and not self.options:
+            return setup_for(app.robot.default_backend, BackendOptions(robot=app.robot))
+        if isinstance(app.robot, CellRobotModel):
+            raise StartRefused(
+                f"parameters check_backend/check_options: {app.name} runs a cell of several robots, checked on each robot's own back end "
+                "and options from the cell; leave check_backend and check_options empty"
+            )
+        backend = self.backend or app.robot.default_backend
+        options = BackendOptions(robot=app.robot, extra=self.options)
+        try:
+            check_options(backend, options, 1.0)
+        except (ValueError, KeyError) as error:
+            raise StartRefused(f"parameters check_backend/check_options: {error.args[0] if isinstance(error, KeyError) and error.args else error}") from None
+        return setup_for(backend, options)
 
     async def verdict(self, app: Application, setup: DryRunSetup, say: Callable[[str], None]) -> DryRunReport | None:
         """The dry run from the simulator's start, as ``run`` does first: the kept verdict (and a line saying
