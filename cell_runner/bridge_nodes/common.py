@@ -127,7 +127,7 @@ async def run_bridge(backend: str, declare: DeclareBridge, node: Node, outcome: 
         clock = backend_clock(node, setup.speed)
         robot_backend = await create_backend(backend, clock, setup.options)
         if base is not None or not names.identity:  # a robot of a mixed cell: poses in the cell's world frame, groups and joints by its names
-            robot_backend = PlacedBackend(robot_backend, base or Pose(), node.name.removesuffix("_bridge"), names)
+            robot_backend = PlacedBackend(robot_backend, base or Pose(), node.name.removesuffix("_bridge"), names, setup.options.robot.cameras)
     try:
         with startup_errors():
             bridge = BridgeNode(node, robot_backend)
