@@ -14,8 +14,6 @@ import json
 from collections.abc import Sequence
 
 SEPARATOR = ";"
-#: options about the link to a controller, which the dry run never opens
-LINK_OPTIONS = frozenset({"host", "port", "rsi_listen"})
 
 
 def options_text(options: Sequence[tuple[str, str]]) -> str:

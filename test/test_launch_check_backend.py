@@ -118,3 +118,13 @@ def test_a_check_option_the_back_end_refuses_refuses_the_run_naming_it(run_sim: 
     spec = NodeSpec(ENGINE_NODE, ("--ros-args", "-p", "check_backend:=ros2-control", "-p", "check_options:=arm.gripper_open=banana"))
     with pytest.raises(StartRefused, match=r"^parameters check_backend/check_options: .*gripper_open"):
         engine_setup(run_sim, spec, KUKA_APP)
+
+
+def test_a_cell_given_a_check_back_end_is_refused_naming_the_parameters(run_sim: Any, tmp_path: Path) -> None:
+    """A cell's robots each have their back end in the cell: one back end for all of them would check another cell."""
+    (tmp_path / "driven_cell.xml").write_text(CELL)
+    app = tmp_path / "driven.xml"
+    app.write_text(CELL_APP)
+    spec = NodeSpec(ENGINE_NODE, ("--ros-args", "-p", "check_backend:=ros2-control"))
+    with pytest.raises(StartRefused, match=r"^parameters check_backend/check_options: driven runs a cell of several robots"):
+        engine_setup(run_sim, spec, app)

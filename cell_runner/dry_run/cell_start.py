@@ -29,7 +29,6 @@ from cell_runner.dry_run.report import DryRunReport
 from cell_runner.dry_run.runner import DryRunError, dry_run_setup
 from cell_runner.dry_run.simulators import DryRunSetup, setup_for
 from cell_runner.dry_run.start import MeasuredState, StartRefused, UntrustedState, check_run, measured
-from cell_runner.engine_check import LINK_OPTIONS
 from core_functions.cell_robots import CellRobotModel
 from execution_engine.app_model.model import Application
 from execution_engine.engine.engine import ExecutionEngine
@@ -54,7 +53,7 @@ class CellStarts:
         self.trajectory_db = trajectory_db or None
         self.timeout = timeout
         self.backend = backend  # '' : each application robot's default back end
-        self.options = {k: v for k, v in (options or {}).items() if k not in LINK_OPTIONS}  # the dry run opens no link
+        self.options = dict(options or {})  # checked as launch checks --backend-option (the same back end's parse_options)
         if backend or self.options:
             given = "; ".join(f"{k}={v}" for k, v in self.options.items()) or "its default options"
             node.logger.info("%s: each run is checked on the dry run of the %s back end (%s)", node.fully_qualified_name, backend or "robot's default", given)
