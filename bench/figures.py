@@ -306,6 +306,13 @@ def _ik(s: Summary) -> Measured:
                     at_most(max(s["near_median_us"], s["far_median_us"], s["near_p99_us"]), 1000) and s["near_failures"] == 0)
 
 
+def _cell_tf(s: Summary) -> Measured:
+    ticks = s["us_cpu_per_tick"]
+    drawn, undrawn = ticks["drawn moving tf listener"], ticks["undrawn idle tf listener"]
+    return Measured(f"{n(drawn, 1)} us CPU per state tick of both bridges (drawn, moving, a /tf listener); "
+                    f"{n(ticks['drawn idle no listener'], 1)} us with no listener", f"undrawn: {n(undrawn, 1)} us", drawn / undrawn)
+
+
 def _async_cycle(s: Summary) -> Measured:
     rows = s["rows"]
     return Measured(f"{rows['flags']['cycle_s']:.2f} s predicted cycle", f"lock-step: {rows['lock-step']['cycle_s']:.2f} s", s["ratio"])
@@ -390,6 +397,10 @@ OTHERS = (
     ), issue=False),
     Bench("ik_solve.py", (), 90, (  # its full run takes seconds; fewer solves make the p99 a few stalls of a shared machine
         Figure("Nextage IK solve", "<= 1 ms (medians, near p99)", _ik, "nextage-simulator-ik-solve-time-issue-2"),
+    ), issue=False),
+    Bench("cell_tf.py", ("--ticks", "1000"), 120, (
+        Figure("a cell of several robots: each robot drawn on tf (a Viper and a Nextage)", "-", _cell_tf,
+               "a-cell-of-several-robots-each-robot-drawn-on-tf-issue-23"),
     ), issue=False),
     Bench("async_cycle.py", (), 90, (
         Figure("asynchronous rivet demonstrator (`sync=\"flags\"`), cycle", "-", _async_cycle, "asynchronous-rivet-demonstrator-against-lock-step-issue-15"),
