@@ -29,6 +29,7 @@ REAL_TIME_FILES = frozenset({
     "test_rsi_conventions.py", "test_rsi_signals.py", "test_speed_override_kuka.py",
     "test_mixed_cell.py",  # the mixed cell's KUKA: the simulated KR C4 on the wall clock
     "test_dds_follow_joint_trajectory.py", "test_follow_joint_trajectory_ros.py",  # their KUKA cases: the simulated KR C4 on the wall clock
+    "test_cell_group_names_run.py", "test_cell_group_names_studio.py", "test_cell_tf_placed_dds.py",  # side_by_side's KUKA over RSI
 })
 
 

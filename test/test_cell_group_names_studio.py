@@ -44,7 +44,8 @@ def test_the_3d_view_draws_both_robots_by_the_cell_s_joint_names(driver: Any, tm
     served = open_3d(driver, tmp_path, file="side_by_side.xml", speed=1.0, trace=str(trace))
     try:
         until(driver, lambda d: d.find_element(By.ID, "ctl-start").click() or True)
-        until(driver, lambda d: d.find_element(By.ID, "engine-state").text == "finished")
+        until(driver, lambda d: d.find_element(By.ID, "engine-state").text in ("finished", "failed", "stopped"))
+        assert driver.find_element(By.ID, "engine-state").text == "finished", driver.find_element(By.ID, "alarms").text
         show_3d(driver)
         reported = last_tcps(trace)
         assert set(reported) == {"kuka_arm", "inspector"}
