@@ -38,6 +38,16 @@ def answers(driver: Any) -> int:
     return int(driver.find_element(By.TAG_NAME, "body").get_attribute("data-edit-answers") or 0)
 
 
+def apply_edit(driver: Any, value: str, answered: int) -> str | None:
+    """Type ``value`` as the selected call's first parameter and apply it as an edit of the paused run, the
+    ``answered``-th; the station's answer as the page marks it (refused, swapped)."""
+    type_into(driver, "param-0", value)
+    until(driver, lambda d: validated(d) == "valid")
+    press(driver, "apply-edit-btn")
+    until(driver, lambda d: answers(d) == answered)
+    return driver.find_element(By.TAG_NAME, "body").get_attribute("data-edit-answer")
+
+
 def test_a_colliding_edit_of_the_paused_run_is_refused_at_its_cell_and_a_safe_one_is_swapped_and_runs_to_finished(driver: Any, tmp_path: Path) -> None:
     (tmp_path / "edit_demo.xml").write_text(APP)
     served = open_station(driver, tmp_path, file="edit_demo.xml", speed=8.0, trace=str(tmp_path / "run.jsonl"))
@@ -55,20 +65,12 @@ def test_a_colliding_edit_of_the_paused_run_is_refused_at_its_cell_and_a_safe_on
         assert driver.find_element(By.CSS_SELECTOR, '.ops-row[data-op="1"] input.op-id').get_attribute("disabled") is not None
 
         until(driver, lambda d: cell(d, 2, "left_arm").click() or True)  # the left hand sent to where the right one stands
-        type_into(driver, "param-0", RIGHT_OUT)
-        until(driver, lambda d: validated(d) == "valid")
-        press(driver, "apply-edit-btn")
-        until(driver, lambda d: answers(d) == 1)
-        assert driver.find_element(By.TAG_NAME, "body").get_attribute("data-edit-answer") == "refused", text(driver, "validation-summary")
+        assert apply_edit(driver, RIGHT_OUT, 1) == "refused", text(driver, "validation-summary")
         until(driver, lambda d: "has-error" in (cell(d, 2, "left_arm").get_attribute("class") or "") and "collision" in cell(d, 2, "left_arm").text)
         assert "not swapped" in text(driver, "validation-summary") and "found by the dry run of operations 3.." in text(driver, "validation-summary")
         assert text(driver, "engine-state") == "paused" and engine.app is old  # nothing changed
 
-        type_into(driver, "param-0", WIDER)
-        until(driver, lambda d: validated(d) == "valid")
-        press(driver, "apply-edit-btn")
-        until(driver, lambda d: answers(d) == 2)
-        assert driver.find_element(By.TAG_NAME, "body").get_attribute("data-edit-answer") == "swapped", text(driver, "validation-summary")
+        assert apply_edit(driver, WIDER, 2) == "swapped", text(driver, "validation-summary")
         assert text(driver, "validation-summary").startswith("edit: swapped: operations from 3 on are edit_demo.xml's")
         new = engine.app
         assert new is not old and new.operations[2].calls["left_arm"].params[0] == WIDER

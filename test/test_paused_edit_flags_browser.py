@@ -22,9 +22,9 @@ if browser.missing() is not None:
 from selenium.webdriver.common.by import By  # noqa: E402
 
 from test_paused_edit import RIGHT_OUT  # noqa: E402
-from test_paused_edit_browser import answers, lock  # noqa: E402
+from test_paused_edit_browser import apply_edit, lock  # noqa: E402
 from test_paused_edit_flags import OLD, WHERE, WIDER  # noqa: E402
-from test_studio_browser import cell, driver, open_station, press, text, type_into, until, validated  # noqa: E402,F401
+from test_studio_browser import cell, driver, open_station, press, text, until, validated  # noqa: E402,F401
 
 
 def test_a_paused_flags_run_refuses_a_colliding_edit_at_its_cell_and_swaps_a_safe_one_that_runs_to_finished(driver: Any, tmp_path: Path) -> None:
@@ -43,20 +43,12 @@ def test_a_paused_flags_run_refuses_a_colliding_edit_at_its_cell_and_swaps_a_saf
         until(driver, lambda d: lock(d, 1) == "running" and lock(d, 3) is None)  # the right arm is in right_wait (each group's position)
 
         until(driver, lambda d: cell(d, 2, "left_arm").click() or True)  # the left hand sent to where the right one waits
-        type_into(driver, "param-0", RIGHT_OUT)
-        until(driver, lambda d: validated(d) == "valid")
-        press(driver, "apply-edit-btn")
-        until(driver, lambda d: answers(d) == 1)
-        assert driver.find_element(By.TAG_NAME, "body").get_attribute("data-edit-answer") == "refused", text(driver, "validation-summary")
+        assert apply_edit(driver, RIGHT_OUT, 1) == "refused", text(driver, "validation-summary")
         until(driver, lambda d: "has-error" in (cell(d, 2, "left_arm").get_attribute("class") or "") and "collision" in cell(d, 2, "left_arm").text)
         assert "found by the dry run of the operations no group has started" in text(driver, "validation-summary")
         assert text(driver, "engine-state") == "paused" and engine.app is old  # nothing changed
 
-        type_into(driver, "param-0", WIDER)
-        until(driver, lambda d: validated(d) == "valid")
-        press(driver, "apply-edit-btn")
-        until(driver, lambda d: answers(d) == 2)
-        assert driver.find_element(By.TAG_NAME, "body").get_attribute("data-edit-answer") == "swapped", text(driver, "validation-summary")
+        assert apply_edit(driver, WIDER, 2) == "swapped", text(driver, "validation-summary")
         assert WHERE in text(driver, "validation-summary")
         assert engine.app is not old and engine.app.operation("closer").calls["left_arm"].params[0] == WIDER
 
