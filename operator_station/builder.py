@@ -26,7 +26,6 @@ from core_functions.robots import find_robot
 from execution_engine.app_model import Application, Diagnostic, read_application
 from execution_engine.app_model.cell import read_cell
 from execution_engine.app_model.document import AppDocument, OperationEntry, Placement, parse_document, serialize
-from execution_engine.run_plan import operation_durations
 from operator_station.blocks import BlockDocument, walk
 from operator_station.blocks_xml import Where, read_blocks, write_blocks
 
@@ -238,10 +237,3 @@ def save_document(document: AppDocument | BlockDocument, path: Path, catalog: Ca
     temporary.write_text(text, encoding="utf-8")
     os.replace(temporary, path)
     return True, messages
-
-
-def planned_durations(report: Any, app: Application) -> list[float]:
-    """Each operation's planned duration from a dry run's timeline, as the run's plan holds it
-    (:func:`execution_engine.run_plan.operation_durations`: the waits between operations count too, and the
-    durations add up to the predicted cycle time)."""
-    return operation_durations(report.timeline, report.cycle_time, [op.id for op in app.operations])

@@ -1,6 +1,6 @@
 """The time left of a run: in run time, and in the wall time it will take at the clock's speed.
 
-The estimate is the dry run's plan (each operation's planned seconds, :func:`operator_station.builder.planned_durations`)
+The estimate is the dry run's plan (each operation's planned seconds, :func:`execution_engine.run_plan.operation_durations`)
 of what is still to run: the operations after the current one whole, the current one less the run time it has
 worked so far (never below zero); the current one is the earliest a group is still working in (sync="flags"
 lets a group run ahead: the run is as far as its slowest group).  Every time in it is *run time* -- the trace's ``t``, the plan's seconds --

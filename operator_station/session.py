@@ -34,21 +34,19 @@ from execution_engine.app_model import Application
 from execution_engine.engine.report import RunReport
 from execution_engine.engine.speed import speed_for_next_run
 from execution_engine.observers import RunObserver, TraceWriter
-from execution_engine.run_plan import PlanReader
+from execution_engine.run_plan import PlanReader, plan_of
 from node_transport import codec, typed
 from node_transport.clock import Clock, run_with_clock
 from node_transport.msgs import Bool, JointState
 from node_transport.port import Node
 from node_transport.qos import LATCHED, SENSOR
 from node_transport.wire import JOINT_STATES, SAFETY_STOP, EngineStatus, SmStructure, sm_topic
-from operator_station.builder import planned_durations
 from operator_station.cell_audit import watch_safety
 from operator_station.eta import EtaFeed
 from operator_station.feed import Feed
 from operator_station.paused_edit import EditTarget
 from operator_station.replay import show_plan
 from operator_station.run_summary import summarize
-from operator_station.timeline_view import plan_json
 from operator_station.scene3d import begin_run, keep_dry_run
 from operator_station.scene3d_live import observe as observe_scene
 from robot_bridges import registry
@@ -184,7 +182,7 @@ class RunSession:
             found += [{"severity": "error", "message": f"not checked: {note}"} for note in report.notes]
             self.feed.update(messages=[{"severity": "error", "message": f"not run: {len(report.findings)} problem(s) found by the dry run"}, *found])
             return False
-        self.feed.update(plan=planned_durations(report, app), plan_functions=plan_json(report.timeline))  # the timeline's planned bars
+        show_plan(self.feed, plan_of(report, [op.id for op in app.operations]))  # the ETA and the timeline's planned bars until the start check's plan comes
         self._verdict = report
         return True
 

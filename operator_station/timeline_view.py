@@ -10,10 +10,10 @@ that instant are folded afresh, so the page shows only what had happened by then
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
-from execution_engine.timeline import STATE_COLOURS, PlannedSpan, Timeline, TimelineBuilder, plan_deltas, planned_functions
+from execution_engine.timeline import STATE_COLOURS, Timeline, TimelineBuilder, plan_deltas
 from execution_engine.timeline_path import critical_path
 from operator_station.feed import Feed
 
@@ -85,7 +85,3 @@ def planned_of(snapshot: Any) -> dict[tuple[str, str], float]:
     """The dry run's seconds per function of the run the feed shows ((group, operation) -> s; empty: no plan)."""
     return {(str(p["group"]), str(p["operation"])): float(p["planned"]) for p in getattr(snapshot, "plan_functions", None) or []}
 
-
-def plan_json(spans: Iterable[PlannedSpan]) -> list[dict[str, Any]]:
-    """The dry run's seconds per function as the feed keeps them (from its timeline's spans)."""
-    return [{"group": group, "operation": operation, "planned": seconds} for (group, operation), seconds in planned_functions(spans).items()]

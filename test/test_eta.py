@@ -53,7 +53,7 @@ class Watched(Feed):
 
 
 def operation_times(records: list[dict[str, Any]], ids: list[str]) -> list[float]:
-    """Each operation's actual seconds as the plan counts them (builder.planned_durations): from its first
+    """Each operation's actual seconds as the plan counts them (run_plan.operation_durations): from its first
     function's start to the next one's (the last: to the end), on a clock that never goes back (sync="flags":
     an operation may start before one listed ahead of it)."""
     starts: dict[str, float] = {}
