@@ -54,6 +54,11 @@ class CellNames:
         calls and its image topics."""
         return self.prefix + own if own else own
 
+    def own(self, named: str) -> str:
+        """The robot's own name of the cell's joint or camera name ``named`` (:meth:`joint`, :meth:`camera` undone:
+        the prefix taken off); a name without the prefix as it is, for the robot to refuse as the unknown name it is."""
+        return named[len(self.prefix):] if self.prefix and named.startswith(self.prefix) else named
+
     def text(self) -> str:
         """One parameter's text (``prefix=viper_;arm=loader``), read back by :meth:`parse`: how ``launch``
         tells a robot's bridge and machines the cell's names."""

@@ -84,13 +84,11 @@ class PlacedBackend(RobotBackend):
     def own_joints(self, joints: tuple[str, ...]) -> tuple[str, ...]:
         """The robot's names of the cell's joint names ``joints``: the prefix taken off; a name without the
         prefix is passed as it is, for the robot to refuse as the unknown joint it is."""
-        prefix = self.names.prefix
-        return tuple(j[len(prefix):] if prefix and j.startswith(prefix) else j for j in joints)
+        return tuple(self.names.own(j) for j in joints)
 
     def own_camera(self, camera: str) -> str:
         """The robot's name of the cell's camera ``camera`` (the prefix taken off, as of a joint)."""
-        prefix = self.names.prefix
-        return camera[len(prefix):] if prefix and camera.startswith(prefix) else camera
+        return self.names.own(camera)
 
     def cell_camera(self, own: str) -> str:
         """The cell's name of the robot's camera ``own``: what the bridge names its image topics after."""
